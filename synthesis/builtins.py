@@ -1,0 +1,177 @@
+"""The paper's examples as built-in problems (paper-examples.md).
+
+Grid examples without special rules are written in the TOML format and parsed with
+the same loader users get; examples whose labels need code (fuel levels, motion
+primitives, test agents) are built in Python.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from typing import Callable
+
+from .problems import Problem, make_problem, problem_from_dict
+from .systems import Cell, fuel_grid_world, graph_system
+
+EXAMPLE1 = """
+name = "example1"
+description = "The paper's running example: a 3x5 grid, two goals, three I cells; static walls."
+[system]
+grid = '''
+T . I . T
+. . . . .
+I . S . I
+'''
+start = "S"
+terminal = ["T"]
+[labels]
+goal = ["T"]
+I = ["I"]
+[objectives]
+system = "F goal"
+test = "F I"
+[environment]
+kind = "static"
+"""
+
+SMALL_REACTIVE = """
+name = "small-reactive"
+description = "The paper's second running example: visit I1 and I2 before the goal; reactive doors."
+[system]
+grid = '''
+I1 .  T
+S  .  I2
+'''
+start = "S"
+terminal = ["T"]
+[labels]
+goal = ["T"]
+I1 = ["I1"]
+I2 = ["I2"]
+[objectives]
+system = "F goal"
+test = "F I1 & F I2"
+[environment]
+kind = "reactive"
+"""
+
+
+def _from_toml(text: str) -> Problem:
+    return problem_from_dict(tomllib.loads(text), "built-in")
+
+
+def example1() -> Problem:
+    return _from_toml(EXAMPLE1)
+
+
+def small_reactive() -> Problem:
+    return _from_toml(SMALL_REACTIVE)
+
+
+def beaver_rescue() -> Problem:
+    """Leave the lab through one door, fetch the beaver, come back through the other."""
+    states = ["init", "d1", "d2", "beaver", "p1", "p2", "goal"]
+    edges = [
+        ("init", "d1"), ("init", "d2"), ("d1", "d2"), ("d2", "d1"), ("d1", "beaver"), ("d2", "beaver"),
+        ("beaver", "p1"), ("beaver", "p2"), ("p1", "p2"), ("p2", "p1"), ("p1", "goal"), ("p2", "goal"),
+    ]
+    labels = {"d1": ["door1"], "p1": ["door1"], "d2": ["door2"], "p2": ["door2"], "beaver": ["beaver"], "goal": ["goal"]}
+    ts = graph_system(states, edges, "init", ["goal"], labels)
+    return make_problem(
+        "beaver-rescue", ts, "F(beaver & F goal)", "F door1 & F door2", "reactive",
+        description="A rescue robot must use both doors: out through one, back through the other.",
+    )
+
+
+def motion_primitives() -> Problem:
+    """Doors open according to the motion primitives already shown (jump, lie, stand)."""
+    states = [
+        "init", "p1", "p2", "p3", "jump1", "stand1", "stand2", "stand3", "lie3",
+        "d1_j", "d1_s", "d2_s", "d3_s", "d3_l", "goal",
+    ]
+    edges = [
+        ("init", "p1"), ("init", "p2"), ("init", "p3"),
+        ("p1", "jump1"), ("p1", "stand1"), ("p2", "stand2"), ("p3", "stand3"), ("p3", "lie3"),
+        ("jump1", "d1_j"), ("stand1", "d1_s"), ("stand2", "d2_s"), ("stand3", "d3_s"), ("lie3", "d3_l"),
+        ("d1_s", "p1"), ("d1_j", "p1"), ("d2_s", "p2"), ("d3_s", "p3"), ("d3_l", "p3"),
+        ("p1", "p2"), ("p2", "p1"), ("p2", "p3"), ("p3", "p2"),
+    ]
+    edges += [(d, "goal") for d in ("d1_j", "d1_s", "d2_s", "d3_s", "d3_l")]
+    labels = {"jump1": ["jump"], "lie3": ["lie"], "stand1": ["stand"], "stand2": ["stand"], "stand3": ["stand"], "goal": ["goal"]}
+    ts = graph_system(states, edges, "init", ["goal"], labels)
+    return make_problem(
+        "motion-primitives", ts, "F goal", "F jump & F lie & F stand", "reactive",
+        description="A legged robot must show a jump, a lie-down and a stand before the exit opens.",
+    )
+
+
+def _grid_cells(rows: int, cols: int, blocked: set[Cell] = frozenset()) -> list[Cell]:
+    return [(r, c) for r in range(rows) for c in range(cols) if (r, c) not in blocked]
+
+
+def refueling() -> Problem:
+    """5x5 with fuel: the test wants the system low on fuel far from the goal."""
+    goal: Cell = (0, 0)
+    refuel: Cell = (0, 4)
+    low_cells = {(r, c) for r in range(4) for c in range(2, 5)} - {refuel}
+
+    def label(cell: Cell, fuel: int) -> list[str]:
+        # one label per state, priority goal > unsafe > low
+        if cell == goal:
+            return ["goal"]
+        if fuel == 0:
+            return ["unsafe"]
+        if cell in low_cells and fuel == 1:
+            return ["low"]
+        return []
+
+    tokens = {goal: "T", refuel: "R", (4, 0): "S"} | {c: "L" for c in low_cells}
+    ts = fuel_grid_world(_grid_cells(5, 5), 5, 5, (4, 0), 10, [refuel], [goal], label, tokens)
+    return make_problem(
+        "refueling", ts, "F goal & G !unsafe", "F low", "static", tie_places=True,
+        description="Reach the goal without running dry; walls force a low-fuel detour far from the goal.",
+    )
+
+
+def mars_exploration() -> Problem:
+    """6x6 with fuel, samples to drop off, the paper's large static instance."""
+    goal: Cell = (0, 0)
+    refuel = [(0, 5), (3, 3)]
+    ice, rock = (1, 4), (4, 1)
+    dropoff = [(3, 0), (4, 5)]
+
+    def label(cell: Cell, fuel: int) -> list[str]:
+        if cell == goal:
+            return ["goal"]
+        r, c = cell
+        lab = None  # one label per state, later wins
+        if 1 <= fuel <= min(r + c - 2, 9):
+            lab = "lowfuel"
+        if fuel == 0:
+            lab = "unsafe"
+        if fuel <= 9:
+            if cell == ice:
+                lab = "ice"
+            if cell == rock:
+                lab = "rock"
+            if cell in dropoff:
+                lab = "dropoff"
+        return [lab] if lab else []
+
+    tokens = {goal: "T", ice: "i", rock: "r", (5, 0): "S"} | {c: "R" for c in refuel} | {c: "D" for c in dropoff}
+    ts = fuel_grid_world(_grid_cells(6, 6), 6, 6, (5, 0), 10, refuel, [goal], label, tokens)
+    return make_problem(
+        "mars-exploration", ts, "F goal & G !unsafe & G((ice | rock) -> F dropoff)",
+        "F lowfuel & F ice & F rock", "static", tie_places=True,
+        description="A rover samples ice and rock, drops them off, and is pushed to run low on fuel.",
+    )
+
+
+BUILTINS: dict[str, Callable[[], Problem]] = {
+    "example1": example1,
+    "small-reactive": small_reactive,
+    "beaver-rescue": beaver_rescue,
+    "motion-primitives": motion_primitives,
+    "refueling": refueling,
+    "mars-exploration": mars_exploration,
+}

@@ -1,0 +1,535 @@
+"""The routing optimization of method.md §5 (and the MILP-agent options of §7) on HiGHS.
+
+One builder serves every variant: MILP-static, MILP-reactive, MILP-mixed, with the
+bidirectional option (c14), cuts tied across places (fuel levels), the test-agent
+state penalties and exclusion of rejected cut sets. The model is assembled in bulk
+as one sparse matrix.
+
+Reductions, none of which changes the optimum of method.md §5:
+
+* **Pruning.** Nodes of G with no path to ``Tgt`` carry no flow and lie on no
+  ``Src -> Tgt`` path, so they (and their edges) are left out of the model; cut
+  counts still refer to the whole G.
+* **Cut groups.** Edges that must share a cut value (c9 ties over the same
+  transition, c14 pairs, fuel levels) share one binary, weighted by the number of
+  edges of G it stands for. A group that touches no constraint c5 is never worth
+  cutting (cutting only lowers flow and tightens feasibility) and gets no binary.
+* **Lexicographic objective in two phases.** ``F - (1/|E|) sum d`` with integral F
+  is maximised by first maximising F and then minimising the cuts with ``F`` fixed;
+  both objectives are integral, so an absolute gap below 1 proves optimality.
+* **Aggregated feasibility flows.** For a history ``q`` with ``K`` kept entry nodes,
+  the ``K`` unit flows of c6-c8 are replaced by one flow in which every entry node
+  supplies one unit, on edges of capacity ``K (1 - d)``. By flow decomposition each
+  unit reaches ``Tgt_sys`` over uncut edges, and conversely ``K`` paths give such a
+  flow, so the feasible cut sets are the same. Each flow lives on the part of
+  G_sys reachable from its entries and co-reachable to ``Tgt_sys``.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Callable
+
+import highspy
+import numpy as np
+import scipy.sparse as sp
+
+from .errors import InconsistentProblem
+from .products import Products, coreachable, reachable
+
+MU_INT = False
+MODES = ("static", "reactive", "mixed")
+
+
+@dataclass
+class MilpOptions:
+    """Options of the routing MILP.
+
+    Attributes
+    ----------
+    mode
+        ``"static"`` (c9 on every transition), ``"reactive"`` (c1-c8) or ``"mixed"``
+        (c1-c8, c9 on ``static_moves``).
+    static_moves
+        ``bool`` mask over the moves of T: the static area of a mixed problem.
+    bidirectional
+        c14: a cut on ``s -> s'`` also cuts ``s' -> s`` (under the same history).
+    tie_places
+        Static cuts are tied between places (cells), not states: one wall per pair
+        of cells across fuel levels.
+    block_states
+        MILP-agent: add ``d_state`` per place entered by a cut and minimise them
+        before the cuts (method.md §7).
+    exclusions
+        Rejected cut sets, each as a list of cut-group keys; each gets the row
+        ``sum d <= |C| - 1``.
+    time_limit
+        Seconds for both phases together (``None``: no limit).
+    mip_rel_gap
+        Relative gap at which HiGHS may stop (reported; ``status`` is then
+        ``"feasible"`` unless the gap is proven 0).
+    threads
+        HiGHS threads (``None``: HiGHS decides).
+    """
+
+    mode: str = "reactive"
+    static_moves: np.ndarray | None = None
+    bidirectional: bool = False
+    tie_places: bool = False
+    block_states: bool = False
+    exclusions: list[list[int]] = field(default_factory=list)
+    time_limit: float | None = None
+    mip_rel_gap: float = 0.0
+    threads: int | None = None
+    progress: Callable[[str], None] | None = None
+
+
+@dataclass
+class RoutingResult:
+    """The answer of the routing MILP.
+
+    Attributes
+    ----------
+    status
+        ``"optimal"`` only when both phases were proven optimal, else ``"feasible"``.
+    flow
+        The flow value F.
+    cut_edges
+        Indices of the edges of G with ``d_e = 1`` (tied copies included).
+    cut_group_keys
+        The keys of the cut groups (used to exclude this cut set later).
+    static_moves_cut
+        ``bool`` mask over T's moves: moves blocked for the whole test.
+    blocked_places
+        Places with ``d_state = 1`` (MILP-agent only).
+    mip_gap
+        Relative gap of the last phase.
+    stats
+        Model sizes and times (problem-format.md's names).
+    """
+
+    status: str
+    flow: int
+    cut_edges: np.ndarray
+    cut_group_keys: list[int]
+    static_moves_cut: np.ndarray
+    blocked_places: np.ndarray
+    mip_gap: float
+    stats: dict
+
+
+class _Model:
+    """Columns and rows collected as arrays, assembled once into a sparse matrix."""
+
+    def __init__(self) -> None:
+        self.n_col = 0
+        self.lower: list[np.ndarray] = []
+        self.upper: list[np.ndarray] = []
+        self.integer: list[np.ndarray] = []
+        self.n_row = 0
+        self.rows: list[np.ndarray] = []
+        self.cols: list[np.ndarray] = []
+        self.vals: list[np.ndarray] = []
+        self.row_lo: list[np.ndarray] = []
+        self.row_hi: list[np.ndarray] = []
+
+    def add_cols(self, n: int, lo: float, hi: float, integer: bool = False) -> np.ndarray:
+        idx = np.arange(self.n_col, self.n_col + n)
+        self.n_col += n
+        self.lower.append(np.full(n, lo, dtype=float))
+        self.upper.append(np.full(n, hi, dtype=float))
+        self.integer.append(np.full(n, integer, dtype=bool))
+        return idx
+
+    def add_rows(self, lo: np.ndarray | float, hi: np.ndarray | float, n: int) -> np.ndarray:
+        idx = np.arange(self.n_row, self.n_row + n)
+        self.n_row += n
+        self.row_lo.append(np.broadcast_to(np.asarray(lo, dtype=float), (n,)).copy())
+        self.row_hi.append(np.broadcast_to(np.asarray(hi, dtype=float), (n,)).copy())
+        return idx
+
+    def add_terms(self, rows: np.ndarray, cols: np.ndarray, vals: np.ndarray | float) -> None:
+        rows = np.asarray(rows, dtype=np.int64)
+        self.rows.append(rows)
+        self.cols.append(np.asarray(cols, dtype=np.int64))
+        self.vals.append(np.broadcast_to(np.asarray(vals, dtype=float), rows.shape).copy())
+
+    def to_highs(self, cost: np.ndarray, maximize: bool) -> highspy.HighsLp:
+        lp = highspy.HighsLp()
+        lp.num_col_ = self.n_col
+        lp.num_row_ = self.n_row
+        lp.col_cost_ = cost
+        lp.col_lower_ = np.concatenate(self.lower) if self.lower else np.zeros(0)
+        lp.col_upper_ = np.concatenate(self.upper) if self.upper else np.zeros(0)
+        lp.row_lower_ = np.concatenate(self.row_lo) if self.row_lo else np.zeros(0)
+        lp.row_upper_ = np.concatenate(self.row_hi) if self.row_hi else np.zeros(0)
+        cat = lambda xs, dt: np.concatenate(xs).astype(dt) if xs else np.zeros(0, dtype=dt)  # noqa: E731
+        a = sp.csc_matrix(
+            (cat(self.vals, float), (cat(self.rows, np.int64), cat(self.cols, np.int64))),
+            shape=(self.n_row, self.n_col),
+        )
+        a.sum_duplicates()
+        lp.a_matrix_.format_ = highspy.MatrixFormat.kColwise
+        lp.a_matrix_.start_ = a.indptr.astype(np.int32)
+        lp.a_matrix_.index_ = a.indices.astype(np.int32)
+        lp.a_matrix_.value_ = a.data
+        lp.a_matrix_.num_col_ = self.n_col
+        lp.a_matrix_.num_row_ = self.n_row
+        integ = np.concatenate(self.integer) if self.integer else np.zeros(0, dtype=bool)
+        lp.integrality_ = [
+            highspy.HighsVarType.kInteger if b else highspy.HighsVarType.kContinuous for b in integ
+        ]
+        lp.sense_ = highspy.ObjSense.kMaximize if maximize else highspy.ObjSense.kMinimize
+        return lp
+
+    @property
+    def n_integer(self) -> int:
+        return int(sum(int(x.sum()) for x in self.integer))
+
+
+@dataclass
+class CutGroups:
+    """Edges of G grouped by shared cut value.
+
+    ``of_edge[e]`` is the group of edge ``e`` (every edge has one; groups of
+    unrestrictable edges are never cut), ``keys[g]`` its stable key, ``weight[g]``
+    the number of edges of G it stands for, ``restrictable[g]`` whether it may be cut,
+    ``static[g]`` whether it is a static (history-independent) group.
+    """
+
+    of_edge: np.ndarray
+    keys: np.ndarray
+    weight: np.ndarray
+    restrictable: np.ndarray
+    static: np.ndarray
+    move_key: np.ndarray  # per move of T, its static tie key
+
+
+def cut_groups(products: Products, options: MilpOptions) -> CutGroups:
+    """Group the edges of G by the cut value they must share (c9, c14, fuel ties)."""
+    ts, g = products.ts, products.virtual
+    static_moves = _static_moves(products, options)
+    place = ts.place if options.tie_places else np.arange(ts.n_states, dtype=np.int32)
+    n_place = int(place.max()) + 1
+    a = place[ts.src].astype(np.int64)
+    b = place[ts.dst].astype(np.int64)
+    if options.bidirectional:
+        a, b = np.minimum(a, b), np.maximum(a, b)
+    move_key = a * n_place + b  # static tie key of each move
+    span = np.int64(n_place) * n_place
+    is_static = static_moves[g.move]
+    key = np.where(is_static, move_key[g.move], span + g.hist[g.src].astype(np.int64) * span + move_key[g.move])
+    keys, of_edge = np.unique(key, return_inverse=True)
+    of_edge = of_edge.ravel()
+    n = keys.size
+    weight = np.bincount(of_edge, minlength=n)
+    unrestrictable = np.bincount(of_edge, weights=~ts.restrictable[g.move], minlength=n) > 0
+    return CutGroups(
+        of_edge=of_edge,
+        keys=keys,
+        weight=weight,
+        restrictable=~unrestrictable,
+        static=keys < span,
+        move_key=move_key,
+    )
+
+
+def _static_moves(products: Products, options: MilpOptions) -> np.ndarray:
+    n = products.ts.n_moves
+    if options.mode == "static":
+        return np.ones(n, dtype=bool)
+    if options.mode == "reactive":
+        return np.zeros(n, dtype=bool)
+    if options.mode == "mixed":
+        if options.static_moves is None:
+            raise ValueError("a mixed MILP needs static_moves")
+        return np.asarray(options.static_moves, dtype=bool)
+    raise ValueError(f"unknown MILP mode {options.mode!r}; expected one of {MODES}")
+
+
+def check_consistency(products: Products) -> np.ndarray:
+    """Raise :class:`InconsistentProblem` for the two cases of method.md §5.
+
+    Returns the mask of G's nodes that can reach ``Tgt``.
+    """
+    g = products.virtual
+    co = coreachable(g.n_nodes, g.src, g.dst, products.target)
+    if not co[g.initial]:
+        raise InconsistentProblem(
+            "unreachable", "the system objective cannot be met: no execution from the start reaches the goal"
+        )
+    if not np.any(products.intermediate & co):
+        raise InconsistentProblem(
+            "unroutable",
+            "the test objective cannot be routed: no execution that meets the system objective "
+            "also meets the test objective",
+        )
+    return co
+
+
+def solve_routing(products: Products, options: MilpOptions | None = None) -> RoutingResult:
+    """Solve the routing MILP for least-restrictive cuts (method.md §5, §7).
+
+    Raises
+    ------
+    InconsistentProblem
+        ``unreachable`` or ``unroutable`` (including a MILP without solution, or
+        maximum flow 0: every routing cut set would trap the system).
+    """
+    options = options or MilpOptions()
+    note = options.progress or (lambda msg: None)
+    t0 = time.perf_counter()
+    g = products.virtual
+    ts = products.ts
+    src_node = g.initial
+    inter = products.intermediate
+    tgt = products.target
+    keep_node = check_consistency(products)
+    groups = cut_groups(products, options)
+    feasibility = options.mode != "static"
+
+    # ---- the model's edges: pruned, no flow into Src or out of Tgt
+    keep_edge = keep_node[g.src] & keep_node[g.dst] & (g.dst != src_node) & ~tgt[g.src]
+    edges = np.flatnonzero(keep_edge)
+    eu, ev = g.src[edges], g.dst[edges]
+    c5_edges = ~inter[eu] & ~inter[ev]  # positions in `edges` that carry a c5 row
+    grp = groups.of_edge[edges]
+    useful = np.zeros(groups.keys.size, dtype=bool)
+    useful[grp[c5_edges]] = True
+    has_var = useful & groups.restrictable
+    group_col = np.full(groups.keys.size, -1, dtype=np.int64)
+
+    m = _Model()
+    f_col = m.add_cols(edges.size, 0.0, 1.0)
+    var_groups = np.flatnonzero(has_var)
+    group_col[var_groups] = m.add_cols(var_groups.size, 0.0, 1.0, integer=True)
+    mu_nodes = np.flatnonzero(keep_node & ~inter & ~tgt)
+    mu_nodes = mu_nodes[mu_nodes != src_node]
+    mu_col = np.full(g.n_nodes, -1, dtype=np.int64)
+    mu_col[mu_nodes] = m.add_cols(mu_nodes.size, 0.0, 1.0, integer=MU_INT)
+
+    # (c2) conservation at nodes outside Src and Tgt
+    cons_nodes = np.flatnonzero(keep_node & ~tgt)
+    cons_nodes = cons_nodes[cons_nodes != src_node]
+    cons_row = np.full(g.n_nodes, -1, dtype=np.int64)
+    cons_row[cons_nodes] = m.add_rows(0.0, 0.0, cons_nodes.size)
+    out_ok = cons_row[eu] >= 0
+    m.add_terms(cons_row[eu[out_ok]], f_col[out_ok], 1.0)
+    in_ok = cons_row[ev] >= 0
+    m.add_terms(cons_row[ev[in_ok]], f_col[in_ok], -1.0)
+
+    # (c3) a cut edge carries no flow
+    dcol = group_col[grp]
+    with_d = np.flatnonzero(dcol >= 0)
+    r = m.add_rows(-np.inf, 1.0, with_d.size)
+    m.add_terms(r, f_col[with_d], 1.0)
+    m.add_terms(r, dcol[with_d], 1.0)
+
+    # (c4, c5) every Src -> Tgt path avoiding I holds a cut: d_uv - mu_u + mu_v >= 0
+    k = np.flatnonzero(c5_edges)
+    u, v, dk = eu[k], ev[k], dcol[k]
+    rhs = np.where(u == src_node, 1.0, 0.0)  # mu_src = 1 moves to the right-hand side
+    no_vars = (dk < 0) & (mu_col[u] < 0) & (mu_col[v] < 0)
+    if np.any(no_vars & (rhs > 0)):
+        raise InconsistentProblem(
+            "unroutable",
+            "the test objective cannot be routed: an unrestrictable move leads from the start "
+            "straight to the goal",
+        )
+    k, u, v, dk, rhs = (x[~no_vars] for x in (k, u, v, dk, rhs))
+    r = m.add_rows(rhs, np.inf, k.size)
+    sel = dk >= 0
+    m.add_terms(r[sel], dk[sel], 1.0)
+    sel = mu_col[u] >= 0
+    m.add_terms(r[sel], mu_col[u[sel]], -1.0)
+    sel = mu_col[v] >= 0
+    m.add_terms(r[sel], mu_col[v[sel]], 1.0)
+
+    # Strengthening (valid, optimum unchanged): some optimal solution has mu_v = 1
+    # exactly on the nodes reachable from Src outside I over uncut edges, and flow
+    # outside I runs only on those nodes, so f_uv <= mu_u and f_uv <= mu_v there.
+    for ends in (eu, ev):
+        sel = np.flatnonzero(mu_col[ends] >= 0)
+        r = m.add_rows(-np.inf, 0.0, sel.size)
+        m.add_terms(r, f_col[sel], 1.0)
+        m.add_terms(r, mu_col[ends[sel]], -1.0)
+
+    # (c6-c8) feasibility flows on G_sys, one aggregated flow per history
+    n_feas_cols = 0
+    if feasibility:
+        n_feas_cols = _add_feasibility(m, products, groups, group_col)
+
+    # MILP-agent: d_state per place entered by a cut, and the exclusions
+    place_col = np.zeros(0, dtype=np.int64)
+    state_places = np.zeros(0, dtype=np.int64)
+    if options.block_states:
+        # every edge of G in a group with a binary enters the place of its head
+        e_all = np.flatnonzero(group_col[groups.of_edge] >= 0)
+        pl = ts.place[ts.dst[g.move[e_all]]].astype(np.int64)
+        pairs = np.unique(np.stack([pl, groups.of_edge[e_all]], axis=1), axis=0)
+        state_places = np.unique(pairs[:, 0])
+        place_col = m.add_cols(state_places.size, 0.0, 1.0, integer=True)
+        pc = place_col[np.searchsorted(state_places, pairs[:, 0])]
+        r = m.add_rows(0.0, np.inf, pairs.shape[0])
+        m.add_terms(r, pc, 1.0)
+        m.add_terms(r, group_col[pairs[:, 1]], -1.0)
+    for excluded in options.exclusions:
+        pos = np.searchsorted(groups.keys, np.asarray(excluded, dtype=np.int64))
+        ok = (pos < groups.keys.size) & (groups.keys[np.minimum(pos, groups.keys.size - 1)] == excluded)
+        cols = group_col[pos[ok]]
+        if not ok.all() or np.any(cols < 0):
+            # a group of the rejected set cannot be cut in this model: the set is already excluded
+            continue
+        r = m.add_rows(-np.inf, float(cols.size - 1), 1)
+        m.add_terms(np.repeat(r, cols.size), cols, 1.0)
+
+    graph_seconds = time.perf_counter() - t0
+    # ---- phase 1: maximum flow
+    cost = np.zeros(m.n_col)
+    out_src = np.flatnonzero(eu == src_node)
+    cost[f_col[out_src]] = 1.0
+    lp = m.to_highs(cost, maximize=True)
+    h = _highs(options)
+    h.passModel(lp)
+    t_solve = time.perf_counter()
+    note("solving the routing MILP, phase 1 of 2: maximum flow")
+    deadline = None if options.time_limit is None else t_solve + options.time_limit
+    status1, gap1 = _run(h, deadline)
+    if status1 == "infeasible":
+        raise InconsistentProblem(
+            "unroutable",
+            "the test objective cannot be routed without trapping the system: no cut set "
+            "routes every successful execution through it while leaving a way to the goal",
+        )
+    x = np.asarray(h.getSolution().col_value)
+    flow = int(round(float(x[f_col[out_src]].sum())))
+    if flow < 1:
+        raise InconsistentProblem(
+            "unroutable",
+            "the test objective cannot be routed without trapping the system: every routing "
+            "cut set blocks all executions to the goal",
+        )
+    # ---- phase 2: fewest cuts (then, for the agent, fewest blocked states first)
+    note(f"solving the routing MILP, phase 2 of 2: fewest cuts at flow {flow}")
+    h.addRow(flow - 0.5, highspy.kHighsInf, out_src.size, f_col[out_src].astype(np.int32), np.ones(out_src.size))
+    cost2 = np.zeros(m.n_col)
+    cost2[group_col[var_groups]] = groups.weight[var_groups]
+    if options.block_states and place_col.size:
+        cost2[place_col] = float(groups.weight[var_groups].sum() + 1)
+    h.changeObjectiveSense(highspy.ObjSense.kMinimize)
+    h.changeColsCost(m.n_col, np.arange(m.n_col, dtype=np.int32), cost2)
+    sol = highspy.HighsSolution()
+    sol.col_value = list(x)
+    sol.value_valid = True
+    h.setSolution(sol)
+    status2, gap2 = _run(h, deadline)
+    if status2 == "infeasible":  # cannot happen: phase 1's solution is feasible
+        raise RuntimeError("phase 2 of the routing MILP lost the phase-1 solution")
+    x = np.asarray(h.getSolution().col_value)
+    solve_seconds = time.perf_counter() - t_solve
+
+    cut = np.zeros(groups.keys.size, dtype=bool)
+    cut[var_groups] = x[group_col[var_groups]] > 0.5
+    cut_edges = np.flatnonzero(cut[groups.of_edge])
+    static_cut_keys = groups.keys[cut & groups.static]
+    static_moves_cut = np.isin(groups.move_key, static_cut_keys) & _static_moves(products, options)
+    blocked = state_places[x[place_col] > 0.5] if place_col.size else np.zeros(0, dtype=np.int64)
+    status = "optimal" if status1 == status2 == "optimal" else "feasible"
+    stats = {
+        "binary_vars": m.n_integer,
+        "continuous_vars": m.n_col - m.n_integer,
+        "constraints": m.n_row + 1,
+        "feasibility_vars": n_feas_cols,
+        "model_edges": int(edges.size),
+        "graph_seconds": graph_seconds,
+        "solve_seconds": solve_seconds,
+        "mip_gap": float(max(gap1, gap2)) if status != "optimal" else 0.0,
+    }
+    return RoutingResult(
+        status=status,
+        flow=flow,
+        cut_edges=cut_edges,
+        cut_group_keys=[int(k) for k in groups.keys[cut]],
+        static_moves_cut=static_moves_cut,
+        blocked_places=blocked,
+        mip_gap=stats["mip_gap"],
+        stats=stats,
+    )
+
+
+def _add_feasibility(m: _Model, products: Products, groups: CutGroups, group_col: np.ndarray) -> int:
+    """Add c6-c8 as one aggregated flow per history; returns the number of columns added."""
+    g, gs = products.virtual, products.system
+    ts = products.ts
+    co = products.system_coreachable
+    sys_tgt = products.system_target
+    # the edge of G in Gr(q) over move t, for every (q, t) that has one
+    gkey = g.hist.astype(np.int64)[g.src] * ts.n_moves + g.move
+    gorder = np.argsort(gkey)
+    gkey_sorted = gkey[gorder]
+    added = 0
+    for q, entries in products.kept_entries.items():
+        supply_nodes = entries[~sys_tgt[entries]]
+        if supply_nodes.size == 0:
+            continue
+        area = reachable(gs.n_nodes, gs.src, gs.dst, np.isin(np.arange(gs.n_nodes), supply_nodes)) & co
+        e = np.flatnonzero(area[gs.src] & area[gs.dst] & ~sys_tgt[gs.src])
+        cap = float(supply_nodes.size)
+        cols = m.add_cols(e.size, 0.0, cap)
+        added += e.size
+        nodes = np.flatnonzero(area & ~sys_tgt)
+        row_of = np.full(gs.n_nodes, -1, dtype=np.int64)
+        supply = np.isin(nodes, supply_nodes).astype(float)
+        row_of[nodes] = m.add_rows(supply, supply, nodes.size)
+        s, d = gs.src[e], gs.dst[e]
+        m.add_terms(row_of[s], cols, 1.0)
+        ok = row_of[d] >= 0
+        m.add_terms(row_of[d[ok]], cols[ok], -1.0)
+        # (c7) no flow over a transition cut under q: x + K d <= K
+        want = np.int64(q) * ts.n_moves + gs.move[e]
+        pos = np.searchsorted(gkey_sorted, want)
+        pos = np.minimum(pos, gkey_sorted.size - 1)
+        found = gkey_sorted[pos] == want
+        dcol = np.full(e.size, -1, dtype=np.int64)
+        dcol[found] = group_col[groups.of_edge[gorder[pos[found]]]]
+        sel = np.flatnonzero(dcol >= 0)
+        r = m.add_rows(-np.inf, cap, sel.size)
+        m.add_terms(r, cols[sel], 1.0)
+        m.add_terms(r, dcol[sel], cap)
+    return added
+
+
+def _highs(options: MilpOptions) -> highspy.Highs:
+    h = highspy.Highs()
+    h.setOptionValue("output_flag", False)
+    if options.threads is not None:
+        highspy.Highs.resetGlobalScheduler(True)
+        h.setOptionValue("threads", int(options.threads))
+    h.setOptionValue("mip_rel_gap", float(options.mip_rel_gap))
+    # both objectives are integral: an absolute gap below 1 proves optimality
+    h.setOptionValue("mip_abs_gap", 1.0 - 1e-6)
+    return h
+
+
+def _run(h: highspy.Highs, deadline: float | None) -> tuple[str, float]:
+    """Run HiGHS until done or the deadline; return (status, relative gap)."""
+    if deadline is not None:
+        h.setOptionValue("time_limit", max(deadline - time.perf_counter(), 0.01))
+    h.run()
+    ms = h.getModelStatus()
+    info = h.getInfo()
+    has_sol = info.primal_solution_status == highspy.SolutionStatus.kSolutionStatusFeasible
+    if ms == highspy.HighsModelStatus.kOptimal:
+        # HiGHS says optimal within its gap tolerances; integral objectives make an
+        # absolute gap below 1 a proof, a larger one (a user's mip_rel_gap) is not
+        if abs(info.objective_function_value - info.mip_dual_bound) < 1.0 - 1e-6:
+            return "optimal", 0.0
+        return "feasible", float(info.mip_gap)
+    if ms == highspy.HighsModelStatus.kInfeasible:
+        return "infeasible", float("inf")
+    if has_sol:
+        return "feasible", float(info.mip_gap)
+    if ms in (highspy.HighsModelStatus.kTimeLimit, highspy.HighsModelStatus.kInterrupt):
+        raise TimeoutError("the routing MILP found no solution within the time limit")
+    raise RuntimeError(f"HiGHS stopped with status {h.modelStatusToString(ms)}")

@@ -1,0 +1,115 @@
+"""From a problem to a checked test: automata, products, routing MILP, strategy, checks.
+
+:func:`synthesize` is the one entry point for static, reactive and mixed problems;
+agent problems continue in :mod:`synthesis.agent` from the same pieces.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+
+from .automata import SpecificationProduct, specification_product
+from .milp import MilpOptions, RoutingResult, solve_routing
+from .problems import Problem
+from .products import Products, build_products
+from .strategy import TestStrategy
+from .verify import CheckReport, check_test
+
+
+@dataclass
+class SynthesisOptions:
+    """User-facing solver options (``None`` fields fall back to the problem's)."""
+
+    time_limit: float | None = None
+    mip_rel_gap: float = 0.0
+    threads: int | None = None
+    setting: str | None = None
+    progress: Callable[[str], None] | None = None
+
+
+@dataclass
+class SynthesizedTest:
+    """A synthesized, checked test: everything an environment or a report needs."""
+
+    __test__ = False
+
+    problem: Problem
+    spec: SpecificationProduct
+    products: Products
+    routing: RoutingResult
+    strategy: TestStrategy
+    checks: CheckReport
+    graph_seconds: float
+    agent: Any = None  # the test agent's synthesized strategy (agent problems)
+    extra_stats: dict = field(default_factory=dict)
+
+    @property
+    def cut_edges_outside_intermediate(self) -> np.ndarray:
+        """The cut set C: cut edges of G outside ``E(I)``."""
+        e = self.routing.cut_edges
+        return e[~self.products.touches_intermediate[e]]
+
+
+def build_graphs(problem: Problem) -> tuple[SpecificationProduct, Products]:
+    """Automata and product graphs of a problem (method.md §3-4)."""
+    ts = problem.system
+    spec = specification_product(problem.system_objective, problem.test_objective, ts.letters())
+    return spec, build_products(ts, spec)
+
+
+def milp_options(problem: Problem, options: SynthesisOptions) -> MilpOptions:
+    """The routing MILP options a problem asks for."""
+    mode = "mixed" if problem.kind in ("mixed", "agent") else problem.kind
+    return MilpOptions(
+        mode=mode,
+        static_moves=problem.static_moves,
+        bidirectional=problem.bidirectional_cuts,
+        tie_places=problem.tie_places,
+        block_states=problem.kind == "agent",
+        time_limit=options.time_limit if options.time_limit is not None else problem.time_limit,
+        mip_rel_gap=options.mip_rel_gap,
+        threads=options.threads,
+        progress=options.progress,
+    )
+
+
+def strategy_from_routing(products: Products, routing: RoutingResult, setting: str) -> TestStrategy:
+    """``C(q)`` per history and the static obstacles, as a test strategy (method.md §6)."""
+    g, ts = products.virtual, products.ts
+    e = routing.cut_edges
+    e = e[~products.touches_intermediate[e]]
+    restrictions = np.zeros((g.n_hist, ts.n_moves), dtype=bool)
+    restrictions[g.hist[g.src[e]], g.move[e]] = True
+    return TestStrategy(routing.static_moves_cut.copy(), restrictions, setting)
+
+
+def synthesize(problem: Problem, options: SynthesisOptions | None = None) -> SynthesizedTest:
+    """Synthesize and check the least-restrictive test of a static, reactive or mixed problem.
+
+    Raises
+    ------
+    InconsistentProblem
+        If the goal is unreachable or the test objective cannot be routed.
+    CheckFailed
+        If the answer fails an independent check (a FlowTest bug).
+    """
+    if problem.kind == "agent":
+        from .agent import synthesize_agent_test
+
+        return synthesize_agent_test(problem, options)
+    options = options or SynthesisOptions()
+    note = options.progress or (lambda msg: None)
+    t0 = time.perf_counter()
+    note("building automata and product graphs")
+    spec, products = build_graphs(problem)
+    graph_seconds = time.perf_counter() - t0
+    routing = solve_routing(products, milp_options(problem, options))
+    setting = options.setting or problem.extras.get("setting", "instantaneous")
+    strategy = strategy_from_routing(products, routing, setting)
+    note("checking the test (bypass flow, feasibility)")
+    checks = check_test(products, strategy, routing.flow)
+    return SynthesizedTest(problem, spec, products, routing, strategy, checks, graph_seconds)

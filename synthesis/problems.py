@@ -1,0 +1,379 @@
+"""Test problems: a system, its objectives and the kind of test environment.
+
+Problems come from TOML files (problem-format.md) or from the built-in registry
+(paper-examples.md). :func:`load_problem` accepts either a path or a built-in name.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from .errors import ProblemError
+from .specs import Objective, check_propositions, parse_objective
+from .systems import Cell, TransitionSystem, fuel_grid_world, graph_system, grid_world
+
+KINDS = ("static", "reactive", "mixed", "agent")
+
+
+@dataclass
+class Problem:
+    """Everything synthesis needs.
+
+    Attributes
+    ----------
+    name
+        The problem's name (used in outputs).
+    system
+        The transition system T with labels and harness.
+    system_objective, test_objective
+        Parsed objectives (``phi_sys``, ``phi_test``).
+    kind
+        ``"static"``, ``"reactive"``, ``"mixed"`` or ``"agent"``.
+    bidirectional_cuts
+        c14 (default: true for static problems, false otherwise).
+    tie_places
+        Tie static cuts across states of the same place (fuel levels).
+    static_moves
+        ``bool`` mask over moves: the static area of a mixed problem.
+    time_limit
+        Default solver time limit in seconds (``None``: none).
+    agent
+        The test agent of an agent problem (see :mod:`synthesis.agent`).
+    description
+        One paragraph for people.
+    """
+
+    name: str
+    system: TransitionSystem
+    system_objective: Objective
+    test_objective: Objective
+    kind: str
+    bidirectional_cuts: bool
+    tie_places: bool = False
+    static_moves: np.ndarray | None = None
+    time_limit: float | None = None
+    agent: Any = None
+    description: str = ""
+    extras: dict = field(default_factory=dict)
+
+
+def make_problem(
+    name: str,
+    system: TransitionSystem,
+    system_objective: str,
+    test_objective: str,
+    kind: str,
+    bidirectional_cuts: bool | None = None,
+    **kw: Any,
+) -> Problem:
+    """Validate and assemble a problem.
+
+    Raises
+    ------
+    ProblemError
+        On an unknown kind, a formula outside the fragment, an unknown proposition,
+        or a system objective whose goal is not at terminal states.
+    """
+    if kind not in KINDS:
+        raise ProblemError(f"unknown environment kind {kind!r}; expected one of {', '.join(KINDS)}")
+    sys_obj = parse_objective(system_objective, "system")
+    test_obj = parse_objective(test_objective, "test")
+    known = system.propositions() | set(kw.pop("declared_propositions", ()))
+    check_propositions(sys_obj, known, "system")
+    check_propositions(test_obj, known, "test")
+    _check_goal_terminal(system, sys_obj)
+    if bidirectional_cuts is None:
+        bidirectional_cuts = kind == "static"
+    if kind == "mixed" and kw.get("static_moves") is None:
+        raise ProblemError("a mixed problem needs [environment] static = [...] (its static area)")
+    return Problem(name, system, sys_obj, test_obj, kind, bool(bidirectional_cuts), **kw)
+
+
+def _check_goal_terminal(ts: TransitionSystem, objective: Objective) -> None:
+    """method.md §2: some visit task's last proposition holds only at terminal states."""
+    from .specs import holds
+
+    for task in objective.tasks:
+        if not task.is_visit:
+            continue
+        last = task.props[-1]
+        where = np.array([holds(last, a) for a in ts.labels])
+        if where.any() and not np.any(where & ~ts.terminal):
+            return
+    raise ProblemError(
+        "the system objective needs a visit task whose last proposition holds only at terminal "
+        "states (the goal); make the goal cells terminal or fix the labels"
+    )
+
+
+# ----------------------------------------------------------------------- TOML files
+
+_TOP_KEYS = {"name", "description", "system", "labels", "objectives", "environment"}
+_GRID_KEYS = {"grid", "start", "terminal", "restrictable"}
+_GRAPH_KEYS = {"states", "edges", "start", "terminal", "stay", "restrictable"}
+_OBJ_KEYS = {"system", "test"}
+_ENV_KEYS = {"kind", "static", "bidirectional_cuts", "time_limit", "setting", "agent"}
+
+
+def _unknown(section: str, got: dict, allowed: set[str]) -> None:
+    extra = sorted(set(got) - allowed)
+    if extra:
+        raise ProblemError(
+            f"unknown key {extra[0]!r} in {section} (allowed: {', '.join(sorted(allowed))})"
+        )
+
+
+def _table(d: dict, key: str, where: str) -> dict:
+    v = d.get(key)
+    if v is None:
+        raise ProblemError(f"missing section [{key}]{where}")
+    if not isinstance(v, dict):
+        raise ProblemError(f"[{key}] must be a table{where}")
+    return v
+
+
+def parse_grid(text: str, where: str = "[system] grid") -> tuple[list[list[str]], int, int]:
+    """Split grid text into rows of tokens; all rows must have the same width."""
+    if not isinstance(text, str):
+        raise ProblemError(f"{where} must be a string of whitespace-separated tokens")
+    rows = [line.split() for line in text.strip("\n").splitlines() if line.strip()]
+    if not rows:
+        raise ProblemError(f"{where} is empty")
+    width = len(rows[0])
+    for i, r in enumerate(rows):
+        if len(r) != width:
+            raise ProblemError(f"{where}: row {i} has {len(r)} cells, row 0 has {width}")
+    return rows, len(rows), width
+
+
+def _cells_of(spec: Any, tokens: dict[str, list[Cell]], where: str, rows: int, cols: int) -> list[Cell]:
+    """Resolve a token name, a ``[row, col]`` cell, or a list of them."""
+    if isinstance(spec, str):
+        if spec not in tokens:
+            raise ProblemError(f"{where}: no cell of the grid holds token {spec!r}")
+        return list(tokens[spec])
+    if isinstance(spec, list) and len(spec) == 2 and all(isinstance(x, int) for x in spec):
+        r, c = spec
+        if not (0 <= r < rows and 0 <= c < cols):
+            raise ProblemError(f"{where}: cell [{r}, {c}] is outside the {rows}x{cols} grid")
+        return [(r, c)]
+    if isinstance(spec, list):
+        out: list[Cell] = []
+        for item in spec:
+            if isinstance(item, list) and not (len(item) == 2 and all(isinstance(x, int) for x in item)):
+                raise ProblemError(f"{where}: {item!r} is neither a token nor a [row, col] cell")
+            out.extend(_cells_of(item, tokens, where, rows, cols))
+        return out
+    raise ProblemError(f"{where}: {spec!r} is neither a token nor a [row, col] cell")
+
+
+def problem_from_dict(data: dict, source: str = "<problem>") -> Problem:
+    """Build a problem from the parsed TOML of problem-format.md."""
+    where = f" of {source}"
+    _unknown(f"the top level{where}", data, _TOP_KEYS)
+    name = data.get("name", Path(source).stem)
+    if not isinstance(name, str):
+        raise ProblemError(f"`name`{where} must be a string")
+    system = _table(data, "system", where)
+    objectives = _table(data, "objectives", where)
+    env = _table(data, "environment", where)
+    labels = data.get("labels", {})
+    if not isinstance(labels, dict):
+        raise ProblemError(f"[labels]{where} must be a table")
+    _unknown(f"[objectives]{where}", objectives, _OBJ_KEYS)
+    _unknown(f"[environment]{where}", env, _ENV_KEYS)
+    for key in ("system", "test"):
+        if key not in objectives:
+            raise ProblemError(f"missing `{key}` in [objectives]{where}")
+    if "kind" not in env:
+        raise ProblemError(f"missing `kind` in [environment]{where}")
+    kind = env["kind"]
+    for key in ("start", "terminal"):
+        if key not in system:
+            raise ProblemError(f"missing `{key}` in [system]{where}")
+    if "grid" in system:
+        _unknown(f"[system]{where}", system, _GRID_KEYS)
+        ts, cell_of = _grid_from_toml(system, labels, where)
+    elif "states" in system:
+        _unknown(f"[system]{where}", system, _GRAPH_KEYS)
+        ts, cell_of = _graph_from_toml(system, labels, where)
+    else:
+        raise ProblemError(f"[system]{where} needs either `grid` or `states` and `edges`")
+    static_moves = None
+    if "static" in env:
+        static_moves = _moves_mask(ts, env["static"], cell_of, f"[environment] static{where}")
+    if "restrictable" in system:
+        ts.restrictable = _moves_mask(ts, system["restrictable"], cell_of, f"[system] restrictable{where}")
+    time_limit = env.get("time_limit")
+    if time_limit is not None and (not isinstance(time_limit, (int, float)) or time_limit <= 0):
+        raise ProblemError(f"`time_limit` in [environment]{where} must be a positive number of seconds")
+    bidir = env.get("bidirectional_cuts")
+    if bidir is not None and not isinstance(bidir, bool):
+        raise ProblemError(f"`bidirectional_cuts` in [environment]{where} must be true or false")
+    extras: dict = {}
+    if "setting" in env:
+        extras["setting"] = env["setting"]
+    kw: dict[str, Any] = {"static_moves": static_moves, "time_limit": time_limit, "extras": extras}
+    if "agent" in env:
+        from .agent import agent_from_toml  # the test agent's own section
+
+        kw["agent"] = agent_from_toml(env["agent"], ts, cell_of, f"[environment.agent]{where}")
+    kw["declared_propositions"] = set(labels)
+    return make_problem(
+        name, ts, objectives["system"], objectives["test"], kind, bidir, description=data.get("description", ""), **kw
+    )
+
+
+def _grid_from_toml(system: dict, labels: dict, where: str) -> tuple[TransitionSystem, Callable[[Any, str], list[int]]]:
+    rows, n_rows, n_cols = parse_grid(system["grid"], f"[system] grid{where}")
+    tokens: dict[str, list[Cell]] = {}
+    free: list[Cell] = []
+    named: dict[Cell, str] = {}
+    for r, row in enumerate(rows):
+        for c, tok in enumerate(row):
+            if tok == "#":
+                continue
+            free.append((r, c))
+            if tok != ".":
+                tokens.setdefault(tok, []).append((r, c))
+                named[(r, c)] = tok
+    if not free:
+        raise ProblemError(f"[system] grid{where} has no free cell")
+    start_cells = _cells_of(system["start"], tokens, f"[system] start{where}", n_rows, n_cols)
+    if len(start_cells) != 1:
+        raise ProblemError(f"[system] start{where} must name exactly one cell, got {len(start_cells)}")
+    start = start_cells[0]
+    if start not in set(free):
+        raise ProblemError(f"[system] start{where}: cell {list(start)} is blocked")
+    terminal = _cells_of(system["terminal"], tokens, f"[system] terminal{where}", n_rows, n_cols)
+    if not terminal:
+        raise ProblemError(f"[system] terminal{where} is empty: a test must be able to end")
+    free_set = set(free)
+    for c in terminal:
+        if c not in free_set:
+            raise ProblemError(f"[system] terminal{where}: cell {list(c)} is blocked")
+    lab: dict[Cell, set[str]] = {}
+    for prop, spec in labels.items():
+        for c in _cells_of(spec, tokens, f"[labels] {prop}{where}", n_rows, n_cols):
+            if c not in free_set:
+                raise ProblemError(f"[labels] {prop}{where}: cell {list(c)} is blocked")
+            lab.setdefault(c, set()).add(prop)
+    ts = grid_world(free, n_rows, n_cols, start, terminal, lab, named)
+
+    def cell_of(spec: Any, at: str) -> list[int]:
+        cells = _cells_of(spec, tokens, at, n_rows, n_cols)
+        out = []
+        for c in cells:
+            if c not in free_set:
+                raise ProblemError(f"{at}: cell {list(c)} is blocked")
+            out.append(ts.index(c))
+        return out
+
+    return ts, cell_of
+
+
+def _graph_from_toml(system: dict, labels: dict, where: str) -> tuple[TransitionSystem, Callable[[Any, str], list[int]]]:
+    states = system["states"]
+    if not isinstance(states, list) or not all(isinstance(s, str) for s in states):
+        raise ProblemError(f"[system] states{where} must be a list of state names")
+    if not states:
+        raise ProblemError(f"[system] states{where} is empty")
+    edges = system.get("edges", [])
+    if not isinstance(edges, list) or not all(
+        isinstance(e, list) and len(e) == 2 and all(isinstance(x, str) for x in e) for e in edges
+    ):
+        raise ProblemError(f"[system] edges{where} must be a list of [from, to] state-name pairs")
+    start = system["start"]
+    if not isinstance(start, str):
+        raise ProblemError(f"[system] start{where} must be a state name")
+    terminal = system["terminal"]
+    if isinstance(terminal, str):
+        terminal = [terminal]
+    if not isinstance(terminal, list) or not terminal:
+        raise ProblemError(f"[system] terminal{where} must be a non-empty list of state names")
+    lab: dict[str, set[str]] = {}
+    known = set(states)
+    for prop, spec in labels.items():
+        names = [spec] if isinstance(spec, str) else spec
+        if not isinstance(names, list):
+            raise ProblemError(f"[labels] {prop}{where} must be a state name or a list of them")
+        for s in names:
+            if s not in known:
+                raise ProblemError(f"[labels] {prop}{where}: unknown state {s!r}")
+            lab.setdefault(s, set()).add(prop)
+    stay = system.get("stay", True)
+    if not isinstance(stay, bool):
+        raise ProblemError(f"[system] stay{where} must be true or false")
+    ts = graph_system(states, [tuple(e) for e in edges], start, terminal, lab, stay)
+
+    def cell_of(spec: Any, at: str) -> list[int]:
+        names = [spec] if isinstance(spec, str) else spec
+        out = []
+        for s in names:
+            if not isinstance(s, str) or s not in known:
+                raise ProblemError(f"{at}: unknown state {s!r}")
+            out.append(ts.index(s))
+        return out
+
+    return ts, cell_of
+
+
+def _moves_mask(ts: TransitionSystem, spec: Any, cell_of: Callable[[Any, str], list[int]], where: str) -> np.ndarray:
+    """A list of transitions ``[from, to]`` (cells, tokens or state names) as a move mask."""
+    if not isinstance(spec, list):
+        raise ProblemError(f"{where} must be a list of [from, to] transitions")
+    index = ts.move_index()
+    mask = np.zeros(ts.n_moves, dtype=bool)
+    for item in spec:
+        if not (isinstance(item, list) and len(item) == 2):
+            raise ProblemError(f"{where}: {item!r} is not a [from, to] transition")
+        for a in cell_of(item[0], where):
+            for b in cell_of(item[1], where):
+                e = index.get((a, b))
+                if e is None:
+                    raise ProblemError(f"{where}: there is no move from {ts.states[a]} to {ts.states[b]}")
+                mask[e] = True
+    return mask
+
+
+def load_problem_file(path: str | Path) -> Problem:
+    """Read a TOML problem file.
+
+    Raises
+    ------
+    ProblemError
+        If the file cannot be read or parsed, or describes an invalid problem.
+    """
+    p = Path(path)
+    try:
+        raw = p.read_bytes()
+    except OSError as exc:
+        raise ProblemError(f"cannot read problem file {str(p)!r}: {exc.strerror or exc}") from None
+    try:
+        data = tomllib.loads(raw.decode("utf-8"))
+    except UnicodeDecodeError:
+        raise ProblemError(f"problem file {str(p)!r} is not UTF-8 text") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ProblemError(f"{p}: invalid TOML: {exc}") from None
+    return problem_from_dict(data, str(p))
+
+
+def load_problem(name_or_path: str) -> Problem:
+    """A built-in problem by name, or a TOML file by path."""
+    from .builtins import BUILTINS
+
+    if name_or_path in BUILTINS:
+        return BUILTINS[name_or_path]()
+    p = Path(name_or_path)
+    if p.suffix.lower() == ".toml" or p.exists():
+        return load_problem_file(p)
+    raise ProblemError(
+        f"unknown problem {name_or_path!r}: not a file, and not a built-in "
+        f"({', '.join(sorted(BUILTINS))})"
+    )
+

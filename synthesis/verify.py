@@ -1,0 +1,113 @@
+"""Independent checks of a synthesized test (Theorems 1 and 2 of the method).
+
+Nothing here reads the MILP: the checks take the restrictions an environment will
+enforce and search the product graphs directly.
+
+* **bypass flow** (Theorem 1): the maximum flow from ``Src`` to ``Tgt`` on G without
+  the edges ``E(I)`` and without the restricted edges must be 0, i.e. no execution
+  reaches the goal without passing the test objective;
+* **flow**: the maximum flow on G without the restricted edges equals the MILP's F;
+* **feasibility** (Theorem 2): from every history's kept entry nodes, ``Tgt_sys`` is
+  reachable on G_sys over moves not restricted under that history.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import maximum_flow
+
+from .errors import CheckFailed
+from .products import Products, coreachable
+from .strategy import TestStrategy
+
+
+def restricted_edges(products: Products, strategy: TestStrategy) -> np.ndarray:
+    """``bool[m]``: the edges of G blocked by the strategy (history of the tail)."""
+    g = products.virtual
+    return strategy.blocked[g.hist[g.src], g.move]
+
+
+def max_flow(n: int, src: np.ndarray, dst: np.ndarray, source: int, targets: np.ndarray) -> int:
+    """Maximum flow with unit edge capacities from ``source`` to the set ``targets``."""
+    if targets[source]:
+        return 0
+    t = np.flatnonzero(targets)
+    sink = n
+    big = max(int(src.size), 1)
+    rows = np.concatenate([src, t])
+    cols = np.concatenate([dst, np.full(t.size, sink)])
+    caps = np.concatenate([np.ones(src.size, dtype=np.int32), np.full(t.size, big, dtype=np.int32)])
+    keep = rows != cols
+    cap = sp.csr_matrix((caps[keep], (rows[keep], cols[keep])), shape=(n + 1, n + 1))
+    cap.sum_duplicates()
+    return int(maximum_flow(cap, source, sink).flow_value)
+
+
+def bypass_flow(products: Products, blocked_edges: np.ndarray) -> int:
+    """Max flow ``Src -> Tgt`` on G without ``E(I)`` and without ``blocked_edges``."""
+    g = products.virtual
+    keep = ~products.touches_intermediate & ~blocked_edges
+    return max_flow(g.n_nodes, g.src[keep], g.dst[keep], g.initial, products.target)
+
+
+def routed_flow(products: Products, blocked_edges: np.ndarray) -> int:
+    """Max flow ``Src -> Tgt`` on G without ``blocked_edges``."""
+    g = products.virtual
+    keep = ~blocked_edges
+    return max_flow(g.n_nodes, g.src[keep], g.dst[keep], g.initial, products.target)
+
+
+def trapped_entries(products: Products, strategy: TestStrategy) -> dict[int, np.ndarray]:
+    """Per history, kept entry nodes (of G_sys) with no way to ``Tgt_sys`` under its restrictions."""
+    gs = products.system
+    out: dict[int, np.ndarray] = {}
+    for q, entries in products.kept_entries.items():
+        keep = ~strategy.blocked[q, gs.move]
+        ok = coreachable(gs.n_nodes, gs.src[keep], gs.dst[keep], products.system_target)
+        bad = entries[~ok[entries]]
+        if bad.size:
+            out[q] = bad
+    return out
+
+
+@dataclass
+class CheckReport:
+    """Outcome of the checks; ``ok`` when every one holds."""
+
+    bypass_flow: int
+    flow: int
+    expected_flow: int
+    trapped: dict[int, np.ndarray] = field(default_factory=dict)
+
+    @property
+    def ok(self) -> bool:
+        return self.bypass_flow == 0 and self.flow == self.expected_flow and self.flow >= 1 and not self.trapped
+
+    def problems(self) -> list[str]:
+        msgs = []
+        if self.bypass_flow:
+            msgs.append(f"bypass flow is {self.bypass_flow}, not 0: some execution avoids the test objective")
+        if self.flow != self.expected_flow:
+            msgs.append(f"flow under the restrictions is {self.flow}, the MILP said {self.expected_flow}")
+        if self.flow < 1:
+            msgs.append("no execution reaches the goal under the restrictions")
+        for q, nodes in self.trapped.items():
+            msgs.append(f"history q{q}: {nodes.size} entry node(s) have no way to the goal")
+        return msgs
+
+
+def check_test(products: Products, strategy: TestStrategy, expected_flow: int, raise_on_failure: bool = True) -> CheckReport:
+    """Run every check; raise :class:`CheckFailed` (a FlowTest bug) if one fails."""
+    blocked = restricted_edges(products, strategy)
+    report = CheckReport(
+        bypass_flow=bypass_flow(products, blocked),
+        flow=routed_flow(products, blocked),
+        expected_flow=expected_flow,
+        trapped=trapped_entries(products, strategy),
+    )
+    if raise_on_failure and not report.ok:
+        raise CheckFailed("synthesized test failed its checks: " + "; ".join(report.problems()))
+    return report
