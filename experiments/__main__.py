@@ -1,0 +1,7 @@
+"""``python -m experiments``: the same command line as the ``flowtest`` script."""
+
+from __future__ import annotations
+
+from .cli import main
+
+raise SystemExit(main())

@@ -1,0 +1,558 @@
+"""The ``flowtest`` command line.
+
+``flowtest synthesize PROBLEM`` turns a problem (a TOML file or a built-in name) into a
+checked test: it prints a summary (or, with ``--json``, exactly the JSON object that
+problem-format.md fixes), and can write the test artifact (``--out``) and a picture
+(``--plot``). Progress goes to standard error only, so standard output stays clean for
+scripts.
+
+Subcommands are registered with :func:`command`: each is a function taking the parsed
+arguments and returning an exit code, plus a function that declares its arguments.
+Every subcommand gets the same error handling from :func:`main`, which is the single
+place that maps FlowTest's exceptions to exit codes:
+
+====  =========================================================================
+code  meaning
+====  =========================================================================
+0     success
+1     an unexpected internal error (traceback printed: a FlowTest bug)
+2     invalid input (:class:`~synthesis.errors.ProblemError`, bad options,
+      an output file that exists without ``--force``)
+3     inconsistent problem (:class:`~synthesis.errors.InconsistentProblem`)
+4     a synthesized test failed its independent check
+      (:class:`~synthesis.errors.CheckFailed`, a FlowTest bug)
+5     no solution within the time limit (:class:`TimeoutError`)
+130   interrupted (Ctrl-C)
+====  =========================================================================
+
+Adding a subcommand (``demo``, ``train``, ``evaluate``, ``bench``) takes one decorated
+function, e.g. in this module or in a module imported by it::
+
+    def _demo_arguments(p: argparse.ArgumentParser) -> None:
+        p.add_argument("PROBLEM")
+
+    @command("demo", "run a scripted system through a test", _demo_arguments)
+    def run_demo(args: argparse.Namespace) -> int:
+        ...
+        return EXIT_OK
+"""
+
+from __future__ import annotations
+
+import argparse
+import io
+import json
+import math
+import os
+import shutil
+import sys
+import threading
+import time
+import traceback
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Sequence, TextIO
+
+import numpy as np
+
+from synthesis import pipeline
+from synthesis.errors import CheckFailed, InconsistentProblem, ProblemError
+
+EXIT_OK = 0
+EXIT_INTERNAL = 1
+EXIT_INVALID = 2
+EXIT_INCONSISTENT = 3
+EXIT_CHECK_FAILED = 4
+EXIT_TIMEOUT = 5
+EXIT_INTERRUPTED = 130
+
+PROG = "flowtest"
+
+#: What each :attr:`InconsistentProblem.reason` means, for the one-line error message.
+INCONSISTENT_REASONS: dict[str, str] = {
+    "unreachable": "the goal is unreachable",
+    "unroutable": "the test objective is unroutable",
+    "infeasible": "no test agent strategy is feasible",
+}
+
+
+# --------------------------------------------------------------------------- registry
+
+
+@dataclass(frozen=True)
+class Command:
+    """A subcommand: its name, one-line help, argument declaration and body."""
+
+    name: str
+    help: str
+    configure: Callable[[argparse.ArgumentParser], None]
+    run: Callable[[argparse.Namespace], int]
+
+
+#: Subcommands in the order ``flowtest --help`` lists them.
+COMMANDS: dict[str, Command] = {}
+
+
+def command(
+    name: str, help: str, configure: Callable[[argparse.ArgumentParser], None]
+) -> Callable[[Callable[[argparse.Namespace], int]], Callable[[argparse.Namespace], int]]:
+    """Register the decorated function as the subcommand ``name``.
+
+    The function receives the parsed arguments and returns the exit code; it may raise
+    the errors listed in the module docstring and :func:`main` maps them to exit codes,
+    so subcommands never print tracebacks or call ``sys.exit`` themselves.
+    """
+
+    def register(run: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Namespace], int]:
+        if name in COMMANDS:
+            raise ValueError(f"subcommand {name!r} is registered twice")
+        COMMANDS[name] = Command(name, help, configure, run)
+        return run
+
+    return register
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser with every registered subcommand."""
+    parser = argparse.ArgumentParser(
+        prog=PROG,
+        description="Flow-based synthesis of reactive tests for discrete decision-making systems.",
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for cmd in COMMANDS.values():
+        p = sub.add_parser(cmd.name, help=cmd.help, description=cmd.help)
+        cmd.configure(p)
+        p.set_defaults(run=cmd.run)
+    return parser
+
+
+# --------------------------------------------------------------------------- progress
+
+
+class StageProgress:
+    """Stage messages on standard error, with a live elapsed-time indicator on a TTY.
+
+    Called with a message, it starts a new stage. On a terminal the stage is one line
+    that a small background thread rewrites (``\\r``) with the stage's elapsed time once
+    the stage has run longer than ``delay`` seconds, so a long MILP solve visibly
+    progresses; elsewhere (a file, a pipe, a CI log) each stage is printed once as a
+    plain line, because carriage returns make logs unreadable. Nothing is ever written
+    to standard output.
+
+    Use it as a context manager so the indicator thread always stops and the last line
+    is terminated, even when synthesis raises.
+    """
+
+    PREFIX = f"{PROG}: "
+
+    def __init__(
+        self,
+        stream: TextIO | None = None,
+        *,
+        enabled: bool = True,
+        live: bool | None = None,
+        delay: float = 1.0,
+        interval: float = 0.2,
+    ) -> None:
+        self.stream: TextIO = stream if stream is not None else sys.stderr
+        self.enabled = enabled
+        if live is None:
+            isatty = getattr(self.stream, "isatty", None)
+            live = bool(isatty and isatty())
+        self.live = enabled and live
+        self.delay = delay
+        self.interval = interval
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._message: str | None = None  # the stage whose line is still open (live mode)
+        self._width = 0  # characters on the open line
+        self._started = 0.0
+        self._t0 = time.perf_counter()
+
+    # -- context manager
+    def __enter__(self) -> "StageProgress":
+        if self.live:
+            self._thread = threading.Thread(target=self._tick, name="flowtest-progress", daemon=True)
+            self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- stages
+    def __call__(self, message: str) -> None:
+        """Start the stage ``message`` (the ``progress`` callback of synthesis)."""
+        if not self.enabled:
+            return
+        with self._lock:
+            self._end_line()
+            self._started = time.perf_counter()
+            if self.live:
+                self._message = message
+                self._rewrite(self.PREFIX + message)
+            else:
+                self._write(self.PREFIX + message + "\n")
+
+    def done(self, message: str) -> None:
+        """A final line (e.g. the total time), printed in every mode."""
+        if not self.enabled:
+            return
+        with self._lock:
+            self._end_line()
+            self._write(self.PREFIX + message + "\n")
+
+    def elapsed(self) -> float:
+        """Seconds since this reporter was created."""
+        return time.perf_counter() - self._t0
+
+    def close(self) -> None:
+        """Stop the indicator thread and terminate the open line."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join()
+            self._thread = None
+        with self._lock:
+            self._end_line()
+
+    # -- internals (call with the lock held)
+    def _end_line(self) -> None:
+        if self._message is not None:
+            self._rewrite(f"{self.PREFIX}{self._message} ({time.perf_counter() - self._started:.1f} s)")
+            self._write("\n")
+            self._message = None
+            self._width = 0
+
+    def _rewrite(self, line: str) -> None:
+        """Replace the open line: fit it to the terminal, blank out what it no longer covers."""
+        columns = self._columns() - 1
+        if len(line) > columns:
+            line = line[: max(columns - 3, 0)] + "..."
+        self._write("\r" + line.ljust(self._width))
+        self._width = len(line)
+
+    def _write(self, text: str) -> None:
+        try:
+            self.stream.write(text)
+            self.stream.flush()
+        except (OSError, ValueError):  # closed or broken stderr: progress is best effort
+            self.enabled = False
+
+    def _columns(self) -> int:
+        """The width of the terminal behind the stream (stdout may be redirected)."""
+        try:
+            return os.get_terminal_size(self.stream.fileno()).columns
+        except (AttributeError, OSError, ValueError, io.UnsupportedOperation):
+            return shutil.get_terminal_size((100, 24)).columns
+
+    def _tick(self) -> None:
+        while not self._stop.wait(self.interval):
+            with self._lock:
+                if self._message is None or not self.enabled:
+                    continue
+                elapsed = time.perf_counter() - self._started
+                if elapsed >= self.delay:
+                    self._rewrite(f"{self.PREFIX}{self._message} ... {elapsed:.1f} s")
+
+
+# --------------------------------------------------------------------------- outputs
+
+
+def check_output_path(path: Path, force: bool, what: str) -> None:
+    """Refuse to overwrite an existing file without ``--force`` (raises ProblemError)."""
+    if path.is_dir():
+        raise ProblemError(f"{what} {str(path)!r} is a directory, not a file")
+    if path.exists() and not force:
+        raise ProblemError(f"{what} {str(path)!r} exists; use --force to overwrite")
+
+
+def write_atomically(path: Path, write: Callable[[Path], None]) -> None:
+    """Create ``path``'s parent directories and write it through a temporary file.
+
+    ``write`` writes a given path; the result replaces ``path`` only once complete, so
+    an interrupted run never leaves a truncated artifact or picture behind.
+    """
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ProblemError(f"cannot create the directory of {str(path)!r}: {exc.strerror or exc}") from None
+    # same directory (so the rename is atomic), same suffix (it picks the picture's format),
+    # created by `write` itself so the file gets the user's usual permissions
+    tmp = path.with_name(f".{path.stem}.{os.getpid()}.{threading.get_ident()}.tmp{path.suffix}")
+    try:
+        write(tmp)
+        os.replace(tmp, path)
+    except OSError as exc:
+        raise ProblemError(f"cannot write {str(path)!r}: {exc.strerror or exc}") from None
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def json_safe(value: Any) -> Any:
+    """Plain JSON data: numpy scalars and arrays converted, non-finite floats as ``null``.
+
+    ``json.dumps`` would otherwise fail on numpy integers or write ``Infinity``, which
+    is not JSON.
+    """
+    if isinstance(value, dict):
+        return {str(k): json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_safe(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return json_safe(value.tolist())
+    if isinstance(value, np.bool_):
+        return bool(value)
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        v = float(value)
+        return v if math.isfinite(v) else None
+    return value
+
+
+# --------------------------------------------------------------------------- human summary
+
+
+def _state_text(ts: Any, s: int) -> str:
+    """A state as people write it: ``(r,c)``, ``(r,c)@fuel`` or the state's name."""
+    key = ts.states[s]
+    if ts.kind == "grid":
+        return f"({key[0]},{key[1]})"
+    if ts.kind == "fuel":
+        (r, c), f = key
+        return f"({r},{c})@{f}"
+    return str(key)
+
+
+def _place_text(ts: Any, p: int) -> str:
+    place = ts.places[p]
+    if isinstance(place, tuple) and len(place) == 2:
+        return f"({place[0]},{place[1]})"
+    return str(place)
+
+
+def _limited(items: Sequence[str], limit: int = 10) -> str:
+    if len(items) <= limit:
+        return ", ".join(items)
+    return ", ".join(items[:limit]) + f", ... ({len(items) - limit} more)"
+
+
+def _moves_text(ts: Any, mask: np.ndarray) -> list[str]:
+    """Restricted moves as ``a -> b``, one per move (fuel levels kept apart)."""
+    return [f"{_state_text(ts, int(ts.src[m]))} -> {_state_text(ts, int(ts.dst[m]))}" for m in np.flatnonzero(mask)]
+
+
+def _walls_text(ts: Any, mask: np.ndarray) -> list[str]:
+    """Blocked moves merged by place: ``a | b`` when both directions are blocked."""
+    pairs = {(int(ts.place[ts.src[m]]), int(ts.place[ts.dst[m]])) for m in np.flatnonzero(mask)}
+    out: list[str] = []
+    for a, b in sorted(pairs, key=lambda ab: (str(ts.places[ab[0]]), str(ts.places[ab[1]]))):
+        if (b, a) in pairs:
+            if str(ts.places[a]) < str(ts.places[b]):
+                out.append(f"{_place_text(ts, a)} | {_place_text(ts, b)}")
+        else:
+            out.append(f"{_place_text(ts, a)} -> {_place_text(ts, b)}")
+    return out
+
+
+def human_summary(test: Any, summary: dict) -> str:
+    """A few lines a person reads after ``flowtest synthesize`` (without ``--json``)."""
+    p, ts, strategy = test.problem, test.problem.system, test.strategy
+    stats = summary["stats"]
+    lines = [
+        f"{p.name}: {p.kind} test, {summary['status']}",
+        f"  objectives   system: {p.system_objective.text}   test: {p.test_objective.text}",
+        f"  flow         {summary['flow']} (edge-disjoint ways through the test)",
+        f"  cuts         {summary['n_cuts']} edges of the product graph",
+    ]
+    reactive = strategy.restrictions & ~strategy.static_obstacles[None, :]
+    histories = [q for q in range(strategy.n_hist) if reactive[q].any()]
+    if histories:
+        lines.append("  restrictions by history (moves the test blocks while the history holds):")
+        for q in histories:
+            lines.append(f"    {test.spec.history_name(q)} [{test.spec.describe(q)}]: {_limited(_moves_text(ts, reactive[q]))}")
+    elif p.kind != "static":
+        lines.append("  restrictions none")
+    walls = _walls_text(ts, strategy.static_obstacles)
+    lines.append(f"  static walls {_limited(walls) if walls else 'none'}")
+    if test.agent is not None and "counterexamples" in summary:
+        lines.append(f"  test agent   {summary['counterexamples']} counterexample(s)")
+    graph = stats["graph"]
+    lines.append(
+        f"  model        graph {graph['nodes']} nodes / {graph['edges']} edges; MILP {stats['binary_vars']} binary, "
+        f"{stats['continuous_vars']} continuous, {stats['constraints']} constraints"
+    )
+    gap = stats.get("mip_gap")
+    gap_text = "" if summary["status"] == "optimal" or gap is None else f", gap {gap:.2%}"
+    lines.append(f"  time         graphs {stats['graph_seconds']:.2f} s, solve {stats['solve_seconds']:.2f} s{gap_text}")
+    lines.append(f"  check        bypass flow {summary['bypass_flow']} (must be 0), feasibility flows ok")
+    return "\n".join(lines)
+
+
+# --------------------------------------------------------------------------- synthesize
+
+
+def _positive_float(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of seconds, got {text!r}") from None
+    if not math.isfinite(v) or v <= 0:
+        raise argparse.ArgumentTypeError(f"expected a positive number of seconds, got {text!r}")
+    return v
+
+
+def _gap(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a relative gap such as 0.01, got {text!r}") from None
+    if not (0.0 <= v < 1.0):
+        raise argparse.ArgumentTypeError(f"the relative gap must be in [0, 1), got {text!r}")
+    return v
+
+
+def _positive_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
+    if v <= 0:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
+    return v
+
+
+def _synthesize_arguments(p: argparse.ArgumentParser) -> None:
+    from synthesis.builtins import BUILTINS
+    from synthesis.strategy import SETTINGS
+
+    p.add_argument(
+        "problem",
+        metavar="PROBLEM",
+        help=f"a TOML problem file, or a built-in problem: {', '.join(BUILTINS)}",
+    )
+    p.add_argument("--json", action="store_true", help="print the JSON summary of problem-format.md (only it) on stdout")
+    p.add_argument("--out", metavar="ARTIFACT", type=Path, help="write the synthesized-test artifact (JSON) here")
+    p.add_argument("--plot", metavar="PNG", type=Path, help="draw the test (PNG, SVG or PDF by the file's suffix)")
+    p.add_argument("--time-limit", metavar="S", type=_positive_float, help="solver time limit in seconds (default: the problem's, else none)")
+    p.add_argument("--gap", metavar="G", type=_gap, default=0.0, help="relative MIP gap at which to stop (default 0: prove optimality)")
+    p.add_argument("--threads", metavar="N", type=_positive_int, help="solver threads (default: HiGHS's choice)")
+    p.add_argument("--setting", choices=SETTINGS, help="how reactive obstacles are shown (default: the problem's, else instantaneous)")
+    p.add_argument("--force", action="store_true", help="overwrite existing --out/--plot files")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress lines on stderr")
+
+
+@command("synthesize", "synthesize a test for a problem (TOML file or built-in name)", _synthesize_arguments)
+def run_synthesize(args: argparse.Namespace) -> int:
+    """``flowtest synthesize``: load, synthesize, check, then print and write outputs."""
+    from synthesis.artifact import artifact_of
+    from synthesis.problems import load_problem
+    from synthesis.summary import summary_of
+
+    outputs: list[tuple[Path, str]] = []
+    if args.out is not None:
+        outputs.append((args.out, "artifact"))
+    if args.plot is not None:
+        outputs.append((args.plot, "plot"))
+    if len(outputs) == 2 and args.out.resolve() == args.plot.resolve():
+        raise ProblemError("--out and --plot name the same file")
+    for path, what in outputs:  # refuse before spending time on synthesis
+        check_output_path(path, args.force, what)
+    if args.plot is not None:
+        from .plots import check_plot_format
+
+        check_plot_format(args.plot)
+
+    problem = _load(load_problem, args.problem)
+    with StageProgress(enabled=not args.quiet) as progress:
+        progress(f"synthesizing {problem.name} ({problem.kind} test)")
+        options = pipeline.SynthesisOptions(
+            time_limit=args.time_limit,
+            mip_rel_gap=args.gap,
+            threads=args.threads,
+            setting=args.setting,
+            progress=progress,
+        )
+        test = pipeline.synthesize(problem, options)
+        summary = json_safe(summary_of(test))
+        if args.out is not None:
+            progress(f"writing the artifact {args.out}")
+            check_output_path(args.out, args.force, "artifact")
+            write_atomically(args.out, artifact_of(test, summary).save)
+        if args.plot is not None:
+            progress(f"drawing {args.plot}")
+            from .plots import plot_test
+
+            check_output_path(args.plot, args.force, "plot")
+            write_atomically(args.plot, lambda tmp: plot_test(test, tmp))
+        progress.done(f"done in {progress.elapsed():.1f} s")
+
+    if args.json:
+        sys.stdout.write(json.dumps(summary, allow_nan=False) + "\n")
+    else:
+        sys.stdout.write(human_summary(test, summary) + "\n")
+    sys.stdout.flush()
+    return EXIT_OK
+
+
+def _load(load_problem: Callable[[str], Any], name: str) -> Any:
+    """Load a problem; prefix errors with the file name when the message lacks it."""
+    try:
+        return load_problem(name)
+    except ProblemError as exc:
+        message = str(exc)
+        if name not in message and Path(name).name not in message and Path(name).exists():
+            raise ProblemError(f"{name}: {message}") from None
+        raise
+
+
+# --------------------------------------------------------------------------- main
+
+
+def _error(message: str) -> None:
+    """One line ``error: ...`` on stderr (newlines folded so it stays one line)."""
+    text = " ".join(str(message).split())
+    try:
+        sys.stderr.write(f"error: {text}\n")
+        sys.stderr.flush()
+    except (OSError, ValueError):
+        pass
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line; return the exit code (see the module docstring)."""
+    parser = build_parser()
+    args = parser.parse_args(argv)  # usage errors exit 2 via argparse
+    try:
+        return int(args.run(args))
+    except KeyboardInterrupt:
+        return EXIT_INTERRUPTED
+    except ProblemError as exc:
+        _error(str(exc))
+        return EXIT_INVALID
+    except InconsistentProblem as exc:
+        meaning = INCONSISTENT_REASONS.get(exc.reason, exc.reason)
+        _error(f"inconsistent problem ({exc.reason}): {meaning}: {exc}")
+        return EXIT_INCONSISTENT
+    except CheckFailed as exc:
+        _error(f"FLOWTEST BUG (please report it with the problem): the synthesized test failed its check: {exc}")
+        return EXIT_CHECK_FAILED
+    except TimeoutError as exc:
+        detail = str(exc) or "no solution was found"
+        _error(f"time limit reached: {detail}; raise --time-limit or accept a gap with --gap")
+        return EXIT_TIMEOUT
+    except BrokenPipeError:
+        # stdout closed early (e.g. `| head`): not an error worth a traceback
+        try:
+            sys.stdout = open(os.devnull, "w")
+        except OSError:
+            pass
+        return EXIT_INTERNAL
+    except Exception:  # a bug: keep the traceback, it is what a maintainer needs
+        traceback.print_exc()
+        _error("internal error (a FlowTest bug); the traceback above says where")
+        return EXIT_INTERNAL
+
+
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(main())

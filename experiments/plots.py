@@ -1,0 +1,600 @@
+"""Pictures of synthesized tests, for people.
+
+:func:`plot_test` draws a :class:`~synthesis.pipeline.SynthesizedTest` so that its
+restrictions can be read at a glance:
+
+* **grid** and **fuel** systems are drawn as cells (blocked cells dark, tokens written
+  in the cells, the start green, the goal cells gold). Static obstacles are thick black
+  walls on the border two cells share; a fuel system's moves between the same two
+  cells at any fuel level are one wall. Reactive restrictions are one-way red markers:
+  an arrow from the source cell toward the border, stopped by a bar on the source's
+  side, meaning "from this cell, this way is closed";
+* **graph** systems are node-link pictures in a deterministic layered layout (layers
+  are the breadth-first distance from the start, left to right), the start and
+  terminal states highlighted, propositions under the nodes, restricted edges red and
+  static obstacles black and dashed.
+
+Reactive and mixed tests get one panel per history that restricts something, titled
+with the history's name and what it means; static walls appear in every panel. A
+test whose restrictions are all static gets a single panel.
+
+An optional test-agent overlay shades the agent's cells (and marks its parks); agent
+problems pass it automatically through ``test.agent``.
+
+Drawing uses a private :class:`matplotlib.figure.Figure` rendered by Agg (or the
+vector backends for ``.svg``/``.pdf``); pyplot's global state is never touched, so
+plotting is safe inside other programs and threads.
+"""
+
+from __future__ import annotations
+
+import math
+import textwrap
+from collections import deque
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+from matplotlib.patches import Patch, Rectangle
+
+from synthesis.errors import ProblemError
+
+#: File formats :func:`plot_test` writes, chosen by the path's suffix.
+FORMATS = ("png", "svg", "pdf")
+
+# colours: one meaning each, the same in every picture
+FREE = "#ffffff"
+BLOCKED = "#3a3a3a"
+START = "#b9e6b3"
+GOAL = "#ffd966"
+GRID_LINE = "#9a9a9a"
+WALL = "#000000"
+RESTRICTED = "#d62728"
+EDGE = "#9a9a9a"
+AGENT = "#9ecae1"
+TEXT = "#202020"
+PROP = "#1f5fa0"
+
+Cell = tuple[int, int]
+
+
+def check_plot_format(path: Path) -> str:
+    """The format of ``path`` from its suffix; raises ProblemError if unsupported."""
+    fmt = path.suffix.lower().lstrip(".")
+    if fmt not in FORMATS:
+        raise ProblemError(f"cannot draw {str(path)!r}: use a .png, .svg or .pdf file name")
+    return fmt
+
+
+@dataclass
+class Panel:
+    """One picture of the system: a title and the moves to mark as restricted."""
+
+    title: str
+    restricted: np.ndarray  # bool[n_moves], reactive restrictions only
+
+
+def panels_of(test: Any) -> list[Panel]:
+    """One panel per history with reactive restrictions, or one static panel.
+
+    Reactive restrictions of history ``q`` are ``C(q)`` minus the static obstacles
+    (those are drawn in every panel anyway).
+    """
+    strategy = test.strategy
+    static = strategy.static_obstacles
+    reactive = strategy.restrictions & ~static[None, :]
+    panels = []
+    for q in range(strategy.n_hist):
+        if reactive[q].any():
+            name, meaning = test.spec.history_name(q), test.spec.describe(q)
+            panels.append(Panel(f"history {name}: {meaning}", reactive[q]))
+    if not panels:
+        title = "static walls (the whole test)" if static.any() else "no restrictions"
+        panels.append(Panel(title, np.zeros_like(static)))
+    return panels
+
+
+def plot_test(test: Any, path: str | Path, *, agent: Any = None, dpi: int = 110) -> Path:
+    """Draw ``test`` (a :class:`~synthesis.pipeline.SynthesizedTest`) to ``path``.
+
+    Parameters
+    ----------
+    test
+        The synthesized test.
+    path
+        Output file; ``.png``, ``.svg`` or ``.pdf``. Parent directories must exist.
+    agent
+        An optional test-agent overlay: any object (or mapping) with ``cells`` (places
+        of T, ``(row, col)`` cells or state names: where the agent moves) and optionally
+        ``parks`` (see :func:`_agent_overlay`). Defaults to ``test.agent``, then
+        ``test.problem.agent`` (a :class:`synthesis.agent.TestAgent`); objects without
+        ``cells`` are ignored.
+    dpi
+        Resolution of raster output.
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
+    path = Path(path)
+    fmt = check_plot_format(path)
+    ts = test.problem.system
+    panels = panels_of(test)
+    overlay = _agent_overlay(test, agent)
+    if ts.kind in ("grid", "fuel") and ts.layout is not None:
+        fig = _grid_figure(test, panels, overlay)
+    else:
+        fig = _graph_figure(test, panels, overlay)
+    FigureCanvasAgg(fig)
+    fig.savefig(path, format=fmt, dpi=dpi)
+    return path
+
+
+# --------------------------------------------------------------------------- shared
+
+
+def _layout_grid(n: int, max_cols: int) -> tuple[int, int]:
+    cols = min(n, max_cols)
+    return math.ceil(n / cols), cols
+
+
+def _wrap(text: str, width: int) -> str:
+    return "\n".join(textwrap.wrap(text, width)) or text
+
+
+def _header(test: Any) -> str:
+    p, r = test.problem, test.routing
+    fuel = f", fuel 0..{p.system.max_fuel}" if p.system.kind == "fuel" else ""
+    return (
+        f"{p.name}: {p.kind} test{fuel}, flow {r.flow}, {int(r.cut_edges.size)} cuts ({r.status})\n"
+        f"system: {p.system_objective.text}      test: {p.test_objective.text}"
+    )
+
+
+@dataclass
+class _Park:
+    """A park of the test agent: a state outside T, entered from some places of T."""
+
+    name: str
+    entries: list[int]  # places of T the park is entered from
+    cell: Cell | None = None  # where to draw it, when given explicitly (grids)
+
+
+@dataclass
+class _Overlay:
+    """What the picture shows of a test agent: its places of T and its parks."""
+
+    places: set[int]
+    parks: list[_Park]
+
+
+def _get(obj: Any, name: str) -> Any:
+    if isinstance(obj, dict):
+        return obj.get(name)
+    return getattr(obj, name, None)
+
+
+def _resolve(ts: Any, item: Any) -> tuple[int | None, Cell | None]:
+    """A place of T from a place index, a ``(row, col)`` cell or a state name.
+
+    Returns ``(place, cell)``; a cell outside T gives ``(None, cell)``.
+    """
+    place_index = {p: i for i, p in enumerate(ts.places)}
+    if isinstance(item, (int, np.integer)) and not isinstance(item, bool):
+        return (int(item), None) if 0 <= int(item) < len(ts.places) else (None, None)
+    if isinstance(item, (tuple, list)) and len(item) == 2 and all(isinstance(x, (int, np.integer)) for x in item):
+        cell = (int(item[0]), int(item[1]))
+        return place_index.get(cell), cell
+    if isinstance(item, str) and item in place_index:
+        return place_index[item], None
+    return None, None
+
+
+def _agent_overlay(test: Any, agent: Any) -> _Overlay | None:
+    """Read a duck-typed agent overlay; ``None`` when there is nothing to draw.
+
+    ``cells`` items are places of T (indices into ``ts.places``, which are the state
+    indices on grid and graph systems, as :class:`synthesis.agent.TestAgent` keeps
+    them), ``(row, col)`` cells or state names. ``parks`` items are objects or
+    mappings with a ``name`` and ``entries`` (indices into ``cells``) or ``from``
+    (cells), or plain places/cells drawn as parks.
+    """
+    ts = test.problem.system
+    candidates = [agent] if agent is not None else [getattr(test, "agent", None), getattr(test.problem, "agent", None)]
+    for cand in candidates:
+        cells = _get(cand, "cells") if cand is not None else None
+        if cells is None:
+            continue
+        cell_places = [_resolve(ts, item)[0] for item in cells]
+        places = {p for p in cell_places if p is not None}
+        parks: list[_Park] = []
+        for k, item in enumerate(_get(cand, "parks") or ()):
+            name, entries = _get(item, "name"), _get(item, "entries")
+            if name is not None or entries is not None or _get(item, "from") is not None:
+                if entries is not None:
+                    ent = [cell_places[int(e)] for e in entries if 0 <= int(e) < len(cell_places)]
+                else:
+                    ent = [_resolve(ts, c)[0] for c in _get(item, "from") or ()]
+                parks.append(_Park(str(name if name is not None else f"park {k}"), [e for e in ent if e is not None]))
+                continue
+            place, cell = _resolve(ts, item)
+            if place is not None:
+                parks.append(_Park("P", [place], None if ts.layout is None else _cell_of_place(ts, place)))
+            elif cell is not None:
+                parks.append(_Park("P", [], cell))
+        if places or parks:
+            return _Overlay(places, parks)
+    return None
+
+
+def _park_cells(ts: Any, parks: Sequence[_Park]) -> list[tuple[_Park, Cell]]:
+    """Where each park is drawn on a grid: its own cell, else beside an entry cell.
+
+    A park beside the grid (just outside an entry cell on the border) reads as "the
+    agent leaves the grid here"; failing that, a blocked neighbour; else nothing.
+    """
+    lay = ts.layout
+    out: list[tuple[_Park, Cell]] = []
+    for park in parks:
+        if park.cell is not None:
+            out.append((park, park.cell))
+            continue
+        outside: list[Cell] = []
+        blocked: list[Cell] = []
+        for e in park.entries:
+            r, c = _cell_of_place(ts, e)
+            for n in ((r - 1, c), (r + 1, c), (r, c - 1), (r, c + 1)):
+                if not (0 <= n[0] < lay.rows and 0 <= n[1] < lay.cols):
+                    outside.append(n)
+                elif n in lay.blocked:
+                    blocked.append(n)
+        taken = {cell for _, cell in out}
+        free = [x for x in outside + blocked if x not in taken]
+        if free:
+            out.append((park, free[0]))
+    return out
+
+
+# --------------------------------------------------------------------------- grids
+
+
+def _cell_of_place(ts: Any, p: int) -> Cell:
+    c = ts.places[p]
+    return int(c[0]), int(c[1])
+
+
+def _place_pairs(ts: Any, mask: np.ndarray) -> set[tuple[int, int]]:
+    """Directed place pairs of the moves in ``mask`` (fuel levels merged)."""
+    m = np.flatnonzero(mask)
+    return set(zip(ts.place[ts.src[m]].tolist(), ts.place[ts.dst[m]].tolist()))
+
+
+def _border(a: Cell, b: Cell) -> tuple[tuple[float, float], tuple[float, float]]:
+    """The segment (in x=col, y=row coordinates) two adjacent cells share."""
+    (r1, c1), (r2, c2) = a, b
+    if r1 == r2:
+        x = float(max(c1, c2))
+        return (x, float(r1)), (x, float(r1 + 1))
+    y = float(max(r1, r2))
+    return (float(c1), y), (float(c1 + 1), y)
+
+
+def _adjacent(a: Cell, b: Cell) -> bool:
+    return abs(a[0] - b[0]) + abs(a[1] - b[1]) == 1
+
+
+def _draw_wall(ax: Axes, a: Cell, b: Cell) -> None:
+    (x0, y0), (x1, y1) = _border(a, b)
+    ax.plot([x0, x1], [y0, y1], color=WALL, linewidth=6, solid_capstyle="butt", zorder=5)
+
+
+def _draw_restriction(ax: Axes, a: Cell, b: Cell, note: str | None = None, color: str = RESTRICTED) -> None:
+    """A one-way marker: arrow from inside ``a`` toward the border with ``b``, then a bar."""
+    (r1, c1), (r2, c2) = a, b
+    d = np.array([c2 - c1, r2 - r1], dtype=float)  # direction in (x, y)
+    n = np.array([-d[1], d[0]])  # along the border
+    mid = np.array([max(c1, c2) if r1 == r2 else c1 + 0.5, max(r1, r2) if c1 == c2 else r1 + 0.5], dtype=float)
+    bar_c = mid - 0.08 * d
+    p0, p1 = bar_c - 0.3 * n, bar_c + 0.3 * n
+    ax.plot([p0[0], p1[0]], [p0[1], p1[1]], color=color, linewidth=3.5, solid_capstyle="round", zorder=6)
+    tail, head = mid - 0.34 * d, mid - 0.1 * d
+    ax.annotate(
+        "",
+        xy=(head[0], head[1]),
+        xytext=(tail[0], tail[1]),
+        arrowprops={"arrowstyle": "-|>", "color": color, "lw": 2.0, "mutation_scale": 14, "shrinkA": 0, "shrinkB": 0},
+        zorder=6,
+    )
+    if note:
+        at = mid - 0.25 * d + 0.22 * n
+        ax.text(at[0], at[1], note, fontsize=6.5, color=color, ha="center", va="center", zorder=7)
+
+
+def _fuel_note(ts: Any, mask: np.ndarray, a: int, b: int) -> str | None:
+    """On fuel systems, the fuel levels at which the move ``a -> b`` is restricted."""
+    if ts.kind != "fuel":
+        return None
+    m = np.flatnonzero(mask)
+    m = m[(ts.place[ts.src[m]] == a) & (ts.place[ts.dst[m]] == b)]
+    levels = sorted({int(ts.states[int(s)][1]) for s in ts.src[m]})
+    all_levels = {
+        int(ts.states[int(s)][1]) for s in ts.src[(ts.place[ts.src] == a) & (ts.place[ts.dst] == b)]
+    }
+    if set(levels) == all_levels:
+        return None
+    return "fuel " + ",".join(map(str, levels))
+
+
+def _draw_grid_panel(ax: Axes, test: Any, panel: Panel, overlay: _Overlay | None) -> None:
+    ts = test.problem.system
+    lay = ts.layout
+    start = _cell_of_place(ts, int(ts.place[ts.initial]))
+    goals = {_cell_of_place(ts, int(p)) for p in np.unique(ts.place[ts.terminal])}
+    agent_cells = {_cell_of_place(ts, p) for p in overlay.places} if overlay else set()
+    parks = _park_cells(ts, overlay.parks) if overlay else []
+    labels_of: dict[Cell, set[str]] = {}
+    if ts.kind == "grid":
+        for s in range(ts.n_states):
+            labels_of.setdefault(_cell_of_place(ts, int(ts.place[s])), set()).update(ts.labels[s])
+    for r in range(lay.rows):
+        for c in range(lay.cols):
+            cell = (r, c)
+            if cell in lay.blocked:
+                color = BLOCKED
+            elif cell == start:
+                color = START
+            elif cell in goals:
+                color = GOAL
+            else:
+                color = FREE
+            ax.add_patch(Rectangle((c, r), 1, 1, facecolor=color, edgecolor=GRID_LINE, linewidth=1.0, zorder=1))
+            if cell in agent_cells:
+                ax.add_patch(Rectangle((c, r), 1, 1, facecolor=AGENT, alpha=0.55, edgecolor=GRID_LINE, linewidth=1.0, zorder=2))
+            text = lay.tokens.get(cell)
+            if cell == start and text is None:
+                text = "start"
+            if text is not None and cell not in lay.blocked:
+                ax.text(c + 0.5, r + 0.5, text, ha="center", va="center", fontsize=13, fontweight="bold", color=TEXT, zorder=3)
+            elif cell not in lay.blocked and labels_of.get(cell):
+                ax.text(c + 0.5, r + 0.5, "\n".join(sorted(labels_of[cell])), ha="center", va="center", fontsize=8,
+                        color=TEXT, zorder=3)
+    lo_r, lo_c, hi_r, hi_c = 0, 0, lay.rows, lay.cols
+    for park, (r, c) in parks:
+        ax.add_patch(Rectangle((c + 0.06, r + 0.06), 0.88, 0.88, facecolor=AGENT, alpha=0.55, hatch="//",
+                               edgecolor=AGENT, linewidth=1.5, zorder=3))
+        ax.text(c + 0.5, r + 0.5, park.name, ha="center", va="center", fontsize=7, fontweight="bold", color=TEXT, zorder=4)
+        lo_r, lo_c, hi_r, hi_c = min(lo_r, r), min(lo_c, c), max(hi_r, r + 1), max(hi_c, c + 1)
+    ax.add_patch(Rectangle((0, 0), lay.cols, lay.rows, fill=False, edgecolor=WALL, linewidth=2.5, zorder=4))
+    moves = _place_pairs(ts, np.ones(ts.n_moves, dtype=bool))
+    static = _place_pairs(ts, test.strategy.static_obstacles)
+    for a, b in sorted(static):
+        ca, cb = _cell_of_place(ts, a), _cell_of_place(ts, b)
+        if not _adjacent(ca, cb):
+            continue
+        if (b, a) in static or (b, a) not in moves:
+            _draw_wall(ax, ca, cb)  # closed both ways (or the way back does not exist)
+        else:
+            _draw_restriction(ax, ca, cb, color=WALL)  # a one-way static obstacle
+    for a, b in sorted(_place_pairs(ts, panel.restricted)):
+        ca, cb = _cell_of_place(ts, a), _cell_of_place(ts, b)
+        if _adjacent(ca, cb):
+            _draw_restriction(ax, ca, cb, _fuel_note(ts, panel.restricted, a, b))
+    ax.set_xlim(lo_c - 0.05, hi_c + 0.05)
+    ax.set_ylim(hi_r + 0.05, lo_r - 0.05)  # row 0 at the top
+    ax.set_aspect("equal")
+    ax.set_xticks([i + 0.5 for i in range(lay.cols)], [str(i) for i in range(lay.cols)], fontsize=7)
+    ax.set_yticks([i + 0.5 for i in range(lay.rows)], [str(i) for i in range(lay.rows)], fontsize=7)
+    ax.tick_params(length=0, pad=2, colors="#707070")
+    for spine in ax.spines.values():
+        spine.set_visible(False)
+
+
+def _grid_figure(test: Any, panels: Sequence[Panel], overlay: _Overlay | None) -> Figure:
+    lay = test.problem.system.layout
+    cell = 0.62 if max(lay.rows, lay.cols) <= 8 else max(0.2, 5.0 / max(lay.rows, lay.cols))
+    pw, ph = max(lay.cols * cell, 2.6) + 0.5, lay.rows * cell + 0.9
+    nrows, ncols = _layout_grid(len(panels), 4 if lay.cols <= 4 else 3)
+    fig = Figure(figsize=(max(ncols * pw, 6.0), nrows * ph + 1.7), layout="constrained")
+    axes = fig.subplots(nrows, ncols, squeeze=False)
+    width = max(24, int(pw * 11))
+    for ax, panel in zip(axes.flat, panels):
+        _draw_grid_panel(ax, test, panel, overlay)
+        ax.set_title(_wrap(panel.title, width), fontsize=9)
+    for ax in list(axes.flat)[len(panels):]:
+        ax.set_visible(False)
+    fig.suptitle(_header(test), fontsize=10)
+    handles = [
+        Patch(facecolor=START, edgecolor=GRID_LINE, label="start"),
+        Patch(facecolor=GOAL, edgecolor=GRID_LINE, label="goal (terminal)"),
+    ]
+    if lay.blocked:
+        handles.append(Patch(facecolor=BLOCKED, label="blocked cell"))
+    if test.strategy.static_obstacles.any():
+        handles.append(Line2D([], [], color=WALL, linewidth=5, label="static wall"))
+        ts = test.problem.system
+        static = _place_pairs(ts, test.strategy.static_obstacles)
+        moves = _place_pairs(ts, np.ones(ts.n_moves, dtype=bool))
+        if any((b, a) in moves and (b, a) not in static for a, b in static):
+            handles.append(Line2D([], [], color=WALL, linewidth=2, marker=">", markersize=7,
+                                  label="one-way static wall"))
+    if any(p.restricted.any() for p in panels):
+        handles.append(
+            Line2D([], [], color=RESTRICTED, linewidth=2, marker=">", markersize=7,
+                   label="restricted move (one way, toward the bar)")
+        )
+    if overlay is not None:
+        handles.append(Patch(facecolor=AGENT, alpha=0.55, label="test agent cells"))
+        if overlay.parks:
+            handles.append(Patch(facecolor=AGENT, alpha=0.55, hatch="//", label="test agent park"))
+    fig.legend(handles=handles, loc="outside lower center", ncols=min(len(handles), 3), fontsize=8, frameon=False)
+    return fig
+
+
+# --------------------------------------------------------------------------- graphs
+
+
+def layered_positions(ts: Any) -> dict[int, tuple[float, float]]:
+    """Deterministic positions of a graph system's places, layered left to right.
+
+    A place's layer is its breadth-first distance from the start (unreachable places
+    go in a last layer); within a layer places are ordered by the mean position of
+    their predecessors (one barycentre sweep), ties by index, which keeps most edges
+    short and uncrossed on the paper's graph examples.
+    """
+    n = len(ts.places)
+    succ: list[list[int]] = [[] for _ in range(n)]
+    pred: list[list[int]] = [[] for _ in range(n)]
+    for a, b in zip(ts.place[ts.src].tolist(), ts.place[ts.dst].tolist()):
+        if a != b:
+            succ[a].append(b)
+            pred[b].append(a)
+    start = int(ts.place[ts.initial])
+    dist = {start: 0}
+    queue = deque([start])
+    while queue:
+        u = queue.popleft()
+        for v in succ[u]:
+            if v not in dist:
+                dist[v] = dist[u] + 1
+                queue.append(v)
+    last = max(dist.values()) + 1
+    terminal = set(np.unique(ts.place[ts.terminal]).tolist())
+    # terminal places go to the far right so the picture reads start -> goal
+    far = max([d for p, d in dist.items() if p not in terminal] + [0]) + 1
+    layer = {p: (far if p in terminal and p in dist else dist.get(p, last + 1)) for p in range(n)}
+    layers: dict[int, list[int]] = {}
+    for p in range(n):
+        layers.setdefault(layer[p], []).append(p)
+    ypos: dict[int, float] = {}
+    pos: dict[int, tuple[float, float]] = {}
+    for x, key in enumerate(sorted(layers)):
+        members = layers[key]
+
+        def barycentre(p: int) -> tuple[float, int]:
+            # top of the layer first: the highest mean predecessor position first
+            ys = [ypos[q] for q in pred[p] if q in ypos and layer[q] < layer[p]]
+            return (-float(np.mean(ys)) if ys else 0.0, p)
+
+        members.sort(key=barycentre)
+        k = len(members)
+        for i, p in enumerate(members):
+            y = (k - 1) / 2.0 - i
+            ypos[p] = y
+            pos[p] = (float(x), y)
+    return pos
+
+
+def _draw_graph_panel(ax: Axes, test: Any, panel: Panel, overlay: _Overlay | None, pos: dict[int, tuple[float, float]]) -> None:
+    ts = test.problem.system
+    start = int(ts.place[ts.initial])
+    terminal = set(np.unique(ts.place[ts.terminal]).tolist())
+    static = _place_pairs(ts, test.strategy.static_obstacles)
+    restricted = _place_pairs(ts, panel.restricted)
+    pairs = sorted(set(zip(ts.place[ts.src].tolist(), ts.place[ts.dst].tolist())))
+    pair_set = set(pairs)
+    radius_pt = 19.0  # node radius in points
+    for a, b in pairs:
+        if a == b:
+            continue
+        (xa, ya), (xb, yb) = pos[a], pos[b]
+        if (b, a) in pair_set:
+            rad = 0.18
+        elif xb < xa or (xb == xa and abs(yb - ya) > 1.01):
+            rad = 0.35  # backward or layer-skipping edges bend around the nodes between
+        else:
+            rad = 0.0
+        if (a, b) in restricted:
+            style = {"color": RESTRICTED, "lw": 2.6, "zorder": 4}
+        elif (a, b) in static:
+            style = {"color": WALL, "lw": 2.4, "zorder": 3, "linestyle": "--"}
+        else:
+            style = {"color": EDGE, "lw": 1.0, "zorder": 2}
+        z = style.pop("zorder")
+        ax.annotate(
+            "",
+            xy=(xb, yb),
+            xytext=(xa, ya),
+            arrowprops={
+                "arrowstyle": "-|>",
+                "mutation_scale": 12,
+                "shrinkA": radius_pt,
+                "shrinkB": radius_pt,
+                "connectionstyle": f"arc3,rad={rad}",
+                **style,
+            },
+            zorder=z,
+        )
+    agent_places = overlay.places if overlay else set()
+    for p, (x, y) in pos.items():
+        if p == start:
+            color = START
+        elif p in terminal:
+            color = GOAL
+        else:
+            color = FREE
+        edge = AGENT if p in agent_places else "#505050"
+        ax.scatter([x], [y], s=(2 * radius_pt) ** 2, c=color, edgecolors=edge, linewidths=3.0 if p in agent_places else 1.2, zorder=5)
+        name = str(ts.places[p])
+        props = sorted(set().union(*(ts.labels[s] for s in np.flatnonzero(ts.place == p))))
+        ax.text(x, y + (0.07 if props else 0.0), name, ha="center", va="center", fontsize=7 if len(name) <= 6 else 6,
+                color=TEXT, zorder=6)
+        if props:
+            ax.text(x, y - 0.11, ",".join(props), ha="center", va="center", fontsize=6.5, fontstyle="italic",
+                    color=PROP, zorder=6)
+    xs = [x for x, _ in pos.values()]
+    ys = [y for _, y in pos.values()]
+    for k, park in enumerate(overlay.parks if overlay else []):
+        # a park is outside T: a hatched box above its first entry, dashed lines to its entries
+        if not park.entries:
+            continue
+        ex, ey = pos[park.entries[0]]
+        px, py = ex + 0.3, ey + 0.55 + 0.25 * k
+        for e in park.entries:
+            ax.plot([pos[e][0], px], [pos[e][1], py], color=AGENT, linestyle=":", linewidth=1.5, zorder=1)
+        ax.text(px, py, park.name, ha="center", va="center", fontsize=7, zorder=6,
+                bbox={"boxstyle": "square,pad=0.3", "facecolor": AGENT, "edgecolor": AGENT, "hatch": "//", "alpha": 0.7})
+        ys.append(py)
+        xs.append(px)
+    ax.set_xlim(min(xs) - 0.6, max(xs) + 0.6)
+    ax.set_ylim(min(ys) - 0.9, max(ys) + 0.7)
+    ax.set_axis_off()
+
+
+def _graph_figure(test: Any, panels: Sequence[Panel], overlay: _Overlay | None) -> Figure:
+    ts = test.problem.system
+    pos = layered_positions(ts)
+    n_layers = len({x for x, _ in pos.values()})
+    height = max(sum(1 for x, _ in pos.values() if x == lx) for lx in {x for x, _ in pos.values()})
+    pw, ph = max(1.15 * n_layers + 0.6, 3.4), max(0.85 * height + 1.0, 2.4)
+    nrows, ncols = _layout_grid(len(panels), 3)
+    fig = Figure(figsize=(max(ncols * pw, 6.0), nrows * ph + 1.2), layout="constrained")
+    axes = fig.subplots(nrows, ncols, squeeze=False)
+    for ax, panel in zip(axes.flat, panels):
+        _draw_graph_panel(ax, test, panel, overlay, pos)
+        ax.set_title(_wrap(panel.title, max(26, int(pw * 10))), fontsize=9)
+    for ax in list(axes.flat)[len(panels):]:
+        ax.set_visible(False)
+    fig.suptitle(_header(test), fontsize=10)
+    handles = [
+        Line2D([], [], linestyle="", marker="o", markersize=10, markerfacecolor=START, markeredgecolor="#505050", label="start"),
+        Line2D([], [], linestyle="", marker="o", markersize=10, markerfacecolor=GOAL, markeredgecolor="#505050", label="terminal"),
+        Line2D([], [], color=EDGE, linewidth=1.0, label="transition"),
+    ]
+    if any(p.restricted.any() for p in panels):
+        handles.append(Line2D([], [], color=RESTRICTED, linewidth=2.6, label="restricted under this history"))
+    if test.strategy.static_obstacles.any():
+        handles.append(Line2D([], [], color=WALL, linewidth=2.4, linestyle="--", label="static obstacle"))
+    if overlay is not None:
+        handles.append(Line2D([], [], linestyle="", marker="o", markersize=10, markerfacecolor=FREE,
+                              markeredgecolor=AGENT, markeredgewidth=3, label="test agent state"))
+        if overlay.parks:
+            handles.append(Patch(facecolor=AGENT, alpha=0.7, hatch="//", label="test agent park"))
+    handles.append(Line2D([], [], linestyle="", marker="$p$", color=PROP, label="propositions (blue italic)"))
+    fig.legend(handles=handles, loc="outside lower center", ncols=min(len(handles), 3), fontsize=8, frameon=False)
+    return fig
