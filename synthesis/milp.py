@@ -34,11 +34,11 @@ from typing import Callable
 import highspy
 import numpy as np
 import scipy.sparse as sp
+from scipy.sparse.csgraph import maximum_flow
 
 from .errors import InconsistentProblem
 from .products import Products, coreachable, reachable
 
-MU_INT = False
 MODES = ("static", "reactive", "mixed")
 
 
@@ -301,13 +301,13 @@ def solve_routing(products: Products, options: MilpOptions | None = None) -> Rou
     group_col = np.full(groups.keys.size, -1, dtype=np.int64)
 
     m = _Model()
-    f_col = m.add_cols(edges.size, 0.0, 1.0)
+    f_col = m.add_cols(edges.size, 0.0, 1.0, )
     var_groups = np.flatnonzero(has_var)
     group_col[var_groups] = m.add_cols(var_groups.size, 0.0, 1.0, integer=True)
     mu_nodes = np.flatnonzero(keep_node & ~inter & ~tgt)
     mu_nodes = mu_nodes[mu_nodes != src_node]
     mu_col = np.full(g.n_nodes, -1, dtype=np.int64)
-    mu_col[mu_nodes] = m.add_cols(mu_nodes.size, 0.0, 1.0, integer=MU_INT)
+    mu_col[mu_nodes] = m.add_cols(mu_nodes.size, 0.0, 1.0)
 
     # (c2) conservation at nodes outside Src and Tgt
     cons_nodes = np.flatnonzero(keep_node & ~tgt)
@@ -385,33 +385,43 @@ def solve_routing(products: Products, options: MilpOptions | None = None) -> Rou
         m.add_terms(np.repeat(r, cols.size), cols, 1.0)
 
     graph_seconds = time.perf_counter() - t0
-    # ---- phase 1: maximum flow
-    cost = np.zeros(m.n_col)
-    out_src = np.flatnonzero(eu == src_node)
-    cost[f_col[out_src]] = 1.0
-    lp = m.to_highs(cost, maximize=True)
+    lp = m.to_highs(np.zeros(m.n_col), maximize=True)
     h = _highs(options)
     h.passModel(lp)
+    out_src = np.flatnonzero(eu == src_node)
     t_solve = time.perf_counter()
-    note("solving the routing MILP, phase 1 of 2: maximum flow")
     deadline = None if options.time_limit is None else t_solve + options.time_limit
-    status1, gap1 = _run(h, deadline)
-    if status1 == "infeasible":
-        raise InconsistentProblem(
-            "unroutable",
-            "the test objective cannot be routed without trapping the system: no cut set "
-            "routes every successful execution through it while leaving a way to the goal",
-        )
-    x = np.asarray(h.getSolution().col_value)
+    layout = _Layout(edges, eu, ev, c5_edges, grp, group_col, f_col, mu_col, m.n_col, groups.of_edge)
+
+    # ---- phase 1: maximum flow
+    note("routing MILP, phase 1 of 2: maximum flow")
+    x = _max_flow_witness(products, layout, feasibility)
+    if x is not None:
+        status1, gap1 = "optimal", 0.0  # the flow upper bound is attained: proven
+    else:
+        cost = np.zeros(m.n_col)
+        cost[f_col[out_src]] = 1.0
+        h.changeColsCost(m.n_col, np.arange(m.n_col, dtype=np.int32), cost)
+        status1, gap1 = _run(h, deadline)
+        if status1 == "infeasible":
+            raise InconsistentProblem(
+                "unroutable",
+                "the test objective cannot be routed without trapping the system: no cut set "
+                "routes every successful execution through it while leaving a way to the goal",
+            )
+        x = np.asarray(h.getSolution().col_value)
     flow = int(round(float(x[f_col[out_src]].sum())))
     if flow < 1:
+        if status1 != "optimal":
+            raise TimeoutError("no test with flow >= 1 was found within the time limit")
         raise InconsistentProblem(
             "unroutable",
             "the test objective cannot be routed without trapping the system: every routing "
             "cut set blocks all executions to the goal",
         )
-    # ---- phase 2: fewest cuts (then, for the agent, fewest blocked states first)
-    note(f"solving the routing MILP, phase 2 of 2: fewest cuts at flow {flow}")
+
+    # ---- phase 2: fewest cuts (for the agent: fewest blocked states first) at flow F
+    note(f"routing MILP, phase 2 of 2: fewest cuts at flow {flow}")
     h.addRow(flow - 0.5, highspy.kHighsInf, out_src.size, f_col[out_src].astype(np.int32), np.ones(out_src.size))
     cost2 = np.zeros(m.n_col)
     cost2[group_col[var_groups]] = groups.weight[var_groups]
@@ -419,6 +429,7 @@ def solve_routing(products: Products, options: MilpOptions | None = None) -> Rou
         cost2[place_col] = float(groups.weight[var_groups].sum() + 1)
     h.changeObjectiveSense(highspy.ObjSense.kMinimize)
     h.changeColsCost(m.n_col, np.arange(m.n_col, dtype=np.int32), cost2)
+    x = _incumbent(h, x, f_col, deadline)
     sol = highspy.HighsSolution()
     sol.col_value = list(x)
     sol.value_valid = True
@@ -456,6 +467,105 @@ def solve_routing(products: Products, options: MilpOptions | None = None) -> Rou
         mip_gap=stats["mip_gap"],
         stats=stats,
     )
+
+
+@dataclass
+class _Layout:
+    """Where the model keeps what: edges of the model and their columns."""
+
+    edges: np.ndarray
+    eu: np.ndarray
+    ev: np.ndarray
+    c5: np.ndarray
+    grp: np.ndarray
+    group_col: np.ndarray
+    f_col: np.ndarray
+    mu_col: np.ndarray
+    n_col: int
+    group_of_edge: np.ndarray
+
+
+def _max_flow_witness(products: Products, lay: _Layout, feasibility: bool) -> np.ndarray | None:
+    """A phase-1 optimum found without the MILP, when there is an easy one.
+
+    Every valid cut set carries no flow over an edge from outside I straight into Tgt
+    (that edge lies on a path avoiding I, so it is cut or unreachable), hence the
+    maximum flow ``U`` of the model without those edges bounds F. Take such a
+    maximum flow and cut every group it does not use: if that separates ``Src`` from
+    ``Tgt`` outside I (and, in the reactive case, traps no entry node), F = U is
+    proven and this solution is returned; otherwise ``None`` (the MILP decides).
+    """
+    g = products.virtual
+    src = g.initial
+    tgt = products.target
+    n = g.n_nodes
+    usable = ~(lay.c5 & tgt[lay.ev])
+    e = np.flatnonzero(usable)
+    sink = n
+    t = np.flatnonzero(tgt)
+    rows = np.concatenate([lay.eu[e], t])
+    cols = np.concatenate([lay.ev[e], np.full(t.size, sink)])
+    caps = np.concatenate([np.ones(e.size, dtype=np.int32), np.full(t.size, max(e.size, 1), dtype=np.int32)])
+    cap = sp.csr_matrix((caps, (rows, cols)), shape=(n + 1, n + 1))
+    res = maximum_flow(cap, src, sink)
+    if res.flow_value < 1:
+        return None
+    fmat = res.flow.tocsr()
+    fval = np.zeros(lay.edges.size)
+    fval[e] = np.asarray(fmat[lay.eu[e], lay.ev[e]]).ravel()
+    fval = np.clip(fval, 0, 1)
+    used_groups = np.unique(lay.grp[fval > 0.5])
+    col_groups = np.flatnonzero(lay.group_col >= 0)
+    cut_groups_ = np.setdiff1d(col_groups, used_groups)
+    cut_mask = np.zeros(lay.group_col.size, dtype=bool)
+    cut_mask[cut_groups_] = True
+    edge_cut = cut_mask[lay.grp]
+    keep = lay.c5 & ~edge_cut
+    reach = reachable(n, lay.eu[keep], lay.ev[keep], np.arange(n) == src)
+    if np.any(reach & tgt):
+        return None
+    if feasibility:
+        from .strategy import TestStrategy  # local: strategy does not depend on the MILP
+        from .verify import trapped_entries
+
+        ts = products.ts
+        restr = np.zeros((g.n_hist, ts.n_moves), dtype=bool)
+        cut_all = np.flatnonzero(cut_mask[lay.group_of_edge])
+        restr[g.hist[g.src[cut_all]], g.move[cut_all]] = True
+        if trapped_entries(products, TestStrategy(np.zeros(ts.n_moves, dtype=bool), restr)):
+            return None
+    x = np.zeros(lay.n_col)
+    x[lay.f_col] = fval
+    x[lay.group_col[cut_groups_]] = 1.0
+    has_mu = lay.mu_col >= 0
+    x[lay.mu_col[has_mu]] = reach[has_mu].astype(float)
+    return x
+
+
+def _incumbent(h: highspy.Highs, x: np.ndarray, f_col: np.ndarray, deadline: float | None) -> np.ndarray:
+    """A good first phase-2 solution: fewest cuts with the phase-1 flow held fixed.
+
+    Without the flow to choose, the model is a plain (tied) cut problem that HiGHS
+    solves quickly; its answer is feasible for phase 2 and seeds the search.
+    """
+    lp = h.getLp()
+    lo = np.asarray(lp.col_lower_)[f_col]
+    hi = np.asarray(lp.col_upper_)[f_col]
+    fv = np.round(x[f_col])
+    idx = f_col.astype(np.int32)
+    h.changeColsBounds(idx.size, idx, fv, fv)
+    sol = highspy.HighsSolution()
+    sol.col_value = list(x)
+    sol.value_valid = True
+    h.setSolution(sol)
+    try:
+        status, _ = _run(h, deadline)
+        if status in ("optimal", "feasible"):
+            x = np.asarray(h.getSolution().col_value)
+    except TimeoutError:
+        pass
+    h.changeColsBounds(idx.size, idx, lo, hi)
+    return x
 
 
 def _add_feasibility(m: _Model, products: Products, groups: CutGroups, group_col: np.ndarray) -> int:
@@ -533,3 +643,4 @@ def _run(h: highspy.Highs, deadline: float | None) -> tuple[str, float]:
     if ms in (highspy.HighsModelStatus.kTimeLimit, highspy.HighsModelStatus.kInterrupt):
         raise TimeoutError("the routing MILP found no solution within the time limit")
     raise RuntimeError(f"HiGHS stopped with status {h.modelStatusToString(ms)}")
+
