@@ -554,5 +554,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_INTERNAL
 
 
+# Subcommands defined in their own modules register themselves on import.
+from . import demo as _demo  # noqa: E402,F401
+
+
 if __name__ == "__main__":  # pragma: no cover
     raise SystemExit(main())
+
