@@ -38,6 +38,7 @@ from scipy.sparse.csgraph import maximum_flow
 
 from .errors import InconsistentProblem
 from .products import Products, coreachable, reachable
+from .routing_heuristic import RoutingGuess, guess_routing
 
 MODES = ("static", "reactive", "mixed")
 
@@ -395,13 +396,16 @@ def solve_routing(products: Products, options: MilpOptions | None = None) -> Rou
 
     # ---- phase 1: maximum flow
     note("routing MILP, phase 1 of 2: maximum flow")
-    x = _max_flow_witness(products, layout, feasibility)
-    if x is not None:
-        status1, gap1 = "optimal", 0.0  # the flow upper bound is attained: proven
+    guess = guess_routing(g.n_nodes, src_node, eu, ev, grp, c5_edges, group_col >= 0, tgt)
+    x_guess = _guess_solution(products, layout, guess, feasibility, options, place_col, state_places, groups)
+    if x_guess is not None and guess.flow == guess.upper_bound:
+        x, status1, gap1 = x_guess, "optimal", 0.0  # the flow upper bound is attained: proven
     else:
         cost = np.zeros(m.n_col)
         cost[f_col[out_src]] = 1.0
         h.changeColsCost(m.n_col, np.arange(m.n_col, dtype=np.int32), cost)
+        if x_guess is not None:
+            _set_solution(h, x_guess)
         status1, gap1 = _run(h, deadline)
         if status1 == "infeasible":
             raise InconsistentProblem(
@@ -430,10 +434,7 @@ def solve_routing(products: Products, options: MilpOptions | None = None) -> Rou
     h.changeObjectiveSense(highspy.ObjSense.kMinimize)
     h.changeColsCost(m.n_col, np.arange(m.n_col, dtype=np.int32), cost2)
     x = _incumbent(h, x, f_col, deadline)
-    sol = highspy.HighsSolution()
-    sol.col_value = list(x)
-    sol.value_valid = True
-    h.setSolution(sol)
+    _set_solution(h, x)
     status2, gap2 = _run(h, deadline)
     if status2 == "infeasible":  # cannot happen: phase 1's solution is feasible
         raise RuntimeError("phase 2 of the routing MILP lost the phase-1 solution")
@@ -485,61 +486,62 @@ class _Layout:
     group_of_edge: np.ndarray
 
 
-def _max_flow_witness(products: Products, lay: _Layout, feasibility: bool) -> np.ndarray | None:
-    """A phase-1 optimum found without the MILP, when there is an easy one.
+def _guess_solution(
+    products: Products,
+    lay: "_Layout",
+    guess: RoutingGuess,
+    feasibility: bool,
+    options: MilpOptions,
+    place_col: np.ndarray,
+    state_places: np.ndarray,
+    groups: CutGroups,
+) -> np.ndarray | None:
+    """The heuristic's cut set as a full model solution, or ``None`` if it is unusable.
 
-    Every valid cut set carries no flow over an edge from outside I straight into Tgt
-    (that edge lies on a path avoiding I, so it is cut or unreachable), hence the
-    maximum flow ``U`` of the model without those edges bounds F. Take such a
-    maximum flow and cut every group it does not use: if that separates ``Src`` from
-    ``Tgt`` outside I (and, in the reactive case, traps no entry node), F = U is
-    proven and this solution is returned; otherwise ``None`` (the MILP decides).
+    Unusable: no flow, a rejected cut set (an exclusion row), or, with feasibility
+    constraints, an entry node trapped by the cuts (checked by graph search; the
+    aggregated feasibility flows are then left for HiGHS to complete).
     """
-    g = products.virtual
-    src = g.initial
-    tgt = products.target
-    n = g.n_nodes
-    usable = ~(lay.c5 & tgt[lay.ev])
-    e = np.flatnonzero(usable)
-    sink = n
-    t = np.flatnonzero(tgt)
-    rows = np.concatenate([lay.eu[e], t])
-    cols = np.concatenate([lay.ev[e], np.full(t.size, sink)])
-    caps = np.concatenate([np.ones(e.size, dtype=np.int32), np.full(t.size, max(e.size, 1), dtype=np.int32)])
-    cap = sp.csr_matrix((caps, (rows, cols)), shape=(n + 1, n + 1))
-    res = maximum_flow(cap, src, sink)
-    if res.flow_value < 1:
+    if guess.flow < 1:
         return None
-    fmat = res.flow.tocsr()
-    fval = np.zeros(lay.edges.size)
-    fval[e] = np.asarray(fmat[lay.eu[e], lay.ev[e]]).ravel()
-    fval = np.clip(fval, 0, 1)
-    used_groups = np.unique(lay.grp[fval > 0.5])
-    col_groups = np.flatnonzero(lay.group_col >= 0)
-    cut_groups_ = np.setdiff1d(col_groups, used_groups)
-    cut_mask = np.zeros(lay.group_col.size, dtype=bool)
-    cut_mask[cut_groups_] = True
-    edge_cut = cut_mask[lay.grp]
-    keep = lay.c5 & ~edge_cut
-    reach = reachable(n, lay.eu[keep], lay.ev[keep], np.arange(n) == src)
-    if np.any(reach & tgt):
-        return None
+    cut_mask = guess.cut_groups & (lay.group_col >= 0)
+    cut_keys = set(groups.keys[cut_mask].tolist())
+    for excluded in options.exclusions:
+        if excluded and set(excluded) <= cut_keys:
+            return None
+    g, ts = products.virtual, products.ts
     if feasibility:
-        from .strategy import TestStrategy  # local: strategy does not depend on the MILP
+        from .strategy import TestStrategy
         from .verify import trapped_entries
 
-        ts = products.ts
-        restr = np.zeros((g.n_hist, ts.n_moves), dtype=bool)
         cut_all = np.flatnonzero(cut_mask[lay.group_of_edge])
+        restr = np.zeros((g.n_hist, ts.n_moves), dtype=bool)
         restr[g.hist[g.src[cut_all]], g.move[cut_all]] = True
         if trapped_entries(products, TestStrategy(np.zeros(ts.n_moves, dtype=bool), restr)):
             return None
-    x = np.zeros(lay.n_col)
-    x[lay.f_col] = fval
-    x[lay.group_col[cut_groups_]] = 1.0
+    x = np.full(lay.n_col, np.nan) if feasibility else np.zeros(lay.n_col)
+    x[lay.f_col] = guess.edge_flow
+    cols = np.flatnonzero(lay.group_col >= 0)
+    x[lay.group_col[cols]] = cut_mask[cols].astype(float)
     has_mu = lay.mu_col >= 0
-    x[lay.mu_col[has_mu]] = reach[has_mu].astype(float)
+    x[lay.mu_col[has_mu]] = guess.reach[has_mu].astype(float)
+    if place_col.size:
+        e_all = np.flatnonzero(cut_mask[lay.group_of_edge])
+        pl = ts.place[ts.dst[g.move[e_all]]]
+        x[place_col] = np.isin(state_places, pl).astype(float)
     return x
+
+
+def _set_solution(h: highspy.Highs, x: np.ndarray) -> None:
+    """Offer HiGHS a starting solution; ``nan`` entries are left for HiGHS to complete."""
+    known = np.flatnonzero(~np.isnan(x))
+    if known.size == x.size:
+        sol = highspy.HighsSolution()
+        sol.col_value = list(x)
+        sol.value_valid = True
+        h.setSolution(sol)
+    else:
+        h.setSolution(int(known.size), known.astype(np.int32), x[known].astype(np.float64))
 
 
 def _incumbent(h: highspy.Highs, x: np.ndarray, f_col: np.ndarray, deadline: float | None) -> np.ndarray:
@@ -554,10 +556,7 @@ def _incumbent(h: highspy.Highs, x: np.ndarray, f_col: np.ndarray, deadline: flo
     fv = np.round(x[f_col])
     idx = f_col.astype(np.int32)
     h.changeColsBounds(idx.size, idx, fv, fv)
-    sol = highspy.HighsSolution()
-    sol.col_value = list(x)
-    sol.value_valid = True
-    h.setSolution(sol)
+    _set_solution(h, x)
     try:
         status, _ = _run(h, deadline)
         if status in ("optimal", "feasible"):
