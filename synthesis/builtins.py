@@ -175,3 +175,122 @@ BUILTINS: dict[str, Callable[[], Problem]] = {
     "refueling": refueling,
     "mars-exploration": mars_exploration,
 }
+
+
+# ------------------------------------------------------------ dynamic test agents
+
+
+def maze1() -> Problem:
+    """7x5 maze: visit I1, I2 and I3 before the goal; a test agent climbs column 2.
+
+    The agent starts at (6, 2), moves up one row or stays (never down), and leaves the
+    grid to a park above (0, 2). On rows 6, 4, 2 and 0 it may not stay: when it is its
+    turn there, it moves up (paper-examples.md). The system moves first.
+    """
+    from .agent import make_test_agent, places_of_cells
+    from .systems import grid_world
+
+    rows, cols = 7, 5
+    blocked = {(1, 0), (1, 1), (1, 3), (3, 1), (3, 3), (3, 4), (5, 0), (5, 1), (5, 3)}
+    goal, start = (0, 0), (6, 0)
+    special = {(1, 4): "I1", (3, 0): "I2", (5, 4): "I3"}
+    column = [(r, 2) for r in range(rows)]
+    tokens = {c: "t" for c in column} | {(6, 2): "t0", goal: "T", start: "S"} | special
+    labels = {goal: ["goal"]} | {c: [name] for c, name in special.items()}
+    ts = grid_world(_grid_cells(rows, cols, blocked), rows, cols, start, [goal], labels, tokens)
+    cells = places_of_cells(ts, column, "maze1 agent")
+    up = [(places_of_cells(ts, [(r, 2)])[0], places_of_cells(ts, [(r - 1, 2)])[0]) for r in range(1, rows)]
+    may_stay = places_of_cells(ts, [(r, 2) for r in (1, 3, 5)])
+    agent = make_test_agent(
+        ts, cells, places_of_cells(ts, [(6, 2)])[0], [("above", places_of_cells(ts, [(0, 2)]))],
+        moves=up, stay=may_stay, first="system", where="maze1 agent",
+    )
+    return make_problem(
+        "maze1", ts, "F goal", "F I1 & F I2 & F I3", "agent", agent=agent,
+        static_moves=agent.static_moves(ts),
+        description="A maze with three test cells; a test agent climbing the middle column blocks shortcuts.",
+    )
+
+
+def maze2() -> Problem:
+    """5x5 maze, the headline environment: visit I1 and I2 before the goal.
+
+    The test agent lives on the plus (centre row and centre column), starts at (2, 2)
+    and moves first: one step along the plus, or stays. Four absorbing parks lie off
+    the ends of the plus. Static area: every free cell off the plus.
+    """
+    from .agent import make_test_agent, places_of_cells
+    from .systems import grid_world
+
+    rows, cols = 5, 5
+    blocked = {(1, 1), (1, 3), (3, 1), (3, 3)}
+    goal, start = (0, 4), (4, 0)
+    special = {(3, 4): "I1", (1, 0): "I2"}
+    plus = [(2, c) for c in range(cols)] + [(r, 2) for r in range(rows) if r != 2]
+    tokens = {c: "t" for c in plus} | {(2, 2): "t0", goal: "T", start: "S"} | special
+    labels = {goal: ["goal"]} | {c: [name] for c, name in special.items()}
+    ts = grid_world(_grid_cells(rows, cols, blocked), rows, cols, start, [goal], labels, tokens)
+    cells = places_of_cells(ts, plus, "maze2 agent")
+    parks = [
+        ("above", places_of_cells(ts, [(0, 2)])),
+        ("below", places_of_cells(ts, [(4, 2)])),
+        ("left", places_of_cells(ts, [(2, 0)])),
+        ("right", places_of_cells(ts, [(2, 4)])),
+    ]
+    agent = make_test_agent(
+        ts, cells, places_of_cells(ts, [(2, 2)])[0], parks, moves="4-neighbour", stay=True, first="agent",
+        where="maze2 agent",
+    )
+    return make_problem(
+        "maze2", ts, "F goal", "F I1 & F I2", "agent", agent=agent,
+        static_moves=agent.static_moves(ts),
+        description="The headline maze: a test agent on the central plus makes the system visit I1 and I2.",
+    )
+
+
+def patrolling() -> Problem:
+    """6x6 with fuel: a test agent patrolling column 2 makes the system run low on fuel.
+
+    Fuel as in refueling (max 10, moves cost 1, R refills); start ((5, 5), 10); goal
+    (5, 0). ``empty`` at fuel 0; ``lowfuel`` at ``1 <= f <= min((5 - row) + col - 2, 9)``;
+    one label per state, priority goal > empty > lowfuel (as refueling). The agent moves
+    one row up or down in column 2 or stays, starts at (5, 2), and parks off the grid
+    from row 0 or row 5. Static area: everything off column 2.
+
+    Static cuts are per transition of T (method.md §5, c9), i.e. per fuel level:
+    paper-examples.md ties them across fuel levels for refueling and mars-exploration
+    only, and tying them here makes the routing MILP intractable (phase 1 unproven
+    after 60 s).
+    """
+    from .agent import make_test_agent, places_of_cells
+
+    rows, cols = 6, 6
+    goal, start, refuel = (5, 0), (5, 5), (1, 5)
+
+    def label(cell: Cell, fuel: int) -> list[str]:
+        if cell == goal:
+            return ["goal"]
+        if fuel == 0:
+            return ["empty"]
+        r, c = cell
+        if 1 <= fuel <= min((5 - r) + c - 2, 9):
+            return ["lowfuel"]
+        return []
+
+    column = [(r, 2) for r in range(rows)]
+    tokens = {c: "t" for c in column} | {(5, 2): "t0", goal: "T", start: "S", refuel: "R"}
+    ts = fuel_grid_world(_grid_cells(rows, cols), rows, cols, start, 10, [refuel], [goal], label, tokens)
+    cells = places_of_cells(ts, column, "patrolling agent")
+    parks = [("top", places_of_cells(ts, [(0, 2)])), ("bottom", places_of_cells(ts, [(5, 2)]))]
+    agent = make_test_agent(
+        ts, cells, places_of_cells(ts, [(5, 2)])[0], parks, moves="4-neighbour", stay=True, first="system",
+        where="patrolling agent",
+    )
+    return make_problem(
+        "patrolling", ts, "F goal & G !empty", "F lowfuel", "agent", agent=agent,
+        static_moves=agent.static_moves(ts),
+        description="A test agent patrolling column 2 pushes a fuel-limited robot to run low far from the goal.",
+    )
+
+
+BUILTINS.update({"maze1": maze1, "maze2": maze2, "patrolling": patrolling})

@@ -1,0 +1,375 @@
+"""The test-agent game of method.md §7 as an explicit GR(1) game over integer arrays.
+
+Players and turns
+-----------------
+The test agent is the controlled player (the GR(1) *system*); the system under test
+(SUT) is its environment. A game *position* is a configuration at the SUT's turn,
+``(v, a)`` with ``v = (x_sys, q_hist)`` a node of the virtual product graph G and ``a``
+an agent state (a cell of the agent or a park). One round of :class:`~synthesis.gr1.GR1Game`
+is one SUT step followed by one agent step, so ``turn`` (g3, g4, a3) is built into the
+rounds and needs no variable:
+
+1. the SUT picks an edge of G out of ``v`` or stays (a2), never into the agent's place
+   (a5) and never over a static obstacle of ``Obs``; the history is updated with the
+   state entered (``q' = delta(q, L(s'))``; a stay keeps it, the automata being
+   idempotent on a repeated letter). The pair ``(v', a)`` reached is a *configuration*
+   where the agent decides;
+2. the agent picks a move of ``T_TA`` (g2), never into the SUT's place (g5), such that
+   the next position is *legal* (below), and not a stay in a place that blocks every
+   path of the SUT to its goal (g8).
+
+The initial condition (a1, g1): the SUT at the initial node of G with the initial
+history, the agent at its start. If the agent moves first, the single initial group is
+the set of positions its first move can reach from configuration ``(Src, a0)``;
+otherwise it is ``{(Src, a0)}`` when that position is legal (else empty: unrealizable).
+
+Legal positions (g5, g6, g7)
+----------------------------
+Write ``R(q)`` for the reactive restrictions of history ``q`` (the cuts ``C(q)`` outside
+the static obstacles). A position ``((s, q), a)`` is legal iff the agent does not stand
+on the SUT's place and, for every move ``(s, s')`` of ``T`` that is not a static
+obstacle, the agent stands on the place of ``s'`` **exactly when** ``(s, s') in R(q)``.
+So at every SUT turn the agent blocks ``R(q)`` out of ``s`` — no less (g6), no more
+(g7). If ``R(q)`` restricts two places out of ``s``, or a place the agent cannot
+occupy, no position at ``(s, q)`` is legal. A move into a static obstacle's target is
+blocked anyway, so the agent may stand there (the static area is off the agent's cells,
+so this only matters for hand-given static areas).
+
+End of the test (terminal handling)
+-----------------------------------
+A test ends when the SUT reaches ``Tgt`` (goal states are terminal) or stands on a node
+of G from which ``Tgt`` is unreachable even without restrictions: the SUT has then
+failed its objective on its own and the verdict is fixed. Positions at such *ended*
+nodes have no SUT choices, which the GR(1) solver counts as won by the agent; they only
+need to be collision-free (g6/g7 are about the SUT's next move, and there is none).
+
+Liveness (a4) and g8
+--------------------
+Every guarantee of the agent (g1-g8) is a safety property, and the game asks the agent
+to keep them on *every* play, including plays where the SUT never reaches its goal.
+That is stronger than the paper's ``(a4 & ...) -> guarantees`` (a4: ``G F goal``), so a
+strategy found here also wins the paper's specification; a4 would only excuse liveness
+guarantees and the agent has none, so the game carries no liveness sets (the GR(1)
+solver's ``G F true``). The SUT's progress is the SUT's business: since the agent blocks
+exactly ``R(q)``, the SUT's options at ``(s, q)`` are those of the routing strategy,
+and the counterexample loop rejects a cut set under which some reachable configuration
+has lost every way to the goal (:func:`trapped_nodes`).
+
+g8 (the livelock guard) is computed, not hand-listed: a place ``p`` *blocks every path*
+of the SUT at node ``v`` when ``Tgt`` is reachable from ``v`` in G without the static
+obstacles, but not once every move into ``p`` is removed as well. In turn-based time
+the agent stands still during the SUT's step (g3), so "staying two steps in a row" in
+such a place means staying there again at its own turn, which g8 forbids (Maze 1's
+"must leave rows 6, 4, 2, 0" is an instance of this rule).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+from .gr1 import GR1Game
+from .products import Products, coreachable, reachable
+from .strategy import TestStrategy
+
+__all__ = ["AgentGame", "build_agent_game", "ended_nodes", "blocking_places", "trapped_nodes", "reactive_restrictions"]
+
+
+class TestAgentLike(Protocol):
+    """What :func:`build_agent_game` reads of a test agent (see :class:`synthesis.agent.TestAgent`)."""
+
+    n_states: int
+    place_of_state: np.ndarray
+    moves: np.ndarray
+    start: int
+    first: str
+
+
+def _ranges(ptr: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Expand CSR rows: ``(row of each entry, entry index)`` over ``rows``."""
+    starts = ptr[rows]
+    lens = ptr[rows + 1] - starts
+    total = int(lens.sum())
+    if total == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    offsets = np.cumsum(lens) - lens
+    idx = np.repeat(starts - offsets, lens) + np.arange(total, dtype=np.int64)
+    return np.repeat(np.arange(rows.size, dtype=np.int64), lens), idx
+
+
+def _csr(keys: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Stable order of ``keys`` and the CSR pointer of ``n`` rows."""
+    order = np.argsort(keys, kind="stable")
+    ptr = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(np.bincount(keys, minlength=n), out=ptr[1:])
+    return order, ptr
+
+
+def reactive_restrictions(strategy: TestStrategy) -> np.ndarray:
+    """``bool[n_hist, n_moves]``: ``R(q)``, the restrictions of ``C(q)`` that are not static obstacles."""
+    return strategy.restrictions & ~strategy.static_obstacles[None, :]
+
+
+def ended_nodes(products: Products) -> np.ndarray:
+    """``bool[n_nodes]``: nodes of G where the test is over (``Tgt``, or ``Tgt`` unreachable)."""
+    g = products.virtual
+    viable = coreachable(g.n_nodes, g.src, g.dst, products.target)
+    return products.target | ~viable
+
+
+def blocking_places(products: Products, static_obstacles: np.ndarray, places: np.ndarray) -> np.ndarray:
+    """``bool[n_nodes, len(places)]``: place ``places[k]`` blocks every path of the SUT at node ``v``.
+
+    That is: ``Tgt`` is reachable from ``v`` in G without the static obstacles, but not
+    when every move into the place is removed too (g8). Ended nodes block nothing.
+    """
+    g, ts = products.virtual, products.ts
+    free = ~static_obstacles[g.move]
+    base = coreachable(g.n_nodes, g.src[free], g.dst[free], products.target) & ~ended_nodes(products)
+    head_place = ts.place[g.state[g.dst]]
+    out = np.zeros((g.n_nodes, places.size), dtype=bool)
+    for k, p in enumerate(places.tolist()):
+        keep = free & (head_place != p)
+        out[:, k] = base & ~coreachable(g.n_nodes, g.src[keep], g.dst[keep], products.target)
+    return out
+
+
+def trapped_nodes(products: Products, strategy: TestStrategy) -> np.ndarray:
+    """Nodes of G the SUT can reach under the test's restrictions and where it is trapped.
+
+    The SUT moves over G without the restricted edges (static obstacles and ``C(q)`` of
+    the tail's history, exactly what a legal agent blocks) and stops at ended nodes. A
+    reachable node that is not ended (so the goal is reachable without restrictions) but
+    from which no restricted path reaches ``Tgt`` is a trap: the test took the SUT's
+    last way to its goal. Returns the indices of such nodes (empty: no trap).
+    """
+    g = products.virtual
+    blocked = strategy.blocked[g.hist[g.src], g.move]
+    ended = ended_nodes(products)
+    keep = ~blocked
+    alive = coreachable(g.n_nodes, g.src[keep], g.dst[keep], products.target)
+    walk = keep & ~ended[g.src]
+    start = np.zeros(g.n_nodes, dtype=bool)
+    start[g.initial] = True
+    seen = reachable(g.n_nodes, g.src[walk], g.dst[walk], start)
+    return np.flatnonzero(seen & ~ended & ~alive)
+
+
+@dataclass
+class AgentGame:
+    """The test-agent game and the tables that translate it back to the test.
+
+    Attributes
+    ----------
+    game
+        The GR(1) game (positions at the SUT's turn; see the module docstring).
+    n_agent
+        Number of agent states.
+    position_node, position_agent
+        ``int64[n_positions]``: the node of G and the agent state of each position.
+    position_index
+        ``int64[n_nodes * n_agent]``: the position of ``(v, a)`` (``v * n_agent + a``), or -1.
+    choice_config
+        ``int64[n_choices]``: the configuration ``v' * n_agent + a`` each SUT choice leads to.
+    choice_config_index
+        ``int64[n_choices]``: index of that configuration in :attr:`configs`.
+    configs
+        ``int64[n_configs]``: the configurations (``v' * n_agent + a``) where the agent decides.
+    initial_config
+        The configuration ``(Src, a0)`` of the agent's first move when it moves first, else -1.
+    legal
+        ``bool[n_nodes, n_agent]``: legal positions (g5-g7; collision-free only at ended nodes).
+    ended
+        ``bool[n_nodes]``: nodes where the test is over.
+    blocking
+        ``bool[n_nodes, n_agent]``: g8's "blocks every path" (False for parks).
+    reactive
+        ``bool[n_hist, n_moves]``: ``R(q)``.
+    static_obstacles
+        ``bool[n_moves]``: ``Obs``.
+    """
+
+    game: GR1Game
+    n_agent: int
+    position_node: np.ndarray
+    position_agent: np.ndarray
+    position_index: np.ndarray
+    choice_config: np.ndarray
+    choice_config_index: np.ndarray
+    configs: np.ndarray
+    initial_config: int
+    legal: np.ndarray
+    ended: np.ndarray
+    blocking: np.ndarray
+    reactive: np.ndarray
+    static_obstacles: np.ndarray
+
+    @property
+    def n_positions(self) -> int:
+        return self.game.n_positions
+
+    def size(self) -> dict[str, int]:
+        """Positions, SUT choices, agent moves and configurations (for summaries)."""
+        return {
+            "positions": self.game.n_positions,
+            "choices": self.game.n_choices,
+            "moves": self.game.n_edges,
+            "configurations": int(self.configs.size),
+        }
+
+
+def legal_positions(
+    products: Products,
+    reactive: np.ndarray,
+    static_obstacles: np.ndarray,
+    agent_place: np.ndarray,
+    ended: np.ndarray,
+) -> np.ndarray:
+    """``bool[n_nodes, n_agent]``: positions where the agent blocks exactly ``R(q)`` (g5-g7).
+
+    ``agent_place[a]`` is the place of agent state ``a`` (-1 for a park).
+    """
+    g, ts = products.virtual, products.ts
+    n, n_agent = g.n_nodes, agent_place.size
+    n_places = len(ts.places)
+    agent_of_place = np.full(n_places, -1, dtype=np.int64)
+    cells = np.flatnonzero(agent_place >= 0)
+    agent_of_place[agent_place[cells]] = cells
+    node_place = ts.place[g.state].astype(np.int64)
+    live = ~ended[g.src] & ~static_obstacles[g.move]
+    head_agent = agent_of_place[node_place[g.dst]]
+    restricted = reactive[g.hist[g.src], g.move]
+    # g6: the agent must stand on the place of every restricted move out of s
+    need = live & restricted
+    impossible = np.zeros(n, dtype=bool)
+    impossible[g.src[need & (head_agent < 0)]] = True
+    ok = need & (head_agent >= 0)
+    req_lo = np.full(n, n_agent, dtype=np.int64)
+    req_hi = np.full(n, -1, dtype=np.int64)
+    np.minimum.at(req_lo, g.src[ok], head_agent[ok])
+    np.maximum.at(req_hi, g.src[ok], head_agent[ok])
+    impossible |= (req_hi >= 0) & (req_lo != req_hi)
+    required = np.where(req_hi >= 0, req_hi, -1)
+    # g7: and on no place of an unrestricted move out of s
+    forbid = live & ~restricted & (head_agent >= 0)
+    forbidden = np.zeros((n, n_agent), dtype=bool)
+    forbidden[g.src[forbid], head_agent[forbid]] = True
+    agents = np.arange(n_agent)
+    exact = ~forbidden & ~impossible[:, None] & ((required[:, None] < 0) | (agents[None, :] == required[:, None]))
+    no_collision = agent_place[None, :] != node_place[:, None]
+    return no_collision & (ended[:, None] | exact)
+
+
+def build_agent_game(products: Products, strategy: TestStrategy, agent: TestAgentLike) -> AgentGame:
+    """Build the test-agent game for the restrictions of ``strategy`` (method.md §7).
+
+    Parameters
+    ----------
+    products
+        G and its node sets.
+    strategy
+        The routing strategy: ``Obs`` (static obstacles) and ``C(q)``.
+    agent
+        The test agent (``place_of_state``, ``moves``, ``start``, ``first``).
+
+    Returns
+    -------
+    AgentGame
+        The game (a safety game: no liveness sets) and its translation tables.
+    """
+    g, ts = products.virtual, products.ts
+    n, n_agent = g.n_nodes, agent.n_states
+    agent_place = agent.place_of_state
+    obs = strategy.static_obstacles
+    reactive = reactive_restrictions(strategy)
+    ended = ended_nodes(products)
+    legal = legal_positions(products, reactive, obs, agent_place, ended)
+    blocking = np.zeros((n, n_agent), dtype=bool)
+    cells = np.flatnonzero(agent_place >= 0)
+    blocking[:, cells] = blocking_places(products, obs, agent_place[cells])
+
+    flat_legal = legal.ravel()
+    positions = np.flatnonzero(flat_legal)
+    position_index = np.full(n * n_agent, -1, dtype=np.int64)
+    position_index[positions] = np.arange(positions.size)
+    pos_node = positions // n_agent
+    pos_agent = positions % n_agent
+    node_place = ts.place[g.state].astype(np.int64)
+
+    # the SUT's moves: edges of G (minus static obstacles) and stays
+    stay_nodes = np.flatnonzero(ts.stay[g.state] & ~ended)
+    free = ~obs[g.move]
+    m_src = np.concatenate([g.src[free].astype(np.int64), stay_nodes])
+    m_dst = np.concatenate([g.dst[free].astype(np.int64), stay_nodes])
+    m_order, m_ptr = _csr(m_src, n)
+    m_dst = m_dst[m_order]
+
+    # choices: from every legal position at a node where the test goes on (a2, a5)
+    owners = np.flatnonzero(~ended[pos_node])
+    row, idx = _ranges(m_ptr, pos_node[owners])
+    c_owner = owners[row]
+    c_dst = m_dst[idx]
+    c_agent = pos_agent[c_owner]
+    keep = node_place[c_dst] != agent_place[c_agent]
+    c_owner, c_dst, c_agent = c_owner[keep], c_dst[keep], c_agent[keep]
+    c_config = c_dst * n_agent + c_agent
+
+    # configurations: the agent's answers (g2, g5 via legality, g6/g7, g8)
+    src_node, a0 = g.initial, agent.start
+    initial_config = src_node * n_agent + a0 if agent.first == "agent" else -1
+    extra = np.array([initial_config] if initial_config >= 0 else [], dtype=np.int64)
+    configs, inverse = np.unique(np.concatenate([c_config, extra]), return_inverse=True)
+    choice_config_index = inverse[: c_config.size]
+    k_node, k_agent = configs // n_agent, configs % n_agent
+    ta_order, ta_ptr = _csr(agent.moves[:, 0].astype(np.int64), n_agent)
+    ta_dst = agent.moves[ta_order, 1].astype(np.int64)
+    krow, kidx = _ranges(ta_ptr, k_agent)
+    cand = ta_dst[kidx]
+    cnode = k_node[krow]
+    ok = legal[cnode, cand] & ~((cand == k_agent[krow]) & blocking[cnode, k_agent[krow]])
+    krow, cand, cnode = krow[ok], cand[ok], cnode[ok]
+    k_succ = position_index[cnode * n_agent + cand]
+    k_ptr = np.zeros(configs.size + 1, dtype=np.int64)
+    np.cumsum(np.bincount(krow, minlength=configs.size), out=k_ptr[1:])
+
+    # each choice owns a copy of its configuration's answers
+    crow, cidx = _ranges(k_ptr, choice_config_index)
+    choice_succ = k_succ[cidx]
+    choice_ptr = np.zeros(c_owner.size + 1, dtype=np.int64)
+    np.cumsum(np.bincount(crow, minlength=c_owner.size), out=choice_ptr[1:])
+
+    if agent.first == "agent":
+        k0 = int(np.searchsorted(configs, initial_config))
+        group = k_succ[k_ptr[k0] : k_ptr[k0 + 1]]
+    else:
+        p0 = position_index[src_node * n_agent + a0]
+        group = np.array([p0] if p0 >= 0 else [], dtype=np.int64)
+    game = GR1Game(
+        n_positions=int(positions.size),
+        choice_owner=c_owner,
+        choice_succ_ptr=choice_ptr,
+        choice_succ=choice_succ,
+        initial=[group],
+        env_liveness=[],
+        sys_liveness=[],
+    )
+    return AgentGame(
+        game=game,
+        n_agent=n_agent,
+        position_node=pos_node,
+        position_agent=pos_agent,
+        position_index=position_index,
+        choice_config=c_config,
+        choice_config_index=choice_config_index,
+        configs=configs,
+        initial_config=int(initial_config),
+        legal=legal,
+        ended=ended,
+        blocking=blocking,
+        reactive=reactive,
+        static_obstacles=obs,
+    )
+
+
