@@ -903,11 +903,16 @@ def _restrictable_for_agent(ts: TransitionSystem, agent: TestAgent, static: np.n
 
 
 def synthesize_agent_test(
-    problem: Problem, options: SynthesisOptions | None = None, max_iterations: int | None = None
+    problem: Problem,
+    options: SynthesisOptions | None = None,
+    max_iterations: int | None = None,
+    prefilter: bool = True,
 ) -> SynthesizedTest:
     """Synthesize a test agent strategy for an agent problem (method.md §7).
 
-    The loop: solve MILP-agent; reject the cut set if it traps the system somewhere
+    The loop: exclude what no agent can realize (a move into a place the agent can
+    never occupy at the system's turn is unrestrictable; cuts it could never hold are
+    excluded); solve MILP-agent; reject the cut set if it traps the system somewhere
     reachable (:func:`~synthesis.agent_game.trapped_nodes`); build the test-agent game
     from ``R(q)`` and ``Obs`` and solve it; if the agent cannot win, exclude the cut set
     (``sum_{e in C} d_e <= |C| - 1``) and solve again. The winning strategy is tabulated
@@ -924,6 +929,11 @@ def synthesize_agent_test(
     max_iterations
         Bound on MILP solves; default: ``options.agent_iterations`` if set, else the
         agent's ``max_iterations`` (100 unless the problem says otherwise).
+    prefilter
+        Exclude, before the first solve, the cuts no agent can hold
+        (:func:`~synthesis.agent_game.realizability_exclusions`); this never changes the
+        optimum, only which equally good cut set is tried first and how many solves the
+        loop needs.
 
     Returns
     -------
@@ -941,8 +951,8 @@ def synthesize_agent_test(
         If the result fails an independent check (a FlowTest bug).
     """
     from . import gr1
-    from .agent_game import build_agent_game, trapped_nodes
-    from .milp import solve_routing
+    from .agent_game import build_agent_game, realizability_exclusions, trapped_nodes
+    from .milp import cut_groups, solve_routing
     from .pipeline import SynthesisOptions, SynthesizedTest, build_graphs, milp_options, strategy_from_routing
     from .verify import check_test
 
@@ -964,6 +974,10 @@ def synthesize_agent_test(
     harness = _restrictable_for_agent(ts, agent, static)
     pruned = bool(np.any(ts.restrictable & ~harness))
     milp_products = replace(products, ts=replace(ts, restrictable=harness))
+    if prefilter:
+        necessary = realizability_exclusions(milp_products, agent, cut_groups(milp_products, mopts))
+        mopts.exclusions.extend(necessary)
+        pruned = pruned or bool(necessary)
     setting = options.setting or problem.extras.get("setting", "instantaneous")
     iterations: list[dict] = []
     for it in range(1, bound + 1):

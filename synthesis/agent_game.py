@@ -74,7 +74,15 @@ from .gr1 import GR1Game
 from .products import Products, coreachable, reachable
 from .strategy import TestStrategy
 
-__all__ = ["AgentGame", "build_agent_game", "ended_nodes", "blocking_places", "trapped_nodes", "reactive_restrictions"]
+__all__ = [
+    "AgentGame",
+    "build_agent_game",
+    "ended_nodes",
+    "blocking_places",
+    "trapped_nodes",
+    "reactive_restrictions",
+    "realizability_exclusions",
+]
 
 
 class TestAgentLike(Protocol):
@@ -85,6 +93,15 @@ class TestAgentLike(Protocol):
     moves: np.ndarray
     start: int
     first: str
+
+
+class CutGroupsLike(Protocol):
+    """What :func:`realizability_exclusions` reads of the MILP's cut groups."""
+
+    of_edge: np.ndarray
+    keys: np.ndarray
+    restrictable: np.ndarray
+    static: np.ndarray
 
 
 def _ranges(ptr: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -373,3 +390,60 @@ def build_agent_game(products: Products, strategy: TestStrategy, agent: TestAgen
     )
 
 
+
+
+def realizability_exclusions(products: Products, agent: TestAgentLike, groups: CutGroupsLike) -> list[list[int]]:
+    """Cuts no test agent can hold, as MILP exclusion rows ``d_g <= 0`` (before the first solve).
+
+    A cut group ``g`` is excluded when every edge of it leaves a node ``v = (s, q)``
+    where the SUT may stay, into an agent place ``p`` where the agent cannot stay (no
+    stay move in ``T_TA``) or that blocks every path of the SUT at ``v`` (g8). If ``v``
+    is reachable, the SUT can stay at ``s`` and the agent would have to hold ``p`` (g6)
+    by staying, which ``T_TA`` or g8 forbids.
+
+    Soundness: if a cut set containing ``g`` were realizable, the tails of ``g`` would be
+    unreachable under it (the closed loop follows G minus the cuts exactly), so dropping
+    ``g`` leaves a realizable routing cut set with no fewer paths, no more cuts and no
+    more blocked places: the MILP-agent optimum over realizable cut sets is unchanged.
+    Blocking is computed without static obstacles; where a place blocks every path
+    there, with obstacles it either still does or the node is trapped, which the loop
+    rejects as well. (Pairs of cuts out of one node into two places are unrealizable
+    too, but adding those rows only perturbed HiGHS's choice among equally good cut sets
+    and cost more solves on the built-ins, so they are left to the loop.)
+
+    Parameters
+    ----------
+    products
+        G (with the harness the MILP uses).
+    agent
+        The test agent.
+    groups
+        The MILP's cut groups (``of_edge``, ``keys``, ``restrictable``, ``static``), from
+        :func:`synthesis.milp.cut_groups`.
+
+    Returns
+    -------
+    list[list[int]]
+        One single-key exclusion per excluded group.
+    """
+    g, ts = products.virtual, products.ts
+    n_agent = agent.n_states
+    agent_place = agent.place_of_state
+    agent_of_place = np.full(len(ts.places), -1, dtype=np.int64)
+    cells = np.flatnonzero(agent_place >= 0)
+    agent_of_place[agent_place[cells]] = cells
+    ended = ended_nodes(products)
+    head = agent_of_place[ts.place[g.state[g.dst]]]
+    grp = groups.of_edge
+    reactive = ~groups.static[grp] & groups.restrictable[grp] & (head >= 0) & ~ended[g.src]
+    can_stay = np.zeros(n_agent, dtype=bool)
+    can_stay[agent.moves[agent.moves[:, 0] == agent.moves[:, 1], 0]] = True
+    blocking = np.zeros((g.n_nodes, n_agent), dtype=bool)
+    blocking[:, cells] = blocking_places(products, np.zeros(ts.n_moves, dtype=bool), agent_place[cells])
+    hopeless = reactive & ts.stay[g.state[g.src]]
+    hopeless[hopeless] = ~can_stay[head[hopeless]] | blocking[g.src[hopeless], head[hopeless]]
+    n_groups = groups.keys.size
+    all_bad = np.bincount(grp, weights=hopeless, minlength=n_groups) == np.bincount(grp, minlength=n_groups)
+    used = np.zeros(n_groups, dtype=bool)
+    used[grp[reactive]] = True
+    return [[int(k)] for k in groups.keys[all_bad & used]]

@@ -86,9 +86,21 @@ def test_builtin_synthesizes_and_verifies(tests: dict[str, SynthesizedTest], nam
 
 
 def test_counterexamples_are_reported(tests: dict[str, SynthesizedTest]) -> None:
-    # maze1 and maze2 both reject their first cut set (the agent cannot be in two places)
-    assert tests["maze1"].agent.counterexamples >= 1
-    assert tests["maze2"].agent.counterexamples >= 1
+    # maze2's first cut sets need the agent at (0, 2) and (2, 4) at once: rejected by the game
+    test = tests["maze2"]
+    assert test.agent.counterexamples >= 1
+    verdicts = [it["verdict"] for it in test.agent.iterations]
+    assert verdicts[-1] == "realizable" and all(v != "realizable" for v in verdicts[:-1])
+    assert len(summary_of(test)["agent_strategy"]["rejected"]) == test.agent.counterexamples
+
+
+def test_prefilter_only_saves_solves() -> None:
+    """Without the a-priori exclusions maze1 rejects a cut set on rows the agent cannot hold."""
+    from synthesis.agent import synthesize_agent_test
+
+    plain = synthesize_agent_test(load_problem("maze1"), prefilter=False)
+    assert plain.agent.counterexamples >= 1
+    assert plain.routing.flow == synthesize(load_problem("maze1")).routing.flow
 
 
 @pytest.mark.parametrize("name", AGENT_BUILTINS)
@@ -214,14 +226,20 @@ def test_agent_that_cannot_reach_any_cut_position_is_infeasible() -> None:
 
 
 def test_loop_bound_ends_with_infeasible() -> None:
-    plus = [(2, 2), (2, 0), (2, 1), (2, 3), (2, 4), (0, 2), (1, 2), (3, 2), (4, 2)]
-    problem = _maze2_with(plus, stay=False, first="agent", max_iterations=3)
+    # an agent that can only sit on (2, 2) (or park): every cut set the MILP offers fails
+    problem = _maze2_with([(2, 2)], stay=True, first="agent", max_iterations=2)
     lines: list[str] = []
     with pytest.raises(InconsistentProblem) as err:
         synthesize(problem, SynthesisOptions(progress=lines.append))
     assert err.value.reason == "infeasible"
-    assert "bound of 3 iterations" in str(err.value)
-    assert sum(line.startswith("agent loop") for line in lines) == 3
+    assert "bound of 2 iterations" in str(err.value)
+    assert sum(line.startswith("agent loop") for line in lines) == 2
+    # without the bound the loop runs out of cut sets and says so
+    problem = _maze2_with([(2, 2)], stay=True, first="agent", max_iterations=100)
+    with pytest.raises(InconsistentProblem) as err:
+        synthesize(problem)
+    assert err.value.reason == "infeasible"
+    assert "rejected cut set(s) no routing cut set remains" in str(err.value)
 
 
 def test_toml_agent_problem(tmp_path: Path) -> None:
