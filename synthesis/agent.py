@@ -961,7 +961,7 @@ def synthesize_agent_test(
     agent = problem.agent
     if not isinstance(agent, TestAgent):
         raise ProblemError(f"problem {problem.name!r} is an agent problem without a test agent; add [environment.agent]")
-    bound = max_iterations or getattr(options, "agent_iterations", None) or agent.max_iterations
+    bound = max_iterations or options.agent_iterations or agent.max_iterations
     t_start = time.perf_counter()
     timings = {"graphs": 0.0, "milp": 0.0, "game": 0.0, "gr1": 0.0, "verify": 0.0, "total": 0.0}
     note("building automata and product graphs")

@@ -29,6 +29,7 @@ class SynthesisOptions:
     threads: int | None = None
     setting: str | None = None
     progress: Callable[[str], None] | None = None
+    agent_iterations: int | None = None  # bound on the counterexample-guided loop
 
 
 @dataclass

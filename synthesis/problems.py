@@ -223,6 +223,10 @@ def problem_from_dict(data: dict, source: str = "<problem>") -> Problem:
         from .agent import agent_from_toml  # the test agent's own section
 
         kw["agent"] = agent_from_toml(env["agent"], ts, cell_of, f"[environment.agent]{where}")
+        if kind == "agent" and static_moves is None:
+            kw["static_moves"] = kw["agent"].static_moves(ts)
+    elif kind == "agent":
+        raise ProblemError(f"an agent problem needs an [environment.agent] section{where}")
     kw["declared_propositions"] = set(labels)
     return make_problem(
         name, ts, objectives["system"], objectives["test"], kind, bidir, description=data.get("description", ""), **kw
