@@ -1,0 +1,65 @@
+"""Synthesize the built-in problems and write the artifacts ``flowtest_env`` ships.
+
+Usage::
+
+    python -m experiments.build_artifacts                 # every built-in missing its artifact
+    python -m experiments.build_artifacts maze2 --force   # rebuild one, overwriting it
+
+Each artifact goes to ``flowtest_env/artifacts/<name>.json`` (or ``--out DIR``). An
+existing file is never overwritten without ``--force``: the shipped artifacts are what
+``gym.make`` loads, and ``tests/test_envs.py`` proves each equals a fresh synthesis.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+from flowtest_env.artifacts import ARTIFACT_DIR, synthesize_artifact
+from synthesis.builtins import BUILTINS
+
+
+def build(names: list[str], out: Path, force: bool) -> int:
+    """Synthesize ``names`` into ``out``; returns the process exit code (2 if a file
+    exists and ``force`` is off, 1 on an unknown name)."""
+    unknown = [n for n in names if n not in BUILTINS]
+    if unknown:
+        print(f"unknown built-in problem(s): {', '.join(unknown)}; known: {', '.join(BUILTINS)}", file=sys.stderr)
+        return 1
+    existing = [n for n in names if (out / f"{n}.json").exists()]
+    if existing and not force:
+        print(
+            f"refusing to overwrite {', '.join(str(out / f'{n}.json') for n in existing)}; pass --force",
+            file=sys.stderr,
+        )
+        return 2
+    out.mkdir(parents=True, exist_ok=True)
+    for name in names:
+        t = time.perf_counter()
+        art = synthesize_artifact(name)
+        path = out / f"{name}.json"
+        tmp = path.with_suffix(".json.tmp")
+        art.save(tmp)
+        tmp.replace(path)
+        s = art.summary
+        print(f"{name}: flow {s['flow']}, {s['n_cuts']} cuts, {time.perf_counter() - t:.1f} s -> {path}", flush=True)
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("names", nargs="*", help="built-in problems (default: every one without an artifact)")
+    ap.add_argument("--force", action="store_true", help="overwrite existing artifacts")
+    ap.add_argument("--out", type=Path, default=ARTIFACT_DIR, help=f"output folder (default {ARTIFACT_DIR})")
+    args = ap.parse_args(argv)
+    names = args.names or [n for n in BUILTINS if args.force or not (args.out / f"{n}.json").exists()]
+    if not names:
+        print("every built-in already has an artifact (use --force to rebuild)")
+        return 0
+    return build(names, args.out, args.force)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

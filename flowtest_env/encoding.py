@@ -1,0 +1,265 @@
+"""Observation encoders: what the system under test sees of a test run.
+
+Two encodings, both built once per :class:`~flowtest_env.game.TestGame`:
+
+* ``"grid"`` (grid problems only): an image-like ``uint8[C, H, W]`` array, channel first,
+  values ``0`` or ``255`` (fuel scaled to ``0..255``), so stable-baselines3 takes it as an
+  image. Channels, in order:
+
+  ====================  =========================================================
+  ``free``              the cell is a state of the system (not blocked)
+  ``wall_N..wall_W``    a static obstacle on the move out of the cell, per direction
+  ``door_N..door_W``    a reactive restriction shown now on the move out of the cell
+  ``test_agent``        the test agent's cell
+  ``system``            the system's own cell
+  ``goal``              the goal (terminal) cells
+  ``<p>``               one per proposition of the *system* objective other than the
+                        goal (e.g. ``ice``, ``rock``, ``dropoff``): cells where it holds
+                        at the system's current fuel level
+  ``refuel``            refuel cells (fuel problems)
+  ``fuel``              constant plane, current fuel / max fuel (fuel problems)
+  ``objective_<i>``     constant plane, one-hot progress of the system objective
+                        (its automaton state), when it has more than one state
+  ====================  =========================================================
+
+* ``"flat"``: a ``float32`` vector in ``[0, 1]``. Grid problems: the spatial channels
+  above flattened (``free`` .. ``refuel``), then one entry per action slot (restricted
+  now, the test agent's block included), then the fuel fraction (fuel problems), then
+  the objective progress one-hot. Graph problems: one-hot of the system's state, the
+  test agent's state, the goal states, one block per system proposition, one entry per
+  move of the system (restriction shown now), the action slots, the objective progress.
+
+Never encoded: the test objective's cells or propositions, the history, the
+test-objective part of the history, the agent's strategy memory.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from gymnasium import spaces
+
+from synthesis.specs import parse_formula, propositions
+
+from .game import GRID_ACTIONS, RunState, TestGame
+
+DIRS = GRID_ACTIONS
+
+
+class EncodingError(ValueError):
+    """An observation kind the problem does not support."""
+
+
+def system_propositions(game: TestGame) -> list[str]:
+    """Propositions of the system objective worth showing: all but those that hold only at
+    terminal (goal) states, sorted."""
+    ts = game.ts
+    props = propositions(parse_formula(game.artifact.objectives["system"]))
+    out = []
+    for p in sorted(props):
+        where = [s for s in range(ts.n_states) if p in ts.labels[s]]
+        if where and all(ts.terminal[s] for s in where):
+            continue
+        out.append(p)
+    return out
+
+
+def _fuel_of(game: TestGame) -> np.ndarray:
+    ts = game.ts
+    if ts.kind == "fuel":
+        return np.array([int(k[1]) for k in ts.states], dtype=np.int64)
+    return np.zeros(ts.n_states, dtype=np.int64)
+
+
+class Encoder:
+    """Common interface of the encoders."""
+
+    obs_kind: str
+    space: spaces.Box
+
+    def encode(self, run: RunState) -> np.ndarray:  # pragma: no cover - interface
+        raise NotImplementedError
+
+
+class GridEncoder(Encoder):
+    """Image-like and flat encodings of a grid problem (see the module docstring)."""
+
+    def __init__(self, game: TestGame, obs_kind: str = "grid") -> None:
+        if not game.is_grid:
+            raise EncodingError(f"problem {game.artifact.name!r} is a graph: only obs_kind='flat' is available")
+        if obs_kind not in ("grid", "flat"):
+            raise EncodingError(f"unknown obs_kind {obs_kind!r}; expected 'grid' or 'flat'")
+        self.game = game
+        self.obs_kind = obs_kind
+        ts = game.ts
+        lay = ts.layout
+        assert lay is not None
+        self.rows, self.cols = H, W = lay.rows, lay.cols
+        self.fuel = _fuel_of(game)
+        self.max_fuel = int(ts.max_fuel or 0)
+        self.sys_props = system_propositions(game)
+        names = ["free", *(f"wall_{d}" for d in DIRS), *(f"door_{d}" for d in DIRS), "test_agent", "system", "goal"]
+        names += self.sys_props
+        self.is_fuel = ts.kind == "fuel"
+        if self.is_fuel:
+            names.append("refuel")
+        self.n_spatial = len(names)
+        if self.is_fuel:
+            names.append("fuel")
+        self.n_qsys = int(game.artifact.system_automaton.n_states)
+        if self.n_qsys > 1:
+            names += [f"objective_{i}" for i in range(self.n_qsys)]
+        self.channels: list[str] = names
+        ch = {n: i for i, n in enumerate(names)}
+        self.ch = ch
+        cell = [tuple(p) for p in ts.places]
+        self.cell_r = np.array([c[0] for c in cell], dtype=np.int64)
+        self.cell_c = np.array([c[1] for c in cell], dtype=np.int64)
+        base = np.zeros((len(names), H, W), dtype=np.uint8)
+        base[ch["free"], self.cell_r, self.cell_c] = 255
+        static = game.artifact.strategy.static_obstacles
+        for m in np.flatnonzero(static):
+            p = int(ts.place[ts.src[m]])
+            base[ch[f"wall_{ts.action[m]}"], self.cell_r[p], self.cell_c[p]] = 255
+        goal_places = np.unique(ts.place[ts.terminal])
+        base[ch["goal"], self.cell_r[goal_places], self.cell_c[goal_places]] = 255
+        if self.is_fuel:
+            refill = ts.dst[self.fuel[ts.dst] == self.max_fuel]
+            rp = np.unique(ts.place[refill])
+            base[ch["refuel"], self.cell_r[rp], self.cell_c[rp]] = 255
+        self.base = base
+        # proposition planes per fuel level
+        levels = self.max_fuel + 1
+        prop_planes = np.zeros((levels, len(self.sys_props), H, W), dtype=np.uint8)
+        for s in range(ts.n_states):
+            p = int(ts.place[s])
+            for i, name in enumerate(self.sys_props):
+                if name in ts.labels[s]:
+                    prop_planes[self.fuel[s], i, self.cell_r[p], self.cell_c[p]] = 255
+        self.prop_planes = prop_planes
+        self.prop_start = ch["goal"] + 1
+        self.door_start = ch["door_N"]
+        self.dir_of_move = np.array([DIRS.index(a) for a in ts.action], dtype=np.int64)
+        self.move_cell = np.stack([self.cell_r[ts.place[ts.src]], self.cell_c[ts.place[ts.src]]], axis=1)
+        self.is_static = static.copy()
+        self.place_list = ts.place.tolist()
+        self.cell_r_list = self.cell_r.tolist()
+        self.cell_c_list = self.cell_c.tolist()
+        self.fuel_list = self.fuel.tolist()
+        self.qsys_list = game.q_sys.tolist()
+        self.n_slots = game.n_slots
+        if obs_kind == "grid":
+            self.space = spaces.Box(0, 255, shape=base.shape, dtype=np.uint8)
+        else:
+            n = self.n_spatial * H * W + self.n_slots + (1 if self.is_fuel else 0) + self.n_qsys
+            self.space = spaces.Box(0.0, 1.0, shape=(n,), dtype=np.float32)
+
+    def planes(self, run: RunState) -> np.ndarray:
+        """The ``uint8[C, H, W]`` encoding of ``run``."""
+        g = self.game
+        obs = self.base.copy()
+        s = run.system
+        # shown reactive restrictions (static ones are already on the wall planes)
+        for m in g.shown_moves(run):
+            if not self.is_static[m]:
+                r, c = self.move_cell[m]
+                obs[self.door_start + self.dir_of_move[m], r, c] = 255
+        ch = self.ch
+        if run.agent >= 0:
+            ap = g.agent_place[run.agent]
+            if ap >= 0:
+                obs[ch["test_agent"], self.cell_r_list[ap], self.cell_c_list[ap]] = 255
+        p = self.place_list[s]
+        obs[ch["system"], self.cell_r_list[p], self.cell_c_list[p]] = 255
+        f = self.fuel_list[s]
+        if self.sys_props:
+            obs[self.prop_start : self.prop_start + len(self.sys_props)] = self.prop_planes[f]
+        if self.is_fuel:
+            obs[ch["fuel"]] = (255 * f) // max(self.max_fuel, 1)
+        if self.n_qsys > 1:
+            obs[ch["objective_0"] + self.qsys_list[run.history]] = 255
+        return obs
+
+    def encode(self, run: RunState) -> np.ndarray:
+        planes = self.planes(run)
+        if self.obs_kind == "grid":
+            return planes
+        g = self.game
+        tail = np.zeros(self.n_slots + (1 if self.is_fuel else 0) + self.n_qsys, dtype=np.float32)
+        if not run.done:
+            bits = g.restricted_bits_of(run) & g.exists_bits[run.system]
+            for k in range(self.n_slots):
+                if (bits >> k) & 1:
+                    tail[k] = 1.0
+        i = self.n_slots
+        if self.is_fuel:
+            tail[i] = self.fuel_list[run.system] / max(self.max_fuel, 1)
+            i += 1
+        tail[i + self.qsys_list[run.history]] = 1.0
+        spatial = planes[: self.n_spatial].ravel().astype(np.float32)
+        spatial *= 1.0 / 255.0
+        return np.concatenate([spatial, tail])
+
+
+class GraphEncoder(Encoder):
+    """Flat encoding of a graph problem (see the module docstring)."""
+
+    def __init__(self, game: TestGame, obs_kind: str = "flat") -> None:
+        if obs_kind != "flat":
+            raise EncodingError(
+                f"problem {game.artifact.name!r} is a graph: only obs_kind='flat' is available, not {obs_kind!r}"
+            )
+        self.game = game
+        self.obs_kind = obs_kind
+        ts = game.ts
+        self.n_places = P = len(ts.places)
+        self.sys_props = system_propositions(game)
+        self.n_qsys = int(game.artifact.system_automaton.n_states)
+        self.n_moves = ts.n_moves
+        self.n_slots = game.n_slots
+        static = np.zeros(P * (3 + len(self.sys_props)), dtype=np.float32)
+        goal = np.unique(ts.place[ts.terminal])
+        static[2 * P + goal] = 1.0
+        for s in range(ts.n_states):
+            for i, name in enumerate(self.sys_props):
+                if name in ts.labels[s]:
+                    static[(3 + i) * P + int(ts.place[s])] = 1.0
+        self.static = static
+        self.move_off = static.size
+        self.slot_off = self.move_off + self.n_moves
+        self.q_off = self.slot_off + self.n_slots
+        self.size = self.q_off + self.n_qsys
+        self.place_list = ts.place.tolist()
+        self.qsys_list = game.q_sys.tolist()
+        self.space = spaces.Box(0.0, 1.0, shape=(self.size,), dtype=np.float32)
+
+    def encode(self, run: RunState) -> np.ndarray:
+        g = self.game
+        obs = np.zeros(self.size, dtype=np.float32)
+        obs[: self.move_off] = self.static
+        obs[self.place_list[run.system]] = 1.0
+        if run.agent >= 0 and g.agent_place[run.agent] >= 0:
+            obs[self.n_places + g.agent_place[run.agent]] = 1.0
+        for m in g.shown_moves(run):
+            obs[self.move_off + m] = 1.0
+        if not run.done:
+            bits = g.restricted_bits_of(run) & g.exists_bits[run.system]
+            for k in range(self.n_slots):
+                if (bits >> k) & 1:
+                    obs[self.slot_off + k] = 1.0
+        obs[self.q_off + self.qsys_list[run.history]] = 1.0
+        return obs
+
+
+def make_encoder(game: TestGame, obs_kind: str) -> Encoder:
+    """The encoder of ``obs_kind`` for ``game``.
+
+    Raises
+    ------
+    EncodingError
+        On an unknown kind, or ``"grid"`` for a graph problem.
+    """
+    if obs_kind not in ("grid", "flat"):
+        raise EncodingError(f"unknown obs_kind {obs_kind!r}; expected 'grid' or 'flat'")
+    if game.is_grid:
+        return GridEncoder(game, obs_kind)
+    return GraphEncoder(game, obs_kind)

@@ -1,0 +1,650 @@
+"""Single-agent Gymnasium environments: the system under test (SUT) is the learner.
+
+The environment side is the synthesized test: its restrictions (walls, reactive
+doors) and, in agent problems, its test agent moving by the synthesized strategy.
+Everything is played by the shared :class:`~flowtest_env.game.TestGame`; this module
+adds spaces, rewards, observations, rendering and registration data.
+
+:class:`FlowTestEnv` is the base; one thin subclass per built-in problem carries the
+problem's documentation (``FlowTest-<Name>-v0``), and :class:`RandomGridEnv` draws
+each episode from a pool of seeded random grid problems.
+"""
+
+from __future__ import annotations
+
+from typing import Any, SupportsFloat
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from synthesis.artifact import TestArtifact
+
+from .artifacts import builtin_game
+from .encoding import Encoder, make_encoder
+from .game import GRID_ACTIONS, MET, VIOLATED, GameError, RunState, TestGame
+from .render import ansi, make_renderer
+
+DEFAULT_MAX_STEPS: dict[str, int] = {
+    "example1": 50,
+    "small-reactive": 50,
+    "beaver-rescue": 50,
+    "motion-primitives": 100,
+    "refueling": 100,
+    "mars-exploration": 200,
+    "maze1": 100,
+    "maze2": 100,
+    "patrolling": 200,
+}
+
+
+class FlowTestEnv(gym.Env[np.ndarray, np.int64]):
+    """## Description
+
+    A synthesized FlowTest test as an environment: the learner is the system under
+    test (SUT), the environment enforces the test's restrictions and moves its test
+    agent. An episode is one test run: it ends when the system objective is met or
+    violated, or when the step budget runs out. The test objective stays hidden; the
+    verdict at the end of the episode tells whether the test realized it.
+
+    ## Action Space
+
+    ``Discrete(5)`` on grids: ``0`` N, ``1`` S, ``2`` E, ``3`` W, ``4`` stay.
+    On graphs ``Discrete(k + 1)``: action ``i < k`` takes the ``i``-th outgoing edge of
+    the current state (``k`` the largest out-degree), action ``k`` stays.
+    Actions that do not exist from the current state, or are restricted now, are
+    *masked*: ``info["action_mask"]`` (``int8``, every step and reset),
+    :meth:`action_masks` (``bool``, for sb3-contrib's MaskablePPO), or the
+    :class:`~flowtest_env.wrappers.ActionMaskObservation` wrapper. A masked action
+    leaves the SUT in place.
+
+    ## Observation Space
+
+    ``obs_kind="flat"`` (default): a ``float32`` vector in ``[0, 1]``;
+    ``obs_kind="grid"`` (grid problems): an image-like ``uint8[C, H, W]`` encoding
+    (free cells, static walls and shown restrictions per direction, test agent,
+    system, goal, the system objective's own cells, refuel cells, fuel, objective
+    progress). See :mod:`flowtest_env.encoding`. Never the hidden test objective.
+
+    ## Rewards
+
+    ``-step_cost`` (0.01) per step; ``-restricted_penalty`` (0.05) more for a masked
+    action; ``+goal_reward`` (1) when the system objective is met;
+    ``-violation_penalty`` (1) when it is violated.
+
+    ## Starting State
+
+    The problem's initial state and history; the test agent at its start (after its
+    first move when it moves first).
+
+    ## Episode End
+
+    Terminated when the system objective is met (its automaton accepts) or violated
+    (no run can meet it any more: a rejecting sink such as fuel 0, or a terminal state
+    that does not accept). Truncated after ``max_steps`` steps. ``info["verdict"]`` at
+    the end: ``system_objective`` (``"met"``/``"violated"``/``"open"``),
+    ``test_objective_realized``, ``restrictions`` (decisions taken with at least one
+    restricted move out of the SUT's state), ``blocked_attempts`` (masked actions
+    taken) and ``steps``. ``info["system_state"]`` every step: ``[row, col]``,
+    ``[[row, col], fuel]`` or a state name.
+
+    ## Arguments
+
+    ``problem`` (built-in name), ``setting`` (``"instantaneous"``/``"accumulative"``:
+    which restrictions are shown), ``max_steps``, ``obs_kind``, ``render_mode``
+    (``"rgb_array"``, ``"ansi"``; ``"human"`` through Gymnasium's HumanRendering),
+    ``view`` (``"system"`` or ``"engineer"``: the picture also shows the hidden test
+    cells), ``tile_size`` and the reward weights.
+    """
+
+    metadata: dict[str, Any] = {"render_modes": ["rgb_array", "ansi"], "render_fps": 4}
+
+    def __init__(
+        self,
+        problem: str = "maze2",
+        setting: str | None = None,
+        max_steps: int | None = None,
+        obs_kind: str = "flat",
+        render_mode: str | None = None,
+        view: str = "system",
+        tile_size: int = 32,
+        step_cost: float = 0.01,
+        restricted_penalty: float = 0.05,
+        goal_reward: float = 1.0,
+        violation_penalty: float = 1.0,
+    ) -> None:
+        game = builtin_game(problem, setting)
+        self._configure(
+            [game], max_steps if max_steps is not None else DEFAULT_MAX_STEPS.get(problem, 100), obs_kind,
+            render_mode, view, tile_size, step_cost, restricted_penalty, goal_reward, violation_penalty,
+        )
+        self.problem = problem
+
+    # ------------------------------------------------------------------ set-up
+
+    def _configure(
+        self,
+        games: list[TestGame],
+        max_steps: int,
+        obs_kind: str,
+        render_mode: str | None,
+        view: str,
+        tile_size: int,
+        step_cost: float,
+        restricted_penalty: float,
+        goal_reward: float,
+        violation_penalty: float,
+    ) -> None:
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"unknown render_mode {render_mode!r}; expected one of {self.metadata['render_modes']}")
+        if view not in ("system", "engineer"):
+            raise ValueError(f"unknown view {view!r}; expected 'system' or 'engineer'")
+        if int(max_steps) < 1:
+            raise ValueError(f"max_steps must be at least 1, not {max_steps}")
+        self.games = games
+        self.encoders: list[Encoder] = [make_encoder(g, obs_kind) for g in games]
+        first = self.encoders[0].space
+        for g, e in zip(games, self.encoders):
+            if e.space != first or g.n_actions != games[0].n_actions:
+                raise GameError(f"problem {g.artifact.name!r} does not share the pool's observation or action space")
+        self.observation_space = first
+        self.action_space = spaces.Discrete(games[0].n_actions)
+        self.max_steps = int(max_steps)
+        self.obs_kind = obs_kind
+        self.render_mode = render_mode
+        self.view = view
+        self.tile_size = int(tile_size)
+        self.step_cost = float(step_cost)
+        self.restricted_penalty = float(restricted_penalty)
+        self.goal_reward = float(goal_reward)
+        self.violation_penalty = float(violation_penalty)
+        self._index = 0
+        self.game = games[0]
+        self.encoder = self.encoders[0]
+        self._renderers: dict[int, Any] = {}
+        self.run: RunState | None = None
+
+    # ------------------------------------------------------------------ API
+
+    @property
+    def artifact(self) -> TestArtifact:
+        """The synthesized test of the current episode."""
+        return self.game.artifact
+
+    def _choose_game(self) -> int:
+        """Which game of the pool the next episode plays (the base env has one)."""
+        return 0
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+        super().reset(seed=seed)
+        self._index = self._choose_game()
+        self.game = self.games[self._index]
+        self.encoder = self.encoders[self._index]
+        self.run = self.game.reset()
+        return self.encoder.encode(self.run), self._info(self.run)
+
+    def step(self, action: Any) -> tuple[np.ndarray, SupportsFloat, bool, bool, dict[str, Any]]:
+        run = self.run
+        if run is None:
+            raise gym.error.ResetNeeded("call reset() before step()")
+        if run.done or run.steps >= self.max_steps:
+            raise gym.error.ResetNeeded("the episode has ended; call reset()")
+        try:
+            a = int(action)
+        except (TypeError, ValueError):
+            raise gym.error.InvalidAction(f"action {action!r} is not an integer") from None
+        if not self.action_space.contains(a):
+            raise gym.error.InvalidAction(f"action {a} is outside {self.action_space}")
+        out = self.game.step(run, a)
+        reward = -self.step_cost
+        if out.restricted or out.invalid:
+            reward -= self.restricted_penalty
+        terminated = run.done
+        if run.outcome == MET:
+            reward += self.goal_reward
+        elif run.outcome == VIOLATED:
+            reward -= self.violation_penalty
+        truncated = not terminated and run.steps >= self.max_steps
+        info = self._info(run)
+        if terminated or truncated:
+            info["verdict"] = self.game.verdict(run)
+        return self.encoder.encode(run), float(reward), terminated, truncated, info
+
+    def _info(self, run: RunState) -> dict[str, Any]:
+        return {"system_state": self.game.state_json(run.system), "action_mask": self.game.action_mask(run)}
+
+    def action_masks(self) -> np.ndarray:
+        """``bool[n_actions]``: the legal actions now (sb3-contrib's MaskablePPO convention)."""
+        if self.run is None:
+            raise gym.error.ResetNeeded("call reset() before action_masks()")
+        return self.game.action_mask(self.run).astype(bool)
+
+    def verdict(self) -> dict[str, Any]:
+        """The running verdict of the current episode."""
+        if self.run is None:
+            raise gym.error.ResetNeeded("call reset() before verdict()")
+        return self.game.verdict(self.run)
+
+    def action_meanings(self) -> list[str]:
+        """Names of the actions from the current state (``N``.. or ``-> <state>``, ``stay``)."""
+        s = self.run.system if self.run is not None else int(self.game.ts.initial)
+        return [self.game.action_name(s, a) for a in range(self.game.n_actions)]
+
+    def render(self) -> Any:
+        if self.render_mode is None:
+            gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array' or 'ansi' to make()")
+            return None
+        run = self.run if self.run is not None else self.game.reset()
+        if self.render_mode == "ansi":
+            return ansi(self.game, run, self.view)
+        return self.frame(run)
+
+    def frame(self, run: RunState | None = None) -> np.ndarray:
+        """The ``rgb_array`` picture of ``run`` (default: the current run)."""
+        run = run if run is not None else (self.run if self.run is not None else self.game.reset())
+        r = self._renderers.get(self._index)
+        if r is None:
+            r = self._renderers[self._index] = make_renderer(self.game, self.tile_size, self.view)
+        return r.frame(run)
+
+    def close(self) -> None:
+        self._renderers.clear()
+        super().close()
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = self.__dict__.copy()
+        state["_renderers"] = {}  # rebuilt on demand
+        return state
+
+
+# ---------------------------------------------------------------- the built-ins
+
+
+class Example1Env(FlowTestEnv):
+    """## Description
+
+    The paper's running example (``example1``): a 3x5 grid, start at the bottom
+    centre, goals in the two top corners, test cells ``I`` at (0,2), (2,0), (2,4).
+    Static walls (both directions) make every path to a goal pass an ``I`` cell.
+
+    ## Action Space
+
+    ``Discrete(5)``: N, S, E, W, stay.
+
+    ## Observation Space
+
+    Flat ``float32`` (default) or ``obs_kind="grid"``: ``uint8[12, 3, 5]``.
+
+    ## Rewards
+
+    -0.01 per step, -0.05 more for a masked action, +1 at a goal.
+
+    ## Termination
+
+    At a goal (met). Truncated after 50 steps.
+
+    ## Registered Configurations
+
+    * ``FlowTest-Example1-v0``
+    """
+
+    def __init__(self, problem: str = "example1", **kwargs: Any) -> None:
+        super().__init__(problem, **kwargs)
+
+
+class SmallReactiveEnv(FlowTestEnv):
+    """## Description
+
+    The paper's second running example (``small-reactive``): a 2x3 grid, start (1,0),
+    goal (0,2), test cells I1 (0,0) and I2 (1,2). Reactive doors open and close with the
+    history so that every run to the goal visits both I1 and I2.
+
+    ## Action Space
+
+    ``Discrete(5)``: N, S, E, W, stay.
+
+    ## Observation Space
+
+    Flat ``float32`` (default) or ``obs_kind="grid"``: ``uint8[12, 2, 3]``.
+
+    ## Rewards
+
+    -0.01 per step, -0.05 more for a masked action, +1 at the goal.
+
+    ## Termination
+
+    At the goal (met). Truncated after 50 steps.
+
+    ## Registered Configurations
+
+    * ``FlowTest-SmallReactive-v0`` (``setting="instantaneous"``; pass
+      ``setting="accumulative"`` to keep doors met under a history shown)
+    """
+
+    def __init__(self, problem: str = "small-reactive", **kwargs: Any) -> None:
+        super().__init__(problem, **kwargs)
+
+
+class BeaverRescueEnv(FlowTestEnv):
+    """## Description
+
+    ``beaver-rescue``, a graph: a rescue robot leaves the lab through door 1 or door 2,
+    fetches the beaver and comes back through a door to the goal. Reactive restrictions
+    make it use both doors.
+
+    ## Action Space
+
+    ``Discrete(3)``: take the first or the second outgoing edge of the current state,
+    or stay (see :meth:`FlowTestEnv.action_meanings`).
+
+    ## Observation Space
+
+    Flat ``float32`` only.
+
+    ## Rewards
+
+    -0.01 per step, -0.05 more for a masked action, +1 at the goal with the beaver.
+
+    ## Termination
+
+    At the goal (met if the beaver was fetched, violated otherwise). Truncated after
+    50 steps.
+
+    ## Registered Configurations
+
+    * ``FlowTest-BeaverRescue-v0``
+    """
+
+    def __init__(self, problem: str = "beaver-rescue", **kwargs: Any) -> None:
+        super().__init__(problem, **kwargs)
+
+
+class MotionPrimitivesEnv(FlowTestEnv):
+    """## Description
+
+    ``motion-primitives``, a graph of 15 states: a legged robot shows motion
+    primitives (jump, stand, lie) at three platforms; doors to the goal open according
+    to the primitives already shown, so it must show all three kinds.
+
+    ## Action Space
+
+    ``Discrete(k + 1)``: one action per outgoing-edge slot, and stay.
+
+    ## Observation Space
+
+    Flat ``float32`` only.
+
+    ## Rewards
+
+    -0.01 per step, -0.05 more for a masked action, +1 at the goal.
+
+    ## Termination
+
+    At the goal (met). Truncated after 100 steps.
+
+    ## Registered Configurations
+
+    * ``FlowTest-MotionPrimitives-v0``
+    """
+
+    def __init__(self, problem: str = "motion-primitives", **kwargs: Any) -> None:
+        super().__init__(problem, **kwargs)
+
+
+class RefuelingEnv(FlowTestEnv):
+    """## Description
+
+    ``refueling``: a 5x5 grid with fuel (max 10, a move costs 1, the refuel cell (0,4)
+    refills). Reach the goal (0,0) from (4,0) without running dry. Static walls force a
+    detour that leaves the system with fuel 1 in the ``L`` region far from the goal.
+
+    ## Action Space
+
+    ``Discrete(5)``: N, S, E, W, stay (only stay at fuel 0).
+
+    ## Observation Space
+
+    Flat ``float32`` (default) or ``obs_kind="grid"`` with ``unsafe``, ``refuel`` and
+    ``fuel`` planes.
+
+    ## Rewards
+
+    -0.01 per step, -0.05 more for a masked action, +1 at the goal, -1 when fuel runs
+    out.
+
+    ## Termination
+
+    At the goal (met) or at fuel 0 (violated). Truncated after 100 steps.
+
+    ## Registered Configurations
+
+    * ``FlowTest-Refueling-v0``
+    """
+
+    def __init__(self, problem: str = "refueling", **kwargs: Any) -> None:
+        super().__init__(problem, **kwargs)
+
+
+class MarsExplorationEnv(FlowTestEnv):
+    """## Description
+
+    ``mars-exploration``: a 6x6 grid with fuel, two refuel stations, ice (1,4) and rock
+    (4,1) samples to drop off at (3,0) or (4,5), and the goal (0,0). Static walls make
+    the rover sample both and run low on fuel.
+
+    ## Action Space
+
+    ``Discrete(5)``: N, S, E, W, stay.
+
+    ## Observation Space
+
+    Flat ``float32`` (default) or ``obs_kind="grid"`` with ``dropoff``, ``ice``,
+    ``rock``, ``unsafe``, ``refuel``, ``fuel`` and objective-progress planes.
+
+    ## Rewards
+
+    -0.01 per step, -0.05 more for a masked action, +1 when the objective is met, -1
+    when it is violated (fuel 0, or the goal with a sample not dropped off).
+
+    ## Termination
+
+    Met or violated as above. Truncated after 200 steps.
+
+    ## Registered Configurations
+
+    * ``FlowTest-MarsExploration-v0``
+    """
+
+    def __init__(self, problem: str = "mars-exploration", **kwargs: Any) -> None:
+        super().__init__(problem, **kwargs)
+
+
+class Maze1Env(FlowTestEnv):
+    """## Description
+
+    ``maze1``: a 7x5 maze; a test agent climbs the middle column (it moves up or
+    waits, and leaves through a park above the top). It blocks the system's shortcuts so
+    that the system visits I1, I2 and I3 before the goal (0,0). The system moves first.
+
+    ## Action Space
+
+    ``Discrete(5)``: N, S, E, W, stay; a move into the test agent's cell is masked.
+
+    ## Observation Space
+
+    Flat ``float32`` (default) or ``obs_kind="grid"`` (``test_agent`` plane).
+
+    ## Rewards
+
+    -0.01 per step, -0.05 more for a masked action, +1 at the goal.
+
+    ## Termination
+
+    At the goal (met). Truncated after 100 steps.
+
+    ## Registered Configurations
+
+    * ``FlowTest-Maze1-v0``
+    """
+
+    def __init__(self, problem: str = "maze1", **kwargs: Any) -> None:
+        super().__init__(problem, **kwargs)
+
+
+class Maze2Env(FlowTestEnv):
+    """## Description
+
+    ``maze2``, the headline environment: a 5x5 maze with four blocked cells; the test
+    agent lives on the central plus, starts at the centre and moves first. It realizes
+    the synthesized reactive restrictions by standing in the system's way, so every
+    run from (4,0) to the goal (0,4) visits I1 (3,4) and I2 (1,0).
+
+    ## Action Space
+
+    ``Discrete(5)``: N, S, E, W, stay; a move into the test agent's cell is masked.
+
+    ## Observation Space
+
+    Flat ``float32[343]`` (default) or ``obs_kind="grid"``: ``uint8[12, 5, 5]``.
+
+    ## Rewards
+
+    -0.01 per step, -0.05 more for a masked action, +1 at the goal.
+
+    ## Termination
+
+    At the goal (met). Truncated after 100 steps.
+
+    ## Registered Configurations
+
+    * ``FlowTest-Maze2-v0``
+    """
+
+    def __init__(self, problem: str = "maze2", **kwargs: Any) -> None:
+        super().__init__(problem, **kwargs)
+
+
+class PatrollingEnv(FlowTestEnv):
+    """## Description
+
+    ``patrolling``: a 6x6 grid with fuel; a test agent patrols column 2 (up, down or
+    wait) and pushes the fuel-limited system, going from (5,5) to the goal (5,0), to
+    run low on fuel far from the goal. Refuel at (1,5).
+
+    ## Action Space
+
+    ``Discrete(5)``: N, S, E, W, stay; a move into the test agent's cell is masked.
+
+    ## Observation Space
+
+    Flat ``float32`` (default) or ``obs_kind="grid"``.
+
+    ## Rewards
+
+    -0.01 per step, -0.05 more for a masked action, +1 at the goal, -1 when the fuel
+    runs out.
+
+    ## Termination
+
+    At the goal (met) or at fuel 0 (violated). Truncated after 200 steps.
+
+    ## Registered Configurations
+
+    * ``FlowTest-Patrolling-v0``
+    """
+
+    def __init__(self, problem: str = "patrolling", **kwargs: Any) -> None:
+        super().__init__(problem, **kwargs)
+
+
+class RandomGridEnv(FlowTestEnv):
+    """## Description
+
+    Random grid worlds of the paper's scalability study: an empty ``size x size`` grid
+    with a start, a goal and one cell per proposition, drawn by seed. Each reset draws
+    one problem of a pool of seeded instances (with ``self.np_random``); the pool is
+    synthesized once and cached in memory and on disk (``$FLOWTEST_CACHE_DIR``, default
+    ``~/.cache/flowtest``).
+
+    ## Action Space
+
+    ``Discrete(5)``: N, S, E, W, stay.
+
+    ## Observation Space
+
+    Flat ``float32`` (default) or ``obs_kind="grid"``; the layout (goal, system
+    propositions) is part of the observation because it changes between episodes.
+
+    ## Rewards
+
+    -0.01 per step, -0.05 more for a masked action, +1 when the system objective is
+    met, -1 when it is violated.
+
+    ## Termination
+
+    Met or violated; truncated after ``max_steps`` (default ``4 * size * size``).
+
+    ## Arguments
+
+    ``size`` (5), ``family`` (``"reachability"``, ``"reaction"``, ``"safety"``),
+    ``n`` (spec size; 1 for reachability, 2 otherwise by default), ``seeds`` (the pool,
+    default ``0..7``), ``kind`` (``"reactive"`` or ``"static"``), and the base
+    arguments.
+
+    ## Registered Configurations
+
+    * ``FlowTest-RandomGrid-v0``: 5x5, reachability with one test cell, reactive,
+      seeds 0..7.
+    """
+
+    def __init__(
+        self,
+        size: int = 5,
+        family: str = "reachability",
+        n: int | None = None,
+        seeds: list[int] | tuple[int, ...] = tuple(range(8)),
+        kind: str = "reactive",
+        setting: str | None = None,
+        max_steps: int | None = None,
+        obs_kind: str = "flat",
+        render_mode: str | None = None,
+        view: str = "system",
+        tile_size: int = 32,
+        step_cost: float = 0.01,
+        restricted_penalty: float = 0.05,
+        goal_reward: float = 1.0,
+        violation_penalty: float = 1.0,
+    ) -> None:
+        from .random_grid import random_pool
+
+        if kind not in ("static", "reactive"):
+            raise ValueError(f"unknown kind {kind!r}; expected 'static' or 'reactive'")
+        if not seeds:
+            raise ValueError("the seed pool is empty")
+        n = n if n is not None else (1 if family == "reachability" else 2)
+        pool = random_pool(int(size), family, int(n), tuple(int(s) for s in seeds), kind)
+        games = [TestGame(a, setting) for a in pool]
+        self._configure(
+            games, max_steps if max_steps is not None else 4 * size * size, obs_kind, render_mode, view, tile_size,
+            step_cost, restricted_penalty, goal_reward, violation_penalty,
+        )
+        self.problem = f"random-{size}x{size}-{family}{n}"
+
+    def _choose_game(self) -> int:
+        return int(self.np_random.integers(len(self.games)))
+
+
+BUILTIN_ENVS: dict[str, tuple[str, type[FlowTestEnv]]] = {
+    "example1": ("Example1", Example1Env),
+    "small-reactive": ("SmallReactive", SmallReactiveEnv),
+    "beaver-rescue": ("BeaverRescue", BeaverRescueEnv),
+    "motion-primitives": ("MotionPrimitives", MotionPrimitivesEnv),
+    "refueling": ("Refueling", RefuelingEnv),
+    "mars-exploration": ("MarsExploration", MarsExplorationEnv),
+    "maze1": ("Maze1", Maze1Env),
+    "maze2": ("Maze2", Maze2Env),
+    "patrolling": ("Patrolling", PatrollingEnv),
+}
+"""Built-in problem name -> (ID stem, env class)."""
+
+__all__ = ["FlowTestEnv", "RandomGridEnv", "BUILTIN_ENVS", "GRID_ACTIONS"] + [c.__name__ for _, c in BUILTIN_ENVS.values()]

@@ -1,0 +1,462 @@
+"""The test game: the rules of one synthesized test run, shared by every FlowTest environment.
+
+A :class:`TestGame` is built once from a :class:`~synthesis.artifact.TestArtifact` and
+holds only look-up tables; a :class:`RunState` is the small mutable state of one run.
+Every rule below is a table or dictionary look-up, so nothing is solved at step time
+(design.md: "a step is a few array or dictionary look-ups").
+
+Rules (method.md §6-7)
+----------------------
+* **Moves.** The system under test (SUT) picks an *action*: on grids ``N, S, E, W,
+  stay`` (actions 0-4); on graphs one action per outgoing edge *slot* of its current
+  state (slot ``k`` = its ``k``-th outgoing move, in the artifact's move order) and a
+  last action ``stay``. An action without a move from the current state is *invalid*.
+* **Restrictions.** Obstacle problems (``static``/``reactive``/``mixed``): a move is
+  restricted while the history is ``h`` iff ``artifact.strategy.blocked[h, move]``
+  (static walls included). Agent problems: static walls, and every move into the place
+  the test agent occupies (the agent realizes the reactive restrictions ``R(q)`` by
+  standing there, method.md §7). Stay is always allowed on non-terminal states.
+* **Attempts.** An invalid or restricted action leaves the SUT in place (as a stay)
+  and is counted in ``blocked_attempts``; the legal-action mask never offers one.
+* **The test agent** answers every SUT step from its synthesized table
+  (:class:`synthesis.agent.AgentController`); when it moves first it also answers once
+  at reset.
+* **Termination.** The run ends when the system objective is *met* (the history's
+  ``q_sys`` accepts) or *violated*: no run from the SUT's state and history that
+  respects the enforced restrictions can reach acceptance any more (a rejecting sink
+  such as fuel 0 or an unsafe state, a terminal state that does not accept, or fuel
+  too low for the way round the walls). This "doomed" table is computed once, by
+  backward reachability over ``T x B_pi``. With an external tester (the PettingZoo env) only
+  the static walls count, since the tester's choices are not known in advance.
+* **Verdict.** ``system_objective`` (``"met"``/``"violated"``/``"open"``),
+  ``test_objective_realized`` (the history's ``q_test`` accepts), ``restrictions``
+  (number of SUT decisions taken while at least one move out of its state was
+  restricted: a static wall, a reactive restriction or the test agent in the way),
+  ``blocked_attempts`` (actions refused: restricted or invalid) and ``steps``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from synthesis.artifact import TestArtifact
+
+GRID_ACTIONS: tuple[str, ...] = ("N", "S", "E", "W")
+"""Action names of grid problems, in action order; action 4 is ``stay``."""
+
+OPEN, MET, VIOLATED = "open", "met", "violated"
+
+
+class GameError(ValueError):
+    """An artifact or a call the test game cannot honour (bad action index, bad agent move)."""
+
+
+@dataclass
+class RunState:
+    """The state of one test run.
+
+    Attributes
+    ----------
+    system
+        The SUT's state (index into ``artifact.system.states``).
+    history
+        The state of ``B_pi`` after reading the labels seen so far.
+    agent, memory
+        The test agent's state and strategy memory (``-1`` without a test agent).
+    visited
+        States met since the current history began (the accumulative setting shows
+        their restrictions).
+    steps
+        SUT steps taken.
+    restrictions, blocked_attempts
+        See the module docstring (the verdict).
+    outcome
+        ``"open"``, ``"met"`` or ``"violated"``.
+    override
+        Restrictions of the SUT's current state chosen by another tester for this step
+        (a slot bitmask on top of the static walls), or ``None``: the synthesized ones.
+        Cleared by every SUT step.
+    """
+
+    system: int
+    history: int
+    agent: int = -1
+    memory: int = -1
+    visited: set[int] = field(default_factory=set)
+    steps: int = 0
+    restrictions: int = 0
+    blocked_attempts: int = 0
+    outcome: str = OPEN
+    override: int | None = None
+
+    def copy(self) -> "RunState":
+        """An independent copy (for search over runs)."""
+        return RunState(
+            self.system, self.history, self.agent, self.memory, set(self.visited), self.steps,
+            self.restrictions, self.blocked_attempts, self.outcome, self.override,
+        )
+
+    def key(self) -> tuple[int, int, int, int]:
+        """What decides the future of the run: ``(system, history, agent, memory)``."""
+        return (self.system, self.history, self.agent, self.memory)
+
+    @property
+    def done(self) -> bool:
+        return self.outcome != OPEN
+
+
+@dataclass(frozen=True)
+class StepOutcome:
+    """What a SUT step did: whether it moved, and whether it was refused and why."""
+
+    moved: bool
+    restricted: bool
+    invalid: bool
+
+
+def _coreachable_to_acceptance(artifact: TestArtifact, enforced: np.ndarray) -> np.ndarray:
+    """``bool[n_hist, n_states]``: from ``(s, h)`` some run of T that respects the
+    enforced restrictions (``enforced[h, move]``) reaches a history whose system part
+    accepts (backward reachability, vectorised over the edges of ``T x B_pi``)."""
+    ts = artifact.system
+    dba = artifact.histories
+    nh, n = dba.n_states, ts.n_states
+    letter = ts.letter_of_state(artifact.letters)
+    nxt = dba.delta[:, letter]  # [h, s]: history after entering s
+    hm, mm = np.nonzero(~enforced)
+    st = np.flatnonzero(ts.stay)
+    h = np.arange(nh)
+    src = np.concatenate([hm * n + ts.src[mm], (h[:, None] * n + st[None, :]).ravel()])
+    dst = np.concatenate([nxt[hm, ts.dst[mm]] * n + ts.dst[mm], (nxt[:, st] * n + st[None, :]).ravel()])
+    can = np.repeat(dba.accepting[:, 0], n)
+    while True:  # backward fixpoint: one round per step of the longest shortest path
+        grow = src[can[dst] & ~can[src]]
+        if grow.size == 0:
+            return can.reshape(nh, n)
+        can[grow] = True
+
+
+class TestGame:
+    """The rules of a synthesized test, as look-up tables built once from its artifact.
+
+    Parameters
+    ----------
+    artifact
+        The synthesized test.
+    setting
+        ``"instantaneous"`` or ``"accumulative"``: which restrictions are *shown*
+        (never which are enforced); default the artifact's.
+    external_tester
+        The reactive restrictions (or agent moves) come from another tester: a run is
+        violated only when the static walls alone leave no way to meet the objective.
+
+    Raises
+    ------
+    GameError
+        On an unknown setting or an agent artifact without a controller.
+    """
+
+    __test__ = False
+
+    def __init__(self, artifact: TestArtifact, setting: str | None = None, external_tester: bool = False) -> None:
+        self.artifact = artifact
+        ts = self.ts = artifact.system
+        setting = setting or artifact.strategy.setting
+        if setting not in ("instantaneous", "accumulative"):
+            raise GameError(f"unknown obstacle setting {setting!r}; expected 'instantaneous' or 'accumulative'")
+        self.setting = setting
+        self.is_grid = ts.kind in ("grid", "fuel") and ts.layout is not None
+        n, n_moves = ts.n_states, ts.n_moves
+        # ---- action slots
+        out: list[list[int]] = [[] for _ in range(n)]
+        for m in range(n_moves):
+            out[int(ts.src[m])].append(m)
+        if self.is_grid:
+            self.n_slots = len(GRID_ACTIONS)
+            slots = [[-1] * self.n_slots for _ in range(n)]
+            for s in range(n):
+                for m in out[s]:
+                    slots[s][GRID_ACTIONS.index(ts.action[m])] = m
+        else:
+            self.n_slots = max(1, max((len(o) for o in out), default=1))
+            slots = [o + [-1] * (self.n_slots - len(o)) for o in out]
+        self.n_actions = self.n_slots + 1
+        self.stay_action = self.n_slots
+        self.slot_move = np.asarray(slots, dtype=np.int64).reshape(n, self.n_slots)
+        """``int64[n_states, n_slots]``: the move of each action slot, -1 if none."""
+        exists = self.slot_move >= 0
+        self.successor = np.where(exists, ts.dst[np.maximum(self.slot_move, 0)], np.arange(n)[:, None]).astype(np.int64)
+        """``int64[n_states, n_slots]``: the state an action slot leads to (itself if none)."""
+        self.dst_place = np.where(exists, ts.place[self.successor], -2).astype(np.int64)
+        # ---- restrictions per (history, state) as slot bitmasks
+        strat = artifact.strategy
+        self.agent_controller: Any = None
+        if artifact.kind == "agent":
+            if not artifact.agent or "controller" not in artifact.agent:
+                raise GameError(f"agent artifact {artifact.name!r} has no test agent controller")
+            from synthesis.agent import AgentController
+
+            self.agent_controller = AgentController.from_dict(artifact.agent["controller"])
+            enforced = np.broadcast_to(strat.static_obstacles[None, :], strat.blocked.shape)
+        else:
+            enforced = strat.blocked
+        self.enforced = np.ascontiguousarray(enforced)
+        """``bool[n_hist, n_moves]``: restrictions the game enforces itself."""
+        pad = np.concatenate([self.enforced, np.zeros((self.enforced.shape[0], 1), dtype=bool)], axis=1)
+        restricted = pad[:, self.slot_move]  # [h, s, slot]; -1 picks the padding column
+        weights = 1 << np.arange(self.n_slots + 1, dtype=np.int64)
+        self.restricted_bits: list[list[int]] = (restricted.astype(np.int64) @ weights[: self.n_slots]).tolist()
+        stay_bit = 1 << self.stay_action
+        self.exists_bits: list[int] = ((exists.astype(np.int64) @ weights[: self.n_slots]) + np.where(ts.stay, stay_bit, 0)).tolist()
+        self.static_bits: list[int] = (
+            np.concatenate([strat.static_obstacles, [False]])[self.slot_move].astype(np.int64) @ weights[: self.n_slots]
+        ).tolist()
+        self.choosable_bits: list[int] = (
+            np.concatenate([ts.restrictable & ~strat.static_obstacles, [False]])[self.slot_move].astype(np.int64)
+            @ weights[: self.n_slots]
+        ).tolist()
+        """Slots a tester may restrict per state: existing, in the harness, not a static wall."""
+        # slots of s leading into place p: for the test agent
+        self.into_bits: list[dict[int, int]] = []
+        for s in range(n):
+            d: dict[int, int] = {}
+            for k in range(self.n_slots):
+                p = int(self.dst_place[s, k])
+                if p >= 0:
+                    d[p] = d.get(p, 0) | (1 << k)
+            self.into_bits.append(d)
+        if self.n_actions <= 12:
+            table = (np.arange(1 << self.n_actions)[:, None] >> np.arange(self.n_actions)[None, :]) & 1
+            self._mask_table: np.ndarray | None = table.astype(np.int8)
+        else:
+            self._mask_table = None
+        # ---- histories and objectives
+        letter = ts.letter_of_state(artifact.letters)
+        self.next_history: list[list[int]] = artifact.histories.delta[:, letter].tolist()
+        """``next_history[h][s]``: the history after entering ``s``."""
+        comps = artifact.histories.components
+        self.q_sys = comps[:, 0].astype(np.int64) if comps is not None else np.zeros(artifact.histories.n_states, np.int64)
+        self.sys_accepting: list[bool] = artifact.histories.accepting[:, 0].tolist()
+        self.test_accepting: list[bool] = artifact.histories.accepting[:, 1].tolist()
+        self.external_tester = external_tester
+        walls = np.broadcast_to(strat.static_obstacles[None, :], strat.blocked.shape)
+        self.doomed: list[list[bool]] = (
+            ~_coreachable_to_acceptance(artifact, walls if external_tester else self.enforced)
+        ).tolist()
+        """``doomed[h][s]``: no run from ``s`` with history ``h`` that respects the enforced
+        restrictions can meet the system objective any more."""
+        self.succ_list: list[list[int]] = self.successor.tolist()
+        self.slot_list: list[list[int]] = self.slot_move.tolist()
+        self.place_list: list[int] = ts.place.tolist()
+        # ---- the test agent
+        if self.agent_controller is not None:
+            ctl = self.agent_controller
+            self.agent_place: list[int] = [-1 if p is None else int(p) for p in ctl.agent_places]
+            self.agent_first = ctl.first == "agent"
+            moves = np.asarray(artifact.agent.get("moves", []), dtype=np.int64).reshape(-1, 2)
+            na = len(ctl.agent_places)
+            self.agent_moves = np.zeros((na, na), dtype=bool)
+            self.agent_moves[moves[:, 0], moves[:, 1]] = True
+            """``bool[n_agent, n_agent]``: the moves of the agent's transition system."""
+        else:
+            self.agent_place = []
+            self.agent_first = False
+            self.agent_moves = np.zeros((0, 0), dtype=bool)
+
+    # ------------------------------------------------------------------ queries
+
+    @property
+    def has_agent(self) -> bool:
+        return self.agent_controller is not None
+
+    @property
+    def n_agent_states(self) -> int:
+        return len(self.agent_place)
+
+    def action_name(self, state: int, action: int) -> str:
+        """A readable name of ``action`` in ``state`` (``"N"``, ``"stay"``, ``"-> d1"``)."""
+        if action == self.stay_action:
+            return "stay"
+        if self.is_grid:
+            return GRID_ACTIONS[action]
+        m = self.slot_list[state][action]
+        return "(none)" if m < 0 else f"-> {self.ts.states[int(self.ts.dst[m])]}"
+
+    def agent_bits(self, run: RunState) -> int:
+        """Slots of the SUT's state blocked by the test agent's position."""
+        if run.agent < 0:
+            return 0
+        p = self.agent_place[run.agent]
+        return self.into_bits[run.system].get(p, 0) if p >= 0 else 0
+
+    def restricted_bits_of(self, run: RunState) -> int:
+        """Slots of the SUT's state restricted now (walls, reactive restrictions or the
+        tester's override, agent)."""
+        if run.override is not None:
+            return run.override | self.static_bits[run.system] | self.agent_bits(run)
+        return self.restricted_bits[run.history][run.system] | self.agent_bits(run)
+
+    def legal_bits(self, run: RunState, restricted: int | None = None) -> int:
+        """Legal actions as a bitmask; ``restricted`` overrides the synthesized restrictions
+        (slot bitmask chosen by a tester). Never empty on a live run: without stay and
+        with every move refused, ``stay`` is offered as a no-op."""
+        r = self.restricted_bits_of(run) if restricted is None else restricted | self.agent_bits(run)
+        bits = self.exists_bits[run.system] & ~r
+        return bits if bits else 1 << self.stay_action
+
+    def mask_of_bits(self, bits: int) -> np.ndarray:
+        """``int8[n_actions]`` mask of a bitmask (a fresh array)."""
+        if self._mask_table is not None:
+            return self._mask_table[bits].copy()
+        return np.array([(bits >> a) & 1 for a in range(self.n_actions)], dtype=np.int8)
+
+    def action_mask(self, run: RunState) -> np.ndarray:
+        """``int8[n_actions]``: the actions the SUT may take now (all zeros once the run ended)."""
+        if run.done:
+            return np.zeros(self.n_actions, dtype=np.int8)
+        return self.mask_of_bits(self.legal_bits(run))
+
+    def shown_moves(self, run: RunState) -> list[int]:
+        """The moves shown as obstacles now (enforced restrictions out of the displayed
+        states: the current one, or every state visited under the current history in the
+        accumulative setting). Test-agent blocks are not included: the agent is shown.
+        With a tester's override, the restrictions it chose on the current state."""
+        if run.override is not None:
+            s, bits, out = run.system, run.override | self.static_bits[run.system], []
+            for k in range(self.n_slots):
+                if (bits >> k) & 1 and self.slot_list[s][k] >= 0:
+                    out.append(self.slot_list[s][k])
+            return out
+        h = run.history
+        states = (run.system,) if self.setting == "instantaneous" else run.visited | {run.system}
+        out: list[int] = []
+        rb = self.restricted_bits[h]
+        for s in states:
+            bits = rb[s]
+            k = 0
+            while bits:
+                if bits & 1:
+                    out.append(self.slot_list[s][k])
+                bits >>= 1
+                k += 1
+        return out
+
+    def system_objective(self, run: RunState) -> str:
+        return run.outcome
+
+    def verdict(self, run: RunState) -> dict[str, Any]:
+        """The running verdict (see the module docstring)."""
+        return {
+            "system_objective": run.outcome,
+            "test_objective_realized": bool(self.test_accepting[run.history]),
+            "restrictions": run.restrictions,
+            "blocked_attempts": run.blocked_attempts,
+            "steps": run.steps,
+        }
+
+    # ------------------------------------------------------------------ dynamics
+
+    def reset(self, agent_first_move: bool = True) -> RunState:
+        """A fresh run: the SUT at ``s0`` with the initial history; the agent at its start
+        (and, if it moves first and ``agent_first_move``, after its synthesized first move)."""
+        s0 = int(self.ts.initial)
+        h0 = self.artifact.initial_history()
+        run = RunState(system=s0, history=h0, visited={s0})
+        if self.has_agent:
+            run.agent, run.memory = self.agent_controller.reset()
+            if self.agent_first and agent_first_move:
+                self.agent_respond(run)
+        self._settle(run)
+        return run
+
+    def synthesized_agent_move(self, run: RunState) -> tuple[int, int]:
+        """The synthesized test agent's answer ``(agent_state, memory)`` to the run now."""
+        return self.agent_controller.respond(run.agent, run.memory, run.system, run.history)
+
+    def agent_respond(self, run: RunState) -> None:
+        """Move the test agent by its synthesized strategy."""
+        run.agent, run.memory = self.synthesized_agent_move(run)
+
+    def agent_legal(self, run: RunState) -> np.ndarray:
+        """``bool[n_agent]``: the agent's legal moves now (along its transition system,
+        never into the SUT's place)."""
+        ok = self.agent_moves[run.agent].copy()
+        sp = self.place_list[run.system]
+        for a in np.flatnonzero(ok):
+            if self.agent_place[a] == sp:
+                ok[a] = False
+        if not ok.any():
+            ok[run.agent] = True
+        return ok
+
+    def agent_move(self, run: RunState, agent_state: int) -> None:
+        """Move the test agent to ``agent_state`` chosen by another tester (memory kept).
+
+        Raises
+        ------
+        GameError
+            If the move is not legal now.
+        """
+        if not (0 <= agent_state < self.n_agent_states) or not self.agent_legal(run)[agent_state]:
+            raise GameError(f"illegal test agent move {run.agent} -> {agent_state}")
+        run.agent = int(agent_state)
+
+    def system_step(self, run: RunState, action: int, restricted: int | None = None) -> StepOutcome:
+        """Apply the SUT's ``action`` (history, visited set, counters, outcome).
+
+        ``restricted`` overrides the synthesized restrictions with a slot bitmask chosen
+        by another tester (the PettingZoo env); the agent's block always applies.
+
+        Raises
+        ------
+        GameError
+            If ``action`` is not an action index, or the run already ended.
+        """
+        if run.done:
+            raise GameError("the run has ended; reset it")
+        if not (0 <= action < self.n_actions):
+            raise GameError(f"action {action} is outside 0..{self.n_actions - 1}")
+        s, h = run.system, run.history
+        r = self.restricted_bits_of(run) if restricted is None else restricted | self.agent_bits(run)
+        if r & self.exists_bits[s]:
+            run.restrictions += 1
+        bit = 1 << action
+        legal = self.exists_bits[s] & ~r
+        invalid = not (self.exists_bits[s] & bit) and not (legal == 0 and action == self.stay_action)
+        refused = bool(r & bit) and not invalid
+        nxt = s if (action == self.stay_action or invalid or refused) else self.succ_list[s][action]
+        if invalid or refused:
+            run.blocked_attempts += 1
+        run.steps += 1
+        run.override = None
+        h2 = self.next_history[h][nxt]
+        run.system = nxt
+        if h2 != h:
+            run.history = h2
+            run.visited = {nxt}
+        else:
+            run.visited.add(nxt)
+        self._settle(run)
+        return StepOutcome(moved=nxt != s, restricted=refused, invalid=invalid)
+
+    def _settle(self, run: RunState) -> None:
+        h, s = run.history, run.system
+        if self.sys_accepting[h]:
+            run.outcome = MET
+        elif self.doomed[h][s]:
+            run.outcome = VIOLATED
+
+    def step(self, run: RunState, action: int) -> StepOutcome:
+        """One round of the single-agent game: the SUT acts, then (if the run goes on) the
+        synthesized test agent answers."""
+        out = self.system_step(run, action)
+        if self.has_agent and not run.done:
+            self.agent_respond(run)
+        return out
+
+    def state_json(self, state: int) -> object:
+        """A system state written as in problem-format.md."""
+        return self.ts.to_json_state(state)

@@ -1,0 +1,374 @@
+"""The two-player FlowTest environment (PettingZoo): a tester against a system under test.
+
+## Description
+
+One test run as a turn-based game between ``tester_0`` and ``system_0``, played by the
+shared :class:`~flowtest_env.game.TestGame`. The synthesized test strategy ships as the
+default tester (:func:`synthesized_tester`), so any system policy can be plugged in;
+or a learned tester can be trained against a fixed system.
+
+* **Obstacle problems** (static, reactive, mixed): each round the tester first chooses
+  which outgoing moves of the system's current state to restrict for this step, then
+  the system moves. Static walls are part of the map (always enforced, never chosen).
+* **Agent problems** (maze1, maze2, patrolling): the tester moves the test agent along
+  its transition system; the system may not enter the agent's cell. Who moves first is
+  the problem's (maze2: the tester; maze1, patrolling: the system).
+
+## Action Spaces
+
+``system_0``: as the single-agent env (grids: N, S, E, W, stay; graphs: edge slots +
+stay). ``tester_0``: obstacle problems ``Discrete(2**k)`` (bit ``i`` of the action
+restricts the ``i``-th move slot; ``k`` = 4 on grids); agent problems
+``Discrete(n_agent_states)`` (the agent state to move to, parks included).
+
+Masks (``observation["action_mask"]``) enforce the system's assumptions: the tester
+may only restrict moves that exist, are in the test harness and are not static walls,
+and may never restrict every move of the state; the test agent moves along its
+transition system and never into the system's cell; the system takes only
+unrestricted moves. An action outside the mask is replaced by the no-op (the tester
+restricts nothing, the agent stays, the system stays) and costs the actor
+``restricted_penalty``.
+
+## Observation Spaces
+
+``Dict(observation=..., action_mask=int8[n])`` per agent. The system sees what the
+single-agent env shows (``obs_kind`` ``"flat"`` or ``"grid"``), with the restrictions the
+tester chose this step. The tester sees everything: one-hots of the system's state,
+the history and the test agent's state.
+
+## Rewards
+
+``system_0``: ``-step_cost`` per step, +1 when its objective is met, -1 when violated.
+``tester_0``: at the end of a run that met the system objective, +1 if the test
+objective was realized, -1 if not.
+
+## Termination
+
+When the system objective is met or violated (both agents); truncated after
+``max_cycles`` rounds (each agent acted ``max_cycles`` times). ``infos[agent]["verdict"]``
+at the end, as in the single-agent env.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Callable
+
+import gymnasium
+import numpy as np
+from gymnasium import spaces
+from pettingzoo import AECEnv, ParallelEnv
+from pettingzoo.utils import wrappers
+
+from .artifacts import builtin_game
+from .encoding import make_encoder
+from .envs import DEFAULT_MAX_STEPS
+from .game import MET, VIOLATED, RunState, TestGame
+from .render import ansi, make_renderer
+
+TESTER, SYSTEM = "tester_0", "system_0"
+
+
+def env(**kwargs: Any) -> AECEnv:
+    """The wrapped AEC environment (order enforcing, bounds checked)."""
+    e: AECEnv = raw_env(**kwargs)
+    e = wrappers.AssertOutOfBoundsWrapper(e)
+    e = wrappers.OrderEnforcingWrapper(e)
+    return e
+
+
+def parallel_env(**kwargs: Any) -> "ParallelFlowTestEnv":
+    """The parallel version: one ``step`` plays one round, the agents' actions applied in
+    turn order (so the system's action is chosen before it sees this round's tester
+    choice when the tester moves first)."""
+    return ParallelFlowTestEnv(**kwargs)
+
+
+class raw_env(AECEnv):  # noqa: N801 - PettingZoo's module shape
+    """The AEC tester-vs-system environment (see the module docstring).
+
+    Parameters
+    ----------
+    problem
+        A built-in problem name (``maze2``, ``small-reactive``, ...).
+    setting
+        Obstacle display setting (``"instantaneous"``/``"accumulative"``).
+    max_cycles
+        Rounds before truncation (default: the single-agent env's ``max_steps``).
+    obs_kind
+        The system's observation encoding (``"flat"`` or ``"grid"``).
+    render_mode
+        ``"rgb_array"`` or ``"ansi"``.
+    view
+        ``"engineer"`` (default: shows the hidden test cells) or ``"system"``.
+    """
+
+    metadata: dict[str, Any] = {
+        "render_modes": ["rgb_array", "ansi"],
+        "name": "flowtest_v0",
+        "is_parallelizable": True,
+        "render_fps": 4,
+    }
+
+    def __init__(
+        self,
+        problem: str = "maze2",
+        setting: str | None = None,
+        max_cycles: int | None = None,
+        obs_kind: str = "flat",
+        render_mode: str | None = None,
+        view: str = "engineer",
+        tile_size: int = 32,
+        step_cost: float = 0.01,
+        restricted_penalty: float = 0.05,
+    ) -> None:
+        super().__init__()
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"unknown render_mode {render_mode!r}; expected one of {self.metadata['render_modes']}")
+        game = builtin_game(problem, setting, external_tester=True)
+        self.game: TestGame = game
+        self.problem = problem
+        self.max_cycles = int(max_cycles if max_cycles is not None else DEFAULT_MAX_STEPS.get(problem, 100))
+        if self.max_cycles < 1:
+            raise ValueError(f"max_cycles must be at least 1, not {max_cycles}")
+        self.render_mode = render_mode
+        self.view = view
+        self.tile_size = tile_size
+        self.step_cost = float(step_cost)
+        self.restricted_penalty = float(restricted_penalty)
+        self.encoder = make_encoder(game, obs_kind)
+        system_first = game.has_agent and not game.agent_first
+        self.possible_agents = [SYSTEM, TESTER] if system_first else [TESTER, SYSTEM]
+        n_test = game.n_agent_states if game.has_agent else 1 << game.n_slots
+        self._n_hist = int(game.artifact.histories.n_states)
+        self._n_states = game.ts.n_states
+        tester_obs = spaces.Box(0.0, 1.0, shape=(self._n_states + self._n_hist + game.n_agent_states,), dtype=np.float32)
+        self._action_spaces: dict[str, spaces.Discrete] = {
+            TESTER: spaces.Discrete(n_test),
+            SYSTEM: spaces.Discrete(game.n_actions),
+        }
+        self._observation_spaces: dict[str, spaces.Dict] = {
+            TESTER: spaces.Dict({"observation": tester_obs, "action_mask": spaces.Box(0, 1, (n_test,), dtype=np.int8)}),
+            SYSTEM: spaces.Dict(
+                {"observation": self.encoder.space, "action_mask": spaces.Box(0, 1, (game.n_actions,), dtype=np.int8)}
+            ),
+        }
+        if not game.has_agent:
+            bits = np.arange(n_test)
+            self._choice_bits = bits
+        self._renderer: Any = None
+        self.run: RunState = game.reset(agent_first_move=False)
+        self.agents = []
+
+    # ------------------------------------------------------------------ spaces
+
+    def observation_space(self, agent: str) -> spaces.Space:
+        """The (cached, built once) observation space of ``agent``."""
+        return self._observation_spaces[agent]
+
+    def action_space(self, agent: str) -> spaces.Space:
+        """The (cached, built once) action space of ``agent``."""
+        return self._action_spaces[agent]
+
+    # ------------------------------------------------------------------ masks
+
+    def tester_mask(self) -> np.ndarray:
+        """``int8[n_tester_actions]``: the tester's legal actions now."""
+        g, run = self.game, self.run
+        n = int(self._action_spaces[TESTER].n)
+        if run.done:
+            return np.zeros(n, dtype=np.int8)
+        if g.has_agent:
+            return g.agent_legal(run).astype(np.int8)
+        s = run.system
+        allowed = g.choosable_bits[s]
+        open_moves = g.exists_bits[s] & ~(1 << g.stay_action) & ~g.static_bits[s] & ~g.agent_bits(run)
+        c = self._choice_bits
+        ok = (c & ~allowed) == 0
+        if open_moves:
+            ok &= (open_moves & ~c) != 0
+        return ok.astype(np.int8)
+
+    def system_mask(self) -> np.ndarray:
+        """``int8[n_actions]``: the system's legal actions now (with this step's restrictions)."""
+        return self.game.action_mask(self.run)
+
+    def synthesized_action(self) -> int:
+        """The synthesized tester's action now: the agent's next state, or the bitmask of
+        the synthesized restrictions of the system's state (static walls excluded)."""
+        g, run = self.game, self.run
+        if g.has_agent:
+            return int(g.synthesized_agent_move(run)[0])
+        return int(g.restricted_bits[run.history][run.system] & g.choosable_bits[run.system])
+
+    # ------------------------------------------------------------------ AEC API
+
+    def observe(self, agent: str) -> dict[str, np.ndarray]:
+        if agent == SYSTEM:
+            return {"observation": self.encoder.encode(self.run), "action_mask": self.system_mask()}
+        g, run = self.game, self.run
+        obs = np.zeros(self._observation_spaces[TESTER]["observation"].shape, dtype=np.float32)
+        obs[run.system] = 1.0
+        obs[self._n_states + run.history] = 1.0
+        if run.agent >= 0:
+            obs[self._n_states + self._n_hist + run.agent] = 1.0
+        return {"observation": obs, "action_mask": self.tester_mask()}
+
+    def reset(self, seed: int | None = None, options: dict[str, Any] | None = None) -> None:
+        self.agents = list(self.possible_agents)
+        self.run = self.game.reset(agent_first_move=False)
+        self.rewards = {a: 0.0 for a in self.agents}
+        self._cumulative_rewards = {a: 0.0 for a in self.agents}
+        self.terminations = {a: False for a in self.agents}
+        self.truncations = {a: False for a in self.agents}
+        self.infos = {a: {"system_state": self.game.state_json(self.run.system)} for a in self.agents}
+        self.agent_selection = self.agents[0]
+        self._rounds = 0
+
+    def step(self, action: Any) -> None:
+        agent = self.agent_selection
+        if self.terminations[agent] or self.truncations[agent]:
+            self._was_dead_step(action)
+            return
+        g, run = self.game, self.run
+        self._cumulative_rewards[agent] = 0.0
+        self.rewards = {a: 0.0 for a in self.agents}
+        a = int(action)
+        if agent == TESTER:
+            legal = self.tester_mask()
+            if not (0 <= a < legal.size and legal[a]):
+                self.rewards[TESTER] -= self.restricted_penalty
+                a = -1
+            if g.has_agent:
+                if a >= 0:
+                    syn_agent, syn_memory = g.synthesized_agent_move(run)
+                    run.agent = a
+                    if a == syn_agent:
+                        run.memory = syn_memory
+            else:
+                run.override = max(a, 0)
+        else:
+            mask = self.system_mask()
+            if not (0 <= a < mask.size and mask[a]):
+                self.rewards[SYSTEM] -= self.restricted_penalty
+            g.system_step(run, a if 0 <= a < g.n_actions else g.stay_action)
+            self.rewards[SYSTEM] -= self.step_cost
+            if run.done:
+                if run.outcome == MET:
+                    self.rewards[SYSTEM] += 1.0
+                    self.rewards[TESTER] += 1.0 if g.test_accepting[run.history] else -1.0
+                elif run.outcome == VIOLATED:
+                    self.rewards[SYSTEM] -= 1.0
+                self.terminations = {x: True for x in self.agents}
+        if agent == self.possible_agents[-1]:
+            self._rounds += 1
+            if self._rounds >= self.max_cycles and not run.done:
+                self.truncations = {x: True for x in self.agents}
+        for x in self.agents:
+            self.infos[x] = {"system_state": g.state_json(run.system)}
+            if run.done or self.truncations[x]:
+                self.infos[x]["verdict"] = g.verdict(run)
+        self.agent_selection = self.agents[1] if agent == self.agents[0] else self.agents[0]
+        self._accumulate_rewards()
+
+    def render(self) -> Any:
+        if self.render_mode is None:
+            gymnasium.logger.warn("render() called without a render_mode")
+            return None
+        if self.render_mode == "ansi":
+            return ansi(self.game, self.run, self.view)
+        if self._renderer is None:
+            self._renderer = make_renderer(self.game, self.tile_size, self.view)
+        return self._renderer.frame(self.run)
+
+    def close(self) -> None:
+        self._renderer = None
+
+
+class ParallelFlowTestEnv(ParallelEnv):
+    """The parallel API over :class:`raw_env` (same arguments).
+
+    A round applies the actions in turn order; when the run ends in the middle of a
+    round (the system reached its goal before the tester's turn), the rest of the round
+    is skipped. Every agent leaves ``agents`` at the end of the run.
+    """
+
+    metadata: dict[str, Any] = raw_env.metadata
+
+    def __init__(self, **kwargs: Any) -> None:
+        self.aec_env = raw_env(**kwargs)
+        self.possible_agents = list(self.aec_env.possible_agents)
+        self.render_mode = self.aec_env.render_mode
+        self.agents: list[str] = []
+
+    def observation_space(self, agent: str) -> spaces.Space:
+        return self.aec_env.observation_space(agent)
+
+    def action_space(self, agent: str) -> spaces.Space:
+        return self.aec_env.action_space(agent)
+
+    def reset(self, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[dict[str, Any], dict[str, Any]]:
+        self.aec_env.reset(seed=seed, options=options)
+        self.agents = list(self.aec_env.agents)
+        return {a: self.aec_env.observe(a) for a in self.agents}, {a: dict(self.aec_env.infos[a]) for a in self.agents}
+
+    def step(
+        self, actions: dict[str, Any]
+    ) -> tuple[dict[str, Any], dict[str, float], dict[str, bool], dict[str, bool], dict[str, Any]]:
+        aec = self.aec_env
+        rewards = {a: 0.0 for a in self.agents}
+        for agent in self.possible_agents:
+            if agent not in self.agents or aec.terminations[agent] or aec.truncations[agent]:
+                break
+            if agent not in actions:
+                raise KeyError(f"no action for {agent}")
+            action = actions[agent]
+            if not aec.action_space(agent).contains(np.int64(action)):
+                raise ValueError(f"action {action!r} of {agent} is outside {aec.action_space(agent)}")
+            aec.agent_selection = agent
+            aec.step(action)
+            for a in rewards:
+                rewards[a] += float(aec.rewards.get(a, 0.0))
+        terminations = {a: bool(aec.terminations[a]) for a in self.agents}
+        truncations = {a: bool(aec.truncations[a]) for a in self.agents}
+        infos = {a: dict(aec.infos[a]) for a in self.agents}
+        observations = {a: aec.observe(a) for a in self.agents}
+        self.agents = [a for a in self.agents if not (terminations[a] or truncations[a])]
+        if not self.agents:
+            aec.agents = []
+        else:
+            aec.agent_selection = self.possible_agents[0]
+        return observations, rewards, terminations, truncations, infos
+
+    def render(self) -> Any:
+        return self.aec_env.render()
+
+    def close(self) -> None:
+        self.aec_env.close()
+
+    def state(self) -> np.ndarray:
+        """The tester's full view of the run (system state, history, agent), flat."""
+        return self.aec_env.observe(TESTER)["observation"]
+
+
+def synthesized_tester(e: Any) -> Callable[..., int]:
+    """The synthesized test strategy as a tester policy for ``e`` (an ``env()``,
+    ``raw_env`` or ``parallel_env`` of this module).
+
+    Returns a callable ``policy(observation=None, agent="tester_0") -> action`` that reads
+    the run from the environment (the strategy needs the history, which observations of
+    the system never carry).
+    """
+    raw = e
+    while not isinstance(raw, raw_env):
+        nxt = getattr(raw, "aec_env", None) or getattr(raw, "env", None)
+        if nxt is None:
+            raise TypeError(f"{type(e).__name__} is not a flowtest_env.multiagent environment")
+        raw = nxt
+
+    def policy(observation: Any = None, agent: str = TESTER) -> int:
+        return raw.synthesized_action()
+
+    return policy
+
+
+__all__ = ["env", "raw_env", "parallel_env", "ParallelFlowTestEnv", "synthesized_tester", "TESTER", "SYSTEM"]

@@ -1,0 +1,377 @@
+"""Pictures of a test run: numpy tiles for grids, node-link pictures for graphs, text.
+
+Grid frames are assembled from tiles drawn once per tile size and cached (module-level
+cache keyed by kind and size): floor, blocked cell, goal, marks for the system's own
+cells (refuel, drop-off, ...), hidden test cells (test-engineer view only), the test
+agent and the system under test; walls and restrictions are bars on cell edges. The
+static background of a problem is composed once per renderer; a frame is one copy of
+it plus a few tile blits.
+
+Graph frames: a layout is computed once (a seeded spring layout), the background
+(edges, nodes, names) is drawn once with matplotlib's Agg backend into an array, and
+frames overlay the system, the agent and the restricted edges with numpy.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from .game import GRID_ACTIONS, RunState, TestGame
+
+RGB = tuple[int, int, int]
+
+FLOOR: RGB = (236, 236, 231)
+GRID_LINE: RGB = (190, 190, 185)
+BLOCKED: RGB = (70, 70, 75)
+GOAL: RGB = (96, 180, 96)
+SYSTEM: RGB = (214, 48, 49)
+AGENT: RGB = (40, 96, 200)
+WALL: RGB = (30, 30, 30)
+DOOR: RGB = (240, 140, 0)
+TEST_CELL: RGB = (170, 60, 200)
+PALETTE: tuple[RGB, ...] = ((0, 170, 200), (150, 100, 50), (120, 60, 170), (200, 170, 0), (0, 130, 110), (200, 90, 140))
+REFUEL: RGB = (235, 190, 20)
+STATUS_BG: RGB = (40, 40, 44)
+FUEL_BAR: RGB = (235, 190, 20)
+
+_TILES: dict[tuple[Any, ...], np.ndarray] = {}
+
+
+def _disk(size: int, radius: float) -> np.ndarray:
+    yy, xx = np.mgrid[0:size, 0:size] + 0.5
+    c = size / 2
+    return (yy - c) ** 2 + (xx - c) ** 2 <= (radius * size) ** 2
+
+
+def _diamond(size: int, radius: float) -> np.ndarray:
+    yy, xx = np.mgrid[0:size, 0:size] + 0.5
+    c = size / 2
+    return np.abs(yy - c) + np.abs(xx - c) <= radius * size
+
+
+def _ring(size: int, outer: float, inner: float) -> np.ndarray:
+    return _disk(size, outer) & ~_disk(size, inner)
+
+
+def _square(size: int, margin: float) -> np.ndarray:
+    m = int(round(margin * size))
+    out = np.zeros((size, size), dtype=bool)
+    out[m : size - m, m : size - m] = True
+    return out
+
+
+def _cross(size: int, width: float, length: float) -> np.ndarray:
+    yy, xx = np.mgrid[0:size, 0:size] + 0.5
+    c = size / 2
+    a = (np.abs(yy - c) <= width * size) & (np.abs(xx - c) <= length * size)
+    b = (np.abs(xx - c) <= width * size) & (np.abs(yy - c) <= length * size)
+    return a | b
+
+
+def shape_mask(kind: str, size: int) -> np.ndarray:
+    """A cached ``bool[size, size]`` mask of a tile shape."""
+    key = ("shape", kind, size)
+    m = _TILES.get(key)
+    if m is None:
+        makers = {
+            "system": lambda: _disk(size, 0.32),
+            "agent": lambda: _diamond(size, 0.36),
+            "goal": lambda: _square(size, 0.12),
+            "mark": lambda: _disk(size, 0.14),
+            "test": lambda: _ring(size, 0.44, 0.36),
+            "refuel": lambda: _cross(size, 0.07, 0.3),
+        }
+        m = makers[kind]()
+        _TILES[key] = m
+    return m
+
+
+def floor_tile(size: int, color: RGB = FLOOR) -> np.ndarray:
+    """A cached ``uint8[size, size, 3]`` cell tile with a one-pixel grid line."""
+    key = ("floor", color, size)
+    t = _TILES.get(key)
+    if t is None:
+        t = np.empty((size, size, 3), dtype=np.uint8)
+        t[:] = color
+        t[0, :] = GRID_LINE
+        t[:, 0] = GRID_LINE
+        _TILES[key] = t
+    return t
+
+
+def _paint(img: np.ndarray, r: int, c: int, size: int, mask: np.ndarray, color: RGB) -> None:
+    view = img[r * size : (r + 1) * size, c * size : (c + 1) * size]
+    view[mask] = color
+
+
+def _edge_bar(img: np.ndarray, r: int, c: int, size: int, direction: str, color: RGB, thick: float) -> None:
+    w = max(2, int(round(thick * size)))
+    y0, x0 = r * size, c * size
+    if direction == "N":
+        img[y0 : y0 + w, x0 : x0 + size] = color
+    elif direction == "S":
+        img[y0 + size - w : y0 + size, x0 : x0 + size] = color
+    elif direction == "W":
+        img[y0 : y0 + size, x0 : x0 + w] = color
+    else:
+        img[y0 : y0 + size, x0 + size - w : x0 + size] = color
+
+
+def marked_places(game: TestGame, prop: str, majority: bool = True) -> list[int]:
+    """Non-goal places worth marking with ``prop``: where it holds at some state, and with
+    ``majority`` at half of the place's states at least (on fuel grids ``unsafe`` at
+    fuel 0 then marks nothing, while ``ice`` at fuel 0..9 marks its cell). Hidden test
+    cells in the engineer view use ``majority=False`` (``low`` holds at fuel 1 only)."""
+    ts = game.ts
+    n_places = len(ts.places)
+    total = np.bincount(ts.place, minlength=n_places)
+    has = np.array([prop in lab for lab in ts.labels], dtype=bool)
+    hits = np.bincount(ts.place[has], minlength=n_places)
+    goal = np.zeros(n_places, dtype=bool)
+    goal[ts.place[ts.terminal]] = True
+    keep = ((2 * hits >= total) if majority else np.ones(n_places, dtype=bool)) & (hits > 0) & ~goal
+    return [int(p) for p in np.flatnonzero(keep)]
+
+
+class GridRenderer:
+    """Frames of a grid problem (see the module docstring).
+
+    Parameters
+    ----------
+    game
+        The test game.
+    tile_size
+        Pixels per cell.
+    view
+        ``"system"`` (what the SUT may know) or ``"engineer"`` (also the hidden test cells).
+    """
+
+    def __init__(self, game: TestGame, tile_size: int = 32, view: str = "system") -> None:
+        if view not in ("system", "engineer"):
+            raise ValueError(f"unknown view {view!r}; expected 'system' or 'engineer'")
+        from .encoding import system_propositions
+
+        self.game, self.size, self.view = game, tile_size, view
+        ts = game.ts
+        lay = ts.layout
+        assert lay is not None
+        self.rows, self.cols = lay.rows, lay.cols
+        self.is_fuel = ts.kind == "fuel"
+        self.max_fuel = int(ts.max_fuel or 0)
+        size = tile_size
+        status = size // 3 if self.is_fuel else 0
+        img = np.empty((self.rows * size + status, self.cols * size, 3), dtype=np.uint8)
+        img[:] = STATUS_BG
+        for r in range(self.rows):
+            for c in range(self.cols):
+                blocked = (r, c) in lay.blocked
+                img[r * size : (r + 1) * size, c * size : (c + 1) * size] = floor_tile(size, BLOCKED if blocked else FLOOR)
+        cells = [tuple(p) for p in ts.places]
+        for p in np.unique(ts.place[ts.terminal]):
+            _paint(img, *cells[p], size, shape_mask("goal", size), GOAL)
+        props = system_propositions(game)
+        for i, name in enumerate(props):
+            for p in marked_places(game, name):
+                _paint(img, *cells[p], size, shape_mask("mark", size), PALETTE[i % len(PALETTE)])
+        if self.is_fuel:
+            fuel = np.array([k[1] for k in ts.states])
+            for p in np.unique(ts.place[ts.dst[fuel[ts.dst] == self.max_fuel]]):
+                _paint(img, *cells[p], size, shape_mask("refuel", size), REFUEL)
+        if view == "engineer":
+            from synthesis.specs import parse_formula, propositions
+
+            test_props = propositions(parse_formula(game.artifact.objectives["test"])) - set(props)
+            for name in sorted(test_props):
+                for p in marked_places(game, name, majority=False):
+                    _paint(img, *cells[p], size, shape_mask("test", size), TEST_CELL)
+        static = game.artifact.strategy.static_obstacles
+        for m in np.flatnonzero(static):
+            r, c = cells[int(ts.place[ts.src[m]])]
+            _edge_bar(img, r, c, size, ts.action[m], WALL, 0.12)
+        self.background = img
+        self.cells = cells
+        self.static = static
+
+    def frame(self, run: RunState) -> np.ndarray:
+        """``uint8[H, W, 3]``: the run now."""
+        g, size = self.game, self.size
+        ts = g.ts
+        img = self.background.copy()
+        for m in g.shown_moves(run):
+            if not self.static[m]:
+                r, c = self.cells[int(ts.place[ts.src[m]])]
+                _edge_bar(img, r, c, size, ts.action[m], DOOR, 0.16)
+        if run.agent >= 0 and g.agent_place[run.agent] >= 0:
+            _paint(img, *self.cells[g.agent_place[run.agent]], size, shape_mask("agent", size), AGENT)
+        _paint(img, *self.cells[g.place_list[run.system]], size, shape_mask("system", size), SYSTEM)
+        if self.is_fuel:
+            fuel = int(ts.states[run.system][1])
+            y0 = self.rows * size
+            h = img.shape[0] - y0
+            width = int(round(img.shape[1] * fuel / max(self.max_fuel, 1)))
+            img[y0 + h // 4 : y0 + h - h // 4, :width] = FUEL_BAR
+        return img
+
+
+class GraphRenderer:
+    """Node-link frames of a graph problem (see the module docstring)."""
+
+    def __init__(self, game: TestGame, tile_size: int = 32, view: str = "system") -> None:
+        if view not in ("system", "engineer"):
+            raise ValueError(f"unknown view {view!r}; expected 'system' or 'engineer'")
+        import matplotlib
+
+        matplotlib.use("Agg", force=False)
+        import networkx as nx
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
+
+        from .encoding import system_propositions
+
+        self.game, self.view = game, view
+        ts = game.ts
+        g = nx.DiGraph()
+        g.add_nodes_from(range(ts.n_states))
+        g.add_edges_from(zip(ts.src.tolist(), ts.dst.tolist()))
+        pos = nx.kamada_kawai_layout(g.to_undirected()) if ts.n_states > 1 else {0: np.zeros(2)}
+        xy = np.array([pos[i] for i in range(ts.n_states)], dtype=float)
+        px = max(240, 15 * tile_size)
+        fig = Figure(figsize=(px / 100, px / 100), dpi=100)
+        canvas = FigureCanvasAgg(fig)
+        ax = fig.add_axes((0.0, 0.0, 1.0, 1.0))
+        ax.set_xlim(xy[:, 0].min() - 0.25, xy[:, 0].max() + 0.25)
+        ax.set_ylim(xy[:, 1].min() - 0.25, xy[:, 1].max() + 0.25)
+        ax.set_aspect("equal")
+        ax.axis("off")
+        fig.patch.set_facecolor(np.array(FLOOR) / 255)
+        for a, b in zip(ts.src.tolist(), ts.dst.tolist()):
+            ax.annotate(
+                "", xy=xy[b], xytext=xy[a],
+                arrowprops={"arrowstyle": "-|>", "color": "0.55", "lw": 1.2, "shrinkA": 14, "shrinkB": 14,
+                            "connectionstyle": "arc3,rad=0.12"},
+            )
+        props = system_propositions(game)
+        test_props: set[str] = set()
+        if view == "engineer":
+            from synthesis.specs import parse_formula, propositions
+
+            test_props = propositions(parse_formula(game.artifact.objectives["test"])) - set(props)
+        for s in range(ts.n_states):
+            face = np.array(GOAL) / 255 if ts.terminal[s] else "white"
+            edge = np.array(TEST_CELL) / 255 if ts.labels[s] & test_props else "0.3"
+            ax.scatter([xy[s, 0]], [xy[s, 1]], s=520, c=[face] if not isinstance(face, str) else face,
+                       edgecolors=[edge] if not isinstance(edge, str) else edge, linewidths=2.5, zorder=3)
+            ax.text(xy[s, 0], xy[s, 1] - 0.13, str(ts.states[s]), ha="center", va="top", fontsize=8, zorder=4)
+        canvas.draw()
+        self.background = np.asarray(canvas.buffer_rgba())[:, :, :3].copy()
+        # pixel coordinates of nodes (data -> display, y flipped)
+        disp = ax.transData.transform(xy)
+        h = self.background.shape[0]
+        self.node_px = np.stack([h - disp[:, 1], disp[:, 0]], axis=1)
+        self.radius = int(np.sqrt(520) / 2 * 100 / 72)  # marker points -> pixels at dpi 100
+        self.src, self.dst = ts.src.copy(), ts.dst.copy()
+
+    def _disc(self, img: np.ndarray, node: int, radius: int, color: RGB) -> None:
+        y, x = self.node_px[node]
+        y0, y1 = int(max(0, y - radius)), int(min(img.shape[0], y + radius + 1))
+        x0, x1 = int(max(0, x - radius)), int(min(img.shape[1], x + radius + 1))
+        yy, xx = np.mgrid[y0:y1, x0:x1]
+        mask = (yy - y) ** 2 + (xx - x) ** 2 <= radius**2
+        img[y0:y1, x0:x1][mask] = color
+
+    def _segment(self, img: np.ndarray, m: int, color: RGB) -> None:
+        a, b = self.node_px[self.src[m]], self.node_px[self.dst[m]]
+        d = b - a
+        n = max(2, int(np.hypot(*d)))
+        t = np.linspace(0.3, 0.7, n)  # the middle of the edge: off the node discs
+        pts = np.rint(a[None, :] + t[:, None] * d[None, :]).astype(int)
+        for dy in (-2, -1, 0, 1, 2):
+            for dx in (-2, -1, 0, 1, 2):
+                yy = np.clip(pts[:, 0] + dy, 0, img.shape[0] - 1)
+                xx = np.clip(pts[:, 1] + dx, 0, img.shape[1] - 1)
+                img[yy, xx] = color
+
+    def frame(self, run: RunState) -> np.ndarray:
+        g = self.game
+        img = self.background.copy()
+        for m in g.shown_moves(run):
+            self._segment(img, m, DOOR)
+        if run.agent >= 0 and g.agent_place[run.agent] >= 0:
+            self._disc(img, g.agent_place[run.agent], self.radius, AGENT)
+        self._disc(img, run.system, max(5, (2 * self.radius) // 3), SYSTEM)
+        return img
+
+
+def make_renderer(game: TestGame, tile_size: int = 32, view: str = "system") -> GridRenderer | GraphRenderer:
+    """The renderer of a game's kind."""
+    if game.is_grid:
+        return GridRenderer(game, tile_size, view)
+    return GraphRenderer(game, tile_size, view)
+
+
+def ansi(game: TestGame, run: RunState, view: str = "system") -> str:
+    """A text picture of the run: the grid (or the state list), restrictions, status.
+
+    Grid legend: ``@`` system, ``A`` test agent, ``T`` goal, ``#`` blocked, ``.`` free,
+    the first letter of a system proposition (``R`` refuel), ``?`` a hidden test cell
+    (engineer view); restricted moves are listed below the grid.
+    """
+    ts = game.ts
+    lines: list[str] = []
+    ap = game.agent_place[run.agent] if run.agent >= 0 else -1
+    from .encoding import system_propositions
+
+    props = system_propositions(game)
+    test_props: set[str] = set()
+    if view == "engineer":
+        from synthesis.specs import parse_formula, propositions
+
+        test_props = propositions(parse_formula(game.artifact.objectives["test"])) - set(props)
+    if game.is_grid:
+        lay = ts.layout
+        assert lay is not None
+        grid = [["#" if (r, c) in lay.blocked else "." for c in range(lay.cols)] for r in range(lay.rows)]
+        cells = [tuple(p) for p in ts.places]
+        for s in np.flatnonzero(ts.terminal):
+            r, c = cells[int(ts.place[s])]
+            grid[r][c] = "T"
+        for name in sorted(test_props):
+            for p in marked_places(game, name, majority=False):
+                r, c = cells[p]
+                grid[r][c] = "?"
+        for name in props:
+            for p in marked_places(game, name):
+                r, c = cells[p]
+                grid[r][c] = name[0]
+        if ts.kind == "fuel":
+            fuel = np.array([k[1] for k in ts.states])
+            for p in np.unique(ts.place[ts.dst[fuel[ts.dst] == ts.max_fuel]]):
+                r, c = cells[p]
+                grid[r][c] = "R"
+        if ap >= 0:
+            r, c = cells[ap]
+            grid[r][c] = "A"
+        r, c = cells[game.place_list[run.system]]
+        grid[r][c] = "@"
+        lines += [" ".join(row) for row in grid]
+    else:
+        for s in range(ts.n_states):
+            mark = "@" if s == run.system else ("A" if s == ap else " ")
+            tag = "T" if ts.terminal[s] else ("?" if ts.labels[s] & test_props else " ")
+            lines.append(f"{mark}{tag} {ts.states[s]}")
+    shown = game.shown_moves(run)
+    if shown:
+        w = ts.to_json_state
+        lines.append("restricted: " + ", ".join(f"{w(int(ts.src[m]))}->{w(int(ts.dst[m]))}" for m in shown))
+    status = f"step {run.steps}  state {ts.to_json_state(run.system)}  system objective {run.outcome}"
+    if view == "engineer":
+        desc = game.artifact.extras.get("history_descriptions")
+        hist = desc[run.history] if desc else str(run.history)
+        status += f"  history [{hist}]  test objective {'realized' if game.test_accepting[run.history] else 'open'}"
+    lines.append(status)
+    return "\n".join(lines) + "\n"
+
+
+__all__ = ["GRID_ACTIONS", "GridRenderer", "GraphRenderer", "make_renderer", "ansi"]

@@ -1,0 +1,525 @@
+"""The single-agent FlowTest environments: API checks over the whole registry, the test
+game's rules and guarantees, artifacts, rendering.
+
+Fast by default; the artifact-equality tests of the large problems are marked slow.
+"""
+
+from __future__ import annotations
+
+import json
+import pickle
+import subprocess
+import sys
+import warnings
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.envs.registration import EnvSpec
+from gymnasium.utils.env_checker import check_env, data_equivalence
+
+import flowtest_env
+from flowtest_env import ActionMaskObservation
+from flowtest_env.artifacts import artifact_path, builtin_game, synthesize_artifact
+from flowtest_env.envs import BUILTIN_ENVS
+from flowtest_env.game import MET, RunState, TestGame
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _shipped(env_id: str) -> bool:
+    for name, (stem, _) in BUILTIN_ENVS.items():
+        if env_id == f"FlowTest-{stem}-v0":
+            return artifact_path(name).exists()
+    return True
+
+
+IDS = [
+    pytest.param(i, marks=pytest.mark.skip(reason="artifact not shipped yet")) if not _shipped(i) else i
+    for i in flowtest_env.ENV_IDS
+]
+GRID_IDS = [i for i in flowtest_env.ENV_IDS if i not in ("FlowTest-BeaverRescue-v0", "FlowTest-MotionPrimitives-v0") and _shipped(i)]
+BUILTIN_NAMES = [n for n in BUILTIN_ENVS if artifact_path(n).exists()]
+
+
+def _rollout(env: gym.Env, n_steps: int, seed: int) -> list[Any]:
+    """``n_steps`` of random masked actions, resetting at episode ends; everything seen."""
+    rng = np.random.default_rng(seed)
+    obs, info = env.reset(seed=seed)
+    seen: list[Any] = [(obs, info)]
+    for _ in range(n_steps):
+        action = int(rng.choice(np.flatnonzero(info["action_mask"])))
+        obs, reward, terminated, truncated, info = env.step(action)
+        seen.append((action, obs, reward, terminated, truncated, info))
+        if terminated or truncated:
+            obs, info = env.reset()
+            seen.append((obs, info))
+    return seen
+
+
+# ---------------------------------------------------------------- registry-wide API
+
+
+def test_registry_lists_every_builtin_and_the_random_grid() -> None:
+    stems = {stem for stem, _ in BUILTIN_ENVS.values()}
+    assert {f"FlowTest-{s}-v0" for s in stems} | {"FlowTest-RandomGrid-v0"} == set(flowtest_env.ENV_IDS)
+    assert all(i in gym.registry for i in flowtest_env.ENV_IDS)
+    assert len(flowtest_env.ENV_IDS) == 10
+
+
+@pytest.mark.parametrize("env_id", IDS)
+def test_gymnasium_env_checker(env_id: str) -> None:
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        env = gym.make(env_id, render_mode="rgb_array")
+        check_env(env.unwrapped, skip_render_check=False)
+
+
+@pytest.mark.parametrize("env_id", GRID_IDS)
+def test_gymnasium_env_checker_grid_observations(env_id: str) -> None:
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        env = gym.make(env_id, obs_kind="grid")
+        assert env.observation_space.dtype == np.uint8 and len(env.observation_space.shape) == 3
+        check_env(env.unwrapped)
+
+
+@pytest.mark.parametrize("env_id", IDS)
+def test_stable_baselines3_env_checker(env_id: str) -> None:
+    sb3_checker = pytest.importorskip("stable_baselines3.common.env_checker")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        sb3_checker.check_env(gym.make(env_id), warn=True)
+        sb3_checker.check_env(ActionMaskObservation(gym.make(env_id)), warn=True)
+
+
+def test_stable_baselines3_accepts_grid_images() -> None:
+    """The image encoding is uint8 in [0, 255], channel first. sb3's only remarks are
+    about its default CnnPolicy, which wants 36x36 pixels and guesses the channel axis
+    from the smallest dimension (14 channels on 5x5 cells defeat the guess): a small
+    grid needs a custom features extractor, as MiniGrid's 7x7 images do."""
+    sb3_checker = pytest.importorskip("stable_baselines3.common.env_checker")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        sb3_checker.check_env(gym.make("FlowTest-Maze2-v0", obs_kind="grid"), warn=True)
+    advisory = ("minimal resolution", "Treating image space as channels-last")
+    assert caught and all(any(a in str(w.message) for a in advisory) for w in caught)
+
+
+@pytest.mark.parametrize("env_id", IDS)
+def test_200_step_determinism(env_id: str) -> None:
+    a = _rollout(gym.make(env_id), 200, seed=7)
+    b = _rollout(gym.make(env_id), 200, seed=7)
+    assert data_equivalence(a, b)
+
+
+@pytest.mark.parametrize("env_id", IDS)
+def test_pickling_keeps_the_run(env_id: str) -> None:
+    env = gym.make(env_id, render_mode="rgb_array")
+    _, info = env.reset(seed=3)
+    rng = np.random.default_rng(3)
+    for _ in range(3):
+        _, _, term, trunc, info = env.step(int(rng.choice(np.flatnonzero(info["action_mask"]))))
+        if term or trunc:
+            _, info = env.reset()
+    env.render()
+    clone = pickle.loads(pickle.dumps(env))
+    for _ in range(20):
+        action = int(rng.choice(np.flatnonzero(info["action_mask"])))
+        out1, out2 = env.step(action), clone.step(action)
+        assert data_equivalence(out1, out2)
+        info = out1[4]
+        if out1[2] or out1[3]:
+            r1, r2 = env.reset(seed=5), clone.reset(seed=5)
+            assert data_equivalence(r1, r2)
+            info = r1[1]
+    assert np.array_equal(env.render(), clone.render())
+
+
+@pytest.mark.parametrize("mode", ["sync", "async"])
+@pytest.mark.parametrize("env_id", IDS)
+def test_vector_envs(env_id: str, mode: str) -> None:
+    envs = gym.make_vec(env_id, num_envs=2, vectorization_mode=mode)
+    try:
+        obs, info = envs.reset(seed=[1, 2])
+        assert obs.shape == (2, *envs.single_observation_space.shape)
+        for _ in range(15):
+            masks = info["action_mask"]
+            actions = np.array([int(np.flatnonzero(m)[0]) if m.any() else 0 for m in masks])
+            obs, rew, term, trunc, info = envs.step(actions)
+            assert obs.shape[0] == 2 and rew.dtype.kind == "f"
+    finally:
+        envs.close()
+
+
+@pytest.mark.parametrize("env_id", IDS)
+def test_spec_round_trips_through_json(env_id: str) -> None:
+    env = gym.make(env_id)
+    text = env.spec.to_json()
+    json.loads(text)
+    spec = EnvSpec.from_json(text)
+    assert spec == env.spec
+    again = gym.make(spec)
+    assert again.observation_space == env.observation_space
+
+
+# ---------------------------------------------------------------- info, masks, rewards
+
+
+@pytest.mark.parametrize("env_id", IDS)
+def test_info_contract_and_three_masks(env_id: str) -> None:
+    env = gym.make(env_id)
+    wrapped = ActionMaskObservation(gym.make(env_id))
+    obs, info = env.reset(seed=0)
+    wobs, _ = wrapped.reset(seed=0)
+    rng = np.random.default_rng(0)
+    game = env.unwrapped.game
+    for _ in range(300):
+        mask = info["action_mask"]
+        assert mask.dtype == np.int8 and mask.shape == (env.action_space.n,)
+        assert np.array_equal(mask.astype(bool), env.unwrapped.action_masks())
+        assert np.array_equal(mask, wobs["action_mask"]) and np.array_equal(obs, wobs["observation"])
+        state = info["system_state"]
+        if game.ts.kind == "grid":
+            assert isinstance(state, list) and len(state) == 2 and all(isinstance(x, int) for x in state)
+        elif game.ts.kind == "fuel":
+            assert isinstance(state, list) and isinstance(state[0], list) and isinstance(state[1], int)
+        else:
+            assert isinstance(state, str)
+        action = int(rng.choice(np.flatnonzero(mask)))
+        obs, reward, term, trunc, info = env.step(action)
+        wobs, _, _, _, _ = wrapped.step(action)
+        if term or trunc:
+            v = info["verdict"]
+            assert set(v) >= {"system_objective", "test_objective_realized", "restrictions", "steps"}
+            assert v["system_objective"] in ("met", "violated", "open")
+            assert isinstance(v["test_objective_realized"], bool) and isinstance(v["restrictions"], int)
+            assert (v["system_objective"] == "open") == trunc
+            obs, info = env.reset()
+            wobs, _ = wrapped.reset()
+        else:
+            assert "verdict" not in info
+
+
+def _path_to(game: TestGame, wanted: Any) -> list[int]:
+    """Legal actions from reset to the nearest game state where ``wanted(run)`` holds."""
+    from collections import deque
+
+    root = game.reset()
+    queue: deque[tuple[RunState, list[int]]] = deque([(root, [])])
+    seen = {root.key()}
+    while queue:
+        run, path = queue.popleft()
+        if wanted(run):
+            return path
+        for a in np.flatnonzero(game.action_mask(run)):
+            nxt = run.copy()
+            game.step(nxt, int(a))
+            if not nxt.done and nxt.key() not in seen:
+                seen.add(nxt.key())
+                queue.append((nxt, path + [int(a)]))
+    raise AssertionError("no such state")
+
+
+def test_rewards_goal_step_cost_and_refused_moves() -> None:
+    env = gym.make("FlowTest-SmallReactive-v0")
+    _, info = env.reset(seed=0)
+    game = env.unwrapped.game
+    path = _path_to(game, lambda r: bool(game.restricted_bits_of(r) & game.exists_bits[r.system]))
+    for a in path:
+        _, reward, _, _, info = env.step(a)
+        assert reward == pytest.approx(-0.01)
+    run = env.unwrapped.run
+    refused = [a for a in range(game.n_slots) if (game.restricted_bits_of(run) >> a) & 1 and game.slot_move[run.system, a] >= 0]
+    before = info["system_state"]
+    _, reward, term, _, info = env.step(refused[0])
+    assert info["system_state"] == before and not term
+    assert reward == pytest.approx(-0.01 - 0.05)
+    assert env.unwrapped.verdict()["blocked_attempts"] == 1
+    assert env.unwrapped.verdict()["restrictions"] >= 1
+    for _ in range(50):
+        _, reward, term, trunc, info = env.step(_greedy_to_goal(game, env.unwrapped.run))
+        if term:
+            break
+    assert term and info["verdict"]["system_objective"] == "met" and info["verdict"]["test_objective_realized"]
+    assert reward == pytest.approx(1.0 - 0.01)
+
+
+def _greedy_to_goal(game: TestGame, run: RunState) -> int:
+    """A legal action on a shortest path to a met state in the game's state space."""
+    from collections import deque
+
+    start = run.copy()
+    queue: deque[tuple[RunState, int]] = deque([(start, -1)])
+    seen = {start.key()}
+    while queue:
+        r, first = queue.popleft()
+        for a in np.flatnonzero(game.action_mask(r)):
+            r2 = r.copy()
+            game.step(r2, int(a))
+            f = int(a) if first < 0 else first
+            if r2.outcome == MET:
+                return f
+            if not r2.done and r2.key() not in seen:
+                seen.add(r2.key())
+                queue.append((r2, f))
+    raise AssertionError("no way to the goal")
+
+
+def test_violation_ends_the_run_with_a_penalty() -> None:
+    env = gym.make("FlowTest-Refueling-v0")
+    _, info = env.reset(seed=0)
+    stay = env.unwrapped.game.stay_action
+    rng = np.random.default_rng(1)
+    for _ in range(100):
+        moves = [a for a in np.flatnonzero(info["action_mask"]) if a != stay]
+        _, reward, term, trunc, info = env.step(int(rng.choice(moves)) if moves else stay)
+        if term:
+            break
+    assert term and info["verdict"]["system_objective"] in ("violated", "met")
+    if info["verdict"]["system_objective"] == "violated":
+        assert reward <= -1.0
+
+
+def test_observations_never_reveal_the_test_history() -> None:
+    """Two runs that differ only in the test part of the history look the same."""
+    game = builtin_game("maze2")
+    from flowtest_env.encoding import make_encoder
+
+    comps = game.artifact.histories.components
+    same_sys = [(h1, h2) for h1 in range(len(comps)) for h2 in range(len(comps)) if h1 < h2 and comps[h1][0] == comps[h2][0]]
+    assert same_sys
+    for kind in ("flat", "grid"):
+        enc = make_encoder(game, kind)
+        for h1, h2 in same_sys:
+            r1 = game.reset()
+            r2 = r1.copy()
+            r1.history, r2.history = h1, h2
+            assert np.array_equal(enc.encode(r1), enc.encode(r2))
+        names = getattr(enc, "channels", [])
+        assert not any(n.startswith("I") for n in names)
+
+
+def test_accumulative_setting_shows_more_but_enforces_the_same() -> None:
+    inst = gym.make("FlowTest-SmallReactive-v0", obs_kind="grid")
+    acc = gym.make("FlowTest-SmallReactive-v0", obs_kind="grid", setting="accumulative")
+    o1, i1 = inst.reset(seed=0)
+    o2, i2 = acc.reset(seed=0)
+    shown_more = False
+    for action in (4, 0, 2, 4, 1, 2, 2, 0, 2):
+        if not i1["action_mask"][action]:
+            action = 4
+        o1, r1, t1, _, i1 = inst.step(action)
+        o2, r2, t2, _, i2 = acc.step(action)
+        assert np.array_equal(i1["action_mask"], i2["action_mask"]) and r1 == r2 and t1 == t2
+        shown_more |= int(o2[5:9].sum()) > int(o1[5:9].sum())
+        assert np.all(o2[5:9] >= o1[5:9])
+        if t1:
+            break
+    assert shown_more
+
+
+# ---------------------------------------------------------------- the guarantees
+
+
+def _explore(game: TestGame) -> tuple[list[RunState], np.ndarray, np.ndarray]:
+    """Every game state the synthesized test can reach against any system behaviour
+    (every legal action; refused ones are stays), with the edges between them."""
+    root = game.reset()
+    index = {root.key(): 0}
+    states, stack, src, dst = [root], [root], [], []
+    while stack:
+        run = stack.pop()
+        if run.done:
+            continue
+        i = index[run.key()]
+        for a in np.flatnonzero(game.action_mask(run)):
+            nxt = run.copy()
+            game.step(nxt, int(a))
+            k = nxt.key()
+            if k not in index:
+                index[k] = len(states)
+                states.append(nxt)
+                stack.append(nxt)
+            src.append(i)
+            dst.append(index[k])
+    return states, np.array(src, dtype=np.int64), np.array(dst, dtype=np.int64)
+
+
+@pytest.mark.parametrize("name", ["small-reactive", "maze2", "example1", "beaver-rescue", "motion-primitives", "maze1"])
+def test_synthesized_test_keeps_its_guarantees_exhaustively(name: str) -> None:
+    """Against every system behaviour (exhaustive over reachable game states): every run
+    that meets the system objective has realized the test objective, no run is
+    violated, and from every reachable state the system can still reach its goal."""
+    if not artifact_path(name).exists():
+        pytest.skip("artifact not shipped")
+    game = builtin_game(name)
+    states, src, dst = _explore(game)
+    met = np.array([s.outcome == MET for s in states])
+    assert met.any()
+    for s in states:
+        assert s.outcome != "violated", f"{name}: violated at {game.state_json(s.system)}"
+        if s.outcome == MET:
+            assert game.test_accepting[s.history], f"{name}: goal reached at {game.state_json(s.system)} without the test objective"
+    can = met.copy()
+    while True:
+        grow = src[can[dst] & ~can[src]]
+        if grow.size == 0:
+            break
+        can[grow] = True
+    trapped = [game.state_json(s.system) for s, ok in zip(states, can) if not ok]
+    assert not trapped, f"{name}: the system is trapped at {trapped[:5]}"
+
+
+def test_every_system_action_sequence_on_small_reactive() -> None:
+    """Literally every action sequence (masked actions included) up to 6 steps."""
+    game = builtin_game("small-reactive")
+    frontier = [game.reset()]
+    ended = 0
+    for _ in range(6):
+        nxt = []
+        for run in frontier:
+            for a in range(game.n_actions):
+                r = run.copy()
+                game.step(r, a)
+                if r.done:
+                    ended += 1
+                    assert r.outcome == MET and game.test_accepting[r.history]
+                else:
+                    nxt.append(r)
+        frontier = nxt
+    assert ended > 0
+
+
+@pytest.mark.parametrize("name", ["refueling", "patrolling"])
+def test_fuel_problems_meet_only_through_the_test_objective(name: str) -> None:
+    if not artifact_path(name).exists():
+        pytest.skip("artifact not shipped")
+    game = builtin_game(name)
+    states, _, _ = _explore(game)
+    met = [s for s in states if s.outcome == MET]
+    assert met and all(game.test_accepting[s.history] for s in met)
+
+
+# ---------------------------------------------------------------- artifacts
+
+
+def test_make_is_fast_cold() -> None:
+    code = (
+        "import time, gymnasium, flowtest_env\n"
+        "from flowtest_env.envs import BUILTIN_ENVS\n"
+        "from flowtest_env.artifacts import artifact_path\n"
+        "worst = 0.0\n"
+        "for name, (stem, _) in BUILTIN_ENVS.items():\n"
+        "    if not artifact_path(name).exists(): continue\n"
+        "    t = time.perf_counter(); gymnasium.make(f'FlowTest-{stem}-v0').reset(seed=0)\n"
+        "    worst = max(worst, time.perf_counter() - t)\n"
+        "print(worst)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)
+    assert float(out.stdout.strip()) < 1.0
+
+
+def _comparable(art: Any) -> dict[str, Any]:
+    s = art.summary
+    out = {
+        "strategy": art.strategy.to_dict(),
+        "flow": s["flow"],
+        "n_cuts": s["n_cuts"],
+        "cuts": s["cuts"],
+        "restrictions": s["restrictions"],
+        "static_obstacles": s["static_obstacles"],
+        "system": art.system.to_dict(),
+        "objectives": art.objectives,
+    }
+    if art.agent is not None:
+        out["agent_controller"] = art.agent["controller"]
+    return out
+
+
+SLOW_ARTIFACTS = {"refueling", "mars-exploration"}
+
+
+@pytest.mark.parametrize(
+    "name", [pytest.param(n, marks=pytest.mark.slow) if n in SLOW_ARTIFACTS else n for n in BUILTIN_NAMES]
+)
+def test_shipped_artifact_equals_a_fresh_synthesis(name: str) -> None:
+    from synthesis.artifact import TestArtifact
+
+    shipped = TestArtifact.load(artifact_path(name))
+    fresh = synthesize_artifact(name)
+    assert _comparable(shipped) == _comparable(fresh)
+
+
+def test_build_artifacts_refuses_to_overwrite(tmp_path: Path) -> None:
+    from experiments.build_artifacts import main
+
+    (tmp_path / "small-reactive.json").write_text("{}")
+    assert main(["small-reactive", "--out", str(tmp_path)]) == 2
+    assert (tmp_path / "small-reactive.json").read_text() == "{}"
+    assert main(["small-reactive", "--out", str(tmp_path), "--force"]) == 0
+    assert json.loads((tmp_path / "small-reactive.json").read_text())["name"] == "small-reactive"
+    assert main(["no-such-problem", "--out", str(tmp_path)]) == 1
+
+
+# ---------------------------------------------------------------- rendering
+
+
+@pytest.mark.parametrize("env_id", IDS)
+def test_render_rgb_array_and_ansi(env_id: str) -> None:
+    env = gym.make(env_id, render_mode="rgb_array")
+    env.reset(seed=0)
+    frame = env.render()
+    assert frame.dtype == np.uint8 and frame.ndim == 3 and frame.shape[2] == 3 and frame.shape[0] >= 32
+    text_env = gym.make(env_id, render_mode="ansi")
+    text_env.reset(seed=0)
+    text = text_env.render()
+    assert isinstance(text, str) and "step 0" in text
+
+
+def test_engineer_view_shows_hidden_test_cells() -> None:
+    sys_env = gym.make("FlowTest-Maze2-v0", render_mode="rgb_array")
+    eng_env = gym.make("FlowTest-Maze2-v0", render_mode="rgb_array", view="engineer")
+    sys_env.reset(seed=0)
+    eng_env.reset(seed=0)
+    a, b = sys_env.render(), eng_env.render()
+    assert a.shape == b.shape and not np.array_equal(a, b)
+    t = gym.make("FlowTest-Maze2-v0", render_mode="ansi", view="engineer")
+    t.reset(seed=0)
+    assert "?" in t.render()
+    t2 = gym.make("FlowTest-Maze2-v0", render_mode="ansi")
+    t2.reset(seed=0)
+    assert "?" not in t2.render()
+
+
+# ---------------------------------------------------------------- random grids
+
+
+def test_random_grid_draws_from_its_pool_deterministically() -> None:
+    env = gym.make("FlowTest-RandomGrid-v0")
+    names = set()
+    for seed in range(12):
+        env.reset(seed=seed)
+        names.add(env.unwrapped.artifact.name)
+    assert len(names) > 1
+    other = gym.make("FlowTest-RandomGrid-v0")
+    env.reset(seed=3)
+    other.reset(seed=3)
+    assert env.unwrapped.artifact.name == other.unwrapped.artifact.name
+
+
+def test_bad_arguments_raise_clear_errors() -> None:
+    with pytest.raises(ValueError, match="obs_kind"):
+        gym.make("FlowTest-Maze2-v0", obs_kind="pixels")
+    with pytest.raises(ValueError, match="graph"):
+        gym.make("FlowTest-BeaverRescue-v0", obs_kind="grid")
+    with pytest.raises(ValueError, match="setting"):
+        gym.make("FlowTest-Maze2-v0", setting="sometimes")
+    with pytest.raises(ValueError, match="family"):
+        gym.make("FlowTest-RandomGrid-v0", family="liveness")
+    env = gym.make("FlowTest-Maze2-v0")
+    env.reset(seed=0)
+    with pytest.raises(gym.error.InvalidAction):
+        env.unwrapped.step(9)

@@ -1,0 +1,175 @@
+"""The two-player (tester vs. system) PettingZoo environment."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import data_equivalence
+from pettingzoo.test import api_test, max_cycles_test, parallel_api_test, seed_test
+
+from flowtest_env import multiagent
+from flowtest_env.artifacts import artifact_path, builtin_game
+from flowtest_env.envs import BUILTIN_ENVS
+from flowtest_env.multiagent import SYSTEM, TESTER, synthesized_tester
+
+# PettingZoo's api_test remarks that Dict observations (observation + action_mask, the
+# classic-env convention it asks for) are not plain arrays and differ between agents.
+pytestmark = [
+    pytest.mark.filterwarnings("ignore:Observation is not a NumPy array:UserWarning"),
+    pytest.mark.filterwarnings("ignore:Observations are different shapes:UserWarning"),
+    pytest.mark.filterwarnings("ignore:Observation space for each agent:UserWarning"),
+    pytest.mark.filterwarnings("ignore:Agents have different observation space sizes:UserWarning"),
+]
+
+PROBLEMS = [n for n in BUILTIN_ENVS if artifact_path(n).exists()]
+
+
+@pytest.mark.parametrize("problem", PROBLEMS)
+def test_pettingzoo_api(problem: str) -> None:
+    api_test(multiagent.env(problem=problem), num_cycles=300)
+    parallel_api_test(multiagent.parallel_env(problem=problem), num_cycles=300)
+
+
+@pytest.mark.parametrize("problem", PROBLEMS)
+def test_pettingzoo_seed(problem: str) -> None:
+    seed_test(lambda: multiagent.env(problem=problem), num_cycles=100)
+
+
+def test_pettingzoo_max_cycles() -> None:
+    max_cycles_test(multiagent)
+
+
+def _play(problem: str, seed: int, n_steps: int) -> list[object]:
+    """``n_steps`` AEC steps of seeded random masked actions for both players."""
+    env = multiagent.env(problem=problem, max_cycles=40)
+    env.reset(seed=seed)
+    rng = np.random.default_rng(seed)
+    trace: list[object] = []
+    for _ in range(n_steps):
+        agent = env.agent_selection
+        obs, reward, term, trunc, info = env.last()
+        trace.append((agent, obs, reward, term, trunc, info))
+        if term or trunc:
+            env.step(None)
+            if not env.agents:
+                env.reset()
+            continue
+        env.step(int(rng.choice(np.flatnonzero(obs["action_mask"]))))
+    return trace
+
+
+@pytest.mark.parametrize("problem", ["maze2", "small-reactive", "patrolling", "beaver-rescue"])
+def test_multi_step_determinism(problem: str) -> None:
+    if problem not in PROBLEMS:
+        pytest.skip("artifact not shipped")
+    assert data_equivalence(_play(problem, 11, 400), _play(problem, 11, 400))
+
+
+@pytest.mark.parametrize("problem", PROBLEMS)
+def test_synthesized_tester_matches_the_single_agent_env(problem: str) -> None:
+    """The default tester plays exactly the synthesized test of the Gymnasium env."""
+    import gymnasium as gym
+
+    stem = BUILTIN_ENVS[problem][0]
+    single = gym.make(f"FlowTest-{stem}-v0")
+    _, info = single.reset(seed=0)
+    aec = multiagent.env(problem=problem)
+    aec.reset(seed=0)
+    tester = synthesized_tester(aec)
+    rng = np.random.default_rng(0)
+    for _ in range(60):
+        agent = aec.agent_selection
+        obs, _, term, trunc, ainfo = aec.last()
+        if term or trunc:
+            break
+        if agent == TESTER:
+            action = tester(obs, agent)
+            assert obs["action_mask"][action], "the synthesized tester's move is legal"
+            aec.step(action)
+            continue
+        assert np.array_equal(obs["action_mask"], info["action_mask"])
+        assert ainfo["system_state"] == info["system_state"]
+        a = int(rng.choice(np.flatnonzero(info["action_mask"])))
+        aec.step(a)
+        _, _, t1, tr1, info = single.step(a)
+        if t1 or tr1:
+            assert aec.terminations[SYSTEM] == t1
+            if t1:
+                assert aec.infos[SYSTEM]["verdict"] == info["verdict"]
+            break
+
+
+@pytest.mark.parametrize("problem", ["small-reactive", "maze2", "beaver-rescue", "motion-primitives"])
+def test_synthesized_tester_guarantee_against_random_systems(problem: str) -> None:
+    """Many random system rollouts against the default tester: every run that meets the
+    system objective has realized the test objective; none is violated."""
+    par = multiagent.parallel_env(problem=problem, max_cycles=60)
+    tester = synthesized_tester(par)
+    rng = np.random.default_rng(5)
+    met = 0
+    for episode in range(150):
+        obs, infos = par.reset(seed=episode)
+        while par.agents:
+            actions = {}
+            if TESTER in par.agents:
+                actions[TESTER] = tester(obs[TESTER], TESTER)
+            # the system chooses knowing only its own observation
+            actions[SYSTEM] = int(rng.choice(np.flatnonzero(obs[SYSTEM]["action_mask"])))
+            obs, rewards, terms, truncs, infos = par.step(actions)
+        verdict = infos[SYSTEM]["verdict"]
+        assert verdict["system_objective"] != "violated"
+        if verdict["system_objective"] == "met":
+            met += 1
+            assert verdict["test_objective_realized"]
+            assert rewards[TESTER] >= 1.0 or par.possible_agents[0] == SYSTEM
+    assert met > 0
+
+
+def test_tester_masks_enforce_the_system_assumptions() -> None:
+    """Obstacle problems: the tester never restricts a missing move, a static wall or
+    every move; agent problems: the agent never steps onto the system."""
+    env = multiagent.raw_env(problem="small-reactive")
+    env.reset(seed=0)
+    game = env.game
+    rng = np.random.default_rng(2)
+    for _ in range(200):
+        if env.terminations[env.agent_selection] or env.truncations[env.agent_selection]:
+            env.reset()
+        obs = env.observe(env.agent_selection)
+        if env.agent_selection == TESTER:
+            s = env.run.system
+            open_moves = game.exists_bits[s] & ~(1 << game.stay_action) & ~game.static_bits[s]
+            for choice in np.flatnonzero(obs["action_mask"]):
+                assert choice & ~game.choosable_bits[s] == 0
+                assert open_moves == 0 or open_moves & ~choice
+        env.step(int(rng.choice(np.flatnonzero(obs["action_mask"]))))
+    agent_env = multiagent.raw_env(problem="maze2")
+    agent_env.reset(seed=0)
+    g = agent_env.game
+    for _ in range(200):
+        if agent_env.terminations[agent_env.agent_selection] or agent_env.truncations[agent_env.agent_selection]:
+            agent_env.reset()
+        obs = agent_env.observe(agent_env.agent_selection)
+        if agent_env.agent_selection == TESTER:
+            for a in np.flatnonzero(obs["action_mask"]):
+                assert g.agent_moves[agent_env.run.agent, a]
+                assert g.agent_place[a] != g.place_list[agent_env.run.system]
+        agent_env.step(int(rng.choice(np.flatnonzero(obs["action_mask"]))))
+        assert agent_env.run.agent < 0 or g.agent_place[agent_env.run.agent] != g.place_list[agent_env.run.system]
+
+
+def test_illegal_tester_action_is_a_penalized_no_op() -> None:
+    env = multiagent.raw_env(problem="small-reactive")
+    env.reset(seed=0)
+    mask = env.observe(TESTER)["action_mask"]
+    illegal = int(np.flatnonzero(mask == 0)[0])
+    env.step(illegal)
+    assert env.rewards[TESTER] < 0
+    assert env.run.override == 0
+
+
+def test_spaces_are_cached() -> None:
+    env = multiagent.raw_env(problem="maze2")
+    assert env.observation_space(TESTER) is env.observation_space(TESTER)
+    assert env.action_space(SYSTEM) is env.action_space(SYSTEM)
+    assert builtin_game("maze2", None, external_tester=True) is env.game
