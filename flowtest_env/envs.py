@@ -273,7 +273,7 @@ class Example1Env(FlowTestEnv):
 
     ## Observation Space
 
-    Flat ``float32`` (default) or ``obs_kind="grid"``: ``uint8[12, 3, 5]``.
+    Flat ``float32[186]`` (default) or ``obs_kind="grid"``: ``uint8[14, 3, 5]``.
 
     ## Rewards
 
@@ -305,7 +305,7 @@ class SmallReactiveEnv(FlowTestEnv):
 
     ## Observation Space
 
-    Flat ``float32`` (default) or ``obs_kind="grid"``: ``uint8[12, 2, 3]``.
+    Flat ``float32[78]`` (default) or ``obs_kind="grid"``: ``uint8[14, 2, 3]``.
 
     ## Rewards
 
@@ -505,7 +505,7 @@ class Maze2Env(FlowTestEnv):
 
     ## Observation Space
 
-    Flat ``float32[343]`` (default) or ``obs_kind="grid"``: ``uint8[12, 5, 5]``.
+    Flat ``float32[306]`` (default) or ``obs_kind="grid"``: ``uint8[14, 5, 5]``.
 
     ## Rewards
 

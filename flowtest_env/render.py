@@ -179,13 +179,21 @@ class GridRenderer:
             fuel = np.array([k[1] for k in ts.states])
             for p in np.unique(ts.place[ts.dst[fuel[ts.dst] == self.max_fuel]]):
                 _paint(img, *cells[p], size, shape_mask("refuel", size), REFUEL)
+        # hidden test cells (engineer view): fixed on plain grids; on fuel grids the cells
+        # where a test proposition holds at the system's current fuel level
+        self.test_marks: dict[int, list[int]] = {}
         if view == "engineer":
             from synthesis.specs import parse_formula, propositions
 
             test_props = propositions(parse_formula(game.artifact.objectives["test"])) - set(props)
-            for name in sorted(test_props):
-                for p in marked_places(game, name, majority=False):
-                    _paint(img, *cells[p], size, shape_mask("test", size), TEST_CELL)
+            if self.is_fuel:
+                for s in range(ts.n_states):
+                    if ts.labels[s] & test_props and not ts.terminal[s]:
+                        self.test_marks.setdefault(int(ts.states[s][1]), []).append(int(ts.place[s]))
+            else:
+                for name in sorted(test_props):
+                    for p in marked_places(game, name, majority=False):
+                        _paint(img, *cells[p], size, shape_mask("test", size), TEST_CELL)
         static = game.artifact.strategy.static_obstacles
         for m in np.flatnonzero(static):
             r, c = cells[int(ts.place[ts.src[m]])]
@@ -199,6 +207,9 @@ class GridRenderer:
         g, size = self.game, self.size
         ts = g.ts
         img = self.background.copy()
+        if self.test_marks:
+            for p in self.test_marks.get(int(ts.states[run.system][1]), ()):
+                _paint(img, *self.cells[p], size, shape_mask("test", size), TEST_CELL)
         for m in g.shown_moves(run):
             if not self.static[m]:
                 r, c = self.cells[int(ts.place[ts.src[m]])]

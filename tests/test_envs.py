@@ -523,3 +523,15 @@ def test_bad_arguments_raise_clear_errors() -> None:
     env.reset(seed=0)
     with pytest.raises(gym.error.InvalidAction):
         env.unwrapped.step(9)
+
+
+def test_human_rendering_through_gymnasium(monkeypatch: pytest.MonkeyPatch) -> None:
+    pytest.importorskip("pygame")
+    monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # gymnasium says it applies HumanRendering for us
+        env = gym.make("FlowTest-Maze2-v0", render_mode="human")
+    assert isinstance(env, gym.wrappers.HumanRendering)
+    env.reset(seed=0)
+    env.step(4)
+    env.close()
