@@ -1,0 +1,373 @@
+"""Scripted systems under test: one correct replanner and three realistic faulty ones.
+
+Every scripted SUT knows what a real planner would know: its transition system (the
+map, with the test's *static walls*, which every observation shows), its own *system*
+objective (as the automaton ``B_sys``), and the restrictions it observes *now* through
+the action mask. None of them sees the hidden test objective,
+the test's history or the test agent's strategy.
+
+* ``scripted:replanner`` (:class:`Replanner`) — correct. Plans a shortest path on its
+  system product graph ``G_sys = T x B_sys`` (so fuel, safety and reactions of its
+  objective are respected: it never enters a node from which its objective can no
+  longer be met), replanning every step. Restrictions it has seen are remembered as
+  blocked transitions (so it does not oscillate in front of a closed door) and
+  forgotten when it sees them open again; when the remembered blocks cut it off from
+  its goal it forgets all but the ones it sees now, and when even those leave no path
+  it waits in place rather than violate its objective.
+* ``scripted:committed`` (:class:`Committed`) — fault: *plans once and never
+  replans*. At reset it computes a shortest path on ``G_sys`` (with the restrictions
+  visible at its start) and then follows it blindly; when a planned move is restricted
+  it waits for it to open, so a door that closes on its plan stalls it until the step
+  budget runs out.
+* ``scripted:fuel-blind`` (:class:`FuelBlind`) — fault: *plans on cells only*. Shortest
+  path (with the same replanning and memory as the correct SUT, walls included) to the nearest goal
+  cell, ignoring fuel, safety and the other parts of its objective: it runs dry, enters
+  unsafe cells, or reaches the goal without the sub-goal it had to visit first.
+* ``scripted:greedy`` (:class:`Greedy`) — fault: *one-step greedy descent*. Moves to the
+  legal neighbour closest to the nearest goal cell (Manhattan distance on grids, hop
+  distance on graphs, ignoring walls and restrictions in the estimate); when no
+  neighbour is closer than where it stands, it is stuck in a local minimum (a dead end
+  of the maze, a closed door) and stays.
+
+Contract: ``reset`` must be called after the env's ``reset`` (the env may switch games
+at reset, e.g. ``FlowTest-RandomGrid-v0``).
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from typing import Any
+
+import numpy as np
+
+from flowtest_env.game import TestGame
+
+from .base import Policy, PolicyError, action_mask_of, game_of, register_policy, state_index
+
+INF = np.iinfo(np.int64).max // 4
+
+
+class SystemProduct:
+    """The SUT's own product graph ``G_sys = T x B_sys`` over a test game's actions.
+
+    Node ``s * n_q + q``: system state ``s`` with ``B_sys`` in state ``q`` after reading
+    ``L(s)``. ``next_node[node, a]`` is the node an action leads to (stay included),
+    ``-1`` where the action does not exist. ``distances(blocked)`` is the number of
+    steps to an accepting node avoiding the blocked transitions ``(s, action)``; nodes
+    from which acceptance is unreachable get :data:`INF`.
+    """
+
+    def __init__(self, game: TestGame) -> None:
+        self.game = game
+        ts = game.ts
+        dba = game.artifact.system_automaton
+        letter = ts.letter_of_state(game.artifact.letters)
+        self.n_q = nq = dba.n_states
+        self.delta = dba.delta
+        self.letter = letter
+        self.q0 = int(dba.initial)
+        n = ts.n_states
+        n_act = game.n_actions
+        nxt = np.full((n * nq, n_act), -1, dtype=np.int64)
+        succ = game.successor  # [n, slots]
+        walls = np.concatenate([game.artifact.strategy.static_obstacles, [False]])[game.slot_move]
+        exists = (game.slot_move >= 0) & ~walls  # static walls are on the map: never planned through
+        for q in range(nq):
+            nodes = np.arange(n) * nq + q
+            q2 = dba.delta[q, letter[succ]]  # [n, slots]
+            nxt[nodes, : game.n_slots] = np.where(exists, succ * nq + q2, -1)
+            qs = dba.delta[q, letter]
+            nxt[nodes, game.stay_action] = np.where(ts.stay, np.arange(n) * nq + qs, -1)
+        self.next_node = nxt
+        self.accepting = np.repeat(dba.accepting[:, 0][None, :], n, axis=0).ravel()
+        # reverse adjacency: for each node, (predecessor node, action)
+        src, act = np.nonzero(nxt >= 0)
+        dst = nxt[src, act]
+        order = np.argsort(dst, kind="stable")
+        self._rsrc, self._ract, rdst = src[order], act[order], dst[order]
+        self._rptr = np.searchsorted(rdst, np.arange(n * nq + 1))
+        self._cache: dict[frozenset[tuple[int, int]], np.ndarray] = {}
+
+    def node(self, s: int, q: int) -> int:
+        return s * self.n_q + q
+
+    def step_q(self, q: int, s: int) -> int:
+        """``B_sys`` after entering (or staying in) state ``s``."""
+        return int(self.delta[q, self.letter[s]])
+
+    def distances(self, blocked: frozenset[tuple[int, int]] = frozenset()) -> np.ndarray:
+        """Backward BFS from the accepting nodes, skipping blocked ``(s, action)`` pairs."""
+        hit = self._cache.get(blocked)
+        if hit is not None:
+            return hit
+        nq = self.n_q
+        dist = np.full(self.next_node.shape[0], INF, dtype=np.int64)
+        frontier = deque(np.flatnonzero(self.accepting).tolist())
+        for v in frontier:
+            dist[v] = 0
+        rsrc, ract, rptr = self._rsrc, self._ract, self._rptr
+        while frontier:
+            v = frontier.popleft()
+            dv = dist[v] + 1
+            for i in range(rptr[v], rptr[v + 1]):
+                u = int(rsrc[i])
+                if dist[u] <= dv or self.accepting[u]:
+                    continue
+                if blocked and (u // nq, int(ract[i])) in blocked:
+                    continue
+                dist[u] = dv
+                frontier.append(u)
+        if len(self._cache) > 256:
+            self._cache.clear()
+        self._cache[blocked] = dist
+        return dist
+
+    def path(self, start: int, blocked: frozenset[tuple[int, int]] = frozenset()) -> list[int]:
+        """Actions of one shortest path from node ``start`` (empty if none)."""
+        dist = self.distances(blocked)
+        out: list[int] = []
+        v = start
+        nq = self.n_q
+        while dist[v] not in (0, INF):
+            for a in range(self.next_node.shape[1]):
+                w = self.next_node[v, a]
+                if w >= 0 and dist[w] == dist[v] - 1 and (v // nq, a) not in blocked:
+                    out.append(a)
+                    v = int(w)
+                    break
+            else:  # pragma: no cover - BFS guarantees a predecessor
+                break
+        return out
+
+
+class _Tracked:
+    """Shared bookkeeping: the env's game, the SUT's state and its ``B_sys`` state."""
+
+    name = "scripted"
+
+    def __init__(self, env: Any) -> None:
+        self.env = env
+        self.game: TestGame | None = None
+        self.product: SystemProduct | None = None
+        self.q: int | None = None
+        self._refresh()
+
+    def _refresh(self) -> None:
+        g = game_of(self.env)
+        if g is not self.game:
+            self.game = g
+            self.product = SystemProduct(g)
+
+    def reset(self, seed: int | None = None) -> None:
+        self._refresh()
+        self.q = None
+
+    def _observe(self, info: dict[str, Any]) -> tuple[int, int]:
+        """The current state index and ``B_sys`` state (updated by the state entered)."""
+        if "system_state" not in info:
+            raise PolicyError("a scripted SUT needs info['system_state']")
+        assert self.game is not None and self.product is not None
+        s = state_index(self.game, info["system_state"])
+        self.q = self.product.step_q(self.product.q0 if self.q is None else self.q, s)
+        return s, self.q
+
+
+class Replanner(_Tracked):
+    """The correct scripted SUT (see the module docstring)."""
+
+    def __init__(self, env: Any) -> None:
+        super().__init__(env)
+        self.known: set[tuple[int, int]] = set()
+
+    def reset(self, seed: int | None = None) -> None:
+        super().reset(seed)
+        self.known = set()
+
+    def act(self, observation: Any, info: dict[str, Any]) -> int:
+        s, q = self._observe(info)
+        mask = action_mask_of(observation, info)
+        game, prod = self.game, self.product
+        assert game is not None and prod is not None
+        v = prod.node(s, q)
+        now_blocked = set()
+        for a in range(game.n_slots):
+            if prod.next_node[v, a] < 0:
+                continue
+            if mask[a]:
+                self.known.discard((s, a))
+            else:
+                now_blocked.add((s, a))
+        self.known |= now_blocked
+        dist = prod.distances(frozenset(self.known))
+        if dist[v] >= INF:
+            self.known = set(now_blocked)
+            dist = prod.distances(frozenset(self.known))
+        if dist[v] >= INF:  # every path blocked now: wait for the test to open one
+            return _safe_wait(game, prod, v, mask, prod.distances())
+        best, best_d = -1, INF
+        for a in range(game.n_actions):
+            w = prod.next_node[v, a]
+            if mask[a] and w >= 0 and dist[w] < best_d:
+                best, best_d = a, int(dist[w])
+        return best if best >= 0 else _safe_wait(game, prod, v, mask, prod.distances())
+
+
+def _safe_wait(game: TestGame, prod: SystemProduct, v: int, mask: np.ndarray, free_dist: np.ndarray) -> int:
+    """Stay if allowed; otherwise the legal action that keeps the objective reachable."""
+    if mask[game.stay_action]:
+        return game.stay_action
+    legal = [a for a in range(game.n_actions) if mask[a] and prod.next_node[v, a] >= 0]
+    legal.sort(key=lambda a: free_dist[prod.next_node[v, a]])
+    return legal[0] if legal else game.stay_action
+
+
+class Committed(_Tracked):
+    """Faulty: plans once at reset, never replans (see the module docstring)."""
+
+    def __init__(self, env: Any) -> None:
+        super().__init__(env)
+        self.plan: list[int] | None = None
+
+    def reset(self, seed: int | None = None) -> None:
+        super().reset(seed)
+        self.plan = None
+
+    def act(self, observation: Any, info: dict[str, Any]) -> int:
+        s, q = self._observe(info)
+        mask = action_mask_of(observation, info)
+        game, prod = self.game, self.product
+        assert game is not None and prod is not None
+        if self.plan is None:
+            blocked = frozenset((s, a) for a in range(game.n_slots) if not mask[a])
+            self.plan = prod.path(prod.node(s, q), blocked)
+        if not self.plan:
+            return game.stay_action
+        a = self.plan[0]
+        if not mask[a]:
+            return game.stay_action  # waits for its planned move; never looks for another
+        self.plan.pop(0)
+        return a
+
+
+def _place_distances(game: TestGame, blocked: frozenset[tuple[int, int]] = frozenset()) -> np.ndarray:
+    """Hop distance from every place to the nearest goal place (terminal states), over
+    the place graph minus the static walls and the blocked ``(place, place')`` transitions."""
+    ts = game.ts
+    walls = game.artifact.strategy.static_obstacles
+    n_places = len(ts.places)
+    goal = np.zeros(n_places, dtype=bool)
+    goal[ts.place[ts.terminal]] = True
+    radj: list[set[int]] = [set() for _ in range(n_places)]
+    for a, b, w in zip(ts.place[ts.src].tolist(), ts.place[ts.dst].tolist(), walls.tolist()):
+        if a != b and not w and (a, b) not in blocked:
+            radj[b].add(a)
+    dist = np.full(n_places, INF, dtype=np.int64)
+    dq = deque(np.flatnonzero(goal).tolist())
+    dist[goal] = 0
+    while dq:
+        v = dq.popleft()
+        for u in radj[v]:
+            if dist[u] == INF:
+                dist[u] = dist[v] + 1
+                dq.append(u)
+    return dist
+
+
+class FuelBlind(_Tracked):
+    """Faulty: shortest path in cells to the goal, ignoring fuel, safety and sub-goals."""
+
+    def __init__(self, env: Any) -> None:
+        super().__init__(env)
+        self.known: set[tuple[int, int]] = set()
+
+    def reset(self, seed: int | None = None) -> None:
+        super().reset(seed)
+        self.known = set()
+
+    def act(self, observation: Any, info: dict[str, Any]) -> int:
+        s, _ = self._observe(info)
+        mask = action_mask_of(observation, info)
+        game = self.game
+        assert game is not None
+        place = game.ts.place
+        p = int(place[s])
+        now = set()
+        for a in range(game.n_slots):
+            if game.slot_list[s][a] < 0:
+                continue
+            edge = (p, int(place[game.succ_list[s][a]]))
+            if mask[a]:
+                self.known.discard(edge)
+            else:
+                now.add(edge)
+        self.known |= now
+        dist = _place_distances(game, frozenset(self.known))
+        if dist[p] >= INF:
+            self.known = now
+            dist = _place_distances(game, frozenset(self.known))
+        best, best_d = game.stay_action, INF
+        for a in range(game.n_slots):
+            if mask[a] and game.slot_list[s][a] >= 0:
+                d = int(dist[place[game.succ_list[s][a]]])
+                if d < best_d:
+                    best, best_d = a, d
+        return best if mask[best] or best != game.stay_action else _any_legal(game, mask)
+
+
+def _any_legal(game: TestGame, mask: np.ndarray) -> int:
+    legal = np.flatnonzero(mask)
+    return int(legal[0]) if legal.size else game.stay_action
+
+
+class Greedy(_Tracked):
+    """Faulty: one-step greedy descent on a goal-distance estimate; stuck at local minima."""
+
+    def reset(self, seed: int | None = None) -> None:
+        super().reset(seed)
+        game = self.game
+        assert game is not None
+        ts = game.ts
+        if ts.layout is not None:
+            goals = [ts.places[int(p)] for p in np.unique(ts.place[ts.terminal])]
+            self.h = np.array(
+                [min(abs(c[0] - g[0]) + abs(c[1] - g[1]) for g in goals) if goals else 0 for c in ts.places],
+                dtype=np.int64,
+            )
+        else:
+            self.h = _place_distances(game)
+
+    def act(self, observation: Any, info: dict[str, Any]) -> int:
+        s, _ = self._observe(info)
+        mask = action_mask_of(observation, info)
+        game = self.game
+        assert game is not None
+        place = game.ts.place
+        here = int(self.h[place[s]])
+        best, best_h = game.stay_action, here
+        for a in range(game.n_slots):
+            if mask[a] and game.slot_list[s][a] >= 0:
+                hv = int(self.h[place[game.succ_list[s][a]]])
+                if hv < best_h:
+                    best, best_h = a, hv
+        if best == game.stay_action and not mask[best]:
+            return _any_legal(game, mask)
+        return best
+
+
+SCRIPTED: dict[str, type[_Tracked]] = {
+    "replanner": Replanner,
+    "committed": Committed,
+    "fuel-blind": FuelBlind,
+    "greedy": Greedy,
+}
+"""The scripted SUTs by name (``scripted:<name>``)."""
+
+
+@register_policy("scripted")
+def _make_scripted(env: Any, arg: str) -> Policy:
+    cls = SCRIPTED.get(arg or "replanner")
+    if cls is None:
+        raise PolicyError(f"unknown scripted SUT {arg!r}; known: {', '.join(SCRIPTED)}")
+    policy = cls(env)
+    policy.reset(None)
+    return policy  # type: ignore[return-value]
