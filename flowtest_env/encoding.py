@@ -147,6 +147,18 @@ class GridEncoder(Encoder):
         self.fuel_list = self.fuel.tolist()
         self.qsys_list = game.q_sys.tolist()
         self.n_slots = game.n_slots
+        # flat fast path: the spatial planes as one float vector, written by index
+        hw = H * W
+        self.hw = hw
+        self.flat_base = base[: self.n_spatial].ravel().astype(np.float32) / 255.0
+        n_props = len(self.sys_props)
+        self.flat_props = (
+            prop_planes.reshape(levels, n_props * hw).astype(np.float32) / 255.0 if n_props else None
+        )
+        self.flat_cell = (self.cell_r * W + self.cell_c).tolist()
+        self.move_flat = ((self.door_start + self.dir_of_move) * hw + self.move_cell[:, 0] * W + self.move_cell[:, 1]).tolist()
+        self.static_list = static.tolist()
+        self.tail_size = self.n_slots + (1 if self.is_fuel else 0) + self.n_qsys
         if obs_kind == "grid":
             self.space = spaces.Box(0, 255, shape=base.shape, dtype=np.uint8)
         else:
@@ -180,24 +192,39 @@ class GridEncoder(Encoder):
         return obs
 
     def encode(self, run: RunState) -> np.ndarray:
-        planes = self.planes(run)
         if self.obs_kind == "grid":
-            return planes
-        g = self.game
-        tail = np.zeros(self.n_slots + (1 if self.is_fuel else 0) + self.n_qsys, dtype=np.float32)
+            return self.planes(run)
+        g, hw, ch = self.game, self.hw, self.ch
+        n = self.flat_base.size
+        obs = np.zeros(n + self.tail_size, dtype=np.float32)
+        obs[:n] = self.flat_base
+        for m in g.shown_moves(run):
+            if not self.static_list[m]:
+                obs[self.move_flat[m]] = 1.0
+        if run.agent >= 0:
+            ap = g.agent_place[run.agent]
+            if ap >= 0:
+                obs[ch["test_agent"] * hw + self.flat_cell[ap]] = 1.0
+        s = run.system
+        obs[ch["system"] * hw + self.flat_cell[self.place_list[s]]] = 1.0
+        f = self.fuel_list[s]
+        if self.flat_props is not None:
+            start = self.prop_start * hw
+            obs[start : start + self.flat_props.shape[1]] = self.flat_props[f]
         if not run.done:
-            bits = g.restricted_bits_of(run) & g.exists_bits[run.system]
-            for k in range(self.n_slots):
-                if (bits >> k) & 1:
-                    tail[k] = 1.0
-        i = self.n_slots
+            bits = g.restricted_bits_of(run) & g.exists_bits[s]
+            k = 0
+            while bits:
+                if bits & 1 and k < self.n_slots:
+                    obs[n + k] = 1.0
+                bits >>= 1
+                k += 1
+        i = n + self.n_slots
         if self.is_fuel:
-            tail[i] = self.fuel_list[run.system] / max(self.max_fuel, 1)
+            obs[i] = f / max(self.max_fuel, 1)
             i += 1
-        tail[i + self.qsys_list[run.history]] = 1.0
-        spatial = planes[: self.n_spatial].ravel().astype(np.float32)
-        spatial *= 1.0 / 255.0
-        return np.concatenate([spatial, tail])
+        obs[i + self.qsys_list[run.history]] = 1.0
+        return obs
 
 
 class GraphEncoder(Encoder):

@@ -56,7 +56,7 @@ class FlowTestEnv(gym.Env[np.ndarray, np.int64]):
     *masked*: ``info["action_mask"]`` (``int8``, every step and reset),
     :meth:`action_masks` (``bool``, for sb3-contrib's MaskablePPO), or the
     :class:`~flowtest_env.wrappers.ActionMaskObservation` wrapper. A masked action
-    leaves the SUT in place.
+    leaves the SUT in place. The mask is all zeros once the episode has ended.
 
     ## Observation Space
 
@@ -176,6 +176,9 @@ class FlowTestEnv(gym.Env[np.ndarray, np.int64]):
         return 0
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+        """Start a test run (``seed`` seeds ``self.np_random``, which only the random-grid
+        env uses, to draw its problem). ``info`` carries ``system_state`` and
+        ``action_mask``."""
         super().reset(seed=seed)
         self._index = self._choose_game()
         self.game = self.games[self._index]
@@ -184,6 +187,15 @@ class FlowTestEnv(gym.Env[np.ndarray, np.int64]):
         return self.encoder.encode(self.run), self._info(self.run)
 
     def step(self, action: Any) -> tuple[np.ndarray, SupportsFloat, bool, bool, dict[str, Any]]:
+        """The SUT takes ``action``; the test answers (restrictions, test agent).
+
+        Raises
+        ------
+        gymnasium.error.ResetNeeded
+            Before ``reset()`` or after the episode ended.
+        gymnasium.error.InvalidAction
+            If ``action`` is not an action index (a masked action is *not* an error).
+        """
         run = self.run
         if run is None:
             raise gym.error.ResetNeeded("call reset() before step()")
@@ -193,7 +205,7 @@ class FlowTestEnv(gym.Env[np.ndarray, np.int64]):
             a = int(action)
         except (TypeError, ValueError):
             raise gym.error.InvalidAction(f"action {action!r} is not an integer") from None
-        if not self.action_space.contains(a):
+        if not (0 <= a < self.game.n_actions):
             raise gym.error.InvalidAction(f"action {a} is outside {self.action_space}")
         out = self.game.step(run, a)
         reward = -self.step_cost

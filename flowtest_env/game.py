@@ -105,6 +105,7 @@ class RunState:
 
     @property
     def done(self) -> bool:
+        """Whether the run has ended (the system objective is met or violated)."""
         return self.outcome != OPEN
 
 
@@ -270,10 +271,12 @@ class TestGame:
 
     @property
     def has_agent(self) -> bool:
+        """Whether the test has a test agent (agent problems)."""
         return self.agent_controller is not None
 
     @property
     def n_agent_states(self) -> int:
+        """Number of the test agent's states (cells, then parks); 0 without an agent."""
         return len(self.agent_place)
 
     def action_name(self, state: int, action: int) -> str:
@@ -343,9 +346,6 @@ class TestGame:
                 bits >>= 1
                 k += 1
         return out
-
-    def system_objective(self, run: RunState) -> str:
-        return run.outcome
 
     def verdict(self, run: RunState) -> dict[str, Any]:
         """The running verdict (see the module docstring)."""

@@ -44,9 +44,19 @@ objective was realized, -1 if not.
 
 ## Termination
 
-When the system objective is met or violated (both agents); truncated after
+When the system objective is met or violated (both agents; with an external tester only
+the static walls count when deciding that no way to meet it is left); truncated after
 ``max_cycles`` rounds (each agent acted ``max_cycles`` times). ``infos[agent]["verdict"]``
 at the end, as in the single-agent env.
+
+## Parallel version
+
+:func:`parallel_env` plays one round per ``step``, applying the actions in turn order.
+Both players choose from the round-start observations, so the system commits before it
+sees this round's tester choice: its observation then shows the restrictions in force
+without a tester choice (the synthesized ones), and a move the tester restricts in the
+same round is refused (a stay). With the synthesized tester the two coincide and the
+parallel game equals the AEC game; for a learned tester use the AEC version.
 """
 
 from __future__ import annotations
@@ -203,6 +213,7 @@ class raw_env(AECEnv):  # noqa: N801 - PettingZoo's module shape
     # ------------------------------------------------------------------ AEC API
 
     def observe(self, agent: str) -> dict[str, np.ndarray]:
+        """``{"observation", "action_mask"}`` of ``agent`` now (see the module docstring)."""
         if agent == SYSTEM:
             return {"observation": self.encoder.encode(self.run), "action_mask": self.system_mask()}
         g, run = self.game, self.run
@@ -214,6 +225,7 @@ class raw_env(AECEnv):  # noqa: N801 - PettingZoo's module shape
         return {"observation": obs, "action_mask": self.tester_mask()}
 
     def reset(self, seed: int | None = None, options: dict[str, Any] | None = None) -> None:
+        """Start a run; the game has no randomness, so ``seed`` changes nothing."""
         self.agents = list(self.possible_agents)
         self.run = self.game.reset(agent_first_move=False)
         self.rewards = {a: 0.0 for a in self.agents}
@@ -225,6 +237,7 @@ class raw_env(AECEnv):  # noqa: N801 - PettingZoo's module shape
         self._rounds = 0
 
     def step(self, action: Any) -> None:
+        """Play ``action`` for the selected agent (an illegal one is a penalized no-op)."""
         agent = self.agent_selection
         if self.terminations[agent] or self.truncations[agent]:
             self._was_dead_step(action)

@@ -305,6 +305,7 @@ class GraphRenderer:
                 img[yy, xx] = color
 
     def frame(self, run: RunState) -> np.ndarray:
+        """``uint8[H, W, 3]``: the run now."""
         g = self.game
         img = self.background.copy()
         for m in g.shown_moves(run):
