@@ -1,0 +1,508 @@
+"""``flowtest evaluate``: run systems under test against synthesized tests and report.
+
+Every SUT (a policy name, :func:`agents.base.make_policy`) plays every env for
+``--episodes`` episodes; episode ``i`` uses seed ``S + i`` for both the env and the
+policy, so each run can be replayed exactly with
+``flowtest evaluate --env ID --sut POLICY --episodes 1 --seed S+i --replay``.
+
+Outputs in ``--out``:
+
+* ``results.json`` — a list, one record per SUT x env: ``env``, ``sut``, ``episodes``,
+  ``seed``, ``system_objective_met_rate``, ``test_objective_realized_rate`` (among the
+  runs that met the system objective; ``null`` if none did), ``violated``, ``open``,
+  ``mean_restrictions``, ``mean_steps``, ``test_failures`` and ``failures`` (at most
+  :data:`MAX_LISTED` listed, ``n_failures`` counts all; each with ``seed``, ``kind``,
+  ``reason``, the ``verdict`` and its ``replay`` command).
+* ``report.md`` and ``report.html`` — one table per SUT (a row per test), trace
+  pictures of a typical and a failing run, the replay commands.
+* ``traces/*.png`` — the trace pictures.
+
+Two kinds of failure are told apart:
+
+* a **SUT failure**: the system objective was violated, or not met within the step
+  budget (``open``). The test never helps the SUT, so this is the SUT's fault.
+* a **test failure** (a FlowTest bug, reported loudly): a run that met the system
+  objective without realizing the test objective (the routing guarantee broke), or a
+  *trapped* system: a run violated although, from where it stopped, the system
+  objective was still reachable past the static walls — the test's reactive
+  restrictions, not the SUT, closed every way.
+"""
+
+from __future__ import annotations
+
+import argparse
+import html
+import json
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from synthesis.errors import ProblemError
+
+from .cli import EXIT_OK, command, json_safe, write_atomically
+
+MAX_LISTED = 20
+"""How many failures a results record lists (``n_failures`` counts all)."""
+
+EXIT_TEST_FAILED = 4
+"""A test failure was found (a FlowTest bug), as ``flowtest synthesize``'s failed check."""
+
+
+# --------------------------------------------------------------------------- runs
+
+
+@dataclass
+class Trace:
+    """One run: the seed, the run states after reset and every step, actions, verdict."""
+
+    env_id: str
+    sut: str
+    seed: int
+    states: list[Any] = field(default_factory=list)
+    actions: list[int] = field(default_factory=list)
+    verdict: dict[str, Any] = field(default_factory=dict)
+    kind: str = "pass"
+    reason: str = ""
+
+    @property
+    def failed(self) -> bool:
+        return self.kind != "pass"
+
+
+def replay_command(env_id: str, sut: str, seed: int) -> str:
+    """The command that replays one run exactly."""
+    return f"flowtest evaluate --env {env_id} --sut {sut} --episodes 1 --seed {seed} --replay"
+
+
+def make_env(env_id: str) -> Any:
+    """``gymnasium.make(env_id)`` after registering FlowTest's envs.
+
+    Raises
+    ------
+    ProblemError
+        If the ID is not registered.
+    """
+    import gymnasium as gym
+
+    import flowtest_env  # noqa: F401  (registers FlowTest-*-v0)
+
+    try:
+        return gym.make(env_id)
+    except gym.error.Error as exc:
+        known = ", ".join(flowtest_env.ENV_IDS)
+        raise ProblemError(f"unknown environment {env_id!r}: {exc}; known: {known}") from None
+
+
+def classify(env: Any, verdict: dict[str, Any]) -> tuple[str, str]:
+    """``(kind, reason)`` of a finished run: ``pass``, ``sut`` (a SUT failure) or ``test``
+    (a FlowTest bug); see the module docstring."""
+    met = verdict["system_objective"] == "met"
+    if met and not verdict["test_objective_realized"]:
+        return "test", "met the system objective without realizing the test objective"
+    if met:
+        return "pass", ""
+    if verdict["system_objective"] == "violated":
+        u = env.unwrapped
+        game, run = u.game, u.run
+        if _reachable_past_walls(game, run.history, run.system):
+            return "test", "trapped: the test's restrictions closed every way to the goal"
+        return "sut", "violated the system objective"
+    return "sut", f"did not meet the system objective within {verdict['steps']} steps"
+
+
+_WALL_GAMES: dict[int, Any] = {}
+
+
+def _reachable_past_walls(game: Any, history: int, state: int) -> bool:
+    """Whether the system objective is reachable from ``(state, history)`` when only the
+    static walls are enforced (the game with an external tester computes exactly this)."""
+    from flowtest_env.game import TestGame
+
+    key = id(game.artifact)
+    walls = _WALL_GAMES.get(key)
+    if walls is None:
+        walls = _WALL_GAMES[key] = TestGame(game.artifact, game.setting, external_tester=True)
+    return not walls.doomed[history][state]
+
+
+def run_episode(env: Any, policy: Any, env_id: str, sut: str, seed: int, record: bool = True) -> Trace:
+    """Play one seeded episode; the trace keeps copies of the run states when ``record``."""
+    obs, info = env.reset(seed=seed)
+    policy.reset(seed)
+    u = env.unwrapped
+    trace = Trace(env_id, sut, seed)
+    if record:
+        trace.states.append(u.run.copy())
+    while True:
+        action = int(policy.act(obs, info))
+        obs, _, terminated, truncated, info = env.step(action)
+        trace.actions.append(action)
+        if record:
+            trace.states.append(u.run.copy())
+        if terminated or truncated:
+            break
+    trace.verdict = dict(info["verdict"])
+    trace.kind, trace.reason = classify(env, trace.verdict)
+    return trace
+
+
+@dataclass
+class Cell:
+    """The results of one SUT on one env."""
+
+    env_id: str
+    sut: str
+    traces: list[Trace]
+    seed: int
+    seconds: float
+    pictures: dict[str, str] = field(default_factory=dict)
+
+    def record(self) -> dict[str, Any]:
+        """The ``results.json`` record."""
+        n = len(self.traces)
+        met = [t for t in self.traces if t.verdict["system_objective"] == "met"]
+        fails = [t for t in self.traces if t.failed]
+        return {
+            "env": self.env_id,
+            "sut": self.sut,
+            "episodes": n,
+            "seed": self.seed,
+            "system_objective_met_rate": len(met) / n if n else None,
+            "test_objective_realized_rate": (
+                sum(t.verdict["test_objective_realized"] for t in met) / len(met) if met else None
+            ),
+            "violated": sum(t.verdict["system_objective"] == "violated" for t in self.traces),
+            "open": sum(t.verdict["system_objective"] == "open" for t in self.traces),
+            "mean_restrictions": float(np.mean([t.verdict["restrictions"] for t in self.traces])) if n else None,
+            "mean_steps": float(np.mean([t.verdict["steps"] for t in self.traces])) if n else None,
+            "test_failures": sum(t.kind == "test" for t in self.traces),
+            "n_failures": len(fails),
+            "failures": [
+                {
+                    "seed": t.seed,
+                    "kind": t.kind,
+                    "reason": t.reason,
+                    "verdict": t.verdict,
+                    "replay": replay_command(self.env_id, self.sut, t.seed),
+                }
+                for t in fails[:MAX_LISTED]
+            ],
+            "pictures": self.pictures,
+            "seconds": round(self.seconds, 3),
+        }
+
+
+def evaluate(
+    env_ids: Sequence[str],
+    suts: Sequence[str],
+    episodes: int,
+    seed: int = 0,
+    progress: Callable[[str], None] | None = None,
+) -> list[Cell]:
+    """Run every SUT against every env (``episodes`` seeded runs each)."""
+    from agents.base import make_policy
+
+    if episodes < 1:
+        raise ProblemError("--episodes must be at least 1")
+    cells: list[Cell] = []
+    total = len(env_ids) * len(suts)
+    k = 0
+    for env_id in env_ids:
+        env = make_env(env_id)
+        for sut in suts:
+            k += 1
+            t0 = time.perf_counter()
+            policy = make_policy(sut, env)
+            traces = []
+            for i in range(episodes):
+                traces.append(run_episode(env, policy, env_id, sut, seed + i))
+                if progress is not None and (i + 1 == episodes or (i + 1) % max(1, episodes // 10) == 0):
+                    progress(f"[{k}/{total}] {sut} on {env_id}: {i + 1}/{episodes} episodes")
+            cells.append(Cell(env_id, sut, traces, seed, time.perf_counter() - t0))
+        env.close()
+    return cells
+
+
+# --------------------------------------------------------------------------- pictures
+
+
+def _slug(text: str) -> str:
+    return "".join(ch if ch.isalnum() else "-" for ch in text).strip("-").lower()
+
+
+def trace_picture(trace: Trace, path: Path) -> None:
+    """Draw a run: on grids the engineer's view (walls, hidden test cells) at the end of
+    the run with the SUT's path numbered step by step; on graphs a strip of frames."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from flowtest_env.render import make_renderer
+
+    env = make_env(trace.env_id)
+    game = env.unwrapped.game
+    env.close()
+    tile = 48
+    renderer = make_renderer(game, tile, "engineer")
+    v = trace.verdict
+    title = (
+        f"{trace.sut} on {trace.env_id} (seed {trace.seed})\n"
+        f"system objective {v['system_objective']}, test objective "
+        f"{'realized' if v['test_objective_realized'] else 'not realized'}, {v['steps']} steps, "
+        f"{v['restrictions']} restricted decisions"
+    )
+    if game.is_grid:
+        fig, ax = plt.subplots(figsize=(7, 7.6))
+        ax.imshow(renderer.frame(trace.states[-1]))
+        cells = [game.ts.places[int(game.ts.place[r.system])] for r in trace.states]
+        xs = np.array([(c[1] + 0.5) * tile for c in cells], dtype=float)
+        ys = np.array([(c[0] + 0.5) * tile for c in cells], dtype=float)
+        # keep consecutive duplicates (waits) out of the line, jitter revisits slightly
+        ax.plot(xs, ys, "-", color="#1f3b99", lw=2.5, alpha=0.8, zorder=3)
+        ax.plot(xs[0], ys[0], "o", ms=14, color="#2ca02c", zorder=4, label="start")
+        ax.plot(xs[-1], ys[-1], "X", ms=16, color="#d62728" if trace.failed else "#1f3b99", zorder=4, label="end")
+        seen: dict[tuple[float, float], int] = {}
+        last = None
+        for step, (x, y) in enumerate(zip(xs, ys)):
+            if last == (x, y):
+                continue
+            last = (x, y)
+            n = seen.get((x, y), 0)
+            seen[(x, y)] = n + 1
+            if n < 3:
+                ax.annotate(str(step), (x + (n - 1) * tile * 0.22, y - tile * 0.28), color="black", fontsize=9,
+                            ha="center", va="center", zorder=5,
+                            bbox={"boxstyle": "round,pad=0.12", "fc": "white", "ec": "none", "alpha": 0.8})
+        ax.legend(loc="upper right", bbox_to_anchor=(1.0, -0.01), ncol=2, fontsize=9, frameon=False)
+        ax.set_axis_off()
+        ax.set_title(title, fontsize=10)
+    else:
+        # frames where the system moved (plus start and end), at most six, in two rows
+        moves = [0] + [i for i in range(1, len(trace.states)) if trace.states[i].system != trace.states[i - 1].system]
+        moves.append(len(trace.states) - 1)
+        moves = sorted(set(moves))
+        if len(moves) > 6:
+            moves = [moves[int(round(j))] for j in np.linspace(0, len(moves) - 1, 6)]
+        n_cols = min(3, len(moves))
+        n_rows = (len(moves) + n_cols - 1) // n_cols
+        fig, axes = plt.subplots(n_rows, n_cols, figsize=(4.6 * n_cols, 4.6 * n_rows + 0.8), squeeze=False)
+        for ax in axes.ravel():
+            ax.set_axis_off()
+        for ax, i in zip(axes.ravel(), moves):
+            ax.imshow(renderer.frame(trace.states[i]))
+            ax.set_title(f"step {i}: at {game.ts.states[trace.states[i].system]}", fontsize=12)
+        fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+# --------------------------------------------------------------------------- reports
+
+
+def _pct(x: float | None) -> str:
+    return "–" if x is None else f"{100 * x:.0f} %"
+
+
+def write_report(cells: Sequence[Cell], out: Path) -> list[dict[str, Any]]:
+    """Write ``results.json``, ``report.md``, ``report.html`` and the trace pictures."""
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "traces").mkdir(exist_ok=True)
+    for cell in cells:
+        typical = next((t for t in cell.traces if not t.failed), None)
+        failing = next((t for t in cell.traces if t.failed), None)
+        for label, tr in (("typical", typical), ("failing", failing)):
+            if tr is None:
+                continue
+            name = f"traces/{_slug(cell.sut)}--{_slug(cell.env_id)}--{label}.png"
+            write_atomically(out / name, lambda tmp, tr=tr: trace_picture(tr, tmp))
+            cell.pictures[label] = name
+    records = [cell.record() for cell in cells]
+    write_atomically(out / "results.json", lambda tmp: tmp.write_text(json.dumps(json_safe(records), indent=1) + "\n"))
+    md, body = _markdown(records), _html(records)
+    write_atomically(out / "report.md", lambda tmp: tmp.write_text(md))
+    write_atomically(out / "report.html", lambda tmp: tmp.write_text(body))
+    return records
+
+
+def test_failure_records(records: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The records with a test failure (a FlowTest bug)."""
+    return [r for r in records if r["test_failures"]]
+
+
+def _markdown(records: Sequence[dict[str, Any]]) -> str:
+    lines = ["# FlowTest evaluation", ""]
+    bugs = test_failure_records(records)
+    if bugs:
+        lines += ["> **FLOWTEST BUG: a test failed its guarantee.** A run met the system objective without "
+                  "realizing the test objective, or the test trapped the system. Please report it with the "
+                  "replay commands below.", ""]
+        for r in bugs:
+            for f in r["failures"]:
+                if f["kind"] == "test":
+                    lines.append(f"- {r['sut']} on {r['env']}: {f['reason']} — `{f['replay']}`")
+        lines.append("")
+    lines += [
+        "System objective met: share of runs; test objective realized: share of the runs that met the "
+        "system objective (the test guarantees 100 %). Restrictions: mean number of decisions taken "
+        "with a restricted move. A failure is the SUT's unless marked *test*.",
+        "",
+    ]
+    for sut in dict.fromkeys(r["sut"] for r in records):
+        lines += [f"## {sut}", "", "| test | runs | met | realized | violated | open | restrictions | steps | failures |",
+                  "|---|---|---|---|---|---|---|---|---|"]
+        rows = [r for r in records if r["sut"] == sut]
+        for r in rows:
+            lines.append(
+                f"| {r['env']} | {r['episodes']} | {_pct(r['system_objective_met_rate'])} "
+                f"| {_pct(r['test_objective_realized_rate'])} | {r['violated']} | {r['open']} "
+                f"| {r['mean_restrictions']:.1f} | {r['mean_steps']:.1f} | {r['n_failures']}"
+                f"{' (' + str(r['test_failures']) + ' test)' if r['test_failures'] else ''} |"
+            )
+        lines.append("")
+        for r in rows:
+            pics = r["pictures"]
+            if r["failures"]:
+                f = r["failures"][0]
+                lines += [f"**{r['env']}** — first failure ({f['kind']}): {f['reason']}. Replay:", "",
+                          f"    {f['replay']}", ""]
+            for label in ("typical", "failing"):
+                if label in pics:
+                    lines.append(f"![{label} run of {sut} on {r['env']}]({pics[label]})")
+            lines.append("")
+    return "\n".join(lines) + "\n"
+
+
+def _html(records: Sequence[dict[str, Any]]) -> str:
+    e = html.escape
+    parts = [
+        "<!doctype html><html><head><meta charset='utf-8'><title>FlowTest evaluation</title><style>",
+        "body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;padding:0 1em}",
+        "table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:4px 8px;text-align:right}",
+        "td:first-child,th:first-child{text-align:left}.bad{background:#fde2e2}.bug{background:#b00020;color:white;"
+        "padding:1em;font-weight:bold}code{background:#f3f3f3;padding:2px 4px}img{max-width:48%;margin:4px;"
+        "border:1px solid #ddd}",
+        "</style></head><body><h1>FlowTest evaluation</h1>",
+    ]
+    bugs = test_failure_records(records)
+    if bugs:
+        parts.append("<div class='bug'>FLOWTEST BUG: a test failed its guarantee (a run met the system objective "
+                     "without realizing the test objective, or the test trapped the system).<ul>")
+        for r in bugs:
+            for f in r["failures"]:
+                if f["kind"] == "test":
+                    parts.append(f"<li>{e(r['sut'])} on {e(r['env'])}: {e(f['reason'])} — <code>{e(f['replay'])}</code></li>")
+        parts.append("</ul></div>")
+    parts.append("<p>Met: share of runs meeting the system objective. Realized: share of those runs that "
+                 "realized the hidden test objective (guaranteed 100 %). Restrictions: mean restricted decisions.</p>")
+    for sut in dict.fromkeys(r["sut"] for r in records):
+        rows = [r for r in records if r["sut"] == sut]
+        parts.append(f"<h2>{e(sut)}</h2><table><tr><th>test</th><th>runs</th><th>met</th><th>realized</th>"
+                     "<th>violated</th><th>open</th><th>restrictions</th><th>steps</th><th>failures</th></tr>")
+        for r in rows:
+            cls = " class='bad'" if r["n_failures"] else ""
+            parts.append(
+                f"<tr{cls}><td>{e(r['env'])}</td><td>{r['episodes']}</td><td>{_pct(r['system_objective_met_rate'])}</td>"
+                f"<td>{_pct(r['test_objective_realized_rate'])}</td><td>{r['violated']}</td><td>{r['open']}</td>"
+                f"<td>{r['mean_restrictions']:.1f}</td><td>{r['mean_steps']:.1f}</td><td>{r['n_failures']}</td></tr>"
+            )
+        parts.append("</table>")
+        for r in rows:
+            if r["failures"]:
+                f = r["failures"][0]
+                parts.append(f"<p><b>{e(r['env'])}</b>: first failure ({e(f['kind'])}): {e(f['reason'])}. "
+                             f"Replay: <code>{e(f['replay'])}</code></p>")
+            for label in ("typical", "failing"):
+                if label in r["pictures"]:
+                    parts.append(f"<img src='{e(r['pictures'][label])}' alt='{label} run of {e(sut)} on {e(r['env'])}'>")
+    parts.append("</body></html>")
+    return "\n".join(parts) + "\n"
+
+
+# --------------------------------------------------------------------------- command line
+
+
+def _arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--env", nargs="+", required=True, metavar="ID", help="environment IDs, e.g. FlowTest-Maze2-v0")
+    p.add_argument("--sut", nargs="+", required=True, metavar="POLICY",
+                   help="systems under test: scripted:replanner, scripted:committed, scripted:fuel-blind, "
+                        "scripted:greedy, random, gr1, ppo:PATH")
+    p.add_argument("--episodes", type=int, default=10, help="runs per SUT and env (default 10)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the first run; run i uses seed+i (default 0)")
+    p.add_argument("--out", type=Path, help="report folder (required unless --replay)")
+    p.add_argument("--replay", action="store_true", help="print every step of the runs instead of a report")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
+
+
+def replay(env_id: str, sut: str, seed: int, stream: Any = None) -> Trace:
+    """Replay one run and print it step by step (state, legal actions, action, verdict)
+    to ``stream`` (standard output by default)."""
+    stream = sys.stdout if stream is None else stream
+    from agents.base import make_policy
+
+    env = make_env(env_id)
+    policy = make_policy(sut, env)
+    trace = run_episode(env, policy, env_id, sut, seed)
+    game = env.unwrapped.game
+    stream.write(f"{sut} on {env_id}, seed {seed}\n")
+    for k, a in enumerate(trace.actions):
+        r = trace.states[k]
+        mask = game.action_mask(r)
+        legal = ",".join(game.action_name(r.system, i) for i in np.flatnonzero(mask))
+        stream.write(f"step {k:3d}  {json.dumps(game.state_json(r.system))}  legal [{legal}]  -> {game.action_name(r.system, a)}\n")
+    stream.write(f"verdict: {json.dumps(trace.verdict)}\n")
+    stream.write(f"outcome: {trace.kind}{': ' + trace.reason if trace.reason else ''}\n")
+    env.close()
+    return trace
+
+
+@command("evaluate", "run systems under test against synthesized tests and write a report", _arguments)
+def run_evaluate(args: argparse.Namespace) -> int:
+    """Evaluate (or replay); exit 4 if a test failed its guarantee (a FlowTest bug)."""
+    if args.replay:
+        bug = False
+        for env_id in args.env:
+            for sut in args.sut:
+                for i in range(args.episodes):
+                    bug |= replay(env_id, sut, args.seed + i).kind == "test"
+        return EXIT_TEST_FAILED if bug else EXIT_OK
+    if args.out is None:
+        raise ProblemError("--out is required (or use --replay)")
+
+    def progress(msg: str) -> None:
+        if not args.quiet:
+            sys.stderr.write(msg + "\n")
+            sys.stderr.flush()
+
+    cells = evaluate(args.env, args.sut, args.episodes, args.seed, progress)
+    progress("drawing trace pictures")
+    records = write_report(cells, args.out)
+    for r in records:
+        sys.stdout.write(
+            f"{r['sut']:24s} {r['env']:30s} met {_pct(r['system_objective_met_rate']):>6s}  "
+            f"realized {_pct(r['test_objective_realized_rate']):>6s}  failures {r['n_failures']}\n"
+        )
+    bugs = test_failure_records(records)
+    if bugs:
+        sys.stderr.write("flowtest: FLOWTEST BUG: a test failed its guarantee; see the report\n")
+    sys.stdout.write(f"report: {(args.out / 'report.html').resolve()}\n")
+    return EXIT_TEST_FAILED if bugs else EXIT_OK
+
+
+def run_evaluation_demo(out_dir: str | Path, episodes: int = 5, progress: Callable[[str], None] | None = None) -> Path:
+    """The demo hook: evaluate the correct, faulty and GR(1) SUTs (and PPO when the
+    ``rl`` extra and a model at ``<out_dir>/ppo-maze2.zip`` exist) on
+    ``FlowTest-Maze2-v0``; write the report and return the path of ``report.html``."""
+    out = Path(out_dir)
+    suts = ["scripted:replanner", "gr1", "scripted:committed", "scripted:fuel-blind", "scripted:greedy", "random"]
+    model = out / "ppo-maze2.zip"
+    if model.exists():
+        suts.append(f"ppo:{model}")
+    cells = evaluate(["FlowTest-Maze2-v0"], suts, episodes, 0, progress)
+    write_report(cells, out)
+    return out / "report.html"
