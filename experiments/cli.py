@@ -561,3 +561,4 @@ from . import demo as _demo  # noqa: E402,F401
 if __name__ == "__main__":  # pragma: no cover
     raise SystemExit(main())
 
+from . import evaluate as _evaluate  # noqa: E402,F401
