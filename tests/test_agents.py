@@ -15,7 +15,7 @@ SHIPPED_IDS = [
     f"FlowTest-{stem}-v0" for name, (stem, _) in flowtest_env.envs.BUILTIN_ENVS.items() if artifact_path(name).exists()
 ]
 """Built-ins whose artifact ships (the others would be synthesized on first use: slow)."""
-CORRECT = ["scripted:replanner"]
+CORRECT = ["scripted:replanner", "gr1"]
 FAULTY = ["scripted:committed", "scripted:fuel-blind", "scripted:greedy"]
 
 
@@ -80,3 +80,14 @@ def test_unknown_policy_names_are_rejected() -> None:
     for name in ("nope", "scripted:nope", "ppo:"):
         with pytest.raises(PolicyError):
             make_policy(name, env)
+
+
+def test_gr1_controller_is_verified_and_resynthesized_on_new_restrictions() -> None:
+    from agents.gr1_sut import GR1SUT
+
+    env = gym.make("FlowTest-SmallReactive-v0")
+    policy = make_policy("gr1:verify", env)  # verify_strategy checks every synthesis
+    assert isinstance(policy, GR1SUT)
+    t = run_episode(env, policy, "FlowTest-SmallReactive-v0", "gr1:verify", 0, record=False)
+    assert t.verdict["system_objective"] == "met" and t.verdict["restrictions"] > 0
+    assert policy.syntheses >= 2  # the first plan, then again when a restriction appeared
