@@ -506,3 +506,7 @@ def run_evaluation_demo(out_dir: str | Path, episodes: int = 5, progress: Callab
     cells = evaluate(["FlowTest-Maze2-v0"], suts, episodes, 0, progress)
     write_report(cells, out)
     return out / "report.html"
+
+
+# `flowtest train` lives in its own module; importing it here registers it with the single cli hook.
+from . import train as _train  # noqa: E402,F401

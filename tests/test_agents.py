@@ -91,3 +91,16 @@ def test_gr1_controller_is_verified_and_resynthesized_on_new_restrictions() -> N
     t = run_episode(env, policy, "FlowTest-SmallReactive-v0", "gr1:verify", 0, record=False)
     assert t.verdict["system_objective"] == "met" and t.verdict["restrictions"] > 0
     assert policy.syntheses >= 2  # the first plan, then again when a restriction appeared
+
+
+def test_ppo_smoke_training_saves_model_curve_and_loads_as_sut(tmp_path) -> None:
+    pytest.importorskip("sb3_contrib")
+    from experiments.train import train
+
+    s = train("FlowTest-SmallReactive-v0", 256, tmp_path / "m.zip", seed=0, progress_bar=False,
+              eval_episodes=2, n_steps=128, batch_size=64, n_epochs=1)
+    assert (tmp_path / "m.zip").exists() and (tmp_path / "m.png").exists()
+    env = gym.make("FlowTest-SmallReactive-v0")
+    policy = make_policy(f"ppo:{tmp_path / 'm.zip'}", env)
+    t = run_episode(env, policy, "FlowTest-SmallReactive-v0", "ppo", 0, record=False)
+    assert t.verdict["system_objective"] in ("met", "violated", "open")
