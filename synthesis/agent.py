@@ -1046,7 +1046,7 @@ def synthesize_agent_test(
     full = controller_from_strategy(products, game, result.strategy, agent)
     report = verify_closed_loop(products, strategy, agent, full)
     controller = full.restricted(*report.entries)
-    checks = check_test(products, strategy, routing.flow)
+    checks = check_test(products, strategy, routing.flow, closed_loop=options.closed_loop)
     timings["verify"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t_start
     solution = AgentSynthesis(

@@ -72,6 +72,9 @@ class MilpOptions:
         ``"feasible"`` unless the gap is proven 0).
     threads
         HiGHS threads (``None``: HiGHS decides).
+    closed_loop
+        Also forbid traps at configurations that are not entry nodes (see
+        :func:`solve_routing`); ``False`` gives method.md §5 exactly.
     """
 
     mode: str = "reactive"
@@ -84,6 +87,7 @@ class MilpOptions:
     mip_rel_gap: float = 0.0
     threads: int | None = None
     progress: Callable[[str], None] | None = None
+    closed_loop: bool = True
 
 
 @dataclass
@@ -272,13 +276,75 @@ def check_consistency(products: Products) -> np.ndarray:
 def solve_routing(products: Products, options: MilpOptions | None = None) -> RoutingResult:
     """Solve the routing MILP for least-restrictive cuts (method.md §5, §7).
 
+    The feasibility flows (c6-c8) are added where they bind: MILP-static starts without
+    them (method.md §5), the others with all of them; the answer is checked by graph
+    search, and the flows of the histories whose entry nodes it traps are added, until
+    no entry node is trapped. A relaxation's optimum that
+    satisfies every omitted constraint is optimal for the full model, so the answer is
+    the optimum of method.md §5, reached with the flows only where they bind. This also
+    covers MILP-static, whose "feasibility iff F >= 1" shortcut fails when the system
+    objective has histories of its own (a delayed reaction can leave an entry node with
+    no way to the goal behind static walls).
+
+    Beyond the method (with ``options.closed_loop``, the default), closed-loop
+    configurations that the restrictions trap although they are not entry nodes
+    (possible only with one-way moves, outside method.md §2's bidirectional
+    assumption) are added as entry nodes of their history, so no test returned ever
+    traps the system; on bidirectional systems this never triggers.
+
     Raises
     ------
     InconsistentProblem
         ``unreachable`` or ``unroutable`` (including a MILP without solution, or
         maximum flow 0: every routing cut set would trap the system).
     """
+    from .verify import trapped_configurations, trapped_entries_of
+
     options = options or MilpOptions()
+    # reactive models start with every history's flows (adding them lazily costs more
+    # rounds than it saves there); static ones start without, as the method says
+    entries: dict[int, np.ndarray] = {} if options.mode == "static" else dict(products.kept_entries)
+    rounds = 0
+    while True:
+        rounds += 1
+        result = _solve_once(products, options, entries)
+        blocked = blocked_by(products, result)
+        trapped = trapped_entries_of(products, blocked, _with_extra(products.kept_entries, entries))
+        if not trapped:
+            traps = trapped_configurations(products, blocked) if options.closed_loop else np.zeros(0, dtype=np.int64)
+            if traps.size == 0:
+                result.stats["feasibility_rounds"] = rounds
+                result.stats["feasibility_histories"] = len(entries)
+                return result
+            trapped = {}
+            for q in np.unique(products.virtual.hist[traps]):
+                trapped[int(q)] = products.projection[traps[products.virtual.hist[traps] == q]]
+        for q, nodes in trapped.items():
+            base = entries.get(q, products.kept_entries.get(q, np.zeros(0, dtype=np.int64)))
+            entries[q] = np.union1d(base, nodes)
+        if options.progress:
+            options.progress(f"routing MILP: adding feasibility flows for {len(trapped)} trapped histories")
+
+
+def _with_extra(kept: dict[int, np.ndarray], extra: dict[int, np.ndarray]) -> dict[int, np.ndarray]:
+    out = dict(kept)
+    for q, nodes in extra.items():
+        out[q] = np.union1d(out.get(q, np.zeros(0, dtype=np.int64)), nodes)
+    return out
+
+
+def blocked_by(products: Products, result: RoutingResult) -> np.ndarray:
+    """``bool[n_hist, n_moves]``: the moves a routing answer restricts under each history."""
+    g, ts = products.virtual, products.ts
+    blocked = np.zeros((g.n_hist, ts.n_moves), dtype=bool)
+    e = result.cut_edges
+    blocked[g.hist[g.src[e]], g.move[e]] = True
+    blocked |= result.static_moves_cut[None, :]
+    return blocked
+
+
+def _solve_once(products: Products, options: MilpOptions, entries: dict[int, np.ndarray]) -> RoutingResult:
+    """One solve of the routing MILP with feasibility flows for the given entry nodes."""
     note = options.progress or (lambda msg: None)
     t0 = time.perf_counter()
     g = products.virtual
@@ -288,7 +354,7 @@ def solve_routing(products: Products, options: MilpOptions | None = None) -> Rou
     tgt = products.target
     keep_node = check_consistency(products)
     groups = cut_groups(products, options)
-    feasibility = options.mode != "static"
+    feasibility = bool(entries)
 
     # ---- the model's edges: pruned, no flow into Src or out of Tgt
     keep_edge = keep_node[g.src] & keep_node[g.dst] & (g.dst != src_node) & ~tgt[g.src]
@@ -359,7 +425,7 @@ def solve_routing(products: Products, options: MilpOptions | None = None) -> Rou
     # (c6-c8) feasibility flows on G_sys, one aggregated flow per history
     n_feas_cols = 0
     if feasibility:
-        n_feas_cols = _add_feasibility(m, products, groups, group_col)
+        n_feas_cols = _add_feasibility(m, products, groups, group_col, entries)
 
     # MILP-agent: d_state per place entered by a cut, and the exclusions
     place_col = np.zeros(0, dtype=np.int64)
@@ -397,7 +463,7 @@ def solve_routing(products: Products, options: MilpOptions | None = None) -> Rou
     # ---- phase 1: maximum flow
     note("routing MILP, phase 1 of 2: maximum flow")
     guess = guess_routing(g.n_nodes, src_node, eu, ev, grp, c5_edges, group_col >= 0, tgt)
-    x_guess = _guess_solution(products, layout, guess, feasibility, options, place_col, state_places, groups)
+    x_guess = _guess_solution(products, layout, guess, entries, options, place_col, state_places, groups)
     if x_guess is not None and guess.flow == guess.upper_bound:
         x, status1, gap1 = x_guess, "optimal", 0.0  # the flow upper bound is attained: proven
     else:
@@ -490,7 +556,7 @@ def _guess_solution(
     products: Products,
     lay: "_Layout",
     guess: RoutingGuess,
-    feasibility: bool,
+    entries: dict[int, np.ndarray],
     options: MilpOptions,
     place_col: np.ndarray,
     state_places: np.ndarray,
@@ -510,16 +576,15 @@ def _guess_solution(
         if excluded and set(excluded) <= cut_keys:
             return None
     g, ts = products.virtual, products.ts
-    if feasibility:
-        from .strategy import TestStrategy
-        from .verify import trapped_entries
+    if entries:
+        from .verify import trapped_entries_of
 
         cut_all = np.flatnonzero(cut_mask[lay.group_of_edge])
-        restr = np.zeros((g.n_hist, ts.n_moves), dtype=bool)
-        restr[g.hist[g.src[cut_all]], g.move[cut_all]] = True
-        if trapped_entries(products, TestStrategy(np.zeros(ts.n_moves, dtype=bool), restr)):
+        blocked = np.zeros((g.n_hist, ts.n_moves), dtype=bool)
+        blocked[g.hist[g.src[cut_all]], g.move[cut_all]] = True
+        if trapped_entries_of(products, blocked, entries):
             return None
-    x = np.full(lay.n_col, np.nan) if feasibility else np.zeros(lay.n_col)
+    x = np.full(lay.n_col, np.nan) if entries else np.zeros(lay.n_col)
     x[lay.f_col] = guess.edge_flow
     cols = np.flatnonzero(lay.group_col >= 0)
     x[lay.group_col[cols]] = cut_mask[cols].astype(float)
@@ -567,7 +632,9 @@ def _incumbent(h: highspy.Highs, x: np.ndarray, f_col: np.ndarray, deadline: flo
     return x
 
 
-def _add_feasibility(m: _Model, products: Products, groups: CutGroups, group_col: np.ndarray) -> int:
+def _add_feasibility(
+    m: _Model, products: Products, groups: CutGroups, group_col: np.ndarray, entries: dict[int, np.ndarray]
+) -> int:
     """Add c6-c8 as one aggregated flow per history; returns the number of columns added."""
     g, gs = products.virtual, products.system
     ts = products.ts
@@ -578,8 +645,8 @@ def _add_feasibility(m: _Model, products: Products, groups: CutGroups, group_col
     gorder = np.argsort(gkey)
     gkey_sorted = gkey[gorder]
     added = 0
-    for q, entries in products.kept_entries.items():
-        supply_nodes = entries[~sys_tgt[entries]]
+    for q, nodes in entries.items():
+        supply_nodes = nodes[~sys_tgt[nodes]]
         if supply_nodes.size == 0:
             continue
         area = reachable(gs.n_nodes, gs.src, gs.dst, np.isin(np.arange(gs.n_nodes), supply_nodes)) & co

@@ -30,6 +30,7 @@ class SynthesisOptions:
     setting: str | None = None
     progress: Callable[[str], None] | None = None
     agent_iterations: int | None = None  # bound on the counterexample-guided loop
+    closed_loop: bool = True  # never trap the system, also off entry nodes (False: method.md §5 exactly)
 
 
 @dataclass
@@ -75,6 +76,7 @@ def milp_options(problem: Problem, options: SynthesisOptions) -> MilpOptions:
         mip_rel_gap=options.mip_rel_gap,
         threads=options.threads,
         progress=options.progress,
+        closed_loop=options.closed_loop,
     )
 
 
@@ -112,5 +114,5 @@ def synthesize(problem: Problem, options: SynthesisOptions | None = None) -> Syn
     setting = options.setting or problem.extras.get("setting", "instantaneous")
     strategy = strategy_from_routing(products, routing, setting)
     note("checking the test (bypass flow, feasibility)")
-    checks = check_test(products, strategy, routing.flow)
+    checks = check_test(products, strategy, routing.flow, closed_loop=options.closed_loop)
     return SynthesizedTest(problem, spec, products, routing, strategy, checks, graph_seconds)

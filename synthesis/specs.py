@@ -162,10 +162,11 @@ def to_text(f: Formula) -> str:
     if isinstance(f, Const):
         return "true" if f.value else "false"
     if isinstance(f, Not):
-        inner = to_text(f.arg)
-        return f"!{inner}" if isinstance(f.arg, (Prop, Const, Not, Temporal)) else f"!({inner})"
+        return f"!{to_text(f.arg)}"  # a binary operand is already parenthesised
     if isinstance(f, Temporal):
         inner = to_text(f.arg)
+        if isinstance(f.arg, BinOp):
+            return f"{f.op}{inner}"
         return f"{f.op} {inner}" if isinstance(f.arg, (Prop, Const)) else f"{f.op}({inner})"
     return f"({to_text(f.left)} {f.op} {to_text(f.right)})"
 

@@ -8,7 +8,9 @@ enforce and search the product graphs directly.
   reaches the goal without passing the test objective;
 * **flow**: the maximum flow on G without the restricted edges equals the MILP's F;
 * **feasibility** (Theorem 2): from every history's kept entry nodes, ``Tgt_sys`` is
-  reachable on G_sys over moves not restricted under that history.
+  reachable on G_sys over moves not restricted under that history;
+* **no trap in the closed loop**: no configuration reachable under the restrictions
+  loses, through them, a way to the goal it would otherwise have.
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import maximum_flow
 
 from .errors import CheckFailed
-from .products import Products, coreachable
+from .products import Products, coreachable, reachable
 from .strategy import TestStrategy
 
 
@@ -60,17 +62,41 @@ def routed_flow(products: Products, blocked_edges: np.ndarray) -> int:
     return max_flow(g.n_nodes, g.src[keep], g.dst[keep], g.initial, products.target)
 
 
-def trapped_entries(products: Products, strategy: TestStrategy) -> dict[int, np.ndarray]:
-    """Per history, kept entry nodes (of G_sys) with no way to ``Tgt_sys`` under its restrictions."""
+def trapped_entries_of(products: Products, blocked: np.ndarray, entries: dict[int, np.ndarray]) -> dict[int, np.ndarray]:
+    """Per history, the given G_sys nodes with no way to ``Tgt_sys`` under that history's restrictions.
+
+    ``blocked[q, m]`` says whether move ``m`` is restricted under history ``q``.
+    """
     gs = products.system
     out: dict[int, np.ndarray] = {}
-    for q, entries in products.kept_entries.items():
-        keep = ~strategy.blocked[q, gs.move]
+    for q, nodes in entries.items():
+        keep = ~blocked[q, gs.move]
         ok = coreachable(gs.n_nodes, gs.src[keep], gs.dst[keep], products.system_target)
-        bad = entries[~ok[entries]]
+        bad = nodes[~ok[nodes]]
         if bad.size:
-            out[q] = bad
+            out[int(q)] = bad
     return out
+
+
+def trapped_entries(products: Products, strategy: TestStrategy) -> dict[int, np.ndarray]:
+    """Per history, kept entry nodes (of G_sys) with no way to ``Tgt_sys`` under its restrictions."""
+    return trapped_entries_of(products, strategy.blocked, products.kept_entries)
+
+
+def trapped_configurations(products: Products, blocked: np.ndarray) -> np.ndarray:
+    """Nodes of G where the closed loop traps the system.
+
+    Trapped: reachable from ``Src`` under the restrictions (applied with the history of
+    each move's tail), able to reach ``Tgt`` in G without restrictions (the system has
+    not doomed itself), yet unable to under the restrictions.
+    """
+    g = products.virtual
+    keep = ~blocked[g.hist[g.src], g.move]
+    src, dst = g.src[keep], g.dst[keep]
+    reach = reachable(g.n_nodes, src, dst, np.arange(g.n_nodes) == g.initial)
+    can = coreachable(g.n_nodes, g.src, g.dst, products.target)
+    can_restricted = coreachable(g.n_nodes, src, dst, products.target)
+    return np.flatnonzero(reach & can & ~can_restricted)
 
 
 @dataclass
@@ -81,10 +107,18 @@ class CheckReport:
     flow: int
     expected_flow: int
     trapped: dict[int, np.ndarray] = field(default_factory=dict)
+    trapped_nodes: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    closed_loop: bool = True
 
     @property
     def ok(self) -> bool:
-        return self.bypass_flow == 0 and self.flow == self.expected_flow and self.flow >= 1 and not self.trapped
+        return (
+            self.bypass_flow == 0
+            and self.flow == self.expected_flow
+            and self.flow >= 1
+            and not self.trapped
+            and (self.trapped_nodes.size == 0 or not self.closed_loop)
+        )
 
     def problems(self) -> list[str]:
         msgs = []
@@ -96,17 +130,31 @@ class CheckReport:
             msgs.append("no execution reaches the goal under the restrictions")
         for q, nodes in self.trapped.items():
             msgs.append(f"history q{q}: {nodes.size} entry node(s) have no way to the goal")
+        if self.trapped_nodes.size:
+            msgs.append(f"{self.trapped_nodes.size} reachable configuration(s) are trapped by the restrictions")
         return msgs
 
 
-def check_test(products: Products, strategy: TestStrategy, expected_flow: int, raise_on_failure: bool = True) -> CheckReport:
-    """Run every check; raise :class:`CheckFailed` (a FlowTest bug) if one fails."""
+def check_test(
+    products: Products,
+    strategy: TestStrategy,
+    expected_flow: int,
+    raise_on_failure: bool = True,
+    closed_loop: bool = True,
+) -> CheckReport:
+    """Run every check; raise :class:`CheckFailed` (a FlowTest bug) if one fails.
+
+    With ``closed_loop=False`` (method.md §5 exactly) trapped non-entry configurations
+    are reported in the report but do not fail it.
+    """
     blocked = restricted_edges(products, strategy)
     report = CheckReport(
         bypass_flow=bypass_flow(products, blocked),
         flow=routed_flow(products, blocked),
         expected_flow=expected_flow,
         trapped=trapped_entries(products, strategy),
+        trapped_nodes=trapped_configurations(products, strategy.blocked),
+        closed_loop=closed_loop,
     )
     if raise_on_failure and not report.ok:
         raise CheckFailed("synthesized test failed its checks: " + "; ".join(report.problems()))

@@ -34,10 +34,13 @@ import numpy as np
 import pytest
 
 from synthesis.errors import CheckFailed, InconsistentProblem
-from synthesis.pipeline import SynthesizedTest, build_graphs, synthesize
+from synthesis.pipeline import SynthesisOptions, SynthesizedTest, build_graphs, synthesize
 from synthesis.problems import Problem, make_problem
 from synthesis.products import Products
 from synthesis.systems import TransitionSystem, graph_system, grid_world
+
+#: The brute force enumerates method.md §5 exactly (entry-node feasibility only).
+METHOD_EXACT = SynthesisOptions(closed_loop=False)
 
 # ----------------------------------------------------------------------- plain views
 
@@ -599,7 +602,7 @@ def compare_static(problem: Problem, max_sets: int = 1 << 14) -> None:
     best, n_sets = static_optimum(v, problem.system, problem.bidirectional_cuts)
     assert n_sets <= max_sets
     try:
-        res = synthesize(problem)
+        res = synthesize(problem, METHOD_EXACT)
     except InconsistentProblem as exc:
         assert best is None, f"MILP says {exc.reason!r}, brute force found {best}"
         assert (exc.reason == "unreachable") == (not any_path(v, 0)), exc.reason
@@ -643,7 +646,7 @@ def compare_reactive(problem: Problem, max_candidates: int = 16, max_side_bits: 
     assert len(set(values.values())) == 1, f"the enumerations disagree: {values}"
     best = answers[0][1]
     try:
-        res = synthesize(problem)
+        res = synthesize(problem, METHOD_EXACT)
     except InconsistentProblem as exc:
         assert best is None, f"MILP says {exc.reason!r}, brute force found {(best.flow, best.n_cuts)}"
         assert (exc.reason == "unreachable") == (not any_path(v, 0)), exc.reason
@@ -802,16 +805,9 @@ def test_static_trap_instance_by_enumeration() -> None:
     assert not feasible_static(v, blocked)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="BUG: milp.solve_routing drops c6-c8 in static mode (feasibility = mode != 'static'), "
-    "relying on 'static feasibility <=> F >= 1', which fails for delayed reactions G(p -> F q): "
-    "the optimum walls trap the system and synthesize raises CheckFailed",
-    raises=CheckFailed,
-)
 def test_static_walls_never_trap_the_system() -> None:
     """MILP-static must return the best wall set that keeps the system a way to its goal."""
-    res = synthesize(trap_instance())
+    res = synthesize(trap_instance(), METHOD_EXACT)
     assert (res.routing.flow, int(res.routing.cut_edges.size)) == (1, 6)
 
 

@@ -453,12 +453,6 @@ def one_way_trap() -> TransitionSystem:
     return graph_system(names, edges, "s", ["g"], {"g": {"goal"}, "i": {"I"}})
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="METHOD GAP: c6-c8 check only entry nodes; with one-way moves (graph problems, which "
-    "graph_system accepts without warning) the optimal cuts can trap the system in a dead end",
-    raises=AssertionError,
-)
 @pytest.mark.parametrize("kind", ["static", "reactive"])
 def test_one_way_moves_can_trap_the_system(kind: str) -> None:
     """No closed-loop configuration may be trapped by the test (fails: see the reason)."""

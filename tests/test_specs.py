@@ -363,12 +363,6 @@ def test_check_propositions_names_unknown() -> None:
     assert "'zz'" in msg and to_text(parse_formula("G(p -> F zz)")) in msg
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="BUG (cosmetic): specs.to_text wraps a BinOp under F/G in two pairs of parentheses, "
-    "so messages quote 'G((p -> F q))' for the user's 'G(p -> F q)'",
-    raises=AssertionError,
-)
 @pytest.mark.parametrize("text", ["G(p -> F q)", "F(a & F b)", "G !(a & b)"])
 def test_to_text_has_no_doubled_parentheses(text: str) -> None:
     """Quoted parts in messages should read as the user wrote them (no '((')."""
