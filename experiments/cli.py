@@ -556,9 +556,9 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 # Subcommands defined in their own modules register themselves on import.
 from . import demo as _demo  # noqa: E402,F401
+from . import evaluate as _evaluate  # noqa: E402,F401
 
 
 if __name__ == "__main__":  # pragma: no cover
     raise SystemExit(main())
 
-from . import evaluate as _evaluate  # noqa: E402,F401

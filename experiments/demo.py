@@ -1,7 +1,9 @@
 """``flowtest demo``: the main job of the README's first command.
 
-Synthesizes the built-in examples, checks each test, and writes into one output folder a
-picture and an artifact per example plus a Markdown summary. The folder is FlowTest's own:
+Synthesizes the built-in examples (Maze 2 first), checks each test, and writes into one
+output folder a picture and an artifact per example plus a Markdown summary; then runs
+the correct, faulty, GR(1) and random systems under test against ``FlowTest-Maze2-v0``
+and writes the evaluation report. The folder is FlowTest's own:
 it carries a marker file, and the demo refuses to write into an existing folder without it,
 so nothing a user made is overwritten.
 """
@@ -24,7 +26,7 @@ from synthesis.errors import ProblemError
 
 MARKER = ".flowtest-demo"
 #: The examples the demo synthesizes, fastest first.
-DEMO_PROBLEMS = ("small-reactive", "example1", "beaver-rescue", "motion-primitives", "refueling")
+DEMO_PROBLEMS = ("maze2", "small-reactive", "example1", "beaver-rescue", "motion-primitives", "refueling")
 
 
 def _arguments(p: argparse.ArgumentParser) -> None:
@@ -32,6 +34,8 @@ def _arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--problems", nargs="+", default=list(DEMO_PROBLEMS), metavar="NAME", help="problems to synthesize"
     )
+    p.add_argument("--episodes", type=int, default=5, help="evaluation episodes per system (default 5)")
+    p.add_argument("--no-evaluation", action="store_true", help="only synthesize and draw, run no system under test")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines on stderr")
 
 
@@ -68,6 +72,12 @@ def run_demo(args: argparse.Namespace) -> int:
             write_atomically(out / f"{name}.json", artifact_of(test, summary).save)
             write_atomically(out / f"{name}.png", lambda tmp: plot_test(test, tmp))
             rows.append((name, problem.kind, summary, seconds))
+        report = None
+        if not args.no_evaluation:
+            from .evaluate import run_evaluation_demo
+
+            progress("evaluating systems under test against FlowTest-Maze2-v0")
+            report = run_evaluation_demo(out / "evaluation", episodes=args.episodes, progress=progress)
         progress.done(f"done in {progress.elapsed():.1f} s")
     lines = [
         "# FlowTest demo",
@@ -84,4 +94,6 @@ def run_demo(args: argparse.Namespace) -> int:
     (out / "summary.json").write_text(json.dumps([s for _, _, s, _ in rows], indent=1) + "\n")
     sys.stdout.write("\n".join(lines[2:]) + "\n\n")
     sys.stdout.write(f"pictures, artifacts and summary.md are in {out.resolve()}\n")
+    if report is not None:
+        sys.stdout.write(f"evaluation report (open in a browser): {Path(report).resolve()}\n")
     return EXIT_OK

@@ -74,7 +74,7 @@ class MilpOptions:
         HiGHS threads (``None``: HiGHS decides).
     closed_loop
         Also forbid traps at configurations that are not entry nodes (see
-        :func:`solve_routing`); ``False`` gives method.md §5 exactly.
+        :func:`solve_routing`); ``False`` (the default) gives method.md §5 exactly.
     """
 
     mode: str = "reactive"
@@ -87,7 +87,7 @@ class MilpOptions:
     mip_rel_gap: float = 0.0
     threads: int | None = None
     progress: Callable[[str], None] | None = None
-    closed_loop: bool = True
+    closed_loop: bool = False
 
 
 @dataclass
@@ -286,11 +286,13 @@ def solve_routing(products: Products, options: MilpOptions | None = None) -> Rou
     objective has histories of its own (a delayed reaction can leave an entry node with
     no way to the goal behind static walls).
 
-    Beyond the method (with ``options.closed_loop``, the default), closed-loop
-    configurations that the restrictions trap although they are not entry nodes
-    (possible only with one-way moves, outside method.md §2's bidirectional
-    assumption) are added as entry nodes of their history, so no test returned ever
-    traps the system; on bidirectional systems this never triggers.
+    Beyond the method (with ``options.closed_loop``), closed-loop configurations that
+    the restrictions trap although they are not entry nodes are added as entry nodes
+    of their history, so no test returned traps the system anywhere. This matters
+    with one-way moves (outside method.md §2's bidirectional assumption), where the
+    method's optimum can lead the system into a dead end; it is off by default
+    because on irreversible systems such as fuel grids it also forbids configurations
+    that only a wasteful system reaches, and can make a routable test unroutable.
 
     Raises
     ------

@@ -30,7 +30,9 @@ class SynthesisOptions:
     setting: str | None = None
     progress: Callable[[str], None] | None = None
     agent_iterations: int | None = None  # bound on the counterexample-guided loop
-    closed_loop: bool = True  # never trap the system, also off entry nodes (False: method.md §5 exactly)
+    # also forbid restrictions that trap the system off entry nodes (one-way moves);
+    # off by default: method.md §5 exactly (see solve_routing)
+    closed_loop: bool = False
 
 
 @dataclass

@@ -458,8 +458,11 @@ def test_one_way_moves_can_trap_the_system(kind: str) -> None:
     """No closed-loop configuration may be trapped by the test (fails: see the reason)."""
     ts = one_way_trap()
     assert not reversible(ts)
-    res = synthesize(make_problem("one-way-trap", ts, "F goal", "F I", kind))
+    res = synthesize(make_problem("one-way-trap", ts, "F goal", "F I", kind), SynthesisOptions(closed_loop=True))
     assert trapped_configurations(res.products, res.strategy.blocked) == []
+    # method.md §5 exactly (the default) may trap here: the report says so
+    exact = synthesize(make_problem("one-way-trap", ts, "F goal", "F I", kind))
+    assert exact.checks.ok
 
 
 @pytest.mark.slow
