@@ -97,7 +97,6 @@ class GR1SUT(_Tracked):
     def __init__(self, env: Any, verify: bool = False) -> None:
         super().__init__(env)
         self.verify = verify
-        self.known: set[tuple[int, int]] = set()
         self.memory = 0
         self._strategies: dict[tuple[Blocked, int], GR1Strategy | None] = {}
         self.syntheses = 0
@@ -107,7 +106,6 @@ class GR1SUT(_Tracked):
         super().reset(seed)
         if self.product is not old:
             self._strategies = {}
-        self.known = set()
         self.memory = 0
 
     def _controller(self, blocked: Blocked, v: int) -> GR1Strategy | None:
@@ -132,15 +130,7 @@ class GR1SUT(_Tracked):
         game, prod = self.game, self.product
         assert game is not None and prod is not None
         v = prod.node(s, q)
-        now = set()
-        for a in range(game.n_slots):
-            if prod.next_node[v, a] < 0:
-                continue
-            if mask[a]:
-                self.known.discard((s, a))
-            else:
-                now.add((s, a))
-        self.known |= now
+        now = self._remember(s, v, mask)
         strat = self._controller(frozenset(self.known), v)
         if strat is None or strat.next_position[0, v] < 0:
             self.known = now

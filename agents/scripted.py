@@ -150,6 +150,7 @@ class _Tracked:
         self.game: TestGame | None = None
         self.product: SystemProduct | None = None
         self.q: int | None = None
+        self.known: set[tuple[int, int]] = set()  # (state, action) restrictions seen and not seen lifted
         self._refresh()
 
     def _refresh(self) -> None:
@@ -161,6 +162,25 @@ class _Tracked:
     def reset(self, seed: int | None = None) -> None:
         self._refresh()
         self.q = None
+        self.known = set()
+
+    def _remember(self, s: int, v: int, mask: np.ndarray) -> set[tuple[int, int]]:
+        """Update the remembered restrictions from the mask at product node ``v``.
+
+        A restriction seen now is remembered; one seen lifted is forgotten. Returns the
+        restrictions active now.
+        """
+        assert self.game is not None and self.product is not None
+        now: set[tuple[int, int]] = set()
+        for a in range(self.game.n_slots):
+            if self.product.next_node[v, a] < 0:
+                continue
+            if mask[a]:
+                self.known.discard((s, a))
+            else:
+                now.add((s, a))
+        self.known |= now
+        return now
 
     def _observe(self, info: dict[str, Any]) -> tuple[int, int]:
         """The current state index and ``B_sys`` state (updated by the state entered)."""
@@ -175,29 +195,13 @@ class _Tracked:
 class Replanner(_Tracked):
     """The correct scripted SUT (see the module docstring)."""
 
-    def __init__(self, env: Any) -> None:
-        super().__init__(env)
-        self.known: set[tuple[int, int]] = set()
-
-    def reset(self, seed: int | None = None) -> None:
-        super().reset(seed)
-        self.known = set()
-
     def act(self, observation: Any, info: dict[str, Any]) -> int:
         s, q = self._observe(info)
         mask = action_mask_of(observation, info)
         game, prod = self.game, self.product
         assert game is not None and prod is not None
         v = prod.node(s, q)
-        now_blocked = set()
-        for a in range(game.n_slots):
-            if prod.next_node[v, a] < 0:
-                continue
-            if mask[a]:
-                self.known.discard((s, a))
-            else:
-                now_blocked.add((s, a))
-        self.known |= now_blocked
+        now_blocked = self._remember(s, v, mask)
         dist = prod.distances(frozenset(self.known))
         if dist[v] >= INF:
             self.known = set(now_blocked)
