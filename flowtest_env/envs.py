@@ -77,7 +77,7 @@ class FlowTestEnv(gym.Env[np.ndarray, np.int64]):
     The problem's initial state and history; the test agent at its start (after its
     first move when it moves first).
 
-    ## Episode End
+    ## Termination
 
     Terminated when the system objective is met (its automaton accepts) or violated
     (no run can meet it any more: a rejecting sink such as fuel 0, or a terminal state
@@ -95,6 +95,11 @@ class FlowTestEnv(gym.Env[np.ndarray, np.int64]):
     (``"rgb_array"``, ``"ansi"``; ``"human"`` through Gymnasium's HumanRendering),
     ``view`` (``"system"`` or ``"engineer"``: the picture also shows the hidden test
     cells), ``tile_size`` and the reward weights.
+
+    ## Registered Configurations
+
+    ``FlowTest-<Name>-v0`` for every built-in problem (see the subclasses) and
+    ``FlowTest-RandomGrid-v0``; ``flowtest_env.ENV_IDS`` lists them.
     """
 
     metadata: dict[str, Any] = {"render_modes": ["rgb_array", "ansi"], "render_fps": 4}
