@@ -68,6 +68,12 @@ def load_builtin(name: str) -> TestArtifact:
     cached = cache_dir() / "builtins" / f"{name}.json"
     if cached.exists():
         return TestArtifact.load(cached)
+    from gymnasium import logger
+
+    logger.warn(
+        f"no shipped artifact for {name!r}: synthesizing it now (this can take minutes for large problems); "
+        f"`python -m experiments.build_artifacts {name}` ships it, the result is cached in {cached}"
+    )
     art = synthesize_artifact(name)
     cached.parent.mkdir(parents=True, exist_ok=True)
     tmp = cached.with_suffix(f".{os.getpid()}.tmp")
