@@ -321,9 +321,18 @@ def solve_routing(products: Products, options: MilpOptions | None = None) -> Rou
             trapped = {}
             for q in np.unique(products.virtual.hist[traps]):
                 trapped[int(q)] = products.projection[traps[products.virtual.hist[traps] == q]]
+        grew = False
         for q, nodes in trapped.items():
             base = entries.get(q, products.kept_entries.get(q, np.zeros(0, dtype=np.int64)))
-            entries[q] = np.union1d(base, nodes)
+            merged = np.union1d(base, nodes)
+            grew |= q not in entries or merged.size > entries[q].size
+            entries[q] = merged
+        if not grew:
+            # the model already holds these flows: the answer cannot change, and the
+            # independent checks will report the disagreement as a FlowTest bug
+            result.stats["feasibility_rounds"] = rounds
+            result.stats["feasibility_histories"] = len(entries)
+            return result
         if options.progress:
             options.progress(f"routing MILP: adding feasibility flows for {len(trapped)} trapped histories")
 
@@ -427,7 +436,7 @@ def _solve_once(products: Products, options: MilpOptions, entries: dict[int, np.
     # (c6-c8) feasibility flows on G_sys, one aggregated flow per history
     n_feas_cols = 0
     if feasibility:
-        n_feas_cols = _add_feasibility(m, products, groups, group_col, entries)
+        n_feas_cols = _add_feasibility(m, products, groups, group_col, entries, _static_moves(products, options))
 
     # MILP-agent: d_state per place entered by a cut, and the exclusions
     place_col = np.zeros(0, dtype=np.int64)
@@ -635,9 +644,19 @@ def _incumbent(h: highspy.Highs, x: np.ndarray, f_col: np.ndarray, deadline: flo
 
 
 def _add_feasibility(
-    m: _Model, products: Products, groups: CutGroups, group_col: np.ndarray, entries: dict[int, np.ndarray]
+    m: _Model,
+    products: Products,
+    groups: CutGroups,
+    group_col: np.ndarray,
+    entries: dict[int, np.ndarray],
+    static_moves: np.ndarray,
 ) -> int:
-    """Add c6-c8 as one aggregated flow per history; returns the number of columns added."""
+    """Add c6-c8 as one aggregated flow per history; returns the number of columns added.
+
+    A flow edge over move ``t`` under history ``q`` is closed by the cut of the G edge
+    of ``Gr(q)`` over ``t``; over a static move it is closed by the move's wall even
+    where G has no such edge (a wall stands in every history).
+    """
     g, gs = products.virtual, products.system
     ts = products.ts
     co = products.system_coreachable
@@ -671,6 +690,12 @@ def _add_feasibility(
         found = gkey_sorted[pos] == want
         dcol = np.full(e.size, -1, dtype=np.int64)
         dcol[found] = group_col[groups.of_edge[gorder[pos[found]]]]
+        walls = np.flatnonzero((dcol < 0) & static_moves[gs.move[e]])
+        if walls.size:
+            wkey = groups.move_key[gs.move[e[walls]]]
+            wpos = np.minimum(np.searchsorted(groups.keys, wkey), groups.keys.size - 1)
+            hit = groups.keys[wpos] == wkey
+            dcol[walls[hit]] = group_col[wpos[hit]]
         sel = np.flatnonzero(dcol >= 0)
         r = m.add_rows(-np.inf, cap, sel.size)
         m.add_terms(r, cols[sel], 1.0)
