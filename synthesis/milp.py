@@ -436,7 +436,7 @@ def _solve_once(products: Products, options: MilpOptions, entries: dict[int, np.
     # (c6-c8) feasibility flows on G_sys, one aggregated flow per history
     n_feas_cols = 0
     if feasibility:
-        n_feas_cols = _add_feasibility(m, products, groups, group_col, entries, _static_moves(products, options))
+        n_feas_cols = _add_feasibility(m, products, groups, group_col, entries)
 
     # MILP-agent: d_state per place entered by a cut, and the exclusions
     place_col = np.zeros(0, dtype=np.int64)
@@ -649,13 +649,11 @@ def _add_feasibility(
     groups: CutGroups,
     group_col: np.ndarray,
     entries: dict[int, np.ndarray],
-    static_moves: np.ndarray,
 ) -> int:
     """Add c6-c8 as one aggregated flow per history; returns the number of columns added.
 
     A flow edge over move ``t`` under history ``q`` is closed by the cut of the G edge
-    of ``Gr(q)`` over ``t``; over a static move it is closed by the move's wall even
-    where G has no such edge (a wall stands in every history).
+    of ``Gr(q)`` over ``t`` (method.md c7); where G has no such edge nothing closes it.
     """
     g, gs = products.virtual, products.system
     ts = products.ts
@@ -690,12 +688,6 @@ def _add_feasibility(
         found = gkey_sorted[pos] == want
         dcol = np.full(e.size, -1, dtype=np.int64)
         dcol[found] = group_col[groups.of_edge[gorder[pos[found]]]]
-        walls = np.flatnonzero((dcol < 0) & static_moves[gs.move[e]])
-        if walls.size:
-            wkey = groups.move_key[gs.move[e[walls]]]
-            wpos = np.minimum(np.searchsorted(groups.keys, wkey), groups.keys.size - 1)
-            hit = groups.keys[wpos] == wkey
-            dcol[walls[hit]] = group_col[wpos[hit]]
         sel = np.flatnonzero(dcol >= 0)
         r = m.add_rows(-np.inf, cap, sel.size)
         m.add_terms(r, cols[sel], 1.0)

@@ -237,8 +237,8 @@ def test_loop_bound_ends_with_infeasible() -> None:
 
 
 def test_agent_that_can_only_sit_in_the_middle_has_no_test() -> None:
-    # an agent that can only sit on (2, 2) (or park): the routing MILP, whose feasibility
-    # flows respect the static walls in every history, finds no cut set at all
+    # an agent that can only sit on (2, 2) (or park): no cut set it could realize exists;
+    # the routing MILP or the counterexample-guided loop proves it
     problem = _maze2_with([(2, 2)], stay=True, first="agent", max_iterations=100)
     with pytest.raises(InconsistentProblem) as err:
         synthesize(problem)
