@@ -8,7 +8,9 @@ Two encodings, both built once per :class:`~flowtest_env.game.TestGame`:
 
   ====================  =========================================================
   ``free``              the cell is a state of the system (not blocked)
-  ``wall_N..wall_W``    a static obstacle on the move out of the cell, per direction
+  ``wall_N..wall_W``    a static obstacle on the move out of the cell, per direction:
+                        the walls of the map, and the static obstacles that hold only
+                        at some states of a cell (walls per fuel level) while shown
   ``door_N..door_W``    a reactive restriction shown now on the move out of the cell
   ``test_agent``        the test agent's cell
   ``system``            the system's own cell
@@ -117,7 +119,7 @@ class GridEncoder(Encoder):
         base = np.zeros((len(names), H, W), dtype=np.uint8)
         base[ch["free"], self.cell_r, self.cell_c] = 255
         static = game.artifact.strategy.static_obstacles
-        for m in np.flatnonzero(static):
+        for m in np.flatnonzero(game.permanent_wall):  # the other static ones: per step
             p = int(ts.place[ts.src[m]])
             base[ch[f"wall_{ts.action[m]}"], self.cell_r[p], self.cell_c[p]] = 255
         goal_places = np.unique(ts.place[ts.terminal])
@@ -138,9 +140,15 @@ class GridEncoder(Encoder):
         self.prop_planes = prop_planes
         self.prop_start = ch["goal"] + 1
         self.door_start = ch["door_N"]
+        self.wall_start = ch["wall_N"]
         self.dir_of_move = np.array([DIRS.index(a) for a in ts.action], dtype=np.int64)
         self.move_cell = np.stack([self.cell_r[ts.place[ts.src]], self.cell_c[ts.place[ts.src]]], axis=1)
-        self.is_static = static.copy()
+        self.permanent = game.permanent_wall.copy()
+        # the plane a shown restriction is written to: -1 a wall of the map (already on the
+        # base), a wall plane for a static obstacle of this state only, else a door plane
+        plane = np.where(static, self.wall_start + self.dir_of_move, self.door_start + self.dir_of_move)
+        self.shown_plane = np.where(self.permanent, -1, plane)
+        self.shown_plane_list = self.shown_plane.tolist()
         self.place_list = ts.place.tolist()
         self.cell_r_list = self.cell_r.tolist()
         self.cell_c_list = self.cell_c.tolist()
@@ -156,8 +164,9 @@ class GridEncoder(Encoder):
             prop_planes.reshape(levels, n_props * hw).astype(np.float32) / 255.0 if n_props else None
         )
         self.flat_cell = (self.cell_r * W + self.cell_c).tolist()
-        self.move_flat = ((self.door_start + self.dir_of_move) * hw + self.move_cell[:, 0] * W + self.move_cell[:, 1]).tolist()
-        self.static_list = static.tolist()
+        self.move_flat = np.where(
+            self.permanent, -1, self.shown_plane * hw + self.move_cell[:, 0] * W + self.move_cell[:, 1]
+        ).tolist()
         self.tail_size = self.n_slots + (1 if self.is_fuel else 0) + self.n_qsys
         if obs_kind == "grid":
             self.space = spaces.Box(0, 255, shape=base.shape, dtype=np.uint8)
@@ -170,11 +179,12 @@ class GridEncoder(Encoder):
         g = self.game
         obs = self.base.copy()
         s = run.system
-        # shown reactive restrictions (static ones are already on the wall planes)
+        # shown restrictions (walls of the map are already on the wall planes)
         for m in g.shown_moves(run):
-            if not self.is_static[m]:
+            k = self.shown_plane_list[m]
+            if k >= 0:
                 r, c = self.move_cell[m]
-                obs[self.door_start + self.dir_of_move[m], r, c] = 255
+                obs[k, r, c] = 255
         ch = self.ch
         if run.agent >= 0:
             ap = g.agent_place[run.agent]
@@ -199,8 +209,9 @@ class GridEncoder(Encoder):
         obs = np.zeros(n + self.tail_size, dtype=np.float32)
         obs[:n] = self.flat_base
         for m in g.shown_moves(run):
-            if not self.static_list[m]:
-                obs[self.move_flat[m]] = 1.0
+            i = self.move_flat[m]
+            if i >= 0:
+                obs[i] = 1.0
         if run.agent >= 0:
             ap = g.agent_place[run.agent]
             if ap >= 0:

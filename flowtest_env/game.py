@@ -140,6 +140,34 @@ def _coreachable_to_acceptance(artifact: TestArtifact, enforced: np.ndarray) -> 
         can[grow] = True
 
 
+def _permanent_walls(artifact: TestArtifact) -> np.ndarray:
+    """``bool[n_moves]``: static obstacles that hold between their two places at every
+    state the system can reach.
+
+    A move's *place move* is its pair ``(place[src], place[dst])``; on fuel grids one
+    place move stands for a move at every fuel level. Tied walls (refueling) are static at
+    every reachable fuel level and so permanent; per-level cuts (patrolling) are not,
+    and showing them at every level would draw walls that are not there. Reachability
+    is over the moves that are not static obstacles, from the initial state.
+    """
+    ts = artifact.system
+    static = artifact.strategy.static_obstacles
+    src, dst = ts.src[~static], ts.dst[~static]
+    reach = np.zeros(ts.n_states, dtype=bool)
+    reach[int(ts.initial)] = True
+    frontier = reach.copy()
+    while frontier.any():  # breadth-first, one layer per round
+        nxt = np.zeros_like(reach)
+        nxt[dst[frontier[src]]] = True
+        frontier = nxt & ~reach
+        reach |= frontier
+    n_places = len(ts.places)
+    key = ts.place[ts.src].astype(np.int64) * n_places + ts.place[ts.dst]
+    open_somewhere = np.zeros(n_places * n_places, dtype=bool)
+    np.logical_or.at(open_somewhere, key, reach[ts.src] & ~static)
+    return static & ~open_somewhere[key]
+
+
 class TestGame:
     """The rules of a synthesized test, as look-up tables built once from its artifact.
 
@@ -206,6 +234,11 @@ class TestGame:
             enforced = strat.blocked
         self.enforced = np.ascontiguousarray(enforced)
         """``bool[n_hist, n_moves]``: restrictions the game enforces itself."""
+        self.permanent_wall = _permanent_walls(artifact)
+        """``bool[n_moves]``: static obstacles that are walls of the map, drawn and
+        encoded at all times; the other static obstacles hold only at some states of
+        their cell (a fuel grid with walls per fuel level) and are shown, like reactive
+        restrictions, while the system is at such a state."""
         pad = np.concatenate([self.enforced, np.zeros((self.enforced.shape[0], 1), dtype=bool)], axis=1)
         restricted = pad[:, self.slot_move]  # [h, s, slot]; -1 picks the padding column
         weights = 1 << np.arange(self.n_slots + 1, dtype=np.int64)

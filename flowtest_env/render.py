@@ -2,14 +2,18 @@
 
 Grid frames are assembled from tiles drawn once per tile size and cached (module-level
 cache keyed by kind and size): floor, blocked cell, goal, marks for the system's own
-cells (refuel, drop-off, ...), hidden test cells (test-engineer view only), the test
-agent and the system under test; walls and restrictions are bars on cell edges. The
-static background of a problem is composed once per renderer; a frame is one copy of
-it plus a few tile blits.
+cells (refuel, drop-off, ...), hidden test cells (test-engineer view only: purple rings;
+on fuel grids pale rings where the test proposition holds only at a lower fuel level),
+the test agent and the system under test; walls (black) and restrictions shown now
+(orange) are bars on the edge of the cell the move leaves. The static background of a
+problem is composed once per renderer; a frame is one copy of it plus a few tile blits.
+Static obstacles that hold at some states of a cell only (walls per fuel level) are not
+walls of the map: they are drawn, black, while the system stands at such a state.
 
-Graph frames: a layout is computed once (a seeded spring layout), the background
+Graph frames: a layout is computed once (Kamada-Kawai, deterministic), the background
 (edges, nodes, names) is drawn once with matplotlib's Agg backend into an array, and
-frames overlay the system, the agent and the restricted edges with numpy.
+frames overlay the system, the agent and the restricted edges with numpy; a restricted
+edge is marked on its own arc, so the two directions of a two-way edge stay apart.
 """
 
 from __future__ import annotations
@@ -31,6 +35,7 @@ AGENT: RGB = (40, 96, 200)
 WALL: RGB = (30, 30, 30)
 DOOR: RGB = (240, 140, 0)
 TEST_CELL: RGB = (170, 60, 200)
+TEST_CELL_LATER: RGB = (214, 176, 226)
 PALETTE: tuple[RGB, ...] = ((0, 170, 200), (150, 100, 50), (120, 60, 170), (200, 170, 0), (0, 130, 110), (200, 90, 140))
 REFUEL: RGB = (235, 190, 20)
 STATUS_BG: RGB = (40, 40, 44)
@@ -135,6 +140,39 @@ def marked_places(game: TestGame, prop: str, majority: bool = True) -> list[int]
     return [int(p) for p in np.flatnonzero(keep)]
 
 
+def hidden_propositions(game: TestGame) -> set[str]:
+    """Propositions of the hidden test objective that the system objective does not
+    mention (those it does are drawn as the system's own cells)."""
+    from synthesis.specs import parse_formula, propositions
+
+    from .encoding import system_propositions
+
+    objectives = game.artifact.objectives
+    return propositions(parse_formula(objectives["test"])) - set(system_propositions(game))
+
+
+def fuel_test_places(game: TestGame, props: set[str]) -> tuple[dict[int, list[int]], dict[int, list[int]]]:
+    """Hidden test cells of a fuel grid, per fuel level ``f`` of the system:
+    ``(now[f], later[f])``. ``now[f]``: cells where a proposition of ``props`` holds at
+    fuel ``f`` (the test is realized by entering one with that fuel); ``later[f]``: cells
+    where one holds only at a lower level (refueling's ``low`` is fuel 1 in a region:
+    from fuel 8 the region is ``later``). Terminal states are left out."""
+    ts = game.ts
+    holds: dict[int, set[int]] = {}
+    for s in range(ts.n_states):
+        if ts.labels[s] & props and not ts.terminal[s]:
+            holds.setdefault(int(ts.states[s][1]), set()).add(int(ts.place[s]))
+    now: dict[int, list[int]] = {}
+    later: dict[int, list[int]] = {}
+    below: set[int] = set()
+    for f in range(int(ts.max_fuel or 0) + 1):
+        here = holds.get(f, set())
+        now[f] = sorted(here)
+        later[f] = sorted(below - here)
+        below |= here
+    return now, later
+
+
 class GridRenderer:
     """Frames of a grid problem (see the module docstring).
 
@@ -179,41 +217,46 @@ class GridRenderer:
             fuel = np.array([k[1] for k in ts.states])
             for p in np.unique(ts.place[ts.dst[fuel[ts.dst] == self.max_fuel]]):
                 _paint(img, *cells[p], size, shape_mask("refuel", size), REFUEL)
-        # hidden test cells (engineer view): fixed on plain grids; on fuel grids the cells
-        # where a test proposition holds at the system's current fuel level
-        self.test_marks: dict[int, list[int]] = {}
+        # hidden test cells (engineer view): fixed on plain grids; on fuel grids they
+        # depend on the fuel level (see fuel_test_places), so frame() draws them
+        self.test_now: dict[int, list[int]] = {}
+        self.test_later: dict[int, list[int]] = {}
         if view == "engineer":
-            from synthesis.specs import parse_formula, propositions
-
-            test_props = propositions(parse_formula(game.artifact.objectives["test"])) - set(props)
+            test_props = hidden_propositions(game)
             if self.is_fuel:
-                for s in range(ts.n_states):
-                    if ts.labels[s] & test_props and not ts.terminal[s]:
-                        self.test_marks.setdefault(int(ts.states[s][1]), []).append(int(ts.place[s]))
+                self.test_now, self.test_later = fuel_test_places(game, test_props)
             else:
                 for name in sorted(test_props):
                     for p in marked_places(game, name, majority=False):
                         _paint(img, *cells[p], size, shape_mask("test", size), TEST_CELL)
-        static = game.artifact.strategy.static_obstacles
-        for m in np.flatnonzero(static):
+        # walls of the map on the background; static obstacles that hold only at some
+        # states of their cell (walls per fuel level) are drawn by frame() while they hold
+        for m in np.flatnonzero(game.permanent_wall):
             r, c = cells[int(ts.place[ts.src[m]])]
             _edge_bar(img, r, c, size, ts.action[m], WALL, 0.12)
         self.background = img
         self.cells = cells
-        self.static = static
+        self.static = game.artifact.strategy.static_obstacles
+        self.permanent = game.permanent_wall
 
     def frame(self, run: RunState) -> np.ndarray:
         """``uint8[H, W, 3]``: the run now."""
         g, size = self.game, self.size
         ts = g.ts
         img = self.background.copy()
-        if self.test_marks:
-            for p in self.test_marks.get(int(ts.states[run.system][1]), ()):
+        if self.is_fuel and self.view == "engineer":
+            fuel = int(ts.states[run.system][1])
+            for p in self.test_later.get(fuel, ()):
+                _paint(img, *self.cells[p], size, shape_mask("test", size), TEST_CELL_LATER)
+            for p in self.test_now.get(fuel, ()):
                 _paint(img, *self.cells[p], size, shape_mask("test", size), TEST_CELL)
         for m in g.shown_moves(run):
-            if not self.static[m]:
+            if not self.permanent[m]:
                 r, c = self.cells[int(ts.place[ts.src[m]])]
-                _edge_bar(img, r, c, size, ts.action[m], DOOR, 0.16)
+                if self.static[m]:
+                    _edge_bar(img, r, c, size, ts.action[m], WALL, 0.12)
+                else:
+                    _edge_bar(img, r, c, size, ts.action[m], DOOR, 0.16)
         if run.agent >= 0 and g.agent_place[run.agent] >= 0:
             _paint(img, *self.cells[g.agent_place[run.agent]], size, shape_mask("agent", size), AGENT)
         _paint(img, *self.cells[g.place_list[run.system]], size, shape_mask("system", size), SYSTEM)
@@ -224,6 +267,29 @@ class GridRenderer:
             width = int(round(img.shape[1] * fuel / max(self.max_fuel, 1)))
             img[y0 + h // 4 : y0 + h - h // 4, :width] = FUEL_BAR
         return img
+
+
+ARC_RAD = 0.12
+"""Bend of the graph pictures' edges (matplotlib's ``arc3`` connection style)."""
+
+
+def _arc_middles(disp: np.ndarray, src: np.ndarray, dst: np.ndarray, rad: float, height: int) -> list[np.ndarray]:
+    """Pixel points ``int[k, 2]`` (row, column) of the middle 40 % of each edge's arc.
+
+    ``disp`` are the nodes' display coordinates (y up). The arc is matplotlib's
+    ``arc3``: a quadratic Bezier from ``a`` to ``b`` with control point
+    ``(a + b) / 2 + rad * (dy, -dx)``, ``(dx, dy) = b - a``; so overlays lie on the drawn
+    arrow rather than on the straight chord.
+    """
+    out: list[np.ndarray] = []
+    for a, b in zip(disp[src], disp[dst]):
+        d = b - a
+        ctl = (a + b) / 2 + rad * np.array([d[1], -d[0]])
+        n = max(2, int(np.hypot(*d)))
+        t = np.linspace(0.3, 0.7, n)[:, None]
+        pts = (1 - t) ** 2 * a + 2 * (1 - t) * t * ctl + t**2 * b
+        out.append(np.rint(np.stack([height - pts[:, 1], pts[:, 0]], axis=1)).astype(np.int64))
+    return out
 
 
 class GraphRenderer:
@@ -261,14 +327,10 @@ class GraphRenderer:
             ax.annotate(
                 "", xy=xy[b], xytext=xy[a],
                 arrowprops={"arrowstyle": "-|>", "color": "0.55", "lw": 1.2, "shrinkA": 14, "shrinkB": 14,
-                            "connectionstyle": "arc3,rad=0.12"},
+                            "connectionstyle": f"arc3,rad={ARC_RAD}"},
             )
         props = system_propositions(game)
-        test_props: set[str] = set()
-        if view == "engineer":
-            from synthesis.specs import parse_formula, propositions
-
-            test_props = propositions(parse_formula(game.artifact.objectives["test"])) - set(props)
+        test_props = hidden_propositions(game) if view == "engineer" else set()
         for s in range(ts.n_states):
             face = np.array(GOAL) / 255 if ts.terminal[s] else "white"
             edge = np.array(TEST_CELL) / 255 if ts.labels[s] & test_props else "0.3"
@@ -283,6 +345,11 @@ class GraphRenderer:
         self.node_px = np.stack([h - disp[:, 1], disp[:, 0]], axis=1)
         self.radius = int(np.sqrt(520) / 2 * 100 / 72)  # marker points -> pixels at dpi 100
         self.src, self.dst = ts.src.copy(), ts.dst.copy()
+        self.arc_px = _arc_middles(disp, self.src, self.dst, ARC_RAD, h)
+        self.static = game.artifact.strategy.static_obstacles
+        self.permanent = game.permanent_wall
+        for m in np.flatnonzero(self.permanent):
+            self._segment(self.background, int(m), WALL)
 
     def _disc(self, img: np.ndarray, node: int, radius: int, color: RGB) -> None:
         y, x = self.node_px[node]
@@ -293,11 +360,9 @@ class GraphRenderer:
         img[y0:y1, x0:x1][mask] = color
 
     def _segment(self, img: np.ndarray, m: int, color: RGB) -> None:
-        a, b = self.node_px[self.src[m]], self.node_px[self.dst[m]]
-        d = b - a
-        n = max(2, int(np.hypot(*d)))
-        t = np.linspace(0.3, 0.7, n)  # the middle of the edge: off the node discs
-        pts = np.rint(a[None, :] + t[:, None] * d[None, :]).astype(int)
+        """Paint the middle of move ``m``'s arc (5 pixels wide): on the arc, so the two
+        directions of a two-way edge, which bend to opposite sides, stay apart."""
+        pts = self.arc_px[m]
         for dy in (-2, -1, 0, 1, 2):
             for dx in (-2, -1, 0, 1, 2):
                 yy = np.clip(pts[:, 0] + dy, 0, img.shape[0] - 1)
@@ -309,7 +374,8 @@ class GraphRenderer:
         g = self.game
         img = self.background.copy()
         for m in g.shown_moves(run):
-            self._segment(img, m, DOOR)
+            if not self.permanent[m]:
+                self._segment(img, m, WALL if self.static[m] else DOOR)
         if run.agent >= 0 and g.agent_place[run.agent] >= 0:
             self._disc(img, g.agent_place[run.agent], self.radius, AGENT)
         self._disc(img, run.system, max(5, (2 * self.radius) // 3), SYSTEM)
@@ -328,7 +394,9 @@ def ansi(game: TestGame, run: RunState, view: str = "system") -> str:
 
     Grid legend: ``@`` system, ``A`` test agent, ``T`` goal, ``#`` blocked, ``.`` free,
     the first letter of a system proposition (``R`` refuel), ``?`` a hidden test cell
-    (engineer view); restricted moves are listed below the grid.
+    (engineer view; on fuel grids where a test proposition holds at the current fuel
+    level, ``~`` where it holds only at a lower one); restricted moves are listed below
+    the grid.
     """
     ts = game.ts
     lines: list[str] = []
@@ -336,11 +404,7 @@ def ansi(game: TestGame, run: RunState, view: str = "system") -> str:
     from .encoding import system_propositions
 
     props = system_propositions(game)
-    test_props: set[str] = set()
-    if view == "engineer":
-        from synthesis.specs import parse_formula, propositions
-
-        test_props = propositions(parse_formula(game.artifact.objectives["test"])) - set(props)
+    test_props = hidden_propositions(game) if view == "engineer" else set()
     if game.is_grid:
         lay = ts.layout
         assert lay is not None
@@ -349,8 +413,15 @@ def ansi(game: TestGame, run: RunState, view: str = "system") -> str:
         for s in np.flatnonzero(ts.terminal):
             r, c = cells[int(ts.place[s])]
             grid[r][c] = "T"
-        for name in sorted(test_props):
-            for p in marked_places(game, name, majority=False):
+        if ts.kind == "fuel":  # as in the pictures: per fuel level, see fuel_test_places
+            now, later = fuel_test_places(game, test_props)
+            fuel = int(ts.states[run.system][1])
+            for mark, places in (("~", later.get(fuel, [])), ("?", now.get(fuel, []))):
+                for p in places:
+                    r, c = cells[p]
+                    grid[r][c] = mark
+        else:
+            for p in sorted({p for name in test_props for p in marked_places(game, name, majority=False)}):
                 r, c = cells[p]
                 grid[r][c] = "?"
         for name in props:

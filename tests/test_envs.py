@@ -302,6 +302,56 @@ def test_observations_never_reveal_the_test_history() -> None:
         assert not any(n.startswith("I") for n in names)
 
 
+@pytest.mark.parametrize("name", ["example1", "small-reactive", "refueling", "maze2", "patrolling"])
+def test_grid_observation_shows_exactly_the_restrictions_in_force(name: str) -> None:
+    """At every reachable state, the wall and door planes at the system's cell show
+    exactly the moves restricted now (the test agent's block aside: it is the
+    ``test_agent`` plane), and the flat encoding carries the same planes. Patrolling's
+    static cuts hold at some fuel levels only: the planes must not show them at the
+    others."""
+    from flowtest_env.encoding import make_encoder
+
+    if not artifact_path(name).exists():
+        pytest.skip("artifact not shipped")
+    game = builtin_game(name)
+    enc = make_encoder(game, "grid")
+    flat = make_encoder(game, "flat")
+    walls = [enc.ch[f"wall_{d}"] for d in "NSEW"]
+    doors = [enc.ch[f"door_{d}"] for d in "NSEW"]
+    states, _, _ = _explore(game)
+    shown_without_force = 0
+    for run in states:
+        if run.done:
+            continue
+        obs = enc.planes(run)
+        spatial = obs[: enc.n_spatial].ravel().astype(np.float32) / 255
+        assert np.array_equal(flat.encode(run)[: spatial.size], spatial), "flat and grid encodings disagree"
+        r, c = game.ts.places[game.place_list[run.system]]
+        in_force = game.restricted_bits[run.history][run.system] & game.exists_bits[run.system]
+        for k in range(4):
+            shown = bool(obs[walls[k], r, c] or obs[doors[k], r, c])
+            if game.slot_move[run.system, k] < 0:
+                continue  # no move that way: a wall of the map may still be drawn
+            assert shown == bool((in_force >> k) & 1), (name, game.state_json(run.system), "NSEW"[k])
+            shown_without_force += shown and not (in_force >> k) & 1
+    assert shown_without_force == 0
+
+
+def test_permanent_walls() -> None:
+    """Tied walls (refueling, plain grids) are walls of the map; patrolling's per-fuel-level
+    cuts are not, since the same cell edge is open at other reachable fuel levels."""
+    for name in ("example1", "refueling"):
+        game = builtin_game(name)
+        assert np.array_equal(game.permanent_wall, game.artifact.strategy.static_obstacles)
+    game = builtin_game("patrolling")
+    static = game.artifact.strategy.static_obstacles
+    assert static.any() and not game.permanent_wall.any()
+    ts = game.ts
+    # (5,4) -> W is cut at some fuel levels and open at a reachable other one
+    west = [m for m in range(ts.n_moves) if ts.states[ts.src[m]][0] == (5, 4) and ts.action[m] == "W"]
+    assert any(static[m] for m in west) and any(not static[m] for m in west)
+
+
 def test_accumulative_setting_shows_more_but_enforces_the_same() -> None:
     inst = gym.make("FlowTest-SmallReactive-v0", obs_kind="grid")
     acc = gym.make("FlowTest-SmallReactive-v0", obs_kind="grid", setting="accumulative")
