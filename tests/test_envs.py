@@ -29,19 +29,32 @@ from flowtest_env.game import MET, RunState, TestGame
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _shipped(env_id: str) -> bool:
+def _problem_of(env_id: str) -> str | None:
+    """The built-in problem of a registered ID (``None`` for the random grid)."""
     for name, (stem, _) in BUILTIN_ENVS.items():
         if env_id == f"FlowTest-{stem}-v0":
-            return artifact_path(name).exists()
-    return True
+            return name
+    return None
 
 
-IDS = [
-    pytest.param(i, marks=pytest.mark.skip(reason="artifact not shipped yet")) if not _shipped(i) else i
-    for i in flowtest_env.ENV_IDS
-]
-GRID_IDS = [i for i in flowtest_env.ENV_IDS if i not in ("FlowTest-BeaverRescue-v0", "FlowTest-MotionPrimitives-v0") and _shipped(i)]
-BUILTIN_NAMES = [n for n in BUILTIN_ENVS if artifact_path(n).exists()]
+def _no_artifact(name: str) -> pytest.MarkDecorator:
+    """Skip mark for a built-in without a shipped artifact: making its env would run the
+    synthesis first (minutes for mars-exploration), which a test must not."""
+    return pytest.mark.skip(
+        reason=f"no shipped artifact flowtest_env/artifacts/{name}.json (its synthesis is too slow for a test run); "
+        f"`python -m experiments.build_artifacts {name}` builds it and these tests then run"
+    )
+
+
+def _param(env_id: str) -> Any:
+    name = _problem_of(env_id)
+    if name is not None and not artifact_path(name).exists():
+        return pytest.param(env_id, marks=_no_artifact(name))
+    return env_id
+
+
+IDS = [_param(i) for i in flowtest_env.ENV_IDS]
+GRID_IDS = [_param(i) for i in flowtest_env.ENV_IDS if i not in ("FlowTest-BeaverRescue-v0", "FlowTest-MotionPrimitives-v0")]
 
 
 def _rollout(env: gym.Env, n_steps: int, seed: int) -> list[Any]:
@@ -67,6 +80,12 @@ def test_registry_lists_every_builtin_and_the_random_grid() -> None:
     assert {f"FlowTest-{s}-v0" for s in stems} | {"FlowTest-RandomGrid-v0"} == set(flowtest_env.ENV_IDS)
     assert all(i in gym.registry for i in flowtest_env.ENV_IDS)
     assert len(flowtest_env.ENV_IDS) == 10
+    for name, (stem, cls) in BUILTIN_ENVS.items():  # mars-exploration too, shipped or not
+        spec = gym.spec(f"FlowTest-{stem}-v0")
+        assert spec.entry_point == f"flowtest_env.envs:{cls.__name__}" and spec.kwargs["problem"] == name
+    for env_id in flowtest_env.ENV_IDS:  # plain-data kwargs
+        kwargs = gym.spec(env_id).kwargs
+        assert json.loads(json.dumps(kwargs)) == kwargs
 
 
 @pytest.mark.parametrize("env_id", IDS)
@@ -138,20 +157,38 @@ def test_pickling_keeps_the_run(env_id: str) -> None:
     assert np.array_equal(env.render(), clone.render())
 
 
-@pytest.mark.parametrize("mode", ["sync", "async"])
-@pytest.mark.parametrize("env_id", IDS)
-def test_vector_envs(env_id: str, mode: str) -> None:
+def _vector_run(env_id: str, mode: str, n_steps: int) -> list[Any]:
+    """``n_steps`` of a 2-env vector env of ``mode``: every output, with seeded random
+    masked actions (the masks come from the vector env's own infos)."""
     envs = gym.make_vec(env_id, num_envs=2, vectorization_mode=mode)
+    rng = np.random.default_rng(0)
     try:
+        assert envs.single_action_space == gym.spaces.Discrete(envs.single_action_space.n)
         obs, info = envs.reset(seed=[1, 2])
         assert obs.shape == (2, *envs.single_observation_space.shape)
-        for _ in range(15):
+        seen: list[Any] = [(obs, info)]
+        for _ in range(n_steps):
             masks = info["action_mask"]
-            actions = np.array([int(np.flatnonzero(m)[0]) if m.any() else 0 for m in masks])
-            obs, rew, term, trunc, info = envs.step(actions)
-            assert obs.shape[0] == 2 and rew.dtype.kind == "f"
+            actions = np.array([int(rng.choice(np.flatnonzero(m))) if m.any() else 0 for m in masks])
+            out = envs.step(actions)
+            obs, rew, term, trunc, info = out
+            assert obs.shape[0] == 2 and rew.dtype.kind == "f" and term.dtype == bool
+            seen.append((actions, *out))
+        return seen
     finally:
         envs.close()
+
+
+@pytest.mark.parametrize("env_id", IDS)
+def test_vector_envs_sync_and_async_agree(env_id: str) -> None:
+    """Sync and async vector envs (subprocesses: the env and its artifact cross a
+    process boundary) play the same 60 steps, episode ends and autoresets included; the
+    first sub-env starts as a single env reset with the same seed."""
+    sync = _vector_run(env_id, "sync", 60)
+    asyn = _vector_run(env_id, "async", 60)
+    assert data_equivalence(sync, asyn)
+    single_obs, _ = gym.make(env_id).reset(seed=1)
+    assert np.array_equal(sync[0][0][0], single_obs)
 
 
 @pytest.mark.parametrize("env_id", IDS)
@@ -398,29 +435,59 @@ def _explore(game: TestGame) -> tuple[list[RunState], np.ndarray, np.ndarray]:
     return states, np.array(src, dtype=np.int64), np.array(dst, dtype=np.int64)
 
 
-@pytest.mark.parametrize("name", ["small-reactive", "maze2", "example1", "beaver-rescue", "motion-primitives", "maze1"])
+@pytest.mark.parametrize(
+    "name", [n if artifact_path(n).exists() else pytest.param(n, marks=_no_artifact(n)) for n in BUILTIN_ENVS]
+)
 def test_synthesized_test_keeps_its_guarantees_exhaustively(name: str) -> None:
-    """Against every system behaviour (exhaustive over reachable game states): every run
-    that meets the system objective has realized the test objective, no run is
-    violated, and from every reachable state the system can still reach its goal."""
-    if not artifact_path(name).exists():
-        pytest.skip("artifact not shipped")
+    """Against every system behaviour (exhaustive over the reachable game states, so over
+    every action sequence of any length): every run that meets the system objective has
+    realized the test objective, and from every reachable live state the system can
+    still meet its objective (no trap). A violation is then always the system's own
+    doing (running dry on a fuel grid); without fuel none is reachable at all."""
     game = builtin_game(name)
     states, src, dst = _explore(game)
     met = np.array([s.outcome == MET for s in states])
+    live = np.array([not s.done for s in states])
     assert met.any()
     for s in states:
-        assert s.outcome != "violated", f"{name}: violated at {game.state_json(s.system)}"
         if s.outcome == MET:
             assert game.test_accepting[s.history], f"{name}: goal reached at {game.state_json(s.system)} without the test objective"
+    if game.ts.kind != "fuel":
+        assert all(s.outcome != "violated" for s in states), f"{name}: a run is violated"
+    else:
+        assert any(s.outcome == "violated" for s in states), "the exploration reaches the system's own failures too"
     can = met.copy()
     while True:
         grow = src[can[dst] & ~can[src]]
         if grow.size == 0:
             break
         can[grow] = True
-    trapped = [game.state_json(s.system) for s, ok in zip(states, can) if not ok]
+    trapped = [game.state_json(s.system) for s, ok in zip(states, can & live | ~live) if not ok]
     assert not trapped, f"{name}: the system is trapped at {trapped[:5]}"
+
+
+@pytest.mark.parametrize("env_id", ["FlowTest-SmallReactive-v0", "FlowTest-Maze2-v0"])
+def test_random_systems_through_the_gymnasium_api(env_id: str) -> None:
+    """The same guarantee end to end through ``gym.make``, ``step`` and the verdict: 300
+    random systems (any action, masked ones included) to the end of the step budget.
+    A met run has realized the test objective; none is violated; and the synthesized
+    test lets some meet it (it restricts, it does not forbid)."""
+    env = gym.make(env_id)
+    rng = np.random.default_rng(0)
+    outcomes: dict[str, int] = {"met": 0, "open": 0}
+    for episode in range(300):
+        _, info = env.reset(seed=episode)
+        done = False
+        while not done:
+            _, _, terminated, truncated, info = env.step(int(rng.integers(env.action_space.n)))
+            done = terminated or truncated
+        v = info["verdict"]
+        assert v["system_objective"] in outcomes, v
+        outcomes[v["system_objective"]] += 1
+        if v["system_objective"] == "met":
+            assert v["test_objective_realized"], v
+        assert v["steps"] <= env.unwrapped.max_steps
+    assert outcomes["met"] > 0
 
 
 def test_every_system_action_sequence_on_small_reactive() -> None:
@@ -443,68 +510,112 @@ def test_every_system_action_sequence_on_small_reactive() -> None:
     assert ended > 0
 
 
-@pytest.mark.parametrize("name", ["refueling", "patrolling"])
-def test_fuel_problems_meet_only_through_the_test_objective(name: str) -> None:
-    if not artifact_path(name).exists():
-        pytest.skip("artifact not shipped")
-    game = builtin_game(name)
-    states, _, _ = _explore(game)
-    met = [s for s in states if s.outcome == MET]
-    assert met and all(game.test_accepting[s.history] for s in met)
-
-
 # ---------------------------------------------------------------- artifacts
 
 
-def test_make_is_fast_cold() -> None:
-    code = (
-        "import time, gymnasium, flowtest_env\n"
-        "from flowtest_env.envs import BUILTIN_ENVS\n"
-        "from flowtest_env.artifacts import artifact_path\n"
-        "worst = 0.0\n"
-        "for name, (stem, _) in BUILTIN_ENVS.items():\n"
-        "    if not artifact_path(name).exists(): continue\n"
-        "    t = time.perf_counter(); gymnasium.make(f'FlowTest-{stem}-v0').reset(seed=0)\n"
-        "    worst = max(worst, time.perf_counter() - t)\n"
-        "print(worst)\n"
-    )
-    # best of two fresh interpreters: the machine may be busy with other work
-    times = [
-        float(subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT).stdout)
-        for _ in range(2)
-    ]
-    assert min(times) < 1.0
+COLD_MAKE = """
+import time
+cpu = time.process_time()
+import gymnasium, flowtest_env
+t = time.perf_counter()
+gymnasium.make({env_id!r}).reset(seed=0)
+print(time.perf_counter() - t, time.process_time() - cpu)
+"""
+
+
+@pytest.mark.parametrize("env_id", [_param(i) for i in flowtest_env.ENV_IDS if _problem_of(i) is not None])
+def test_make_is_fast_cold(env_id: str) -> None:
+    """``make`` + ``reset`` of a built-in env in a fresh interpreter takes under 1 s of
+    wall time, and importing ``flowtest_env`` (gymnasium, numpy and synthesis included)
+    on top of it under 1 s of CPU time (wall time there depends on what else the two
+    shared cores run: a fresh interpreter is retried twice before the wall-time bound
+    fails)."""
+    for _ in range(3):
+        out = subprocess.run(
+            [sys.executable, "-c", COLD_MAKE.format(env_id=env_id)], capture_output=True, text=True, check=True, cwd=ROOT
+        )
+        made, cpu = map(float, out.stdout.split())
+        if made < 1.0:
+            break
+    assert made < 1.0, f"{env_id}: make + reset took {made:.2f} s cold"
+    assert cpu < 1.0, f"{env_id}: import + make + reset took {cpu:.2f} s of CPU cold"
 
 
 def _comparable(art: Any) -> dict[str, Any]:
-    s = art.summary
-    out = {
-        "strategy": art.strategy.to_dict(),
-        "flow": s["flow"],
-        "n_cuts": s["n_cuts"],
-        "cuts": s["cuts"],
-        "restrictions": s["restrictions"],
-        "static_obstacles": s["static_obstacles"],
-        "system": art.system.to_dict(),
-        "objectives": art.objectives,
-    }
-    if art.agent is not None:
-        out["agent_controller"] = art.agent["controller"]
-    return out
+    """The whole artifact as JSON data, minus what differs between two syntheses of the
+    same test: the solver's statistics (``summary["stats"]``: times, node counts, rounds)
+    and every ``*_seconds`` figure."""
+
+    def strip(x: Any) -> Any:
+        if isinstance(x, dict):
+            return {k: strip(v) for k, v in x.items() if not k.endswith("_seconds")}
+        if isinstance(x, list):
+            return [strip(v) for v in x]
+        return x
+
+    d = json.loads(json.dumps(art.to_dict()))
+    d["summary"].pop("stats", None)
+    return strip(d)
 
 
 SLOW_ARTIFACTS = {"refueling", "mars-exploration"}
 
 
 @pytest.mark.parametrize(
-    "name", [pytest.param(n, marks=pytest.mark.slow) if n in SLOW_ARTIFACTS else n for n in BUILTIN_NAMES]
+    "name",
+    [
+        pytest.param(n, marks=[pytest.mark.slow] + ([] if artifact_path(n).exists() else [_no_artifact(n)]))
+        if n in SLOW_ARTIFACTS
+        else n
+        for n in BUILTIN_ENVS
+    ],
 )
 def test_shipped_artifact_equals_a_fresh_synthesis(name: str) -> None:
+    """What ``gym.make`` loads is what the synthesis computes today (the slow problems'
+    syntheses are marked slow)."""
     from synthesis.artifact import TestArtifact
 
-    shipped = TestArtifact.load(artifact_path(name))
-    fresh = synthesize_artifact(name)
-    assert _comparable(shipped) == _comparable(fresh)
+    shipped = _comparable(TestArtifact.load(artifact_path(name)))
+    fresh = _comparable(synthesize_artifact(name))
+    assert shipped.keys() == fresh.keys()
+    for key in shipped:  # one assertion per part, so a failure names the part
+        assert shipped[key] == fresh[key], f"{name}: shipped {key!r} differs from a fresh synthesis; rebuild with build_artifacts --force"
+
+
+@pytest.fixture
+def no_shipped_artifacts(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Any:
+    """A checkout without shipped artifacts and with an empty cache under ``tmp_path``;
+    the per-process memos are emptied before and after."""
+    import flowtest_env.artifacts as artifacts
+
+    monkeypatch.setattr(artifacts, "ARTIFACT_DIR", tmp_path / "shipped")
+    monkeypatch.setenv("FLOWTEST_CACHE_DIR", str(tmp_path / "cache"))
+    artifacts.load_builtin.cache_clear()
+    artifacts.builtin_game.cache_clear()
+    yield tmp_path
+    artifacts.load_builtin.cache_clear()
+    artifacts.builtin_game.cache_clear()
+
+
+def test_missing_artifact_is_synthesized_once_and_cached(no_shipped_artifacts: Path) -> None:
+    """How FlowTest-MarsExploration-v0 works without a shipped artifact, shown on
+    small-reactive: the first ``make`` warns and synthesizes, later ones (in a new
+    process: here, with the memo emptied) read the cache silently."""
+    import flowtest_env.artifacts as artifacts
+    from synthesis.artifact import TestArtifact
+
+    with pytest.warns(UserWarning, match="no shipped artifact for 'small-reactive'"):
+        env = gym.make("FlowTest-SmallReactive-v0")
+    cached = no_shipped_artifacts / "cache" / "builtins" / "small-reactive.json"
+    assert cached.exists() and not (no_shipped_artifacts / "shipped").exists()
+    artifacts.load_builtin.cache_clear()
+    artifacts.builtin_game.cache_clear()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        again = gym.make("FlowTest-SmallReactive-v0")
+    shipped = TestArtifact.load(ROOT / "flowtest_env" / "artifacts" / "small-reactive.json")
+    assert _comparable(env.unwrapped.artifact) == _comparable(again.unwrapped.artifact) == _comparable(shipped)
+    assert data_equivalence(_rollout(env, 30, seed=1), _rollout(again, 30, seed=1))
 
 
 def test_build_artifacts_refuses_to_overwrite(tmp_path: Path) -> None:
