@@ -2,7 +2,9 @@
 
 Uses sb3-contrib's ``MaskablePPO`` with the env's action masks (the SUT never wastes a
 step on a restricted move; the masks are what a real SUT observes before committing),
-an MLP policy on the flat observation, a progress bar, one seed for everything. Writes
+an MLP policy on the flat observation plus the SUT's memory of the places it has
+occupied (:mod:`agents.ppo`), several envs stepped together, a progress bar, one seed
+for everything. Writes
 the model (``PATH``, a ``.zip``), its training curve (``PATH`` with ``.png``: success
 rate and episode return against time steps) and ``PATH`` with ``.json`` (settings,
 time, the curve's data). Load the model as a SUT with ``--sut ppo:PATH``: train on one
@@ -28,16 +30,21 @@ from synthesis.errors import ProblemError
 from .cli import EXIT_OK, command, write_atomically
 
 DEFAULTS: dict[str, Any] = {
-    "n_steps": 512,
-    "batch_size": 128,
+    "n_envs": 8,
+    "n_steps": 128,
+    "batch_size": 256,
     "learning_rate": 1e-3,
     "gamma": 0.99,
     "ent_coef": 0.01,
     "n_epochs": 10,
     "net_arch": [64, 64],
     "shaping": 10.0,
+    "memory": "visited",
 }
-"""PPO settings (small problems: short rollouts, a small network, a high learning rate)."""
+"""PPO settings: 8 envs stepped in one process (one batched policy call per step of all
+eight), rollouts of 8 x 128 steps, a small network, a high learning rate; the shaping
+scale (:func:`_shaped`); the SUT's memory (:mod:`agents.ppo`: without it no
+deterministic policy passes a reactive test that makes the SUT pass a cell twice)."""
 
 
 def _require_rl() -> None:
@@ -86,19 +93,57 @@ def _shaped(env: Any, gamma: float, scale: float) -> Any:
     return Shaping(env)
 
 
-def make_training_env(env_id: str, seed: int, gamma: float = 0.99, shaping: float = 10.0) -> Any:
+def make_training_env(env_id: str, seed: int, gamma: float = 0.99, shaping: float = 10.0,
+                       memory: str = "visited") -> Any:
     """The env wrapped for MaskablePPO (:class:`sb3_contrib.common.wrappers.ActionMasker`),
-    with potential-based shaping when ``shaping > 0`` (see :func:`_shaped`)."""
+    with potential-based shaping when ``shaping > 0`` (see :func:`_shaped`) and the SUT's
+    ``memory`` in the observation (:func:`agents.ppo.with_memory`)."""
     from sb3_contrib.common.wrappers import ActionMasker
+
+    from agents.ppo import with_memory
 
     from .evaluate import make_env
 
     env = make_env(env_id)
     if shaping > 0:
         env = _shaped(env, gamma, shaping)
+    env = with_memory(env, memory)
     env.reset(seed=seed)
     env.action_space.seed(seed)
     return ActionMasker(env, lambda e: e.unwrapped.action_masks())
+
+
+def make_training_vec_env(env_id: str, seed: int, settings: dict[str, Any]) -> Any:
+    """``settings["n_envs"]`` training envs (seeds ``seed``, ``seed + 1``, ...) in one
+    process (SB3's ``DummyVecEnv``): the envs step in microseconds, the policy network is
+    the cost, and it runs once per step for all of them."""
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    n = int(settings["n_envs"])
+    if n < 1:
+        raise ProblemError("n_envs must be at least 1")
+    return DummyVecEnv([
+        (lambda i=i: make_training_env(env_id, seed + i, settings["gamma"], settings["shaping"], settings["memory"]))
+        for i in range(n)
+    ])
+
+
+def make_model(env: Any, settings: dict[str, Any], seed: int) -> Any:
+    """A ``MaskablePPO`` on ``env`` with ``settings`` (see :data:`DEFAULTS`), on the CPU,
+    one torch thread, seeded; it records its memory kind for :class:`agents.ppo.PPOPolicy`."""
+    import torch
+    from sb3_contrib import MaskablePPO
+
+    torch.manual_seed(seed)
+    torch.set_num_threads(1)
+    model = MaskablePPO(
+        "MlpPolicy", env, seed=seed, verbose=0, device="cpu",
+        n_steps=settings["n_steps"], batch_size=settings["batch_size"], learning_rate=settings["learning_rate"],
+        gamma=settings["gamma"], ent_coef=settings["ent_coef"], n_epochs=settings["n_epochs"],
+        policy_kwargs={"net_arch": list(settings["net_arch"])},
+    )
+    model.flowtest_memory = settings["memory"]  # saved with the model, read by PPOPolicy
+    return model
 
 
 def _progress_callback(total: int) -> Any:
@@ -111,7 +156,7 @@ def _progress_callback(total: int) -> Any:
             self.bar = tqdm(total=total, unit="step", desc="training", file=sys.stderr, mininterval=1.0)
 
         def _on_step(self) -> bool:
-            self.bar.update(1)
+            self.bar.update(self.num_timesteps - self.bar.n)  # one call per step of all envs
             return True
 
         def _on_training_end(self) -> None:
@@ -121,7 +166,8 @@ def _progress_callback(total: int) -> Any:
 
 
 class _Curve:
-    """Records (time step, success, return) at every episode end, as an SB3 callback."""
+    """Records (time step, success, return) at every episode end of every training env,
+    as an SB3 callback."""
 
     def __init__(self) -> None:
         from stable_baselines3.common.callbacks import BaseCallback
@@ -131,14 +177,17 @@ class _Curve:
         class Callback(BaseCallback):
             def __init__(self) -> None:
                 super().__init__()
-                self.ret = 0.0
+                self.ret: np.ndarray | None = None
 
             def _on_step(self) -> bool:
-                self.ret += float(self.locals["rewards"][0])
-                if self.locals["dones"][0]:
-                    verdict = self.locals["infos"][0].get("verdict", {})
-                    curve.points.append((self.num_timesteps, verdict.get("system_objective") == "met", self.ret))
-                    self.ret = 0.0
+                rewards, dones, infos = self.locals["rewards"], self.locals["dones"], self.locals["infos"]
+                if self.ret is None:
+                    self.ret = np.zeros(len(rewards))
+                self.ret += rewards
+                for i in np.flatnonzero(dones):
+                    verdict = infos[i].get("verdict", {})
+                    curve.points.append((self.num_timesteps, verdict.get("system_objective") == "met", float(self.ret[i])))
+                    self.ret[i] = 0.0
                 return True
 
         self.points: list[tuple[int, bool, float]] = []
@@ -152,7 +201,7 @@ def success_rate(model: Any, env_id: str, episodes: int = 100, seed: int = 10_00
     from .evaluate import make_env, run_episode
 
     env = make_env(env_id)
-    policy = PPOPolicy(model)
+    policy = PPOPolicy(model, "ppo", env)
     met = 0
     for i in range(episodes):
         t = run_episode(env, policy, env_id, "ppo", seed + i, record=False)
@@ -191,32 +240,24 @@ def plot_curve(points: list[tuple[int, bool, float]], path: Path, title: str) ->
 
 def train(env_id: str, steps: int, out: str | Path, seed: int = 0, progress_bar: bool = True,
           eval_episodes: int = 100, **overrides: Any) -> dict[str, Any]:
-    """Train MaskablePPO on ``env_id`` for ``steps`` time steps; save model, curve, summary.
+    """Train MaskablePPO on ``env_id`` for ``steps`` time steps (rounded up to whole
+    rollouts of ``n_envs x n_steps``); save model, curve, summary. ``overrides`` replace
+    entries of :data:`DEFAULTS`.
 
     Returns
     -------
     dict
-        ``env``, ``steps``, ``seed``, ``seconds`` (training wall time), ``success_rate``
+        ``env``, ``steps`` (taken), ``seed``, ``seconds`` (training wall time), ``success_rate``
         (over ``eval_episodes`` evaluation runs, ``None`` if 0), ``model``, ``curve``.
     """
     _require_rl()
-    import torch
-    from sb3_contrib import MaskablePPO
-
     if steps < 1:
         raise ProblemError("--steps must be at least 1")
-    torch.manual_seed(seed)
-    torch.set_num_threads(1)
     settings = {**DEFAULTS, **overrides}
     out = Path(out)
     model_path = out if out.suffix == ".zip" else out.with_suffix(".zip")
-    env = make_training_env(env_id, seed, settings["gamma"], settings["shaping"])
-    model = MaskablePPO(
-        "MlpPolicy", env, seed=seed, verbose=0, device="cpu",
-        n_steps=settings["n_steps"], batch_size=settings["batch_size"], learning_rate=settings["learning_rate"],
-        gamma=settings["gamma"], ent_coef=settings["ent_coef"], n_epochs=settings["n_epochs"],
-        policy_kwargs={"net_arch": list(settings["net_arch"])},
-    )
+    env = make_training_vec_env(env_id, seed, settings)
+    model = make_model(env, settings, seed)
     curve = _Curve()
     t0 = time.perf_counter()
     callbacks = [curve.callback] + ([_progress_callback(steps)] if progress_bar else [])
@@ -227,7 +268,7 @@ def train(env_id: str, steps: int, out: str | Path, seed: int = 0, progress_bar:
     write_atomically(png, lambda tmp: plot_curve(curve.points, tmp, f"MaskablePPO on {env_id} (seed {seed})"))
     rate = success_rate(model, env_id, eval_episodes) if eval_episodes else None
     summary = {
-        "env": env_id, "steps": steps, "seed": seed, "seconds": round(seconds, 2), "success_rate": rate,
+        "env": env_id, "steps": int(model.num_timesteps), "seed": seed, "seconds": round(seconds, 2), "success_rate": rate,
         "eval_episodes": eval_episodes, "settings": settings, "model": str(model_path), "curve": str(png),
         "episodes": len(curve.points),
         "points": [[s, bool(m), round(r, 4)] for s, m, r in curve.points],
