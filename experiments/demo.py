@@ -3,7 +3,8 @@
 Synthesizes the built-in examples (Maze 2 first), checks each test, and writes into one
 output folder a picture and an artifact per example plus a Markdown summary; then runs
 the correct, faulty, GR(1) and random systems under test against ``FlowTest-Maze2-v0``
-and writes the evaluation report. The folder is FlowTest's own:
+(and a PPO system, trained on it in about ten seconds, when the ``rl`` extra is
+installed) and writes the evaluation report. The folder is FlowTest's own:
 it carries a marker file, and the demo refuses to write into an existing folder without it,
 so nothing a user made is overwritten.
 """

@@ -23,9 +23,11 @@ Two kinds of failure are told apart:
   budget (``open``). The test never helps the SUT, so this is the SUT's fault.
 * a **test failure** (a FlowTest bug, reported loudly): a run that met the system
   objective without realizing the test objective (the routing guarantee broke), or a
-  *trapped* system: a run violated although, from where it stopped, the system
-  objective was still reachable past the static walls — the test's reactive
-  restrictions, not the SUT, closed every way.
+  *trapped* system: a run (violated, or still open when the step budget ran out) that
+  stopped where no sequence of SUT actions can meet the system objective any more
+  against the test as it really answers (its reactive restrictions, its test agent),
+  although the static walls alone would still let the system through — the test, not
+  the SUT, closed every way (:func:`can_still_meet`).
 """
 
 from __future__ import annotations
@@ -33,6 +35,7 @@ from __future__ import annotations
 import argparse
 import html
 import json
+import shlex
 import sys
 import time
 from dataclasses import dataclass, field
@@ -74,8 +77,8 @@ class Trace:
 
 
 def replay_command(env_id: str, sut: str, seed: int) -> str:
-    """The command that replays one run exactly."""
-    return f"flowtest evaluate --env {env_id} --sut {sut} --episodes 1 --seed {seed} --replay"
+    """The command that replays one run exactly (shell-quoted: a model path may hold spaces)."""
+    return f"flowtest evaluate --env {shlex.quote(env_id)} --sut {shlex.quote(sut)} --episodes 1 --seed {seed} --replay"
 
 
 def make_env(env_id: str) -> Any:
@@ -105,13 +108,46 @@ def classify(env: Any, verdict: dict[str, Any]) -> tuple[str, str]:
         return "test", "met the system objective without realizing the test objective"
     if met:
         return "pass", ""
+    u = env.unwrapped
+    game, run = u.game, u.run
+    if not can_still_meet(game, run) and _reachable_past_walls(game, run.history, run.system):
+        return "test", "trapped: the test's restrictions closed every way to the goal"
     if verdict["system_objective"] == "violated":
-        u = env.unwrapped
-        game, run = u.game, u.run
-        if _reachable_past_walls(game, run.history, run.system):
-            return "test", "trapped: the test's restrictions closed every way to the goal"
         return "sut", "violated the system objective"
     return "sut", f"did not meet the system objective within {verdict['steps']} steps"
+
+
+def can_still_meet(game: Any, run: Any) -> bool:
+    """Whether some sequence of legal SUT actions from ``run`` meets the system objective,
+    against the test as it really answers: its restrictions per history and its test
+    agent moving by the synthesized strategy (no step budget).
+
+    The test is deterministic, so this is a search over the run states
+    ``(system, history, agent, memory)`` reachable from ``run``; ``run`` is not changed.
+    A run that ends where this is false, although the static walls alone would let the
+    system through (:func:`_reachable_past_walls`), was trapped by the test.
+    """
+    if run.outcome == "met":
+        return True
+    if run.done:
+        return False
+    seen = {run.key()}
+    frontier = [run.copy()]
+    while frontier:
+        nxt = []
+        for r in frontier:
+            for a in np.flatnonzero(game.action_mask(r)):
+                r2 = r.copy()
+                game.step(r2, int(a))
+                if r2.outcome == "met":
+                    return True
+                k = r2.key()
+                if r2.done or k in seen:
+                    continue
+                seen.add(k)
+                nxt.append(r2)
+        frontier = nxt
+    return False
 
 
 _WALL_GAMES: dict[int, Any] = {}
@@ -196,6 +232,17 @@ class Cell:
         }
 
 
+def _policy(sut: str, env: Any) -> Any:
+    """:func:`agents.base.make_policy`, its errors (unknown name, a model that does not fit
+    the env) reported as invalid input."""
+    from agents.base import PolicyError, make_policy
+
+    try:
+        return make_policy(sut, env)
+    except PolicyError as exc:
+        raise ProblemError(f"--sut {sut}: {exc}") from None
+
+
 def evaluate(
     env_ids: Sequence[str],
     suts: Sequence[str],
@@ -204,8 +251,6 @@ def evaluate(
     progress: Callable[[str], None] | None = None,
 ) -> list[Cell]:
     """Run every SUT against every env (``episodes`` seeded runs each)."""
-    from agents.base import make_policy
-
     if episodes < 1:
         raise ProblemError("--episodes must be at least 1")
     cells: list[Cell] = []
@@ -216,7 +261,7 @@ def evaluate(
         for sut in suts:
             k += 1
             t0 = time.perf_counter()
-            policy = make_policy(sut, env)
+            policy = _policy(sut, env)
             traces = []
             for i in range(episodes):
                 traces.append(run_episode(env, policy, env_id, sut, seed + i))
@@ -443,10 +488,8 @@ def replay(env_id: str, sut: str, seed: int, stream: Any = None) -> Trace:
     """Replay one run and print it step by step (state, legal actions, action, verdict)
     to ``stream`` (standard output by default)."""
     stream = sys.stdout if stream is None else stream
-    from agents.base import make_policy
-
     env = make_env(env_id)
-    policy = make_policy(sut, env)
+    policy = _policy(sut, env)
     trace = run_episode(env, policy, env_id, sut, seed)
     game = env.unwrapped.game
     stream.write(f"{sut} on {env_id}, seed {seed}\n")
@@ -494,13 +537,31 @@ def run_evaluate(args: argparse.Namespace) -> int:
     return EXIT_TEST_FAILED if bugs else EXIT_OK
 
 
+DEMO_PPO_STEPS = 16_384
+"""Training steps of the demo's PPO system (about ten seconds; ``python -m
+experiments.bench_ppo`` measures how many it needs, see docs/benchmarks.md)."""
+
+
+def _rl_installed() -> bool:
+    import importlib.util
+
+    return all(importlib.util.find_spec(m) is not None for m in ("torch", "stable_baselines3", "sb3_contrib"))
+
+
 def run_evaluation_demo(out_dir: str | Path, episodes: int = 5, progress: Callable[[str], None] | None = None) -> Path:
-    """The demo hook: evaluate the correct, faulty and GR(1) SUTs (and PPO when the
-    ``rl`` extra and a model at ``<out_dir>/ppo-maze2.zip`` exist) on
-    ``FlowTest-Maze2-v0``; write the report and return the path of ``report.html``."""
+    """The demo hook: evaluate the correct, faulty and GR(1) SUTs on ``FlowTest-Maze2-v0``,
+    and, when the ``rl`` extra is installed, a PPO SUT: the model at
+    ``<out_dir>/ppo-maze2.zip``, trained there first (:data:`DEMO_PPO_STEPS` steps, seed 0)
+    if there is none. Write the report and return the path of ``report.html``."""
     out = Path(out_dir)
     suts = ["scripted:replanner", "gr1", "scripted:committed", "scripted:fuel-blind", "scripted:greedy", "random"]
-    model = out / "ppo-maze2.zip"
+    model = (out / "ppo-maze2.zip").resolve()  # absolute: the replay commands work from anywhere
+    if not model.exists() and _rl_installed():
+        from .train import train
+
+        if progress is not None:
+            progress(f"training a PPO system under test on FlowTest-Maze2-v0 ({DEMO_PPO_STEPS} steps)")
+        train("FlowTest-Maze2-v0", DEMO_PPO_STEPS, model, seed=0, progress_bar=False, eval_episodes=0)
     if model.exists():
         suts.append(f"ppo:{model}")
     cells = evaluate(["FlowTest-Maze2-v0"], suts, episodes, 0, progress)
