@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import platform
 import subprocess
 import sys
@@ -77,13 +78,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--repeat", type=int, default=3, help="runs per measurement (best reported)")
     ap.add_argument("--out", help="also write the Markdown to this file")
     args = ap.parse_args(argv)
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")  # other work on the machine
 
     import flowtest_env
     from flowtest_env.artifacts import artifact_path
     from flowtest_env.envs import BUILTIN_ENVS
 
     try:
-        import minigrid  # noqa: F401
+        import minigrid  # registers MiniGrid-*; an optional extra: pip install -e '.[bench]'
 
         have_minigrid = True
     except ImportError:
@@ -99,9 +101,12 @@ def main(argv: list[str] | None = None) -> int:
     if have_minigrid:
         runs.append(("MiniGrid-Empty-8x8-v0", "default obs, random policy", best("MiniGrid-Empty-8x8-v0", False)))
 
+    versions = f"gymnasium {gym.__version__}"
+    if have_minigrid:
+        versions += f", minigrid {minigrid.__version__}"
     lines = [
-        f"Machine: {platform.machine()}, Python {platform.python_version()}, gymnasium {gym.__version__}; "
-        f"{args.steps} steps per run, best of {args.repeat}.",
+        f"Machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}, {versions}; "
+        f"{args.steps} steps per run, best of {args.repeat}; 1-min load average {load:.1f} before the run.",
         "",
         "| environment | setting | steps/s |",
         "| --- | --- | ---: |",
