@@ -99,7 +99,7 @@ def test_ppo_smoke_training_learns_saves_model_curve_and_loads_as_sut(tmp_path) 
 
     from experiments.train import train
 
-    s = train("FlowTest-SmallReactive-v0", 2048, tmp_path / "m.zip", seed=0, progress_bar=False,
+    s = train("FlowTest-SmallReactive-v0", 2048, tmp_path / "m.zip", seed=0, progress_bar=True,
               eval_episodes=3, n_envs=4, n_steps=64, batch_size=128)
     assert (tmp_path / "m.zip").exists() and (tmp_path / "m.png").exists()
     summary = json.loads((tmp_path / "m.json").read_text())
