@@ -52,11 +52,20 @@ at the end, as in the single-agent env.
 ## Parallel version
 
 :func:`parallel_env` plays one round per ``step``, applying the actions in turn order.
-Both players choose from the round-start observations, so the system commits before it
-sees this round's tester choice: its observation then shows the restrictions in force
-without a tester choice (the synthesized ones), and a move the tester restricts in the
-same round is refused (a stay). With the synthesized tester the two coincide and the
-parallel game equals the AEC game; for a learned tester use the AEC version.
+Both players choose from the round-start observations, so neither sees the other's
+choice of the same round:
+
+* obstacle problems: the system's observation shows the synthesized restrictions, and a
+  move the tester restricts in the same round is refused (a stay). With the synthesized
+  tester the two coincide and the parallel game equals the AEC game;
+* agent problems: the system does not see where the agent goes this round (a move into
+  its new cell is refused: a stay), and when the system moves first (maze1, patrolling)
+  the tester answers the round-start position, not the system's move of the round.
+
+The synthesized tester keeps the test's guarantees in the parallel game as well (every
+met run realizes the test objective, no state traps the system: ``tests/test_multiagent.py``
+explores every system behaviour). For exact turn-by-turn play, and for a learned
+tester, use the AEC version.
 """
 
 from __future__ import annotations

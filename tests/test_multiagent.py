@@ -13,6 +13,7 @@ from pettingzoo.test import api_test, max_cycles_test, parallel_api_test, seed_t
 from flowtest_env import multiagent
 from flowtest_env.artifacts import artifact_path, builtin_game
 from flowtest_env.envs import BUILTIN_ENVS
+from flowtest_env.game import RunState
 from flowtest_env.multiagent import SYSTEM, TESTER, synthesized_tester
 
 # PettingZoo's api_test remarks that Dict observations (observation + action_mask, the
@@ -210,6 +211,65 @@ def test_synthesized_tester_guarantee_against_random_systems(problem: str) -> No
             assert verdict["test_objective_realized"]
             assert rewards[TESTER] >= 1.0 or par.possible_agents[0] == SYSTEM
     assert met > 0
+
+
+@pytest.mark.parametrize("problem", PROBLEMS)
+def test_synthesized_tester_keeps_the_guarantees_in_the_parallel_game(problem: str) -> None:
+    """Every system behaviour against the synthesized tester in the parallel version,
+    where the players of a round choose simultaneously (agent problems: the system does
+    not see the agent's move of the round, the tester answers the round-start position
+    when the system moves first). Exhaustive over reachable game states, by copying the
+    run state: every met run realized the test objective, every live state can still meet
+    the system objective."""
+    env = multiagent.parallel_env(problem=problem, max_cycles=10**6)
+    tester = synthesized_tester(env)
+
+    def at(state: RunState) -> dict[str, Any]:
+        """Put the env at a game state (a fresh run's bookkeeping, this run state)."""
+        env.reset(seed=0)
+        env.aec_env.run = state.copy()
+        return {a: env.aec_env.observe(a) for a in env.agents}
+
+    env.reset(seed=0)
+    root = env.aec_env.run.copy()
+    index = {root.key() + (False,): 0}
+    stack = [root]
+    src: list[int] = []
+    dst: list[int] = []
+    met, ended = set(), set()
+    while stack:
+        state = stack.pop()
+        i = index[state.key() + (False,)]
+        for a in np.flatnonzero(at(state)[SYSTEM]["action_mask"]):
+            obs = at(state)
+            actions = {SYSTEM: int(a)}
+            if TESTER in env.agents:
+                actions[TESTER] = tester(obs[TESTER], TESTER)
+            _, _, _, _, infos = env.step(actions)
+            run = env.aec_env.run
+            key = run.key() + (run.done,)
+            if key not in index:
+                index[key] = len(index)
+                if run.done:
+                    ended.add(index[key])
+                    if run.outcome == "met":
+                        met.add(index[key])
+                        assert infos[SYSTEM]["verdict"]["test_objective_realized"], run
+                else:
+                    stack.append(run.copy())
+            src.append(i)
+            dst.append(index[key])
+    assert met, f"{problem}: no system behaviour meets the objective"
+    can = np.zeros(len(index), dtype=bool)
+    can[list(met)] = True
+    s, d = np.array(src), np.array(dst)
+    while True:
+        grow = s[can[d] & ~can[s]]
+        if grow.size == 0:
+            break
+        can[grow] = True
+    trapped = [k for k, i in index.items() if i not in ended and not can[i]]
+    assert not trapped, f"{problem}: the system is trapped at {trapped[:3]}"
 
 
 def test_tester_masks_enforce_the_system_assumptions() -> None:
