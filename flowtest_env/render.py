@@ -395,8 +395,9 @@ def ansi(game: TestGame, run: RunState, view: str = "system") -> str:
     Grid legend: ``@`` system, ``A`` test agent, ``T`` goal, ``#`` blocked, ``.`` free,
     the first letter of a system proposition (``R`` refuel), ``?`` a hidden test cell
     (engineer view; on fuel grids where a test proposition holds at the current fuel
-    level, ``~`` where it holds only at a lower one); restricted moves are listed below
-    the grid.
+    level, ``~`` where it holds only at a lower one). Below the grid: the static walls and
+    the reactive restrictions shown now (out of the system's state; in the accumulative
+    setting also out of the states visited under the current history).
     """
     ts = game.ts
     lines: list[str] = []
@@ -445,9 +446,11 @@ def ansi(game: TestGame, run: RunState, view: str = "system") -> str:
             tag = "T" if ts.terminal[s] else ("?" if ts.labels[s] & test_props else " ")
             lines.append(f"{mark}{tag} {ts.states[s]}")
     shown = game.shown_moves(run)
-    if shown:
-        w = ts.to_json_state
-        lines.append("restricted: " + ", ".join(f"{w(int(ts.src[m]))}->{w(int(ts.dst[m]))}" for m in shown))
+    static = game.artifact.strategy.static_obstacles
+    w = ts.to_json_state
+    for label, moves in (("walls", [m for m in shown if static[m]]), ("restricted now", [m for m in shown if not static[m]])):
+        if moves:
+            lines.append(f"{label}: " + ", ".join(f"{w(int(ts.src[m]))}->{w(int(ts.dst[m]))}" for m in moves))
     status = f"step {run.steps}  state {ts.to_json_state(run.system)}  system objective {run.outcome}"
     if view == "engineer":
         desc = game.artifact.extras.get("history_descriptions")
