@@ -34,7 +34,7 @@ from typing import Callable
 import highspy
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import maximum_flow
+from scipy.sparse.csgraph import breadth_first_order, maximum_flow
 
 from .errors import InconsistentProblem
 from .products import Products, coreachable, reachable
@@ -434,9 +434,8 @@ def _solve_once(products: Products, options: MilpOptions, entries: dict[int, np.
         m.add_terms(r, mu_col[ends[sel]], -1.0)
 
     # (c6-c8) feasibility flows on G_sys, one aggregated flow per history
-    n_feas_cols = 0
-    if feasibility:
-        n_feas_cols = _add_feasibility(m, products, groups, group_col, entries)
+    flows = _add_feasibility(m, products, groups, group_col, entries) if feasibility else []
+    n_feas_cols = sum(fl.cols.size for fl in flows)
 
     # MILP-agent: d_state per place entered by a cut, and the exclusions
     place_col = np.zeros(0, dtype=np.int64)
@@ -469,7 +468,7 @@ def _solve_once(products: Products, options: MilpOptions, entries: dict[int, np.
     out_src = np.flatnonzero(eu == src_node)
     t_solve = time.perf_counter()
     deadline = None if options.time_limit is None else t_solve + options.time_limit
-    layout = _Layout(edges, eu, ev, c5_edges, grp, group_col, f_col, mu_col, m.n_col, groups.of_edge)
+    layout = _Layout(edges, eu, ev, c5_edges, grp, group_col, f_col, mu_col, m.n_col, groups.of_edge, flows)
 
     # ---- phase 1: maximum flow
     note("routing MILP, phase 1 of 2: maximum flow")
@@ -510,7 +509,7 @@ def _solve_once(products: Products, options: MilpOptions, entries: dict[int, np.
         cost2[place_col] = float(groups.weight[var_groups].sum() + 1)
     h.changeObjectiveSense(highspy.ObjSense.kMinimize)
     h.changeColsCost(m.n_col, np.arange(m.n_col, dtype=np.int32), cost2)
-    x = _incumbent(h, x, f_col, deadline)
+    x = _incumbent(h, x, f_col, _share(deadline, INCUMBENT_SHARE, time.perf_counter() - t_solve))
     _set_solution(h, x)
     status2, gap2 = _run(h, deadline)
     if status2 == "infeasible":  # cannot happen: phase 1's solution is feasible
@@ -561,6 +560,7 @@ class _Layout:
     mu_col: np.ndarray
     n_col: int
     group_of_edge: np.ndarray
+    flows: list["_FeasibilityFlow"]
 
 
 def _guess_solution(
@@ -576,8 +576,9 @@ def _guess_solution(
     """The heuristic's cut set as a full model solution, or ``None`` if it is unusable.
 
     Unusable: no flow, a rejected cut set (an exclusion row), or, with feasibility
-    constraints, an entry node trapped by the cuts (checked by graph search; the
-    aggregated feasibility flows are then left for HiGHS to complete).
+    constraints, an entry node trapped by the cuts. The feasibility flows are
+    completed along shortest open paths, so the start is a whole solution and a solve
+    stopped by its time limit still returns a checked test.
     """
     if guess.flow < 1:
         return None
@@ -595,7 +596,7 @@ def _guess_solution(
         blocked[g.hist[g.src[cut_all]], g.move[cut_all]] = True
         if trapped_entries_of(products, blocked, entries):
             return None
-    x = np.full(lay.n_col, np.nan) if entries else np.zeros(lay.n_col)
+    x = np.zeros(lay.n_col)
     x[lay.f_col] = guess.edge_flow
     cols = np.flatnonzero(lay.group_col >= 0)
     x[lay.group_col[cols]] = cut_mask[cols].astype(float)
@@ -605,6 +606,13 @@ def _guess_solution(
         e_all = np.flatnonzero(cut_mask[lay.group_of_edge])
         pl = ts.place[ts.dst[g.move[e_all]]]
         x[place_col] = np.isin(state_places, pl).astype(float)
+    is_cut = x > 0.5
+    sys_targets = products.system_target
+    for fl in lay.flows:
+        value = fl.tree_flow(products.system.n_nodes, is_cut, sys_targets)
+        if value is None:
+            return None
+        x[fl.cols] = value
     return x
 
 
@@ -618,6 +626,18 @@ def _set_solution(h: highspy.Highs, x: np.ndarray) -> None:
         h.setSolution(sol)
     else:
         h.setSolution(int(known.size), known.astype(np.int32), x[known].astype(np.float64))
+
+
+INCUMBENT_SHARE = 0.25
+
+
+def _share(deadline: float | None, share: float, spent: float) -> float:
+    """A deadline for a helper solve: ``share`` of the time left, or without a limit
+    of the time spent so far (at least a second), so a heuristic never runs away."""
+    now = time.perf_counter()
+    if deadline is None:
+        return now + max(1.0, spent)
+    return now + share * max(deadline - now, 0.0)
 
 
 def _incumbent(h: highspy.Highs, x: np.ndarray, f_col: np.ndarray, deadline: float | None) -> np.ndarray:
@@ -649,8 +669,8 @@ def _add_feasibility(
     groups: CutGroups,
     group_col: np.ndarray,
     entries: dict[int, np.ndarray],
-) -> int:
-    """Add c6-c8 as one aggregated flow per history; returns the number of columns added.
+) -> list["_FeasibilityFlow"]:
+    """Add c6-c8 as one aggregated flow per history; returns where each flow lives.
 
     A flow edge over move ``t`` under history ``q`` is closed by the cut of the G edge
     of ``Gr(q)`` over ``t`` (method.md c7); where G has no such edge nothing closes it.
@@ -663,7 +683,7 @@ def _add_feasibility(
     gkey = g.hist.astype(np.int64)[g.src] * ts.n_moves + g.move
     gorder = np.argsort(gkey)
     gkey_sorted = gkey[gorder]
-    added = 0
+    flows: list[_FeasibilityFlow] = []
     for q, nodes in entries.items():
         supply_nodes = nodes[~sys_tgt[nodes]]
         if supply_nodes.size == 0:
@@ -672,7 +692,6 @@ def _add_feasibility(
         e = np.flatnonzero(area[gs.src] & area[gs.dst] & ~sys_tgt[gs.src])
         cap = float(supply_nodes.size)
         cols = m.add_cols(e.size, 0.0, cap)
-        added += e.size
         nodes = np.flatnonzero(area & ~sys_tgt)
         row_of = np.full(gs.n_nodes, -1, dtype=np.int64)
         supply = np.isin(nodes, supply_nodes).astype(float)
@@ -692,7 +711,56 @@ def _add_feasibility(
         r = m.add_rows(-np.inf, cap, sel.size)
         m.add_terms(r, cols[sel], 1.0)
         m.add_terms(r, dcol[sel], cap)
-    return added
+        flows.append(_FeasibilityFlow(cols=cols, src=s, dst=d, dcol=dcol, supply_nodes=supply_nodes))
+    return flows
+
+
+@dataclass
+class _FeasibilityFlow:
+    """One aggregated feasibility flow: its columns, their G_sys edges and closing cuts."""
+
+    cols: np.ndarray
+    src: np.ndarray
+    dst: np.ndarray
+    dcol: np.ndarray  # the cut column closing each edge, -1 where none
+    supply_nodes: np.ndarray
+
+    def tree_flow(self, n_nodes: int, is_cut: np.ndarray, targets: np.ndarray) -> np.ndarray | None:
+        """A feasible value of this flow under the cut values ``is_cut`` (per column).
+
+        Every supply node sends its unit along a shortest open path to ``targets``
+        (a BFS tree towards them), so no edge carries more than the supply: ``None``
+        if some supply node has no open path.
+        """
+        open_edge = np.flatnonzero((self.dcol < 0) | ~is_cut[np.maximum(self.dcol, 0)])
+        s, d = self.src[open_edge], self.dst[open_edge]
+        tnodes = np.flatnonzero(targets)
+        # reverse graph with a super node pointing at every target
+        rs = np.concatenate([d, np.full(tnodes.size, n_nodes)])
+        rd = np.concatenate([s, tnodes])
+        adj = sp.csr_matrix((np.ones(rs.size, dtype=np.int8), (rs, rd)), shape=(n_nodes + 1, n_nodes + 1))
+        order, pred = breadth_first_order(adj, n_nodes, directed=True, return_predecessors=True)
+        depth = np.full(n_nodes + 1, -1, dtype=np.int64)
+        depth[n_nodes] = 0
+        for v in order[1:]:  # BFS order: a node's tree parent comes before it
+            depth[v] = depth[pred[v]] + 1
+        if np.any(depth[self.supply_nodes] < 0):
+            return None
+        load = np.zeros(n_nodes + 1)
+        load[self.supply_nodes] = 1.0
+        value = np.zeros(self.cols.size)
+        # the open edge v -> pred[v] of each node on the tree, farthest nodes first
+        key = s.astype(np.int64) * (n_nodes + 1) + d
+        korder = np.argsort(key)
+        for level in range(int(depth.max()), 1, -1):
+            v = np.flatnonzero(depth == level)
+            v = v[load[v] > 0]
+            if v.size == 0:
+                continue
+            k = korder[np.searchsorted(key[korder], v.astype(np.int64) * (n_nodes + 1) + pred[v])]
+            np.add.at(value, open_edge[k], load[v])
+            np.add.at(load, pred[v], load[v])
+        return value
 
 
 def _highs(options: MilpOptions) -> highspy.Highs:
@@ -709,8 +777,8 @@ def _highs(options: MilpOptions) -> highspy.Highs:
 
 def _run(h: highspy.Highs, deadline: float | None) -> tuple[str, float]:
     """Run HiGHS until done or the deadline; return (status, relative gap)."""
-    if deadline is not None:
-        h.setOptionValue("time_limit", max(deadline - time.perf_counter(), 0.01))
+    limit = highspy.kHighsInf if deadline is None else max(deadline - time.perf_counter(), 0.01)
+    h.setOptionValue("time_limit", limit)
     h.run()
     ms = h.getModelStatus()
     info = h.getInfo()
