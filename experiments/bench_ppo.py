@@ -3,13 +3,16 @@ met in at least 95 % of 100 evaluation runs; print the steps and wall time it to
 
 Trains in rounds of ``--chunk`` time steps (one model, training continued), evaluating
 after each round, up to ``--max-steps``. The settings are :data:`experiments.train.DEFAULTS`
-(the ones ``flowtest train`` uses). The wall time counts training only; evaluation
-runs are timed apart. Run: ``python -m experiments.bench_ppo``.
+(the ones ``flowtest train`` uses); ``--set KEY=VALUE`` changes one (a JSON value), e.g.
+``--set memory='"none"'`` or ``--set shaping=0`` for the ablations in docs/benchmarks.md.
+The wall time counts training only; evaluation runs are timed apart.
+Run: ``python -m experiments.bench_ppo``.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import tempfile
 import time
@@ -27,11 +30,21 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--episodes", type=int, default=100, help="evaluation runs after each round (default 100)")
     p.add_argument("--out", type=Path, default=Path(tempfile.gettempdir()) / "flowtest-bench-ppo.zip",
                    help="where the model that reached the target is saved")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override one training setting (JSON value), e.g. --set n_envs=1")
     args = p.parse_args(argv)
 
     from experiments.train import DEFAULTS, make_model, make_training_vec_env, success_rate
 
     settings = dict(DEFAULTS)
+    for item in args.set:
+        key, sep, value = item.partition("=")
+        if not sep or key not in DEFAULTS:
+            p.error(f"--set {item!r}: expected KEY=VALUE with KEY one of {', '.join(DEFAULTS)}")
+        try:
+            settings[key] = json.loads(value)
+        except json.JSONDecodeError:
+            p.error(f"--set {item!r}: the value is not JSON")
     env = make_training_vec_env(args.env, args.seed, settings)
     model = make_model(env, settings, args.seed)
     print(f"MaskablePPO on {args.env}, seed {args.seed}, settings {settings}", flush=True)
