@@ -472,7 +472,9 @@ def _solve_once(products: Products, options: MilpOptions, entries: dict[int, np.
 
     # ---- phase 1: maximum flow
     note("routing MILP, phase 1 of 2: maximum flow")
-    guess = guess_routing(g.n_nodes, src_node, eu, ev, grp, c5_edges, group_col >= 0, tgt)
+    guess = guess_routing(
+        g.n_nodes, src_node, eu, ev, grp, c5_edges, group_col >= 0, tgt, traps=_trap_test(products, groups, entries)
+    )
     x_guess = _guess_solution(products, layout, guess, entries, options, place_col, state_places, groups)
     if x_guess is not None and guess.flow == guess.upper_bound:
         x, status1, gap1 = x_guess, "optimal", 0.0  # the flow upper bound is attained: proven
@@ -614,6 +616,23 @@ def _guess_solution(
             return None
         x[fl.cols] = value
     return x
+
+
+def _trap_test(products: Products, groups: CutGroups, entries: dict[int, np.ndarray]) -> Callable[[np.ndarray], bool] | None:
+    """Whether a cut set (``bool`` per group) traps an entry node, for the heuristic."""
+    if not entries:
+        return None
+    from .verify import trapped_entries_of
+
+    g, ts = products.virtual, products.ts
+
+    def traps(cut: np.ndarray) -> bool:
+        e = np.flatnonzero(cut[groups.of_edge])
+        blocked = np.zeros((g.n_hist, ts.n_moves), dtype=bool)
+        blocked[g.hist[g.src[e]], g.move[e]] = True
+        return bool(trapped_entries_of(products, blocked, entries))
+
+    return traps
 
 
 def _set_solution(h: highspy.Highs, x: np.ndarray) -> None:

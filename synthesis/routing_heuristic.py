@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from collections import deque
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 import scipy.sparse as sp
@@ -64,6 +65,7 @@ def guess_routing(
     has_var: np.ndarray,
     target: np.ndarray,
     max_rounds: int = 200,
+    traps: Callable[[np.ndarray], bool] | None = None,
 ) -> RoutingGuess:
     """Greedy valid cut set with large flow (see the module docstring).
 
@@ -79,6 +81,10 @@ def guess_routing(
         ``bool`` per group: the group may be cut; other groups are always open.
     target
         ``bool`` per node: ``Tgt``.
+    traps
+        Whether a cut set (``bool`` per group) traps the system (the feasibility
+        constraints c6-c8); an augmenting path whose cut set traps is rejected
+        unless the current one traps already.
     """
     m = eu.size
     usable = ~(c5 & target[ev])
@@ -95,9 +101,15 @@ def guess_routing(
         reach = reachable(n, eu[keep], ev[keep], np.arange(n) == src)
         return not np.any(reach & target), reach
 
-    ok, _ = separated(is_open)
+    def border(reach: np.ndarray) -> np.ndarray:
+        cut = np.zeros(has_var.size, dtype=bool)
+        cut[grp[c5 & reach[eu] & ~reach[ev]]] = True
+        return cut
+
+    ok, reach = separated(is_open)
     if not ok:  # even cutting every cuttable group leaves a path outside I
         return RoutingGuess(0, upper, f.astype(float), np.zeros(has_var.size, dtype=bool), np.zeros(n, dtype=bool))
+    trapping = traps is not None and traps(border(reach))
     flow = 0
     for _ in range(max_rounds):
         if flow >= upper:
@@ -109,7 +121,11 @@ def guess_routing(
         new = np.unique(grp[edges[forward & ~is_open[grp[edges]]]])
         trial = is_open.copy()
         trial[new] = True
-        ok, _ = separated(trial)
+        ok, reach = separated(trial)
+        if ok and traps is not None and not trapping:
+            ok = not traps(border(reach))
+        elif ok and traps is not None:
+            trapping = traps(border(reach))
         if ok:
             is_open = trial
             f[edges[forward]] = True
@@ -118,10 +134,7 @@ def guess_routing(
         else:
             forbidden[new] = True
     _, reach = separated(is_open)
-    border = c5 & reach[eu] & ~reach[ev]
-    cut = np.zeros(has_var.size, dtype=bool)
-    cut[grp[border]] = True
-    return RoutingGuess(flow, upper, f.astype(float), cut, reach)
+    return RoutingGuess(flow, upper, f.astype(float), border(reach), reach)
 
 
 def _augmenting_path(
