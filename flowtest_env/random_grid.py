@@ -1,16 +1,10 @@
 """Seeded random grid worlds (the paper's scalability study, paper-examples.md) as test pools.
 
-An instance is an empty ``size x size`` grid whose special cells are drawn uniformly
-without replacement: first the start, then the goal, then one cell per remaining
-proposition. An instance whose problem is inconsistent (no test exists) is redrawn
-from the next attempt of the same seed, so a seed always names the same instance.
-
-Spec families for a size parameter ``n``:
-
-* ``reachability``: ``phi_sys = F p0`` (``p0`` the goal), ``phi_test = F p1 & ... & F pn``;
-* ``reaction``: ``phi_sys = F p1 & G(p2 -> F q2) & ... & G(pn -> F qn)`` (``p1`` the goal),
-  ``phi_test = F p0 & F p2 & ... & F pn``;
-* ``safety``: ``phi_sys = F p1 & G !p2 & ... & G !pn`` (``p1`` the goal), ``phi_test = F p0``.
+The instances themselves (spec families, seeded draws, redraws) live in the pure
+:mod:`synthesis.random_grid`; this module only synthesizes them into artifacts and
+caches the pools. A pool instance is the first attempt of its seed for which a test of
+the pool's kind is synthesized (an inconsistent attempt is redrawn), so a seed always
+names the same test.
 
 Pools are synthesized once and cached in memory and on disk (:func:`random_pool`).
 """
@@ -21,69 +15,16 @@ import json
 import os
 from pathlib import Path
 
-import numpy as np
-
 from synthesis.artifact import TestArtifact, artifact_of
-from synthesis.errors import InconsistentProblem
 from synthesis.pipeline import synthesize
-from synthesis.problems import Problem, make_problem
+from synthesis.random_grid import FAMILIES, MAX_ATTEMPTS, family_objectives, first_consistent, random_problem
 from synthesis.summary import summary_of
-from synthesis.systems import grid_world
 
 from .artifacts import cache_dir
 
-FAMILIES: tuple[str, ...] = ("reachability", "reaction", "safety")
-MAX_ATTEMPTS = 50
+__all__ = ["FAMILIES", "MAX_ATTEMPTS", "family_objectives", "random_problem", "random_artifact", "random_pool", "pool_path"]
+
 POOL_FORMAT = 1
-
-
-def family_objectives(family: str, n: int) -> tuple[str, str, list[str], str]:
-    """``(phi_sys, phi_test, propositions in drawing order after the goal, goal)``.
-
-    Raises
-    ------
-    ValueError
-        On an unknown family or an ``n`` out of range.
-    """
-    if family not in FAMILIES:
-        raise ValueError(f"unknown spec family {family!r}; expected one of {', '.join(FAMILIES)}")
-    low = 1 if family == "reachability" else 2
-    if not (low <= n <= 8):
-        raise ValueError(f"spec size n={n} out of range {low}..8 for the {family} family")
-    if family == "reachability":
-        return "F p0", " & ".join(f"F p{i}" for i in range(1, n + 1)), [f"p{i}" for i in range(1, n + 1)], "p0"
-    if family == "reaction":
-        sys = " & ".join(["F p1"] + [f"G(p{i} -> F q{i})" for i in range(2, n + 1)])
-        test = " & ".join(["F p0"] + [f"F p{i}" for i in range(2, n + 1)])
-        props = ["p0"] + [f"p{i}" for i in range(2, n + 1)] + [f"q{i}" for i in range(2, n + 1)]
-        return sys, test, props, "p1"
-    sys = " & ".join(["F p1"] + [f"G !p{i}" for i in range(2, n + 1)])
-    return sys, "F p0", ["p0"] + [f"p{i}" for i in range(2, n + 1)], "p1"
-
-
-def random_problem(size: int, family: str, n: int, seed: int, attempt: int = 0, kind: str = "reactive") -> Problem:
-    """The random grid instance of ``(size, family, n, seed, attempt)``.
-
-    Raises
-    ------
-    ValueError
-        If the grid is too small for the special cells.
-    """
-    sys_obj, test_obj, props, goal_prop = family_objectives(family, n)
-    cells = [(r, c) for r in range(size) for c in range(size)]
-    if len(cells) < len(props) + 2:
-        raise ValueError(f"a {size}x{size} grid has too few cells for {len(props) + 2} special cells")
-    rng = np.random.default_rng([seed, attempt])
-    pick = rng.choice(len(cells), size=len(props) + 2, replace=False)
-    start, goal = cells[int(pick[0])], cells[int(pick[1])]
-    labels: dict[tuple[int, int], list[str]] = {goal: [goal_prop]}
-    tokens = {start: "S", goal: "T"}
-    for p, i in zip(props, pick[2:]):
-        labels[cells[int(i)]] = [p]
-        tokens[cells[int(i)]] = p
-    ts = grid_world(cells, size, size, start, [goal], labels, tokens)
-    name = f"random-{size}x{size}-{family}{n}-{kind}-s{seed}"
-    return make_problem(name, ts, sys_obj, test_obj, kind, description=f"random grid, seed {seed}, attempt {attempt}")
 
 
 def random_artifact(size: int, family: str, n: int, seed: int, kind: str = "reactive") -> TestArtifact:
@@ -94,14 +35,9 @@ def random_artifact(size: int, family: str, n: int, seed: int, kind: str = "reac
     RuntimeError
         If no attempt among :data:`MAX_ATTEMPTS` is consistent.
     """
-    for attempt in range(MAX_ATTEMPTS):
-        problem = random_problem(size, family, n, seed, attempt, kind)
-        try:
-            test = synthesize(problem)
-        except InconsistentProblem:
-            continue
-        return artifact_of(test, summary_of(test))
-    raise RuntimeError(f"no consistent random grid for seed {seed} in {MAX_ATTEMPTS} attempts")
+    _, _, test = first_consistent(size, family, n, seed, kind, accept=synthesize)
+    assert test is not None  # synthesize returns a test or raises
+    return artifact_of(test, summary_of(test))
 
 
 _POOLS: dict[tuple[int, str, int, tuple[int, ...], str], list[TestArtifact]] = {}
