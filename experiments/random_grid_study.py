@@ -7,6 +7,7 @@ Usage::
     .venv/bin/python -m experiments.random_grid_study --families reaction:4 --sizes 20 --instances 5
     .venv/bin/python -m experiments.random_grid_study --ray [--ray-address HOST:PORT] [--workers 2]
     .venv/bin/python -m experiments.random_grid_study --gurobi              # vs Gurobi, 5x5..9x9 static
+    .venv/bin/python -m experiments.random_grid_study --report DIR [DIR ...]   # tables of earlier runs
 
 Every spec family of the paper (:data:`synthesis.random_grid.PAPER_SPECS`) times every
 grid size times ``--instances`` seeded instances, each solved with MILP-static and
@@ -532,7 +533,20 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--workers", type=int, default=None, help="CPUs of a local Ray runtime (default: every core)")
     ap.add_argument("--gurobi", action="store_true", help="also solve the paper's MILP-static formulation on Gurobi")
     ap.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
+    ap.add_argument(
+        "--report", nargs="+", type=Path, metavar="DIR",
+        help="run nothing: print the tables of the records in these output directories together",
+    )
     args = ap.parse_args(argv)
+
+    if args.report:
+        recs = [r for d in args.report for r in read_records(d / "records.jsonl")]
+        recs.sort(key=_order)
+        if any(not r.get("gurobi") for r in recs):
+            print(study_table(recs) + "\n")
+        if any(r.get("gurobi") for r in recs):
+            print(gurobi_table(recs))
+        return 0
 
     if args.instances < 1:
         ap.error("--instances must be at least 1")

@@ -106,6 +106,8 @@ def test_command_line_writes_every_output(tmp_path: Path) -> None:
     # --resume keeps what is done and runs nothing new
     assert study.main(["--families", "reachability:1", "--sizes", "5", "--instances", "1", "--time-limit", "60", "--out", str(out), "-q", "--resume"]) == 0
     assert len((out / "records.jsonl").read_text().splitlines()) == 2
+    # --report prints the tables of earlier runs without running anything
+    assert study.main(["--report", str(out)]) == 0
 
 
 def test_family_option_parsing() -> None:
