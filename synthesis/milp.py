@@ -273,11 +273,15 @@ def check_consistency(products: Products) -> np.ndarray:
     return co
 
 
+EAGER_FLOW_LIMIT = 200_000  # histories x G_sys edges up to which all feasibility flows go in at once
+
+
 def solve_routing(products: Products, options: MilpOptions | None = None) -> RoutingResult:
     """Solve the routing MILP for least-restrictive cuts (method.md §5, §7).
 
     The feasibility flows (c6-c8) are added where they bind: MILP-static starts without
-    them (method.md §5), the others with all of them; the answer is checked by graph
+    them (method.md §5), the others with all of them unless that would swamp the model
+    (``EAGER_FLOW_LIMIT``); the answer is checked by graph
     search, and the flows of the histories whose entry nodes it traps are added, until
     no entry node is trapped. A relaxation's optimum that
     satisfies every omitted constraint is optimal for the full model, so the answer is
@@ -303,15 +307,23 @@ def solve_routing(products: Products, options: MilpOptions | None = None) -> Rou
     from .verify import trapped_configurations, trapped_entries_of
 
     options = options or MilpOptions()
-    # reactive models start with every history's flows (adding them lazily costs more
-    # rounds than it saves there); static ones start without, as the method says
-    entries: dict[int, np.ndarray] = {} if options.mode == "static" else dict(products.kept_entries)
+    # small reactive models start with every history's flows (adding them lazily costs
+    # more rounds than it saves there); static ones start without, as the method says,
+    # and so do reactive ones whose flows would swamp the model
+    eager = options.mode != "static" and len(products.kept_entries) * products.system.src.size <= EAGER_FLOW_LIMIT
+    entries: dict[int, np.ndarray] = dict(products.kept_entries) if eager else {}
+    deadline = None if options.time_limit is None else time.perf_counter() + options.time_limit
     rounds = 0
     while True:
         rounds += 1
-        result = _solve_once(products, options, entries)
-        blocked = blocked_by(products, result)
-        trapped = trapped_entries_of(products, blocked, _with_extra(products.kept_entries, entries))
+        try:
+            result = _solve_once(products, options, entries, deadline)
+        except _FlowsBind as more:
+            # the phase-1 answer already traps: add those flows before phase 2
+            trapped = more.trapped
+        else:
+            blocked = blocked_by(products, result)
+            trapped = trapped_entries_of(products, blocked, _with_extra(products.kept_entries, entries))
         if not trapped:
             traps = trapped_configurations(products, blocked) if options.closed_loop else np.zeros(0, dtype=np.int64)
             if traps.size == 0:
@@ -354,8 +366,21 @@ def blocked_by(products: Products, result: RoutingResult) -> np.ndarray:
     return blocked
 
 
-def _solve_once(products: Products, options: MilpOptions, entries: dict[int, np.ndarray]) -> RoutingResult:
-    """One solve of the routing MILP with feasibility flows for the given entry nodes."""
+class _FlowsBind(Exception):
+    """Phase 1's answer traps entry nodes whose feasibility flows the model lacks."""
+
+    def __init__(self, trapped: dict[int, np.ndarray]) -> None:
+        super().__init__(f"{len(trapped)} histories trapped")
+        self.trapped = trapped
+
+
+def _solve_once(
+    products: Products, options: MilpOptions, entries: dict[int, np.ndarray], deadline: float | None
+) -> RoutingResult:
+    """One solve of the routing MILP with feasibility flows for the given entry nodes.
+
+    Raises :class:`_FlowsBind` when the maximum-flow answer already traps entry nodes
+    outside ``entries`` (before the costlier fewest-cuts phase)."""
     note = options.progress or (lambda msg: None)
     t0 = time.perf_counter()
     g = products.virtual
@@ -467,7 +492,6 @@ def _solve_once(products: Products, options: MilpOptions, entries: dict[int, np.
     h.passModel(lp)
     out_src = np.flatnonzero(eu == src_node)
     t_solve = time.perf_counter()
-    deadline = None if options.time_limit is None else t_solve + options.time_limit
     layout = _Layout(edges, eu, ev, c5_edges, grp, group_col, f_col, mu_col, m.n_col, groups.of_edge, flows)
 
     # ---- phase 1: maximum flow
@@ -501,6 +525,20 @@ def _solve_once(products: Products, options: MilpOptions, entries: dict[int, np.
             "the test objective cannot be routed without trapping the system: every routing "
             "cut set blocks all executions to the goal",
         )
+
+    missing = {q: v for q, v in products.kept_entries.items() if q not in entries}
+    if missing:
+        from .verify import trapped_entries_of
+
+        cut1 = np.zeros(groups.keys.size, dtype=bool)
+        cut1[var_groups] = x[group_col[var_groups]] > 0.5
+        e1 = np.flatnonzero(cut1[groups.of_edge])
+        blocked1 = np.zeros((g.n_hist, ts.n_moves), dtype=bool)
+        blocked1[g.hist[g.src[e1]], g.move[e1]] = True
+        blocked1 |= (np.isin(groups.move_key, groups.keys[cut1 & groups.static]) & _static_moves(products, options))[None, :]
+        trapped1 = trapped_entries_of(products, blocked1, missing)
+        if trapped1:
+            raise _FlowsBind(trapped1)
 
     # ---- phase 2: fewest cuts (for the agent: fewest blocked states first) at flow F
     note(f"routing MILP, phase 2 of 2: fewest cuts at flow {flow}")
