@@ -73,6 +73,8 @@ MILPS: tuple[str, ...] = ("static", "reactive")
 PAPER_TIME_LIMIT = 660.0  # 10 minutes to a first solution + 1 more minute, as one limit
 GUROBI_SIZES: tuple[int, ...] = (5, 6, 7, 8, 9)
 SOLVED = ("optimal", "feasible")
+GRAPHS_ONLY = "graphs"  # the pseudo-MILP of --graphs-only: build and time the graphs, solve nothing
+_MILP_ORDER = {"static": 0, "reactive": 1, GRAPHS_ONLY: 2}
 #: fields that must not depend on how or where an instance ran
 ANSWER_FIELDS = ("family", "n", "size", "instance", "milp", "attempt", "outcome", "status", "flow", "n_cuts", "cut_digest")
 
@@ -85,7 +87,7 @@ class Task:
     n: int
     size: int
     instance: int
-    milp: str
+    milp: str  # "static", "reactive", or "graphs" (graph construction only, no MILP)
     time_limit: float | None
     threads: int | None
     gurobi: bool = False
@@ -148,21 +150,26 @@ def run_task(task: Task) -> dict:
     }
     try:
         attempt, _, _ = first_consistent(task.size, task.family, task.n, task.instance)
+        rec["attempt"] = attempt
+        # the graphs do not depend on the environment kind; graphs-only runs build the reactive problem's
+        kind = "reactive" if task.milp == GRAPHS_ONLY else task.milp
+        problem = random_problem(task.size, task.family, task.n, task.instance, attempt, kind)
+        # graph construction timed on its own, so every outcome (timeouts too) reports it
+        t_graph = time.perf_counter()
+        spec, products = build_graphs(problem)
+        rec.update(
+            graph_s=time.perf_counter() - t_graph,
+            g_nodes=int(products.virtual.n_nodes),
+            g_edges=int(products.virtual.n_edges),
+            bpi_states=int(spec.dba.n_states),
+        )
+        del spec, products
     except Exception as exc:  # noqa: BLE001 - recorded, the sweep goes on
-        rec["message"] = f"drawing the instance: {exc!r}"
+        rec["message"] = f"drawing the instance or building its graphs: {exc!r}"
         return rec
-    rec["attempt"] = attempt
-    problem = random_problem(task.size, task.family, task.n, task.instance, attempt, task.milp)
-    # graph construction timed on its own, so every outcome (timeouts too) reports it
-    t_graph = time.perf_counter()
-    spec, products = build_graphs(problem)
-    rec.update(
-        graph_s=time.perf_counter() - t_graph,
-        g_nodes=int(products.virtual.n_nodes),
-        g_edges=int(products.virtual.n_edges),
-        bpi_states=int(spec.dba.n_states),
-    )
-    del spec, products
+    if task.milp == GRAPHS_ONLY:
+        rec["outcome"] = GRAPHS_ONLY
+        return rec
     stamps: dict[str, float] = {}
 
     def progress(msg: str) -> None:
@@ -332,7 +339,7 @@ def study_table(records: list[dict]) -> str:
     """
     recs = [r for r in records if not r.get("gurobi")]
     cells = sorted({(r["family"], r["n"], r["size"]) for r in recs}, key=lambda c: (FAMILIES.index(c[0]), c[1], c[2]))
-    milps = [m for m in MILPS if any(r["milp"] == m for r in recs)]
+    milps = [m for m in MILPS if any(r["milp"] == m for r in recs)]  # graphs-only runs fill the graph columns only
     head = ["spec", "|AP|", "grid", "G nodes (mean)", "graphs s"]
     for m in milps:
         head += [f"{m}: solve s", f"{m}: solved", f"{m}: optimal", f"{m}: failures"]
@@ -430,7 +437,7 @@ def write_outputs(out: Path, records: list[dict], config: dict) -> None:
 
 
 def _order(r: dict) -> tuple:
-    return (FAMILIES.index(r["family"]), r["n"], r["size"], r["instance"], MILPS.index(r["milp"]), bool(r.get("gurobi")))
+    return (FAMILIES.index(r["family"]), r["n"], r["size"], r["instance"], _MILP_ORDER[r["milp"]], bool(r.get("gurobi")))
 
 
 def read_records(path: Path) -> list[dict]:
@@ -497,7 +504,9 @@ class Progress:
         el = time.perf_counter() - self.t0
         eta = el / self.done * (self.total - self.done)
         what = f"{rec['family']}|AP|={rec['ap']} {rec['size']}x{rec['size']} #{rec['instance']} {rec['milp']}"
-        if rec["outcome"] in SOLVED:
+        if rec["outcome"] == GRAPHS_ONLY:
+            res = f"G {rec['g_nodes']} nodes / {rec['g_edges']} edges, graphs {rec['graph_s']:.3f}s"
+        elif rec["outcome"] in SOLVED:
             res = f"{rec['outcome']} F={rec['flow']} cuts={rec['n_cuts']} graphs {rec['graph_s']:.2f}s solve {rec['solve_s']:.2f}s"
         else:
             res = f"{rec['outcome'].upper()} {str(rec.get('message', ''))[:80]}"
@@ -532,6 +541,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--ray-address", default=None, help="a Ray cluster's address (implies --ray)")
     ap.add_argument("--workers", type=int, default=None, help="CPUs of a local Ray runtime (default: every core)")
     ap.add_argument("--gurobi", action="store_true", help="also solve the paper's MILP-static formulation on Gurobi")
+    ap.add_argument(
+        "--graphs-only", action="store_true",
+        help="only draw the instances and time their graph construction (no MILP)",
+    )
     ap.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
     ap.add_argument(
         "--report", nargs="+", type=Path, metavar="DIR",
@@ -553,6 +566,10 @@ def main(argv: list[str] | None = None) -> int:
     specs = parse_specs(args.families)
     sizes = args.sizes or list(GUROBI_SIZES if args.gurobi else PAPER_SIZES)
     milps = args.milps or (["static"] if args.gurobi else list(MILPS))
+    if args.graphs_only:
+        if args.gurobi:
+            ap.error("--graphs-only solves nothing: it does not combine with --gurobi")
+        milps = [GRAPHS_ONLY]
     if args.gurobi and "reactive" in milps:
         ap.error("--gurobi compares the MILP-static formulation only")
     if args.gurobi:

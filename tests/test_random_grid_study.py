@@ -110,6 +110,14 @@ def test_command_line_writes_every_output(tmp_path: Path) -> None:
     assert study.main(["--report", str(out)]) == 0
 
 
+def test_graphs_only_times_the_graphs_of_large_grids(tmp_path: Path) -> None:
+    out = tmp_path / "graphs"
+    assert study.main(["--graphs-only", "--families", "reaction:4", "--sizes", "20", "--instances", "1", "--out", str(out), "-q"]) == 0
+    (rec,) = json.loads((out / "results.json").read_text())["records"]
+    assert rec["outcome"] == "graphs" and rec["g_nodes"] > 10_000 and rec["graph_s"] < 60
+    assert "| reaction | 7 | 20x20 |" in (out / "tables.md").read_text()
+
+
 def test_family_option_parsing() -> None:
     assert study.parse_specs(["reaction"]) == [("reaction", 2), ("reaction", 3), ("reaction", 4)]
     assert study.parse_specs(["safety:3", "safety:3"]) == [("safety", 3)]
