@@ -4,6 +4,7 @@ Usage::
 
     python -m experiments.build_artifacts                 # every built-in missing its artifact
     python -m experiments.build_artifacts maze2 --force   # rebuild one, overwriting it
+    python -m experiments.build_artifacts mars-exploration --time-limit 1200
 
 Each artifact goes to ``flowtest_env/artifacts/<name>.json`` (or ``--out DIR``). An
 existing file is never overwritten without ``--force``: the shipped artifacts are what
@@ -21,7 +22,7 @@ from flowtest_env.artifacts import ARTIFACT_DIR, synthesize_artifact
 from synthesis.builtins import BUILTINS
 
 
-def build(names: list[str], out: Path, force: bool) -> int:
+def build(names: list[str], out: Path, force: bool, time_limit: float | None = None) -> int:
     """Synthesize ``names`` into ``out``; returns the process exit code (2 if a file
     exists and ``force`` is off, 1 on an unknown name)."""
     unknown = [n for n in names if n not in BUILTINS]
@@ -38,13 +39,16 @@ def build(names: list[str], out: Path, force: bool) -> int:
     out.mkdir(parents=True, exist_ok=True)
     for name in names:
         t = time.perf_counter()
-        art = synthesize_artifact(name)
+        art = synthesize_artifact(name, time_limit)
         path = out / f"{name}.json"
         tmp = path.with_suffix(".json.tmp")
         art.save(tmp)
         tmp.replace(path)
         s = art.summary
-        print(f"{name}: flow {s['flow']}, {s['n_cuts']} cuts, {time.perf_counter() - t:.1f} s -> {path}", flush=True)
+        print(
+            f"{name}: {s['status']}, flow {s['flow']}, {s['n_cuts']} cuts, {time.perf_counter() - t:.1f} s -> {path}",
+            flush=True,
+        )
     return 0
 
 
@@ -53,12 +57,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("names", nargs="*", help="built-in problems (default: every one without an artifact)")
     ap.add_argument("--force", action="store_true", help="overwrite existing artifacts")
     ap.add_argument("--out", type=Path, default=ARTIFACT_DIR, help=f"output folder (default {ARTIFACT_DIR})")
+    ap.add_argument(
+        "--time-limit", type=float, default=None, metavar="S",
+        help="solver time limit per problem (the answer may then be feasible, not proven optimal)",
+    )
     args = ap.parse_args(argv)
     names = args.names or [n for n in BUILTINS if args.force or not (args.out / f"{n}.json").exists()]
     if not names:
         print("every built-in already has an artifact (use --force to rebuild)")
         return 0
-    return build(names, args.out, args.force)
+    return build(names, args.out, args.force, args.time_limit)
 
 
 if __name__ == "__main__":

@@ -40,8 +40,11 @@ def artifact_path(name: str) -> Path:
     return ARTIFACT_DIR / f"{name}.json"
 
 
-def synthesize_artifact(name: str) -> TestArtifact:
+def synthesize_artifact(name: str, time_limit: float | None = None) -> TestArtifact:
     """Synthesize a built-in problem and wrap it as an artifact (slow: solves a MILP).
+
+    With ``time_limit`` the answer may be feasible rather than proven optimal (its
+    summary says which, with the gap); it is checked all the same.
 
     Raises
     ------
@@ -50,12 +53,12 @@ def synthesize_artifact(name: str) -> TestArtifact:
     """
     from synthesis.artifact import artifact_of
     from synthesis.builtins import BUILTINS
-    from synthesis.pipeline import synthesize
+    from synthesis.pipeline import SynthesisOptions, synthesize
     from synthesis.summary import summary_of
 
     if name not in BUILTINS:
         raise KeyError(f"unknown built-in problem {name!r}; known: {', '.join(sorted(BUILTINS))}")
-    test = synthesize(BUILTINS[name]())
+    test = synthesize(BUILTINS[name](), SynthesisOptions(time_limit=time_limit))
     return artifact_of(test, summary_of(test))
 
 
