@@ -75,6 +75,10 @@ class MilpOptions:
     closed_loop
         Also forbid traps at configurations that are not entry nodes (see
         :func:`solve_routing`); ``False`` (the default) gives method.md §5 exactly.
+    feasibility
+        When the feasibility flows (c6-c8) enter the model: ``"auto"`` (see
+        :func:`solve_routing`), ``"eager"`` (all at once: one round, and every
+        incumbent of a time-limited solve is trap-free) or ``"lazy"`` (where they bind).
     """
 
     mode: str = "reactive"
@@ -88,6 +92,7 @@ class MilpOptions:
     threads: int | None = None
     progress: Callable[[str], None] | None = None
     closed_loop: bool = False
+    feasibility: str = "auto"
 
 
 @dataclass
@@ -310,7 +315,13 @@ def solve_routing(products: Products, options: MilpOptions | None = None) -> Rou
     # small reactive models start with every history's flows (adding them lazily costs
     # more rounds than it saves there); static ones start without, as the method says,
     # and so do reactive ones whose flows would swamp the model
-    eager = options.mode != "static" and len(products.kept_entries) * products.system.src.size <= EAGER_FLOW_LIMIT
+    if options.feasibility not in ("auto", "eager", "lazy"):
+        raise ValueError(f"unknown feasibility option {options.feasibility!r}; expected auto, eager or lazy")
+    eager = options.feasibility == "eager" or (
+        options.feasibility == "auto"
+        and options.mode != "static"
+        and len(products.kept_entries) * products.system.src.size <= EAGER_FLOW_LIMIT
+    )
     entries: dict[int, np.ndarray] = dict(products.kept_entries) if eager else {}
     deadline = None if options.time_limit is None else time.perf_counter() + options.time_limit
     rounds = 0

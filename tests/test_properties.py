@@ -471,3 +471,34 @@ def test_one_way_moves_can_trap_the_system(kind: str) -> None:
 def test_sweep_grid_answers_hold(seed: int, kind: str) -> None:
     """A larger sweep of the grid properties (30 s per solve at most)."""
     run_case(grid_problem(60_000 + seed, kind), time_limit=30.0)
+
+
+@pytest.mark.parametrize("kind", ["static", "reactive"])
+@pytest.mark.parametrize("seed", range(12))
+def test_feasibility_flows_eager_or_lazy_give_the_same_optimum(seed: int, kind: str) -> None:
+    """Adding c6-c8 all at once or only where they bind is the same MILP optimum."""
+    from synthesis.milp import solve_routing
+    from synthesis.pipeline import milp_options
+
+    problem = grid_problem(40_000 + seed, kind)
+    _, products = build_graphs(problem)
+    answers = []
+    for feasibility in ("eager", "lazy"):
+        options = milp_options(problem, SynthesisOptions())
+        options.feasibility = feasibility
+        try:
+            r = solve_routing(products, options)
+        except InconsistentProblem as exc:
+            answers.append(exc.reason)
+            continue
+        assert r.status == "optimal"
+        answers.append((r.flow, int(np.sum(r.cut_edges.size))))
+    assert answers[0] == answers[1], answers
+
+
+def test_unknown_feasibility_option_is_rejected() -> None:
+    from synthesis.milp import MilpOptions, solve_routing
+
+    _, products = build_graphs(grid_problem(40_000, "reactive"))
+    with pytest.raises(ValueError, match="feasibility"):
+        solve_routing(products, MilpOptions(feasibility="sometimes"))
