@@ -279,6 +279,32 @@ def _slug(text: str) -> str:
     return "".join(ch if ch.isalnum() else "-" for ch in text).strip("-").lower()
 
 
+def _trace_legend(ax: Any, game: Any) -> list[Any]:
+    """Legend entries for the path markers and the renderer's symbols, so a newcomer can
+    read a trace picture without the env docs."""
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
+    from flowtest_env import render
+
+    def rgb(c: tuple[int, int, int]) -> tuple[float, ...]:
+        return tuple(x / 255 for x in c)
+
+    handles, _ = ax.get_legend_handles_labels()
+    marker = {"linestyle": "", "markersize": 10}
+    handles += [
+        Line2D([], [], marker="o", color=rgb(render.SYSTEM), label="system under test", **marker),
+        Patch(facecolor=rgb(render.GOAL), label="goal"),
+        Line2D([], [], marker="o", markerfacecolor="none", markeredgewidth=2, color=rgb(render.TEST_CELL),
+               label="hidden test cell", **marker),
+        Patch(facecolor=rgb(render.BLOCKED), label="blocked cell"),
+        Line2D([], [], color=rgb(render.WALL), lw=4, label="wall"),
+    ]
+    if game.artifact.kind == "agent":
+        handles.append(Line2D([], [], marker="D", color=rgb(render.AGENT), label="test agent", **marker))
+    return handles
+
+
 def trace_picture(trace: Trace, path: Path) -> None:
     """Draw a run: on grids the engineer's view (walls, hidden test cells) at the end of
     the run with the SUT's path numbered step by step; on graphs a strip of frames."""
@@ -323,7 +349,8 @@ def trace_picture(trace: Trace, path: Path) -> None:
                 ax.annotate(str(step), (x + (n - 1) * tile * 0.22, y - tile * 0.28), color="black", fontsize=9,
                             ha="center", va="center", zorder=5,
                             bbox={"boxstyle": "round,pad=0.12", "fc": "white", "ec": "none", "alpha": 0.8})
-        ax.legend(loc="upper right", bbox_to_anchor=(1.0, -0.01), ncol=2, fontsize=9, frameon=False)
+        ax.legend(handles=_trace_legend(ax, game), loc="upper center", bbox_to_anchor=(0.5, -0.01), ncol=4,
+                  fontsize=8, frameon=False)
         ax.set_axis_off()
         ax.set_title(title, fontsize=10)
     else:
