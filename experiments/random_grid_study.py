@@ -8,6 +8,7 @@ Usage::
     .venv/bin/python -m experiments.random_grid_study --ray [--ray-address HOST:PORT] [--workers 2]
     .venv/bin/python -m experiments.random_grid_study --gurobi              # vs Gurobi, 5x5..9x9 static
     .venv/bin/python -m experiments.random_grid_study --report DIR [DIR ...]   # tables of earlier runs
+    .venv/bin/python -m experiments.random_grid_study --graphs-only         # graph construction only
 
 Every spec family of the paper (:data:`synthesis.random_grid.PAPER_SPECS`) times every
 grid size times ``--instances`` seeded instances, each solved with MILP-static and
