@@ -34,7 +34,7 @@ from typing import Callable
 import highspy
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import breadth_first_order, maximum_flow
+from scipy.sparse.csgraph import breadth_first_order
 
 from .errors import InconsistentProblem
 from .products import Products, coreachable, reachable
@@ -369,11 +369,14 @@ def _with_extra(kept: dict[int, np.ndarray], extra: dict[int, np.ndarray]) -> di
 
 def blocked_by(products: Products, result: RoutingResult) -> np.ndarray:
     """``bool[n_hist, n_moves]``: the moves a routing answer restricts under each history."""
-    g, ts = products.virtual, products.ts
-    blocked = np.zeros((g.n_hist, ts.n_moves), dtype=bool)
-    e = result.cut_edges
-    blocked[g.hist[g.src[e]], g.move[e]] = True
-    blocked |= result.static_moves_cut[None, :]
+    return _blocked_of_edges(products, result.cut_edges) | result.static_moves_cut[None, :]
+
+
+def _blocked_of_edges(products: Products, edges: np.ndarray) -> np.ndarray:
+    """``bool[n_hist, n_moves]``: the moves cut edges of G restrict, under the history of their tail."""
+    g = products.virtual
+    blocked = np.zeros((g.n_hist, products.ts.n_moves), dtype=bool)
+    blocked[g.hist[g.src[edges]], g.move[edges]] = True
     return blocked
 
 
@@ -543,9 +546,7 @@ def _solve_once(
 
         cut1 = np.zeros(groups.keys.size, dtype=bool)
         cut1[var_groups] = x[group_col[var_groups]] > 0.5
-        e1 = np.flatnonzero(cut1[groups.of_edge])
-        blocked1 = np.zeros((g.n_hist, ts.n_moves), dtype=bool)
-        blocked1[g.hist[g.src[e1]], g.move[e1]] = True
+        blocked1 = _blocked_of_edges(products, np.flatnonzero(cut1[groups.of_edge]))
         blocked1 |= (np.isin(groups.move_key, groups.keys[cut1 & groups.static]) & _static_moves(products, options))[None, :]
         trapped1 = trapped_entries_of(products, blocked1, missing)
         if trapped1:
@@ -639,14 +640,6 @@ def _guess_solution(
         if excluded and set(excluded) <= cut_keys:
             return None
     g, ts = products.virtual, products.ts
-    if entries:
-        from .verify import trapped_entries_of
-
-        cut_all = np.flatnonzero(cut_mask[lay.group_of_edge])
-        blocked = np.zeros((g.n_hist, ts.n_moves), dtype=bool)
-        blocked[g.hist[g.src[cut_all]], g.move[cut_all]] = True
-        if trapped_entries_of(products, blocked, entries):
-            return None
     x = np.zeros(lay.n_col)
     x[lay.f_col] = guess.edge_flow
     cols = np.flatnonzero(lay.group_col >= 0)
@@ -661,7 +654,7 @@ def _guess_solution(
     sys_targets = products.system_target
     for fl in lay.flows:
         value = fl.tree_flow(products.system.n_nodes, is_cut, sys_targets)
-        if value is None:
+        if value is None:  # the cuts trap an entry node of this history
             return None
         x[fl.cols] = value
     return x
@@ -673,12 +666,8 @@ def _trap_test(products: Products, groups: CutGroups, entries: dict[int, np.ndar
         return None
     from .verify import trapped_entries_of
 
-    g, ts = products.virtual, products.ts
-
     def traps(cut: np.ndarray) -> bool:
-        e = np.flatnonzero(cut[groups.of_edge])
-        blocked = np.zeros((g.n_hist, ts.n_moves), dtype=bool)
-        blocked[g.hist[g.src[e]], g.move[e]] = True
+        blocked = _blocked_of_edges(products, np.flatnonzero(cut[groups.of_edge]))
         return bool(trapped_entries_of(products, blocked, entries))
 
     return traps
