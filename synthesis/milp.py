@@ -284,16 +284,17 @@ EAGER_FLOW_LIMIT = 200_000  # histories x G_sys edges up to which all feasibilit
 def solve_routing(products: Products, options: MilpOptions | None = None) -> RoutingResult:
     """Solve the routing MILP for least-restrictive cuts (method.md §5, §7).
 
-    The feasibility flows (c6-c8) are added where they bind: MILP-static starts without
-    them (method.md §5), the others with all of them unless that would swamp the model
-    (``EAGER_FLOW_LIMIT``); the answer is checked by graph
-    search, and the flows of the histories whose entry nodes it traps are added, until
-    no entry node is trapped. A relaxation's optimum that
-    satisfies every omitted constraint is optimal for the full model, so the answer is
-    the optimum of method.md §5, reached with the flows only where they bind. This also
-    covers MILP-static, whose "feasibility iff F >= 1" shortcut fails when the system
-    objective has histories of its own (a delayed reaction can leave an entry node with
-    no way to the goal behind static walls).
+    MILP-static has no feasibility flows (c6-c8), as method.md §5 says: static walls
+    are part of the map the system sees from its first step, so a correct system
+    plans around them, and the test is feasible iff a successful run exists under
+    them (``F >= 1``). An entry node that the walls alone doom is one no correct
+    system enters (the environments call a run there violated: the system's fault).
+    The other variants add the flows where they bind: all of them at once unless
+    that would swamp the model (``EAGER_FLOW_LIMIT``), else lazily: the answer is
+    checked by graph search, and the flows of the histories whose entry nodes it
+    traps are added, until no entry node is trapped. A relaxation's optimum that
+    satisfies every omitted constraint is optimal for the full model, so the answer
+    is the optimum of method.md §5, reached with the flows only where they bind.
 
     Beyond the method (with ``options.closed_loop``), closed-loop configurations that
     the restrictions trap although they are not entry nodes are added as entry nodes
@@ -313,28 +314,27 @@ def solve_routing(products: Products, options: MilpOptions | None = None) -> Rou
 
     options = options or MilpOptions()
     # small reactive models start with every history's flows (adding them lazily costs
-    # more rounds than it saves there); static ones start without, as the method says,
-    # and so do reactive ones whose flows would swamp the model
+    # more rounds than it saves there); reactive ones whose flows would swamp the model
+    # start without
     if options.feasibility not in ("auto", "eager", "lazy"):
         raise ValueError(f"unknown feasibility option {options.feasibility!r}; expected auto, eager or lazy")
+    required = required_entries(products, options)
     eager = options.feasibility == "eager" or (
-        options.feasibility == "auto"
-        and options.mode != "static"
-        and len(products.kept_entries) * products.system.src.size <= EAGER_FLOW_LIMIT
+        options.feasibility == "auto" and len(required) * products.system.src.size <= EAGER_FLOW_LIMIT
     )
-    entries: dict[int, np.ndarray] = dict(products.kept_entries) if eager else {}
+    entries: dict[int, np.ndarray] = dict(required) if eager else {}
     deadline = None if options.time_limit is None else time.perf_counter() + options.time_limit
     rounds = 0
     while True:
         rounds += 1
         try:
-            result = _solve_once(products, options, entries, deadline)
+            result = _solve_once(products, options, entries, required, deadline)
         except _FlowsBind as more:
             # the phase-1 answer already traps: add those flows before phase 2
             trapped = more.trapped
         else:
             blocked = blocked_by(products, result)
-            trapped = trapped_entries_of(products, blocked, _with_extra(products.kept_entries, entries))
+            trapped = trapped_entries_of(products, blocked, _with_extra(required, entries))
         if not trapped:
             traps = trapped_configurations(products, blocked) if options.closed_loop else np.zeros(0, dtype=np.int64)
             if traps.size == 0:
@@ -346,7 +346,7 @@ def solve_routing(products: Products, options: MilpOptions | None = None) -> Rou
                 trapped[int(q)] = products.projection[traps[products.virtual.hist[traps] == q]]
         grew = False
         for q, nodes in trapped.items():
-            base = entries.get(q, products.kept_entries.get(q, np.zeros(0, dtype=np.int64)))
+            base = entries.get(q, required.get(q, np.zeros(0, dtype=np.int64)))
             merged = np.union1d(base, nodes)
             grew |= q not in entries or merged.size > entries[q].size
             entries[q] = merged
@@ -358,6 +358,13 @@ def solve_routing(products: Products, options: MilpOptions | None = None) -> Rou
             return result
         if options.progress:
             options.progress(f"routing MILP: adding feasibility flows for {len(trapped)} trapped histories")
+
+
+def required_entries(products: Products, options: MilpOptions) -> dict[int, np.ndarray]:
+    """Per history, the G_sys entry nodes the feasibility flows must serve: none for
+    MILP-static (its walls are on the map, see :func:`solve_routing`), else the kept
+    entry nodes of method.md §5."""
+    return {} if options.mode == "static" else products.kept_entries
 
 
 def _with_extra(kept: dict[int, np.ndarray], extra: dict[int, np.ndarray]) -> dict[int, np.ndarray]:
@@ -389,12 +396,16 @@ class _FlowsBind(Exception):
 
 
 def _solve_once(
-    products: Products, options: MilpOptions, entries: dict[int, np.ndarray], deadline: float | None
+    products: Products,
+    options: MilpOptions,
+    entries: dict[int, np.ndarray],
+    required: dict[int, np.ndarray],
+    deadline: float | None,
 ) -> RoutingResult:
     """One solve of the routing MILP with feasibility flows for the given entry nodes.
 
-    Raises :class:`_FlowsBind` when the maximum-flow answer already traps entry nodes
-    outside ``entries`` (before the costlier fewest-cuts phase)."""
+    Raises :class:`_FlowsBind` when the maximum-flow answer already traps ``required``
+    entry nodes outside ``entries`` (before the costlier fewest-cuts phase)."""
     note = options.progress or (lambda msg: None)
     t0 = time.perf_counter()
     g = products.virtual
@@ -540,7 +551,7 @@ def _solve_once(
             "cut set blocks all executions to the goal",
         )
 
-    missing = {q: v for q, v in products.kept_entries.items() if q not in entries}
+    missing = {q: v for q, v in required.items() if q not in entries}
     if missing:
         from .verify import trapped_entries_of
 

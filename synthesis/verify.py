@@ -8,7 +8,11 @@ enforce and search the product graphs directly.
   reaches the goal without passing the test objective;
 * **flow**: the maximum flow on G without the restricted edges equals the MILP's F;
 * **feasibility** (Theorem 2): from every history's kept entry nodes, ``Tgt_sys`` is
-  reachable on G_sys over moves not restricted under that history;
+  reachable on G_sys over moves not restricted under that history. Static walls are
+  on the map the system sees from its first step, so an entry node is kept when
+  ``Tgt_sys`` is reachable from it on that map (T without the walls): one the walls
+  alone doom is entered by no correct system. For a purely static test this leaves
+  ``F >= 1`` as its feasibility, as method.md §5 says;
 * **no trap in the closed loop**: no configuration reachable under the restrictions
   loses, through them, a way to the goal it would otherwise have.
 """
@@ -78,9 +82,20 @@ def trapped_entries_of(products: Products, blocked: np.ndarray, entries: dict[in
     return out
 
 
+def entries_on_map(products: Products, static_obstacles: np.ndarray) -> dict[int, np.ndarray]:
+    """Per history, the kept entry nodes (of G_sys) that can reach ``Tgt_sys`` on the map
+    the system sees: T without the static walls ``static_obstacles`` (``bool[n_moves]``)."""
+    gs = products.system
+    keep = ~static_obstacles[gs.move]
+    ok = coreachable(gs.n_nodes, gs.src[keep], gs.dst[keep], products.system_target)
+    out = {q: nodes[ok[nodes]] for q, nodes in products.kept_entries.items()}
+    return {q: nodes for q, nodes in out.items() if nodes.size}
+
+
 def trapped_entries(products: Products, strategy: TestStrategy) -> dict[int, np.ndarray]:
-    """Per history, kept entry nodes (of G_sys) with no way to ``Tgt_sys`` under its restrictions."""
-    return trapped_entries_of(products, strategy.blocked, products.kept_entries)
+    """Per history, entry nodes (of G_sys) kept on the map with no way to ``Tgt_sys``
+    under that history's restrictions."""
+    return trapped_entries_of(products, strategy.blocked, entries_on_map(products, strategy.static_obstacles))
 
 
 def trapped_configurations(products: Products, blocked: np.ndarray) -> np.ndarray:

@@ -805,10 +805,27 @@ def test_static_trap_instance_by_enumeration() -> None:
     assert not feasible_static(v, blocked)
 
 
-def test_static_walls_never_trap_the_system() -> None:
-    """MILP-static must return the best wall set that keeps the system a way to its goal."""
+def test_static_walls_are_on_the_map() -> None:
+    """MILP-static returns the method's optimum: the walls are on the map, so a system
+    that knows them never needs to enter p, and only ``F >= 1`` is required (method.md §5);
+    the game calls a run that enters p anyway violated by the system, not trapped by the test.
+    With ``closed_loop`` the stricter optimum, which traps no configuration at all."""
+    from flowtest_env.game import TestGame
+    from synthesis.artifact import artifact_of
+    from synthesis.summary import summary_of
+
     res = synthesize(trap_instance(), METHOD_EXACT)
-    assert (res.routing.flow, int(res.routing.cut_edges.size)) == (1, 6)
+    assert (res.routing.flow, int(res.routing.cut_edges.size)) == (1, 2)
+    assert res.checks.trapped_nodes.size > 0  # reported, not failed: S -> p -> q with the wall up
+    game = TestGame(artifact_of(res, summary_of(res)))
+    ts = res.problem.system
+    h = game.reset().history
+    for cell in [(1, 1), (1, 0)]:  # S -> p -> q
+        h = game.next_history[h][ts.index(cell)]
+    assert game.doomed[h][ts.index((1, 0))]
+    strict = synthesize(trap_instance(), SynthesisOptions(closed_loop=True))
+    assert (strict.routing.flow, int(strict.routing.cut_edges.size)) == (1, 6)
+    assert strict.checks.trapped_nodes.size == 0
 
 
 @pytest.mark.slow
