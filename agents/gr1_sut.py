@@ -45,7 +45,7 @@ import numpy as np
 
 from synthesis.gr1 import GR1Game, GR1Strategy, solve, verify_strategy
 
-from .base import Policy, action_mask_of, register_policy
+from .base import Policy, register_policy
 from .scripted import SystemProduct, _safe_wait, _Tracked
 
 Blocked = frozenset[tuple[int, int]]
@@ -125,12 +125,7 @@ class GR1SUT(_Tracked):
         return self._strategies[key]
 
     def act(self, observation: Any, info: dict[str, Any]) -> int:
-        s, q = self._observe(info)
-        mask = action_mask_of(observation, info)
-        game, prod = self.game, self.product
-        assert game is not None and prod is not None
-        v = prod.node(s, q)
-        now = self._remember(s, v, mask)
+        game, prod, v, mask, now = self._situation(observation, info)
         strat = self._controller(frozenset(self.known), v)
         if strat is None or strat.next_position[0, v] < 0:
             self.known = now

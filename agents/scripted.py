@@ -192,16 +192,25 @@ class _Tracked:
         return s, self.q
 
 
-class Replanner(_Tracked):
-    """The correct scripted SUT (see the module docstring)."""
-
-    def act(self, observation: Any, info: dict[str, Any]) -> int:
+    def _situation(
+        self, observation: Any, info: dict[str, Any]
+    ) -> tuple[TestGame, SystemProduct, int, np.ndarray, set[tuple[int, int]]]:
+        """What a product-graph SUT knows before it acts: the game, its product graph,
+        its node there, the legal-action mask and the restrictions active now (also
+        remembered, see :meth:`_remember`)."""
         s, q = self._observe(info)
         mask = action_mask_of(observation, info)
         game, prod = self.game, self.product
         assert game is not None and prod is not None
         v = prod.node(s, q)
-        now_blocked = self._remember(s, v, mask)
+        return game, prod, v, mask, self._remember(s, v, mask)
+
+
+class Replanner(_Tracked):
+    """The correct scripted SUT (see the module docstring)."""
+
+    def act(self, observation: Any, info: dict[str, Any]) -> int:
+        game, prod, v, mask, now_blocked = self._situation(observation, info)
         dist = prod.distances(frozenset(self.known))
         if dist[v] >= INF:
             self.known = set(now_blocked)

@@ -225,7 +225,7 @@ class raw_env(AECEnv):  # noqa: N801 - PettingZoo's module shape
         """``{"observation", "action_mask"}`` of ``agent`` now (see the module docstring)."""
         if agent == SYSTEM:
             return {"observation": self.encoder.encode(self.run), "action_mask": self.system_mask()}
-        g, run = self.game, self.run
+        run = self.run
         obs = np.zeros(self._observation_spaces[TESTER]["observation"].shape, dtype=np.float32)
         obs[run.system] = 1.0
         obs[self._n_states + run.history] = 1.0

@@ -305,8 +305,6 @@ class GraphRenderer:
         from matplotlib.backends.backend_agg import FigureCanvasAgg
         from matplotlib.figure import Figure
 
-        from .encoding import system_propositions
-
         self.game, self.view = game, view
         ts = game.ts
         g = nx.DiGraph()
@@ -329,7 +327,6 @@ class GraphRenderer:
                 arrowprops={"arrowstyle": "-|>", "color": "0.55", "lw": 1.2, "shrinkA": 14, "shrinkB": 14,
                             "connectionstyle": f"arc3,rad={ARC_RAD}"},
             )
-        props = system_propositions(game)
         test_props = hidden_propositions(game) if view == "engineer" else set()
         for s in range(ts.n_states):
             face = np.array(GOAL) / 255 if ts.terminal[s] else "white"

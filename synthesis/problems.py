@@ -15,7 +15,7 @@ import numpy as np
 
 from .errors import ProblemError
 from .specs import Objective, check_propositions, parse_objective
-from .systems import Cell, TransitionSystem, fuel_grid_world, graph_system, grid_world
+from .systems import Cell, TransitionSystem, graph_system, grid_world
 
 KINDS = ("static", "reactive", "mixed", "agent")
 
