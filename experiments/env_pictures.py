@@ -26,7 +26,7 @@ SCRIPTS: dict[str, tuple[str, list[str], dict[str, object]]] = {
     "beaver-rescue": ("FlowTest-BeaverRescue-v0", ["-> d1"], {"tile_size": 32}),
     "motion-primitives": ("FlowTest-MotionPrimitives-v0", ["-> p1", "-> jump1", "-> d1_j"], {"tile_size": 32}),
     "refueling": ("FlowTest-Refueling-v0", ["N", "N", "N", "E", "E", "S", "E", "N"], {}),
-    "mars-exploration": ("FlowTest-MarsExploration-v0", ["E", "E"], {}),
+    "mars-exploration": ("FlowTest-MarsExploration-v0", ["N", "E", "E"], {}),
     "maze1": ("FlowTest-Maze1-v0", ["E", "E"], {}),
     "maze2": ("FlowTest-Maze2-v0", ["N", "N", "E"], {}),
     "patrolling": ("FlowTest-Patrolling-v0", ["W"], {}),
