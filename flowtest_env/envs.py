@@ -447,7 +447,8 @@ class MarsExplorationEnv(FlowTestEnv):
 
     ``mars-exploration``: a 6x6 grid with fuel, two refuel stations, ice (1,4) and rock
     (4,1) samples to drop off at (3,0) or (4,5), and the goal (0,0). Static walls make
-    the rover sample both and run low on fuel.
+    the rover sample both and run low on fuel (the shipped test is a time-limited answer:
+    flow 2, its cut count not proven minimal).
 
     ## Action Space
 
@@ -455,13 +456,15 @@ class MarsExplorationEnv(FlowTestEnv):
 
     ## Observation Space
 
-    Flat ``float32`` (default) or ``obs_kind="grid"`` with ``dropoff``, ``ice``,
-    ``rock``, ``unsafe``, ``refuel``, ``fuel`` and objective-progress planes.
+    Flat ``float32[622]`` (default) or ``obs_kind="grid"``: ``uint8[23, 6, 6]``, with
+    ``dropoff``, ``ice``, ``rock``, ``unsafe``, ``refuel``, ``fuel`` and
+    objective-progress planes.
 
     ## Rewards
 
     -0.01 per step, -0.05 more for a masked action, +1 when the objective is met, -1
-    when it is violated (fuel 0, or the goal with a sample not dropped off).
+    when it is violated (fuel 0, the goal with a sample not dropped off, or fuel too low
+    for the way left round the walls).
 
     ## Termination
 
