@@ -191,7 +191,6 @@ class _Tracked:
         self.q = self.product.step_q(self.product.q0 if self.q is None else self.q, s)
         return s, self.q
 
-
     def _situation(
         self, observation: Any, info: dict[str, Any]
     ) -> tuple[TestGame, SystemProduct, int, np.ndarray, set[tuple[int, int]]]:
