@@ -38,7 +38,7 @@ from scipy.sparse.csgraph import breadth_first_order
 
 from .errors import InconsistentProblem
 from .products import Products, coreachable, reachable
-from .routing_heuristic import RoutingGuess, guess_routing
+from .routing_heuristic import RouteSeed, RoutingGuess, guess_routing
 
 MODES = ("static", "reactive", "mixed")
 
@@ -66,7 +66,12 @@ class MilpOptions:
         Rejected cut sets, each as a list of cut-group keys; each gets the row
         ``sum d <= |C| - 1``.
     time_limit
-        Seconds for both phases together (``None``: no limit).
+        Seconds for both phases together (``None``: no limit); with ``after_first``,
+        seconds to a first test.
+    after_first
+        Once a first test (flow >= 1) is in hand, seconds left to improve it
+        (``None``: ``time_limit`` bounds the whole solve). The paper's budget is
+        ``time_limit=600, after_first=60``.
     mip_rel_gap
         Relative gap at which HiGHS may stop (reported; ``status`` is then
         ``"feasible"`` unless the gap is proven 0).
@@ -88,6 +93,7 @@ class MilpOptions:
     block_states: bool = False
     exclusions: list[list[int]] = field(default_factory=list)
     time_limit: float | None = None
+    after_first: float | None = None
     mip_rel_gap: float = 0.0
     threads: int | None = None
     progress: Callable[[str], None] | None = None
@@ -323,12 +329,12 @@ def solve_routing(products: Products, options: MilpOptions | None = None) -> Rou
         options.feasibility == "auto" and len(required) * products.system.src.size <= EAGER_FLOW_LIMIT
     )
     entries: dict[int, np.ndarray] = dict(required) if eager else {}
-    deadline = None if options.time_limit is None else time.perf_counter() + options.time_limit
+    clock = _Clock(options.time_limit, options.after_first)
     rounds = 0
     while True:
         rounds += 1
         try:
-            result = _solve_once(products, options, entries, required, deadline)
+            result = _solve_once(products, options, entries, required, clock)
         except _FlowsBind as more:
             # the phase-1 answer already traps: add those flows before phase 2
             trapped = more.trapped
@@ -400,7 +406,7 @@ def _solve_once(
     options: MilpOptions,
     entries: dict[int, np.ndarray],
     required: dict[int, np.ndarray],
-    deadline: float | None,
+    clock: "_Clock",
 ) -> RoutingResult:
     """One solve of the routing MILP with feasibility flows for the given entry nodes.
 
@@ -522,9 +528,20 @@ def _solve_once(
     # ---- phase 1: maximum flow
     note("routing MILP, phase 1 of 2: maximum flow")
     guess = guess_routing(
-        g.n_nodes, src_node, eu, ev, grp, c5_edges, group_col >= 0, tgt, traps=_trap_test(products, groups, entries)
+        g.n_nodes,
+        src_node,
+        eu,
+        ev,
+        grp,
+        c5_edges,
+        group_col >= 0,
+        tgt,
+        traps=_trap_test(products, groups, entries),
+        route_seed=RouteSeed(ts.place[g.state], g.hist, inter),
     )
     x_guess = _guess_solution(products, layout, guess, entries, options, place_col, state_places, groups)
+    if x_guess is not None:
+        clock.first_test()
     if x_guess is not None and guess.flow == guess.upper_bound:
         x, status1, gap1 = x_guess, "optimal", 0.0  # the flow upper bound is attained: proven
     else:
@@ -533,7 +550,8 @@ def _solve_once(
         h.changeColsCost(m.n_col, np.arange(m.n_col, dtype=np.int32), cost)
         if x_guess is not None:
             _set_solution(h, x_guess)
-        status1, gap1 = _run(h, deadline)
+        stop_watch = clock.watch_first(h)
+        status1, gap1 = _run(h, clock.deadline, stop_watch)
         if status1 == "infeasible":
             raise InconsistentProblem(
                 "unroutable",
@@ -572,9 +590,10 @@ def _solve_once(
         cost2[place_col] = float(groups.weight[var_groups].sum() + 1)
     h.changeObjectiveSense(highspy.ObjSense.kMinimize)
     h.changeColsCost(m.n_col, np.arange(m.n_col, dtype=np.int32), cost2)
-    x = _incumbent(h, x, f_col, _share(deadline, INCUMBENT_SHARE, time.perf_counter() - t_solve))
+    clock.first_test()
+    x = _incumbent(h, x, f_col, _share(clock.deadline, INCUMBENT_SHARE, time.perf_counter() - t_solve))
     _set_solution(h, x)
-    status2, gap2 = _run(h, deadline)
+    status2, gap2 = _run(h, clock.deadline)
     if status2 == "infeasible":  # cannot happen: phase 1's solution is feasible
         raise RuntimeError("phase 2 of the routing MILP lost the phase-1 solution")
     x = np.asarray(h.getSolution().col_value)
@@ -843,11 +862,65 @@ def _highs(options: MilpOptions) -> highspy.Highs:
     return h
 
 
-def _run(h: highspy.Highs, deadline: float | None) -> tuple[str, float]:
-    """Run HiGHS until done or the deadline; return (status, relative gap)."""
+class _Clock:
+    """The time budget of one routing solve: an overall deadline, or (``after_first``)
+    a deadline to the first test that moves to ``after_first`` seconds after it."""
+
+    def __init__(self, time_limit: float | None, after_first: float | None) -> None:
+        now = time.perf_counter()
+        self.deadline = None if time_limit is None else now + time_limit
+        self.after_first = after_first
+        self.found = False
+
+    def first_test(self) -> None:
+        """A first test is in hand: from now on, only ``after_first`` seconds more."""
+        if self.found:
+            return
+        self.found = True
+        if self.after_first is not None:
+            self.deadline = time.perf_counter() + self.after_first
+
+    def watch_first(self, h: highspy.Highs) -> "Callable[[], None] | None":
+        """For a maximum-flow run without a first test yet: let HiGHS run up to the
+        latest possible end, and stop it ``after_first`` seconds after its first
+        incumbent with flow >= 1 (or at the deadline without one). Returns the
+        clean-up to call after the run; ``None`` if there is nothing to watch."""
+        if self.found or self.after_first is None:
+            return None
+        first_deadline = self.deadline
+
+        def on_interrupt(kind, message, data_out, data_in, user_data) -> None:  # noqa: ANN001
+            now = time.perf_counter()
+            if not self.found and data_out.mip_primal_bound >= 1.0 - 1e-6 and np.isfinite(data_out.mip_primal_bound):
+                self.first_test()
+            limit = self.deadline if self.found else first_deadline
+            if limit is not None and now > limit:
+                data_in.user_interrupt = True
+
+        h.setCallback(on_interrupt, None)
+        h.startCallback(highspy.cb.HighsCallbackType.kCallbackMipInterrupt)
+        if first_deadline is not None:
+            self.deadline = first_deadline + self.after_first  # the latest possible end
+
+        def stop() -> None:
+            h.stopCallback(highspy.cb.HighsCallbackType.kCallbackMipInterrupt)
+            if not self.found:
+                self.deadline = first_deadline
+
+        return stop
+
+
+def _run(h: highspy.Highs, deadline: float | None, cleanup: "Callable[[], None] | None" = None) -> tuple[str, float]:
+    """Run HiGHS until done or the deadline; return (status, relative gap).
+
+    ``cleanup`` (from :meth:`_Clock.watch_first`) runs right after HiGHS stops."""
     limit = highspy.kHighsInf if deadline is None else max(deadline - time.perf_counter(), 0.01)
     h.setOptionValue("time_limit", limit)
-    h.run()
+    try:
+        h.run()
+    finally:
+        if cleanup is not None:
+            cleanup()
     ms = h.getModelStatus()
     info = h.getInfo()
     has_sol = info.primal_solution_status == highspy.SolutionStatus.kSolutionStatusFeasible

@@ -8,6 +8,11 @@ when opening its groups keeps ``Src`` separated from ``Tgt`` outside I, and its 
 are forbidden otherwise. The cut set returned is then only what separation needs: the
 groups on the border of the region reachable from ``Src`` outside I.
 
+Where that growth stops short of the upper bound below (typically at flow 0: the
+shortest route comes back through a cell, and its own moves open a shortcut past I),
+it is run again from the moves of one *place-simple* route, which are a valid cut set
+with flow 1 by themselves (:func:`simple_route`).
+
 Every valid solution carries no flow on an edge from outside I straight into ``Tgt``,
 so the maximum flow without those edges is an upper bound on F; when the heuristic
 reaches it, phase 1 of the MILP is proven without solving it.
@@ -15,13 +20,15 @@ reaches it, phase 1 of the MILP is proven without solving it.
 
 from __future__ import annotations
 
+import heapq
+import time
 from collections import deque
 from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import maximum_flow
+from scipy.sparse.csgraph import maximum_flow, shortest_path
 
 from .products import reachable
 
@@ -66,6 +73,7 @@ def guess_routing(
     target: np.ndarray,
     max_rounds: int = 200,
     traps: Callable[[np.ndarray], bool] | None = None,
+    route_seed: "RouteSeed | None" = None,
 ) -> RoutingGuess:
     """Greedy valid cut set with large flow (see the module docstring).
 
@@ -85,16 +93,16 @@ def guess_routing(
         Whether a cut set (``bool`` per group) traps the system (the feasibility
         constraints c6-c8); an augmenting path whose cut set traps is rejected
         unless the current one traps already.
+    route_seed
+        Where the greedy growth from nothing open ends below the upper bound, it is
+        also grown from the moves of one place-simple route (:func:`simple_route`),
+        and the larger flow is kept.
     """
     m = eu.size
     usable = ~(c5 & target[ev])
     upper = flow_upper_bound(n, src, eu, ev, usable, target)
-    is_open = ~has_var
-    forbidden = np.zeros(has_var.size, dtype=bool)
-    f = np.zeros(m, dtype=bool)
     out_ptr, out_order = _csr(eu, n)
     in_ptr, in_order = _csr(ev, n)
-    tgt_nodes = target
 
     def separated(open_mask: np.ndarray) -> tuple[bool, np.ndarray]:
         keep = c5 & open_mask[grp]
@@ -106,35 +114,270 @@ def guess_routing(
         cut[grp[c5 & reach[eu] & ~reach[ev]]] = True
         return cut
 
-    ok, reach = separated(is_open)
-    if not ok:  # even cutting every cuttable group leaves a path outside I
-        return RoutingGuess(0, upper, f.astype(float), np.zeros(has_var.size, dtype=bool), np.zeros(n, dtype=bool))
-    trapping = traps is not None and traps(border(reach))
-    flow = 0
-    for _ in range(max_rounds):
-        if flow >= upper:
-            break
-        path = _augmenting_path(n, src, eu, ev, grp, usable, f, is_open, forbidden, tgt_nodes, out_ptr, out_order, in_ptr, in_order)
-        if path is None:
-            break
-        edges, forward = path
-        new = np.unique(grp[edges[forward & ~is_open[grp[edges]]]])
-        trial = is_open.copy()
-        trial[new] = True
-        ok, reach = separated(trial)
-        if ok and traps is not None and not trapping:
-            ok = not traps(border(reach))
-        elif ok and traps is not None:
-            trapping = traps(border(reach))
-        if ok:
-            is_open = trial
-            f[edges[forward]] = True
-            f[edges[~forward]] = False
-            flow += 1
-        else:
-            forbidden[new] = True
+    if not separated(~has_var)[0]:  # even cutting every cuttable group leaves a path outside I
+        return RoutingGuess(0, upper, np.zeros(m), np.zeros(has_var.size, dtype=bool), np.zeros(n, dtype=bool))
+
+    def grow(is_open: np.ndarray, f: np.ndarray, flow: int) -> tuple[int, np.ndarray, np.ndarray]:
+        forbidden = np.zeros(has_var.size, dtype=bool)
+        _, reach = separated(is_open)
+        trapping = traps is not None and traps(border(reach))
+        for _ in range(max_rounds):
+            if flow >= upper:
+                break
+            path = _augmenting_path(n, src, eu, ev, grp, usable, f, is_open, forbidden, target, out_ptr, out_order, in_ptr, in_order)
+            if path is None:
+                break
+            edges, forward = path
+            new = np.unique(grp[edges[forward & ~is_open[grp[edges]]]])
+            trial = is_open.copy()
+            trial[new] = True
+            ok, reach = separated(trial)
+            if ok and traps is not None and not trapping:
+                ok = not traps(border(reach))
+            elif ok and traps is not None:
+                trapping = traps(border(reach))
+            if ok:
+                is_open = trial
+                f = f.copy()
+                f[edges[forward]] = True
+                f[edges[~forward]] = False
+                flow += 1
+            else:
+                forbidden[new] = True
+        return flow, is_open, f
+
+    flow, is_open, f = grow(~has_var, np.zeros(m, dtype=bool), 0)
+    if route_seed is not None and flow < upper:
+        route = simple_route(n, src, eu, ev, usable, target, route_seed)
+        if route is not None:
+            seeded = ~has_var
+            seeded[grp[route]] = True
+            ok, reach = separated(seeded)
+            if ok and (traps is None or not traps(border(reach))):
+                f0 = np.zeros(m, dtype=bool)
+                f0[route] = True
+                flow2, open2, f2 = grow(seeded, f0, 1)
+                if flow2 > flow:
+                    flow, is_open, f = flow2, open2, f2
     _, reach = separated(is_open)
     return RoutingGuess(flow, upper, f.astype(float), border(reach), reach)
+
+
+@dataclass
+class RouteSeed:
+    """What :func:`simple_route` needs to know about the nodes of G.
+
+    Attributes
+    ----------
+    place, hist
+        Per node of G: the place (cell) of its state, and its history.
+    intermediate
+        ``bool`` per node: I.
+    tries
+        History sequences to try before giving up.
+    seconds
+        Time for the whole search (large grids with many orders that fail).
+    seed
+        Seed of the randomized segments (the search is deterministic up to the time
+        cap).
+    """
+
+    place: np.ndarray
+    hist: np.ndarray
+    intermediate: np.ndarray
+    tries: int = 64
+    seconds: float = 2.0
+    seed: int = 0
+
+
+def simple_route(
+    n: int, src: int, eu: np.ndarray, ev: np.ndarray, usable: np.ndarray, target: np.ndarray, seed: RouteSeed
+) -> np.ndarray | None:
+    """A ``Src -> I -> Tgt`` path of G that never returns to a place, as edge indices.
+
+    Why: with only its moves open, a walk from ``Src`` to ``Tgt`` can do nothing but
+    retrace the route, back and forth, so it sees the route's labels in the route's
+    order and (for the visit patterns of a test objective) passes I too. That is a
+    valid cut set with flow 1 where the greedy growth finds none, e.g. where the
+    shortest route comes back through a cell and so opens its own shortcut. The
+    caller still checks separation rather than rely on the argument.
+
+    The route follows the history sequence of a shortest ``Src -> I -> Tgt`` path,
+    one segment per history, each a shortest path through places no earlier segment
+    used (then randomized ones, backtracking when a segment walls off the goal).
+    ``None`` if none is found within the search budget.
+    """
+    ok = np.flatnonzero(usable)
+    out_ptr, out_order = _csr(eu[ok], n)
+    out_order = ok[out_order]
+    in_ptr, in_order = _csr(ev[ok], n)
+    in_order = ok[in_order]
+    search = _RouteSearch(n, src, eu, ev, out_ptr, out_order, target, seed)
+    for changes in _history_sequences(src, eu[ok], ev[ok], target, seed):
+        if time.perf_counter() > search.deadline:
+            break
+        search.left = _RouteSearch.BUDGET
+        route = search.through(changes, 0, src, frozenset([int(seed.place[src])]))
+        if route is not None:
+            return np.asarray(route, dtype=np.int64)
+    return None
+
+
+def _history_sequences(
+    src: int, eu: np.ndarray, ev: np.ndarray, target: np.ndarray, seed: RouteSeed
+) -> list[tuple[int, ...]]:
+    """Up to ``seed.tries`` sequences of histories a ``Src -> I -> Tgt`` path of G can
+    pass, each history once, shortest estimated tour first: the orders to try a route in.
+
+    A tour's estimate adds the distances (on the places) between the places where
+    its histories change. Short tours are the likely place-simple ones: a shortest
+    tour through points never crosses itself.
+    """
+    h, place = seed.hist, seed.place
+    n_hist = int(h.max()) + 1
+    inter = np.zeros(n_hist, dtype=bool)
+    inter[h[seed.intermediate]] = True
+    final = np.zeros(n_hist, dtype=bool)
+    final[h[target]] = True
+    change = h[eu] != h[ev]
+    steps = np.unique(np.stack([h[eu[change]], h[ev[change]], place[ev[change]]], axis=1), axis=0)
+    stops = np.unique(np.concatenate([[place[src]], steps[:, 2]]))
+    n_place = int(place.max()) + 1
+    moves = sp.csr_matrix((np.ones(eu.size), (place[eu], place[ev])), shape=(n_place, n_place))
+    dist = shortest_path(moves, unweighted=True, indices=stops)  # rows: stops
+    row = {int(p): i for i, p in enumerate(stops)}
+    succ: dict[int, list[tuple[int, int]]] = {}
+    for a, b, p in steps.tolist():
+        succ.setdefault(a, []).append((b, p))
+    out: list[tuple[int, ...]] = []
+    heap: list[tuple[float, tuple[int, ...], int]] = [(0.0, (int(h[src]),), int(place[src]))]
+    pops = 0
+    while heap and len(out) < seed.tries and pops < 200 * seed.tries:
+        pops += 1
+        cost, seq, at = heapq.heappop(heap)
+        if final[seq[-1]]:
+            if inter[list(seq)].any() and seq not in out:
+                out.append(seq)
+            continue
+        for b, p in succ.get(seq[-1], []):
+            d = dist[row[at], p]
+            if b not in seq and np.isfinite(d):
+                heapq.heappush(heap, (cost + float(d), seq + (b,), p))
+    return out
+
+
+class _RouteSearch:
+    """Backtracking over segment candidates for :func:`simple_route`, with a budget."""
+
+    CANDIDATES = 4  # per segment: the shortest, then randomized ones
+    BUDGET = 40  # segment searches per history sequence
+
+    def __init__(
+        self,
+        n: int,
+        src: int,
+        eu: np.ndarray,
+        ev: np.ndarray,
+        ptr: np.ndarray,
+        order: np.ndarray,
+        target: np.ndarray,
+        seed: RouteSeed,
+    ) -> None:
+        self.n, self.src, self.eu, self.ev, self.ptr, self.order = n, src, eu, ev, ptr, order
+        self.target, self.place, self.hist = target, seed.place, seed.hist
+        self.rng = np.random.default_rng(seed.seed)
+        self.left = self.BUDGET
+        self.deadline = time.perf_counter() + seed.seconds
+
+    def through(self, changes: tuple[int, ...], k: int, cur: int, used: frozenset[int]) -> list[int] | None:
+        """Segments ``k..`` of a place-simple route from ``cur`` through the histories
+        ``changes`` (the last one a target history)."""
+        h, nxt = changes[k], changes[k + 1]
+        last = k + 1 == len(changes) - 1
+
+        def goal(v: int) -> bool:
+            return int(self.hist[v]) == nxt and int(self.place[v]) not in used
+
+        def inside(v: int) -> bool:
+            return int(self.hist[v]) == h and int(self.place[v]) not in used
+
+        seen: set[tuple[int, ...]] = set()
+        for c in range(self.CANDIDATES):
+            if self.left <= 0 or time.perf_counter() > self.deadline:
+                return None
+            self.left -= 1
+            seg = _shortest(self, cur, goal, inside, None if c == 0 else self.rng)
+            if seg is None:
+                return None
+            key = tuple(seg)
+            if key in seen:
+                continue
+            seen.add(key)
+            places = [int(self.place[self.ev[e]]) for e in seg]
+            if len(set(places)) < len(places):
+                continue
+            if last:
+                return seg
+            end = int(self.ev[seg[-1]])
+            now_used = used.union(places)
+            if _shortest(self, end, lambda v: bool(self.target[v]), lambda v: int(self.place[v]) not in now_used) is None:
+                continue  # this segment walls the goal off
+            rest = self.through(changes, k + 1, end, now_used)
+            if rest is not None:
+                return seg + rest
+        return None
+
+
+def _bfs_dist(n: int, starts: np.ndarray, ptr: np.ndarray, order: np.ndarray, head: np.ndarray) -> np.ndarray:
+    """Hop distances from ``starts`` along the CSR adjacency (-1: unreached)."""
+    dist = np.full(n, -1, dtype=np.int64)
+    dist[starts] = 0
+    dq: deque[int] = deque(int(s) for s in starts)
+    while dq:
+        u = dq.popleft()
+        for k in range(ptr[u], ptr[u + 1]):
+            v = int(head[order[k]])
+            if dist[v] < 0:
+                dist[v] = dist[u] + 1
+                dq.append(v)
+    return dist
+
+
+def _shortest(
+    graph: "_RouteSearch",
+    start: int,
+    goal: Callable[[int], bool],
+    inside: Callable[[int], bool],
+    rng: np.random.Generator | None = None,
+) -> list[int] | None:
+    """Edges of a shortest path from ``start`` to a ``goal`` node whose inner nodes are
+    ``inside``: fewest edges, or with ``rng`` under random edge lengths in [1, 3)."""
+    ptr, order, head, tail = graph.ptr, graph.order, graph.ev, graph.eu
+    via = {start: -1}
+    dist = {start: 0.0}
+    heap: list[tuple[float, int]] = [(0.0, start)]
+    done: set[int] = set()
+    while heap:
+        du, u = heapq.heappop(heap)
+        if u in done:
+            continue
+        done.add(u)
+        if u != start and goal(u):
+            path = []
+            while u != start:
+                path.append(via[u])
+                u = int(tail[via[u]])
+            return path[::-1]
+        if u != start and not inside(u):
+            continue
+        for k in range(ptr[u], ptr[u + 1]):
+            e = int(order[k])
+            v = int(head[e])
+            dv = du + (1.0 if rng is None else 1.0 + 2.0 * rng.random())
+            if v not in done and dv < dist.get(v, np.inf):
+                dist[v], via[v] = dv, e
+                heapq.heappush(heap, (dv, v))
+    return None
 
 
 def _augmenting_path(
