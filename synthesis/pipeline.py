@@ -25,6 +25,9 @@ class SynthesisOptions:
     """User-facing solver options (``None`` fields fall back to the problem's)."""
 
     time_limit: float | None = None
+    # seconds to keep improving once a first test is in hand; `time_limit` then bounds
+    # the time to that first test (the paper's budget: 600 and 60)
+    after_first: float | None = None
     mip_rel_gap: float = 0.0
     threads: int | None = None
     setting: str | None = None
@@ -75,6 +78,7 @@ def milp_options(problem: Problem, options: SynthesisOptions) -> MilpOptions:
         tie_places=problem.tie_places,
         block_states=problem.kind == "agent",
         time_limit=options.time_limit if options.time_limit is not None else problem.time_limit,
+        after_first=options.after_first,
         mip_rel_gap=options.mip_rel_gap,
         threads=options.threads,
         progress=options.progress,
