@@ -24,7 +24,7 @@ import heapq
 import time
 from collections import deque
 from dataclasses import dataclass
-from typing import Callable
+from typing import Callable, Iterator
 
 import numpy as np
 import scipy.sparse as sp
@@ -148,17 +148,28 @@ def guess_routing(
 
     flow, is_open, f = grow(~has_var, np.zeros(m, dtype=bool), 0)
     if route_seed is not None and flow < upper:
-        route = simple_route(n, src, eu, ev, usable, target, route_seed)
-        if route is not None:
-            seeded = ~has_var
-            seeded[grp[route]] = True
-            ok, reach = separated(seeded)
-            if ok and (traps is None or not traps(border(reach))):
+        # grow from one route, then from the union of two (two routes through the same
+        # labelled cell in different orders can cross there without a shortcut)
+        pool: list[np.ndarray] = []
+        for route in simple_routes(n, src, eu, ev, usable, target, route_seed):
+            for other in [None] + pool:
+                seeded = ~has_var
+                seeded[grp[route]] = True
+                if other is not None:
+                    seeded[grp[other]] = True
+                ok, reach = separated(seeded)
+                if not ok or (traps is not None and traps(border(reach))):
+                    continue
                 f0 = np.zeros(m, dtype=bool)
                 f0[route] = True
                 flow2, open2, f2 = grow(seeded, f0, 1)
                 if flow2 > flow:
                     flow, is_open, f = flow2, open2, f2
+                if flow >= upper:
+                    break
+            pool.append(route)
+            if flow >= upper or len(pool) >= route_seed.pool:
+                break
     _, reach = separated(is_open)
     return RoutingGuess(flow, upper, f.astype(float), border(reach), reach)
 
@@ -175,6 +186,11 @@ class RouteSeed:
         ``bool`` per node: I.
     tries
         History sequences to try before giving up.
+    pool
+        Routes to combine in pairs (when one gives less than the flow's upper bound).
+    per_order
+        Routes to look for per order of history changes (the first with shortest
+        segments, the others randomized).
     seconds
         Time for the whole search (large grids with many orders that fail).
     seed
@@ -186,6 +202,8 @@ class RouteSeed:
     hist: np.ndarray
     intermediate: np.ndarray
     tries: int = 64
+    pool: int = 12
+    per_order: int = 3
     seconds: float = 2.0
     seed: int = 0
 
@@ -193,7 +211,15 @@ class RouteSeed:
 def simple_route(
     n: int, src: int, eu: np.ndarray, ev: np.ndarray, usable: np.ndarray, target: np.ndarray, seed: RouteSeed
 ) -> np.ndarray | None:
-    """A ``Src -> I -> Tgt`` path of G that never returns to a place, as edge indices.
+    """The first of :func:`simple_routes`, or ``None``."""
+    return next(simple_routes(n, src, eu, ev, usable, target, seed), None)
+
+
+def simple_routes(
+    n: int, src: int, eu: np.ndarray, ev: np.ndarray, usable: np.ndarray, target: np.ndarray, seed: RouteSeed
+) -> Iterator[np.ndarray]:
+    """``Src -> I -> Tgt`` paths of G that never return to a place, as edge indices: at most
+    one per order of history changes, within ``seed.seconds`` for all of them.
 
     Why: with only its moves open, a walk from ``Src`` to ``Tgt`` can do nothing but
     retrace the route, back and forth, so it sees the route's labels in the route's
@@ -202,10 +228,9 @@ def simple_route(
     shortest route comes back through a cell and so opens its own shortcut. The
     caller still checks separation rather than rely on the argument.
 
-    The route follows the history sequence of a shortest ``Src -> I -> Tgt`` path,
-    one segment per history, each a shortest path through places no earlier segment
-    used (then randomized ones, backtracking when a segment walls off the goal).
-    ``None`` if none is found within the search budget.
+    A route follows an order of history changes (:func:`_history_sequences`), one
+    segment per history, each a shortest path through places no earlier segment used
+    (then randomized ones, backtracking when a segment walls off the goal).
     """
     ok = np.flatnonzero(usable)
     out_ptr, out_order = _csr(eu[ok], n)
@@ -216,11 +241,15 @@ def simple_route(
     for changes in _history_sequences(src, eu[ok], ev[ok], target, seed):
         if time.perf_counter() > search.deadline:
             break
-        search.left = _RouteSearch.BUDGET
-        route = search.through(changes, 0, src, frozenset([int(seed.place[src])]))
-        if route is not None:
-            return np.asarray(route, dtype=np.int64)
-    return None
+        seen: set[tuple[int, ...]] = set()
+        for again in range(seed.per_order):
+            search.left = _RouteSearch.BUDGET
+            route = search.through(changes, 0, src, frozenset([int(seed.place[src])]), randomized=again > 0)
+            if route is None:
+                break
+            if tuple(route) not in seen:
+                seen.add(tuple(route))
+                yield np.asarray(route, dtype=np.int64)
 
 
 def _history_sequences(
@@ -289,9 +318,12 @@ class _RouteSearch:
         self.left = self.BUDGET
         self.deadline = time.perf_counter() + seed.seconds
 
-    def through(self, changes: tuple[int, ...], k: int, cur: int, used: frozenset[int]) -> list[int] | None:
+    def through(
+        self, changes: tuple[int, ...], k: int, cur: int, used: frozenset[int], randomized: bool = False
+    ) -> list[int] | None:
         """Segments ``k..`` of a place-simple route from ``cur`` through the histories
-        ``changes`` (the last one a target history)."""
+        ``changes`` (the last one a target history); ``randomized``: no shortest
+        segment first, for another route through the same order."""
         h, nxt = changes[k], changes[k + 1]
         last = k + 1 == len(changes) - 1
 
@@ -306,7 +338,7 @@ class _RouteSearch:
             if self.left <= 0 or time.perf_counter() > self.deadline:
                 return None
             self.left -= 1
-            seg = _shortest(self, cur, goal, inside, None if c == 0 else self.rng)
+            seg = _shortest(self, cur, goal, inside, None if c == 0 and not randomized else self.rng)
             if seg is None:
                 return None
             key = tuple(seg)
@@ -322,7 +354,7 @@ class _RouteSearch:
             now_used = used.union(places)
             if _shortest(self, end, lambda v: bool(self.target[v]), lambda v: int(self.place[v]) not in now_used) is None:
                 continue  # this segment walls the goal off
-            rest = self.through(changes, k + 1, end, now_used)
+            rest = self.through(changes, k + 1, end, now_used, randomized)
             if rest is not None:
                 return seg + rest
         return None
