@@ -435,6 +435,11 @@ def _synthesize_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", metavar="ARTIFACT", type=Path, help="write the synthesized-test artifact (JSON) here")
     p.add_argument("--plot", metavar="PNG", type=Path, help="draw the test (PNG, SVG or PDF by the file's suffix)")
     p.add_argument("--time-limit", metavar="S", type=_positive_float, help="solver time limit in seconds (default: the problem's, else none)")
+    p.add_argument(
+        "--after-first", metavar="S", type=_positive_float,
+        help="stop S seconds after the first test is found (--time-limit then bounds the time to it; "
+        "the paper's budget: --time-limit 600 --after-first 60)",
+    )
     p.add_argument("--gap", metavar="G", type=_gap, default=0.0, help="relative MIP gap at which to stop (default 0: prove optimality)")
     p.add_argument("--threads", metavar="N", type=_positive_int, help="solver threads (default: HiGHS's choice)")
     p.add_argument("--setting", choices=SETTINGS, help="how reactive obstacles are shown (default: the problem's, else instantaneous)")
@@ -468,6 +473,7 @@ def run_synthesize(args: argparse.Namespace) -> int:
         progress(f"synthesizing {problem.name} ({problem.kind} test)")
         options = pipeline.SynthesisOptions(
             time_limit=args.time_limit,
+            after_first=args.after_first,
             mip_rel_gap=args.gap,
             threads=args.threads,
             setting=args.setting,

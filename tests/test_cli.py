@@ -210,16 +210,17 @@ def test_options_reach_the_solver(capsys: pytest.CaptureFixture[str], monkeypatc
 
     monkeypatch.setattr(cli.pipeline, "synthesize", spy)
     argv = ["synthesize", "small-reactive", "--json", "--time-limit", "30", "--gap", "0.01",
-            "--threads", "1", "--setting", "accumulative"]
+            "--threads", "1", "--setting", "accumulative", "--after-first", "5"]
     code, out, err = run(argv, capsys)
     assert code == 0, err
     assert seen["time_limit"] == 30.0 and seen["mip_rel_gap"] == 0.01 and seen["threads"] == 1
+    assert seen["after_first"] == 5.0
     assert seen["setting"] == "accumulative" and callable(seen["progress"])
 
 
 @pytest.mark.parametrize(
     "args",
-    [["--time-limit", "0"], ["--time-limit", "soon"], ["--gap", "2"], ["--threads", "0"], ["--setting", "sometimes"]],
+    [["--time-limit", "0"], ["--time-limit", "soon"], ["--after-first", "-1"], ["--gap", "2"], ["--threads", "0"], ["--setting", "sometimes"]],
 )
 def test_bad_options_exit_2(args: list[str], capsys: pytest.CaptureFixture[str]) -> None:
     with pytest.raises(SystemExit) as exc:
