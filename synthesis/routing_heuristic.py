@@ -95,8 +95,8 @@ def guess_routing(
         unless the current one traps already.
     route_seed
         Where the greedy growth from nothing open ends below the upper bound, it is
-        also grown from the moves of one place-simple route (:func:`simple_route`),
-        and the larger flow is kept.
+        also grown from the moves of place-simple routes (:func:`simple_routes`), one
+        route and pairs of routes, and the largest flow is kept.
     """
     m = eu.size
     usable = ~(c5 & target[ev])
@@ -151,8 +151,11 @@ def guess_routing(
         # grow from one route, then from the union of two (two routes through the same
         # labelled cell in different orders can cross there without a shortcut)
         pool: list[np.ndarray] = []
+        stop_at = time.perf_counter() + route_seed.seconds
         for route in simple_routes(n, src, eu, ev, usable, target, route_seed):
             for other in [None] + pool:
+                if time.perf_counter() > stop_at:
+                    break
                 seeded = ~has_var
                 seeded[grp[route]] = True
                 if other is not None:
@@ -168,7 +171,7 @@ def guess_routing(
                 if flow >= upper:
                     break
             pool.append(route)
-            if flow >= upper or len(pool) >= route_seed.pool:
+            if flow >= upper or len(pool) >= route_seed.pool or time.perf_counter() > stop_at:
                 break
     _, reach = separated(is_open)
     return RoutingGuess(flow, upper, f.astype(float), border(reach), reach)
@@ -192,7 +195,8 @@ class RouteSeed:
         Routes to look for per order of history changes (the first with shortest
         segments, the others randomized).
     seconds
-        Time for the whole search (large grids with many orders that fail).
+        Time for finding routes, and again for growing from them (large grids with
+        many orders that fail).
     seed
         Seed of the randomized segments (the search is deterministic up to the time
         cap).
