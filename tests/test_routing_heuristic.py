@@ -133,3 +133,27 @@ def test_after_first_stops_soon_after_highs_finds_a_first_test(monkeypatch: pyte
     test = synthesize(problem, SynthesisOptions(time_limit=600.0, after_first=1.0))
     assert time.perf_counter() - t0 < 20.0
     assert test.routing.flow >= 1 and test.checks.ok
+
+
+@pytest.mark.parametrize("size,family,n,seed", CASES[::2] + [(5, "safety", 3, 0), (10, "reachability", 1, 2)])
+def test_guess_is_a_valid_cut_set_and_flow(size: int, family: str, n: int, seed: int) -> None:
+    """Whatever the heuristic returns is a solution of the model: its cuts leave no
+    ``Src -> Tgt`` path outside I, and its edge flow is a unit flow of the value it
+    claims, on uncut edges, conserved outside ``Src`` and ``Tgt``."""
+    _, m = _instance(size, family, n, seed)
+    guess = _guess(m, True)
+    cut = guess.cut_groups
+    assert not np.any(cut & ~m["has_var"]), "an unrestrictable group is cut"
+    open_edge = ~cut[m["grp"]]
+    keep = m["c5"] & open_edge
+    reach = reachable(m["n"], m["eu"][keep], m["ev"][keep], np.arange(m["n"]) == m["src"])
+    assert not np.any(reach & m["tgt"])
+    f = guess.edge_flow > 0.5
+    assert not np.any(f & ~open_edge), "flow on a cut edge"
+    assert not np.any(f & m["c5"] & m["tgt"][m["ev"]]), "flow straight from outside I into Tgt"
+    balance = np.bincount(m["eu"][f], minlength=m["n"]) - np.bincount(m["ev"][f], minlength=m["n"])
+    inner = np.ones(m["n"], dtype=bool)
+    inner[m["src"]] = False
+    inner[m["tgt"]] = False
+    assert not np.any(balance[inner]), "flow not conserved"
+    assert balance[m["src"]] == guess.flow <= guess.upper_bound
