@@ -147,6 +147,9 @@ def guess_routing(
         return flow, is_open, f
 
     flow, is_open, f = grow(~has_var, np.zeros(m, dtype=bool), 0)
+    if traps is not None and flow > 0 and traps(border(separated(is_open)[1])):
+        # grown from a trapping start and never left it: no use as a solution
+        flow, is_open, f = 0, ~has_var, np.zeros(m, dtype=bool)
     if route_seed is not None and flow < upper:
         # grow from one route, then from the union of two (two routes through the same
         # labelled cell in different orders can cross there without a shortcut)

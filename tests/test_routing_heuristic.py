@@ -157,3 +157,24 @@ def test_guess_is_a_valid_cut_set_and_flow(size: int, family: str, n: int, seed:
     inner[m["tgt"]] = False
     assert not np.any(balance[inner]), "flow not conserved"
     assert balance[m["src"]] == guess.flow <= guess.upper_bound
+
+
+@pytest.mark.parametrize("size,family,n,seed", [(10, "reaction", 4, 18), (5, "reaction", 2, 0), (5, "reachability", 2, 1)])
+def test_reactive_guess_traps_no_entry_node(size: int, family: str, n: int, seed: int) -> None:
+    """With the feasibility test (c6-c8) the heuristic's answer, when it has flow, traps no
+    kept entry node. 10x10 reaction |AP| = 7 seed 18: the greedy growth ends trapping
+    (it starts from a trapping cut set), so the answer comes from the route seed; before,
+    the trapping answer was returned, was unusable as a start, and HiGHS found no test in
+    600 s."""
+    import synthesis.milp as milp
+
+    _, problem, _ = first_consistent(size, family, n, seed, kind="reactive")
+    _, products = build_graphs(problem)
+    m = _model_edges(products, problem)
+    groups = cut_groups(products, milp_options(problem, SynthesisOptions()))
+    traps = milp._trap_test(products, groups, products.kept_entries)
+    guess = guess_routing(
+        m["n"], m["src"], m["eu"], m["ev"], m["grp"], m["c5"], m["has_var"], m["tgt"], traps=traps, route_seed=m["seed"]
+    )
+    assert guess.flow >= 1
+    assert not traps(guess.cut_groups)
