@@ -22,10 +22,9 @@ import time
 
 import numpy as np
 
-from synthesis.milp import check_consistency, cut_groups
+from synthesis.milp import cut_groups, model_edges
 from synthesis.pipeline import SynthesisOptions, build_graphs, milp_options
 from synthesis.random_grid import first_consistent, paper_ap
-from synthesis.routing_heuristic import RouteSeed, guess_routing
 
 DEFAULT_CELLS = ["reaction:2:5", "reaction:3:5", "reaction:4:5", "reaction:2:10", "reaction:3:10", "reaction:4:10",
                  "reaction:4:20"]
@@ -35,21 +34,11 @@ def guesses(size: int, family: str, n: int, seed: int) -> tuple[tuple[int, int, 
     """``(flow, upper bound, seconds)`` of the heuristic without and with the route seed."""
     _, problem, _ = first_consistent(size, family, n, seed, kind="static")
     _, products = build_graphs(problem)
-    g = products.virtual
-    keep = check_consistency(products)
-    groups = cut_groups(products, milp_options(problem, SynthesisOptions()))
-    tgt, inter = products.target, products.intermediate
-    edges = np.flatnonzero(keep[g.src] & keep[g.dst] & (g.dst != g.initial) & ~tgt[g.src])
-    eu, ev = g.src[edges], g.dst[edges]
-    c5 = ~inter[eu] & ~inter[ev]
-    grp = groups.of_edge[edges]
-    useful = np.zeros(groups.keys.size, dtype=bool)
-    useful[grp[c5]] = True
-    has_var = useful & groups.restrictable
+    edges = model_edges(products, cut_groups(products, milp_options(problem, SynthesisOptions())))
     out = []
-    for seed_route in (None, RouteSeed(products.ts.place[g.state], g.hist, inter)):
+    for seeded in (False, True):
         t0 = time.perf_counter()
-        r = guess_routing(g.n_nodes, g.initial, eu, ev, grp, c5, has_var, tgt, route_seed=seed_route)
+        r = edges.guess(products, route_seed=seeded)
         out.append((r.flow, r.upper_bound, time.perf_counter() - t0))
     return out[0], out[1]
 

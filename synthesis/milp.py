@@ -422,16 +422,8 @@ def _solve_once(
     keep_node = check_consistency(products)
     groups = cut_groups(products, options)
     feasibility = bool(entries)
-
-    # ---- the model's edges: pruned, no flow into Src or out of Tgt
-    keep_edge = keep_node[g.src] & keep_node[g.dst] & (g.dst != src_node) & ~tgt[g.src]
-    edges = np.flatnonzero(keep_edge)
-    eu, ev = g.src[edges], g.dst[edges]
-    c5_edges = ~inter[eu] & ~inter[ev]  # positions in `edges` that carry a c5 row
-    grp = groups.of_edge[edges]
-    useful = np.zeros(groups.keys.size, dtype=bool)
-    useful[grp[c5_edges]] = True
-    has_var = useful & groups.restrictable
+    me = model_edges(products, groups, keep_node)
+    edges, eu, ev, c5_edges, grp, has_var = me.edges, me.eu, me.ev, me.c5, me.grp, me.has_var
     group_col = np.full(groups.keys.size, -1, dtype=np.int64)
 
     m = _Model()
@@ -527,18 +519,7 @@ def _solve_once(
 
     # ---- phase 1: maximum flow
     note("routing MILP, phase 1 of 2: maximum flow")
-    guess = guess_routing(
-        g.n_nodes,
-        src_node,
-        eu,
-        ev,
-        grp,
-        c5_edges,
-        group_col >= 0,
-        tgt,
-        traps=_trap_test(products, groups, entries),
-        route_seed=RouteSeed(ts.place[g.state], g.hist, inter),
-    )
+    guess = me.guess(products, traps=_trap_test(products, groups, entries))
     x_guess = _guess_solution(products, layout, guess, entries, options, place_col, state_places, groups)
     if x_guess is not None:
         clock.first_test()
@@ -626,6 +607,67 @@ def _solve_once(
         mip_gap=stats["mip_gap"],
         stats=stats,
     )
+
+
+@dataclass
+class ModelEdges:
+    """The edges of G the routing model keeps, and what the model knows of each.
+
+    Attributes
+    ----------
+    edges
+        Indices into G's edges: pruned to nodes that reach ``Tgt``, no edge into
+        ``Src`` or out of ``Tgt``.
+    eu, ev
+        Their tails and heads.
+    c5
+        ``bool`` per kept edge: both ends outside I (the edge carries a c5 row).
+    grp
+        The cut group of each kept edge.
+    has_var
+        ``bool`` per group: the group gets a cut variable (restrictable, and on some
+        c5 edge).
+    """
+
+    edges: np.ndarray
+    eu: np.ndarray
+    ev: np.ndarray
+    c5: np.ndarray
+    grp: np.ndarray
+    has_var: np.ndarray
+
+    def guess(self, products: Products, traps: Callable[[np.ndarray], bool] | None = None, route_seed: bool = True) -> RoutingGuess:
+        """The routing heuristic on these edges (with the place-simple route seed unless
+        ``route_seed`` is false)."""
+        g = products.virtual
+        return guess_routing(
+            g.n_nodes,
+            g.initial,
+            self.eu,
+            self.ev,
+            self.grp,
+            self.c5,
+            self.has_var,
+            products.target,
+            traps=traps,
+            route_seed=RouteSeed(products.ts.place[g.state], g.hist, products.intermediate) if route_seed else None,
+        )
+
+
+def model_edges(products: Products, groups: CutGroups, keep_node: np.ndarray | None = None) -> ModelEdges:
+    """The routing model's edges (see :class:`ModelEdges`); ``keep_node`` is what
+    :func:`check_consistency` returns (computed when not given)."""
+    g = products.virtual
+    if keep_node is None:
+        keep_node = check_consistency(products)
+    tgt, inter = products.target, products.intermediate
+    edges = np.flatnonzero(keep_node[g.src] & keep_node[g.dst] & (g.dst != g.initial) & ~tgt[g.src])
+    eu, ev = g.src[edges], g.dst[edges]
+    c5 = ~inter[eu] & ~inter[ev]
+    grp = groups.of_edge[edges]
+    useful = np.zeros(groups.keys.size, dtype=bool)
+    useful[grp[c5]] = True
+    return ModelEdges(edges, eu, ev, c5, grp, useful & groups.restrictable)
 
 
 @dataclass

@@ -17,37 +17,23 @@ import time
 import numpy as np
 import pytest
 
-from synthesis.milp import check_consistency, cut_groups
+from synthesis.milp import ModelEdges, cut_groups, model_edges
 from synthesis.pipeline import SynthesisOptions, build_graphs, milp_options, synthesize
+from synthesis.problems import Problem
 from synthesis.products import Products, reachable
 from synthesis.random_grid import first_consistent
 from synthesis.routing_heuristic import RouteSeed, RoutingGuess, guess_routing, simple_route
 
 
-def _model_edges(products: Products, problem) -> dict:  # type: ignore[no-untyped-def]
-    """The edges the routing MILP keeps, with their cut groups (as in ``_solve_once``)."""
-    g = products.virtual
-    keep = check_consistency(products)
-    groups = cut_groups(products, milp_options(problem, SynthesisOptions()))
-    tgt = products.target
-    edges = np.flatnonzero(keep[g.src] & keep[g.dst] & (g.dst != g.initial) & ~tgt[g.src])
-    eu, ev = g.src[edges], g.dst[edges]
-    inter = products.intermediate
-    c5 = ~inter[eu] & ~inter[ev]
-    grp = groups.of_edge[edges]
-    useful = np.zeros(groups.keys.size, dtype=bool)
-    useful[grp[c5]] = True
-    return {
-        "n": g.n_nodes, "src": g.initial, "eu": eu, "ev": ev, "grp": grp, "c5": c5,
-        "has_var": useful & groups.restrictable, "tgt": tgt,
-        "seed": RouteSeed(products.ts.place[g.state], g.hist, inter),
-    }
-
-
-def _instance(size: int, family: str, n: int, seed: int) -> tuple[Products, dict]:
-    _, problem, _ = first_consistent(size, family, n, seed, kind="static")
+def _instance(size: int, family: str, n: int, seed: int, kind: str = "static") -> tuple[Products, ModelEdges, Problem]:
+    _, problem, _ = first_consistent(size, family, n, seed, kind=kind)
     _, products = build_graphs(problem)
-    return products, _model_edges(products, problem)
+    return products, model_edges(products, cut_groups(products, milp_options(problem, SynthesisOptions()))), problem
+
+
+def _route_seed(products: Products) -> RouteSeed:
+    g = products.virtual
+    return RouteSeed(products.ts.place[g.state], g.hist, products.intermediate)
 
 
 CASES = [(5, "reaction", 2, s) for s in range(12)] + [(10, "reaction", 3, s) for s in range(4)] + [
@@ -57,31 +43,25 @@ CASES = [(5, "reaction", 2, s) for s in range(12)] + [(10, "reaction", 3, s) for
 
 @pytest.mark.parametrize("size,family,n,seed", CASES)
 def test_simple_route_is_a_valid_test_by_itself(size: int, family: str, n: int, seed: int) -> None:
-    products, m = _instance(size, family, n, seed)
-    usable = ~(m["c5"] & m["tgt"][m["ev"]])
-    route = simple_route(m["n"], m["src"], m["eu"], m["ev"], usable, m["tgt"], m["seed"])
+    products, me, _ = _instance(size, family, n, seed)
+    src, tgt, n_nodes = products.virtual.initial, products.target, products.virtual.n_nodes
+    usable = ~(me.c5 & tgt[me.ev])
+    route = simple_route(n_nodes, src, me.eu, me.ev, usable, tgt, _route_seed(products))
     if route is None:
         pytest.skip("no place-simple route found (some instances have none)")
-    eu, ev = m["eu"][route], m["ev"][route]
-    assert eu[0] == m["src"] and m["tgt"][ev[-1]]
+    eu, ev = me.eu[route], me.ev[route]
+    assert eu[0] == src and tgt[ev[-1]]
     assert np.array_equal(eu[1:], ev[:-1]), "the route is not a path of G"
     assert usable[route].all()
-    nodes = np.concatenate([[m["src"]], ev])
-    places = m["seed"].place[nodes]
+    nodes = np.concatenate([[src], ev])
+    places = products.ts.place[products.virtual.state[nodes]]
     assert np.unique(places).size == places.size, "the route returns to a cell"
     assert products.intermediate[nodes].any(), "the route does not pass I"
-    open_groups = ~m["has_var"]
-    open_groups[m["grp"][route]] = True
-    keep = m["c5"] & open_groups[m["grp"]]
-    reach = reachable(m["n"], m["eu"][keep], m["ev"][keep], np.arange(m["n"]) == m["src"])
-    assert not np.any(reach & m["tgt"]), "the route's moves alone let the system bypass I"
-
-
-def _guess(m: dict, seeded: bool) -> RoutingGuess:
-    return guess_routing(
-        m["n"], m["src"], m["eu"], m["ev"], m["grp"], m["c5"], m["has_var"], m["tgt"],
-        route_seed=m["seed"] if seeded else None,
-    )
+    open_groups = ~me.has_var
+    open_groups[me.grp[route]] = True
+    keep = me.c5 & open_groups[me.grp]
+    reach = reachable(n_nodes, me.eu[keep], me.ev[keep], np.arange(n_nodes) == src)
+    assert not np.any(reach & tgt), "the route's moves alone let the system bypass I"
 
 
 def test_route_seed_finds_first_tests_the_greedy_growth_misses() -> None:
@@ -89,8 +69,8 @@ def test_route_seed_finds_first_tests_the_greedy_growth_misses() -> None:
     flow-1 cut set on 8, with the route seed on 19 (measured when this was written)."""
     alone = seeded = 0
     for seed in range(20):
-        _, m = _instance(5, "reaction", 2, seed)
-        a, b = _guess(m, False), _guess(m, True)
+        products, me, _ = _instance(5, "reaction", 2, seed)
+        a, b = me.guess(products, route_seed=False), me.guess(products)
         assert b.flow >= a.flow
         alone += a.flow >= 1
         seeded += b.flow >= 1
@@ -140,23 +120,23 @@ def test_guess_is_a_valid_cut_set_and_flow(size: int, family: str, n: int, seed:
     """Whatever the heuristic returns is a solution of the model: its cuts leave no
     ``Src -> Tgt`` path outside I, and its edge flow is a unit flow of the value it
     claims, on uncut edges, conserved outside ``Src`` and ``Tgt``."""
-    _, m = _instance(size, family, n, seed)
-    guess = _guess(m, True)
+    products, me, _ = _instance(size, family, n, seed)
+    n_nodes, src, tgt = products.virtual.n_nodes, products.virtual.initial, products.target
+    guess = me.guess(products)
     cut = guess.cut_groups
-    assert not np.any(cut & ~m["has_var"]), "an unrestrictable group is cut"
-    open_edge = ~cut[m["grp"]]
-    keep = m["c5"] & open_edge
-    reach = reachable(m["n"], m["eu"][keep], m["ev"][keep], np.arange(m["n"]) == m["src"])
-    assert not np.any(reach & m["tgt"])
+    assert not np.any(cut & ~me.has_var), "an unrestrictable group is cut"
+    open_edge = ~cut[me.grp]
+    keep = me.c5 & open_edge
+    reach = reachable(n_nodes, me.eu[keep], me.ev[keep], np.arange(n_nodes) == src)
+    assert not np.any(reach & tgt)
     f = guess.edge_flow > 0.5
     assert not np.any(f & ~open_edge), "flow on a cut edge"
-    assert not np.any(f & m["c5"] & m["tgt"][m["ev"]]), "flow straight from outside I into Tgt"
-    balance = np.bincount(m["eu"][f], minlength=m["n"]) - np.bincount(m["ev"][f], minlength=m["n"])
-    inner = np.ones(m["n"], dtype=bool)
-    inner[m["src"]] = False
-    inner[m["tgt"]] = False
+    assert not np.any(f & me.c5 & tgt[me.ev]), "flow straight from outside I into Tgt"
+    balance = np.bincount(me.eu[f], minlength=n_nodes) - np.bincount(me.ev[f], minlength=n_nodes)
+    inner = ~tgt
+    inner[src] = False
     assert not np.any(balance[inner]), "flow not conserved"
-    assert balance[m["src"]] == guess.flow <= guess.upper_bound
+    assert balance[src] == guess.flow <= guess.upper_bound
 
 
 @pytest.mark.parametrize("size,family,n,seed", [(10, "reaction", 4, 18), (5, "reaction", 2, 0), (5, "reachability", 2, 1)])
@@ -168,13 +148,9 @@ def test_reactive_guess_traps_no_entry_node(size: int, family: str, n: int, seed
     600 s."""
     import synthesis.milp as milp
 
-    _, problem, _ = first_consistent(size, family, n, seed, kind="reactive")
-    _, products = build_graphs(problem)
-    m = _model_edges(products, problem)
+    products, me, problem = _instance(size, family, n, seed, kind="reactive")
     groups = cut_groups(products, milp_options(problem, SynthesisOptions()))
     traps = milp._trap_test(products, groups, products.kept_entries)
-    guess = guess_routing(
-        m["n"], m["src"], m["eu"], m["ev"], m["grp"], m["c5"], m["has_var"], m["tgt"], traps=traps, route_seed=m["seed"]
-    )
+    guess = me.guess(products, traps=traps)
     assert guess.flow >= 1
     assert not traps(guess.cut_groups)
