@@ -42,6 +42,7 @@ class RoutingGuess:
     edge_flow: np.ndarray  # 0/1 per model edge
     cut_groups: np.ndarray  # bool per group
     reach: np.ndarray  # bool per node of G: reachable from Src outside I over open edges
+    from_route: bool = False  # grown from a place-simple route (not the greedy growth alone)
 
 
 def flow_upper_bound(n: int, src: int, eu: np.ndarray, ev: np.ndarray, usable: np.ndarray, target: np.ndarray) -> int:
@@ -147,6 +148,7 @@ def guess_routing(
         return flow, is_open, f
 
     flow, is_open, f = grow(~has_var, np.zeros(m, dtype=bool), 0)
+    from_route = False
     if traps is not None and flow > 0 and traps(border(separated(is_open)[1])):
         # grown from a trapping start and never left it: no use as a solution
         flow, is_open, f = 0, ~has_var, np.zeros(m, dtype=bool)
@@ -170,14 +172,14 @@ def guess_routing(
                 f0[route] = True
                 flow2, open2, f2 = grow(seeded, f0, 1)
                 if flow2 > flow:
-                    flow, is_open, f = flow2, open2, f2
+                    flow, is_open, f, from_route = flow2, open2, f2, True
                 if flow >= upper:
                     break
             pool.append(route)
             if flow >= upper or len(pool) >= route_seed.pool or time.perf_counter() > stop_at:
                 break
     _, reach = separated(is_open)
-    return RoutingGuess(flow, upper, f.astype(float), border(reach), reach)
+    return RoutingGuess(flow, upper, f.astype(float), border(reach), reach, from_route)
 
 
 @dataclass
