@@ -534,9 +534,9 @@ def _solve_once(
         # no flow 2 in 300 s, against 170 s from scratch)
         if x_guess is not None and not guess.from_route:
             _set_solution(h, x_guess)
-        stop_watch = clock.watch_first(h)
+        highs_deadline, stop_watch = clock.watch_first(h)
         try:
-            status1, gap1 = _run(h, clock.deadline, stop_watch)
+            status1, gap1 = _run(h, highs_deadline, stop_watch)
             highs_solved = True
         except TimeoutError:
             if x_guess is None:
@@ -933,34 +933,24 @@ class _Clock:
         if self.after_first is not None:
             self.deadline = time.perf_counter() + self.after_first
 
-    def watch_first(self, h: highspy.Highs) -> "Callable[[], None] | None":
-        """For a maximum-flow run without a first test yet: let HiGHS run up to the
-        latest possible end, and stop it ``after_first`` seconds after its first
-        incumbent with flow >= 1 (or at the deadline without one). Returns the
-        clean-up to call after the run; ``None`` if there is nothing to watch."""
+    def watch_first(self, h: highspy.Highs) -> tuple[float | None, "Callable[[], None] | None"]:
+        """For a maximum-flow run without a first test yet: stop HiGHS ``after_first``
+        seconds after its first incumbent with flow >= 1, or at the deadline without one.
+        Returns the deadline to give HiGHS (the latest possible end) and the clean-up to
+        call after the run (``None`` if there is nothing to watch)."""
         if self.found or self.after_first is None:
-            return None
-        first_deadline = self.deadline
+            return self.deadline, None
 
         def on_interrupt(kind, message, data_out, data_in, user_data) -> None:  # noqa: ANN001
-            now = time.perf_counter()
-            if not self.found and data_out.mip_primal_bound >= 1.0 - 1e-6 and np.isfinite(data_out.mip_primal_bound):
+            if not self.found and np.isfinite(data_out.mip_primal_bound) and data_out.mip_primal_bound >= 1.0 - 1e-6:
                 self.first_test()
-            limit = self.deadline if self.found else first_deadline
-            if limit is not None and now > limit:
+            if self.deadline is not None and time.perf_counter() > self.deadline:
                 data_in.user_interrupt = True
 
         h.setCallback(on_interrupt, None)
         h.startCallback(highspy.cb.HighsCallbackType.kCallbackMipInterrupt)
-        if first_deadline is not None:
-            self.deadline = first_deadline + self.after_first  # the latest possible end
-
-        def stop() -> None:
-            h.stopCallback(highspy.cb.HighsCallbackType.kCallbackMipInterrupt)
-            if not self.found:
-                self.deadline = first_deadline
-
-        return stop
+        latest = None if self.deadline is None else self.deadline + self.after_first
+        return latest, lambda: h.stopCallback(highspy.cb.HighsCallbackType.kCallbackMipInterrupt)
 
 
 def _run(h: highspy.Highs, deadline: float | None, cleanup: "Callable[[], None] | None" = None) -> tuple[str, float]:

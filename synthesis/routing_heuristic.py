@@ -10,8 +10,8 @@ groups on the border of the region reachable from ``Src`` outside I.
 
 Where that growth stops short of the upper bound below (typically at flow 0: the
 shortest route comes back through a cell, and its own moves open a shortcut past I),
-it is run again from the moves of one *place-simple* route, which are a valid cut set
-with flow 1 by themselves (:func:`simple_route`).
+it is run again from the moves of *place-simple* routes, one route or a pair (a route's
+moves alone are a valid cut set with flow 1, see :func:`simple_routes`).
 
 Every valid solution carries no flow on an edge from outside I straight into ``Tgt``,
 so the maximum flow without those edges is an upper bound on F; when the heuristic
@@ -119,6 +119,7 @@ def guess_routing(
         return RoutingGuess(0, upper, np.zeros(m), np.zeros(has_var.size, dtype=bool), np.zeros(n, dtype=bool))
 
     def grow(is_open: np.ndarray, f: np.ndarray, flow: int) -> tuple[int, np.ndarray, np.ndarray]:
+        f = f.copy()
         forbidden = np.zeros(has_var.size, dtype=bool)
         _, reach = separated(is_open)
         trapping = traps is not None and traps(border(reach))
@@ -139,7 +140,6 @@ def guess_routing(
                 trapping = traps(border(reach))
             if ok:
                 is_open = trial
-                f = f.copy()
                 f[edges[forward]] = True
                 f[edges[~forward]] = False
                 flow += 1
@@ -244,9 +244,7 @@ def simple_routes(
     ok = np.flatnonzero(usable)
     out_ptr, out_order = _csr(eu[ok], n)
     out_order = ok[out_order]
-    in_ptr, in_order = _csr(ev[ok], n)
-    in_order = ok[in_order]
-    search = _RouteSearch(n, src, eu, ev, out_ptr, out_order, target, seed)
+    search = _RouteSearch(eu, ev, out_ptr, out_order, target, seed)
     for changes in _history_sequences(src, eu[ok], ev[ok], target, seed):
         if time.perf_counter() > search.deadline:
             break
@@ -312,8 +310,6 @@ class _RouteSearch:
 
     def __init__(
         self,
-        n: int,
-        src: int,
         eu: np.ndarray,
         ev: np.ndarray,
         ptr: np.ndarray,
@@ -321,7 +317,7 @@ class _RouteSearch:
         target: np.ndarray,
         seed: RouteSeed,
     ) -> None:
-        self.n, self.src, self.eu, self.ev, self.ptr, self.order = n, src, eu, ev, ptr, order
+        self.eu, self.ev, self.ptr, self.order = eu, ev, ptr, order
         self.target, self.place, self.hist = target, seed.place, seed.hist
         self.rng = np.random.default_rng(seed.seed)
         self.left = self.BUDGET
@@ -367,21 +363,6 @@ class _RouteSearch:
             if rest is not None:
                 return seg + rest
         return None
-
-
-def _bfs_dist(n: int, starts: np.ndarray, ptr: np.ndarray, order: np.ndarray, head: np.ndarray) -> np.ndarray:
-    """Hop distances from ``starts`` along the CSR adjacency (-1: unreached)."""
-    dist = np.full(n, -1, dtype=np.int64)
-    dist[starts] = 0
-    dq: deque[int] = deque(int(s) for s in starts)
-    while dq:
-        u = dq.popleft()
-        for k in range(ptr[u], ptr[u + 1]):
-            v = int(head[order[k]])
-            if dist[v] < 0:
-                dist[v] = dist[u] + 1
-                dq.append(v)
-    return dist
 
 
 def _shortest(
