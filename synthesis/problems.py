@@ -6,6 +6,10 @@ Problems come from TOML files (problem-format.md) or from the built-in registry
 
 from __future__ import annotations
 
+import math
+import os
+import re
+import stat
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -14,7 +18,8 @@ from typing import Any, Callable
 import numpy as np
 
 from .errors import ProblemError
-from .specs import Objective, check_propositions, parse_objective
+from .specs import Objective, check_proposition_name, check_propositions, parse_objective
+from .strategy import SETTINGS
 from .systems import Cell, TransitionSystem, graph_system, grid_world
 
 KINDS = ("static", "reactive", "mixed", "agent")
@@ -84,6 +89,11 @@ def make_problem(
     sys_obj = parse_objective(system_objective, "system")
     test_obj = parse_objective(test_objective, "test")
     known = system.propositions() | set(kw.pop("declared_propositions", ()))
+    for prop in sorted(known, key=str):
+        check_proposition_name(prop, "[labels]")
+    setting = kw.get("extras", {}).get("setting")
+    if setting is not None and setting not in SETTINGS:
+        raise ProblemError(f"unknown obstacle setting {setting!r} in [environment]; expected one of {', '.join(SETTINGS)}")
     check_propositions(sys_obj, known, "system")
     check_propositions(test_obj, known, "test")
     _check_goal_terminal(system, sys_obj)
@@ -128,6 +138,18 @@ def _unknown(section: str, got: dict, allowed: set[str]) -> None:
         )
 
 
+def _is_int(x: Any) -> bool:
+    """An integer that is not a boolean (TOML's ``true`` is not the number 1)."""
+    return isinstance(x, int) and not isinstance(x, bool)
+
+
+def _is_cell(x: Any) -> bool:
+    return isinstance(x, list) and len(x) == 2 and all(_is_int(v) for v in x)
+
+
+_TOKEN_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+
+
 def _table(d: dict, key: str, where: str) -> dict:
     v = d.get(key)
     if v is None:
@@ -148,6 +170,12 @@ def parse_grid(text: str, where: str = "[system] grid") -> tuple[list[list[str]]
     for i, r in enumerate(rows):
         if len(r) != width:
             raise ProblemError(f"{where}: row {i} has {len(r)} cells, row 0 has {width}")
+        for j, tok in enumerate(r):
+            if tok not in (".", "#") and _TOKEN_NAME.fullmatch(tok) is None:
+                raise ProblemError(
+                    f"{where}: the token {tok!r} at [{i}, {j}] is not '.', '#' or a name "
+                    "(letters, digits and _, not starting with a digit)"
+                )
     return rows, len(rows), width
 
 
@@ -157,7 +185,7 @@ def _cells_of(spec: Any, tokens: dict[str, list[Cell]], where: str, rows: int, c
         if spec not in tokens:
             raise ProblemError(f"{where}: no cell of the grid holds token {spec!r}")
         return list(tokens[spec])
-    if isinstance(spec, list) and len(spec) == 2 and all(isinstance(x, int) for x in spec):
+    if _is_cell(spec):
         r, c = spec
         if not (0 <= r < rows and 0 <= c < cols):
             raise ProblemError(f"{where}: cell [{r}, {c}] is outside the {rows}x{cols} grid")
@@ -165,7 +193,7 @@ def _cells_of(spec: Any, tokens: dict[str, list[Cell]], where: str, rows: int, c
     if isinstance(spec, list):
         out: list[Cell] = []
         for item in spec:
-            if isinstance(item, list) and not (len(item) == 2 and all(isinstance(x, int) for x in item)):
+            if isinstance(item, list) and not _is_cell(item):
                 raise ProblemError(f"{where}: {item!r} is neither a token nor a [row, col] cell")
             out.extend(_cells_of(item, tokens, where, rows, cols))
         return out
@@ -173,12 +201,19 @@ def _cells_of(spec: Any, tokens: dict[str, list[Cell]], where: str, rows: int, c
 
 
 def problem_from_dict(data: dict, source: str = "<problem>") -> Problem:
-    """Build a problem from the parsed TOML of problem-format.md."""
+    """Build a problem from the parsed TOML of problem-format.md.
+
+    Every section is checked for unknown keys first, so a misspelled key is named
+    (``unknown key 'termnal'``) rather than reported as the key it replaced missing.
+    """
     where = f" of {source}"
     _unknown(f"the top level{where}", data, _TOP_KEYS)
     name = data.get("name", Path(source).stem)
-    if not isinstance(name, str):
-        raise ProblemError(f"`name`{where} must be a string")
+    if not isinstance(name, str) or not name.strip() or not name.isprintable():
+        raise ProblemError(f"`name`{where} must be a non-empty one-line string")
+    description = data.get("description", "")
+    if not isinstance(description, str):
+        raise ProblemError(f"`description`{where} must be a string")
     system = _table(data, "system", where)
     objectives = _table(data, "objectives", where)
     env = _table(data, "environment", where)
@@ -187,20 +222,43 @@ def problem_from_dict(data: dict, source: str = "<problem>") -> Problem:
         raise ProblemError(f"[labels]{where} must be a table")
     _unknown(f"[objectives]{where}", objectives, _OBJ_KEYS)
     _unknown(f"[environment]{where}", env, _ENV_KEYS)
+    if "grid" in system:
+        _unknown(f"[system]{where}", system, _GRID_KEYS)
+    elif "states" in system:
+        _unknown(f"[system]{where}", system, _GRAPH_KEYS)
+    else:
+        _unknown(f"[system]{where}", system, _GRID_KEYS | _GRAPH_KEYS)
+    for prop in labels:
+        check_proposition_name(prop, f"[labels]{where}")
     for key in ("system", "test"):
         if key not in objectives:
             raise ProblemError(f"missing `{key}` in [objectives]{where}")
     if "kind" not in env:
         raise ProblemError(f"missing `kind` in [environment]{where}")
     kind = env["kind"]
+    if not isinstance(kind, str) or kind not in KINDS:
+        raise ProblemError(f"`kind` in [environment]{where} is {kind!r}; expected one of {', '.join(KINDS)}")
     for key in ("start", "terminal"):
         if key not in system:
             raise ProblemError(f"missing `{key}` in [system]{where}")
+    time_limit = env.get("time_limit")
+    if time_limit is not None and (
+        not isinstance(time_limit, (int, float)) or isinstance(time_limit, bool)
+        or not math.isfinite(time_limit) or time_limit <= 0
+    ):
+        raise ProblemError(f"`time_limit` in [environment]{where} must be a positive finite number of seconds, not {time_limit!r}")
+    bidir = env.get("bidirectional_cuts")
+    if bidir is not None and not isinstance(bidir, bool):
+        raise ProblemError(f"`bidirectional_cuts` in [environment]{where} must be true or false")
+    if "setting" in env and env["setting"] not in SETTINGS:
+        raise ProblemError(f"`setting` in [environment]{where} is {env['setting']!r}; expected one of {', '.join(SETTINGS)}")
+    if "static" in env and kind not in ("mixed", "agent"):
+        raise ProblemError(f"`static` in [environment]{where} is for mixed and agent problems, not {kind!r} ones")
+    if "agent" in env and kind != "agent":
+        raise ProblemError(f"[environment.agent]{where} is for kind = \"agent\" problems, not {kind!r} ones")
     if "grid" in system:
-        _unknown(f"[system]{where}", system, _GRID_KEYS)
         ts, cell_of = _grid_from_toml(system, labels, where)
     elif "states" in system:
-        _unknown(f"[system]{where}", system, _GRAPH_KEYS)
         ts, cell_of = _graph_from_toml(system, labels, where)
     else:
         raise ProblemError(f"[system]{where} needs either `grid` or `states` and `edges`")
@@ -209,12 +267,6 @@ def problem_from_dict(data: dict, source: str = "<problem>") -> Problem:
         static_moves = _moves_mask(ts, env["static"], cell_of, f"[environment] static{where}")
     if "restrictable" in system:
         ts.restrictable = _moves_mask(ts, system["restrictable"], cell_of, f"[system] restrictable{where}")
-    time_limit = env.get("time_limit")
-    if time_limit is not None and (not isinstance(time_limit, (int, float)) or time_limit <= 0):
-        raise ProblemError(f"`time_limit` in [environment]{where} must be a positive number of seconds")
-    bidir = env.get("bidirectional_cuts")
-    if bidir is not None and not isinstance(bidir, bool):
-        raise ProblemError(f"`bidirectional_cuts` in [environment]{where} must be true or false")
     extras: dict = {}
     if "setting" in env:
         extras["setting"] = env["setting"]
@@ -229,7 +281,7 @@ def problem_from_dict(data: dict, source: str = "<problem>") -> Problem:
         raise ProblemError(f"an agent problem needs an [environment.agent] section{where}")
     kw["declared_propositions"] = set(labels)
     return make_problem(
-        name, ts, objectives["system"], objectives["test"], kind, bidir, description=data.get("description", ""), **kw
+        name, ts, objectives["system"], objectives["test"], kind, bidir, description=description, **kw
     )
 
 
@@ -283,8 +335,8 @@ def _grid_from_toml(system: dict, labels: dict, where: str) -> tuple[TransitionS
 
 def _graph_from_toml(system: dict, labels: dict, where: str) -> tuple[TransitionSystem, Callable[[Any, str], list[int]]]:
     states = system["states"]
-    if not isinstance(states, list) or not all(isinstance(s, str) for s in states):
-        raise ProblemError(f"[system] states{where} must be a list of state names")
+    if not isinstance(states, list) or not all(isinstance(s, str) and s.strip() and s.isprintable() for s in states):
+        raise ProblemError(f"[system] states{where} must be a list of state names (non-empty one-line strings)")
     if not states:
         raise ProblemError(f"[system] states{where} is empty")
     edges = system.get("edges", [])
@@ -298,13 +350,13 @@ def _graph_from_toml(system: dict, labels: dict, where: str) -> tuple[Transition
     terminal = system["terminal"]
     if isinstance(terminal, str):
         terminal = [terminal]
-    if not isinstance(terminal, list) or not terminal:
+    if not isinstance(terminal, list) or not terminal or not all(isinstance(t, str) for t in terminal):
         raise ProblemError(f"[system] terminal{where} must be a non-empty list of state names")
     lab: dict[str, set[str]] = {}
     known = set(states)
     for prop, spec in labels.items():
         names = [spec] if isinstance(spec, str) else spec
-        if not isinstance(names, list):
+        if not isinstance(names, list) or not all(isinstance(s, str) for s in names):
             raise ProblemError(f"[labels] {prop}{where} must be a state name or a list of them")
         for s in names:
             if s not in known:
@@ -317,6 +369,8 @@ def _graph_from_toml(system: dict, labels: dict, where: str) -> tuple[Transition
 
     def cell_of(spec: Any, at: str) -> list[int]:
         names = [spec] if isinstance(spec, str) else spec
+        if not isinstance(names, list):
+            raise ProblemError(f"{at}: {spec!r} is neither a state name nor a list of them")
         out = []
         for s in names:
             if not isinstance(s, str) or s not in known:
@@ -345,6 +399,34 @@ def _moves_mask(ts: TransitionSystem, spec: Any, cell_of: Callable[[Any, str], l
     return mask
 
 
+MAX_FILE_BYTES = 16 * 1024 * 1024
+"""Largest input file read (problem files, artifacts): far above any solvable problem."""
+
+
+def read_limited(path: str | Path, what: str, limit: int = MAX_FILE_BYTES) -> bytes:
+    """The bytes of a regular file of at most ``limit`` bytes.
+
+    Raises
+    ------
+    ProblemError
+        If ``path`` cannot be read, is not a regular file (a folder, ``/dev/zero``, a
+        pipe: reading it could never end) or is larger than ``limit``.
+    """
+    p = Path(path)
+    try:
+        # non-blocking open: a named pipe must not hang the check below
+        fd = os.open(p, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+        with os.fdopen(fd, "rb") as fh:
+            if not stat.S_ISREG(os.fstat(fd).st_mode):
+                raise ProblemError(f"{what} {str(p)!r} is not a regular file")
+            raw = fh.read(limit + 1)
+    except OSError as exc:
+        raise ProblemError(f"cannot read {what} {str(p)!r}: {exc.strerror or exc}") from None
+    if len(raw) > limit:
+        raise ProblemError(f"{what} {str(p)!r} is larger than {limit // (1024 * 1024)} MiB")
+    return raw
+
+
 def load_problem_file(path: str | Path) -> Problem:
     """Read a TOML problem file.
 
@@ -354,16 +436,15 @@ def load_problem_file(path: str | Path) -> Problem:
         If the file cannot be read or parsed, or describes an invalid problem.
     """
     p = Path(path)
-    try:
-        raw = p.read_bytes()
-    except OSError as exc:
-        raise ProblemError(f"cannot read problem file {str(p)!r}: {exc.strerror or exc}") from None
+    raw = read_limited(p, "problem file")
     try:
         data = tomllib.loads(raw.decode("utf-8"))
     except UnicodeDecodeError:
         raise ProblemError(f"problem file {str(p)!r} is not UTF-8 text") from None
     except tomllib.TOMLDecodeError as exc:
         raise ProblemError(f"{p}: invalid TOML: {exc}") from None
+    except RecursionError:
+        raise ProblemError(f"{p}: invalid TOML: nested too deeply") from None
     return problem_from_dict(data, str(p))
 
 

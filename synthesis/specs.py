@@ -61,6 +61,37 @@ Formula = Union[Prop, Const, Not, BinOp, Temporal]
 _TOKEN = re.compile(r"\s*(->|[()!&|]|[A-Za-z_][A-Za-z0-9_]*|\S)")
 _BINDING = {"->": 1, "|": 2, "&": 3, "U": 4}
 _UNARY_TEMPORAL = {"F", "G", "X"}
+_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+
+RESERVED = frozenset({"true", "false", "F", "G", "X", "U"})
+"""Words of the formula syntax: never proposition names (``true`` as a label would
+silently turn ``F true`` into a visit of that label's cells)."""
+
+MAX_FORMULA_CHARS = 10_000
+"""Longest formula accepted (far beyond any objective whose automaton can be built)."""
+
+MAX_FORMULA_DEPTH = 200
+"""Deepest syntax tree accepted: nesting of parentheses, ``!``, ``F``/``G``/``X`` and
+chains of binary operators. Bounded so that every recursive walk of a formula stays far
+below Python's recursion limit; a deeper formula is refused with a clear error."""
+
+
+def is_proposition_name(name: object) -> bool:
+    """Whether ``name`` can name a proposition: an identifier that is not a reserved word."""
+    return isinstance(name, str) and _NAME.fullmatch(name) is not None and name not in RESERVED
+
+
+def check_proposition_name(name: object, where: str) -> None:
+    """Raise :class:`ProblemError` unless ``name`` can name a proposition."""
+    if not isinstance(name, str) or _NAME.fullmatch(name) is None:
+        raise ProblemError(
+            f"{where}: {name!r} is not a proposition name (letters, digits and _, not starting with a digit)"
+        )
+    if name in RESERVED:
+        raise ProblemError(
+            f"{where}: {name!r} is a reserved word of the formula syntax ({', '.join(sorted(RESERVED))}), "
+            "not a proposition name"
+        )
 
 
 def _tokenize(text: str) -> list[tuple[str, int]]:
@@ -84,6 +115,12 @@ class _Parser:
         self.text = text
         self.tokens = _tokenize(text)
         self.i = 0
+        self.depth = 0  # nesting of the recursive descent, bounded by MAX_FORMULA_DEPTH
+
+    def nest(self) -> None:
+        self.depth += 1
+        if self.depth > MAX_FORMULA_DEPTH:
+            raise self.error(f"the formula nests deeper than {MAX_FORMULA_DEPTH} levels")
 
     def error(self, what: str) -> ProblemError:
         if self.i < len(self.tokens):
@@ -91,7 +128,7 @@ class _Parser:
             where = f"at {tok!r} (position {pos})"
         else:
             where = "at the end"
-        return ProblemError(f"{what} {where} in formula {self.text!r}")
+        return ProblemError(f"{what} {where} in formula {_clip(self.text)!r}")
 
     def peek(self) -> str | None:
         return self.tokens[self.i][0] if self.i < len(self.tokens) else None
@@ -114,7 +151,9 @@ class _Parser:
         while (tok := self.peek()) in _BINDING and _BINDING[tok] >= min_binding:
             self.take()
             # "->" is right associative, the others left associative
+            self.nest()
             right = self.binary(_BINDING[tok] if tok == "->" else _BINDING[tok] + 1)
+            self.depth -= 1
             left = BinOp(tok, left, right)
         return left
 
@@ -124,16 +163,24 @@ class _Parser:
             raise self.error("formula ends too early")
         if tok == "!":
             self.take()
-            return Not(self.unary())
+            self.nest()
+            f: Formula = Not(self.unary())
+            self.depth -= 1
+            return f
         if tok in _UNARY_TEMPORAL:
             self.take()
-            return Temporal(tok, self.unary())
+            self.nest()
+            f = Temporal(tok, self.unary())
+            self.depth -= 1
+            return f
         if tok == "(":
             self.take()
+            self.nest()
             f = self.binary(1)
             if self.peek() != ")":
                 raise self.error("missing ')'")
             self.take()
+            self.depth -= 1
             return f
         if tok in ("true", "false"):
             self.take()
@@ -152,7 +199,35 @@ def parse_formula(text: str) -> Formula:
     ProblemError
         On a syntax error; the message gives the position.
     """
-    return _Parser(text).parse()
+    if len(text) > MAX_FORMULA_CHARS:
+        raise ProblemError(f"formula of {len(text)} characters is longer than the {MAX_FORMULA_CHARS} accepted")
+    tree = _Parser(text).parse()
+    depth = formula_depth(tree)
+    if depth > MAX_FORMULA_DEPTH:
+        raise ProblemError(
+            f"formula {_clip(text)!r} is {depth} levels deep (chains of operators count), "
+            f"more than the {MAX_FORMULA_DEPTH} accepted"
+        )
+    return tree
+
+
+def _clip(text: str, limit: int = 80) -> str:
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def formula_depth(f: Formula) -> int:
+    """Height of the syntax tree, computed without recursion (any tree is safe)."""
+    deepest = 0
+    stack: list[tuple[Formula, int]] = [(f, 1)]
+    while stack:
+        node, d = stack.pop()
+        deepest = max(deepest, d)
+        if isinstance(node, (Not, Temporal)):
+            stack.append((node.arg, d + 1))
+        elif isinstance(node, BinOp):
+            stack.append((node.left, d + 1))
+            stack.append((node.right, d + 1))
+    return deepest
 
 
 def to_text(f: Formula) -> str:
@@ -268,6 +343,8 @@ def _sequence(f: Formula) -> list[Formula] | None:
     if rest is None:
         return None
     here = [p for p in parts if is_propositional(p)]
+    if not here:  # F(F(...)) is F(...)
+        return rest
     head: Formula = here[0]
     for p in here[1:]:
         head = BinOp("&", head, p)
@@ -322,7 +399,12 @@ def parse_objective(text: str, role: str) -> Objective:
     """
     if not isinstance(text, str):
         raise ProblemError(f"the {role} objective must be a string, got {type(text).__name__}")
-    tree = parse_formula(text)
+    if not text.strip():
+        raise ProblemError(f"the {role} objective is empty")
+    try:
+        tree = parse_formula(text)
+    except ProblemError as exc:
+        raise ProblemError(f"the {role} objective: {exc}") from None
     tasks: list[Task] = []
     for part in _conjuncts(tree):
         task = _classify(part)
