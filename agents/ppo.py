@@ -112,6 +112,10 @@ def with_memory(env: gym.Env, memory: str) -> gym.Env:
     raise PolicyError(f"unknown memory {memory!r}; known: {', '.join(MEMORY_KINDS)}")
 
 
+MAX_MODEL_BYTES = 1 << 30
+"""Largest model file loaded (a FlowTest PPO model is well under a megabyte)."""
+
+
 def load_model(path: str | Path) -> Any:
     """Load a saved (Maskable)PPO model.
 
@@ -123,6 +127,11 @@ def load_model(path: str | Path) -> Any:
     p = Path(path)
     if not p.exists() and not p.with_suffix(".zip").exists():
         raise PolicyError(f"no saved model at {str(p)!r}")
+    found = p if p.exists() else p.with_suffix(".zip")
+    if not found.is_file():  # a folder, /dev/zero, a pipe: never read it
+        raise PolicyError(f"the model {str(found)!r} is not a regular file")
+    if found.stat().st_size > MAX_MODEL_BYTES:
+        raise PolicyError(f"the model {str(found)!r} is larger than {MAX_MODEL_BYTES >> 20} MiB")
     try:
         from sb3_contrib import MaskablePPO
     except ImportError:  # pragma: no cover - depends on the rl extra
@@ -136,7 +145,11 @@ def load_model(path: str | Path) -> Any:
             return MaskablePPO.load(str(p), device="cpu")
         except Exception:  # noqa: BLE001 - fall back to plain PPO
             pass
-    return PPO.load(str(p), device="cpu")
+    try:
+        return PPO.load(str(p), device="cpu")
+    except Exception as exc:  # noqa: BLE001 - any unreadable file is the user's input, not a bug
+        detail = " ".join(str(exc).split())[:200]
+        raise PolicyError(f"{str(found)!r} is not a saved PPO model ({type(exc).__name__}: {detail})") from None
 
 
 class PPOPolicy:

@@ -49,6 +49,7 @@ import sys
 import threading
 import time
 import traceback
+import typing
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Sequence, TextIO
@@ -112,9 +113,18 @@ def command(
     return register
 
 
+class ArgumentParser(argparse.ArgumentParser):
+    """argparse with FlowTest's error contract: a usage error is one ``error: ...`` line
+    on stderr and exit code 2 (argparse would print the usage block first)."""
+
+    def error(self, message: str) -> "typing.NoReturn":  # type: ignore[override]
+        _error(f"{self.prog}: {message} (see `{self.prog} --help`)")
+        raise SystemExit(EXIT_INVALID)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser with every registered subcommand."""
-    parser = argparse.ArgumentParser(
+    parser = ArgumentParser(
         prog=PROG,
         description="Flow-based synthesis of reactive tests for discrete decision-making systems.",
     )
@@ -258,20 +268,99 @@ class StageProgress:
 # --------------------------------------------------------------------------- outputs
 
 
+def _nearest_existing(path: Path) -> Path:
+    """``path`` or its closest ancestor that exists (``.`` for a relative path with none)."""
+    p = path
+    while not p.exists() and not p.is_symlink():
+        if p.parent == p:
+            break
+        p = p.parent
+    return p
+
+
+def _probe_folder(folder: Path, what: str, path: Path) -> None:
+    """Raise ProblemError unless a file can be created in ``folder`` (tried, then removed).
+
+    Permission bits lie to root and on read-only mounts; creating a file does not.
+    """
+    import tempfile
+
+    try:
+        fd, name = tempfile.mkstemp(prefix=".flowtest-probe-", dir=folder)
+    except OSError as exc:
+        raise ProblemError(f"cannot write the {what} {str(path)!r}: {str(folder)!r}: {exc.strerror or exc}") from None
+    os.close(fd)
+    os.unlink(name)
+
+
 def check_output_path(path: Path, force: bool, what: str) -> None:
-    """Refuse to overwrite an existing file without ``--force`` (raises ProblemError)."""
+    """Check an output file before any expensive work (raises ProblemError).
+
+    Refused: a folder; a symbolic link (never replaced, even with ``--force``); an
+    existing file without ``--force``; a path under a file; a place where nothing can
+    be written. Nothing is created.
+    """
+    if path.is_symlink():
+        raise ProblemError(f"{what} {str(path)!r} is a symbolic link; FlowTest never replaces one")
     if path.is_dir():
         raise ProblemError(f"{what} {str(path)!r} is a directory, not a file")
     if path.exists() and not force:
         raise ProblemError(f"{what} {str(path)!r} exists; use --force to overwrite")
+    if path.exists() and not path.is_file():
+        raise ProblemError(f"{what} {str(path)!r} is not a regular file")
+    base = _nearest_existing(path.parent)
+    if not base.exists():  # a relative path whose every part is missing: the working folder
+        base = Path(".")
+    if not base.is_dir():
+        raise ProblemError(f"{what} {str(path)!r}: {str(base)!r} is a file, not a folder")
+    _probe_folder(base, what, path)
+
+
+def prepare_output_folder(folder: Path, marker: str, force: bool, what: str, hint: str = "use --force") -> None:
+    """Create or accept an output folder FlowTest may write into (raises ProblemError).
+
+    A folder that already holds files FlowTest did not write (no ``marker`` file from an
+    earlier run) is refused unless ``force``; a file in its place, or a folder nothing can
+    be written into, is refused always. On success the folder exists and holds ``marker``.
+    """
+    if folder.exists() and not folder.is_dir():
+        raise ProblemError(f"{what} {str(folder)!r} exists and is not a folder")
+    if folder.is_dir():
+        try:
+            foreign = any(folder.iterdir()) and not (folder / marker).exists()
+        except OSError as exc:
+            raise ProblemError(f"cannot read the {what} {str(folder)!r}: {exc.strerror or exc}") from None
+        if foreign and not force:
+            raise ProblemError(
+                f"{what} {str(folder)!r} already holds files FlowTest did not write; {hint} or choose another folder"
+            )
+    else:
+        base = _nearest_existing(folder.parent)
+        if base.exists() and not base.is_dir():
+            raise ProblemError(f"{what} {str(folder)!r}: {str(base)!r} is a file, not a folder")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ProblemError(f"cannot create the {what} {str(folder)!r}: {exc.strerror or exc}") from None
+    _probe_folder(folder, what, folder)
+    mark = folder / marker
+    if mark.is_symlink():
+        raise ProblemError(f"{str(mark)!r} is a symbolic link; FlowTest never replaces one")
+    if not mark.exists():
+        write_atomically(mark, lambda tmp: tmp.write_text(f"written by FlowTest ({what}); its files may be overwritten by the next run\n"))
 
 
 def write_atomically(path: Path, write: Callable[[Path], None]) -> None:
     """Create ``path``'s parent directories and write it through a temporary file.
 
     ``write`` writes a given path; the result replaces ``path`` only once complete, so
-    an interrupted run never leaves a truncated artifact or picture behind.
+    an interrupted run never leaves a truncated artifact or picture behind. A symbolic
+    link at ``path`` is never replaced (ProblemError).
     """
+    if path.is_symlink():
+        raise ProblemError(f"{str(path)!r} is a symbolic link; FlowTest never replaces one")
+    if path.is_dir():
+        raise ProblemError(f"{str(path)!r} is a directory, not a file")
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -412,6 +501,22 @@ def _gap(text: str) -> float:
     return v
 
 
+def nonnegative_int(text: str) -> int:
+    """An argparse type: an integer >= 0 (seeds)."""
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a non-negative integer, got {text!r}") from None
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"expected a non-negative integer, got {text!r}")
+    return v
+
+
+def positive_int(text: str) -> int:
+    """An argparse type: an integer >= 1 (episodes, steps, threads)."""
+    return _positive_int(text)
+
+
 def _positive_int(text: str) -> int:
     try:
         v = int(text)
@@ -441,7 +546,7 @@ def _synthesize_arguments(p: argparse.ArgumentParser) -> None:
         "the paper's budget: --time-limit 600 --after-first 60)",
     )
     p.add_argument("--gap", metavar="G", type=_gap, default=0.0, help="relative MIP gap at which to stop (default 0: prove optimality)")
-    p.add_argument("--threads", metavar="N", type=_positive_int, help="solver threads (default: HiGHS's choice)")
+    p.add_argument("--threads", metavar="N", type=_positive_int, help="solver threads (default: HiGHS's choice; at most the machine's CPUs)")
     p.add_argument("--setting", choices=SETTINGS, help="how reactive obstacles are shown (default: the problem's, else instantaneous)")
     p.add_argument("--force", action="store_true", help="overwrite existing --out/--plot files")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines on stderr")
@@ -468,6 +573,9 @@ def run_synthesize(args: argparse.Namespace) -> int:
 
         check_plot_format(args.plot)
 
+    cpus = os.cpu_count() or 1
+    if args.threads is not None and args.threads > cpus:
+        raise ProblemError(f"--threads {args.threads} is more than the {cpus} CPUs of this machine")
     problem = _load(load_problem, args.problem)
     with StageProgress(enabled=not args.quiet) as progress:
         progress(f"synthesizing {problem.name} ({problem.kind} test)")

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
 import time
 from pathlib import Path
@@ -22,7 +23,7 @@ from synthesis.pipeline import SynthesisOptions, synthesize
 from synthesis.problems import load_problem
 from synthesis.summary import summary_of
 
-from .cli import EXIT_OK, StageProgress, command, json_safe, write_atomically
+from .cli import EXIT_OK, StageProgress, command, json_safe, positive_int, prepare_output_folder, write_atomically
 from synthesis.errors import ProblemError
 
 MARKER = ".flowtest-demo"
@@ -35,23 +36,33 @@ def _arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--problems", nargs="+", default=list(DEMO_PROBLEMS), metavar="NAME", help="problems to synthesize"
     )
-    p.add_argument("--episodes", type=int, default=5, help="evaluation episodes per system (default 5)")
+    p.add_argument("--episodes", type=positive_int, default=5, help="evaluation episodes per system (default 5)")
     p.add_argument("--no-evaluation", action="store_true", help="only synthesize and draw, run no system under test")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines on stderr")
 
 
 def prepare_folder(out: Path) -> None:
-    """Create ``out`` as a demo folder, or accept one the demo created before."""
-    if out.exists():
-        if not out.is_dir():
-            raise ProblemError(f"demo output {str(out)!r} exists and is not a folder")
-        if any(out.iterdir()) and not (out / MARKER).exists():
-            raise ProblemError(
-                f"demo output folder {str(out)!r} exists and was not made by the demo; "
-                "choose another with --out"
-            )
-    out.mkdir(parents=True, exist_ok=True)
-    (out / MARKER).write_text("made by `flowtest demo`; its files may be overwritten by the next demo\n")
+    """Create ``out`` as a demo folder, or accept one the demo created before (its marker)."""
+    prepare_output_folder(out, MARKER, False, "demo output folder", hint="it was not made by the demo: use --out")
+
+
+_RESERVED_STEMS = {"summary", "evaluation"}
+
+
+def file_stems(names: list[str]) -> list[str]:
+    """A safe, distinct file stem per problem: its name with anything but letters, digits,
+    ``_`` and ``-`` replaced, so a problem given by path (``../x.toml``) or with a name
+    holding ``/`` is written inside the demo folder, never next to the user's file."""
+    stems: list[str] = []
+    for name in names:
+        stem = re.sub(r"[^A-Za-z0-9_-]+", "-", name).strip("-") or "problem"
+        if stem in _RESERVED_STEMS:
+            stem += "-problem"
+        base, k = stem, 2
+        while stem in stems:
+            stem, k = f"{base}-{k}", k + 1
+        stems.append(stem)
+    return stems
 
 
 @command("demo", "synthesize and draw the built-in examples into a folder", _arguments)
@@ -60,12 +71,13 @@ def run_demo(args: argparse.Namespace) -> int:
     from .plots import plot_test
 
     out: Path = args.out
+    problems = [load_problem(name) for name in args.problems]  # every input checked before any work
+    stems = file_stems([p.name for p in problems])
     prepare_folder(out)
     rows = []
     with StageProgress(enabled=not args.quiet) as progress:
-        for name in args.problems:
-            problem = load_problem(name)
-            progress(f"synthesizing {name} ({problem.kind} test)")
+        for problem, name in zip(problems, stems):
+            progress(f"synthesizing {problem.name} ({problem.kind} test)")
             t0 = time.perf_counter()
             test = synthesize(problem, SynthesisOptions(progress=progress))
             seconds = time.perf_counter() - t0
@@ -91,8 +103,8 @@ def run_demo(args: argparse.Namespace) -> int:
             f"| {name} | {kind} | {s['status']} | {s['flow']} | {s['n_cuts']} | {s['bypass_flow']} "
             f"| {seconds:.2f} | [{name}.png]({name}.png) |"
         )
-    (out / "summary.md").write_text("\n".join(lines) + "\n")
-    (out / "summary.json").write_text(json.dumps([s for _, _, s, _ in rows], indent=1) + "\n")
+    write_atomically(out / "summary.md", lambda tmp: tmp.write_text("\n".join(lines) + "\n"))
+    write_atomically(out / "summary.json", lambda tmp: tmp.write_text(json.dumps([s for _, _, s, _ in rows], indent=1) + "\n"))
     sys.stdout.write("\n".join(lines[2:]) + "\n\n")
     sys.stdout.write(f"pictures, artifacts and summary.md are in {out.resolve()}\n")
     if report is not None:

@@ -46,7 +46,11 @@ import numpy as np
 
 from synthesis.errors import ProblemError
 
-from .cli import EXIT_OK, command, json_safe, write_atomically
+from .cli import EXIT_OK, command, json_safe, nonnegative_int, positive_int, prepare_output_folder, write_atomically
+
+REPORT_MARKER = ".flowtest-evaluation"
+"""The file that marks a report folder as FlowTest's: ``--out`` refuses any other
+non-empty folder unless ``--force``."""
 
 MAX_LISTED = 20
 """How many failures a results record lists (``n_failures`` counts all)."""
@@ -93,11 +97,19 @@ def make_env(env_id: str) -> Any:
 
     import flowtest_env  # noqa: F401  (registers FlowTest-*-v0)
 
+    known = ", ".join(flowtest_env.ENV_IDS)
     try:
-        return gym.make(env_id)
+        spec = gym.spec(env_id)
     except gym.error.Error as exc:
-        known = ", ".join(flowtest_env.ENV_IDS)
         raise ProblemError(f"unknown environment {env_id!r}: {exc}; known: {known}") from None
+    entry = spec.entry_point if isinstance(spec.entry_point, str) else getattr(spec.entry_point, "__module__", "")
+    if not str(entry).startswith("flowtest_env"):
+        raise ProblemError(f"{env_id!r} is not a FlowTest environment; known: {known}")
+    env = gym.make(env_id)
+    if not isinstance(env.unwrapped, flowtest_env.FlowTestEnv):
+        env.close()
+        raise ProblemError(f"{env_id!r} is not a FlowTest environment; known: {known}")
+    return env
 
 
 def classify(env: Any, verdict: dict[str, Any]) -> tuple[str, str]:
@@ -504,9 +516,11 @@ def _arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--sut", nargs="+", required=True, metavar="POLICY",
                    help="systems under test: scripted:replanner, scripted:committed, scripted:fuel-blind, "
                         "scripted:greedy, random, gr1, ppo:PATH")
-    p.add_argument("--episodes", type=int, default=10, help="runs per SUT and env (default 10)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the first run; run i uses seed+i (default 0)")
-    p.add_argument("--out", type=Path, help="report folder (required unless --replay)")
+    p.add_argument("--episodes", type=positive_int, default=10, help="runs per SUT and env (default 10)")
+    p.add_argument("--seed", type=nonnegative_int, default=0, help="seed of the first run; run i uses seed+i (default 0)")
+    p.add_argument("--out", type=Path, help="report folder (required unless --replay); a folder holding files "
+                   "FlowTest did not write is refused unless --force")
+    p.add_argument("--force", action="store_true", help="write into an --out folder that holds other files")
     p.add_argument("--replay", action="store_true", help="print every step of the runs instead of a report")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
 
@@ -543,6 +557,12 @@ def run_evaluate(args: argparse.Namespace) -> int:
         return EXIT_TEST_FAILED if bug else EXIT_OK
     if args.out is None:
         raise ProblemError("--out is required (or use --replay)")
+    for env_id in args.env:  # refuse bad IDs and SUTs before any run or any file
+        env = make_env(env_id)
+        for sut in args.sut:
+            _policy(sut, env)
+        env.close()
+    prepare_output_folder(args.out, REPORT_MARKER, args.force, "report folder")
 
     def progress(msg: str) -> None:
         if not args.quiet:

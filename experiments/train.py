@@ -27,7 +27,7 @@ import numpy as np
 
 from synthesis.errors import ProblemError
 
-from .cli import EXIT_OK, command, write_atomically
+from .cli import EXIT_OK, check_output_path, command, nonnegative_int, positive_int, write_atomically
 
 DEFAULTS: dict[str, Any] = {
     "n_envs": 8,
@@ -279,16 +279,24 @@ def train(env_id: str, steps: int, out: str | Path, seed: int = 0, progress_bar:
 
 def _arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("ENV", help="environment ID, e.g. FlowTest-Maze2-v0")
-    p.add_argument("--steps", type=int, default=50_000, help="training time steps (default 50000)")
+    p.add_argument("--steps", type=positive_int, default=50_000, help="training time steps (default 50000)")
     p.add_argument("--out", type=Path, required=True, help="model file (.zip); the curve goes next to it (.png)")
-    p.add_argument("--seed", type=int, default=0, help="seed (default 0)")
-    p.add_argument("--eval-episodes", type=int, default=100, help="evaluation runs after training (default 100)")
+    p.add_argument("--seed", type=nonnegative_int, default=0, help="seed (default 0)")
+    p.add_argument("--eval-episodes", type=nonnegative_int, default=100, help="evaluation runs after training (default 100)")
+    p.add_argument("--force", action="store_true", help="overwrite an existing model, curve or summary")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
 
 
 @command("train", "train a PPO system under test against a synthesized test", _arguments)
 def run_train(args: argparse.Namespace) -> int:
     """Train, save, evaluate; print where the model and its curve are."""
+    from .evaluate import make_env
+
+    make_env(args.ENV).close()  # a bad ID is refused before anything else
+    model_path = args.out if args.out.suffix == ".zip" else args.out.with_suffix(".zip")
+    for path, what in ((model_path, "model"), (model_path.with_suffix(".png"), "curve"),
+                       (model_path.with_suffix(".json"), "training summary")):
+        check_output_path(path, args.force, what)
     s = train(args.ENV, args.steps, args.out, args.seed, progress_bar=not args.quiet, eval_episodes=args.eval_episodes)
     rate = "-" if s["success_rate"] is None else f"{100 * s['success_rate']:.0f} %"
     sys.stdout.write(

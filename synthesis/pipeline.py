@@ -13,6 +13,7 @@ from typing import Any, Callable
 import numpy as np
 
 from .automata import SpecificationProduct, specification_product
+from .errors import ProblemError
 from .milp import MilpOptions, RoutingResult, solve_routing
 from .problems import Problem
 from .products import Products, build_products
@@ -36,6 +37,33 @@ class SynthesisOptions:
     # also forbid restrictions that trap the system off entry nodes (one-way moves);
     # off by default: method.md §5 exactly (see solve_routing)
     closed_loop: bool = False
+
+
+MAX_THREADS = 256
+"""Most solver threads accepted (far above any machine FlowTest runs on)."""
+
+
+def check_options(options: SynthesisOptions) -> None:
+    """Refuse bad options before any work (raises :class:`ProblemError` naming the option)."""
+    import math
+
+    from .strategy import SETTINGS
+
+    for name in ("time_limit", "after_first"):
+        v = getattr(options, name)
+        if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0):
+            raise ProblemError(f"option {name} must be a positive finite number of seconds, not {v!r}")
+    gap = options.mip_rel_gap
+    if isinstance(gap, bool) or not isinstance(gap, (int, float)) or not (0.0 <= gap < 1.0):
+        raise ProblemError(f"option mip_rel_gap must be a number in [0, 1), not {gap!r}")
+    t = options.threads
+    if t is not None and (isinstance(t, bool) or not isinstance(t, int) or not 1 <= t <= MAX_THREADS):
+        raise ProblemError(f"option threads must be an integer from 1 to {MAX_THREADS}, not {t!r}")
+    if options.setting is not None and options.setting not in SETTINGS:
+        raise ProblemError(f"unknown obstacle setting {options.setting!r}; expected one of {', '.join(SETTINGS)}")
+    it = options.agent_iterations
+    if it is not None and (isinstance(it, bool) or not isinstance(it, int) or it < 1):
+        raise ProblemError(f"option agent_iterations must be a positive integer, not {it!r}")
 
 
 @dataclass
@@ -106,11 +134,12 @@ def synthesize(problem: Problem, options: SynthesisOptions | None = None) -> Syn
     CheckFailed
         If the answer fails an independent check (a FlowTest bug).
     """
+    options = options or SynthesisOptions()
+    check_options(options)
     if problem.kind == "agent":
         from .agent import synthesize_agent_test
 
         return synthesize_agent_test(problem, options)
-    options = options or SynthesisOptions()
     note = options.progress or (lambda msg: None)
     t0 = time.perf_counter()
     note("building automata and product graphs")

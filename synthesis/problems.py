@@ -452,6 +452,8 @@ def load_problem(name_or_path: str) -> Problem:
     """A built-in problem by name, or a TOML file by path."""
     from .builtins import BUILTINS
 
+    if not isinstance(name_or_path, str) or not name_or_path.strip():
+        raise ProblemError("empty problem name: give a TOML file or a built-in name")
     if name_or_path in BUILTINS:
         return BUILTINS[name_or_path]()
     p = Path(name_or_path)
