@@ -219,6 +219,27 @@ class raw_env(AECEnv):  # noqa: N801 - PettingZoo's module shape
             return int(g.synthesized_agent_move(run)[0])
         return int(g.restricted_bits[run.history][run.system] & g.choosable_bits[run.system])
 
+    def apply_tester(self, action: int) -> bool:
+        """Play the tester's ``action`` on the run now (not an AEC step: no turn, reward or
+        round bookkeeping). An action outside :meth:`tester_mask` is the no-op: restrict
+        nothing, or the agent stays. Returns whether the action was legal.
+
+        The exhaustive checks of :mod:`flowtest_env.fairness` play the tester through
+        this method, so they follow exactly the rules of :meth:`step`.
+        """
+        g, run = self.game, self.run
+        legal = self.tester_mask()
+        ok = 0 <= action < legal.size and bool(legal[action])
+        if g.has_agent:
+            if ok:
+                syn_agent, syn_memory = g.synthesized_agent_move(run)
+                run.agent = action
+                if action == syn_agent:
+                    run.memory = syn_memory
+        else:
+            run.override = action if ok else 0
+        return ok
+
     # ------------------------------------------------------------------ AEC API
 
     def observe(self, agent: str) -> dict[str, np.ndarray]:
@@ -256,18 +277,8 @@ class raw_env(AECEnv):  # noqa: N801 - PettingZoo's module shape
         self.rewards = {a: 0.0 for a in self.agents}
         a = int(action)
         if agent == TESTER:
-            legal = self.tester_mask()
-            if not (0 <= a < legal.size and legal[a]):
+            if not self.apply_tester(a):
                 self.rewards[TESTER] -= self.restricted_penalty
-                a = -1
-            if g.has_agent:
-                if a >= 0:
-                    syn_agent, syn_memory = g.synthesized_agent_move(run)
-                    run.agent = a
-                    if a == syn_agent:
-                        run.memory = syn_memory
-            else:
-                run.override = max(a, 0)
         else:
             mask = self.system_mask()
             if not (0 <= a < mask.size and mask[a]):
