@@ -671,6 +671,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 # Subcommands defined in their own modules register themselves on import.
 from . import demo as _demo  # noqa: E402,F401
 from . import evaluate as _evaluate  # noqa: E402,F401
+from . import train_tester as _train_tester  # noqa: E402,F401
 
 
 if __name__ == "__main__":  # pragma: no cover

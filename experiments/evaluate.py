@@ -74,15 +74,56 @@ class Trace:
     verdict: dict[str, Any] = field(default_factory=dict)
     kind: str = "pass"
     reason: str = ""
+    tester: str = "synthesized"
 
     @property
     def failed(self) -> bool:
         return self.kind != "pass"
 
 
-def replay_command(env_id: str, sut: str, seed: int) -> str:
+def replay_command(env_id: str, sut: str, seed: int, tester: str = "synthesized") -> str:
     """The command that replays one run exactly (shell-quoted: a model path may hold spaces)."""
-    return f"flowtest evaluate --env {shlex.quote(env_id)} --sut {shlex.quote(sut)} --episodes 1 --seed {seed} --replay"
+    against = "" if tester == "synthesized" else f" --tester {shlex.quote(tester)}"
+    return (f"flowtest evaluate --env {shlex.quote(env_id)} --sut {shlex.quote(sut)}{against} "
+            f"--episodes 1 --seed {seed} --replay")
+
+
+def make_tester_env(env_id: str, tester: str) -> Any:
+    """The env ``env_id`` with ``tester`` on the environment side: :func:`make_env` for
+    ``synthesized`` (the synthesized test as the single-agent env plays it), else
+    :class:`agents.testers.VersusTesterEnv` on the same problem and step budget.
+
+    Raises
+    ------
+    ProblemError
+        On an unknown tester, or one that cannot play ``env_id``.
+    """
+    if tester == "synthesized":
+        return make_env(env_id)
+    from agents.base import PolicyError
+    from agents.testers import VersusTesterEnv, problem_of
+
+    make_env(env_id).close()  # an unknown ID is reported as make_env reports it
+    try:
+        problem, max_steps = problem_of(env_id)
+        return VersusTesterEnv(problem, tester, max_steps=max_steps)
+    except PolicyError as exc:
+        raise ProblemError(f"--tester {tester}: {exc}") from None
+
+
+def tester_fairness(env_id: str, tester: str) -> dict[str, Any] | None:
+    """The exhaustive fairness check of ``tester`` on ``env_id``'s game
+    (:func:`flowtest_env.fairness.check_tester`), ``None`` for an env without one fixed game."""
+    from agents.base import PolicyError
+    from agents.testers import VersusTesterEnv, problem_of
+    from flowtest_env.fairness import check_tester
+
+    try:
+        problem, _ = problem_of(env_id)
+        env = VersusTesterEnv(problem, tester)
+    except PolicyError:
+        return None
+    return check_tester(env.ma, env.tester).summary()
 
 
 def make_env(env_id: str) -> Any:
@@ -116,11 +157,19 @@ def classify(env: Any, verdict: dict[str, Any]) -> tuple[str, str]:
     """``(kind, reason)`` of a finished run: ``pass``, ``sut`` (a SUT failure) or ``test``
     (a FlowTest bug); see the module docstring."""
     met = verdict["system_objective"] == "met"
+    u = env.unwrapped
+    if hasattr(u, "trapped"):  # another tester than the synthesized one: no guarantee to break
+        if met:
+            return "pass", ""
+        if u.trapped():
+            return "trap", "trapped: the tester closed every way to the goal (an unfair test)"
+        if verdict["system_objective"] == "violated":
+            return "sut", "violated the system objective"
+        return "sut", f"did not meet the system objective within {verdict['steps']} steps"
     if met and not verdict["test_objective_realized"]:
         return "test", "met the system objective without realizing the test objective"
     if met:
         return "pass", ""
-    u = env.unwrapped
     game, run = u.game, u.run
     if not can_still_meet(game, run) and _reachable_past_walls(game, run.history, run.system):
         return "test", "trapped: the test's restrictions closed every way to the goal"
@@ -177,12 +226,13 @@ def _reachable_past_walls(game: Any, history: int, state: int) -> bool:
     return not walls.doomed[history][state]
 
 
-def run_episode(env: Any, policy: Any, env_id: str, sut: str, seed: int, record: bool = True) -> Trace:
+def run_episode(env: Any, policy: Any, env_id: str, sut: str, seed: int, record: bool = True,
+                tester: str = "synthesized") -> Trace:
     """Play one seeded episode; the trace keeps copies of the run states when ``record``."""
     obs, info = env.reset(seed=seed)
     policy.reset(seed)
     u = env.unwrapped
-    trace = Trace(env_id, sut, seed)
+    trace = Trace(env_id, sut, seed, tester=tester)
     if record:
         trace.states.append(u.run.copy())
     while True:
@@ -208,6 +258,8 @@ class Cell:
     seed: int
     seconds: float
     pictures: dict[str, str] = field(default_factory=dict)
+    tester: str = "synthesized"
+    fairness: dict[str, Any] | None = None
 
     def record(self) -> dict[str, Any]:
         """The ``results.json`` record."""
@@ -228,6 +280,10 @@ class Cell:
             "mean_restrictions": float(np.mean([t.verdict["restrictions"] for t in self.traces])) if n else None,
             "mean_steps": float(np.mean([t.verdict["steps"] for t in self.traces])) if n else None,
             "test_failures": sum(t.kind == "test" for t in self.traces),
+            "tester": self.tester,
+            "trapped": sum(t.kind == "trap" for t in self.traces),
+            "sut_failures": sum(t.kind == "sut" for t in self.traces),
+            "tester_fairness": self.fairness,
             "n_failures": len(fails),
             "failures": [
                 {
@@ -235,7 +291,7 @@ class Cell:
                     "kind": t.kind,
                     "reason": t.reason,
                     "verdict": t.verdict,
-                    "replay": replay_command(self.env_id, self.sut, t.seed),
+                    "replay": replay_command(self.env_id, self.sut, t.seed, self.tester),
                 }
                 for t in fails[:MAX_LISTED]
             ],
@@ -261,26 +317,33 @@ def evaluate(
     episodes: int,
     seed: int = 0,
     progress: Callable[[str], None] | None = None,
+    testers: Sequence[str] = ("synthesized",),
 ) -> list[Cell]:
-    """Run every SUT against every env (``episodes`` seeded runs each)."""
+    """Run every SUT against every env (``episodes`` seeded runs each), once per tester
+    (``synthesized``: the synthesized test; ``ppo:PATH``: a learned tester,
+    :mod:`agents.testers`). With more than one tester, every cell also carries the
+    tester's exhaustive fairness check on the env's game."""
     if episodes < 1:
         raise ProblemError("--episodes must be at least 1")
     cells: list[Cell] = []
-    total = len(env_ids) * len(suts)
+    total = len(env_ids) * len(suts) * len(testers)
     k = 0
     for env_id in env_ids:
-        env = make_env(env_id)
-        for sut in suts:
-            k += 1
-            t0 = time.perf_counter()
-            policy = _policy(sut, env)
-            traces = []
-            for i in range(episodes):
-                traces.append(run_episode(env, policy, env_id, sut, seed + i))
-                if progress is not None and (i + 1 == episodes or (i + 1) % max(1, episodes // 10) == 0):
-                    progress(f"[{k}/{total}] {sut} on {env_id}: {i + 1}/{episodes} episodes")
-            cells.append(Cell(env_id, sut, traces, seed, time.perf_counter() - t0))
-        env.close()
+        for tester in testers:
+            env = make_tester_env(env_id, tester)
+            fairness = tester_fairness(env_id, tester) if len(testers) > 1 or tester != "synthesized" else None
+            against = "" if tester == "synthesized" else f" against {tester}"
+            for sut in suts:
+                k += 1
+                t0 = time.perf_counter()
+                policy = _policy(sut, env)
+                traces = []
+                for i in range(episodes):
+                    traces.append(run_episode(env, policy, env_id, sut, seed + i, tester=tester))
+                    if progress is not None and (i + 1 == episodes or (i + 1) % max(1, episodes // 10) == 0):
+                        progress(f"[{k}/{total}] {sut} on {env_id}{against}: {i + 1}/{episodes} episodes")
+                cells.append(Cell(env_id, sut, traces, seed, time.perf_counter() - t0, tester=tester, fairness=fairness))
+            env.close()
     return cells
 
 
@@ -333,8 +396,9 @@ def trace_picture(trace: Trace, path: Path) -> None:
     tile = 48
     renderer = make_renderer(game, tile, "engineer")
     v = trace.verdict
+    against = "" if trace.tester == "synthesized" else f" vs tester {trace.tester}"
     title = (
-        f"{trace.sut} on {trace.env_id} (seed {trace.seed})\n"
+        f"{trace.sut} on {trace.env_id}{against} (seed {trace.seed})\n"
         f"system objective {v['system_objective']}, test objective "
         f"{'realized' if v['test_objective_realized'] else 'not realized'}, {v['steps']} steps, "
         f"{v['restrictions']} restricted decisions"
@@ -403,7 +467,8 @@ def write_report(cells: Sequence[Cell], out: Path) -> list[dict[str, Any]]:
         for label, tr in (("typical", typical), ("failing", failing)):
             if tr is None:
                 continue
-            name = f"traces/{_slug(cell.sut)}--{_slug(cell.env_id)}--{label}.png"
+            against = "" if cell.tester == "synthesized" else f"--{_slug(cell.tester.rsplit('/', 1)[-1])}"
+            name = f"traces/{_slug(cell.sut)}--{_slug(cell.env_id)}{against}--{label}.png"
             write_atomically(out / name, lambda tmp, tr=tr: trace_picture(tr, tmp))
             cell.pictures[label] = name
     records = [cell.record() for cell in cells]
@@ -417,6 +482,58 @@ def write_report(cells: Sequence[Cell], out: Path) -> list[dict[str, Any]]:
 def test_failure_records(records: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     """The records with a test failure (a FlowTest bug)."""
     return [r for r in records if r["test_failures"]]
+
+
+def _test_name(r: dict[str, Any]) -> str:
+    """The env ID, with the tester when it is not the synthesized one."""
+    tester = r.get("tester", "synthesized")
+    return r["env"] if tester == "synthesized" else f"{r['env']} vs {tester}"
+
+
+def _fair_text(f: dict[str, Any] | None) -> str:
+    if f is None:
+        return "–"
+    return "fair" if f["fair"] else f"{f['traps']} trap states"
+
+
+def tester_comparison_rows(records: Sequence[dict[str, Any]]) -> list[list[str]]:
+    """Rows of the testers-side-by-side table (empty unless more than one tester): per
+    env, tester and SUT, the test objective realized among successful runs, trapped runs,
+    faults caught (runs the SUT failed by itself), mean restrictions, and the tester's
+    exhaustive checks (fair: no reachable trap; guaranteed: no run meets the goal without
+    the test objective)."""
+    testers = list(dict.fromkeys(r.get("tester", "synthesized") for r in records))
+    if len(testers) < 2:
+        return []
+    rows = []
+    for r in records:
+        f = r.get("tester_fairness")
+        guaranteed = "–" if f is None else ("yes" if f["guaranteed"] else "no")
+        rows.append([
+            r["env"], r.get("tester", "synthesized"), r["sut"], str(r["episodes"]),
+            _pct(r["test_objective_realized_rate"]), str(r.get("trapped", 0)), str(r.get("sut_failures", 0)),
+            f"{r['mean_restrictions']:.1f}", _fair_text(f), guaranteed,
+        ])
+    return rows
+
+
+TESTER_COLUMNS = ["test", "tester", "system", "runs", "realized (among met)", "trapped runs", "faults caught",
+                  "restrictions", "fairness (exhaustive)", "guaranteed (exhaustive)"]
+
+
+def tester_comparison_markdown(records: Sequence[dict[str, Any]]) -> list[str]:
+    """The testers-side-by-side section of ``report.md`` (no lines for one tester)."""
+    rows = tester_comparison_rows(records)
+    if not rows:
+        return []
+    lines = ["## Testers side by side", "",
+             "Realized: share of the runs meeting the system objective that realized the test objective. Trapped: "
+             "runs that ended where no system play could still meet the objective against the tester (an unfair "
+             "test). Faults caught: runs the system failed by itself. Fairness and guarantee are decided by an "
+             "exhaustive search over the tester's choices and all system moves (`flowtest_env.fairness`).", "",
+             "| " + " | ".join(TESTER_COLUMNS) + " |", "|" + "---|" * len(TESTER_COLUMNS)]
+    lines += ["| " + " | ".join(row) + " |" for row in rows]
+    return lines + [""]
 
 
 def _markdown(records: Sequence[dict[str, Any]]) -> str:
@@ -437,13 +554,14 @@ def _markdown(records: Sequence[dict[str, Any]]) -> str:
         "with a restricted move. A failure is the SUT's unless marked *test*.",
         "",
     ]
+    lines += tester_comparison_markdown(records)
     for sut in dict.fromkeys(r["sut"] for r in records):
         lines += [f"## {sut}", "", "| test | runs | met | realized | violated | open | restrictions | steps | failures |",
                   "|---|---|---|---|---|---|---|---|---|"]
         rows = [r for r in records if r["sut"] == sut]
         for r in rows:
             lines.append(
-                f"| {r['env']} | {r['episodes']} | {_pct(r['system_objective_met_rate'])} "
+                f"| {_test_name(r)} | {r['episodes']} | {_pct(r['system_objective_met_rate'])} "
                 f"| {_pct(r['test_objective_realized_rate'])} | {r['violated']} | {r['open']} "
                 f"| {r['mean_restrictions']:.1f} | {r['mean_steps']:.1f} | {r['n_failures']}"
                 f"{' (' + str(r['test_failures']) + ' test)' if r['test_failures'] else ''} |"
@@ -453,7 +571,7 @@ def _markdown(records: Sequence[dict[str, Any]]) -> str:
             pics = r["pictures"]
             if r["failures"]:
                 f = r["failures"][0]
-                lines += [f"**{r['env']}** — first failure ({f['kind']}): {f['reason']}. Replay:", "",
+                lines += [f"**{_test_name(r)}** — first failure ({f['kind']}): {f['reason']}. Replay:", "",
                           f"    {f['replay']}", ""]
             for label in ("typical", "failing"):
                 if label in pics:
@@ -484,6 +602,12 @@ def _html(records: Sequence[dict[str, Any]]) -> str:
         parts.append("</ul></div>")
     parts.append("<p>Met: share of runs meeting the system objective. Realized: share of those runs that "
                  "realized the hidden test objective (guaranteed 100 %). Restrictions: mean restricted decisions.</p>")
+    comparison = tester_comparison_rows(records)
+    if comparison:
+        parts.append("<h2>Testers side by side</h2><table><tr>" + "".join(f"<th>{e(c)}</th>" for c in TESTER_COLUMNS)
+                     + "</tr>")
+        parts += ["<tr>" + "".join(f"<td>{e(c)}</td>" for c in row) + "</tr>" for row in comparison]
+        parts.append("</table>")
     for sut in dict.fromkeys(r["sut"] for r in records):
         rows = [r for r in records if r["sut"] == sut]
         parts.append(f"<h2>{e(sut)}</h2><table><tr><th>test</th><th>runs</th><th>met</th><th>realized</th>"
@@ -491,7 +615,7 @@ def _html(records: Sequence[dict[str, Any]]) -> str:
         for r in rows:
             cls = " class='bad'" if r["n_failures"] else ""
             parts.append(
-                f"<tr{cls}><td>{e(r['env'])}</td><td>{r['episodes']}</td><td>{_pct(r['system_objective_met_rate'])}</td>"
+                f"<tr{cls}><td>{e(_test_name(r))}</td><td>{r['episodes']}</td><td>{_pct(r['system_objective_met_rate'])}</td>"
                 f"<td>{_pct(r['test_objective_realized_rate'])}</td><td>{r['violated']}</td><td>{r['open']}</td>"
                 f"<td>{r['mean_restrictions']:.1f}</td><td>{r['mean_steps']:.1f}</td><td>{r['n_failures']}</td></tr>"
             )
@@ -499,7 +623,7 @@ def _html(records: Sequence[dict[str, Any]]) -> str:
         for r in rows:
             if r["failures"]:
                 f = r["failures"][0]
-                parts.append(f"<p><b>{e(r['env'])}</b>: first failure ({e(f['kind'])}): {e(f['reason'])}. "
+                parts.append(f"<p><b>{e(_test_name(r))}</b>: first failure ({e(f['kind'])}): {e(f['reason'])}. "
                              f"Replay: <code>{e(f['replay'])}</code></p>")
             for label in ("typical", "failing"):
                 if label in r["pictures"]:
@@ -516,6 +640,9 @@ def _arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--sut", nargs="+", required=True, metavar="POLICY",
                    help="systems under test: scripted:replanner, scripted:committed, scripted:fuel-blind, "
                         "scripted:greedy, random, gr1, ppo:PATH")
+    p.add_argument("--tester", nargs="+", default=["synthesized"], metavar="TESTER",
+                   help="who plays the test: synthesized (default), ppo:PATH (a learned tester, flowtest "
+                        "train-tester); several give a side-by-side comparison")
     p.add_argument("--episodes", type=positive_int, default=10, help="runs per SUT and env (default 10)")
     p.add_argument("--seed", type=nonnegative_int, default=0, help="seed of the first run; run i uses seed+i (default 0)")
     p.add_argument("--out", type=Path, help="report folder (required unless --replay); a folder holding files "
@@ -525,15 +652,16 @@ def _arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
 
 
-def replay(env_id: str, sut: str, seed: int, stream: Any = None) -> Trace:
+def replay(env_id: str, sut: str, seed: int, stream: Any = None, tester: str = "synthesized") -> Trace:
     """Replay one run and print it step by step (state, legal actions, action, verdict)
     to ``stream`` (standard output by default)."""
     stream = sys.stdout if stream is None else stream
-    env = make_env(env_id)
+    env = make_tester_env(env_id, tester)
     policy = _policy(sut, env)
-    trace = run_episode(env, policy, env_id, sut, seed)
+    trace = run_episode(env, policy, env_id, sut, seed, tester=tester)
     game = env.unwrapped.game
-    stream.write(f"{sut} on {env_id}, seed {seed}\n")
+    against = "" if tester == "synthesized" else f" against tester {tester}"
+    stream.write(f"{sut} on {env_id}{against}, seed {seed}\n")
     for k, a in enumerate(trace.actions):
         r = trace.states[k]
         mask = game.action_mask(r)
@@ -551,9 +679,10 @@ def run_evaluate(args: argparse.Namespace) -> int:
     if args.replay:
         bug = False
         for env_id in args.env:
-            for sut in args.sut:
-                for i in range(args.episodes):
-                    bug |= replay(env_id, sut, args.seed + i).kind == "test"
+            for tester in args.tester:
+                for sut in args.sut:
+                    for i in range(args.episodes):
+                        bug |= replay(env_id, sut, args.seed + i, tester=tester).kind == "test"
         return EXIT_TEST_FAILED if bug else EXIT_OK
     if args.out is None:
         raise ProblemError("--out is required (or use --replay)")
@@ -569,13 +698,14 @@ def run_evaluate(args: argparse.Namespace) -> int:
             sys.stderr.write(msg + "\n")
             sys.stderr.flush()
 
-    cells = evaluate(args.env, args.sut, args.episodes, args.seed, progress)
+    cells = evaluate(args.env, args.sut, args.episodes, args.seed, progress, testers=args.tester)
     progress("drawing trace pictures")
     records = write_report(cells, args.out)
     for r in records:
+        trapped = f"  trapped {r['trapped']}" if r["tester"] != "synthesized" else ""
         sys.stdout.write(
-            f"{r['sut']:24s} {r['env']:30s} met {_pct(r['system_objective_met_rate']):>6s}  "
-            f"realized {_pct(r['test_objective_realized_rate']):>6s}  failures {r['n_failures']}\n"
+            f"{r['sut']:24s} {_test_name(r):30s} met {_pct(r['system_objective_met_rate']):>6s}  "
+            f"realized {_pct(r['test_objective_realized_rate']):>6s}  failures {r['n_failures']}{trapped}\n"
         )
     bugs = test_failure_records(records)
     if bugs:

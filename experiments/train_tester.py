@@ -1,0 +1,256 @@
+"""``flowtest train-tester PROBLEM --steps N --out PATH``: learn a tester with PPO.
+
+The learned tester plays ``tester_0`` of the PettingZoo game (:mod:`flowtest_env.multiagent`)
+by its rules (legal moves only: MaskablePPO with the tester's action mask) against a
+fixed system policy (default the correct ``scripted:replanner``), seen through
+:class:`agents.testers.TesterView`. Its reward is what a test engineer asks for: +1
+when the system meets its objective with the hidden test objective realized on the way,
+-1 when it meets it without. Nothing in the reward asks it to be fair: runs the system
+could not finish are tracked (the training curve), and whether the tester *can* trap a
+correct system is decided exhaustively after training (:mod:`flowtest_env.fairness`).
+
+Writes the model (``PATH``, a ``.zip``, usable as ``--tester ppo:PATH``), its training
+curve (``.png``: realized-before-goal and unfinished runs against time steps) and a
+summary (``.json``: settings, time, the final deterministic tester's results against
+the system it trained with, and the exhaustive fairness check). Seeded; progress bar
+on stderr. Needs the ``rl`` extra.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from synthesis.errors import ProblemError
+
+from .cli import EXIT_OK, check_output_path, command, write_atomically
+from .train import _progress_callback, _require_rl
+
+DEFAULTS: dict[str, Any] = {
+    "n_envs": 4,
+    "n_steps": 128,
+    "batch_size": 128,
+    "learning_rate": 1e-3,
+    "gamma": 0.99,
+    "ent_coef": 0.02,
+    "n_epochs": 10,
+    "net_arch": [64, 64],
+    "trap_penalty": 0.0,
+}
+"""PPO settings of a learned tester: 4 envs in one process, rollouts of 4 x 128 steps, a
+small network; ``trap_penalty`` (0: not asked to be fair, see the module docstring)."""
+
+
+def resolve_problem(name: str) -> str:
+    """A built-in problem name, or the problem of a built-in env ID (``FlowTest-Maze2-v0``).
+
+    Raises
+    ------
+    ProblemError
+        If ``name`` is neither.
+    """
+    from agents.base import PolicyError
+    from agents.testers import problem_of
+    from flowtest_env.artifacts import artifact_path
+    from flowtest_env.envs import BUILTIN_ENVS
+
+    if name in BUILTIN_ENVS and artifact_path(name).exists():
+        return name
+    try:
+        return problem_of(name)[0]
+    except PolicyError:
+        raise ProblemError(f"unknown problem {name!r}; known: {', '.join(BUILTIN_ENVS)} or their env IDs") from None
+
+
+def make_tester_vec_env(problem: str, system: str, seed: int, settings: dict[str, Any]) -> Any:
+    """``settings["n_envs"]`` :class:`~agents.testers.TesterView` envs (seeds ``seed``,
+    ``seed + 1``, ...) in one process, masked for MaskablePPO."""
+    from sb3_contrib.common.wrappers import ActionMasker
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from agents.testers import TesterView
+
+    def make(i: int) -> Any:
+        env = TesterView(problem, system, trap_penalty=settings["trap_penalty"])
+        env.reset(seed=seed + i)
+        env.action_space.seed(seed + i)
+        return ActionMasker(env, lambda e: e.unwrapped.action_masks())
+
+    n = int(settings["n_envs"])
+    if n < 1:
+        raise ProblemError("n_envs must be at least 1")
+    return DummyVecEnv([(lambda i=i: make(i)) for i in range(n)])
+
+
+class _Curve:
+    """Records (time step, realized before the goal, unfinished) at every episode end, as
+    an SB3 callback."""
+
+    def __init__(self) -> None:
+        from stable_baselines3.common.callbacks import BaseCallback
+
+        curve = self
+
+        class Callback(BaseCallback):
+            def _on_step(self) -> bool:
+                for i in np.flatnonzero(self.locals["dones"]):
+                    v = self.locals["infos"][i].get("verdict", {})
+                    met = v.get("system_objective") == "met"
+                    curve.points.append((self.num_timesteps, met and bool(v.get("test_objective_realized")), not met))
+                return True
+
+        self.points: list[tuple[int, bool, bool]] = []
+        self.callback = Callback()
+
+
+def plot_tester_curve(points: list[tuple[int, bool, bool]], path: Path, title: str) -> None:
+    """Realized-before-goal and unfinished runs (moving averages over 20 episodes)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 3.6))
+    if points:
+        steps = np.array([p[0] for p in points])
+        win = min(20, len(points))
+        kernel = np.ones(win) / win
+        for k, label, color in ((1, "met, test objective realized", "#2ca02c"), (2, "not met (stalled or trapped)", "#d62728")):
+            ax.plot(steps[win - 1:], 100 * np.convolve([float(p[k]) for p in points], kernel, mode="valid"),
+                    color=color, label=label)
+    ax.set_ylabel("share of episodes (%)")
+    ax.set_xlabel("time steps")
+    ax.set_ylim(-5, 105)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    ax.set_title(title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def assess(model_path: str | Path, problem: str, system: str, episodes: int, seed: int = 10_000) -> dict[str, Any]:
+    """The saved tester, deterministic, against ``system`` for ``episodes`` seeded runs, and
+    its exhaustive fairness check (:func:`flowtest_env.fairness.check_tester`)."""
+    from agents.base import make_policy
+    from agents.testers import VersusTesterEnv
+    from flowtest_env.fairness import check_tester
+
+    env = VersusTesterEnv(problem, f"ppo:{model_path}")
+    out: dict[str, Any] = {"fairness": check_tester(env.ma, env.tester).summary()}
+    if episodes:
+        policy = make_policy(system, env)
+        met = realized = 0
+        for i in range(episodes):
+            obs, info = env.reset(seed=seed + i)
+            policy.reset(seed + i)
+            done = False
+            while not done:
+                obs, _, term, trunc, info = env.step(policy.act(obs, info))
+                done = term or trunc
+            v = info["verdict"]
+            met += v["system_objective"] == "met"
+            realized += v["system_objective"] == "met" and v["test_objective_realized"]
+        out.update({"episodes": episodes, "met_rate": met / episodes, "realized_before_goal_rate": realized / episodes})
+    return out
+
+
+def train_tester(problem: str, steps: int, out: str | Path, system: str = "scripted:replanner", seed: int = 0,
+                 progress_bar: bool = True, eval_episodes: int = 10, **overrides: Any) -> dict[str, Any]:
+    """Train a tester on ``problem`` against ``system`` for ``steps`` tester steps (rounded
+    up to whole rollouts); save model, curve and summary (see the module docstring).
+
+    Returns
+    -------
+    dict
+        ``problem``, ``system``, ``steps``, ``seed``, ``seconds``, ``model``, ``curve`` and the
+        assessment (:func:`assess`).
+    """
+    _require_rl()
+    import torch
+    from sb3_contrib import MaskablePPO
+
+    from agents.testers import TESTER_ROLE
+
+    if steps < 1:
+        raise ProblemError("--steps must be at least 1")
+    problem = resolve_problem(problem)
+    settings = {**DEFAULTS, **overrides}
+    out = Path(out)
+    model_path = out if out.suffix == ".zip" else out.with_suffix(".zip")
+    env = make_tester_vec_env(problem, system, seed, settings)
+    torch.manual_seed(seed)
+    torch.set_num_threads(1)
+    model = MaskablePPO(
+        "MlpPolicy", env, seed=seed, verbose=0, device="cpu",
+        n_steps=settings["n_steps"], batch_size=settings["batch_size"], learning_rate=settings["learning_rate"],
+        gamma=settings["gamma"], ent_coef=settings["ent_coef"], n_epochs=settings["n_epochs"],
+        policy_kwargs={"net_arch": list(settings["net_arch"])},
+    )
+    # saved with the model, read by agents.testers.PPOTester
+    model.flowtest_role = TESTER_ROLE
+    model.flowtest_problem = problem
+    model.flowtest_system = system
+    curve = _Curve()
+    t0 = time.perf_counter()
+    callbacks = [curve.callback] + ([_progress_callback(steps)] if progress_bar else [])
+    model.learn(total_timesteps=steps, callback=callbacks)
+    seconds = time.perf_counter() - t0
+    write_atomically(model_path, lambda tmp: model.save(str(tmp)))
+    png = model_path.with_suffix(".png")
+    write_atomically(png, lambda tmp: plot_tester_curve(curve.points, tmp, f"learned tester on {problem} vs {system} (seed {seed})"))
+    summary = {
+        "problem": problem, "system": system, "steps": int(model.num_timesteps), "seed": seed,
+        "seconds": round(seconds, 2), "settings": settings, "model": str(model_path), "curve": str(png),
+        "episodes": len(curve.points),
+        **assess(model_path, problem, system, eval_episodes),
+        "points": [[s, bool(r), bool(u)] for s, r, u in curve.points],
+    }
+    write_atomically(model_path.with_suffix(".json"), lambda tmp: tmp.write_text(json.dumps(summary) + "\n"))
+    return summary
+
+
+def _arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("PROBLEM", help="a built-in problem with a test agent or reactive doors (maze2, small-reactive, ...) "
+                                   "or its env ID")
+    p.add_argument("--against", default="scripted:replanner", metavar="POLICY",
+                   help="the fixed system the tester trains against (default scripted:replanner)")
+    p.add_argument("--steps", type=int, default=20_000, help="tester steps (default 20000)")
+    p.add_argument("--out", type=Path, required=True, help="model file (.zip); curve (.png) and summary (.json) next to it")
+    p.add_argument("--seed", type=int, default=0, help="seed (default 0)")
+    p.add_argument("--eval-episodes", type=int, default=10, help="runs against --against after training (default 10)")
+    p.add_argument("--trap-penalty", type=float, default=0.0,
+                   help="reward when the system's objective is still open at the end (default 0: not asked to be fair)")
+    p.add_argument("--force", action="store_true", help="overwrite an existing model")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+
+
+@command("train-tester", "train a PPO tester (tester_0 of the PettingZoo game) against a fixed system", _arguments)
+def run_train_tester(args: argparse.Namespace) -> int:
+    """Train, save, check; print where the model is and what the fairness check found."""
+    from agents.base import PolicyError
+
+    out = args.out if args.out.suffix == ".zip" else args.out.with_suffix(".zip")
+    check_output_path(out, args.force, "model")
+    try:
+        s = train_tester(args.PROBLEM, args.steps, out, args.against, args.seed, progress_bar=not args.quiet,
+                         eval_episodes=args.eval_episodes, trap_penalty=args.trap_penalty)
+    except PolicyError as exc:
+        raise ProblemError(f"--against {args.against}: {exc}") from None
+    f = s["fairness"]
+    rate = "-" if "realized_before_goal_rate" not in s else f"{100 * s['realized_before_goal_rate']:.0f} %"
+    sys.stdout.write(
+        f"trained {s['steps']} steps in {s['seconds']:.1f} s; against {s['system']} the test objective was realized "
+        f"before the goal in {rate} of {args.eval_episodes} runs\n"
+        f"fairness (exhaustive, {f['nodes']} game states): "
+        f"{'fair' if f['fair'] else str(f['traps']) + ' trap states'}; "
+        f"{'every' if f['guaranteed'] else 'not every'} run meeting the goal realizes the test objective\n"
+        f"model: {s['model']} (use --tester ppo:{s['model']})\ncurve: {s['curve']}\n"
+    )
+    return EXIT_OK
