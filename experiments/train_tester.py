@@ -29,7 +29,7 @@ import numpy as np
 
 from synthesis.errors import ProblemError
 
-from .cli import EXIT_OK, check_output_path, command, write_atomically
+from .cli import EXIT_OK, check_output_path, command, nonnegative_int, positive_int, write_atomically
 from .train import _progress_callback, _require_rl
 
 DEFAULTS: dict[str, Any] = {
@@ -221,13 +221,13 @@ def _arguments(p: argparse.ArgumentParser) -> None:
                                    "or its env ID")
     p.add_argument("--against", default="scripted:replanner", metavar="POLICY",
                    help="the fixed system the tester trains against (default scripted:replanner)")
-    p.add_argument("--steps", type=int, default=20_000, help="tester steps (default 20000)")
+    p.add_argument("--steps", type=positive_int, default=20_000, help="tester steps (default 20000)")
     p.add_argument("--out", type=Path, required=True, help="model file (.zip); curve (.png) and summary (.json) next to it")
-    p.add_argument("--seed", type=int, default=0, help="seed (default 0)")
-    p.add_argument("--eval-episodes", type=int, default=10, help="runs against --against after training (default 10)")
+    p.add_argument("--seed", type=nonnegative_int, default=0, help="seed (default 0)")
+    p.add_argument("--eval-episodes", type=nonnegative_int, default=10, help="runs against --against after training (default 10)")
     p.add_argument("--trap-penalty", type=float, default=0.0,
                    help="reward when the system's objective is still open at the end (default 0: not asked to be fair)")
-    p.add_argument("--force", action="store_true", help="overwrite an existing model")
+    p.add_argument("--force", action="store_true", help="overwrite an existing model, curve or summary")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
 
 
@@ -236,8 +236,10 @@ def run_train_tester(args: argparse.Namespace) -> int:
     """Train, save, check; print where the model is and what the fairness check found."""
     from agents.base import PolicyError
 
+    resolve_problem(args.PROBLEM)  # a bad name is refused before anything else
     out = args.out if args.out.suffix == ".zip" else args.out.with_suffix(".zip")
-    check_output_path(out, args.force, "model")
+    for path, what in ((out, "model"), (out.with_suffix(".png"), "curve"), (out.with_suffix(".json"), "training summary")):
+        check_output_path(path, args.force, what)
     try:
         s = train_tester(args.PROBLEM, args.steps, out, args.against, args.seed, progress_bar=not args.quiet,
                          eval_episodes=args.eval_episodes, trap_penalty=args.trap_penalty)
