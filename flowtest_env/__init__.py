@@ -1,7 +1,8 @@
 """FlowTest environments: synthesized tests as Gymnasium and PettingZoo environments.
 
 Importing this package registers ``FlowTest-<Name>-v0`` for every built-in problem and
-``FlowTest-RandomGrid-v0``::
+``FlowTest-RandomGrid-v0``, each with a NumPy ``vector_entry_point``
+(:mod:`flowtest_env.vector`: ``gym.make_vec(id, num_envs, vectorization_mode="vector_entry_point")``)::
 
     import gymnasium as gym
     import flowtest_env
@@ -14,6 +15,8 @@ The two-player (tester vs. system) PettingZoo environment is
 
 from __future__ import annotations
 
+from typing import Any
+
 from gymnasium.envs.registration import register, registry
 
 from .envs import BUILTIN_ENVS, DEFAULT_MAX_STEPS, FlowTestEnv, RandomGridEnv
@@ -24,23 +27,24 @@ ENV_IDS: list[str] = []
 """Every registered FlowTest environment ID."""
 
 
-def _register_all() -> None:
-    for problem, (stem, cls) in BUILTIN_ENVS.items():
-        env_id = f"FlowTest-{stem}-v0"
-        ENV_IDS.append(env_id)
-        if env_id in registry:
-            continue
-        register(
-            id=env_id,
-            entry_point=f"flowtest_env.envs:{cls.__name__}",
-            kwargs={"problem": problem, "setting": "instantaneous", "max_steps": DEFAULT_MAX_STEPS[problem], "obs_kind": "flat"},
-        )
-    ENV_IDS.append("FlowTest-RandomGrid-v0")
-    if "FlowTest-RandomGrid-v0" not in registry:
-        register(
-            id="FlowTest-RandomGrid-v0",
-            entry_point="flowtest_env.envs:RandomGridEnv",
-            kwargs={
+def _env_specs() -> list[dict[str, Any]]:
+    """The registry data: one entry per ID (``id``, ``entry_point``,
+    ``vector_entry_point``, ``kwargs``); add an ID by adding an entry here."""
+    specs: list[dict[str, Any]] = [
+        {
+            "id": f"FlowTest-{stem}-v0",
+            "entry_point": f"flowtest_env.envs:{cls.__name__}",
+            "vector_entry_point": "flowtest_env.vector:FlowTestVectorEnv",
+            "kwargs": {"problem": problem, "setting": "instantaneous", "max_steps": DEFAULT_MAX_STEPS[problem], "obs_kind": "flat"},
+        }
+        for problem, (stem, cls) in BUILTIN_ENVS.items()
+    ]
+    specs.append(
+        {
+            "id": "FlowTest-RandomGrid-v0",
+            "entry_point": "flowtest_env.envs:RandomGridEnv",
+            "vector_entry_point": "flowtest_env.vector:RandomGridVectorEnv",
+            "kwargs": {
                 "size": 5,
                 "family": "reachability",
                 "n": 1,
@@ -50,7 +54,16 @@ def _register_all() -> None:
                 "max_steps": 100,
                 "obs_kind": "flat",
             },
-        )
+        }
+    )
+    return specs
+
+
+def _register_all() -> None:
+    for spec in _env_specs():
+        ENV_IDS.append(spec["id"])
+        if spec["id"] not in registry:
+            register(**spec)
 
 
 _register_all()

@@ -1,0 +1,361 @@
+"""Test games compiled to flat tables, for batched stepping (:mod:`flowtest_env.vector`).
+
+A test run is, between two SUT decisions, in a *configuration* ``z = (s, h, a, m)``: the
+system's state, the history, the test agent's state and its strategy memory (a single
+agent state and memory without a test agent). Everything the single env computes at a
+step is a function of the configuration and the action, so a test compiles once into:
+
+* ``next_z[z, action]``: the configuration after the SUT's action and the test agent's
+  answer (the rules of :class:`~flowtest_env.game.TestGame`, evaluated for every
+  configuration at once with array operations);
+* ``refused[z, action]``: the action was restricted or invalid (a blocked attempt);
+* per configuration: the outcome (open, met, violated), whether the test objective is
+  realized, whether a move out of the SUT's state is restricted (the ``restrictions``
+  count), the legal-action mask and the observation row.
+
+Only configurations reachable from the reset configuration are kept (breadth-first
+over ``next_z``), and their observations are written once by the single env's own
+encoder, so the batch observation of a step is a row gather. Several tests compile into
+one :class:`CompiledPool`: their configurations are numbered one after the other and
+padded to a common action count and observation shape, so one batch steps different
+tests with the same array indexing.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .encoding import Encoder
+from .game import MET, OPEN, VIOLATED, RunState, TestGame
+
+OUTCOMES: tuple[str, str, str] = (OPEN, MET, VIOLATED)
+"""Outcome names by code: 0 open, 1 met, 2 violated."""
+
+
+@dataclass(frozen=True)
+class CompiledTest:
+    """One test as tables over its reachable configurations (local numbering).
+
+    Attributes
+    ----------
+    next_z
+        ``int64[n_z, n_actions]``: the next configuration; a configuration that ended
+        the run leads to itself.
+    refused
+        ``bool[n_z, n_actions]``: the action is restricted now or invalid (counted in
+        ``blocked_attempts``, penalised); actions beyond the test's own are invalid.
+    restricted
+        ``bool[n_z]``: at least one existing move out of the SUT's state is restricted
+        (walls, reactive restrictions, the test agent in the way).
+    outcome
+        ``int8[n_z]``: 0 open, 1 met, 2 violated (:data:`OUTCOMES`).
+    test_realized
+        ``bool[n_z]``: the history's test part accepts.
+    mask
+        ``int8[n_z, n_actions]``: the legal actions (all zeros once the run ended).
+    obs_row
+        ``int64[n_z]``: the configuration's row of :attr:`obs`.
+    obs
+        ``[n_rows, *obs_shape]``: the observations of the distinct ``(s, h, a)``.
+    system, history, agent, memory
+        ``int64[n_z]``: the configuration's parts (``agent``/``memory`` ``-1`` without a
+        test agent).
+    initial
+        The reset configuration.
+    """
+
+    next_z: np.ndarray
+    refused: np.ndarray
+    restricted: np.ndarray
+    outcome: np.ndarray
+    test_realized: np.ndarray
+    mask: np.ndarray
+    obs_row: np.ndarray
+    obs: np.ndarray
+    system: np.ndarray
+    history: np.ndarray
+    agent: np.ndarray
+    memory: np.ndarray
+    initial: int
+
+    @property
+    def n_z(self) -> int:
+        """Number of reachable configurations."""
+        return int(self.next_z.shape[0])
+
+    def run_state(self, z: int, steps: int = 0, restrictions: int = 0, blocked_attempts: int = 0) -> RunState:
+        """The :class:`RunState` of configuration ``z`` (for rendering and inspection)."""
+        s = int(self.system[z])
+        return RunState(
+            system=s, history=int(self.history[z]), agent=int(self.agent[z]), memory=int(self.memory[z]),
+            visited={s}, steps=steps, restrictions=restrictions, blocked_attempts=blocked_attempts,
+            outcome=OUTCOMES[int(self.outcome[z])],
+        )
+
+
+def _agent_bits(game: TestGame, n_agent: int) -> np.ndarray:
+    """``int64[n_states, n_agent]``: slots of each SUT state leading into each test
+    agent state's place (the moves the agent blocks by standing there)."""
+    n = game.ts.n_states
+    if not game.has_agent:
+        return np.zeros((n, 1), dtype=np.int64)
+    place = np.asarray(game.agent_place, dtype=np.int64)  # -1: a park
+    into = (game.dst_place[:, None, :] == place[None, :, None]) & (place >= 0)[None, :, None]  # [s, a, slot]
+    weights = np.int64(1) << np.arange(game.n_slots, dtype=np.int64)
+    return into.astype(np.int64) @ weights
+
+
+def _transitions(game: TestGame, n_actions: int) -> dict[str, np.ndarray]:
+    """The rules of :meth:`TestGame.step` for every configuration and action at once.
+
+    Returns the full (unreduced) tables indexed by ``z = ((s*nh + h)*na + a)*nm + m``.
+    """
+    n = game.ts.n_states
+    nh = game.artifact.histories.n_states
+    ctl = game.agent_controller
+    na = max(game.n_agent_states, 1)
+    nm = ctl.n_memory if ctl is not None else 1
+    rbits = np.asarray(game.restricted_bits, dtype=np.int64)  # [h, s]
+    exists = np.asarray(game.exists_bits, dtype=np.int64)  # [s]
+    nxt_hist = np.asarray(game.next_history, dtype=np.int64)  # [h, s]
+    sys_acc = np.asarray(game.sys_accepting, dtype=bool)  # [h]
+    doomed = np.asarray(game.doomed, dtype=bool)  # [h, s]
+    abits = _agent_bits(game, na)  # [s, a]
+    stay = game.stay_action
+    # successor per action column: the slot's move, itself for stay and beyond the slots
+    succ = np.repeat(np.arange(n, dtype=np.int64)[:, None], n_actions, axis=1)
+    succ[:, : game.n_slots] = game.successor
+    S, H, A, M, X = np.meshgrid(
+        np.arange(n), np.arange(nh), np.arange(na), np.arange(nm), np.arange(n_actions), indexing="ij", sparse=True,
+    )
+    r = rbits[H, S] | abits[S, A]  # [s, h, a, 1, 1]
+    ex = exists[S]
+    legal = ex & ~r
+    bit = np.int64(1) << X
+    is_stay = X == stay
+    invalid = ((ex & bit) == 0) & ~((legal == 0) & is_stay)
+    refused = ((r & bit) != 0) & ~invalid
+    moves = ~is_stay & ~invalid & ~refused
+    nxt = np.where(moves, succ[S, X], S)  # [s, h, a, m, x]
+    h2 = nxt_hist[H, nxt]
+    met = sys_acc[h2]
+    done = met | doomed[h2, nxt]
+    a2 = np.broadcast_to(A, nxt.shape)
+    m2 = np.broadcast_to(M, nxt.shape)
+    if ctl is not None:
+        row = ctl.node_of[nxt * ctl.n_hist + h2].astype(np.int64)
+        ok = row >= 0
+        rr = np.maximum(row, 0)
+        Mb, Ab = np.broadcast_to(M, nxt.shape), np.broadcast_to(A, nxt.shape)
+        cand = np.where(ok, ctl.next_agent[Mb, rr, Ab], -1).astype(np.int64)
+        cmem = np.where(ok, ctl.next_memory[Mb, rr, Ab], -1).astype(np.int64)
+        table = cand >= 0
+        fb = ctl.fallback[Ab, ctl.sys_place[nxt]].astype(np.int64)
+        a2 = np.where(done, Ab, np.where(table, cand, fb))
+        m2 = np.where(done | ~table, Mb, cmem)
+    next_z = ((nxt * nh + h2) * na + a2) * nm + m2
+    # per configuration (the state after a step, or the reset state)
+    Sz, Hz, Az = S[..., 0], H[..., 0], A[..., 0]
+    met_z = np.broadcast_to(sys_acc[Hz], (n, nh, na, nm))
+    viol_z = ~met_z & doomed[Hz, Sz]
+    outcome = np.where(met_z, 1, np.where(viol_z, 2, 0)).astype(np.int8)
+    rz = (rbits[Hz, Sz] | abits[Sz, Az]) & exists[Sz]
+    legal_z = exists[Sz] & ~(rbits[Hz, Sz] | abits[Sz, Az])
+    legal_z = np.where(legal_z == 0, np.int64(1) << stay, legal_z)
+    cols = np.arange(n_actions, dtype=np.int64)
+    mask = ((legal_z[..., None] >> cols) & 1).astype(np.int8)
+    mask = np.where((outcome != 0)[..., None], np.int8(0), np.broadcast_to(mask, (n, nh, na, nm, n_actions)))
+    Z = n * nh * na * nm
+    full = lambda x: np.broadcast_to(x, (n, nh, na, nm)).reshape(Z)  # noqa: E731
+    return {
+        "next_z": next_z.reshape(Z, n_actions),
+        "refused": (refused | invalid).reshape(Z, n_actions),
+        "restricted": full(rz != 0),
+        "outcome": full(outcome),
+        "test_realized": full(np.asarray(game.test_accepting, dtype=bool)[Hz]),
+        "mask": mask.reshape(Z, n_actions),
+        "system": full(Sz).astype(np.int64),
+        "history": full(Hz).astype(np.int64),
+        "agent": full(Az).astype(np.int64) if ctl is not None else np.full(Z, -1, dtype=np.int64),
+        "memory": full(M[..., 0]).astype(np.int64) if ctl is not None else np.full(Z, -1, dtype=np.int64),
+        "dims": np.array([n, nh, na, nm], dtype=np.int64),
+    }
+
+
+def _reachable(next_z: np.ndarray, start: int) -> np.ndarray:
+    """Sorted configurations reachable from ``start`` along ``next_z`` (breadth-first)."""
+    seen = np.zeros(next_z.shape[0], dtype=bool)
+    seen[start] = True
+    frontier = np.array([start], dtype=np.int64)
+    while frontier.size:
+        succ = np.unique(next_z[frontier].ravel())
+        frontier = succ[~seen[succ]]
+        seen[frontier] = True
+    return np.flatnonzero(seen)
+
+
+def compile_test(game: TestGame, encoder: Encoder, n_actions: int | None = None) -> CompiledTest:
+    """Compile ``game`` (observations by ``encoder``) with ``n_actions`` action columns
+    (default the game's own; more columns are invalid actions).
+
+    Raises
+    ------
+    ValueError
+        On the accumulative setting (its observation depends on the states visited, not
+        on the configuration) or fewer action columns than the game has.
+    """
+    if game.setting != "instantaneous":
+        raise ValueError(
+            f"the vectorized env supports setting='instantaneous' only, not {game.setting!r} "
+            "(the accumulative observation depends on the states visited under the history)"
+        )
+    n_actions = game.n_actions if n_actions is None else int(n_actions)
+    if n_actions < game.n_actions:
+        raise ValueError(f"{n_actions} action columns for a test with {game.n_actions} actions")
+    t = _transitions(game, n_actions)
+    n, nh, na, nm = (int(v) for v in t["dims"])
+    run0 = game.reset()
+    a0 = max(run0.agent, 0)
+    m0 = max(run0.memory, 0)
+    z0 = ((run0.system * nh + run0.history) * na + a0) * nm + m0
+    full_next = np.where((t["outcome"] != 0)[:, None], np.arange(t["next_z"].shape[0])[:, None], t["next_z"])
+    keep = _reachable(full_next, z0)
+    renum = np.full(full_next.shape[0], -1, dtype=np.int64)
+    renum[keep] = np.arange(keep.size)
+    # observations: one row per distinct (s, h, a), written by the single env's encoder
+    sha = (t["system"][keep] * nh + t["history"][keep]) * na + np.maximum(t["agent"][keep], 0)
+    keys, obs_row = np.unique(sha, return_inverse=True)
+    first = np.zeros(keys.size, dtype=np.int64)
+    first[obs_row[::-1]] = np.arange(keep.size)[::-1]  # one configuration per key
+    rows = []
+    for z in keep[first]:
+        run = RunState(
+            system=int(t["system"][z]), history=int(t["history"][z]), agent=int(t["agent"][z]),
+            memory=int(t["memory"][z]), visited={int(t["system"][z])}, outcome=OUTCOMES[int(t["outcome"][z])],
+        )
+        rows.append(encoder.encode(run))
+    return CompiledTest(
+        next_z=renum[full_next[keep]],
+        refused=np.ascontiguousarray(t["refused"][keep]),
+        restricted=t["restricted"][keep].copy(),
+        outcome=t["outcome"][keep].copy(),
+        test_realized=t["test_realized"][keep].copy(),
+        mask=np.ascontiguousarray(t["mask"][keep]),
+        obs_row=obs_row.reshape(-1).astype(np.int64),
+        obs=np.stack(rows),
+        system=t["system"][keep].copy(),
+        history=t["history"][keep].copy(),
+        agent=t["agent"][keep].copy(),
+        memory=t["memory"][keep].copy(),
+        initial=int(renum[z0]),
+    )
+
+
+def _pad_to(a: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+    """``a`` (rows first) zero-padded at the end of every observation axis to ``shape``."""
+    out = np.zeros((a.shape[0], *shape), dtype=a.dtype)
+    out[(slice(None), *(slice(0, k) for k in a.shape[1:]))] = a
+    return out
+
+
+@dataclass(frozen=True)
+class CompiledPool:
+    """Several compiled tests in one global numbering (see the module docstring).
+
+    Attributes
+    ----------
+    tests
+        The compiled tests, in pool order.
+    offset
+        ``int64[n_tests]``: the first global configuration of each test.
+    initial
+        ``int64[n_tests]``: each test's reset configuration (global).
+    test_of
+        ``int64[n_z]``: the test of each global configuration.
+    next_z, refused, restricted, outcome, test_realized, mask, obs_row, obs
+        As in :class:`CompiledTest`, global; ``next_z`` and ``refused`` flattened to
+        ``[n_z * n_actions]`` (index ``z * n_actions + action``), observations padded
+        to :attr:`obs_shape`.
+    system_state
+        ``object[n_z]``: the SUT's state as in ``info["system_state"]`` of the single env.
+    """
+
+    tests: tuple[CompiledTest, ...]
+    n_actions: int
+    obs_shape: tuple[int, ...]
+    offset: np.ndarray
+    initial: np.ndarray
+    test_of: np.ndarray
+    next_z: np.ndarray
+    refused: np.ndarray
+    restricted: np.ndarray
+    outcome: np.ndarray
+    test_realized: np.ndarray
+    mask: np.ndarray
+    obs_row: np.ndarray
+    obs: np.ndarray
+    system_state: np.ndarray
+
+    @property
+    def n_z(self) -> int:
+        """Number of configurations of the whole pool."""
+        return int(self.outcome.shape[0])
+
+    def rewards(self, step_cost: float, restricted_penalty: float, goal_reward: float, violation_penalty: float) -> np.ndarray:
+        """``float64[n_z * n_actions]``: the single env's reward of each (configuration,
+        action), summed in the single env's order so the floats are identical."""
+        after = self.outcome[self.next_z]
+        r = np.full(self.next_z.shape, -float(step_cost), dtype=np.float64)
+        r = np.where(self.refused, r - float(restricted_penalty), r)
+        return np.where(after == 1, r + float(goal_reward), np.where(after == 2, r - float(violation_penalty), r))
+
+    def locate(self, z: int) -> tuple[int, int]:
+        """``(test index, local configuration)`` of global configuration ``z``."""
+        t = int(self.test_of[z])
+        return t, int(z - self.offset[t])
+
+
+def compile_pool(games: list[TestGame], encoders: list[Encoder]) -> CompiledPool:
+    """Compile every test of a pool into one numbering (action columns and observation
+    axes padded to the largest)."""
+    if not games or len(games) != len(encoders):
+        raise ValueError("a pool needs at least one test and one encoder per test")
+    n_actions = max(g.n_actions for g in games)
+    tests = tuple(compile_test(g, e, n_actions) for g, e in zip(games, encoders))
+    ndim = {t.obs.ndim for t in tests}
+    if len(ndim) != 1:
+        raise ValueError("the pool's tests have observations of different ranks (mix of 'grid' and 'flat'?)")
+    obs_shape = tuple(int(max(t.obs.shape[1 + i] for t in tests)) for i in range(tests[0].obs.ndim - 1))
+    dtypes = {t.obs.dtype for t in tests}
+    if len(dtypes) != 1:
+        raise ValueError(f"the pool's observations have different dtypes: {sorted(map(str, dtypes))}")
+    sizes = np.array([t.n_z for t in tests], dtype=np.int64)
+    offset = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
+    row_sizes = np.array([t.obs.shape[0] for t in tests], dtype=np.int64)
+    row_offset = np.concatenate([[0], np.cumsum(row_sizes)[:-1]]).astype(np.int64)
+    states: list[Any] = []
+    for g, t in zip(games, tests):
+        names = [g.state_json(s) for s in range(g.ts.n_states)]
+        states.extend(names[s] for s in t.system.tolist())
+    system_state = np.empty(len(states), dtype=object)
+    system_state[:] = states
+    return CompiledPool(
+        tests=tests,
+        n_actions=n_actions,
+        obs_shape=obs_shape,
+        offset=offset,
+        initial=offset + np.array([t.initial for t in tests], dtype=np.int64),
+        test_of=np.repeat(np.arange(len(tests), dtype=np.int64), sizes),
+        next_z=np.concatenate([t.next_z + o for t, o in zip(tests, offset)]).reshape(-1),
+        refused=np.concatenate([t.refused for t in tests]).reshape(-1),
+        restricted=np.concatenate([t.restricted for t in tests]),
+        outcome=np.concatenate([t.outcome for t in tests]),
+        test_realized=np.concatenate([t.test_realized for t in tests]),
+        mask=np.concatenate([t.mask for t in tests]),
+        obs_row=np.concatenate([t.obs_row + o for t, o in zip(tests, row_offset)]),
+        obs=np.concatenate([_pad_to(t.obs, obs_shape) for t in tests]),
+        system_state=system_state,
+    )
