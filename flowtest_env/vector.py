@@ -235,13 +235,13 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         return a
 
     def _observe(self, z: np.ndarray) -> np.ndarray:
-        return self.pool.obs[self.pool.obs_row[z]]
+        return np.take(self.pool.obs, self.pool.obs_row[z], axis=0)  # faster than fancy indexing
 
     def _infos(self, z: np.ndarray) -> dict[str, Any]:
         return {
             "system_state": self.pool.system_state[z],
             "_system_state": self._all.copy(),
-            "action_mask": self.pool.mask[z],
+            "action_mask": np.take(self.pool.mask, z, axis=0),
             "_action_mask": self._all.copy(),
         }
 
