@@ -9,6 +9,8 @@ Usage::
 Each artifact goes to ``flowtest_env/artifacts/<name>.json`` (or ``--out DIR``). An
 existing file is never overwritten without ``--force``: the shipped artifacts are what
 ``gym.make`` loads, and ``tests/test_envs.py`` proves each equals a fresh synthesis.
+``SHA256SUMS`` in the same folder lists each file's SHA-256 (rewritten after every file):
+``gym.make`` refuses a shipped artifact whose bytes differ.
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ import sys
 import time
 from pathlib import Path
 
-from flowtest_env.artifacts import ARTIFACT_DIR, synthesize_artifact
+from flowtest_env.artifacts import ARTIFACT_DIR, synthesize_artifact, write_manifest
 from synthesis.builtins import BUILTINS
 
 
@@ -49,6 +51,7 @@ def build(names: list[str], out: Path, force: bool, time_limit: float | None = N
             f"{name}: {s['status']}, flow {s['flow']}, {s['n_cuts']} cuts, {time.perf_counter() - t:.1f} s -> {path}",
             flush=True,
         )
+        write_manifest(out)  # after each file: an interrupted build leaves a true manifest
     return 0
 
 

@@ -7,6 +7,16 @@ synthesized once and the result cached under :func:`cache_dir`.
 
 Loaded artifacts and their :class:`~flowtest_env.game.TestGame` tables are kept in
 memory per process: they are read-only, so every env of a problem shares them.
+
+Nothing loaded here is trusted. A cache entry is checked in full on load
+(:meth:`synthesis.artifact.TestArtifact.load`: schema, source hash, automata,
+restrictions against its own product graphs). A shipped artifact must have exactly the
+bytes FlowTest shipped (:data:`MANIFEST`, the SHA-256 of each file, checked in full by
+the test suite and written by ``experiments/build_artifacts.py``), then its schema,
+source hash and automata are checked; its restrictions are not searched again, so
+``gym.make`` stays fast and needs no graph library. Both must carry the source hash of
+the built-in problem they stand for. An edited file, or one made for another problem,
+is refused with a message naming what is wrong.
 """
 
 from __future__ import annotations
@@ -15,12 +25,16 @@ import os
 from functools import lru_cache
 from pathlib import Path
 
-from synthesis.artifact import TestArtifact
+from synthesis.artifact import TestArtifact, problem_source_hash, verify_artifact
+from synthesis.errors import ProblemError
 
 from .game import TestGame
 
 ARTIFACT_DIR = Path(__file__).resolve().parent / "artifacts"
 """The shipped artifacts of the built-in problems."""
+
+MANIFEST = ARTIFACT_DIR / "SHA256SUMS"
+"""The SHA-256 of every shipped artifact, in ``sha256sum`` format (``sha256sum -c`` reads it)."""
 
 CACHE_ENV = "FLOWTEST_CACHE_DIR"
 
@@ -62,15 +76,105 @@ def synthesize_artifact(name: str, time_limit: float | None = None) -> TestArtif
     return artifact_of(test, summary_of(test))
 
 
+def file_sha256(path: Path) -> str:
+    """The SHA-256 hex digest of a file's bytes."""
+    import hashlib
+
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def shipped_digests(folder: Path = ARTIFACT_DIR) -> dict[str, str]:
+    """The manifest of the artifacts in ``folder``, ``{file name: SHA-256}`` (empty if none)."""
+    manifest = folder / MANIFEST.name
+    if not manifest.exists():
+        return {}
+    out: dict[str, str] = {}
+    for line in manifest.read_text().splitlines():
+        digest, _, name = line.partition("  ")
+        if digest and name:
+            out[name] = digest
+    return out
+
+
+def write_manifest(folder: Path = ARTIFACT_DIR) -> Path:
+    """Write the manifest of every artifact in ``folder`` (``build_artifacts`` does)."""
+    lines = [f"{file_sha256(p)}  {p.name}" for p in sorted(folder.glob("*.json"))]
+    path = folder / MANIFEST.name
+    tmp = path.with_name(f".{MANIFEST.name}.{os.getpid()}.tmp")
+    tmp.write_text("\n".join(lines) + "\n")
+    tmp.replace(path)
+    return path
+
+
+def load_shipped(path: Path, expected_source: str) -> TestArtifact:
+    """Load a shipped artifact: its bytes must be those of the manifest (see module docstring).
+
+    Raises
+    ------
+    ProblemError
+        If the file is not the one FlowTest shipped, or fails its checks.
+    """
+    fix = f"reinstall FlowTest or run `python -m experiments.build_artifacts {path.stem} --force`"
+    want = shipped_digests(path.parent).get(path.name)
+    if want is None:
+        raise ProblemError(f"artifact {path} is not listed in {MANIFEST.name}; {fix}")
+    if file_sha256(path) != want:
+        raise ProblemError(f"artifact {path} is not the file FlowTest shipped (its SHA-256 differs: edited?); {fix}")
+    try:
+        art = TestArtifact.load(path, verify=False)
+        verify_artifact(art, str(path), expected_source, restrictions=False)
+    except ProblemError as exc:
+        raise ProblemError(f"{exc}; {fix}") from None
+    return art
+
+
+def warn_refused_entry(exc: ProblemError) -> None:
+    """Say that a cache entry was refused (and why) before it is synthesized again."""
+    from gymnasium import logger
+
+    logger.warn(f"refused a cache entry: {exc}")
+
+
+def load_checked(path: Path, expected_source: str, what: str) -> TestArtifact:
+    """Load an artifact that must stand for the problem of hash ``expected_source``.
+
+    Raises
+    ------
+    ProblemError
+        If the file fails its checks or was made for another problem; the message
+        names the file and says how to get a good one (``what``).
+    """
+    try:
+        art = TestArtifact.load(path, verify=False)
+        verify_artifact(art, str(path), expected_source)
+    except ProblemError as exc:
+        raise ProblemError(f"{exc}; {what}") from None
+    return art
+
+
 @lru_cache(maxsize=None)
 def load_builtin(name: str) -> TestArtifact:
-    """The artifact of a built-in problem: shipped, else cached, else synthesized now."""
+    """The artifact of a built-in problem: shipped, else cached, else synthesized now.
+
+    Raises
+    ------
+    ProblemError
+        If the shipped artifact or the cache entry fails its checks (see module docstring).
+    """
+    from synthesis.builtins import BUILTINS
+
+    if name not in BUILTINS:
+        raise ProblemError(f"unknown built-in problem {name!r}; known: {', '.join(sorted(BUILTINS))}")
+    expected = problem_source_hash(BUILTINS[name]())
     shipped = artifact_path(name)
     if shipped.exists():
-        return TestArtifact.load(shipped)
+        return load_shipped(shipped, expected)
     cached = cache_dir() / "builtins" / f"{name}.json"
     if cached.exists():
-        return TestArtifact.load(cached)
+        try:
+            return load_checked(cached, expected, "synthesizing it again")
+        except ProblemError as exc:  # FlowTest's own file: refused, said why, rebuilt
+            warn_refused_entry(exc)
     from gymnasium import logger
 
     logger.warn(

@@ -11,16 +11,16 @@ Pools are synthesized once and cached in memory and on disk (:func:`random_pool`
 
 from __future__ import annotations
 
-import json
 import os
 from pathlib import Path
 
 from synthesis.artifact import TestArtifact, artifact_of
+from synthesis.errors import ProblemError
 from synthesis.pipeline import synthesize
 from synthesis.random_grid import FAMILIES, MAX_ATTEMPTS, family_objectives, first_consistent, random_problem
 from synthesis.summary import summary_of
 
-from .artifacts import cache_dir
+from .artifacts import cache_dir, warn_refused_entry
 
 __all__ = ["FAMILIES", "MAX_ATTEMPTS", "family_objectives", "random_problem", "random_artifact", "random_pool", "pool_path"]
 
@@ -60,10 +60,15 @@ def random_pool(size: int, family: str, n: int, seeds: tuple[int, ...], kind: st
         path = pool_path(size, family, n, seed, kind)
         art: TestArtifact | None = None
         if path.exists():
+            # an entry that fails its checks (edited, damaged, another instance's) is refused,
+            # with a warning saying why, and synthesized again
             try:
                 art = TestArtifact.load(path)
-            except (OSError, ValueError, KeyError, json.JSONDecodeError):
-                art = None  # a damaged cache entry is rebuilt
+                if art.name != random_problem(size, family, n, seed, 0, kind).name:
+                    raise ProblemError(f"cache entry {str(path)!r} holds the test {art.name!r}, not the instance of seed {seed}")
+            except ProblemError as exc:
+                warn_refused_entry(ProblemError(f"{exc}; synthesizing it again"))
+                art = None
         if art is None:
             art = random_artifact(size, family, n, seed, kind)
             path.parent.mkdir(parents=True, exist_ok=True)

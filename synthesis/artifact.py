@@ -4,10 +4,19 @@ It holds everything needed to *run* a test without solving anything: the transit
 system with labels, the automata tables (to track histories), the restrictions, the
 test agent's strategy table, and the synthesis summary (the JSON of
 ``flowtest synthesize``). Loading gives a :class:`TestArtifact`.
+
+An artifact cannot lie: loading checks every field against the schema
+(:mod:`synthesis.artifact_schema`), then :func:`verify_artifact` checks its meaning: the
+``source`` hash of what it was synthesized from (system, objectives, kind) matches its
+content, its automata are those of its objectives, and its restrictions pass the
+independent checks of :mod:`synthesis.verify` on its own product graphs (bypass flow 0,
+the flow of its summary, feasibility). Any failure is a :class:`ProblemError` that names
+what is wrong; an edited test never runs.
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -22,6 +31,21 @@ from .systems import TransitionSystem
 
 FORMAT = "flowtest-test"
 VERSION = 1
+
+
+def source_hash(system: dict, objectives: dict, kind: str) -> str:
+    """SHA-256 of what a test is synthesized from: the transition system (as the artifact
+    writes it), the two objective texts and the environment kind, as canonical JSON."""
+    doc = {"format": FORMAT, "system": system, "objectives": {"system": objectives["system"], "test": objectives["test"]},
+           "kind": kind}
+    text = json.dumps(doc, sort_keys=True, separators=(",", ":"), ensure_ascii=True)
+    return hashlib.sha256(text.encode("ascii")).hexdigest()
+
+
+def problem_source_hash(problem: Any) -> str:
+    """:func:`source_hash` of a :class:`~synthesis.problems.Problem` (before synthesis)."""
+    return source_hash(problem.system.to_dict(),
+                       {"system": problem.system_objective.text, "test": problem.test_objective.text}, problem.kind)
 
 
 def dba_to_dict(dba: DBA) -> dict:
@@ -84,6 +108,7 @@ class TestArtifact:
     objectives: dict
     agent: dict | None = None
     extras: dict = field(default_factory=dict)
+    source: str = ""  # source_hash of what it was synthesized from
 
     def initial_history(self) -> int:
         """The history after reading ``L(s0)``."""
@@ -115,44 +140,128 @@ class TestArtifact:
             "agent": self.agent,
             "summary": self.summary,
             "extras": self.extras,
+            "source": {"sha256": self.source or source_hash(self.system.to_dict(), self.objectives, self.kind)},
         }
 
     @classmethod
-    def from_dict(cls, d: dict, source: str = "<artifact>") -> "TestArtifact":
-        if d.get("format") != FORMAT:
-            raise ProblemError(f"{source} is not a FlowTest test artifact (format {d.get('format')!r})")
-        if d.get("version") != VERSION:
-            raise ProblemError(f"{source} has artifact version {d.get('version')}, this FlowTest reads {VERSION}")
-        letters = tuple(frozenset(a) for a in d["letters"])
-        a = d["automata"]
-        return cls(
-            name=d["name"],
-            kind=d["kind"],
-            system=TransitionSystem.from_dict(d["system"]),
-            letters=letters,
-            system_automaton=dba_from_dict(a["system"], letters),
-            test_automaton=dba_from_dict(a["test"], letters),
-            histories=dba_from_dict(a["histories"], letters),
-            strategy=TestStrategy.from_dict(d["strategy"]),
-            summary=d["summary"],
-            objectives=d["objectives"],
-            agent=d.get("agent"),
-            extras=d.get("extras", {}),
-        )
+    def from_dict(cls, d: dict, source: str = "<artifact>", verify: bool = True) -> "TestArtifact":
+        """Build an artifact from its plain data, checked first (see the module docstring).
+
+        Raises
+        ------
+        ProblemError
+            Naming the field or the check that fails. ``verify=False`` skips the
+            checks of meaning (:func:`verify_artifact`), never the schema.
+        """
+        from .artifact_schema import validate_artifact
+
+        validate_artifact(d, source, FORMAT, VERSION)
+        try:
+            letters = tuple(frozenset(a) for a in d["letters"])
+            a = d["automata"]
+            art = cls(
+                name=d["name"],
+                kind=d["kind"],
+                system=TransitionSystem.from_dict(d["system"]),
+                letters=letters,
+                system_automaton=dba_from_dict(a["system"], letters),
+                test_automaton=dba_from_dict(a["test"], letters),
+                histories=dba_from_dict(a["histories"], letters),
+                strategy=TestStrategy.from_dict(d["strategy"]),
+                summary=d["summary"],
+                objectives=d["objectives"],
+                agent=d.get("agent"),
+                extras=d.get("extras", {}),
+                source=d["source"]["sha256"],
+            )
+        except (KeyError, IndexError, TypeError, ValueError, AttributeError) as exc:
+            # the schema should have said it; never let a raw error reach a user
+            raise ProblemError(f"artifact {source} is malformed ({type(exc).__name__}: {exc})") from None
+        if verify:
+            verify_artifact(art, source)
+        return art
 
     def save(self, path: str | Path) -> None:
         Path(path).write_text(json.dumps(self.to_dict(), separators=(",", ":")))
 
     @classmethod
-    def load(cls, path: str | Path) -> "TestArtifact":
+    def load(cls, path: str | Path, verify: bool = True) -> "TestArtifact":
+        """Read and check an artifact file (see :meth:`from_dict`)."""
+        from .problems import read_limited
+
         p = Path(path)
+        raw = read_limited(p, "artifact")
         try:
-            data = json.loads(p.read_text())
-        except OSError as exc:
-            raise ProblemError(f"cannot read artifact {str(p)!r}: {exc.strerror or exc}") from None
+            data = json.loads(raw.decode("utf-8"))
+        except UnicodeDecodeError:
+            raise ProblemError(f"artifact {str(p)!r} is not UTF-8 text") from None
         except json.JSONDecodeError as exc:
             raise ProblemError(f"{p}: invalid JSON: {exc}") from None
-        return cls.from_dict(data, str(p))
+        except RecursionError:
+            raise ProblemError(f"{p}: invalid JSON: nested too deeply") from None
+        return cls.from_dict(data, str(p), verify)
+
+
+def _same_dba(a: DBA, b: DBA) -> bool:
+    return (
+        a.initial == b.initial
+        and a.delta.shape == b.delta.shape
+        and bool(np.array_equal(a.delta, b.delta))
+        and a.accepting.shape == b.accepting.shape
+        and bool(np.array_equal(a.accepting, b.accepting))
+        and (a.components is None) == (b.components is None)
+        and (a.components is None or bool(np.array_equal(a.components, b.components)))
+    )
+
+
+def verify_artifact(
+    art: TestArtifact, source: str = "<artifact>", expected_source: str | None = None, restrictions: bool = True
+) -> None:
+    """Check what an artifact means against what it claims (cheap: graph searches and max flows).
+
+    * its ``source`` hash equals the hash of its own system, objectives and kind (and
+      ``expected_source`` when given: a cache entry must be the problem asked for);
+    * its alphabet is its system's labels and its automata are those of its objectives;
+    * its restrictions pass :func:`synthesis.verify.check_test` on its own product
+      graphs: bypass flow 0, the flow its summary states, no history's entry trapped
+      (skipped with ``restrictions=False``: for files whose every byte is already known
+      good, the shipped artifacts, so that ``gym.make`` needs no graph library).
+
+    Raises
+    ------
+    ProblemError
+        Naming the check that fails (the artifact was edited or made for another problem).
+    """
+    from .automata import specification_product
+    from .specs import parse_objective
+
+    where = f"artifact {source}"
+    own = source_hash(art.system.to_dict(), art.objectives, art.kind)
+    if art.source != own:
+        raise ProblemError(f"{where}: its system, objectives or kind do not match its source hash (the file was edited)")
+    if expected_source is not None and art.source != expected_source:
+        raise ProblemError(f"{where} was synthesized from another problem than the one asked for (source hash mismatch)")
+    if art.letters != art.system.letters():
+        raise ProblemError(f"{where}: field letters is not the alphabet of its system's labels")
+    try:
+        spec = specification_product(
+            parse_objective(art.objectives["system"], "system"), parse_objective(art.objectives["test"], "test"), art.letters
+        )
+    except ProblemError as exc:
+        raise ProblemError(f"{where}: field objectives: {exc}") from None
+    for field_name, mine, derived in (("system", art.system_automaton, spec.sys), ("test", art.test_automaton, spec.test),
+                                      ("histories", art.histories, spec.dba)):
+        if not _same_dba(mine, derived):
+            raise ProblemError(f"{where}: field automata.{field_name} is not the automaton of its objectives "
+                               "(edited, or another problem's automata)")
+    if not restrictions:
+        return
+    from .products import build_products
+    from .verify import check_test
+
+    report = check_test(build_products(art.system, spec), art.strategy, int(art.summary["flow"]), raise_on_failure=False)
+    if not report.ok:
+        raise ProblemError(f"{where}: its restrictions fail the independent check: " + "; ".join(report.problems()))
 
 
 def artifact_of(test: Any, summary: dict) -> TestArtifact:
@@ -172,4 +281,5 @@ def artifact_of(test: Any, summary: dict) -> TestArtifact:
         objectives={"system": p.system_objective.text, "test": p.test_objective.text},
         agent=None if test.agent is None else test.agent.to_dict(),
         extras={"history_descriptions": [spec.describe(h) for h in range(spec.dba.n_states)]},
+        source=problem_source_hash(p),
     )
