@@ -17,6 +17,15 @@ Outputs in ``--out``:
   pictures of a typical and a failing run, the replay commands.
 * ``traces/*.png`` — the trace pictures.
 
+``--tester`` chooses who plays the test's side: ``synthesized`` (default, the synthesized
+test as the single-agent env plays it) or a learned tester ``ppo:PATH``
+(:mod:`agents.testers`, played through :class:`agents.testers.VersusTesterEnv`). Records
+carry ``tester``, ``trapped`` (runs a tester other than the synthesized one trapped: an
+unfair test, not a FlowTest bug), ``sut_failures`` (faults caught: runs the SUT failed
+by itself) and ``tester_fairness`` (the tester's exhaustive check,
+:func:`flowtest_env.fairness.check_tester`; with more than one tester, or another one);
+with several testers the report opens with a side-by-side table.
+
 Two kinds of failure are told apart:
 
 * a **SUT failure**: the system objective was violated, or not met within the step

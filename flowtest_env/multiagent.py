@@ -5,7 +5,8 @@
 One test run as a turn-based game between ``tester_0`` and ``system_0``, played by the
 shared :class:`~flowtest_env.game.TestGame`. The synthesized test strategy ships as the
 default tester (:func:`synthesized_tester`), so any system policy can be plugged in;
-or a learned tester can be trained against a fixed system.
+or a learned tester can be trained against a fixed system (:mod:`agents.testers`,
+``flowtest train-tester``), and checked for traps exhaustively (:mod:`flowtest_env.fairness`).
 
 * **Obstacle problems** (static, reactive, mixed): each round the tester first chooses
   which outgoing moves of the system's current state to restrict for this step, then
