@@ -7,7 +7,7 @@
 2. Trains a PPO system under test (``flowtest train``) on each compared env.
 3. Runs ``flowtest evaluate --tester synthesized ppo:OUT/testers`` on each compared env
    with the correct, faulty, GR(1), random and PPO systems (one report per env in
-   ``OUT/evaluate-<env>/``) and prints the side-by-side table.
+   ``OUT/evaluate-<env>/``) and prints the side-by-side table (``OUT/comparison.md``).
 4. Draws the exhaustive search's shortest witnesses against each learned tester: into a
    trap (then the correct replanner trying from there) and to the goal without the test
    objective, with the replanner's run against the synthesized test of the same problem
@@ -22,6 +22,7 @@ import argparse
 import json
 import shutil
 import sys
+import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -103,7 +104,8 @@ def draw(out: Path, figures: Path | None, seed: int) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--out", type=Path, default=Path("bench-testers"))
+    p.add_argument("--out", type=Path, default=Path(tempfile.gettempdir()) / "flowtest-bench-testers",
+                   help="where models, reports and pictures go (default: the temporary folder)")
     p.add_argument("--steps", type=int, default=20_480, help="tester training steps per problem (default 20480)")
     p.add_argument("--sut-steps", type=int, default=16_384, help="PPO system training steps per env (default 16384)")
     p.add_argument("--episodes", type=int, default=20, help="runs per system, tester and env (default 20)")
