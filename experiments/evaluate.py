@@ -13,9 +13,12 @@ Outputs in ``--out``:
   ``mean_restrictions``, ``mean_steps``, ``test_failures`` and ``failures`` (at most
   :data:`MAX_LISTED` listed, ``n_failures`` counts all; each with ``seed``, ``kind``,
   ``reason``, the ``verdict`` and its ``replay`` command).
-* ``report.md`` and ``report.html`` — one table per SUT (a row per test), trace
-  pictures of a typical and a failing run, the replay commands.
-* ``traces/*.png`` — the trace pictures.
+* ``report.html`` — opens with an outcome matrix (systems x tests), then each test's
+  picture and objectives, the failing runs as filmstrips with their replay commands, and
+  every number (:mod:`experiments.report`); ``report.md`` — the matrix and one table per
+  SUT, trace pictures and replay commands.
+* ``traces/*.png`` — the trace pictures and filmstrips; ``tests/*.png`` — each test at
+  its start.
 
 ``--tester`` chooses who plays the test's side: ``synthesized`` (default, the synthesized
 test as the single-agent env plays it) or a learned tester ``ppo:PATH``
@@ -56,6 +59,7 @@ import numpy as np
 from synthesis.errors import ProblemError
 
 from .cli import EXIT_OK, command, json_safe, nonnegative_int, positive_int, prepare_output_folder, write_atomically
+from .report import GLOSSARY, TestInfo, fold_rows, outcome_class, render_html, test_name
 
 REPORT_MARKER = ".flowtest-evaluation"
 """The file that marks a report folder as FlowTest's: ``--out`` refuses any other
@@ -466,23 +470,64 @@ def _pct(x: float | None) -> str:
     return "–" if x is None else f"{100 * x:.0f} %"
 
 
+def test_infos(env_ids: Sequence[str], out: Path) -> list[TestInfo]:
+    """Draw each test at its start into ``out/tests/`` and collect what the report shows
+    of it (problem, kind, objectives, step budget)."""
+    from .filmstrip import start_picture
+
+    (out / "tests").mkdir(exist_ok=True)
+    infos = []
+    for env_id in env_ids:
+        env = make_env(env_id)
+        u = env.unwrapped
+        game = u.game
+        env.close()
+        name = f"tests/{_slug(env_id)}.png"
+        write_atomically(out / name, lambda tmp, game=game: start_picture(game, tmp))
+        art = game.artifact
+        infos.append(TestInfo(
+            env_id=env_id, problem=str(art.name), kind=str(art.kind),
+            system_objective=str(art.objectives.get("system", "")), test_objective=str(art.objectives.get("test", "")),
+            max_steps=int(u.max_steps), picture=name,
+        ))
+    return infos
+
+
+def _filmstrip(trace: Trace, path: Path) -> None:
+    from .filmstrip import filmstrip
+
+    env = make_env(trace.env_id)
+    game = env.unwrapped.game
+    env.close()
+    v = trace.verdict
+    title = (f"{trace.sut} on {trace.env_id}, seed {trace.seed}: {trace.reason or v['system_objective']} "
+             f"(system objective {v['system_objective']}, {v['steps']} steps)")
+    filmstrip(game, trace.states, trace.actions, title, path)
+
+
 def write_report(cells: Sequence[Cell], out: Path) -> list[dict[str, Any]]:
-    """Write ``results.json``, ``report.md``, ``report.html`` and the trace pictures."""
+    """Write ``results.json``, ``report.md``, ``report.html``, the trace pictures and
+    filmstrips (``traces/``) and a picture of each test (``tests/``)."""
     out.mkdir(parents=True, exist_ok=True)
     (out / "traces").mkdir(exist_ok=True)
     for cell in cells:
+        cell_name = test_name({"env": cell.env_id, "tester": cell.tester})
         typical = next((t for t in cell.traces if not t.failed), None)
         failing = next((t for t in cell.traces if t.failed), None)
         for label, tr in (("typical", typical), ("failing", failing)):
             if tr is None:
                 continue
-            against = "" if cell.tester == "synthesized" else f"--{_slug(cell.tester.rsplit('/', 1)[-1])}"
-            name = f"traces/{_slug(cell.sut)}--{_slug(cell.env_id)}{against}--{label}.png"
+            name = f"traces/{_slug(cell.sut)}--{_slug(cell_name)}--{label}.png"
             write_atomically(out / name, lambda tmp, tr=tr: trace_picture(tr, tmp))
             cell.pictures[label] = name
+        if failing is not None:
+            name = f"traces/{_slug(cell.sut)}--{_slug(cell_name)}--filmstrip.png"
+            write_atomically(out / name, lambda tmp, tr=failing: _filmstrip(tr, tmp))
+            cell.pictures["filmstrip"] = name
+    tests = test_infos(list(dict.fromkeys(c.env_id for c in cells)), out)
     records = [cell.record() for cell in cells]
     write_atomically(out / "results.json", lambda tmp: tmp.write_text(json.dumps(json_safe(records), indent=1) + "\n"))
-    md, body = _markdown(records), _html(records)
+    md, body = _markdown(records), render_html(records, tests, (TESTER_COLUMNS, tester_comparison_rows(records)))
     write_atomically(out / "report.md", lambda tmp: tmp.write_text(md))
     write_atomically(out / "report.html", lambda tmp: tmp.write_text(body))
     return records
@@ -491,12 +536,6 @@ def write_report(cells: Sequence[Cell], out: Path) -> list[dict[str, Any]]:
 def test_failure_records(records: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     """The records with a test failure (a FlowTest bug)."""
     return [r for r in records if r["test_failures"]]
-
-
-def _test_name(r: dict[str, Any]) -> str:
-    """The env ID, with the tester when it is not the synthesized one."""
-    tester = r.get("tester", "synthesized")
-    return r["env"] if tester == "synthesized" else f"{r['env']} vs {tester}"
 
 
 def _fair_text(f: dict[str, Any] | None) -> str:
@@ -557,6 +596,22 @@ def _markdown(records: Sequence[dict[str, Any]]) -> str:
                 if f["kind"] == "test":
                     lines.append(f"- {r['sut']} on {r['env']}: {f['reason']} — `{f['replay']}`")
         lines.append("")
+    envs = list(dict.fromkeys(test_name(r) for r in records))
+    by = {(r["sut"], test_name(r)): r for r in records}
+    lines += ["| system under test | " + " | ".join(envs) + " |", "|---" * (len(envs) + 1) + "|"]
+    for group in fold_rows(records, envs):
+        cells = []
+        for env in envs:
+            r = by.get((group[0], env))
+            if r is None:
+                cells.append("–")
+                continue
+            met = round((r["system_objective_met_rate"] or 0) * r["episodes"])
+            cells.append(f"{met}/{r['episodes']} met ({outcome_class(r)})")
+        lines.append(f"| {', '.join(group)} | " + " | ".join(cells) + " |")
+    lines.append("")
+    lines += [f"- **{word}**: {html.unescape(text).replace('<b>', '').replace('</b>', '')}" for word, text in GLOSSARY]
+    lines.append("")
     lines += [
         "System objective met: share of runs; test objective realized: share of the runs that met the "
         "system objective (the test guarantees 100 %). Restrictions: mean number of decisions taken "
@@ -570,7 +625,7 @@ def _markdown(records: Sequence[dict[str, Any]]) -> str:
         rows = [r for r in records if r["sut"] == sut]
         for r in rows:
             lines.append(
-                f"| {_test_name(r)} | {r['episodes']} | {_pct(r['system_objective_met_rate'])} "
+                f"| {test_name(r)} | {r['episodes']} | {_pct(r['system_objective_met_rate'])} "
                 f"| {_pct(r['test_objective_realized_rate'])} | {r['violated']} | {r['open']} "
                 f"| {r['mean_restrictions']:.1f} | {r['mean_steps']:.1f} | {r['n_failures']}"
                 f"{' (' + str(r['test_failures']) + ' test)' if r['test_failures'] else ''} |"
@@ -580,65 +635,13 @@ def _markdown(records: Sequence[dict[str, Any]]) -> str:
             pics = r["pictures"]
             if r["failures"]:
                 f = r["failures"][0]
-                lines += [f"**{_test_name(r)}** — first failure ({f['kind']}): {f['reason']}. Replay:", "",
+                lines += [f"**{test_name(r)}** — first failure ({f['kind']}): {f['reason']}. Replay:", "",
                           f"    {f['replay']}", ""]
             for label in ("typical", "failing"):
                 if label in pics:
                     lines.append(f"![{label} run of {sut} on {r['env']}]({pics[label]})")
             lines.append("")
     return "\n".join(lines) + "\n"
-
-
-def _html(records: Sequence[dict[str, Any]]) -> str:
-    e = html.escape
-    parts = [
-        "<!doctype html><html><head><meta charset='utf-8'><title>FlowTest evaluation</title><style>",
-        "body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;padding:0 1em}",
-        "table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:4px 8px;text-align:right}",
-        "td:first-child,th:first-child{text-align:left}.bad{background:#fde2e2}.bug{background:#b00020;color:white;"
-        "padding:1em;font-weight:bold}code{background:#f3f3f3;padding:2px 4px}img{max-width:48%;margin:4px;"
-        "border:1px solid #ddd}",
-        "</style></head><body><h1>FlowTest evaluation</h1>",
-    ]
-    bugs = test_failure_records(records)
-    if bugs:
-        parts.append("<div class='bug'>FLOWTEST BUG: a test failed its guarantee (a run met the system objective "
-                     "without realizing the test objective, or the test trapped the system).<ul>")
-        for r in bugs:
-            for f in r["failures"]:
-                if f["kind"] == "test":
-                    parts.append(f"<li>{e(r['sut'])} on {e(r['env'])}: {e(f['reason'])} — <code>{e(f['replay'])}</code></li>")
-        parts.append("</ul></div>")
-    parts.append("<p>Met: share of runs meeting the system objective. Realized: share of those runs that "
-                 "realized the hidden test objective (guaranteed 100 %). Restrictions: mean restricted decisions.</p>")
-    comparison = tester_comparison_rows(records)
-    if comparison:
-        parts.append("<h2>Testers side by side</h2><table><tr>" + "".join(f"<th>{e(c)}</th>" for c in TESTER_COLUMNS)
-                     + "</tr>")
-        parts += ["<tr>" + "".join(f"<td>{e(c)}</td>" for c in row) + "</tr>" for row in comparison]
-        parts.append("</table>")
-    for sut in dict.fromkeys(r["sut"] for r in records):
-        rows = [r for r in records if r["sut"] == sut]
-        parts.append(f"<h2>{e(sut)}</h2><table><tr><th>test</th><th>runs</th><th>met</th><th>realized</th>"
-                     "<th>violated</th><th>open</th><th>restrictions</th><th>steps</th><th>failures</th></tr>")
-        for r in rows:
-            cls = " class='bad'" if r["n_failures"] else ""
-            parts.append(
-                f"<tr{cls}><td>{e(_test_name(r))}</td><td>{r['episodes']}</td><td>{_pct(r['system_objective_met_rate'])}</td>"
-                f"<td>{_pct(r['test_objective_realized_rate'])}</td><td>{r['violated']}</td><td>{r['open']}</td>"
-                f"<td>{r['mean_restrictions']:.1f}</td><td>{r['mean_steps']:.1f}</td><td>{r['n_failures']}</td></tr>"
-            )
-        parts.append("</table>")
-        for r in rows:
-            if r["failures"]:
-                f = r["failures"][0]
-                parts.append(f"<p><b>{e(_test_name(r))}</b>: first failure ({e(f['kind'])}): {e(f['reason'])}. "
-                             f"Replay: <code>{e(f['replay'])}</code></p>")
-            for label in ("typical", "failing"):
-                if label in r["pictures"]:
-                    parts.append(f"<img src='{e(r['pictures'][label])}' alt='{label} run of {e(sut)} on {e(r['env'])}'>")
-    parts.append("</body></html>")
-    return "\n".join(parts) + "\n"
 
 
 # --------------------------------------------------------------------------- command line
@@ -713,7 +716,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
     for r in records:
         trapped = f"  trapped {r['trapped']}" if r["tester"] != "synthesized" else ""
         sys.stdout.write(
-            f"{r['sut']:24s} {_test_name(r):30s} met {_pct(r['system_objective_met_rate']):>6s}  "
+            f"{r['sut']:24s} {test_name(r):30s} met {_pct(r['system_objective_met_rate']):>6s}  "
             f"realized {_pct(r['test_objective_realized_rate']):>6s}  failures {r['n_failures']}{trapped}\n"
         )
     bugs = test_failure_records(records)
