@@ -27,6 +27,9 @@ env ``i`` always plays test ``i % n_tests``). Tests with fewer actions or smalle
 observations than the pool's largest are padded: extra actions are invalid (refused,
 never in the mask), extra observation entries are zero.
 
+:class:`VectorActionMaskObservation` puts the batched mask into the observation, as
+:class:`~flowtest_env.wrappers.ActionMaskObservation` does for one env.
+
 Limits: the ``"instantaneous"`` setting only (the accumulative observation depends on
 the states visited, not on the configuration); ``AutoresetMode.NEXT_STEP`` only.
 """
@@ -366,4 +369,31 @@ class RandomGridVectorEnv(PoolVectorEnv):
         self.problem = f"random-{size}x{size}-{family}{n}"
 
 
-__all__ = ["PoolVectorEnv", "FlowTestVectorEnv", "RandomGridVectorEnv", "DRAWS_PER_REFILL"]
+class VectorActionMaskObservation(gym.vector.VectorWrapper):
+    """Put the batched legal-action mask into the observation, as
+    :class:`~flowtest_env.wrappers.ActionMaskObservation` does for one env: a ``Dict``
+    with ``"observation"`` (``[num_envs, ...]``) and ``"action_mask"``
+    (``int8[num_envs, n_actions]``, taken from ``infos["action_mask"]``)."""
+
+    def __init__(self, env: VectorEnv) -> None:
+        super().__init__(env)
+        if not isinstance(env.single_action_space, spaces.Discrete):
+            raise TypeError(f"VectorActionMaskObservation needs a Discrete action space, not {env.single_action_space}")
+        n = int(env.single_action_space.n)
+        self.single_observation_space = spaces.Dict(
+            {"observation": env.single_observation_space, "action_mask": spaces.Box(0, 1, shape=(n,), dtype=np.int8)}
+        )
+        self.observation_space = batch_space(self.single_observation_space, env.num_envs)
+
+    def reset(
+        self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        obs, infos = self.env.reset(seed=seed, options=options)
+        return {"observation": obs, "action_mask": infos["action_mask"]}, infos
+
+    def step(self, actions: Any) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        obs, reward, terminated, truncated, infos = self.env.step(actions)
+        return {"observation": obs, "action_mask": infos["action_mask"]}, reward, terminated, truncated, infos
+
+
+__all__ = ["PoolVectorEnv", "FlowTestVectorEnv", "RandomGridVectorEnv", "VectorActionMaskObservation", "DRAWS_PER_REFILL"]

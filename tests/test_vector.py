@@ -237,3 +237,21 @@ def test_render_draws_each_env() -> None:
     single = gym.make("FlowTest-Maze2-v0", render_mode="rgb_array")
     single.reset(seed=0)
     assert len(frames) == 2 and np.array_equal(frames[0], single.render())
+
+
+def test_mask_in_the_observation_like_the_single_env_wrapper() -> None:
+    from flowtest_env import ActionMaskObservation
+    from flowtest_env.vector import VectorActionMaskObservation
+
+    vec = VectorActionMaskObservation(gym.make_vec("FlowTest-Maze1-v0", num_envs=4, vectorization_mode="vector_entry_point"))
+    ref = gym.make_vec("FlowTest-Maze1-v0", num_envs=4, vectorization_mode="sync", wrappers=[ActionMaskObservation])
+    assert vec.single_observation_space == ref.single_observation_space
+    rng = np.random.default_rng(0)
+    o1, _ = vec.reset(seed=4)
+    o2, _ = ref.reset(seed=4)
+    assert data_equivalence(o1, o2, exact=True)
+    for _ in range(120):
+        a = _actions(rng, o1["action_mask"], 5, 0.2)
+        o1, r1, te1, tr1, _ = vec.step(a)
+        o2, r2, te2, tr2, _ = ref.step(a)
+        assert data_equivalence((o1, r1, te1, tr1), (o2, r2, te2, tr2), exact=True)
