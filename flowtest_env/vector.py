@@ -241,6 +241,8 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         return np.take(self.pool.obs, self.pool.obs_row[z], axis=0)  # faster than fancy indexing
 
     def _infos(self, z: np.ndarray) -> dict[str, Any]:
+        """``system_state`` (an object array of the single env's values, gathered from one
+        table: read them, do not change them in place) and ``action_mask``."""
         return {
             "system_state": self.pool.system_state[z],
             "_system_state": self._all.copy(),
