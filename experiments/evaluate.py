@@ -140,30 +140,42 @@ def tester_fairness(env_id: str, tester: str) -> dict[str, Any] | None:
 
 
 def make_env(env_id: str) -> Any:
-    """``gymnasium.make(env_id)`` after registering FlowTest's envs.
+    """The environment named by ``env_id``: a registered Gymnasium ID
+    (``FlowTest-Maze2-v0``), else ``gymnasium.make("FlowTest-v0", test=env_id)``: a
+    built-in name, a problem file (synthesized once, then cached) or an artifact file.
 
     Raises
     ------
     ProblemError
-        If the ID is not registered.
+        If ``env_id`` is none of these (or the file is not a valid problem or artifact).
     """
     import gymnasium as gym
 
-    import flowtest_env  # noqa: F401  (registers FlowTest-*-v0)
+    import flowtest_env
 
-    known = ", ".join(flowtest_env.ENV_IDS)
-    try:
+    if env_id in gym.registry:
+        known = ", ".join(flowtest_env.ENV_IDS)
         spec = gym.spec(env_id)
-    except gym.error.Error as exc:
-        raise ProblemError(f"unknown environment {env_id!r}: {exc}; known: {known}") from None
-    entry = spec.entry_point if isinstance(spec.entry_point, str) else getattr(spec.entry_point, "__module__", "")
-    if not str(entry).startswith("flowtest_env"):
-        raise ProblemError(f"{env_id!r} is not a FlowTest environment; known: {known}")
-    env = gym.make(env_id)
-    if not isinstance(env.unwrapped, flowtest_env.FlowTestEnv):
-        env.close()
-        raise ProblemError(f"{env_id!r} is not a FlowTest environment; known: {known}")
-    return env
+        entry = spec.entry_point if isinstance(spec.entry_point, str) else getattr(spec.entry_point, "__module__", "")
+        if not str(entry).startswith("flowtest_env"):
+            raise ProblemError(f"{env_id!r} is not a FlowTest environment; known: {known}")
+        try:
+            env = gym.make(env_id)
+        except gym.error.Error as exc:
+            raise ProblemError(f"environment {env_id!r}: {exc}") from None
+        if not isinstance(env.unwrapped, flowtest_env.FlowTestEnv):
+            env.close()
+            raise ProblemError(f"{env_id!r} is not a FlowTest environment; known: {known}")
+        return env
+    try:
+        return gym.make(flowtest_env.ANY_TEST_ID, test=env_id)
+    except ProblemError as exc:
+        if Path(env_id).suffix or Path(env_id).exists():
+            raise
+        known = ", ".join(flowtest_env.ENV_IDS)
+        raise ProblemError(
+            f"unknown environment {env_id!r}: not a registered ID ({known}), a built-in name or a file"
+        ) from exc
 
 
 def classify(env: Any, verdict: dict[str, Any]) -> tuple[str, str]:
@@ -648,7 +660,9 @@ def _markdown(records: Sequence[dict[str, Any]]) -> str:
 
 
 def _arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--env", nargs="+", required=True, metavar="ID", help="environment IDs, e.g. FlowTest-Maze2-v0")
+    p.add_argument("--env", nargs="+", required=True, metavar="ENV",
+                   help="environments: registered IDs (FlowTest-Maze2-v0), built-in names (maze2), problem files "
+                        "(mine.toml, synthesized once and cached) or artifact files (flowtest synthesize --out)")
     p.add_argument("--sut", nargs="+", required=True, metavar="POLICY",
                    help="systems under test: scripted:replanner, scripted:committed, scripted:fuel-blind, "
                         "scripted:greedy, random, gr1, ppo:PATH")

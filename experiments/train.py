@@ -278,7 +278,8 @@ def train(env_id: str, steps: int, out: str | Path, seed: int = 0, progress_bar:
 
 
 def _arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("ENV", help="environment ID, e.g. FlowTest-Maze2-v0")
+    p.add_argument("ENV", help="environment: a registered ID (FlowTest-Maze2-v0), a built-in name (maze2), a problem "
+                               "file (mine.toml) or an artifact file")
     p.add_argument("--steps", type=positive_int, default=50_000, help="training time steps (default 50000)")
     p.add_argument("--out", type=Path, required=True, help="model file (.zip); the curve goes next to it (.png)")
     p.add_argument("--seed", type=nonnegative_int, default=0, help="seed (default 0)")

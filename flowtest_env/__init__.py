@@ -1,13 +1,16 @@
 """FlowTest environments: synthesized tests as Gymnasium and PettingZoo environments.
 
-Importing this package registers ``FlowTest-<Name>-v0`` for every built-in problem and
-``FlowTest-RandomGrid-v0``, each with a NumPy ``vector_entry_point``
-(:mod:`flowtest_env.vector`: ``gym.make_vec(id, num_envs, vectorization_mode="vector_entry_point")``)::
+Importing this package registers ``FlowTest-v0`` (any test, ``test=...``),
+``FlowTest-<Name>-v0`` for every built-in problem and ``FlowTest-RandomGrid-v0``, each with a
+NumPy ``vector_entry_point`` (:mod:`flowtest_env.vector`:
+``gym.make_vec(id, num_envs, vectorization_mode="vector_entry_point")``)::
 
     import gymnasium as gym
     import flowtest_env
 
     env = gym.make("FlowTest-Maze2-v0")
+    env = gym.make("FlowTest-v0", test="mine.toml")   # a problem file, an artifact, a built-in
+    env = flowtest_env.make_env(problem)              # from Python objects
 
 The two-player (tester vs. system) PettingZoo environment is
 :mod:`flowtest_env.multiagent`.
@@ -21,51 +24,66 @@ from gymnasium.envs.registration import register, registry
 
 from .envs import BUILTIN_ENVS, DEFAULT_MAX_STEPS, FlowTestEnv, RandomGridEnv
 from .game import GameError, RunState, TestGame
+from .sources import TestLike, load_test
 from .wrappers import ActionMaskObservation
 
-ENV_IDS: list[str] = []
-"""Every registered FlowTest environment ID."""
+ANY_TEST_ID = "FlowTest-v0"
+"""The registered ID that plays any test: ``gymnasium.make(ANY_TEST_ID, test=...)``."""
 
-
-def _env_specs() -> list[dict[str, Any]]:
-    """The registry data: one entry per ID (``id``, ``entry_point``,
-    ``vector_entry_point``, ``kwargs``); add an ID by adding an entry here."""
-    specs: list[dict[str, Any]] = [
-        {
-            "id": f"FlowTest-{stem}-v0",
+REGISTRATIONS: dict[str, dict[str, Any]] = {
+    ANY_TEST_ID: {
+        "entry_point": "flowtest_env.envs:FlowTestEnv",
+        "vector_entry_point": "flowtest_env.vector:FlowTestVectorEnv",
+        "kwargs": {},
+    },
+    **{
+        f"FlowTest-{stem}-v0": {
             "entry_point": f"flowtest_env.envs:{cls.__name__}",
             "vector_entry_point": "flowtest_env.vector:FlowTestVectorEnv",
-            "kwargs": {"problem": problem, "setting": "instantaneous", "max_steps": DEFAULT_MAX_STEPS[problem], "obs_kind": "flat"},
+            "kwargs": {"test": name, "setting": "instantaneous", "max_steps": DEFAULT_MAX_STEPS[name], "obs_kind": "flat"},
         }
-        for problem, (stem, cls) in BUILTIN_ENVS.items()
-    ]
-    specs.append(
-        {
-            "id": "FlowTest-RandomGrid-v0",
-            "entry_point": "flowtest_env.envs:RandomGridEnv",
-            "vector_entry_point": "flowtest_env.vector:RandomGridVectorEnv",
-            "kwargs": {
-                "size": 5,
-                "family": "reachability",
-                "n": 1,
-                "seeds": list(range(8)),
-                "kind": "reactive",
-                "setting": "instantaneous",
-                "max_steps": 100,
-                "obs_kind": "flat",
-            },
-        }
-    )
-    return specs
+        for name, (stem, cls) in BUILTIN_ENVS.items()
+    },
+    "FlowTest-RandomGrid-v0": {
+        "entry_point": "flowtest_env.envs:RandomGridEnv",
+        "vector_entry_point": "flowtest_env.vector:RandomGridVectorEnv",
+        "kwargs": {
+            "size": 5, "family": "reachability", "n": 1, "seeds": list(range(8)), "kind": "reactive",
+            "setting": "instantaneous", "max_steps": 100, "obs_kind": "flat",
+        },
+    },
+}
+"""Every ID this package registers -> the keyword arguments of Gymnasium's ``register``
+(one table, so other registration data, e.g. a vector entry point, is added per ID)."""
+
+ENV_IDS: list[str] = [i for i in REGISTRATIONS if i != ANY_TEST_ID]
+"""Every registered FlowTest environment ID with a fixed test (``FlowTest-v0`` aside)."""
 
 
 def _register_all() -> None:
-    for spec in _env_specs():
-        ENV_IDS.append(spec["id"])
-        if spec["id"] not in registry:
-            register(**spec)
+    for env_id, spec in REGISTRATIONS.items():
+        if env_id not in registry:
+            register(id=env_id, **spec)
 
 
 _register_all()
 
-__all__ = ["ENV_IDS", "ActionMaskObservation", "FlowTestEnv", "GameError", "RandomGridEnv", "RunState", "TestGame"]
+
+def make_env(test: TestLike, **options: Any) -> FlowTestEnv:
+    """A single-agent environment of ``test``, without Gymnasium's registry.
+
+    ``test`` is anything :func:`flowtest_env.sources.load_test` accepts: a built-in name,
+    a problem or artifact file path, a :class:`~synthesis.problems.Problem`, a
+    :class:`~synthesis.pipeline.SynthesizedTest` or a
+    :class:`~synthesis.artifact.TestArtifact`; ``options`` are :class:`FlowTestEnv`'s
+    arguments (``obs_kind``, ``max_steps``, ``render_mode``, ...). Equivalent to
+    ``gymnasium.make("FlowTest-v0", test=test, **options).unwrapped``, without
+    Gymnasium's checker wrappers.
+    """
+    return FlowTestEnv(test, **options)
+
+
+__all__ = [
+    "ANY_TEST_ID", "ENV_IDS", "REGISTRATIONS", "ActionMaskObservation", "FlowTestEnv", "GameError", "RandomGridEnv",
+    "RunState", "TestGame", "TestLike", "load_test", "make_env",
+]

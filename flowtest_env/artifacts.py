@@ -189,7 +189,15 @@ def load_builtin(name: str) -> TestArtifact:
     return art
 
 
-@lru_cache(maxsize=None)
 def builtin_game(name: str, setting: str | None = None, external_tester: bool = False) -> TestGame:
-    """The shared :class:`TestGame` of a built-in problem (see :class:`TestGame`)."""
+    """The shared :class:`TestGame` of a built-in problem (see :class:`TestGame`): one per
+    name, setting and tester, however the arguments are passed."""
+    return _builtin_game(name, setting, bool(external_tester))
+
+
+builtin_game.cache_clear = lambda: _builtin_game.cache_clear()  # type: ignore[attr-defined]
+
+
+@lru_cache(maxsize=None)
+def _builtin_game(name: str, setting: str | None, external_tester: bool) -> TestGame:
     return TestGame(load_builtin(name), setting, external_tester)

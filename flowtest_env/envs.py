@@ -20,7 +20,7 @@ from gymnasium import spaces
 
 from synthesis.artifact import TestArtifact
 
-from .artifacts import builtin_game
+from .sources import TestLike, game_for
 from .encoding import Encoder, make_encoder
 from .game import GRID_ACTIONS, MET, VIOLATED, GameError, RunState, TestGame
 from .render import ansi, make_renderer
@@ -36,6 +36,15 @@ DEFAULT_MAX_STEPS: dict[str, int] = {
     "maze2": 100,
     "patrolling": 200,
 }
+
+
+def default_max_steps(game: TestGame) -> int:
+    """The step budget of a test: the built-in's (:data:`DEFAULT_MAX_STEPS`), else four
+    steps per place of the system, at least 50 (room for detours the test forces)."""
+    name = game.artifact.name
+    if name in DEFAULT_MAX_STEPS:
+        return DEFAULT_MAX_STEPS[name]
+    return max(50, 4 * len(game.ts.places))
 
 
 class FlowTestEnv(gym.Env[np.ndarray, np.int64]):
@@ -90,7 +99,10 @@ class FlowTestEnv(gym.Env[np.ndarray, np.int64]):
 
     ## Arguments
 
-    ``problem`` (built-in name), ``setting`` (``"instantaneous"``/``"accumulative"``:
+    ``test``: a built-in name (``"maze2"``), a problem file (synthesized once, then
+    cached), an artifact file (``flowtest synthesize --out``), or a ``Problem``,
+    ``SynthesizedTest`` or ``TestArtifact`` object (:func:`flowtest_env.sources.load_test`;
+    ``problem`` is an older name for it). ``setting`` (``"instantaneous"``/``"accumulative"``:
     which restrictions are shown), ``max_steps``, ``obs_kind``, ``render_mode``
     (``"rgb_array"``, ``"ansi"``; ``"human"`` through Gymnasium's HumanRendering),
     ``view`` (``"system"`` or ``"engineer"``: the picture also shows the hidden test
@@ -98,15 +110,16 @@ class FlowTestEnv(gym.Env[np.ndarray, np.int64]):
 
     ## Registered Configurations
 
-    ``FlowTest-<Name>-v0`` for every built-in problem (see the subclasses) and
-    ``FlowTest-RandomGrid-v0``; ``flowtest_env.ENV_IDS`` lists them.
+    ``FlowTest-v0`` (any test: pass ``test=``), ``FlowTest-<Name>-v0`` for every
+    built-in problem (see the subclasses) and ``FlowTest-RandomGrid-v0``;
+    ``flowtest_env.ENV_IDS`` lists the ones with a fixed test.
     """
 
     metadata: dict[str, Any] = {"render_modes": ["rgb_array", "ansi"], "render_fps": 4}
 
     def __init__(
         self,
-        problem: str = "maze2",
+        test: TestLike = "maze2",
         setting: str | None = None,
         max_steps: int | None = None,
         obs_kind: str = "flat",
@@ -117,13 +130,16 @@ class FlowTestEnv(gym.Env[np.ndarray, np.int64]):
         restricted_penalty: float = 0.05,
         goal_reward: float = 1.0,
         violation_penalty: float = 1.0,
+        problem: TestLike | None = None,
     ) -> None:
-        game = builtin_game(problem, setting)
+        if problem is not None:  # the older name of `test`
+            test = problem
+        game = game_for(test, setting)
         self._configure(
-            [game], max_steps if max_steps is not None else DEFAULT_MAX_STEPS.get(problem, 100), obs_kind,
+            [game], max_steps if max_steps is not None else default_max_steps(game), obs_kind,
             render_mode, view, tile_size, step_cost, restricted_penalty, goal_reward, violation_penalty,
         )
-        self.problem = problem
+        self.problem = game.artifact.name
 
     # ------------------------------------------------------------------ set-up
 
@@ -305,8 +321,8 @@ class Example1Env(FlowTestEnv):
     * ``FlowTest-Example1-v0``
     """
 
-    def __init__(self, problem: str = "example1", **kwargs: Any) -> None:
-        super().__init__(problem, **kwargs)
+    def __init__(self, test: TestLike = "example1", **kwargs: Any) -> None:
+        super().__init__(test, **kwargs)
 
 
 class SmallReactiveEnv(FlowTestEnv):
@@ -338,8 +354,8 @@ class SmallReactiveEnv(FlowTestEnv):
       ``setting="accumulative"`` to keep doors met under a history shown)
     """
 
-    def __init__(self, problem: str = "small-reactive", **kwargs: Any) -> None:
-        super().__init__(problem, **kwargs)
+    def __init__(self, test: TestLike = "small-reactive", **kwargs: Any) -> None:
+        super().__init__(test, **kwargs)
 
 
 class BeaverRescueEnv(FlowTestEnv):
@@ -372,8 +388,8 @@ class BeaverRescueEnv(FlowTestEnv):
     * ``FlowTest-BeaverRescue-v0``
     """
 
-    def __init__(self, problem: str = "beaver-rescue", **kwargs: Any) -> None:
-        super().__init__(problem, **kwargs)
+    def __init__(self, test: TestLike = "beaver-rescue", **kwargs: Any) -> None:
+        super().__init__(test, **kwargs)
 
 
 class MotionPrimitivesEnv(FlowTestEnv):
@@ -404,8 +420,8 @@ class MotionPrimitivesEnv(FlowTestEnv):
     * ``FlowTest-MotionPrimitives-v0``
     """
 
-    def __init__(self, problem: str = "motion-primitives", **kwargs: Any) -> None:
-        super().__init__(problem, **kwargs)
+    def __init__(self, test: TestLike = "motion-primitives", **kwargs: Any) -> None:
+        super().__init__(test, **kwargs)
 
 
 class RefuelingEnv(FlowTestEnv):
@@ -438,8 +454,8 @@ class RefuelingEnv(FlowTestEnv):
     * ``FlowTest-Refueling-v0``
     """
 
-    def __init__(self, problem: str = "refueling", **kwargs: Any) -> None:
-        super().__init__(problem, **kwargs)
+    def __init__(self, test: TestLike = "refueling", **kwargs: Any) -> None:
+        super().__init__(test, **kwargs)
 
 
 class MarsExplorationEnv(FlowTestEnv):
@@ -475,8 +491,8 @@ class MarsExplorationEnv(FlowTestEnv):
     * ``FlowTest-MarsExploration-v0``
     """
 
-    def __init__(self, problem: str = "mars-exploration", **kwargs: Any) -> None:
-        super().__init__(problem, **kwargs)
+    def __init__(self, test: TestLike = "mars-exploration", **kwargs: Any) -> None:
+        super().__init__(test, **kwargs)
 
 
 class Maze1Env(FlowTestEnv):
@@ -507,8 +523,8 @@ class Maze1Env(FlowTestEnv):
     * ``FlowTest-Maze1-v0``
     """
 
-    def __init__(self, problem: str = "maze1", **kwargs: Any) -> None:
-        super().__init__(problem, **kwargs)
+    def __init__(self, test: TestLike = "maze1", **kwargs: Any) -> None:
+        super().__init__(test, **kwargs)
 
 
 class Maze2Env(FlowTestEnv):
@@ -540,8 +556,8 @@ class Maze2Env(FlowTestEnv):
     * ``FlowTest-Maze2-v0``
     """
 
-    def __init__(self, problem: str = "maze2", **kwargs: Any) -> None:
-        super().__init__(problem, **kwargs)
+    def __init__(self, test: TestLike = "maze2", **kwargs: Any) -> None:
+        super().__init__(test, **kwargs)
 
 
 class PatrollingEnv(FlowTestEnv):
@@ -573,8 +589,8 @@ class PatrollingEnv(FlowTestEnv):
     * ``FlowTest-Patrolling-v0``
     """
 
-    def __init__(self, problem: str = "patrolling", **kwargs: Any) -> None:
-        super().__init__(problem, **kwargs)
+    def __init__(self, test: TestLike = "patrolling", **kwargs: Any) -> None:
+        super().__init__(test, **kwargs)
 
 
 class RandomGridEnv(FlowTestEnv):

@@ -79,11 +79,11 @@ from gymnasium import spaces
 from pettingzoo import AECEnv, ParallelEnv
 from pettingzoo.utils import wrappers
 
-from .artifacts import builtin_game
 from .encoding import make_encoder
-from .envs import DEFAULT_MAX_STEPS
+from .envs import default_max_steps
 from .game import MET, VIOLATED, RunState, TestGame
 from .render import ansi, make_renderer
+from .sources import TestLike, game_for
 
 TESTER, SYSTEM = "tester_0", "system_0"
 
@@ -108,8 +108,10 @@ class raw_env(AECEnv):  # noqa: N801 - PettingZoo's module shape
 
     Parameters
     ----------
-    problem
-        A built-in problem name (``maze2``, ``small-reactive``, ...).
+    test
+        The test: a built-in name (``maze2``, ``small-reactive``, ...), a problem file,
+        an artifact file, or a ``Problem``/``SynthesizedTest``/``TestArtifact``
+        (:func:`flowtest_env.sources.load_test`); ``problem`` is an older name for it.
     setting
         Obstacle display setting (``"instantaneous"``/``"accumulative"``).
     max_cycles
@@ -131,7 +133,7 @@ class raw_env(AECEnv):  # noqa: N801 - PettingZoo's module shape
 
     def __init__(
         self,
-        problem: str = "maze2",
+        test: TestLike = "maze2",
         setting: str | None = None,
         max_cycles: int | None = None,
         obs_kind: str = "flat",
@@ -140,14 +142,17 @@ class raw_env(AECEnv):  # noqa: N801 - PettingZoo's module shape
         tile_size: int = 32,
         step_cost: float = 0.01,
         restricted_penalty: float = 0.05,
+        problem: TestLike | None = None,
     ) -> None:
         super().__init__()
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"unknown render_mode {render_mode!r}; expected one of {self.metadata['render_modes']}")
-        game = builtin_game(problem, setting, external_tester=True)
+        if problem is not None:  # the older name of `test`
+            test = problem
+        game = game_for(test, setting, external_tester=True)
         self.game: TestGame = game
-        self.problem = problem
-        self.max_cycles = int(max_cycles if max_cycles is not None else DEFAULT_MAX_STEPS.get(problem, 100))
+        self.problem = game.artifact.name
+        self.max_cycles = int(max_cycles if max_cycles is not None else default_max_steps(game))
         if self.max_cycles < 1:
             raise ValueError(f"max_cycles must be at least 1, not {max_cycles}")
         self.render_mode = render_mode

@@ -47,7 +47,6 @@ from gymnasium.vector.utils import batch_space
 
 from .compiled import OUTCOMES, CompiledPool, compile_pool
 from .encoding import make_encoder
-from .envs import DEFAULT_MAX_STEPS
 from .game import TestGame
 from .render import make_renderer
 
@@ -319,24 +318,30 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
 
 
 class FlowTestVectorEnv(PoolVectorEnv):
-    """The vector entry point of ``FlowTest-<Name>-v0``: ``num_envs`` runs of one built-in
-    test; the arguments are those of :class:`~flowtest_env.envs.FlowTestEnv`."""
+    """The vector entry point of ``FlowTest-v0`` and ``FlowTest-<Name>-v0``: ``num_envs``
+    runs of one test (``test``: anything :func:`flowtest_env.sources.load_test` takes;
+    ``problem`` is its older name); the arguments are those of
+    :class:`~flowtest_env.envs.FlowTestEnv`."""
 
     def __init__(
         self,
         num_envs: int = 1,
-        problem: str = "maze2",
+        test: Any = "maze2",
         setting: str | None = None,
         max_steps: int | None = None,
         obs_kind: str = "flat",
+        problem: Any = None,
         **kwargs: Any,
     ) -> None:
-        from .artifacts import builtin_game
+        from .envs import default_max_steps
+        from .sources import game_for
 
-        game = builtin_game(problem, setting)
-        steps = max_steps if max_steps is not None else DEFAULT_MAX_STEPS.get(problem, 100)
+        if problem is not None:
+            test = problem
+        game = game_for(test, setting)
+        steps = max_steps if max_steps is not None else default_max_steps(game)
         super().__init__(num_envs, [game], max_steps=steps, obs_kind=obs_kind, **kwargs)
-        self.problem = problem
+        self.problem = game.artifact.name
 
 
 class RandomGridVectorEnv(PoolVectorEnv):

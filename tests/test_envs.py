@@ -82,7 +82,7 @@ def test_registry_lists_every_builtin_and_the_random_grid() -> None:
     assert len(flowtest_env.ENV_IDS) == 10
     for name, (stem, cls) in BUILTIN_ENVS.items():  # mars-exploration too, shipped or not
         spec = gym.spec(f"FlowTest-{stem}-v0")
-        assert spec.entry_point == f"flowtest_env.envs:{cls.__name__}" and spec.kwargs["problem"] == name
+        assert spec.entry_point == f"flowtest_env.envs:{cls.__name__}" and spec.kwargs["test"] == name
     for env_id in flowtest_env.ENV_IDS:  # plain-data kwargs
         kwargs = gym.spec(env_id).kwargs
         assert json.loads(json.dumps(kwargs)) == kwargs

@@ -1,0 +1,158 @@
+"""The one front door for tests: whatever names a test becomes a :class:`TestArtifact`.
+
+Every environment (``gymnasium.make("FlowTest-v0", test=...)``, the registered
+``FlowTest-<Name>-v0``, :func:`flowtest_env.make_env`, the PettingZoo envs) and every
+command that takes an environment gets its test from :func:`load_test`, which accepts
+
+* a **built-in name** (``"maze2"``): its shipped artifact;
+* a **problem file** (``mine.toml``): synthesized once, then cached on disk under a key
+  of its content, FlowTest's and HiGHS's versions (:func:`flowtest_env.keys.cache_key`);
+  only a proven-optimal answer is cached (a time-limited one depends on the machine's
+  speed, so it is synthesized again next time, with a warning);
+* an **artifact file** (``mine.json``, written by ``flowtest synthesize --out``);
+* a :class:`~synthesis.problems.Problem`, a :class:`~synthesis.pipeline.SynthesizedTest`
+  or a :class:`~synthesis.artifact.TestArtifact` object.
+
+Loaded tests are kept in memory per process (by content key), so the envs of one test
+share one artifact and one :class:`~flowtest_env.game.TestGame`.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Union
+
+from synthesis.artifact import FORMAT, TestArtifact, artifact_of
+from synthesis.errors import ProblemError
+from synthesis.pipeline import SynthesizedTest, synthesize
+from synthesis.problems import Problem, load_problem_file
+from synthesis.summary import summary_of
+
+from .artifacts import builtin_game, cache_dir, load_builtin
+from .game import TestGame
+from .keys import cache_key
+
+TestLike = Union[str, "os.PathLike[str]", Problem, SynthesizedTest, TestArtifact]
+"""Anything :func:`load_test` accepts."""
+
+_LOADED: dict[str, TestArtifact] = {}
+_GAMES: dict[tuple[int, str | None, bool], tuple[TestArtifact, TestGame]] = {}
+
+
+def builtin_names() -> list[str]:
+    """The built-in problem names, sorted."""
+    from synthesis.builtins import BUILTINS
+
+    return sorted(BUILTINS)
+
+
+def _is_artifact_file(path: Path, raw: bytes) -> bool:
+    """A JSON document whose ``format`` is FlowTest's test artifact."""
+    if path.suffix.lower() != ".json":
+        return False
+    try:
+        head = json.loads(raw)
+    except (json.JSONDecodeError, UnicodeDecodeError):
+        return False
+    return isinstance(head, dict) and head.get("format") == FORMAT
+
+
+def problem_cache_path(path: Path, raw: bytes) -> Path:
+    """Where the synthesized test of a problem file with content ``raw`` is cached."""
+    return cache_dir() / "problems" / f"{path.stem}-{cache_key('problem', raw)[:24]}.json"
+
+
+def _synthesized_artifact(problem: Problem) -> TestArtifact:
+    test = synthesize(problem)
+    return artifact_of(test, summary_of(test))
+
+
+def _problem_file_artifact(path: Path, raw: bytes) -> TestArtifact:
+    """The test of a problem file: from the cache, else synthesized (and cached when
+    the answer is proven optimal, i.e. independent of the machine's speed)."""
+    cached = problem_cache_path(path, raw)
+    if cached.exists():
+        try:
+            return TestArtifact.load(cached)
+        except (ProblemError, KeyError, TypeError, ValueError):
+            pass  # a damaged entry is rebuilt
+    problem = load_problem_file(path)
+    art = _synthesized_artifact(problem)
+    if art.summary.get("status") == "optimal":
+        cached.parent.mkdir(parents=True, exist_ok=True)
+        tmp = cached.with_suffix(f".{os.getpid()}.tmp")
+        art.save(tmp)
+        tmp.replace(cached)
+    else:
+        from gymnasium import logger
+
+        logger.warn(
+            f"{path}: the synthesized test is not proven optimal (status {art.summary.get('status')!r}, "
+            "a time limit): it is not cached; write it once with `flowtest synthesize --out` and pass that file"
+        )
+    return art
+
+
+def load_test(test: TestLike) -> TestArtifact:
+    """The synthesized test named by ``test`` (see the module docstring).
+
+    Raises
+    ------
+    ProblemError
+        If ``test`` is a string that is neither a built-in name nor an existing file, or
+        the file is not a valid problem or artifact (the message says what and where).
+    synthesis.errors.InconsistentProblem, synthesis.errors.CheckFailed, TimeoutError
+        From synthesizing a problem, as ``flowtest synthesize``.
+    """
+    if isinstance(test, TestArtifact):
+        return test
+    if isinstance(test, SynthesizedTest):
+        return artifact_of(test, summary_of(test))
+    if isinstance(test, Problem):
+        return _synthesized_artifact(test)
+    if not isinstance(test, (str, os.PathLike)):
+        raise ProblemError(
+            f"test must be a built-in name, a problem or artifact file, a Problem, a SynthesizedTest or a "
+            f"TestArtifact, not {type(test).__name__}"
+        )
+    text = os.fspath(test)
+    if isinstance(test, str) and text in builtin_names():
+        return load_builtin(text)
+    path = Path(text).expanduser()
+    if not path.is_file():
+        raise ProblemError(
+            f"test {text!r} is neither a built-in ({', '.join(builtin_names())}) nor an existing file"
+        )
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise ProblemError(f"cannot read {text!r}: {exc.strerror or exc}") from None
+    key = cache_key("file", raw)
+    hit = _LOADED.get(key)
+    if hit is not None:
+        return hit
+    if _is_artifact_file(path, raw):
+        art = TestArtifact.load(path)
+    elif path.suffix.lower() == ".json":
+        raise ProblemError(f"{text}: a JSON file that is not a FlowTest test artifact (format {FORMAT!r})")
+    else:
+        art = _problem_file_artifact(path, raw)
+    _LOADED[key] = art
+    return art
+
+
+def game_for(test: TestLike, setting: str | None = None, external_tester: bool = False) -> TestGame:
+    """The shared :class:`TestGame` of ``test`` (one per artifact, setting and tester)."""
+    if isinstance(test, str) and test in builtin_names():
+        return builtin_game(test, setting, external_tester)
+    art = load_test(test)
+    key = (id(art), setting, external_tester)
+    hit = _GAMES.get(key)
+    if hit is not None and hit[0] is art:
+        return hit[1]
+    game = TestGame(art, setting, external_tester)
+    _GAMES[key] = (art, game)
+    return game
+
