@@ -1,6 +1,6 @@
 """Saved stable-baselines3 models as systems under test: ``ppo:PATH``.
 
-The model (``MaskablePPO`` from sb3-contrib, or plain ``PPO``) is loaded lazily, so
+The model (``MaskablePPO`` or ``RecurrentPPO`` from sb3-contrib, or plain ``PPO``) is loaded lazily, so
 FlowTest works without the ``rl`` extra until a ``ppo:`` policy is asked for. Maskable
 models are given ``info["action_mask"]``, so they never pick a restricted action; a
 plain PPO model may, and the env then leaves the SUT in place.
@@ -10,97 +10,47 @@ does not show (the test objective stays hidden), so the observation alone is not
 Markov for the SUT: on ``FlowTest-Maze2-v0`` no deterministic policy of the
 observation alone meets the system objective (the SUT must pass some cells twice, and
 the test agent stands where it stood the first time; an exhaustive search over such
-policies finds none). A SUT needs memory of its own run. :class:`VisitedMemory` gives
-it the smallest useful one: the places it has occupied since the episode began, taken
-from its own position in the observations it has seen (never the hidden history).
-:func:`experiments.train.train` trains with it (:class:`VisitedObservation`) and
-records it in the model (attribute ``flowtest_memory``); :class:`PPOPolicy` rebuilds
-the same memory when it plays, so a saved model acts exactly as it was trained.
+policies finds none). A SUT needs memory of its own run: the public wrapper
+:class:`flowtest_env.wrappers.VisitedPlaces` (or the env option ``memory="visited"``)
+gives it the smallest useful one, the places it has occupied since the episode began,
+taken from its own position in the observations it has seen (never the hidden history).
+:func:`experiments.train.train` trains with it and records it in the model (attribute
+``flowtest_memory``); :class:`PPOPolicy` rebuilds the same memory when it plays, so a
+saved model acts exactly as it was trained.
 """
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
-from gymnasium import spaces
 
-from .base import Policy, PolicyError, action_mask_of, register_policy
+from flowtest_env.encoding import EncodingError, make_encoder
+from flowtest_env.wrappers import MEMORY_KINDS, VisitedMemory, VisitedPlaces, encoder_of
+from flowtest_env.wrappers import position_slice as _position_slice
 
-MEMORY_KINDS = ("none", "visited")
-"""What a trained SUT remembers of its run: nothing, or the places it has occupied."""
-
-
-def _encoder_of(env: Any) -> Any:
-    """The observation encoder behind a FlowTest env (Gymnasium or PettingZoo, wrapped or not)."""
-    seen: list[Any] = []
-    obj = env
-    while obj is not None and len(seen) < 16:
-        seen.append(obj)
-        enc = getattr(obj, "encoder", None)
-        if enc is not None:
-            return enc
-        obj = getattr(obj, "env", None) or getattr(obj, "aec_env", None)
-    enc = getattr(getattr(env, "unwrapped", None), "encoder", None)
-    if enc is None:
-        raise PolicyError(f"{type(env).__name__} exposes no FlowTest observation encoder")
-    return enc
-
+from .base import Policy, PolicyError, action_mask_of, game_of, register_policy
 
 def position_slice(env: Any) -> slice:
-    """Where a flat FlowTest observation holds the one-hot of the SUT's own place: the
-    ``system`` plane on grids, the first block on graphs (see :mod:`flowtest_env.encoding`).
+    """Where a flat FlowTest observation of ``env`` holds the SUT's own place
+    (:func:`flowtest_env.wrappers.position_slice`).
 
     Raises
     ------
     PolicyError
-        For a non-flat observation.
+        For a non-flat observation or a non-FlowTest env.
     """
-    enc = _encoder_of(env)
-    if enc.obs_kind != "flat":
-        raise PolicyError(f"memory needs obs_kind='flat', not {enc.obs_kind!r}")
-    if hasattr(enc, "hw"):  # grid: one H*W plane per channel
-        start = enc.ch["system"] * enc.hw
-        return slice(start, start + enc.hw)
-    return slice(0, enc.n_places)  # graph: one-hot of the system's place first
+    try:
+        return _position_slice(encoder_of(env))
+    except (TypeError, ValueError) as exc:
+        raise PolicyError(str(exc)) from None
 
 
-class VisitedMemory:
-    """The places the SUT has occupied this episode, as a 0/1 vector appended to the
-    observation. Call :meth:`reset` at the start of each episode and :meth:`__call__` on
-    every observation, in order."""
-
-    def __init__(self, where: slice) -> None:
-        self.where = where
-        self.size = where.stop - where.start
-        self._seen: np.ndarray | None = None
-
-    def reset(self) -> None:
-        self._seen = None
-
-    def __call__(self, obs: np.ndarray) -> np.ndarray:
-        here = np.asarray(obs, dtype=np.float32)[self.where]
-        self._seen = here.copy() if self._seen is None else np.maximum(self._seen, here)
-        return np.concatenate([np.asarray(obs, dtype=np.float32), self._seen])
-
-
-class VisitedObservation(gym.ObservationWrapper):
-    """Append :class:`VisitedMemory` to a flat FlowTest observation (for training)."""
-
-    def __init__(self, env: gym.Env) -> None:
-        super().__init__(env)
-        self.memory = VisitedMemory(position_slice(env))
-        n = int(env.observation_space.shape[0]) + self.memory.size
-        self.observation_space = spaces.Box(0.0, 1.0, shape=(n,), dtype=np.float32)
-
-    def reset(self, **kwargs: Any) -> Any:
-        self.memory.reset()
-        return super().reset(**kwargs)
-
-    def observation(self, observation: np.ndarray) -> np.ndarray:
-        return self.memory(observation)
+VisitedObservation = VisitedPlaces
+"""The older name of :class:`flowtest_env.wrappers.VisitedPlaces`."""
 
 
 def with_memory(env: gym.Env, memory: str) -> gym.Env:
@@ -108,7 +58,7 @@ def with_memory(env: gym.Env, memory: str) -> gym.Env:
     if memory == "none":
         return env
     if memory == "visited":
-        return VisitedObservation(env)
+        return VisitedPlaces(env)
     raise PolicyError(f"unknown memory {memory!r}; known: {', '.join(MEMORY_KINDS)}")
 
 
@@ -116,8 +66,21 @@ MAX_MODEL_BYTES = 1 << 30
 """Largest model file loaded (a FlowTest PPO model is well under a megabyte)."""
 
 
+def _saved_policy_module(path: Path) -> str:
+    """The module of the policy class recorded in a saved SB3 model (``""`` if unknown)."""
+    import zipfile
+
+    try:
+        with zipfile.ZipFile(path) as z:
+            data = json.loads(z.read("data"))
+        return str(data.get("policy_class", {}).get("__module__", ""))
+    except (OSError, KeyError, ValueError, zipfile.BadZipFile):
+        return ""
+
+
 def load_model(path: str | Path) -> Any:
-    """Load a saved (Maskable)PPO model.
+    """Load a saved MaskablePPO, RecurrentPPO or plain PPO model (the class is read from
+    the file's recorded policy class).
 
     Raises
     ------
@@ -132,71 +95,115 @@ def load_model(path: str | Path) -> Any:
         raise PolicyError(f"the model {str(found)!r} is not a regular file")
     if found.stat().st_size > MAX_MODEL_BYTES:
         raise PolicyError(f"the model {str(found)!r} is larger than {MAX_MODEL_BYTES >> 20} MiB")
-    try:
-        from sb3_contrib import MaskablePPO
-    except ImportError:  # pragma: no cover - depends on the rl extra
-        MaskablePPO = None
+    p = found
     try:
         from stable_baselines3 import PPO
     except ImportError as exc:  # pragma: no cover
         raise PolicyError("ppo:PATH needs the rl extra: pip install 'flowtest[rl]'") from exc
-    if MaskablePPO is not None:
-        try:
-            return MaskablePPO.load(str(p), device="cpu")
-        except Exception:  # noqa: BLE001 - fall back to plain PPO
-            pass
+    module = _saved_policy_module(p)
     try:
+        if "recurrent" in module:
+            from sb3_contrib import RecurrentPPO
+
+            return RecurrentPPO.load(str(p), device="cpu")
+        if "maskable" in module:
+            from sb3_contrib import MaskablePPO
+
+            return MaskablePPO.load(str(p), device="cpu")
         return PPO.load(str(p), device="cpu")
     except Exception as exc:  # noqa: BLE001 - any unreadable file is the user's input, not a bug
         detail = " ".join(str(exc).split())[:200]
-        raise PolicyError(f"{str(found)!r} is not a saved PPO model ({type(exc).__name__}: {detail})") from None
+        raise PolicyError(f"{str(p)!r} is not a saved PPO model ({type(exc).__name__}: {detail})") from None
 
 
 class PPOPolicy:
     """A trained model acting deterministically (its most likely legal action).
 
-    ``env`` (the env it will play) is needed when the model was trained with memory
-    (``model.flowtest_memory``): the memory is rebuilt from the observations.
+    The model records the observation it was trained on (``model.flowtest_obs``:
+    ``obs_kind`` and ``pad_to``) and the SUT's memory (``model.flowtest_memory``). When
+    the env shows another observation kind, the policy encodes the env's run itself with
+    the model's encoder (the same information the env would show with that option), so a
+    model trained with ``obs_kind="padded"`` plays any grid test that fits; the memory is
+    rebuilt from the observations. RecurrentPPO models keep their LSTM state over the
+    episode.
 
     Raises
     ------
     PolicyError
-        If the model needs memory and no env is given, or if the env's observations do
-        not have the shape the model was trained on.
+        If the model needs memory and no env is given, or if it cannot play the env (an
+        observation it cannot encode, or of another shape than it was trained on).
     """
 
     def __init__(self, model: Any, name: str = "ppo", env: Any = None) -> None:
         self.model = model
         self.name = name
-        self.maskable = type(model).__name__ == "MaskablePPO"
+        kind = type(model).__name__
+        self.maskable = kind == "MaskablePPO"
+        self.recurrent = kind == "RecurrentPPO"
         self.memory_kind = str(getattr(model, "flowtest_memory", "none"))
+        self.obs = dict(getattr(model, "flowtest_obs", None) or {"obs_kind": "flat", "pad_to": 8})
         self.memory: VisitedMemory | None = None
+        self.env = env
+        self._encoders: dict[int, Any] = {}
+        self._state: Any = None
+        self._start = True
         if self.memory_kind not in MEMORY_KINDS:
             raise PolicyError(f"model {name!r} uses unknown memory {self.memory_kind!r}")
-        if self.memory_kind == "visited":
-            if env is None:
+        if env is None:
+            if self.memory_kind != "none":
                 raise PolicyError(f"model {name!r} remembers visited places: PPOPolicy needs the env")
-            self.memory = VisitedMemory(position_slice(env))
-        if env is not None:
-            enc = _encoder_of(env)
-            size = int(enc.space.shape[0]) + (self.memory.size if self.memory else 0)
-            want = tuple(model.observation_space.shape)
-            if want != (size,):
-                raise PolicyError(
-                    f"model {name!r} was trained on observations of shape {want}; this env gives ({size},)"
-                    " (train on a test with the same grid and objective to evaluate on it)"
-                )
+            return
+        enc = encoder_of(env)
+        self.own_encoding = (enc.obs_kind, getattr(enc, "pad_to", self.obs["pad_to"])) != (
+            self.obs["obs_kind"], self.obs["pad_to"]
+        )
+        if self.own_encoding:
+            enc = self._encoder()
+        if self.memory_kind == "visited":
+            try:
+                self.memory = VisitedMemory(_position_slice(enc))
+            except ValueError as exc:
+                raise PolicyError(str(exc)) from None
+        size = int(enc.space.shape[0]) + (self.memory.size if self.memory else 0)
+        want = tuple(model.observation_space.shape)
+        if want != (size,):
+            raise PolicyError(
+                f"model {name!r} was trained on observations of shape {want}; {game_of(env).artifact.name!r} gives "
+                f"({size},) (train with obs_kind='padded' to play tests of other sizes)"
+            )
+
+    def _encoder(self) -> Any:
+        """The model's encoder for the env's current test (the random-grid env switches
+        tests at reset)."""
+        game = game_of(self.env)
+        enc = self._encoders.get(id(game))
+        if enc is None:
+            try:
+                enc = make_encoder(game, self.obs["obs_kind"], int(self.obs["pad_to"]))
+            except EncodingError as exc:
+                raise PolicyError(f"model {self.name!r} was trained on obs_kind={self.obs['obs_kind']!r}: {exc}") from None
+            self._encoders[id(game)] = enc
+        return enc
 
     def reset(self, seed: int | None = None) -> None:
-        """Forget the previous episode (the model itself is a stateless MLP)."""
+        """Forget the previous episode (memory, LSTM state)."""
         if self.memory is not None:
             self.memory.reset()
+        self._state, self._start = None, True
 
     def act(self, observation: Any, info: dict[str, Any]) -> int:
-        obs = observation["observation"] if isinstance(observation, dict) else observation
+        if self.env is not None and self.own_encoding:
+            obs = self._encoder().encode(self.env.unwrapped.run)
+        else:
+            obs = observation["observation"] if isinstance(observation, dict) else observation
         if self.memory is not None:
             obs = self.memory(obs)
-        if self.maskable:
+        if self.recurrent:
+            action, self._state = self.model.predict(
+                obs, state=self._state, episode_start=np.array([self._start]), deterministic=True
+            )
+            self._start = False
+        elif self.maskable:
             mask = action_mask_of(observation, info).astype(bool)
             action, _ = self.model.predict(obs, deterministic=True, action_masks=mask)
         else:

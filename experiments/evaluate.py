@@ -8,7 +8,8 @@ policy, so each run can be replayed exactly with
 Outputs in ``--out``:
 
 * ``results.json`` — a list, one record per SUT x env: ``env``, ``sut``, ``episodes``,
-  ``seed``, ``system_objective_met_rate``, ``test_objective_realized_rate`` (among the
+  ``seed``, ``error`` (``null``, or why this SUT cannot play this env: the pair is
+  reported, not run, and the others go on), ``system_objective_met_rate``, ``test_objective_realized_rate`` (among the
   runs that met the system objective; ``null`` if none did), ``violated``, ``open``,
   ``mean_restrictions``, ``mean_steps``, ``test_failures`` and ``failures`` (at most
   :data:`MAX_LISTED` listed, ``n_failures`` counts all; each with ``seed``, ``kind``,
@@ -139,10 +140,11 @@ def tester_fairness(env_id: str, tester: str) -> dict[str, Any] | None:
     return check_tester(env.ma, env.tester).summary()
 
 
-def make_env(env_id: str) -> Any:
+def make_env(env_id: str, **options: Any) -> Any:
     """The environment named by ``env_id``: a registered Gymnasium ID
     (``FlowTest-Maze2-v0``), else ``gymnasium.make("FlowTest-v0", test=env_id)``: a
     built-in name, a problem file (synthesized once, then cached) or an artifact file.
+    ``options`` are env options (``memory``, ``obs_kind``, ...).
 
     Raises
     ------
@@ -160,7 +162,7 @@ def make_env(env_id: str) -> Any:
         if not str(entry).startswith("flowtest_env"):
             raise ProblemError(f"{env_id!r} is not a FlowTest environment; known: {known}")
         try:
-            env = gym.make(env_id)
+            env = gym.make(env_id, **options)
         except gym.error.Error as exc:
             raise ProblemError(f"environment {env_id!r}: {exc}") from None
         if not isinstance(env.unwrapped, flowtest_env.FlowTestEnv):
@@ -168,7 +170,7 @@ def make_env(env_id: str) -> Any:
             raise ProblemError(f"{env_id!r} is not a FlowTest environment; known: {known}")
         return env
     try:
-        return gym.make(flowtest_env.ANY_TEST_ID, test=env_id)
+        return gym.make(flowtest_env.ANY_TEST_ID, test=env_id, **options)
     except ProblemError as exc:
         if Path(env_id).suffix or Path(env_id).exists():
             raise
@@ -285,9 +287,10 @@ class Cell:
     pictures: dict[str, str] = field(default_factory=dict)
     tester: str = "synthesized"
     fairness: dict[str, Any] | None = None
+    error: str | None = None  # why this SUT cannot play this env (no runs then)
 
     def record(self) -> dict[str, Any]:
-        """The ``results.json`` record."""
+        """The ``results.json`` record (``error`` says why a pair has no runs)."""
         n = len(self.traces)
         met = [t for t in self.traces if t.verdict["system_objective"] == "met"]
         fails = [t for t in self.traces if t.failed]
@@ -322,7 +325,28 @@ class Cell:
             ],
             "pictures": self.pictures,
             "seconds": round(self.seconds, 3),
+            "error": self.error,
         }
+
+
+def check_sut_names(suts: Sequence[str]) -> None:
+    """Reject a SUT name no factory knows (a typo), before anything runs.
+
+    Raises
+    ------
+    ProblemError
+        On an unknown name.
+    """
+    from agents.base import policy_names
+    from agents.scripted import SCRIPTED
+
+    known = set(policy_names())
+    for sut in suts:
+        prefix, _, arg = sut.strip().partition(":")
+        if prefix not in known:
+            raise ProblemError(f"--sut {sut}: unknown policy; known: random, scripted:<name>, gr1, ppo:PATH")
+        if prefix == "scripted" and (arg or "replanner") not in SCRIPTED:
+            raise ProblemError(f"--sut {sut}: unknown scripted SUT {arg!r}; known: {', '.join(SCRIPTED)}")
 
 
 def _policy(sut: str, env: Any) -> Any:
@@ -347,13 +371,29 @@ def evaluate(
     """Run every SUT against every env (``episodes`` seeded runs each), once per tester
     (``synthesized``: the synthesized test; ``ppo:PATH``: a learned tester,
     :mod:`agents.testers`). With more than one tester, every cell also carries the
-    tester's exhaustive fairness check on the env's game."""
+    tester's exhaustive fairness check on the env's game. Each (SUT, test) pair runs on its
+    own: a SUT that cannot play an env (a model trained on another observation shape, a
+    graph for a grid policy) gives a :class:`Cell` with the reason in ``error`` and the
+    run goes on.
+
+    Raises
+    ------
+    ProblemError
+        Before anything runs, if an env or a SUT name is invalid input (not a test, an
+        unknown policy), or ``episodes < 1``.
+    """
+    from agents.base import PolicyError, make_policy
+
     if episodes < 1:
         raise ProblemError("--episodes must be at least 1")
+    check_sut_names(suts)
+    envs = {env_id: make_env(env_id) for env_id in dict.fromkeys(env_ids)}
     cells: list[Cell] = []
-    total = len(env_ids) * len(suts) * len(testers)
+    for env in envs.values():
+        env.close()
+    total = len(envs) * len(suts) * len(testers)
     k = 0
-    for env_id in env_ids:
+    for env_id in envs:
         for tester in testers:
             env = make_tester_env(env_id, tester)
             fairness = tester_fairness(env_id, tester) if len(testers) > 1 or tester != "synthesized" else None
@@ -361,7 +401,14 @@ def evaluate(
             for sut in suts:
                 k += 1
                 t0 = time.perf_counter()
-                policy = _policy(sut, env)
+                try:
+                    policy = make_policy(sut, env)
+                except PolicyError as exc:
+                    cells.append(Cell(env_id, sut, [], seed, time.perf_counter() - t0, tester=tester, fairness=fairness,
+                                      error=str(exc)))
+                    if progress is not None:
+                        progress(f"[{k}/{total}] {sut} on {env_id}{against}: cannot play it: {exc}")
+                    continue
                 traces = []
                 for i in range(episodes):
                     traces.append(run_episode(env, policy, env_id, sut, seed + i, tester=tester))
@@ -636,6 +683,9 @@ def _markdown(records: Sequence[dict[str, Any]]) -> str:
                   "|---|---|---|---|---|---|---|---|---|"]
         rows = [r for r in records if r["sut"] == sut]
         for r in rows:
+            if r["error"]:
+                lines.append(f"| {r['env']} | 0 | not run: {r['error']} |  |  |  |  |  |  |")
+                continue
             lines.append(
                 f"| {test_name(r)} | {r['episodes']} | {_pct(r['system_objective_met_rate'])} "
                 f"| {_pct(r['test_objective_realized_rate'])} | {r['violated']} | {r['open']} "
@@ -712,10 +762,22 @@ def run_evaluate(args: argparse.Namespace) -> int:
         return EXIT_TEST_FAILED if bug else EXIT_OK
     if args.out is None:
         raise ProblemError("--out is required (or use --replay)")
-    for env_id in args.env:  # refuse bad IDs and SUTs before any run or any file
-        env = make_env(env_id)
-        for sut in args.sut:
-            _policy(sut, env)
+    # refuse bad IDs and SUTs before any run or any file: a SUT that can play none of the
+    # tests is bad input (a missing model, a typo); one that cannot play some is a report row
+    check_sut_names(args.sut)
+    envs = [make_env(env_id) for env_id in dict.fromkeys(args.env)]
+    for sut in args.sut:
+        first: ProblemError | None = None
+        for env in envs:
+            try:
+                _policy(sut, env)
+                break
+            except ProblemError as exc:
+                first = first or exc
+        else:
+            assert first is not None
+            raise first
+    for env in envs:
         env.close()
     prepare_output_folder(args.out, REPORT_MARKER, args.force, "report folder")
 
@@ -728,6 +790,9 @@ def run_evaluate(args: argparse.Namespace) -> int:
     progress("drawing trace pictures")
     records = write_report(cells, args.out)
     for r in records:
+        if r["error"]:
+            sys.stdout.write(f"{r['sut']:24s} {_test_name(r):30s} not run: {r['error']}\n")
+            continue
         trapped = f"  trapped {r['trapped']}" if r["tester"] != "synthesized" else ""
         sys.stdout.write(
             f"{r['sut']:24s} {test_name(r):30s} met {_pct(r['system_objective_met_rate']):>6s}  "

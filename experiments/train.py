@@ -1,14 +1,24 @@
 """``flowtest train ENV --steps N --out PATH``: train a PPO system under test against a test.
 
-Uses sb3-contrib's ``MaskablePPO`` with the env's action masks (the SUT never wastes a
-step on a restricted move; the masks are what a real SUT observes before committing),
-an MLP policy on the flat observation plus the SUT's memory of the places it has
-occupied (:mod:`agents.ppo`), several envs stepped together, a progress bar, one seed
-for everything. Writes
-the model (``PATH``, a ``.zip``), its training curve (``PATH`` with ``.png``: success
-rate and episode return against time steps) and ``PATH`` with ``.json`` (settings,
-time, the curve's data). Load the model as a SUT with ``--sut ppo:PATH``: train on one
-test, evaluate on others with ``flowtest evaluate``.
+``ENV`` is anything ``flowtest evaluate --env`` takes (a registered ID, a built-in name, a
+problem file, an artifact file). The algorithm (``--algo``): sb3-contrib's ``MaskablePPO``
+(default) with the env's action masks (the SUT never wastes a step on a restricted move;
+the masks are what a real SUT observes before committing), or sb3-contrib's
+``RecurrentPPO`` (an LSTM policy: its own memory, no masks). Everything it adds to the
+environment is an env option, printed at the start and saved with the model:
+
+* ``memory="visited"`` (default here): the places the SUT has occupied this episode
+  appended to the observation (:class:`flowtest_env.wrappers.VisitedPlaces`); without
+  memory no policy passes a reactive test that makes the SUT pass a cell twice;
+* ``shaping=10`` (default here; 0 turns it off): potential-based shaping towards the SUT's
+  own objective (:class:`flowtest_env.wrappers.DistanceShaping`);
+* ``obs_kind`` and ``pad_to``: the observation (``"padded"`` gives one shape for every grid
+  test up to ``pad_to x pad_to``, so one policy plays many tests).
+
+Every setting of :data:`DEFAULTS` is a flag (``--learning-rate``, ``--memory none``, ...).
+Writes the model (``PATH``, a ``.zip``), its training curve (``PATH`` with ``.png``:
+success rate and episode return against time steps) and ``PATH`` with ``.json``
+(settings, time, the curve's data). Load the model as a SUT with ``--sut ppo:PATH``.
 
 Needs the ``rl`` extra (``pip install 'flowtest[rl]'``: torch, stable-baselines3,
 sb3-contrib).
@@ -29,7 +39,12 @@ from synthesis.errors import ProblemError
 
 from .cli import EXIT_OK, check_output_path, command, nonnegative_int, positive_int, write_atomically
 
+ALGOS = ("maskable-ppo", "recurrent-ppo")
+"""``--algo`` choices: sb3-contrib's MaskablePPO (MLP policy, action masks) and
+RecurrentPPO (LSTM policy, no masks)."""
+
 DEFAULTS: dict[str, Any] = {
+    "algo": "maskable-ppo",
     "n_envs": 8,
     "n_steps": 128,
     "batch_size": 256,
@@ -40,11 +55,16 @@ DEFAULTS: dict[str, Any] = {
     "net_arch": [64, 64],
     "shaping": 10.0,
     "memory": "visited",
+    "obs_kind": "flat",
+    "pad_to": 8,
 }
-"""PPO settings: 8 envs stepped in one process (one batched policy call per step of all
-eight), rollouts of 8 x 128 steps, a small network, a high learning rate; the shaping
-scale (:func:`_shaped`); the SUT's memory (:mod:`agents.ppo`: without it no
-deterministic policy passes a reactive test that makes the SUT pass a cell twice)."""
+"""Training settings: the algorithm; 8 envs stepped in one process (one batched policy
+call per step of all eight), rollouts of 8 x 128 steps, a small network, a high learning
+rate; the env options: the shaping scale (0 = off), the SUT's memory, the observation
+(``pad_to`` is used by ``obs_kind="padded"`` only)."""
+
+ENV_OPTION_KEYS = ("memory", "shaping", "obs_kind", "pad_to")
+"""The settings that are env options (the rest configure the algorithm)."""
 
 
 def _require_rl() -> None:
@@ -55,61 +75,30 @@ def _require_rl() -> None:
         raise ProblemError("training needs the rl extra: pip install 'flowtest[rl]'") from None
 
 
-def _shaped(env: Any, gamma: float, scale: float) -> Any:
-    """Potential-based reward shaping (Ng et al. 1999), which keeps the optimal policies:
-    ``r + gamma * phi(v') - phi(v)`` with ``phi = -distance / scale``, the distance to
-    acceptance on the SUT's own product graph ``G_sys`` past the static walls. It uses
-    only what the SUT knows (its map and its objective), never the test objective; the
-    sparse goal reward alone is almost never found by random exploration in the mazes."""
-    import gymnasium as gym
-
-    from agents.scripted import INF, SystemProduct
-
-    class Shaping(gym.Wrapper):
-        def _phi(self) -> float:
-            u = self.env.unwrapped
-            game = u.game
-            prod = self._prods.get(id(game))
-            if prod is None:
-                prod = self._prods[id(game)] = SystemProduct(game)
-            q = int(game.q_sys[u.run.history])
-            d = prod.distances()[prod.node(u.run.system, q)]
-            return -min(float(d), 4 * scale) / scale if d < INF else -4.0
-
-        def reset(self, **kwargs: Any) -> Any:
-            if not hasattr(self, "_prods"):
-                self._prods: dict[int, SystemProduct] = {}
-            out = self.env.reset(**kwargs)
-            self._last = self._phi()
-            return out
-
-        def step(self, action: Any) -> Any:
-            obs, r, term, trunc, info = self.env.step(action)
-            phi = 0.0 if term else self._phi()
-            r = float(r) + gamma * phi - self._last
-            self._last = phi
-            return obs, r, term, trunc, info
-
-    return Shaping(env)
+def env_options(settings: dict[str, Any]) -> dict[str, Any]:
+    """The env options of ``settings`` (keyword arguments of :class:`flowtest_env.FlowTestEnv`)."""
+    opts: dict[str, Any] = {
+        "memory": settings["memory"], "shaping": float(settings["shaping"]), "shaping_gamma": float(settings["gamma"]),
+        "obs_kind": settings["obs_kind"],
+    }
+    if settings["obs_kind"] == "padded":
+        opts["pad_to"] = int(settings["pad_to"])
+    return opts
 
 
-def make_training_env(env_id: str, seed: int, gamma: float = 0.99, shaping: float = 10.0,
-                       memory: str = "visited") -> Any:
-    """The env wrapped for MaskablePPO (:class:`sb3_contrib.common.wrappers.ActionMasker`),
-    with potential-based shaping when ``shaping > 0`` (see :func:`_shaped`) and the SUT's
-    ``memory`` in the observation (:func:`agents.ppo.with_memory`)."""
-    from sb3_contrib.common.wrappers import ActionMasker
-
-    from agents.ppo import with_memory
-
+def make_training_env(env_id: str, seed: int, settings: dict[str, Any]) -> Any:
+    """The env with the env options of ``settings`` (:func:`env_options`), seeded;
+    wrapped for MaskablePPO (:class:`sb3_contrib.common.wrappers.ActionMasker`) unless
+    the algorithm is RecurrentPPO."""
     from .evaluate import make_env
 
-    env = make_env(env_id)
-    if shaping > 0:
-        env = _shaped(env, gamma, shaping)
-    env = with_memory(env, memory)
+    env = make_env(env_id, **env_options(settings))
     env.reset(seed=seed)
     env.action_space.seed(seed)
+    if settings["algo"] == "recurrent-ppo":
+        return env
+    from sb3_contrib.common.wrappers import ActionMasker
+
     return ActionMasker(env, lambda e: e.unwrapped.action_masks())
 
 
@@ -122,27 +111,53 @@ def make_training_vec_env(env_id: str, seed: int, settings: dict[str, Any]) -> A
     n = int(settings["n_envs"])
     if n < 1:
         raise ProblemError("n_envs must be at least 1")
-    return DummyVecEnv([
-        (lambda i=i: make_training_env(env_id, seed + i, settings["gamma"], settings["shaping"], settings["memory"]))
-        for i in range(n)
-    ])
+    return DummyVecEnv([(lambda i=i: make_training_env(env_id, seed + i, settings)) for i in range(n)])
+
+
+def check_settings(settings: dict[str, Any]) -> None:
+    """Reject settings no algorithm can use, as invalid input.
+
+    Raises
+    ------
+    ProblemError
+        On an unknown key or algorithm, or a value out of range.
+    """
+    unknown = set(settings) - set(DEFAULTS)
+    if unknown:
+        raise ProblemError(f"unknown training settings {sorted(unknown)}; known: {', '.join(DEFAULTS)}")
+    if settings["algo"] not in ALGOS:
+        raise ProblemError(f"unknown --algo {settings['algo']!r}; expected one of {', '.join(ALGOS)}")
+    for key in ("n_envs", "n_steps", "batch_size", "n_epochs"):
+        if int(settings[key]) < 1:
+            raise ProblemError(f"--{key.replace('_', '-')} must be at least 1")
+    if not 0 < float(settings["gamma"]) <= 1:
+        raise ProblemError("--gamma must be in (0, 1]")
+    if float(settings["learning_rate"]) <= 0:
+        raise ProblemError("--learning-rate must be positive")
+    if float(settings["shaping"]) < 0:
+        raise ProblemError("--shaping must be 0 (off) or a positive scale")
+    if not settings["net_arch"] or any(int(w) < 1 for w in settings["net_arch"]):
+        raise ProblemError("--net-arch must be positive layer widths, e.g. 64,64")
 
 
 def make_model(env: Any, settings: dict[str, Any], seed: int) -> Any:
-    """A ``MaskablePPO`` on ``env`` with ``settings`` (see :data:`DEFAULTS`), on the CPU,
-    one torch thread, seeded; it records its memory kind for :class:`agents.ppo.PPOPolicy`."""
+    """A ``MaskablePPO`` or ``RecurrentPPO`` on ``env`` with ``settings`` (see
+    :data:`DEFAULTS`), on the CPU, one torch thread, seeded; it records the env options it
+    was trained with, which :class:`agents.ppo.PPOPolicy` rebuilds when it plays."""
     import torch
-    from sb3_contrib import MaskablePPO
+    from sb3_contrib import MaskablePPO, RecurrentPPO
 
     torch.manual_seed(seed)
     torch.set_num_threads(1)
-    model = MaskablePPO(
-        "MlpPolicy", env, seed=seed, verbose=0, device="cpu",
+    cls, policy = (RecurrentPPO, "MlpLstmPolicy") if settings["algo"] == "recurrent-ppo" else (MaskablePPO, "MlpPolicy")
+    model = cls(
+        policy, env, seed=seed, verbose=0, device="cpu",
         n_steps=settings["n_steps"], batch_size=settings["batch_size"], learning_rate=settings["learning_rate"],
         gamma=settings["gamma"], ent_coef=settings["ent_coef"], n_epochs=settings["n_epochs"],
         policy_kwargs={"net_arch": list(settings["net_arch"])},
     )
     model.flowtest_memory = settings["memory"]  # saved with the model, read by PPOPolicy
+    model.flowtest_obs = {"obs_kind": settings["obs_kind"], "pad_to": int(settings["pad_to"])}
     return model
 
 
@@ -254,6 +269,7 @@ def train(env_id: str, steps: int, out: str | Path, seed: int = 0, progress_bar:
     if steps < 1:
         raise ProblemError("--steps must be at least 1")
     settings = {**DEFAULTS, **overrides}
+    check_settings(settings)
     out = Path(out)
     model_path = out if out.suffix == ".zip" else out.with_suffix(".zip")
     env = make_training_vec_env(env_id, seed, settings)
@@ -265,16 +281,39 @@ def train(env_id: str, steps: int, out: str | Path, seed: int = 0, progress_bar:
     seconds = time.perf_counter() - t0
     write_atomically(model_path, lambda tmp: model.save(str(tmp)))
     png = model_path.with_suffix(".png")
-    write_atomically(png, lambda tmp: plot_curve(curve.points, tmp, f"MaskablePPO on {env_id} (seed {seed})"))
+    algo = "RecurrentPPO" if settings["algo"] == "recurrent-ppo" else "MaskablePPO"
+    write_atomically(png, lambda tmp: plot_curve(curve.points, tmp, f"{algo} on {env_id} (seed {seed})"))
     rate = success_rate(model, env_id, eval_episodes) if eval_episodes else None
     summary = {
         "env": env_id, "steps": int(model.num_timesteps), "seed": seed, "seconds": round(seconds, 2), "success_rate": rate,
-        "eval_episodes": eval_episodes, "settings": settings, "model": str(model_path), "curve": str(png),
+        "eval_episodes": eval_episodes, "settings": settings, "env_options": env_options(settings),
+        "model": str(model_path), "curve": str(png),
         "episodes": len(curve.points),
         "points": [[s, bool(m), round(r, 4)] for s, m, r in curve.points],
     }
     write_atomically(model_path.with_suffix(".json"), lambda tmp: tmp.write_text(json.dumps(summary) + "\n"))
     return summary
+
+
+def _flag(key: str) -> str:
+    return "--" + key.replace("_", "-")
+
+
+def _net_arch(text: str) -> list[int]:
+    try:
+        return [int(w) for w in text.split(",") if w.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected layer widths such as 64,64, not {text!r}") from None
+
+
+SETTING_HELP: dict[str, str] = {
+    "algo": f"algorithm: {', '.join(ALGOS)}",
+    "n_envs": "envs stepped together", "n_steps": "rollout steps per env", "batch_size": "minibatch size",
+    "learning_rate": "learning rate", "gamma": "discount", "ent_coef": "entropy bonus", "n_epochs": "epochs per rollout",
+    "net_arch": "hidden layer widths, comma-separated", "shaping": "env option: shaping scale, 0 = off",
+    "memory": "env option: the SUT's memory, none or visited", "obs_kind": "env option: flat, grid or padded",
+    "pad_to": "env option: grid side of obs_kind=padded",
+}
 
 
 def _arguments(p: argparse.ArgumentParser) -> None:
@@ -286,22 +325,42 @@ def _arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--eval-episodes", type=nonnegative_int, default=100, help="evaluation runs after training (default 100)")
     p.add_argument("--force", action="store_true", help="overwrite an existing model, curve or summary")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    g = p.add_argument_group("settings (printed at the start and saved in the .json)")
+    for key, default in DEFAULTS.items():
+        shown = ",".join(map(str, default)) if isinstance(default, list) else default
+        kw: dict[str, Any] = {"default": None, "help": f"{SETTING_HELP[key]} (default {shown})"}
+        if isinstance(default, list):
+            kw["type"] = _net_arch
+        elif isinstance(default, str):
+            kw["choices"] = {"algo": ALGOS, "memory": ("none", "visited"), "obs_kind": ("flat", "grid", "padded")}[key]
+        else:
+            kw["type"] = type(default)
+        g.add_argument(_flag(key), dest=key, **kw)
 
 
 @command("train", "train a PPO system under test against a synthesized test", _arguments)
 def run_train(args: argparse.Namespace) -> int:
-    """Train, save, evaluate; print where the model and its curve are."""
+    """Train, save, evaluate; print the settings used, then where the model and its curve are."""
     from .evaluate import make_env
 
-    make_env(args.ENV).close()  # a bad ID is refused before anything else
+    overrides = {k: getattr(args, k) for k in DEFAULTS if getattr(args, k) is not None}
+    settings = {**DEFAULTS, **overrides}
+    check_settings(settings)
+    make_env(args.ENV).close()  # a bad environment is refused before anything else
     model_path = args.out if args.out.suffix == ".zip" else args.out.with_suffix(".zip")
     for path, what in ((model_path, "model"), (model_path.with_suffix(".png"), "curve"),
                        (model_path.with_suffix(".json"), "training summary")):
         check_output_path(path, args.force, what)
-    s = train(args.ENV, args.steps, args.out, args.seed, progress_bar=not args.quiet, eval_episodes=args.eval_episodes)
+    shown = {k: ",".join(map(str, v)) if isinstance(v, list) else v for k, v in settings.items()}
+    sys.stderr.write("flowtest: training with " + " ".join(f"{_flag(k)} {v}" for k, v in shown.items()) + "\n")
+    s = train(args.ENV, args.steps, args.out, args.seed, progress_bar=not args.quiet, eval_episodes=args.eval_episodes,
+              **overrides)
     rate = "-" if s["success_rate"] is None else f"{100 * s['success_rate']:.0f} %"
+    used = ", ".join(f"{k}={v}" for k, v in s["settings"].items())
     sys.stdout.write(
         f"trained {s['steps']} steps in {s['seconds']:.1f} s; system objective met in {rate} of "
-        f"{s['eval_episodes']} evaluation runs\nmodel: {s['model']} (use --sut ppo:{s['model']})\ncurve: {s['curve']}\n"
+        f"{s['eval_episodes']} evaluation runs\nsettings: {used}\n"
+        f"model: {s['model']} (use --sut ppo:{s['model']})\ncurve: {s['curve']}\n"
+        f"settings and curve data: {Path(s['model']).with_suffix('.json')}\n"
     )
     return EXIT_OK

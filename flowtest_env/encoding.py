@@ -31,6 +31,9 @@ Two encodings, both built once per :class:`~flowtest_env.game.TestGame`:
   test agent's state, the goal states, one block per system proposition, one entry per
   move of the system (restriction shown now), the action slots, the objective progress.
 
+* ``"padded"`` (grid problems up to ``pad_to x pad_to``): one shape for every test, so one
+  policy plays many (:class:`PaddedEncoder`).
+
 Never encoded: the test objective's cells or propositions, the history, the
 test-objective part of the history, the agent's strategy memory.
 """
@@ -79,6 +82,10 @@ class Encoder:
     space: spaces.Box
 
     def encode(self, run: RunState) -> np.ndarray:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def position_slice(self) -> slice:  # pragma: no cover - interface
+        """Where a flat observation holds the one-hot of the SUT's own place."""
         raise NotImplementedError
 
 
@@ -174,6 +181,11 @@ class GridEncoder(Encoder):
             n = self.n_spatial * H * W + self.n_slots + (1 if self.is_fuel else 0) + self.n_qsys
             self.space = spaces.Box(0.0, 1.0, shape=(n,), dtype=np.float32)
 
+    def position_slice(self) -> slice:
+        """The ``system`` plane of the flat observation."""
+        start = self.ch["system"] * self.hw
+        return slice(start, start + self.hw)
+
     def planes(self, run: RunState) -> np.ndarray:
         """The ``uint8[C, H, W]`` encoding of ``run``."""
         g = self.game
@@ -238,6 +250,69 @@ class GridEncoder(Encoder):
         return obs
 
 
+PADDED_CHANNELS = (
+    "free", *(f"wall_{d}" for d in DIRS), *(f"door_{d}" for d in DIRS), "test_agent", "system", "goal", "subgoal", "refuel",
+)
+"""The channels of ``obs_kind="padded"``: the same for every grid test."""
+
+
+class PaddedEncoder(Encoder):
+    """One observation shape for every grid test up to ``pad_to x pad_to`` cells, so one
+    policy can play many tests: the ``"grid"`` planes with the test-specific ones merged
+    (``subgoal``: any proposition of the system objective other than the goal, at the
+    current fuel level), placed in the top-left corner of a ``pad_to x pad_to`` grid
+    (cells outside the test are not ``free``), flattened to ``float32`` in ``[0, 1]``,
+    then the restricted-now bit of each of the four moves and the fuel fraction (0
+    without fuel). Dropped from ``"flat"``: the objective-progress one-hot (its length
+    differs between tests) and which sub-goal a ``subgoal`` cell is."""
+
+    def __init__(self, game: TestGame, pad_to: int = 8) -> None:
+        if not game.is_grid:
+            raise EncodingError(f"problem {game.artifact.name!r} is a graph: obs_kind='padded' needs a grid")
+        self.inner = GridEncoder(game, "grid")
+        self.game = game
+        self.obs_kind = "padded"
+        size = int(pad_to)
+        if self.inner.rows > size or self.inner.cols > size:
+            raise EncodingError(
+                f"problem {game.artifact.name!r} is a {self.inner.rows}x{self.inner.cols} grid: larger than "
+                f"pad_to={size}"
+            )
+        self.pad_to = size
+        self.hw = size * size
+        ch = self.inner.ch
+        direct = [c for c in PADDED_CHANNELS if c in ch and c != "subgoal"]
+        self.src = np.array([ch[c] for c in direct], dtype=np.int64)
+        self.dst = np.array([PADDED_CHANNELS.index(c) for c in direct], dtype=np.int64)
+        self.sub = np.arange(self.inner.prop_start, self.inner.prop_start + len(self.inner.sys_props))
+        self.n_spatial = len(PADDED_CHANNELS) * self.hw
+        self.space = spaces.Box(0.0, 1.0, shape=(self.n_spatial + 4 + 1,), dtype=np.float32)
+
+    def position_slice(self) -> slice:
+        start = PADDED_CHANNELS.index("system") * self.hw
+        return slice(start, start + self.hw)
+
+    def encode(self, run: RunState) -> np.ndarray:
+        inner, S = self.inner, self.pad_to
+        planes = inner.planes(run)
+        grid = np.zeros((len(PADDED_CHANNELS), S, S), dtype=np.float32)
+        H, W = inner.rows, inner.cols
+        grid[self.dst, :H, :W] = planes[self.src]
+        if self.sub.size:
+            grid[PADDED_CHANNELS.index("subgoal"), :H, :W] = planes[self.sub].max(axis=0)
+        obs = np.zeros(self.space.shape[0], dtype=np.float32)
+        obs[: self.n_spatial] = grid.ravel() / 255.0
+        g = self.game
+        if not run.done:
+            bits = g.restricted_bits_of(run) & g.exists_bits[run.system]
+            for k in range(min(4, g.n_slots)):
+                if (bits >> k) & 1:
+                    obs[self.n_spatial + k] = 1.0
+        if inner.is_fuel:
+            obs[-1] = inner.fuel_list[run.system] / max(inner.max_fuel, 1)
+        return obs
+
+
 class GraphEncoder(Encoder):
     """Flat encoding of a graph problem (see the module docstring)."""
 
@@ -270,6 +345,10 @@ class GraphEncoder(Encoder):
         self.qsys_list = game.q_sys.tolist()
         self.space = spaces.Box(0.0, 1.0, shape=(self.size,), dtype=np.float32)
 
+    def position_slice(self) -> slice:
+        """The one-hot of the system's place comes first."""
+        return slice(0, self.n_places)
+
     def encode(self, run: RunState) -> np.ndarray:
         g = self.game
         obs = np.zeros(self.size, dtype=np.float32)
@@ -288,16 +367,23 @@ class GraphEncoder(Encoder):
         return obs
 
 
-def make_encoder(game: TestGame, obs_kind: str) -> Encoder:
-    """The encoder of ``obs_kind`` for ``game``.
+OBS_KINDS = ("flat", "grid", "padded")
+"""The observation kinds (see the module docstring)."""
+
+
+def make_encoder(game: TestGame, obs_kind: str, pad_to: int = 8) -> Encoder:
+    """The encoder of ``obs_kind`` for ``game`` (``pad_to``: the grid side of ``"padded"``).
 
     Raises
     ------
     EncodingError
-        On an unknown kind, or ``"grid"`` for a graph problem.
+        On an unknown kind, ``"grid"`` or ``"padded"`` for a graph problem, or a grid
+        larger than ``pad_to``.
     """
-    if obs_kind not in ("grid", "flat"):
-        raise EncodingError(f"unknown obs_kind {obs_kind!r}; expected 'grid' or 'flat'")
+    if obs_kind not in OBS_KINDS:
+        raise EncodingError(f"unknown obs_kind {obs_kind!r}; expected one of {', '.join(OBS_KINDS)}")
+    if obs_kind == "padded":
+        return PaddedEncoder(game, pad_to)
     if game.is_grid:
         return GridEncoder(game, obs_kind)
     return GraphEncoder(game, obs_kind)

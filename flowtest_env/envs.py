@@ -24,6 +24,7 @@ from .sources import TestLike, game_for
 from .encoding import Encoder, make_encoder
 from .game import GRID_ACTIONS, MET, VIOLATED, GameError, RunState, TestGame
 from .render import ansi, make_renderer
+from .wrappers import MEMORY_KINDS, DistancePotential, VisitedMemory, position_slice
 
 DEFAULT_MAX_STEPS: dict[str, int] = {
     "example1": 50,
@@ -70,6 +71,8 @@ class FlowTestEnv(gym.Env[np.ndarray, np.int64]):
     ## Observation Space
 
     ``obs_kind="flat"`` (default): a ``float32`` vector in ``[0, 1]``;
+    ``obs_kind="padded"`` (grid problems up to ``pad_to x pad_to``, default 8): one
+    flat shape for every grid test, so a policy trained on one test plays others;
     ``obs_kind="grid"`` (grid problems): an image-like ``uint8[C, H, W]`` encoding
     (free cells, static walls and shown restrictions per direction, test agent,
     system, goal, the system objective's own cells, refuel cells, fuel, objective
@@ -107,6 +110,12 @@ class FlowTestEnv(gym.Env[np.ndarray, np.int64]):
     (``"rgb_array"``, ``"ansi"``; ``"human"`` through Gymnasium's HumanRendering),
     ``view`` (``"system"`` or ``"engineer"``: the picture also shows the hidden test
     cells), ``tile_size`` and the reward weights.
+    ``memory``: ``"none"`` (default) or ``"visited"``, the places the SUT has occupied
+    this episode appended to a flat observation (as the
+    :class:`~flowtest_env.wrappers.VisitedPlaces` wrapper; a reactive test answers the
+    run's history, which the observation alone does not show). ``shaping``: 0 (off,
+    default) or the scale of potential-based shaping towards the SUT's own objective, with
+    discount ``shaping_gamma`` (as :class:`~flowtest_env.wrappers.DistanceShaping`).
 
     ## Registered Configurations
 
@@ -123,6 +132,7 @@ class FlowTestEnv(gym.Env[np.ndarray, np.int64]):
         setting: str | None = None,
         max_steps: int | None = None,
         obs_kind: str = "flat",
+        pad_to: int = 8,
         render_mode: str | None = None,
         view: str = "system",
         tile_size: int = 32,
@@ -130,6 +140,9 @@ class FlowTestEnv(gym.Env[np.ndarray, np.int64]):
         restricted_penalty: float = 0.05,
         goal_reward: float = 1.0,
         violation_penalty: float = 1.0,
+        memory: str = "none",
+        shaping: float = 0.0,
+        shaping_gamma: float = 0.99,
         problem: TestLike | None = None,
     ) -> None:
         if problem is not None:  # the older name of `test`
@@ -138,6 +151,7 @@ class FlowTestEnv(gym.Env[np.ndarray, np.int64]):
         self._configure(
             [game], max_steps if max_steps is not None else default_max_steps(game), obs_kind,
             render_mode, view, tile_size, step_cost, restricted_penalty, goal_reward, violation_penalty,
+            memory, shaping, shaping_gamma, pad_to,
         )
         self.problem = game.artifact.name
 
@@ -155,6 +169,10 @@ class FlowTestEnv(gym.Env[np.ndarray, np.int64]):
         restricted_penalty: float,
         goal_reward: float,
         violation_penalty: float,
+        memory: str = "none",
+        shaping: float = 0.0,
+        shaping_gamma: float = 0.99,
+        pad_to: int = 8,
     ) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"unknown render_mode {render_mode!r}; expected one of {self.metadata['render_modes']}")
@@ -163,11 +181,24 @@ class FlowTestEnv(gym.Env[np.ndarray, np.int64]):
         if int(max_steps) < 1:
             raise ValueError(f"max_steps must be at least 1, not {max_steps}")
         self.games = games
-        self.encoders: list[Encoder] = [make_encoder(g, obs_kind) for g in games]
+        self.encoders: list[Encoder] = [make_encoder(g, obs_kind, pad_to) for g in games]
         first = self.encoders[0].space
         for g, e in zip(games, self.encoders):
             if e.space != first or g.n_actions != games[0].n_actions:
                 raise GameError(f"problem {g.artifact.name!r} does not share the pool's observation or action space")
+        if memory not in MEMORY_KINDS:
+            raise ValueError(f"unknown memory {memory!r}; expected one of {', '.join(MEMORY_KINDS)}")
+        if shaping < 0:
+            raise ValueError(f"shaping must be 0 (off) or a positive scale, not {shaping}")
+        self.memory_kind = memory
+        self.memory: VisitedMemory | None = None
+        if memory == "visited":
+            self.memory = VisitedMemory(position_slice(self.encoders[0]))
+            first = spaces.Box(0.0, 1.0, shape=(int(first.shape[0]) + self.memory.size,), dtype=np.float32)
+        self.shaping = float(shaping)
+        self.shaping_gamma = float(shaping_gamma)
+        self._potential = DistancePotential(self.shaping) if self.shaping > 0 else None
+        self._phi = 0.0
         self.observation_space = first
         self.action_space = spaces.Discrete(games[0].n_actions)
         self.max_steps = int(max_steps)
@@ -205,7 +236,16 @@ class FlowTestEnv(gym.Env[np.ndarray, np.int64]):
         self.game = self.games[self._index]
         self.encoder = self.encoders[self._index]
         self.run = self.game.reset()
-        return self.encoder.encode(self.run), self._info(self.run)
+        if self.memory is not None:
+            self.memory.reset()
+        if self._potential is not None:
+            self._phi = self._potential(self.game, self.run)
+        return self._observe(self.run), self._info(self.run)
+
+    def _observe(self, run: RunState) -> np.ndarray:
+        """The encoder's observation, with the SUT's memory when asked for."""
+        obs = self.encoder.encode(run)
+        return obs if self.memory is None else self.memory(obs)
 
     def step(self, action: Any) -> tuple[np.ndarray, SupportsFloat, bool, bool, dict[str, Any]]:
         """The SUT takes ``action``; the test answers (restrictions, test agent).
@@ -237,11 +277,15 @@ class FlowTestEnv(gym.Env[np.ndarray, np.int64]):
             reward += self.goal_reward
         elif run.outcome == VIOLATED:
             reward -= self.violation_penalty
+        if self._potential is not None:
+            phi = 0.0 if terminated else self._potential(self.game, run)
+            reward += self.shaping_gamma * phi - self._phi
+            self._phi = phi
         truncated = not terminated and run.steps >= self.max_steps
         info = self._info(run)
         if terminated or truncated:
             info["verdict"] = self.game.verdict(run)
-        return self.encoder.encode(run), float(reward), terminated, truncated, info
+        return self._observe(run), float(reward), terminated, truncated, info
 
     def _info(self, run: RunState) -> dict[str, Any]:
         return {"system_state": self.game.state_json(run.system), "action_mask": self.game.action_mask(run)}
@@ -643,6 +687,7 @@ class RandomGridEnv(FlowTestEnv):
         setting: str | None = None,
         max_steps: int | None = None,
         obs_kind: str = "flat",
+        pad_to: int = 8,
         render_mode: str | None = None,
         view: str = "system",
         tile_size: int = 32,
@@ -650,6 +695,9 @@ class RandomGridEnv(FlowTestEnv):
         restricted_penalty: float = 0.05,
         goal_reward: float = 1.0,
         violation_penalty: float = 1.0,
+        memory: str = "none",
+        shaping: float = 0.0,
+        shaping_gamma: float = 0.99,
     ) -> None:
         from .random_grid import random_pool
 
@@ -662,7 +710,7 @@ class RandomGridEnv(FlowTestEnv):
         games = [TestGame(a, setting) for a in pool]
         self._configure(
             games, max_steps if max_steps is not None else 4 * size * size, obs_kind, render_mode, view, tile_size,
-            step_cost, restricted_penalty, goal_reward, violation_penalty,
+            step_cost, restricted_penalty, goal_reward, violation_penalty, memory, shaping, shaping_gamma, pad_to,
         )
         self.problem = f"random-{size}x{size}-{family}{n}"
 

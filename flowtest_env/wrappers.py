@@ -39,3 +39,167 @@ class ActionMaskObservation(gym.Wrapper[dict[str, np.ndarray], np.int64, np.ndar
     def step(self, action: np.int64) -> tuple[dict[str, np.ndarray], SupportsFloat, bool, bool, dict[str, Any]]:
         obs, reward, terminated, truncated, info = self.env.step(action)
         return {"observation": obs, "action_mask": np.asarray(info["action_mask"], dtype=np.int8)}, reward, terminated, truncated, info
+
+
+# ---------------------------------------------------------------- the SUT's memory
+
+
+MEMORY_KINDS = ("none", "visited")
+"""What a system under test may remember of its own run: nothing, or the places it has
+occupied (:class:`VisitedPlaces`)."""
+
+
+def encoder_of(env: Any) -> Any:
+    """The observation encoder behind a FlowTest env (Gymnasium or PettingZoo, wrapped or not).
+
+    Raises
+    ------
+    TypeError
+        If ``env`` is not a FlowTest env.
+    """
+    obj, seen = env, 0
+    while obj is not None and seen < 16:
+        enc = getattr(obj, "encoder", None)
+        if enc is not None:
+            return enc
+        obj = getattr(obj, "env", None) or getattr(obj, "aec_env", None)
+        seen += 1
+    enc = getattr(getattr(env, "unwrapped", None), "encoder", None)
+    if enc is None:
+        raise TypeError(f"{type(env).__name__} exposes no FlowTest observation encoder")
+    return enc
+
+
+def position_slice(encoder: Any) -> slice:
+    """Where a flat FlowTest observation holds the one-hot of the SUT's own place: the
+    ``system`` plane on grids, the first block on graphs (:mod:`flowtest_env.encoding`).
+
+    Raises
+    ------
+    ValueError
+        For an image-like (``obs_kind="grid"``) observation.
+    """
+    if encoder.obs_kind == "grid":
+        raise ValueError("the visited-places memory needs a flat observation, not obs_kind='grid'")
+    return encoder.position_slice()
+
+
+class VisitedMemory:
+    """The places the SUT has occupied this episode, as a 0/1 vector appended to a flat
+    observation. Call :meth:`reset` at the start of each episode and :meth:`__call__` on
+    every observation, in order. It reads only the SUT's own position from observations
+    it has seen: never the hidden test objective or the test's history."""
+
+    def __init__(self, where: slice) -> None:
+        self.where = where
+        self.size = where.stop - where.start
+        self._seen: np.ndarray | None = None
+
+    def reset(self) -> None:
+        self._seen = None
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        obs = np.asarray(obs, dtype=np.float32)
+        here = obs[self.where]
+        self._seen = here.copy() if self._seen is None else np.maximum(self._seen, here)
+        return np.concatenate([obs, self._seen])
+
+
+class VisitedPlaces(gym.ObservationWrapper[np.ndarray, np.int64, np.ndarray]):
+    """Append the places the SUT has occupied this episode to a flat FlowTest observation.
+
+    **Why.** A reactive test answers the *history* of the run, which the observation
+    does not show (the test objective stays hidden), so the observation alone is not
+    Markov for the SUT: on ``FlowTest-Maze2-v0`` the SUT must pass some cells twice and
+    act differently the second time, and no policy of the observation alone does (a
+    plain MaskablePPO stays at 0 %). With this memory it learns the test
+    (docs/benchmarks.md). Same as the env option ``memory="visited"``.
+
+    Usable with any library: ``VisitedPlaces(gymnasium.make("FlowTest-Maze2-v0"))``.
+    Masks (``action_masks()``, ``info["action_mask"]``) pass through unchanged.
+
+    Raises
+    ------
+    ValueError
+        If the observation is not flat.
+    """
+
+    def __init__(self, env: gym.Env[np.ndarray, np.int64]) -> None:
+        super().__init__(env)
+        self.memory = VisitedMemory(position_slice(encoder_of(env)))
+        n = int(env.observation_space.shape[0]) + self.memory.size
+        self.observation_space = spaces.Box(0.0, 1.0, shape=(n,), dtype=np.float32)
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+        self.memory.reset()
+        return super().reset(seed=seed, options=options)
+
+    def observation(self, observation: np.ndarray) -> np.ndarray:
+        return self.memory(observation)
+
+    def action_masks(self) -> np.ndarray:
+        """The wrapped env's legal actions (sb3-contrib's MaskablePPO convention)."""
+        return self.env.unwrapped.action_masks()
+
+
+# ---------------------------------------------------------------- reward shaping
+
+
+class DistancePotential:
+    """``phi = -min(d, 4 scale) / scale``: ``d`` the number of steps from the SUT's state to
+    its objective on its own product graph ``G_sys`` past the static walls
+    (:class:`~flowtest_env.system_product.SystemProduct`); ``-4`` where it is unreachable.
+    It uses only what the SUT knows (its map and its objective), never the test objective."""
+
+    def __init__(self, scale: float) -> None:
+        if scale <= 0:
+            raise ValueError(f"the shaping scale must be positive, not {scale}")
+        self.scale = float(scale)
+        self._products: dict[int, Any] = {}
+
+    def __call__(self, game: Any, run: Any) -> float:
+        from .system_product import INF, SystemProduct
+
+        prod = self._products.get(id(game))
+        if prod is None:
+            prod = self._products[id(game)] = SystemProduct(game)
+        q = int(game.q_sys[run.history])
+        d = prod.distances()[prod.node(run.system, q)]
+        return -min(float(d), 4 * self.scale) / self.scale if d < INF else -4.0
+
+
+class DistanceShaping(gym.Wrapper[np.ndarray, np.int64, np.ndarray, np.int64]):
+    """Potential-based reward shaping (Ng et al. 1999, keeps the optimal policies):
+    ``r + gamma * phi(s') - phi(s)`` with :class:`DistancePotential` (``phi = 0`` at the
+    end of an episode). Off unless asked for: the same as the env option
+    ``shaping=scale`` (with ``shaping_gamma``). Set ``gamma`` to the learner's discount.
+
+    Why: the mazes' sparse goal reward is rarely found by random exploration; the
+    potential rewards progress towards the SUT's *own* objective only.
+    """
+
+    def __init__(self, env: gym.Env[np.ndarray, np.int64], scale: float = 10.0, gamma: float = 0.99) -> None:
+        super().__init__(env)
+        self.potential = DistancePotential(scale)
+        self.gamma = float(gamma)
+        self._last = 0.0
+
+    def _phi(self) -> float:
+        u = self.env.unwrapped
+        return self.potential(u.game, u.run)
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+        out = self.env.reset(seed=seed, options=options)
+        self._last = self._phi()
+        return out
+
+    def step(self, action: np.int64) -> tuple[np.ndarray, SupportsFloat, bool, bool, dict[str, Any]]:
+        obs, r, term, trunc, info = self.env.step(action)
+        phi = 0.0 if term else self._phi()
+        r = float(r) + self.gamma * phi - self._last
+        self._last = phi
+        return obs, r, term, trunc, info
+
+    def action_masks(self) -> np.ndarray:
+        """The wrapped env's legal actions (sb3-contrib's MaskablePPO convention)."""
+        return self.env.unwrapped.action_masks()
