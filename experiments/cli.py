@@ -473,7 +473,16 @@ def human_summary(test: Any, summary: dict) -> str:
     )
     gap = stats.get("mip_gap")
     gap_text = "" if summary["status"] == "optimal" or gap is None else f", gap {gap:.2%}"
-    lines.append(f"  time         graphs {stats['graph_seconds']:.2f} s, solve {stats['solve_seconds']:.2f} s{gap_text}")
+    loop = stats.get("agent_seconds")
+    if loop:  # the counterexample-guided loop: many MILP solves, GR(1) games, the closed-loop check
+        n = len(test.agent.iterations)
+        lines.append(
+            f"  time         graphs {loop['graphs']:.2f} s, agent loop {loop['total'] - loop['graphs']:.2f} s "
+            f"({n} MILP solve(s) {loop['milp']:.2f} s, games and GR(1) {loop['game'] + loop['gr1']:.2f} s, checks "
+            f"{loop['verify']:.2f} s){gap_text}; total {loop['total']:.2f} s"
+        )
+    else:
+        lines.append(f"  time         graphs {stats['graph_seconds']:.2f} s, solve {stats['solve_seconds']:.2f} s{gap_text}")
     lines.append(f"  check        bypass flow {summary['bypass_flow']} (must be 0), feasibility flows ok")
     return "\n".join(lines)
 

@@ -22,6 +22,8 @@ The pieces, in the order :func:`synthesize_agent_test` uses them:
 
 from __future__ import annotations
 
+import json
+
 import time
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any, Callable, Iterable, Sequence
@@ -902,6 +904,20 @@ def _restrictable_for_agent(ts: TransitionSystem, agent: TestAgent, static: np.n
     return ts.restrictable & (static | reach_place[ts.place[ts.dst]])
 
 
+def _rejected_text(iterations: list[dict], shown: int = 4) -> str:
+    """Which restrictions the test agent could not realize: the places each rejected cut
+    set needed it to block, and why (it could not be there in time, or the cuts trap the
+    system), the last ``shown`` of them."""
+    parts = []
+    for rec in iterations[-shown:]:
+        places = ", ".join(json.dumps(p, separators=(",", ":")) for p in rec["blocked_places"]) or "none"
+        why = ("the agent cannot reach them in time" if rec.get("verdict") == "unrealizable"
+               else rec.get("verdict", "rejected"))
+        parts.append(f"cut set {rec['iteration']} blocks places {places}: {why}")
+    more = f" (and {len(iterations) - shown} earlier)" if len(iterations) > shown else ""
+    return "rejected" + more + ": " + "; ".join(parts)
+
+
 def synthesize_agent_test(
     problem: Problem,
     options: SynthesisOptions | None = None,
@@ -996,7 +1012,7 @@ def synthesize_agent_test(
             raise InconsistentProblem(
                 "infeasible",
                 f"no test agent strategy exists: after {it - 1} rejected cut set(s) no routing cut set "
-                f"remains that the test agent could realize ({exc})",
+                f"remains that the test agent could realize ({exc}); {_rejected_text(iterations)}",
             ) from None
         finally:
             timings["milp"] += time.perf_counter() - t
@@ -1034,7 +1050,8 @@ def synthesize_agent_test(
         raise InconsistentProblem(
             "infeasible",
             f"no test agent strategy found within the bound of {bound} iterations of the counterexample-guided "
-            f"loop ({bound} cut sets rejected); raise max_iterations in [environment.agent] to search further",
+            f"loop ({bound} cut sets rejected; {_rejected_text(iterations)}); raise max_iterations in "
+            "[environment.agent] to search further",
         )
     t = time.perf_counter()
     note("checking the agent strategy in closed loop")
