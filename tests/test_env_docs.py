@@ -120,3 +120,23 @@ def test_pictures_are_the_scripted_frames() -> None:
         assert shipped.shape == frame.shape and np.array_equal(shipped, frame), (
             f"docs/envs/{name}.png is not today's frame; run python -m experiments.env_pictures {name}"
         )
+
+
+@pytest.mark.parametrize("env_id", sorted(PAGES))
+def test_page_says_what_the_observation_lacks_and_how_to_add_it(env_id: str) -> None:
+    """Each page names the memory, shaping and fixed-shape options, and each works on its env."""
+    text = _page(env_id)
+    assert "## What the observation lacks" in text
+    section = text.split("## What the observation lacks", 1)[1].split("\n## ", 1)[0]
+    for needle in ("VisitedPlaces(env)", f'gym.make("{env_id}", memory="visited")', "--algo recurrent-ppo",
+                   "DistanceShaping", 'obs_kind="padded"'):
+        assert needle in section, f"{env_id}: the page does not say {needle}"
+    plain = gym.make(env_id)
+    with_memory = gym.make(env_id, memory="visited", shaping=10.0)
+    assert with_memory.observation_space.shape[0] > plain.observation_space.shape[0]
+    obs, _ = with_memory.reset(seed=0)
+    assert with_memory.observation_space.contains(obs)
+    grid = plain.unwrapped.game.is_grid
+    assert ("needs a grid" in section) == (not grid)
+    if grid:
+        assert gym.make(env_id, obs_kind="padded").observation_space.shape == (14 * 8 * 8 + 5,)
