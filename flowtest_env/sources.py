@@ -9,7 +9,8 @@ command that takes an environment gets its test from :func:`load_test`, which ac
   of its content, FlowTest's and HiGHS's versions (:func:`flowtest_env.keys.cache_key`);
   only a proven-optimal answer is cached (a time-limited one depends on the machine's
   speed, so it is synthesized again next time, with a warning);
-* an **artifact file** (``mine.json``, written by ``flowtest synthesize --out``);
+* an **artifact file** (``mine.json``, written by ``flowtest synthesize --out``), checked on
+  load like every artifact (:func:`synthesis.artifact.verify_artifact`);
 * a :class:`~synthesis.problems.Problem`, a :class:`~synthesis.pipeline.SynthesizedTest`
   or a :class:`~synthesis.artifact.TestArtifact` object.
 
@@ -30,7 +31,7 @@ from synthesis.pipeline import SynthesizedTest, synthesize
 from synthesis.problems import Problem, load_problem_file
 from synthesis.summary import summary_of
 
-from .artifacts import builtin_game, cache_dir, load_builtin
+from .artifacts import builtin_game, cache_dir, load_builtin, warn_refused_entry
 from .game import TestGame
 from .keys import cache_key
 
@@ -75,9 +76,9 @@ def _problem_file_artifact(path: Path, raw: bytes) -> TestArtifact:
     cached = problem_cache_path(path, raw)
     if cached.exists():
         try:
-            return TestArtifact.load(cached)
-        except (ProblemError, KeyError, TypeError, ValueError):
-            pass  # a damaged entry is rebuilt
+            return TestArtifact.load(cached)  # checked on load (schema, source hash, restrictions)
+        except ProblemError as exc:
+            warn_refused_entry(exc)  # a damaged or edited entry is synthesized again
     problem = load_problem_file(path)
     art = _synthesized_artifact(problem)
     if art.summary.get("status") == "optimal":

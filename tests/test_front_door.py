@@ -145,3 +145,16 @@ def test_cli_evaluate_a_problem_file_without_registration(cache: Path, problem_f
     code = main(["evaluate", "--env", "FlowTest-Nope-v0", "--sut", "gr1", "--out", str(tmp_path / "x")])
     assert code == 2
     assert "not a registered ID" in capsys.readouterr().err
+
+
+def test_a_damaged_cache_entry_is_refused_and_rebuilt(cache: Path, problem_file: Path,
+                                                      monkeypatch: pytest.MonkeyPatch) -> None:
+    flowtest_env.load_test(problem_file)
+    (entry,) = (cache / "problems").glob("mine-*.json")
+    good = entry.read_text()
+    entry.write_text(good.replace('"flow":1', '"flow":7'))
+    monkeypatch.setattr(sources, "_LOADED", {})
+    with pytest.warns(UserWarning, match="refused a cache entry"):
+        art = flowtest_env.load_test(problem_file)
+    assert art.summary["flow"] == 1
+    assert TestArtifact.load(entry).summary["flow"] == 1
