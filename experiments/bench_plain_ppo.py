@@ -150,7 +150,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--plot-from", type=Path, nargs="*", default=[])
     args = p.parse_args(argv)
     if args.plot is not None:
-        plot(args.plot_from, args.plot, f"plain MaskablePPO (sb3-contrib defaults) on {args.env}")
+        plot(args.plot_from, args.plot, f"plain MaskablePPO on {args.env}, one line per seed")
         return 0
     rows = run(args.env, args.wrappers, args.seed, args.chunk, args.max_steps, args.episodes, args.n_envs, args.csv, args.hparams)
     reached = [r["steps"] for r in rows if r["met_rate"] >= args.target]

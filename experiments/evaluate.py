@@ -665,6 +665,9 @@ def _markdown(records: Sequence[dict[str, Any]]) -> str:
             if r is None:
                 cells.append("–")
                 continue
+            if r["error"]:
+                cells.append("not run (see below)")
+                continue
             met = round((r["system_objective_met_rate"] or 0) * r["episodes"])
             cells.append(f"{met}/{r['episodes']} met ({outcome_class(r)})")
         lines.append(f"| {', '.join(group)} | " + " | ".join(cells) + " |")
@@ -684,7 +687,7 @@ def _markdown(records: Sequence[dict[str, Any]]) -> str:
         rows = [r for r in records if r["sut"] == sut]
         for r in rows:
             if r["error"]:
-                lines.append(f"| {r['env']} | 0 | not run: {r['error']} |  |  |  |  |  |  |")
+                lines.append(f"| {test_name(r)} | 0 | not run: {r['error']} |  |  |  |  |  |  |")
                 continue
             lines.append(
                 f"| {test_name(r)} | {r['episodes']} | {_pct(r['system_objective_met_rate'])} "
@@ -791,7 +794,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
     records = write_report(cells, args.out)
     for r in records:
         if r["error"]:
-            sys.stdout.write(f"{r['sut']:24s} {_test_name(r):30s} not run: {r['error']}\n")
+            sys.stdout.write(f"{r['sut']:24s} {test_name(r):30s} not run: {r['error']}\n")
             continue
         trapped = f"  trapped {r['trapped']}" if r["tester"] != "synthesized" else ""
         sys.stdout.write(

@@ -67,6 +67,7 @@ td:first-child,th:first-child{text-align:left}
 .matrix td,.matrix th{text-align:center;min-width:7.5em}.matrix td:first-child{text-align:left}.matrix td a{color:inherit;text-decoration:none;display:block}
 .matrix th a{color:#1a4d8f}.sut{font-family:ui-monospace,monospace;font-size:.92em}
 .pass{background:#cfeccb}.some{background:#ffe2a0}.all{background:#f6b3ad}.bug{background:#6a1b9a;color:#fff}
+.notrun{background:#e6e6e6;color:#555}
 .big{font-size:1.15em;font-weight:600}.small{font-size:.82em;opacity:.85}
 .legend span{display:inline-block;padding:2px 8px;margin:2px 6px 2px 0;border:1px solid #bbb}
 dl.glossary{display:grid;grid-template-columns:max-content 1fr;gap:.2em 1em;margin:.6em 0}
@@ -98,7 +99,10 @@ def slug(text: str) -> str:
 
 
 def outcome_class(r: dict[str, Any]) -> str:
-    """The matrix colour of a record: ``pass``, ``some``, ``all`` or ``bug``."""
+    """The matrix colour of a record: ``pass``, ``some``, ``all``, ``bug``, or ``notrun``
+    (the system cannot play this test: ``error`` says why)."""
+    if r.get("error"):
+        return "notrun"
     if r["test_failures"]:
         return "bug"
     if r["n_failures"] == 0:
@@ -108,7 +112,8 @@ def outcome_class(r: dict[str, Any]) -> str:
 
 def _signature(r: dict[str, Any]) -> tuple[Any, ...]:
     met = round((r["system_objective_met_rate"] or 0) * r["episodes"])
-    return (r["episodes"], met, r["test_objective_realized_rate"], r["violated"], r["open"], r["test_failures"], r["n_failures"])
+    return (r["episodes"], met, r["test_objective_realized_rate"], r["violated"], r["open"], r["test_failures"], r["n_failures"],
+            r.get("error"))
 
 
 def fold_rows(records: Sequence[dict[str, Any]], envs: Sequence[str]) -> list[list[str]]:
@@ -124,6 +129,9 @@ def fold_rows(records: Sequence[dict[str, Any]], envs: Sequence[str]) -> list[li
 
 
 def _cell(r: dict[str, Any], anchor: str) -> str:
+    if r.get("error"):
+        return f"<td class='notrun' title='{html.escape(r['error'], quote=True)}'><span class='small'>not run: " \
+               f"{html.escape(r['error'])}</span></td>"
     n = r["episodes"]
     met = round((r["system_objective_met_rate"] or 0) * n)
     cls = outcome_class(r)
@@ -253,6 +261,10 @@ def render_html(
         parts.append(f"<h3 class='sut'>{e(sut)}</h3><table><tr><th>test</th><th>runs</th><th>met</th><th>realized</th>"
                      "<th>violated</th><th>open</th><th>restrictions</th><th>steps</th><th>failures</th></tr>")
         for r in rows:
+            if r.get("error"):
+                parts.append(f"<tr class='notrun'><td>{e(test_name(r))}</td><td>0</td>"
+                             f"<td colspan='7' style='text-align:left'>not run: {e(r['error'])}</td></tr>")
+                continue
             parts.append(
                 f"<tr class='{outcome_class(r) if r['n_failures'] else ''}'><td>{e(test_name(r))}</td><td>{r['episodes']}</td>"
                 f"<td>{_pct(r['system_objective_met_rate'])}</td><td>{_pct(r['test_objective_realized_rate'])}</td>"

@@ -129,6 +129,7 @@ def test_train_flags_are_used_saved_and_play_many_tests(tmp_path: Path, capsys: 
     assert records[("example1", f"ppo:{model}")]["episodes"] == 1 and records[("example1", f"ppo:{model}")]["error"] is None
     assert records[("beaver-rescue", "scripted:replanner")]["system_objective_met_rate"] == 1.0
     assert "not run:" in (out_dir / "report.md").read_text()
+    assert "not run: " in (out_dir / "report.html").read_text()
 
 
 def test_flat_model_on_another_test_is_a_row(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
