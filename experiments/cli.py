@@ -58,6 +58,7 @@ import numpy as np
 
 from synthesis import pipeline
 from synthesis.errors import CheckFailed, InconsistentProblem, ProblemError
+from synthesis.solver_control import SolveControl, solves_running, status_line, stdout_guard
 
 EXIT_OK = 0
 EXIT_INTERNAL = 1
@@ -149,6 +150,11 @@ class StageProgress:
     plain line, because carriage returns make logs unreadable. Nothing is ever written
     to standard output.
 
+    ``status`` (e.g. :func:`synthesis.solver_control.status_line`) says how a running
+    solve stands: its best test so far, the bound and the gap. On a terminal it is shown on
+    the live line; elsewhere it is printed as a plain line every ``every`` seconds when
+    ``every`` is given (``flowtest synthesize --progress``), else not at all.
+
     Use it as a context manager so the indicator thread always stops and the last line
     is terminated, even when synthesis raises.
     """
@@ -163,6 +169,8 @@ class StageProgress:
         live: bool | None = None,
         delay: float = 1.0,
         interval: float = 0.2,
+        status: Callable[[], str | None] | None = None,
+        every: float | None = None,
     ) -> None:
         self.stream: TextIO = stream if stream is not None else sys.stderr
         self.enabled = enabled
@@ -179,10 +187,13 @@ class StageProgress:
         self._width = 0  # characters on the open line
         self._started = 0.0
         self._t0 = time.perf_counter()
+        self.status = status
+        self.every = every if enabled and not self.live else None
+        self._last_status = time.perf_counter()
 
     # -- context manager
     def __enter__(self) -> "StageProgress":
-        if self.live:
+        if self.live or (self.every is not None and self.status is not None):
             self._thread = threading.Thread(target=self._tick, name="flowtest-progress", daemon=True)
             self._thread.start()
         return self
@@ -255,14 +266,32 @@ class StageProgress:
         except (AttributeError, OSError, ValueError, io.UnsupportedOperation):
             return shutil.get_terminal_size((100, 24)).columns
 
+    def _status(self) -> str | None:
+        try:
+            return self.status() if self.status is not None else None
+        except Exception:  # noqa: BLE001 - a progress line must never end a solve
+            return None
+
     def _tick(self) -> None:
         while not self._stop.wait(self.interval):
             with self._lock:
-                if self._message is None or not self.enabled:
+                if not self.enabled:
+                    continue
+                if not self.live:  # plain status lines every `every` seconds (--progress)
+                    now = time.perf_counter()
+                    if self.every is not None and now - self._last_status >= self.every:
+                        self._last_status = now
+                        status = self._status()
+                        if status is not None:
+                            self._write(f"{self.PREFIX}{status}\n")
+                    continue
+                if self._message is None:
                     continue
                 elapsed = time.perf_counter() - self._started
                 if elapsed >= self.delay:
-                    self._rewrite(f"{self.PREFIX}{self._message} ... {elapsed:.1f} s")
+                    status = self._status()
+                    tail = f" | {status}" if status else ""
+                    self._rewrite(f"{self.PREFIX}{self._message} ... {elapsed:.1f} s{tail}")
 
 
 # --------------------------------------------------------------------------- outputs
@@ -448,8 +477,13 @@ def human_summary(test: Any, summary: dict) -> str:
     """A few lines a person reads after ``flowtest synthesize`` (without ``--json``)."""
     p, ts, strategy = test.problem, test.problem.system, test.strategy
     stats = summary["stats"]
+    gap = stats.get("mip_gap")
+    if summary["status"] == "optimal":
+        status = "optimal (proven, gap 0)"
+    else:
+        status = f"{summary['status']} (gap {'unknown' if gap is None else f'{gap:.2%}'})"
     lines = [
-        f"{p.name}: {p.kind} test, {summary['status']}",
+        f"{p.name}: {p.kind} test, {status}",
         f"  objectives   system: {p.system_objective.text}   test: {p.test_objective.text}",
         f"  flow         {summary['flow']} (edge-disjoint ways through the test)",
         f"  cuts         {summary['n_cuts']} edges of the product graph",
@@ -471,7 +505,6 @@ def human_summary(test: Any, summary: dict) -> str:
         f"  model        graph {graph['nodes']} nodes / {graph['edges']} edges; MILP {stats['binary_vars']} binary, "
         f"{stats['continuous_vars']} continuous, {stats['constraints']} constraints"
     )
-    gap = stats.get("mip_gap")
     gap_text = "" if summary["status"] == "optimal" or gap is None else f", gap {gap:.2%}"
     loop = stats.get("agent_seconds")
     if loop:  # the counterexample-guided loop: many MILP solves, GR(1) games, the closed-loop check
@@ -536,6 +569,10 @@ def _positive_int(text: str) -> int:
     return v
 
 
+#: Seconds between two status lines of ``--progress`` when stderr is not a terminal.
+PROGRESS_EVERY = 5.0
+
+
 def _synthesize_arguments(p: argparse.ArgumentParser) -> None:
     from synthesis.builtins import BUILTINS
     from synthesis.strategy import SETTINGS
@@ -559,6 +596,12 @@ def _synthesize_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--setting", choices=SETTINGS, help="how reactive obstacles are shown (default: the problem's, else instantaneous)")
     p.add_argument("--force", action="store_true", help="overwrite existing --out/--plot files")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines on stderr")
+    p.add_argument(
+        "--progress", metavar="S", nargs="?", type=_positive_float, const=PROGRESS_EVERY,
+        help="also when stderr is not a terminal (a log, a pipe), print the solver's status (best "
+        f"test, bound, gap) on stderr every S seconds (default {PROGRESS_EVERY:g}); on a terminal "
+        "the live line always shows it",
+    )
 
 
 @command("synthesize", "synthesize a test for a problem (TOML file or built-in name)", _synthesize_arguments)
@@ -586,7 +629,11 @@ def run_synthesize(args: argparse.Namespace) -> int:
     if args.threads is not None and args.threads > cpus:
         raise ProblemError(f"--threads {args.threads} is more than the {cpus} CPUs of this machine")
     problem = _load(load_problem, args.problem)
-    with StageProgress(enabled=not args.quiet) as progress:
+    control = SolveControl()
+    every = getattr(args, "progress", None)
+    # stdout is ours: whatever a library prints meanwhile (HiGHS's banner, a C printf)
+    # goes to /dev/null, and only our summary reaches the real stdout, after
+    with stdout_guard(), StageProgress(enabled=not args.quiet, status=lambda: status_line(control), every=every) as progress:
         progress(f"synthesizing {problem.name} ({problem.kind} test)")
         options = pipeline.SynthesisOptions(
             time_limit=args.time_limit,
@@ -595,6 +642,7 @@ def run_synthesize(args: argparse.Namespace) -> int:
             threads=args.threads,
             setting=args.setting,
             progress=progress,
+            control=control,
         )
         test = pipeline.synthesize(problem, options)
         summary = json_safe(summary_of(test))
@@ -634,9 +682,23 @@ def _load(load_problem: Callable[[str], Any], name: str) -> Any:
 
 def _error(message: str) -> None:
     """One line ``error: ...`` on stderr (newlines folded so it stays one line)."""
-    text = " ".join(str(message).split())
+    _say("error: " + " ".join(str(message).split()))
+
+
+def _flush_and_exit(code: int) -> None:
+    """Flush Python's standard streams and end the process at once (``os._exit``)."""
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError, AttributeError):
+            pass
+    os._exit(code)
+
+
+def _say(line: str) -> None:
+    """One line on stderr, best effort (stderr may be closed)."""
     try:
-        sys.stderr.write(f"error: {text}\n")
+        sys.stderr.write(line + "\n")
         sys.stderr.flush()
     except (OSError, ValueError):
         pass
@@ -649,6 +711,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         return int(args.run(args))
     except KeyboardInterrupt:
+        # the user's own act, not an error: one plain line, no traceback
+        _say(f"{PROG}: interrupted")
+        if argv is None and solves_running():
+            # we are the process (the console script), and a solver thread has not
+            # reached a point where it notices the stop yet: exiting normally would wait
+            # for it at interpreter shutdown, so leave now (outputs are written
+            # atomically, so no partial file is left behind)
+            _flush_and_exit(EXIT_INTERRUPTED)
         return EXIT_INTERRUPTED
     except ProblemError as exc:
         _error(str(exc))

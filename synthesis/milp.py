@@ -39,6 +39,7 @@ from scipy.sparse.csgraph import breadth_first_order
 from .errors import InconsistentProblem
 from .products import Products, coreachable, reachable
 from .routing_heuristic import RouteSeed, RoutingGuess, guess_routing
+from .solver_control import Clock, SolveControl, run_highs
 
 MODES = ("static", "reactive", "mixed")
 
@@ -84,6 +85,10 @@ class MilpOptions:
         When the feasibility flows (c6-c8) enter the model: ``"auto"`` (see
         :func:`solve_routing`), ``"eager"`` (all at once: one round, and every
         incumbent of a time-limited solve is trap-free) or ``"lazy"`` (where they bind).
+    control
+        Shared with the caller while HiGHS runs: Ctrl-C / stop requests, and the live
+        status (best answer, bound, gap) a progress line shows (see
+        :mod:`synthesis.solver_control`).
     """
 
     mode: str = "reactive"
@@ -99,6 +104,7 @@ class MilpOptions:
     progress: Callable[[str], None] | None = None
     closed_loop: bool = False
     feasibility: str = "auto"
+    control: SolveControl | None = None
 
 
 @dataclass
@@ -329,7 +335,7 @@ def solve_routing(products: Products, options: MilpOptions | None = None) -> Rou
         options.feasibility == "auto" and len(required) * products.system.src.size <= EAGER_FLOW_LIMIT
     )
     entries: dict[int, np.ndarray] = dict(required) if eager else {}
-    clock = _Clock(options.time_limit, options.after_first)
+    clock = Clock(options.time_limit, options.after_first)
     rounds = 0
     while True:
         rounds += 1
@@ -406,7 +412,7 @@ def _solve_once(
     options: MilpOptions,
     entries: dict[int, np.ndarray],
     required: dict[int, np.ndarray],
-    clock: "_Clock",
+    clock: Clock,
 ) -> RoutingResult:
     """One solve of the routing MILP with feasibility flows for the given entry nodes.
 
@@ -534,21 +540,22 @@ def _solve_once(
         # no flow 2 in 300 s, against 170 s from scratch)
         if x_guess is not None and not guess.from_route:
             _set_solution(h, x_guess)
-        highs_deadline, stop_watch = clock.watch_first(h)
+        watch = clock.watching_first()
         try:
-            status1, gap1 = _run(h, highs_deadline, stop_watch)
-            highs_solved = True
+            status1, gap1, x1 = _run(
+                h, clock.latest(), options, phase="phase 1 (maximum flow)", clock=clock, watch_first=watch
+            )
         except TimeoutError:
             if x_guess is None:
                 raise
-            status1, gap1, highs_solved = "feasible", float("inf"), False
+            status1, gap1, x1 = "feasible", float("inf"), None
         if status1 == "infeasible":
             raise InconsistentProblem(
                 "unroutable",
                 "the test objective cannot be routed without trapping the system: no cut set "
                 "routes every successful execution through it while leaving a way to the goal",
             )
-        x = np.asarray(h.getSolution().col_value) if highs_solved else x_guess
+        x = x1 if x1 is not None else x_guess
         if x_guess is not None and guess.flow > float(x[f_col[out_src]].sum()) + 0.5:
             x, status1 = x_guess, "feasible"  # HiGHS stopped below the heuristic's flow
     flow = int(round(float(x[f_col[out_src]].sum())))
@@ -583,12 +590,15 @@ def _solve_once(
     h.changeObjectiveSense(highspy.ObjSense.kMinimize)
     h.changeColsCost(m.n_col, np.arange(m.n_col, dtype=np.int32), cost2)
     clock.first_test()
-    x = _incumbent(h, x, f_col, _share(clock.deadline, INCUMBENT_SHARE, time.perf_counter() - t_solve))
+    x = _incumbent(h, x, f_col, _share(clock.deadline, INCUMBENT_SHARE, time.perf_counter() - t_solve), options, flow)
     _set_solution(h, x)
-    status2, gap2 = _run(h, clock.deadline)
-    if status2 == "infeasible":  # cannot happen: phase 1's solution is feasible
+    try:
+        status2, gap2, x2 = _run(h, clock.deadline, options, phase="phase 2 (fewest cuts)", flow=flow)
+    except TimeoutError:  # HiGHS kept no solution: the start is the answer
+        status2, gap2, x2 = "feasible", float("inf"), x
+    if status2 == "infeasible" or x2 is None:  # cannot happen: phase 1's solution is feasible
         raise RuntimeError("phase 2 of the routing MILP lost the phase-1 solution")
-    x = np.asarray(h.getSolution().col_value)
+    x = x2
     solve_seconds = time.perf_counter() - t_solve
 
     cut = np.zeros(groups.keys.size, dtype=bool)
@@ -756,16 +766,70 @@ def _trap_test(products: Products, groups: CutGroups, entries: dict[int, np.ndar
     return traps
 
 
-def _set_solution(h: highspy.Highs, x: np.ndarray) -> None:
-    """Offer HiGHS a starting solution; ``nan`` entries are left for HiGHS to complete."""
-    known = np.flatnonzero(~np.isnan(x))
-    if known.size == x.size:
-        sol = highspy.HighsSolution()
-        sol.col_value = list(x)
-        sol.value_valid = True
-        h.setSolution(sol)
-    else:
-        h.setSolution(int(known.size), known.astype(np.int32), x[known].astype(np.float64))
+def _set_solution(h: highspy.Highs, x: np.ndarray) -> bool:
+    """Offer HiGHS ``x`` as a starting solution if it is feasible for the model HiGHS holds
+    now (every bound, row and integrality checked); returns whether it was offered.
+
+    A start is only a hint: one that violates the model would at best be ignored, so it is
+    not passed. (Feasibility alone does not make a start safe: see :func:`_run`.)"""
+    if x.size != h.getNumCol() or _violation(_ModelView.of(h), x) > FEASIBILITY_TOLERANCE:
+        return False
+    sol = highspy.HighsSolution()
+    sol.col_value = list(x)
+    sol.value_valid = True
+    h.setSolution(sol)
+    return True
+
+
+#: Largest bound, row or integrality violation of a solution we accept (HiGHS's own
+#: MIP feasibility tolerance is 1e-6; our coefficients are small integers).
+FEASIBILITY_TOLERANCE = 1e-5
+
+
+@dataclass
+class _ModelView:
+    """The model HiGHS holds, as arrays, to check a solution against it ourselves."""
+
+    a: sp.csr_matrix
+    row_lo: np.ndarray
+    row_hi: np.ndarray
+    col_lo: np.ndarray
+    col_hi: np.ndarray
+    integer: np.ndarray
+    cost: np.ndarray
+
+    @classmethod
+    def of(cls, h: highspy.Highs) -> "_ModelView":
+        lp = h.getLp()
+        n, m = int(lp.num_col_), int(lp.num_row_)
+        a = sp.csc_matrix(
+            (np.asarray(lp.a_matrix_.value_), np.asarray(lp.a_matrix_.index_), np.asarray(lp.a_matrix_.start_)),
+            shape=(m, n),
+        ).tocsr()
+        integrality = list(lp.integrality_)
+        integer = np.array([t == highspy.HighsVarType.kInteger for t in integrality], dtype=bool) if integrality else np.zeros(n, dtype=bool)
+        return cls(
+            a,
+            np.asarray(lp.row_lower_, dtype=float),
+            np.asarray(lp.row_upper_, dtype=float),
+            np.asarray(lp.col_lower_, dtype=float),
+            np.asarray(lp.col_upper_, dtype=float),
+            integer,
+            np.asarray(lp.col_cost_, dtype=float),
+        )
+
+
+def _violation(model: _ModelView, x: np.ndarray) -> float:
+    """The largest violation by ``x`` of a column bound, a row or integrality."""
+    ax = model.a @ x
+    parts = [
+        model.col_lo - x,
+        x - model.col_hi,
+        model.row_lo - ax,
+        ax - model.row_hi,
+        np.abs(x[model.integer] - np.round(x[model.integer])),
+    ]
+    return float(max((float(np.max(p)) for p in parts if p.size), default=0.0))
 
 
 INCUMBENT_SHARE = 0.25
@@ -780,7 +844,9 @@ def _share(deadline: float | None, share: float, spent: float) -> float:
     return now + share * max(deadline - now, 0.0)
 
 
-def _incumbent(h: highspy.Highs, x: np.ndarray, f_col: np.ndarray, deadline: float | None) -> np.ndarray:
+def _incumbent(
+    h: highspy.Highs, x: np.ndarray, f_col: np.ndarray, deadline: float | None, options: MilpOptions, flow: int
+) -> np.ndarray:
     """A good first phase-2 solution: fewest cuts with the phase-1 flow held fixed.
 
     Without the flow to choose, the model is a plain (tied) cut problem that HiGHS
@@ -794,9 +860,9 @@ def _incumbent(h: highspy.Highs, x: np.ndarray, f_col: np.ndarray, deadline: flo
     h.changeColsBounds(idx.size, idx, fv, fv)
     _set_solution(h, x)
     try:
-        status, _ = _run(h, deadline)
-        if status in ("optimal", "feasible"):
-            x = np.asarray(h.getSolution().col_value)
+        _, _, y = _run(h, deadline, options, phase="phase 2 start (fewest cuts, flow fixed)", flow=flow)
+        if y is not None:
+            x = y
     except TimeoutError:
         pass
     h.changeColsBounds(idx.size, idx, lo, hi)
@@ -904,8 +970,9 @@ class _FeasibilityFlow:
 
 
 def _highs(options: MilpOptions) -> highspy.Highs:
-    h = highspy.Highs()
+    h = highspy.Highs()  # HiGHS >= 1.16 prints its banner here: see solver_control.stdout_guard
     h.setOptionValue("output_flag", False)
+    h.setOptionValue("log_to_console", False)
     if options.threads is not None:
         highspy.Highs.resetGlobalScheduler(True)
         h.setOptionValue("threads", int(options.threads))
@@ -915,69 +982,68 @@ def _highs(options: MilpOptions) -> highspy.Highs:
     return h
 
 
-class _Clock:
-    """The time budget of one routing solve: an overall deadline, or (``after_first``)
-    a deadline to the first test that moves to ``after_first`` seconds after it."""
+def _run(
+    h: highspy.Highs,
+    deadline: float | None,
+    options: MilpOptions,
+    *,
+    phase: str,
+    flow: int | None = None,
+    clock: Clock | None = None,
+    watch_first: bool = False,
+) -> tuple[str, float, np.ndarray | None]:
+    """Run HiGHS until done, the deadline or a stop; return (status, relative gap, solution).
 
-    def __init__(self, time_limit: float | None, after_first: float | None) -> None:
-        now = time.perf_counter()
-        self.deadline = None if time_limit is None else now + time_limit
-        self.after_first = after_first
-        self.found = False
+    The solution HiGHS returns is checked against the model it holds, by us: every bound,
+    row and integrality, and its objective, recomputed. ``"optimal"`` needs that objective
+    within less than 1 of HiGHS's dual bound (both objectives are integral, so this is a
+    proof), not only HiGHS's word. HiGHS 1.16.0 with a start and presolve can return the
+    start itself while it reports (and proves) a better objective: the proven optimum of
+    the reduced model, not postsolved (``tests/test_highs_start.py``). When the returned
+    solution does not have the objective HiGHS reports, or violates the model, the solve
+    is run again without any start (``clearSolver``); if that still disagrees the answer
+    is at most ``"feasible"``, with the gap its own objective leaves to the bound.
 
-    def first_test(self) -> None:
-        """A first test is in hand: from now on, only ``after_first`` seconds more."""
-        if self.found:
-            return
-        self.found = True
-        if self.after_first is not None:
-            self.deadline = time.perf_counter() + self.after_first
-
-    def watch_first(self, h: highspy.Highs) -> tuple[float | None, "Callable[[], None] | None"]:
-        """For a maximum-flow run without a first test yet: stop HiGHS ``after_first``
-        seconds after its first incumbent with flow >= 1, or at the deadline without one.
-        Returns the deadline to give HiGHS (the latest possible end) and the clean-up to
-        call after the run (``None`` if there is nothing to watch)."""
-        if self.found or self.after_first is None:
-            return self.deadline, None
-
-        def on_interrupt(kind, message, data_out, data_in, user_data) -> None:  # noqa: ANN001
-            if not self.found and np.isfinite(data_out.mip_primal_bound) and data_out.mip_primal_bound >= 1.0 - 1e-6:
-                self.first_test()
-            if self.deadline is not None and time.perf_counter() > self.deadline:
-                data_in.user_interrupt = True
-
-        h.setCallback(on_interrupt, None)
-        h.startCallback(highspy.cb.HighsCallbackType.kCallbackMipInterrupt)
-        latest = None if self.deadline is None else self.deadline + self.after_first
-        return latest, lambda: h.stopCallback(highspy.cb.HighsCallbackType.kCallbackMipInterrupt)
+    Raises ``TimeoutError`` when HiGHS stopped with no solution, ``KeyboardInterrupt``
+    on Ctrl-C or a stop request (see :func:`synthesis.solver_control.run_highs`).
+    """
+    for attempt in (1, 2):
+        run_highs(h, deadline, clock=clock, control=options.control, phase=phase, flow=flow, watch_first=watch_first)
+        status, gap, x, agrees = _read_solution(h)
+        if agrees:
+            return status, gap, x
+        if attempt == 2:
+            if x is None:
+                raise RuntimeError("HiGHS returned a solution that violates its model, twice")
+            return "feasible", gap, x
+        h.clearSolver()  # drops the start too, so the second run begins from scratch
+    raise AssertionError("unreachable")
 
 
-def _run(h: highspy.Highs, deadline: float | None, cleanup: "Callable[[], None] | None" = None) -> tuple[str, float]:
-    """Run HiGHS until done or the deadline; return (status, relative gap).
-
-    ``cleanup`` (from :meth:`_Clock.watch_first`) runs right after HiGHS stops."""
-    limit = highspy.kHighsInf if deadline is None else max(deadline - time.perf_counter(), 0.01)
-    h.setOptionValue("time_limit", limit)
-    try:
-        h.run()
-    finally:
-        if cleanup is not None:
-            cleanup()
+def _read_solution(h: highspy.Highs) -> tuple[str, float, np.ndarray | None, bool]:
+    """(status, gap, solution, whether HiGHS's report agrees with its solution)."""
     ms = h.getModelStatus()
     info = h.getInfo()
-    has_sol = info.primal_solution_status == highspy.SolutionStatus.kSolutionStatusFeasible
-    if ms == highspy.HighsModelStatus.kOptimal:
-        # HiGHS says optimal within its gap tolerances; integral objectives make an
-        # absolute gap below 1 a proof, a larger one (a user's mip_rel_gap) is not
-        if abs(info.objective_function_value - info.mip_dual_bound) < 1.0 - 1e-6:
-            return "optimal", 0.0
-        return "feasible", float(info.mip_gap)
     if ms == highspy.HighsModelStatus.kInfeasible:
-        return "infeasible", float("inf")
-    if has_sol:
-        return "feasible", float(info.mip_gap)
-    if ms in (highspy.HighsModelStatus.kTimeLimit, highspy.HighsModelStatus.kInterrupt):
-        raise TimeoutError("the routing MILP found no solution within the time limit")
-    raise RuntimeError(f"HiGHS stopped with status {h.modelStatusToString(ms)}")
-
+        return "infeasible", float("inf"), None, True
+    has_sol = info.primal_solution_status == highspy.SolutionStatus.kSolutionStatusFeasible
+    if not has_sol:
+        if ms in (highspy.HighsModelStatus.kTimeLimit, highspy.HighsModelStatus.kInterrupt):
+            raise TimeoutError("the routing MILP found no solution within the time limit")
+        raise RuntimeError(f"HiGHS stopped with status {h.modelStatusToString(ms)}")
+    model = _ModelView.of(h)
+    x = np.asarray(h.getSolution().col_value, dtype=float)
+    objective = float(model.cost @ x)
+    reported = float(info.objective_function_value)
+    feasible = _violation(model, x) <= FEASIBILITY_TOLERANCE
+    agrees = feasible and abs(objective - reported) <= 1e-6 * max(1.0, abs(objective))
+    bound = float(info.mip_dual_bound)
+    if not feasible:
+        return "feasible", float("inf"), None, False
+    # integral objectives: an absolute gap below 1 between the solution we hold and
+    # HiGHS's bound proves it optimal; a larger one (a user's mip_rel_gap) does not
+    proven = np.isfinite(bound) and abs(objective - bound) < 1.0 - 1e-6
+    if ms == highspy.HighsModelStatus.kOptimal and proven:
+        return "optimal", 0.0, x, agrees
+    gap = abs(objective - bound) / max(abs(objective), 1.0) if np.isfinite(bound) else float("inf")
+    return "feasible", float(gap), x, agrees

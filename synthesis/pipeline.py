@@ -16,6 +16,7 @@ from .automata import SpecificationProduct, specification_product
 from .errors import ProblemError
 from .milp import MilpOptions, RoutingResult, solve_routing
 from .problems import Problem
+from .solver_control import SolveControl
 from .products import Products, build_products
 from .strategy import TestStrategy
 from .verify import CheckReport, check_test, restricted_edges, routed_flow
@@ -37,6 +38,8 @@ class SynthesisOptions:
     # also forbid restrictions that trap the system off entry nodes (one-way moves);
     # off by default: method.md §5 exactly (see solve_routing)
     closed_loop: bool = False
+    # Ctrl-C and the live solver status, shared with the caller (see solver_control)
+    control: SolveControl | None = None
 
 
 MAX_THREADS = 256
@@ -111,6 +114,7 @@ def milp_options(problem: Problem, options: SynthesisOptions) -> MilpOptions:
         threads=options.threads,
         progress=options.progress,
         closed_loop=options.closed_loop,
+        control=options.control,
     )
 
 

@@ -1,0 +1,325 @@
+"""Control of a running solver: its time budget, Ctrl-C, live status, and standard output.
+
+One small module that every solve shares (the routing MILP today; any later solver can use
+the same pieces):
+
+* :class:`Clock` -- the time budget of one routing solve (an overall deadline, or the
+  paper's rule: a deadline to the first test, then ``after_first`` seconds more).
+* :class:`SolveControl` -- what a caller (the command line) shares with a running solve: a
+  stop request (Ctrl-C) and the latest :class:`SolveStatus` (best answer, bound, gap), which
+  a progress line reads.
+* :func:`run_highs` -- runs HiGHS in a worker thread with one interrupt callback, so the
+  main thread stays responsive: Ctrl-C (``KeyboardInterrupt``) asks HiGHS to stop through
+  its interrupt callbacks (MIP, simplex, IPM) and is raised again within about a second,
+  whether or not HiGHS has returned by then.
+* :func:`stdout_guard` -- points the process's file descriptor 1 at ``/dev/null`` while
+  libraries run, so nothing they print (HiGHS's banner, a C-level ``printf``) lands in
+  output that must hold only our JSON.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import os
+import sys
+import threading
+import time
+from contextlib import contextmanager
+from dataclasses import dataclass
+from typing import Iterator
+
+import highspy
+import numpy as np
+
+#: Seconds the main thread waits for HiGHS to honour a stop request before it gives up
+#: on it and raises ``KeyboardInterrupt`` anyway (the solve thread is a daemon).
+STOP_GRACE = 0.8
+
+#: Seconds between two looks of the main thread at a running solve.
+POLL = 0.05
+
+#: The name of the threads that run HiGHS (see :func:`solves_running`).
+SOLVER_THREAD = "flowtest-highs"
+
+
+@dataclass(frozen=True)
+class SolveStatus:
+    """A running solve as a progress line shows it.
+
+    ``phase`` names what runs (e.g. ``"maximum flow"``), ``sense`` is ``"max"`` or
+    ``"min"``, ``best`` the objective of the best solution so far (``None``: none yet),
+    ``bound`` the proven bound on the optimum, ``started`` the ``perf_counter`` time the
+    run began (the line shows the time since), ``flow`` the flow held fixed (phase 2).
+    """
+
+    phase: str
+    sense: str
+    best: float | None
+    bound: float | None
+    started: float
+    flow: int | None = None
+
+    @property
+    def elapsed(self) -> float:
+        """Seconds since the run began."""
+        return time.perf_counter() - self.started
+
+    @property
+    def gap(self) -> float | None:
+        """Relative gap ``|best - bound| / max(|best|, 1)`` (``None`` without both)."""
+        if self.best is None or self.bound is None:
+            return None
+        return abs(self.best - self.bound) / max(abs(self.best), 1.0)
+
+    def text(self) -> str:
+        """One short line: the best test so far (flow, cuts), the bound and the gap."""
+
+        def num(v: float | None) -> str:
+            return "-" if v is None else f"{v:.0f}" if abs(v - round(v)) < 1e-6 else f"{v:.2f}"
+
+        if self.flow is None:  # maximum flow
+            best = f"best flow {num(self.best)}"
+        else:
+            best = f"flow {self.flow}, best cuts {num(self.best)}"
+        gap = self.gap
+        gap_text = "-" if gap is None else f"{100 * gap:.1f}%"
+        return f"{self.phase}: {best}, bound {num(self.bound)}, gap {gap_text}, {self.elapsed:.0f} s"
+
+
+class SolveControl:
+    """What a caller shares with a running solve: a stop request and the latest status.
+
+    Thread-safe: the solve thread writes the status, the caller's progress thread reads it,
+    the main thread requests the stop.
+    """
+
+    def __init__(self) -> None:
+        self._stop = threading.Event()
+        self._lock = threading.Lock()
+        self._status: SolveStatus | None = None
+
+    def request_stop(self) -> None:
+        """Ask every running and later solve to stop as soon as it can."""
+        self._stop.set()
+
+    @property
+    def stop_requested(self) -> bool:
+        return self._stop.is_set()
+
+    def report(self, status: SolveStatus | None) -> None:
+        """Publish the status of the running solve (``None``: no solve runs)."""
+        with self._lock:
+            self._status = status
+
+    @property
+    def status(self) -> SolveStatus | None:
+        with self._lock:
+            return self._status
+
+
+class Clock:
+    """The time budget of one routing solve: an overall deadline, or (``after_first``)
+    a deadline to the first test that moves to ``after_first`` seconds after it."""
+
+    def __init__(self, time_limit: float | None, after_first: float | None) -> None:
+        now = time.perf_counter()
+        self.deadline = None if time_limit is None else now + time_limit
+        self.after_first = after_first
+        self.found = False
+
+    def first_test(self) -> None:
+        """A first test is in hand: from now on, only ``after_first`` seconds more."""
+        if self.found:
+            return
+        self.found = True
+        if self.after_first is not None:
+            self.deadline = time.perf_counter() + self.after_first
+
+    def watching_first(self) -> bool:
+        """Whether a run must watch for its first test with flow >= 1 (and then move the
+        deadline): no first test yet, and an ``after_first`` budget."""
+        return not self.found and self.after_first is not None
+
+    def latest(self) -> float | None:
+        """The latest a run may end: the deadline, or while watching for a first test,
+        ``after_first`` seconds past it (the callback stops the run earlier)."""
+        if self.deadline is None or not self.watching_first():
+            return self.deadline
+        return self.deadline + float(self.after_first or 0.0)
+
+
+_CALLBACKS = ("kCallbackMipInterrupt", "kCallbackSimplexInterrupt", "kCallbackIpmInterrupt")
+
+
+def run_highs(
+    h: highspy.Highs,
+    deadline: float | None,
+    *,
+    clock: Clock | None = None,
+    control: SolveControl | None = None,
+    phase: str = "",
+    flow: int | None = None,
+    watch_first: bool = False,
+) -> None:
+    """Run HiGHS on its current model until it is done, the deadline passes, or a stop.
+
+    The run happens in a daemon thread while the calling thread waits in short steps, so a
+    ``KeyboardInterrupt`` reaches the caller at once: it sets the stop request, which the
+    interrupt callbacks pass to HiGHS, waits up to :data:`STOP_GRACE` seconds for HiGHS to
+    return, and is raised again. A stop requested through ``control`` by another thread
+    is raised as ``KeyboardInterrupt`` as well.
+
+    With ``watch_first`` (a maximum-flow run of an ``after_first`` budget), the first
+    incumbent with flow >= 1 starts ``clock``'s ``after_first`` seconds and the callback
+    stops HiGHS at the moved deadline. ``phase`` and ``flow`` label the status published
+    to ``control`` from the MIP callback.
+    """
+    sense_max = h.getLp().sense_ == highspy.ObjSense.kMaximize
+    t0 = time.perf_counter()
+    limit = highspy.kHighsInf if deadline is None else max(deadline - t0, 0.01)
+    h.setOptionValue("time_limit", float(limit))
+    stop = threading.Event()
+    if control is not None and control.stop_requested:
+        raise KeyboardInterrupt
+
+    mip_kind = int(highspy.cb.HighsCallbackType.kCallbackMipInterrupt)
+
+    def on_interrupt(kind, message, data_out, data_in, user_data) -> None:  # noqa: ANN001
+        if int(kind) == mip_kind:  # some versions pass the type as a plain int
+            primal = float(data_out.mip_primal_bound)
+            if watch_first and clock is not None and np.isfinite(primal) and primal >= 1.0 - 1e-6:
+                clock.first_test()
+            if control is not None:
+                dual = float(data_out.mip_dual_bound)
+                control.report(
+                    SolveStatus(
+                        phase,
+                        "max" if sense_max else "min",
+                        primal if np.isfinite(primal) else None,
+                        dual if np.isfinite(dual) else None,
+                        t0,
+                        flow,
+                    )
+                )
+            if watch_first and clock is not None and clock.deadline is not None and time.perf_counter() > clock.deadline:
+                data_in.user_interrupt = True
+        if stop.is_set() or (control is not None and control.stop_requested):
+            data_in.user_interrupt = True
+
+    h.setCallback(on_interrupt, None)
+    kinds = [getattr(highspy.cb.HighsCallbackType, k) for k in _CALLBACKS]
+    for k in kinds:
+        h.startCallback(k)
+    failure: list[BaseException] = []
+    done = threading.Event()
+
+    def work() -> None:
+        try:
+            h.run()
+        except BaseException as exc:  # noqa: BLE001 - handed to the caller below
+            failure.append(exc)
+        finally:
+            done.set()
+
+    if control is not None:
+        control.report(SolveStatus(phase, "max" if sense_max else "min", None, None, t0, flow))
+    thread = threading.Thread(target=work, name=SOLVER_THREAD, daemon=True)
+    try:
+        thread.start()
+        while not done.wait(POLL):
+            if control is not None and control.stop_requested:
+                raise KeyboardInterrupt
+        if control is not None and control.stop_requested:  # HiGHS saw the stop first
+            raise KeyboardInterrupt
+    except KeyboardInterrupt:
+        stop.set()
+        if control is not None:
+            control.request_stop()
+        done.wait(STOP_GRACE)
+        raise
+    finally:
+        if done.is_set():
+            for k in kinds:
+                h.stopCallback(k)
+        if control is not None:
+            control.report(None)
+    if failure:
+        raise failure[0]
+
+
+def solves_running() -> bool:
+    """Whether a solver thread started by :func:`run_highs` is still running (one that was
+    asked to stop but has not reached a point where HiGHS notices yet)."""
+    return any(t.name == SOLVER_THREAD and t.is_alive() for t in threading.enumerate())
+
+
+# --------------------------------------------------------------------------- stdout
+
+
+def _flush_c_stdio() -> None:
+    """Flush the C library's stdio buffers (a library's ``printf`` waits there)."""
+    try:
+        ctypes.CDLL(None).fflush(None)
+    except (OSError, AttributeError, TypeError):  # no C library handle here: nothing to flush
+        pass
+
+
+@contextmanager
+def stdout_guard() -> Iterator[None]:
+    """While the body runs, file descriptor 1 points at ``/dev/null``; restored after.
+
+    Whatever a library prints to standard output meanwhile -- from Python (``sys.stdout``
+    is pointed at ``/dev/null`` too), from C through ``printf``, or with ``write(1, ...)`` --
+    is dropped, so a caller whose standard output must hold only its own document
+    (``flowtest ... --json``) writes it after the body. Python's and C's buffers are
+    flushed on both sides of the switch so nothing printed inside reaches the real
+    standard output later. Not for use from several threads.
+    """
+    try:
+        sys.stdout.flush()
+    except (OSError, ValueError, AttributeError):
+        pass
+    _flush_c_stdio()
+    python_stdout = sys.stdout
+    try:
+        saved = os.dup(1)
+    except OSError:  # no file descriptor 1: guard Python's stdout only
+        saved = -1
+    if saved >= 0:
+        null = os.open(os.devnull, os.O_WRONLY)
+        try:
+            os.dup2(null, 1)
+        finally:
+            os.close(null)
+    # Python-level prints too, even where sys.stdout is not file descriptor 1
+    sys.stdout = open(os.devnull, "w")  # noqa: SIM115 - closed below
+    try:
+        yield
+    finally:
+        devnull, sys.stdout = sys.stdout, python_stdout
+        try:
+            devnull.close()
+        except (OSError, ValueError, AttributeError):
+            pass
+        _flush_c_stdio()
+        if saved >= 0:
+            os.dup2(saved, 1)
+            os.close(saved)
+
+
+def status_line(control: SolveControl | None) -> str | None:
+    """The running solve's status as one line, or ``None`` when no solve runs."""
+    status = None if control is None else control.status
+    return None if status is None else status.text()
+
+
+__all__ = [
+    "Clock",
+    "SolveControl",
+    "SolveStatus",
+    "run_highs",
+    "solves_running",
+    "status_line",
+    "stdout_guard",
+]
+
