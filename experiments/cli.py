@@ -706,9 +706,9 @@ def _say(line: str) -> None:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; return the exit code (see the module docstring)."""
-    parser = build_parser()
-    args = parser.parse_args(argv)  # usage errors exit 2 via argparse
     try:
+        parser = build_parser()
+        args = parser.parse_args(argv)  # usage errors exit 2 via argparse
         return int(args.run(args))
     except KeyboardInterrupt:
         # the user's own act, not an error: one plain line, no traceback

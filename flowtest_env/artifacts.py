@@ -68,12 +68,21 @@ def synthesize_artifact(name: str, time_limit: float | None = None) -> TestArtif
     from synthesis.artifact import artifact_of
     from synthesis.builtins import BUILTINS
     from synthesis.pipeline import SynthesisOptions, synthesize
+    from synthesis.solver_control import solver_version
     from synthesis.summary import summary_of
 
     if name not in BUILTINS:
         raise KeyError(f"unknown built-in problem {name!r}; known: {', '.join(sorted(BUILTINS))}")
     test = synthesize(BUILTINS[name](), SynthesisOptions(time_limit=time_limit))
-    return artifact_of(test, summary_of(test))
+    art = artifact_of(test, summary_of(test))
+    # which solver made it: with ties between optimal answers, another HiGHS release may
+    # pick another one, so a shipped artifact equals a fresh synthesis under this version
+    art.extras[SOLVER_KEY] = {"highspy": solver_version()}
+    return art
+
+
+SOLVER_KEY = "made_with"
+"""The key of :attr:`TestArtifact.extras` naming the solver version that made a shipped artifact."""
 
 
 def file_sha256(path: Path) -> str:

@@ -85,6 +85,11 @@ class MilpOptions:
         When the feasibility flows (c6-c8) enter the model: ``"auto"`` (see
         :func:`solve_routing`), ``"eager"`` (all at once: one round, and every
         incumbent of a time-limited solve is trap-free) or ``"lazy"`` (where they bind).
+    offer_starts
+        Offer HiGHS the heuristic's answer (phase 1) and the phase-1 answer (phase 2) as
+        starts (each checked against the model first). Without, they are still kept as
+        the fallback answers of a time-limited solve. (``experiments.bench_starts``
+        measures both.)
     control
         Shared with the caller while HiGHS runs: Ctrl-C / stop requests, and the live
         status (best answer, bound, gap) a progress line shows (see
@@ -105,6 +110,7 @@ class MilpOptions:
     closed_loop: bool = False
     feasibility: str = "auto"
     control: SolveControl | None = None
+    offer_starts: bool = True
 
 
 @dataclass
@@ -538,7 +544,7 @@ def _solve_once(
         # a route-seeded start is kept as the fallback but not handed to HiGHS: from
         # it, HiGHS's neighbourhood heuristics stay near the lone route (mars-exploration:
         # no flow 2 in 300 s, against 170 s from scratch)
-        if x_guess is not None and not guess.from_route:
+        if x_guess is not None and not guess.from_route and options.offer_starts:
             _set_solution(h, x_guess)
         watch = clock.watching_first()
         try:
@@ -591,7 +597,10 @@ def _solve_once(
     h.changeColsCost(m.n_col, np.arange(m.n_col, dtype=np.int32), cost2)
     clock.first_test()
     x = _incumbent(h, x, f_col, _share(clock.deadline, INCUMBENT_SHARE, time.perf_counter() - t_solve), options, flow)
-    _set_solution(h, x)
+    if options.offer_starts:
+        _set_solution(h, x)
+    else:
+        h.clearSolver()
     try:
         status2, gap2, x2 = _run(h, clock.deadline, options, phase="phase 2 (fewest cuts)", flow=flow)
     except TimeoutError:  # HiGHS kept no solution: the start is the answer
@@ -858,7 +867,10 @@ def _incumbent(
     fv = np.round(x[f_col])
     idx = f_col.astype(np.int32)
     h.changeColsBounds(idx.size, idx, fv, fv)
-    _set_solution(h, x)
+    if options.offer_starts:
+        _set_solution(h, x)
+    else:
+        h.clearSolver()
     try:
         _, _, y = _run(h, deadline, options, phase="phase 2 start (fewest cuts, flow fixed)", flow=flow)
         if y is not None:

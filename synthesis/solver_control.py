@@ -26,6 +26,7 @@ import threading
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass
+from importlib.metadata import PackageNotFoundError, version
 from typing import Iterator
 
 import highspy
@@ -33,7 +34,7 @@ import numpy as np
 
 #: Seconds the main thread waits for HiGHS to honour a stop request before it gives up
 #: on it and raises ``KeyboardInterrupt`` anyway (the solve thread is a daemon).
-STOP_GRACE = 0.8
+STOP_GRACE = 0.5
 
 #: Seconds between two looks of the main thread at a running solve.
 POLL = 0.05
@@ -247,6 +248,15 @@ def run_highs(
         raise failure[0]
 
 
+def solver_version() -> str:
+    """The version of the solver package answers depend on (``highspy``, e.g. ``"1.15.1"``):
+    recorded with shipped artifacts, and part of every cache key."""
+    try:
+        return version("highspy")
+    except PackageNotFoundError:  # an unpackaged build: ask HiGHS itself
+        return str(highspy.Highs().version())
+
+
 def solves_running() -> bool:
     """Whether a solver thread started by :func:`run_highs` is still running (one that was
     asked to stop but has not reached a point where HiGHS notices yet)."""
@@ -318,6 +328,7 @@ __all__ = [
     "SolveControl",
     "SolveStatus",
     "run_highs",
+    "solver_version",
     "solves_running",
     "status_line",
     "stdout_guard",

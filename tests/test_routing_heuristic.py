@@ -23,6 +23,7 @@ from synthesis.problems import Problem
 from synthesis.products import Products, reachable
 from synthesis.random_grid import first_consistent
 from synthesis.routing_heuristic import RouteSeed, RoutingGuess, guess_routing, simple_route
+from synthesis.solver_control import Clock
 
 
 def _instance(size: int, family: str, n: int, seed: int, kind: str = "static") -> tuple[Products, ModelEdges, Problem]:
@@ -108,11 +109,27 @@ def test_after_first_stops_soon_after_highs_finds_a_first_test(monkeypatch: pyte
         return RoutingGuess(0, g.upper_bound, np.zeros(eu.size), np.zeros(has_var.size, dtype=bool), np.zeros(n, dtype=bool))
 
     monkeypatch.setattr(milp, "guess_routing", no_guess)
+    first: list[float] = []
+    real_first_test = Clock.first_test
+
+    def first_test(self: Clock) -> None:
+        if not self.found:
+            first.append(time.perf_counter())
+        real_first_test(self)
+
+    monkeypatch.setattr(Clock, "first_test", first_test)
     _, problem, _ = first_consistent(10, "reachability", 1, 0, kind="static")
     t0 = time.perf_counter()
     test = synthesize(problem, SynthesisOptions(time_limit=600.0, after_first=1.0))
-    assert time.perf_counter() - t0 < 20.0
+    t_end = time.perf_counter()
     assert test.routing.flow >= 1 and test.checks.ok
+    # the first test's time depends on HiGHS's search (about 10 s with 1.15, 20-40 s with
+    # 1.16 under load); what this test holds is the rule: the end comes after_first (1 s)
+    # after it -- plus HiGHS's wait for its next interrupt callback (up to 10 s with 1.16
+    # on a loaded machine) and the checks -- not at the 600 s limit
+    assert len(first) == 1
+    assert t_end - first[0] < 1.0 + 15.0, f"ended {t_end - first[0]:.1f} s after the first test"
+    assert t_end - t0 < 120.0
 
 
 @pytest.mark.parametrize("size,family,n,seed", CASES[::2] + [(5, "safety", 3, 0), (10, "reachability", 1, 2)])
