@@ -34,7 +34,7 @@ import numpy as np
 
 #: Seconds the main thread waits for HiGHS to honour a stop request before it gives up
 #: on it and raises ``KeyboardInterrupt`` anyway (the solve thread is a daemon).
-STOP_GRACE = 0.5
+STOP_GRACE = 0.25
 
 #: Seconds between two looks of the main thread at a running solve.
 POLL = 0.05
