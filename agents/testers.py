@@ -137,7 +137,7 @@ def problem_of(env_id: str) -> tuple[str, int]:
     spec = gym.spec(env_id) if env_id in gym.registry else None
     kwargs = dict(spec.kwargs) if spec is not None else {}
     problem = kwargs.get("test", kwargs.get("problem"))
-    if problem is None:
+    if not isinstance(problem, str):
         raise PolicyError(f"{env_id!r} is not a built-in problem's environment; a tester plays one fixed game")
     return str(problem), int(kwargs.get("max_steps") or DEFAULT_MAX_STEPS.get(problem, 100))
 

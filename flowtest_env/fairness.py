@@ -32,7 +32,7 @@ from typing import Callable
 import numpy as np
 
 from .game import MET, GameError, RunState
-from .multiagent import raw_env
+from .multiagent import SYSTEM, raw_env
 
 TesterChoice = Callable[[raw_env], int]
 """A deterministic tester: reads ``env.run`` (or ``env.observe("tester_0")``) and answers
@@ -72,6 +72,8 @@ class FairnessReport:
     illegal
         Nodes at which the tester answered an action outside its mask (always 0 for a
         tester that plays by the rules; the environment would turn it into a no-op).
+    trap_keys
+        The first 100 trap nodes, as :data:`NodeKey` tuples.
     """
 
     nodes: int = 0
@@ -128,7 +130,7 @@ def check_tester(env: raw_env, choose: TesterChoice, max_nodes: int = DEFAULT_MA
     game = env.game
     saved = env.run
     report = FairnessReport()
-    tester_first = env.possible_agents[0] != "system_0"
+    tester_first = env.possible_agents[0] != SYSTEM
     try:
         start = game.reset(agent_first_move=False)
         if tester_first:
