@@ -13,6 +13,9 @@
    objective, with the replanner's run against the synthesized test of the same problem
    (``--figures``).
 
+``--seeds 0 1 2`` instead trains a tester per problem and seed and tabulates only the
+exhaustive checks (trap states, bypass moves).
+
 Run: ``nice python -m experiments.bench_testers`` (about ten minutes on one core).
 """
 
@@ -102,6 +105,25 @@ def draw(out: Path, figures: Path | None, seed: int) -> None:
                 shutil.copy(png, figures / f"learned-tester-{png.name}")
 
 
+def seed_study(out: Path, seeds: list[int], steps: int, trap_penalty: float = 0.0) -> str:
+    """Train a tester per problem and seed (no evaluation) and tabulate the exhaustive
+    checks: how much of what a learned tester is depends on its seed."""
+    from .train_tester import train_tester
+
+    lines = ["| problem | " + " | ".join(f"seed {s}: trap states / bypass moves" for s in seeds) + " |",
+             "|---|" + "---|" * len(seeds)]
+    for problem in PROBLEMS:
+        cells = []
+        for seed in seeds:
+            s = train_tester(problem, steps, out / f"seed{seed}" / f"{problem}.zip", seed=seed, progress_bar=False,
+                             eval_episodes=0, trap_penalty=trap_penalty)
+            f = s["fairness"]
+            cells.append(f"{f['traps']} / {f['bypasses']} (of {f['nodes']})")
+            print(f"{problem} seed {seed}: {cells[-1]}", flush=True)
+        lines.append(f"| {problem} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--out", type=Path, default=Path(tempfile.gettempdir()) / "flowtest-bench-testers",
@@ -112,7 +134,15 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--figures", type=Path, default=None, help="copy the witness pictures here (e.g. docs/images)")
     p.add_argument("--pictures-only", action="store_true", help="only draw, from the testers already in --out")
+    p.add_argument("--seeds", type=int, nargs="+", metavar="SEED",
+                   help="instead: train testers with these seeds and tabulate their exhaustive checks")
+    p.add_argument("--trap-penalty", type=float, default=0.0, help="with --seeds: the testers' trap penalty")
     args = p.parse_args(argv)
+    if args.seeds:
+        table = seed_study(args.out, args.seeds, args.steps, args.trap_penalty)
+        (args.out / "seeds.md").write_text(table)
+        print(table)
+        return 0
     if args.pictures_only:
         draw(args.out, args.figures, args.seed)
         return 0
