@@ -44,12 +44,14 @@ class TestInfo:
 GLOSSARY: tuple[tuple[str, str], ...] = (
     ("met", "the run reached the <b>system objective</b>, the task the system under test (SUT) is given, "
             "within the step budget"),
-    ("realized", "the run also satisfied the <b>test objective</b>, hidden from the SUT; FlowTest guarantees "
-                 "it for every run that meets the system objective, so anything below 100&nbsp;% is a FlowTest bug"),
+    ("realized", "the run also satisfied the <b>test objective</b>, hidden from the SUT; the synthesized "
+                 "test guarantees it for every run that meets the system objective, so anything below 100&nbsp;% "
+                 "there is a FlowTest bug (a learned tester, --tester ppo:PATH, guarantees nothing)"),
     ("violated", "the run made the system objective impossible (fuel ran out, the wrong goal, an unsafe "
                  "state): the SUT's failure"),
     ("open", "the step budget ran out with the system objective neither met nor violated: the SUT's "
-             "failure, unless the test closed every way (then it is marked a FlowTest bug)"),
+             "failure, unless the test closed every way (then it is marked a FlowTest bug; against a learned "
+             "tester, a trapped run: an unfair test)"),
 )
 
 OUTCOME_CLASSES: tuple[tuple[str, str], ...] = (
