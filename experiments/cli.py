@@ -59,6 +59,7 @@ import numpy as np
 from synthesis import pipeline
 from synthesis.errors import CheckFailed, InconsistentProblem, ProblemError
 from synthesis.solver_control import SolveControl, solves_running, status_line, stdout_guard
+from synthesis.summary import stop_note
 
 EXIT_OK = 0
 EXIT_INTERNAL = 1
@@ -483,7 +484,7 @@ def human_summary(test: Any, summary: dict) -> str:
     else:
         status = f"{summary['status']} (gap {'unknown' if gap is None else f'{gap:.2%}'})"
     lines = [
-        f"{p.name}: {p.kind} test, {status}",
+        f"{p.name}: {p.kind} test, {status}{stop_note(summary)}",
         f"  objectives   system: {p.system_objective.text}   test: {p.test_objective.text}",
         f"  flow         {summary['flow']} (edge-disjoint ways through the test)",
         f"  cuts         {summary['n_cuts']} edges of the product graph",
@@ -592,7 +593,7 @@ def _synthesize_arguments(p: argparse.ArgumentParser) -> None:
         "the paper's budget: --time-limit 600 --after-first 60)",
     )
     p.add_argument("--gap", metavar="G", type=_gap, default=0.0, help="relative MIP gap at which to stop (default 0: prove optimality)")
-    p.add_argument("--threads", metavar="N", type=_positive_int, help="solver threads (default: HiGHS's choice; at most the machine's CPUs)")
+    p.add_argument("--threads", metavar="N", type=_positive_int, help="solver threads (default 1: the same answer on every machine; at most the machine's CPUs)")
     p.add_argument("--setting", choices=SETTINGS, help="how reactive obstacles are shown (default: the problem's, else instantaneous)")
     p.add_argument("--force", action="store_true", help="overwrite existing --out/--plot files")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines on stderr")

@@ -77,7 +77,14 @@ class MilpOptions:
         Relative gap at which HiGHS may stop (reported; ``status`` is then
         ``"feasible"`` unless the gap is proven 0).
     threads
-        HiGHS threads (``None``: HiGHS decides).
+        HiGHS threads (``None``: HiGHS decides, which depends on the machine). HiGHS's
+        MIP search is deterministic for fixed options, version and thread count.
+    node_limit
+        Branch-and-bound nodes per HiGHS run (``mip_max_nodes``; ``None``: no limit):
+        a deterministic budget, unlike ``time_limit``. A run stopped by it returns its
+        best test (``"feasible"``) as a time limit does.
+    random_seed
+        HiGHS's ``random_seed``, fixed so the search is the same on every run.
     closed_loop
         Also forbid traps at configurations that are not entry nodes (see
         :func:`solve_routing`); ``False`` (the default) gives method.md §5 exactly.
@@ -109,8 +116,16 @@ class MilpOptions:
     progress: Callable[[str], None] | None = None
     closed_loop: bool = False
     feasibility: str = "auto"
+    node_limit: int | None = None
+    random_seed: int = 0
     control: SolveControl | None = None
     offer_starts: bool = True
+
+    @property
+    def deterministic(self) -> bool:
+        """Whether the answer depends only on the problem, these options and the versions:
+        no wall-clock limit, and a fixed thread count (design.md, "Determinism")."""
+        return self.time_limit is None and self.after_first is None and bool(self.threads)
 
 
 @dataclass
@@ -535,6 +550,7 @@ def _solve_once(
     x_guess = _guess_solution(products, layout, guess, entries, options, place_col, state_places, groups)
     if x_guess is not None:
         clock.first_test()
+    stopped_by: str | None = None
     if x_guess is not None and guess.flow == guess.upper_bound:
         x, status1, gap1 = x_guess, "optimal", 0.0  # the flow upper bound is attained: proven
     else:
@@ -555,6 +571,7 @@ def _solve_once(
             if x_guess is None:
                 raise
             status1, gap1, x1 = "feasible", float("inf"), None
+        stopped_by = _stopped_by(h)
         if status1 == "infeasible":
             raise InconsistentProblem(
                 "unroutable",
@@ -567,7 +584,7 @@ def _solve_once(
     flow = int(round(float(x[f_col[out_src]].sum())))
     if flow < 1:
         if status1 != "optimal":
-            raise TimeoutError("no test with flow >= 1 was found within the time limit")
+            raise TimeoutError(f"no test with flow >= 1 was found within the {_LIMIT_TEXT.get(stopped_by, 'time limit')}")
         raise InconsistentProblem(
             "unroutable",
             "the test objective cannot be routed without trapping the system: every routing "
@@ -596,7 +613,10 @@ def _solve_once(
     h.changeObjectiveSense(highspy.ObjSense.kMinimize)
     h.changeColsCost(m.n_col, np.arange(m.n_col, dtype=np.int32), cost2)
     clock.first_test()
-    x = _incumbent(h, x, f_col, _share(clock.deadline, INCUMBENT_SHARE, time.perf_counter() - t_solve), options, flow)
+    if clock.deadline is None:  # no wall clock: a deterministic budget for the helper solve
+        x = _incumbent(h, x, f_col, None, options, flow, _min_limit(INCUMBENT_NODES, options.node_limit))
+    else:
+        x = _incumbent(h, x, f_col, _share(clock.deadline, INCUMBENT_SHARE), options, flow)
     if options.offer_starts:
         _set_solution(h, x)
     else:
@@ -605,6 +625,7 @@ def _solve_once(
         status2, gap2, x2 = _run(h, clock.deadline, options, phase="phase 2 (fewest cuts)", flow=flow)
     except TimeoutError:  # HiGHS kept no solution: the start is the answer
         status2, gap2, x2 = "feasible", float("inf"), x
+    stopped_by = stopped_by or _stopped_by(h)
     if status2 == "infeasible" or x2 is None:  # cannot happen: phase 1's solution is feasible
         raise RuntimeError("phase 2 of the routing MILP lost the phase-1 solution")
     x = x2
@@ -626,6 +647,8 @@ def _solve_once(
         "graph_seconds": graph_seconds,
         "solve_seconds": solve_seconds,
         "mip_gap": float(max(gap1, gap2)) if status != "optimal" else 0.0,
+        "stopped_by": None if status == "optimal" else stopped_by,
+        "deterministic": options.deterministic,
     }
     return RoutingResult(
         status=status,
@@ -844,22 +867,35 @@ def _violation(model: _ModelView, x: np.ndarray) -> float:
 INCUMBENT_SHARE = 0.25
 
 
-def _share(deadline: float | None, share: float, spent: float) -> float:
-    """A deadline for a helper solve: ``share`` of the time left, or without a limit
-    of the time spent so far (at least a second), so a heuristic never runs away."""
+INCUMBENT_NODES = 500  # branch-and-bound nodes for the phase-2 helper solve without a clock
+
+
+def _share(deadline: float, share: float) -> float:
+    """A deadline for a helper solve under a wall-clock budget: ``share`` of the time left."""
     now = time.perf_counter()
-    if deadline is None:
-        return now + max(1.0, spent)
     return now + share * max(deadline - now, 0.0)
 
 
+def _min_limit(a: int, b: int | None) -> int:
+    return a if b is None else min(a, b)
+
+
 def _incumbent(
-    h: highspy.Highs, x: np.ndarray, f_col: np.ndarray, deadline: float | None, options: MilpOptions, flow: int
+    h: highspy.Highs,
+    x: np.ndarray,
+    f_col: np.ndarray,
+    deadline: float | None,
+    options: MilpOptions,
+    flow: int,
+    nodes: int | None = None,
 ) -> np.ndarray:
     """A good first phase-2 solution: fewest cuts with the phase-1 flow held fixed.
 
     Without the flow to choose, the model is a plain (tied) cut problem that HiGHS
-    solves quickly; its answer is feasible for phase 2 and seeds the search.
+    solves quickly; its answer is feasible for phase 2 and seeds the search. The helper
+    solve is bounded by ``deadline`` (wall clock, under a time limit) or by ``nodes``
+    (deterministic, otherwise), so it never runs away and, without a clock, gives the
+    same start on every machine.
     """
     lp = h.getLp()
     lo = np.asarray(lp.col_lower_)[f_col]
@@ -871,12 +907,17 @@ def _incumbent(
         _set_solution(h, x)
     else:
         h.clearSolver()
+    _, node_limit = h.getOptionValue("mip_max_nodes")
+    if nodes is not None:
+        h.setOptionValue("mip_max_nodes", int(nodes))
     try:
         _, _, y = _run(h, deadline, options, phase="phase 2 start (fewest cuts, flow fixed)", flow=flow)
         if y is not None:
             x = y
     except TimeoutError:
         pass
+    finally:
+        h.setOptionValue("mip_max_nodes", node_limit)
     h.changeColsBounds(idx.size, idx, lo, hi)
     return x
 
@@ -989,6 +1030,9 @@ def _highs(options: MilpOptions) -> highspy.Highs:
         highspy.Highs.resetGlobalScheduler(True)
         h.setOptionValue("threads", int(options.threads))
     h.setOptionValue("mip_rel_gap", float(options.mip_rel_gap))
+    h.setOptionValue("random_seed", int(options.random_seed))
+    if options.node_limit is not None:
+        h.setOptionValue("mip_max_nodes", int(options.node_limit))
     # both objectives are integral: an absolute gap below 1 proves optimality
     h.setOptionValue("mip_abs_gap", 1.0 - 1e-6)
     return h
@@ -1040,8 +1084,9 @@ def _read_solution(h: highspy.Highs) -> tuple[str, float, np.ndarray | None, boo
         return "infeasible", float("inf"), None, True
     has_sol = info.primal_solution_status == highspy.SolutionStatus.kSolutionStatusFeasible
     if not has_sol:
-        if ms in (highspy.HighsModelStatus.kTimeLimit, highspy.HighsModelStatus.kInterrupt):
-            raise TimeoutError("the routing MILP found no solution within the time limit")
+        reason = _stopped_by(h)
+        if reason is not None:
+            raise TimeoutError(f"the routing MILP found no solution within the {_LIMIT_TEXT[reason]}")
         raise RuntimeError(f"HiGHS stopped with status {h.modelStatusToString(ms)}")
     model = _ModelView.of(h)
     x = np.asarray(h.getSolution().col_value, dtype=float)
@@ -1059,3 +1104,17 @@ def _read_solution(h: highspy.Highs) -> tuple[str, float, np.ndarray | None, boo
         return "optimal", 0.0, x, agrees
     gap = abs(objective - bound) / max(abs(objective), 1.0) if np.isfinite(bound) else float("inf")
     return "feasible", float(gap), x, agrees
+
+
+_LIMIT_TEXT = {"time_limit": "time limit", "node_limit": "node limit"}
+
+
+def _stopped_by(h: highspy.Highs) -> str | None:
+    """Which budget stopped HiGHS's last run: ``"time_limit"`` (the wall clock, or the
+    interrupt that enforces it), ``"node_limit"`` (a deterministic work limit) or ``None``."""
+    ms = h.getModelStatus()
+    if ms in (highspy.HighsModelStatus.kTimeLimit, highspy.HighsModelStatus.kInterrupt):
+        return "time_limit"
+    if ms in (highspy.HighsModelStatus.kSolutionLimit, highspy.HighsModelStatus.kIterationLimit):
+        return "node_limit"
+    return None

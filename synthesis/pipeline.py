@@ -31,7 +31,11 @@ class SynthesisOptions:
     # the time to that first test (the paper's budget: 600 and 60)
     after_first: float | None = None
     mip_rel_gap: float = 0.0
+    # HiGHS threads; None: 1, so the answer is the same on every machine (HiGHS's MIP
+    # search is deterministic for a fixed thread count); 0: HiGHS's choice
     threads: int | None = None
+    # branch-and-bound nodes per HiGHS run: a deterministic budget (see MilpOptions)
+    node_limit: int | None = None
     setting: str | None = None
     progress: Callable[[str], None] | None = None
     agent_iterations: int | None = None  # bound on the counterexample-guided loop
@@ -111,7 +115,8 @@ def milp_options(problem: Problem, options: SynthesisOptions) -> MilpOptions:
         time_limit=options.time_limit if options.time_limit is not None else problem.time_limit,
         after_first=options.after_first,
         mip_rel_gap=options.mip_rel_gap,
-        threads=options.threads,
+        threads=options.threads if options.threads is not None else 1,
+        node_limit=options.node_limit,
         progress=options.progress,
         closed_loop=options.closed_loop,
         control=options.control,

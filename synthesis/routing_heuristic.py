@@ -13,6 +13,11 @@ shortest route comes back through a cell, and its own moves open a shortcut past
 it is run again from the moves of *place-simple* routes, one route or a pair (a route's
 moves alone are a valid cut set with flow 1, see :func:`simple_routes`).
 
+The search for routes and the growth from them stop at a deterministic work budget
+(:attr:`RouteSeed.work`, counted in edges visited), never at a clock: the same model
+gives the same guess on every machine under any load, so the guess may seed cached and
+shipped answers.
+
 Every valid solution carries no flow on an edge from outside I straight into ``Tgt``,
 so the maximum flow without those edges is an upper bound on F; when the heuristic
 reaches it, phase 1 of the MILP is proven without solving it.
@@ -21,7 +26,6 @@ reaches it, phase 1 of the MILP is proven without solving it.
 from __future__ import annotations
 
 import heapq
-import time
 from collections import deque
 from dataclasses import dataclass
 from typing import Callable, Iterator
@@ -118,7 +122,7 @@ def guess_routing(
     if not separated(~has_var)[0]:  # even cutting every cuttable group leaves a path outside I
         return RoutingGuess(0, upper, np.zeros(m), np.zeros(has_var.size, dtype=bool), np.zeros(n, dtype=bool))
 
-    def grow(is_open: np.ndarray, f: np.ndarray, flow: int) -> tuple[int, np.ndarray, np.ndarray]:
+    def grow(is_open: np.ndarray, f: np.ndarray, flow: int, work: "Work | None" = None) -> tuple[int, np.ndarray, np.ndarray]:
         f = f.copy()
         forbidden = np.zeros(has_var.size, dtype=bool)
         _, reach = separated(is_open)
@@ -126,6 +130,8 @@ def guess_routing(
         for _ in range(max_rounds):
             if flow >= upper:
                 break
+            if work is not None:
+                work.spend(m)  # an augmenting path search and a separation test visit the edges
             path = _augmenting_path(n, src, eu, ev, grp, usable, f, is_open, forbidden, target, out_ptr, out_order, in_ptr, in_order)
             if path is None:
                 break
@@ -156,10 +162,10 @@ def guess_routing(
         # grow from one route, then from the union of two (two routes through the same
         # labelled cell in different orders can cross there without a shortcut)
         pool: list[np.ndarray] = []
-        stop_at = time.perf_counter() + route_seed.seconds
-        for route in simple_routes(n, src, eu, ev, usable, target, route_seed):
+        work = Work(route_seed.work)
+        for route in simple_routes(n, src, eu, ev, usable, target, route_seed, work):
             for other in [None] + pool:
-                if time.perf_counter() > stop_at:
+                if work.exhausted:
                     break
                 seeded = ~has_var
                 seeded[grp[route]] = True
@@ -170,13 +176,13 @@ def guess_routing(
                     continue
                 f0 = np.zeros(m, dtype=bool)
                 f0[route] = True
-                flow2, open2, f2 = grow(seeded, f0, 1)
+                flow2, open2, f2 = grow(seeded, f0, 1, work)
                 if flow2 > flow:
                     flow, is_open, f, from_route = flow2, open2, f2, True
                 if flow >= upper:
                     break
             pool.append(route)
-            if flow >= upper or len(pool) >= route_seed.pool or time.perf_counter() > stop_at:
+            if flow >= upper or len(pool) >= route_seed.pool or work.exhausted:
                 break
     _, reach = separated(is_open)
     return RoutingGuess(flow, upper, f.astype(float), border(reach), reach, from_route)
@@ -199,12 +205,13 @@ class RouteSeed:
     per_order
         Routes to look for per order of history changes (the first with shortest
         segments, the others randomized).
-    seconds
-        Time for finding routes, and again for growing from them (large grids with
-        many orders that fail).
+    work
+        Work budget, in edges visited, for finding routes and growing from them
+        together (large grids with many orders that fail); deterministic, unlike a
+        time cap: about 2 s of this machine's time when unloaded
+        (docs/benchmarks.md).
     seed
-        Seed of the randomized segments (the search is deterministic up to the time
-        cap).
+        Seed of the randomized segments.
     """
 
     place: np.ndarray
@@ -213,8 +220,23 @@ class RouteSeed:
     tries: int = 64
     pool: int = 12
     per_order: int = 3
-    seconds: float = 2.0
+    work: int = 3_000_000
     seed: int = 0
+
+
+class Work:
+    """A deterministic work budget: units spent (edges visited) against a limit."""
+
+    def __init__(self, limit: int) -> None:
+        self.limit = int(limit)
+        self.spent = 0
+
+    def spend(self, units: int) -> None:
+        self.spent += int(units)
+
+    @property
+    def exhausted(self) -> bool:
+        return self.spent >= self.limit
 
 
 def simple_route(
@@ -225,10 +247,18 @@ def simple_route(
 
 
 def simple_routes(
-    n: int, src: int, eu: np.ndarray, ev: np.ndarray, usable: np.ndarray, target: np.ndarray, seed: RouteSeed
+    n: int,
+    src: int,
+    eu: np.ndarray,
+    ev: np.ndarray,
+    usable: np.ndarray,
+    target: np.ndarray,
+    seed: RouteSeed,
+    work: Work | None = None,
 ) -> Iterator[np.ndarray]:
     """``Src -> I -> Tgt`` paths of G that never return to a place, as edge indices: at most
-    one per order of history changes, within ``seed.seconds`` for all of them.
+    one per order of history changes, within the work budget ``work`` (a fresh one of
+    ``seed.work`` if not given; shared with the caller's growth from the routes).
 
     Why: with only its moves open, a walk from ``Src`` to ``Tgt`` can do nothing but
     retrace the route, back and forth, so it sees the route's labels in the route's
@@ -244,9 +274,9 @@ def simple_routes(
     ok = np.flatnonzero(usable)
     out_ptr, out_order = _csr(eu[ok], n)
     out_order = ok[out_order]
-    search = _RouteSearch(eu, ev, out_ptr, out_order, target, seed)
+    search = _RouteSearch(eu, ev, out_ptr, out_order, target, seed, work if work is not None else Work(seed.work))
     for changes in _history_sequences(src, eu[ok], ev[ok], target, seed):
-        if time.perf_counter() > search.deadline:
+        if search.work.exhausted:
             break
         seen: set[tuple[int, ...]] = set()
         for again in range(seed.per_order):
@@ -316,12 +346,13 @@ class _RouteSearch:
         order: np.ndarray,
         target: np.ndarray,
         seed: RouteSeed,
+        work: Work,
     ) -> None:
         self.eu, self.ev, self.ptr, self.order = eu, ev, ptr, order
         self.target, self.place, self.hist = target, seed.place, seed.hist
         self.rng = np.random.default_rng(seed.seed)
         self.left = self.BUDGET
-        self.deadline = time.perf_counter() + seed.seconds
+        self.work = work
 
     def through(
         self, changes: tuple[int, ...], k: int, cur: int, used: frozenset[int], randomized: bool = False
@@ -340,7 +371,7 @@ class _RouteSearch:
 
         seen: set[tuple[int, ...]] = set()
         for c in range(self.CANDIDATES):
-            if self.left <= 0 or time.perf_counter() > self.deadline:
+            if self.left <= 0 or self.work.exhausted:
                 return None
             self.left -= 1
             seg = _shortest(self, cur, goal, inside, None if c == 0 and not randomized else self.rng)
@@ -375,6 +406,7 @@ def _shortest(
     """Edges of a shortest path from ``start`` to a ``goal`` node whose inner nodes are
     ``inside``: fewest edges, or with ``rng`` under random edge lengths in [1, 3)."""
     ptr, order, head, tail = graph.ptr, graph.order, graph.ev, graph.eu
+    graph.work.spend(1)
     via = {start: -1}
     dist = {start: 0.0}
     heap: list[tuple[float, int]] = [(0.0, start)]
@@ -392,6 +424,7 @@ def _shortest(
             return path[::-1]
         if u != start and not inside(u):
             continue
+        graph.work.spend(int(ptr[u + 1] - ptr[u]))
         for k in range(ptr[u], ptr[u + 1]):
             e = int(order[k])
             v = int(head[e])

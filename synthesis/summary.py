@@ -28,6 +28,8 @@ def summary_of(test: Any) -> dict:
         "problem": p.name,
         "environment": p.kind,
         "status": r.status,
+        "stopped_by": stats.pop("stopped_by", None),
+        "deterministic": stats.pop("deterministic", False),
         "flow": r.flow,
         "n_cuts": int(r.cut_edges.size),
         "cuts": cuts,
@@ -54,3 +56,16 @@ def summary_of(test: Any) -> dict:
     if test.agent is not None:
         out.update(test.agent.summary())
     return out
+
+
+def stop_note(summary: dict) -> str:
+    """What a person should know after the status: what stopped a solve short of its
+    proof, and whether the answer would be the same on another machine ("" if nothing)."""
+    stopped = summary.get("stopped_by")
+    if stopped == "time_limit":
+        return "; time limit reached: the answer depends on this machine's speed and load"
+    if stopped == "node_limit":
+        return "; node limit reached (deterministic)"
+    if not summary.get("deterministic", True):
+        return "; wall-clock budget set: not guaranteed the same on another machine"
+    return ""
