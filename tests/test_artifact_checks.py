@@ -161,7 +161,7 @@ def test_shipped_artifact_of_another_problem_is_refused(own_artifacts: Path) -> 
 
 def test_edited_cache_entry_is_refused_with_a_warning_and_rebuilt(own_artifacts: Path) -> None:
     (own_artifacts / "shipped" / "small-reactive.json").unlink()
-    cached = own_artifacts / "cache" / "builtins" / "small-reactive.json"
+    cached = artifacts.builtin_cache_path("small-reactive")
     cached.parent.mkdir(parents=True)
     d = shipped("small-reactive")
     _empty_restrictions(d)
@@ -179,7 +179,7 @@ def test_edited_cache_entry_is_refused_with_a_warning_and_rebuilt(own_artifacts:
 
 def test_cache_entry_of_another_problem_is_refused(own_artifacts: Path) -> None:
     (own_artifacts / "shipped" / "small-reactive.json").unlink()
-    cached = own_artifacts / "cache" / "builtins" / "small-reactive.json"
+    cached = artifacts.builtin_cache_path("small-reactive")
     cached.parent.mkdir(parents=True)
     shutil.copy(SHIPPED / "example1.json", cached)
     with pytest.warns(UserWarning, match="another problem"):

@@ -1,0 +1,49 @@
+"""The test suite never writes to the user's real cache or home.
+
+Before any test module (and so any FlowTest module) is imported, ``HOME``, the XDG base
+folders and ``FLOWTEST_CACHE_DIR`` are pointed into one temporary folder for the session
+(shared by pytest-xdist workers, which inherit the environment, and removed at exit by the
+process that made it). ``tests/test_pools.py`` proves it: a test run with a fresh fake
+home leaves that home empty.
+"""
+
+from __future__ import annotations
+
+import atexit
+import os
+import shutil
+import tempfile
+from pathlib import Path
+
+SANDBOX_ENV = "FLOWTEST_TEST_SANDBOX"
+"""Set to the session's temporary folder once the environment points into it."""
+
+REAL_HOME_ENV = "FLOWTEST_TEST_REAL_HOME"
+"""The home folder the session started with (for the test that proves it stays untouched)."""
+
+
+def _sandbox() -> Path:
+    existing = os.environ.get(SANDBOX_ENV)
+    if existing and Path(existing).is_dir():
+        return Path(existing)
+    root = Path(tempfile.mkdtemp(prefix="flowtest-tests-"))
+    atexit.register(shutil.rmtree, root, ignore_errors=True)
+    os.environ.setdefault(REAL_HOME_ENV, os.environ.get("HOME", str(Path.home())))
+    home = root / "home"
+    for sub in ("home", "home/.cache", "home/.config", "home/.local/share", "mpl"):
+        (root / sub).mkdir(parents=True, exist_ok=True)
+    os.environ.update(
+        {
+            SANDBOX_ENV: str(root),
+            "HOME": str(home),
+            "XDG_CACHE_HOME": str(home / ".cache"),
+            "XDG_CONFIG_HOME": str(home / ".config"),
+            "XDG_DATA_HOME": str(home / ".local" / "share"),
+            "FLOWTEST_CACHE_DIR": str(home / ".cache" / "flowtest"),
+            "MPLCONFIGDIR": str(root / "mpl"),
+        }
+    )
+    return root
+
+
+SANDBOX = _sandbox()
