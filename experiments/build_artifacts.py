@@ -4,13 +4,18 @@ Usage::
 
     python -m experiments.build_artifacts                 # every built-in missing its artifact
     python -m experiments.build_artifacts maze2 --force   # rebuild one, overwriting it
-    python -m experiments.build_artifacts mars-exploration --time-limit 1200
+    python -m experiments.build_artifacts mars-exploration --node-limit 5000
 
 Each artifact goes to ``flowtest_env/artifacts/<name>.json`` (or ``--out DIR``). An
 existing file is never overwritten without ``--force``: the shipped artifacts are what
 ``gym.make`` loads, and ``tests/test_envs.py`` proves each equals a fresh synthesis.
 ``SHA256SUMS`` in the same folder lists each file's SHA-256 (rewritten after every file):
 ``gym.make`` refuses a shipped artifact whose bytes differ.
+
+Shipped artifacts use deterministic budgets only (one HiGHS thread, a fixed seed, a node
+limit per HiGHS run: :func:`flowtest_env.artifacts.artifact_options`), never a wall-clock
+limit, so a rebuild on any machine, under any load, gives the same files (apart from
+timings).
 """
 
 from __future__ import annotations
@@ -20,11 +25,11 @@ import sys
 import time
 from pathlib import Path
 
-from flowtest_env.artifacts import ARTIFACT_DIR, synthesize_artifact, write_manifest
+from flowtest_env.artifacts import ARTIFACT_DIR, ARTIFACT_NODE_LIMIT, synthesize_artifact, write_manifest
 from synthesis.builtins import BUILTINS
 
 
-def build(names: list[str], out: Path, force: bool, time_limit: float | None = None) -> int:
+def build(names: list[str], out: Path, force: bool, node_limit: int | None = None) -> int:
     """Synthesize ``names`` into ``out``; returns the process exit code (2 if a file
     exists and ``force`` is off, 1 on an unknown name)."""
     unknown = [n for n in names if n not in BUILTINS]
@@ -41,14 +46,15 @@ def build(names: list[str], out: Path, force: bool, time_limit: float | None = N
     out.mkdir(parents=True, exist_ok=True)
     for name in names:
         t = time.perf_counter()
-        art = synthesize_artifact(name, time_limit)
+        art = synthesize_artifact(name, node_limit)
         path = out / f"{name}.json"
         tmp = path.with_suffix(".json.tmp")
         art.save(tmp)
         tmp.replace(path)
         s = art.summary
         print(
-            f"{name}: {s['status']}, flow {s['flow']}, {s['n_cuts']} cuts, {time.perf_counter() - t:.1f} s -> {path}",
+            f"{name}: {s['status']}{' (stopped by ' + s['stopped_by'] + ')' if s.get('stopped_by') else ''}, "
+            f"flow {s['flow']}, {s['n_cuts']} cuts, {time.perf_counter() - t:.1f} s -> {path}",
             flush=True,
         )
         write_manifest(out)  # after each file: an interrupted build leaves a true manifest
@@ -61,15 +67,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--force", action="store_true", help="overwrite existing artifacts")
     ap.add_argument("--out", type=Path, default=ARTIFACT_DIR, help=f"output folder (default {ARTIFACT_DIR})")
     ap.add_argument(
-        "--time-limit", type=float, default=None, metavar="S",
-        help="solver time limit per problem (the answer may then be feasible, not proven optimal)",
+        "--node-limit", type=int, default=None, metavar="N",
+        help=f"branch-and-bound nodes per HiGHS run (default {ARTIFACT_NODE_LIMIT}; a deterministic budget: "
+        "the answer may then be feasible, not proven optimal)",
     )
     args = ap.parse_args(argv)
     names = args.names or [n for n in BUILTINS if args.force or not (args.out / f"{n}.json").exists()]
     if not names:
         print("every built-in already has an artifact (use --force to rebuild)")
         return 0
-    return build(names, args.out, args.force, args.time_limit)
+    return build(names, args.out, args.force, args.node_limit)
 
 
 if __name__ == "__main__":

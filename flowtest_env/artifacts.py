@@ -3,7 +3,13 @@
 Built-in problems ship their artifacts in ``flowtest_env/artifacts/<name>.json``
 (written by ``experiments/build_artifacts.py``), so ``gym.make`` never solves anything.
 If an artifact is missing (a development checkout before the build), the problem is
-synthesized once and the result cached under :func:`cache_dir`.
+synthesized once and the result cached under :func:`cache_dir`, filed under a key of the
+FlowTest and solver versions and the options (:func:`builtin_cache_path`): an answer
+computed under another version is recomputed, not reused.
+
+Shipped and cached artifacts are computed with deterministic budgets only
+(:func:`artifact_options`: one HiGHS thread, a fixed seed, a node limit per HiGHS run),
+never a wall-clock limit, so they are the same on every machine.
 
 Loaded artifacts and their :class:`~flowtest_env.game.TestGame` tables are kept in
 memory per process: they are read-only, so every env of a problem shares them.
@@ -24,6 +30,7 @@ from __future__ import annotations
 import os
 from functools import lru_cache
 from pathlib import Path
+from typing import Any
 
 from synthesis.artifact import TestArtifact, problem_source_hash, verify_artifact
 from synthesis.errors import ProblemError
@@ -54,11 +61,24 @@ def artifact_path(name: str) -> Path:
     return ARTIFACT_DIR / f"{name}.json"
 
 
-def synthesize_artifact(name: str, time_limit: float | None = None) -> TestArtifact:
-    """Synthesize a built-in problem and wrap it as an artifact (slow: solves a MILP).
+ARTIFACT_NODE_LIMIT = 20_000
+"""Branch-and-bound nodes per HiGHS run for shipped and cached built-in artifacts: far
+above what the built-ins proven optimal need; it bounds mars-exploration, whose fewest
+cuts HiGHS does not prove in hours (docs/benchmarks.md)."""
 
-    With ``time_limit`` the answer may be feasible rather than proven optimal (its
-    summary says which, with the gap); it is checked all the same.
+
+def artifact_options(node_limit: int | None = None) -> dict[str, Any]:
+    """The synthesis options of shipped and cached artifacts: deterministic budgets only
+    (``node_limit`` defaults to :data:`ARTIFACT_NODE_LIMIT`)."""
+    return {"threads": 1, "node_limit": ARTIFACT_NODE_LIMIT if node_limit is None else int(node_limit)}
+
+
+def synthesize_artifact(name: str, node_limit: int | None = None) -> TestArtifact:
+    """Synthesize a built-in problem with :func:`artifact_options` and wrap it as an
+    artifact (slow: solves a MILP). A solve stopped by the node limit gives a feasible
+    test rather than a proven optimum (its summary says which, with the gap); it is
+    checked all the same. The artifact records the options and versions it was made
+    under (``extras["provenance"]``).
 
     Raises
     ------
@@ -68,21 +88,32 @@ def synthesize_artifact(name: str, time_limit: float | None = None) -> TestArtif
     from synthesis.artifact import artifact_of
     from synthesis.builtins import BUILTINS
     from synthesis.pipeline import SynthesisOptions, synthesize
+    from synthesis.provenance import versions
     from synthesis.solver_control import solver_version
     from synthesis.summary import summary_of
 
     if name not in BUILTINS:
         raise KeyError(f"unknown built-in problem {name!r}; known: {', '.join(sorted(BUILTINS))}")
-    test = synthesize(BUILTINS[name](), SynthesisOptions(time_limit=time_limit))
+    options = artifact_options(node_limit)
+    test = synthesize(BUILTINS[name](), SynthesisOptions(**options))
     art = artifact_of(test, summary_of(test))
     # which solver made it: with ties between optimal answers, another HiGHS release may
     # pick another one, so a shipped artifact equals a fresh synthesis under this version
     art.extras[SOLVER_KEY] = {"highspy": solver_version()}
+    art.extras["provenance"] = {"options": options, "versions": versions()}
     return art
 
 
 SOLVER_KEY = "made_with"
 """The key of :attr:`TestArtifact.extras` naming the solver version that made a shipped artifact."""
+
+
+def builtin_cache_path(name: str) -> Path:
+    """The cache file of a built-in's artifact synthesized on this machine, under a key
+    of its name, the options and the current versions."""
+    from synthesis.provenance import cache_key
+
+    return cache_dir() / "builtins" / name / f"{cache_key('builtin', {'name': name, 'options': artifact_options()})}.json"
 
 
 def file_sha256(path: Path) -> str:
@@ -178,7 +209,7 @@ def load_builtin(name: str) -> TestArtifact:
     shipped = artifact_path(name)
     if shipped.exists():
         return load_shipped(shipped, expected)
-    cached = cache_dir() / "builtins" / f"{name}.json"
+    cached = builtin_cache_path(name)
     if cached.exists():
         try:
             return load_checked(cached, expected, "synthesizing it again")

@@ -544,8 +544,10 @@ def test_make_is_fast_cold(env_id: str) -> None:
 
 def _comparable(art: Any) -> dict[str, Any]:
     """The whole artifact as JSON data, minus what differs between two syntheses of the
-    same test: the solver's statistics (``summary["stats"]``: times, node counts, rounds)
-    and every ``*_seconds`` figure."""
+    same test: the solver's statistics (``summary["stats"]``: times, node counts, rounds),
+    every ``*_seconds`` figure, and the versions it was made under
+    (``extras["provenance"]["versions"]``: the synthesis sources' digest changes with any
+    edit; the answer is what is compared)."""
 
     def strip(x: Any) -> Any:
         if isinstance(x, dict):
@@ -556,6 +558,7 @@ def _comparable(art: Any) -> dict[str, Any]:
 
     d = json.loads(json.dumps(art.to_dict()))
     d["summary"].pop("stats", None)
+    d["extras"].get("provenance", {}).pop("versions", None)
     return strip(d)
 
 
@@ -640,7 +643,8 @@ def test_missing_artifact_is_synthesized_once_and_cached(no_shipped_artifacts: P
 
     with pytest.warns(UserWarning, match="no shipped artifact for 'small-reactive'"):
         env = gym.make("FlowTest-SmallReactive-v0")
-    cached = no_shipped_artifacts / "cache" / "builtins" / "small-reactive.json"
+    cached = artifacts.builtin_cache_path("small-reactive")
+    assert no_shipped_artifacts / "cache" / "builtins" / "small-reactive" in cached.parents
     assert cached.exists() and not (no_shipped_artifacts / "shipped").exists()
     artifacts.load_builtin.cache_clear()
     artifacts.builtin_game.cache_clear()
@@ -650,6 +654,46 @@ def test_missing_artifact_is_synthesized_once_and_cached(no_shipped_artifacts: P
     shipped = TestArtifact.load(ROOT / "flowtest_env" / "artifacts" / "small-reactive.json")
     assert _comparable(env.unwrapped.artifact) == _comparable(again.unwrapped.artifact) == _comparable(shipped)
     assert data_equivalence(_rollout(env, 30, seed=1), _rollout(again, 30, seed=1))
+
+
+def test_cached_builtin_from_another_version_is_rebuilt(no_shipped_artifacts: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A built-in's cached artifact is filed under the FlowTest and solver versions: under
+    another highspy (or FlowTest) version it is synthesized again, not reused."""
+    import flowtest_env.artifacts as artifacts
+    from synthesis import provenance
+
+    with pytest.warns(UserWarning, match="synthesizing it now"):
+        artifacts.load_builtin("small-reactive")
+    first = artifacts.builtin_cache_path("small-reactive")
+    real = provenance.versions()
+    for name in ("highspy", "flowtest"):
+        monkeypatch.setattr(provenance, "versions", lambda name=name: dict(real, **{name: "0.0.0-other"}))
+        artifacts.load_builtin.cache_clear()
+        with pytest.warns(UserWarning, match="synthesizing it now"):
+            artifacts.load_builtin("small-reactive")
+        assert artifacts.builtin_cache_path("small-reactive") != first
+    monkeypatch.setattr(provenance, "versions", lambda: real)
+    artifacts.load_builtin.cache_clear()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        artifacts.load_builtin("small-reactive")  # the first one's cache again
+    assert len(list(first.parent.iterdir())) == 3
+
+
+def test_shipped_artifacts_say_how_they_were_made() -> None:
+    """Every shipped artifact was made with deterministic budgets only (no wall clock,
+    one HiGHS thread, a node limit) and records the versions it was made under."""
+    from synthesis.artifact import TestArtifact
+
+    for name in BUILTIN_ENVS:
+        if not artifact_path(name).exists():
+            continue
+        art = TestArtifact.load(artifact_path(name))
+        prov = art.extras.get("provenance")
+        assert prov is not None, f"{name}: rebuild with build_artifacts --force"
+        assert prov["options"]["threads"] == 1 and prov["options"]["node_limit"] >= 1
+        assert set(prov["versions"]) >= {"flowtest", "highspy"}
+        assert art.summary["deterministic"] is True and art.summary["stopped_by"] in (None, "node_limit")
 
 
 def test_build_artifacts_refuses_to_overwrite(tmp_path: Path) -> None:
