@@ -32,7 +32,7 @@ class SynthesisOptions:
     after_first: float | None = None
     mip_rel_gap: float = 0.0
     # HiGHS threads; None: 1, so the answer is the same on every machine (HiGHS's MIP
-    # search is deterministic for a fixed thread count); 0: HiGHS's choice
+    # search is deterministic for a fixed thread count)
     threads: int | None = None
     # branch-and-bound nodes per HiGHS run: a deterministic budget (see MilpOptions)
     node_limit: int | None = None
@@ -66,6 +66,9 @@ def check_options(options: SynthesisOptions) -> None:
     t = options.threads
     if t is not None and (isinstance(t, bool) or not isinstance(t, int) or not 1 <= t <= MAX_THREADS):
         raise ProblemError(f"option threads must be an integer from 1 to {MAX_THREADS}, not {t!r}")
+    nl = options.node_limit
+    if nl is not None and (isinstance(nl, bool) or not isinstance(nl, int) or nl < 1):
+        raise ProblemError(f"option node_limit must be a positive integer, not {nl!r}")
     if options.setting is not None and options.setting not in SETTINGS:
         raise ProblemError(f"unknown obstacle setting {options.setting!r}; expected one of {', '.join(SETTINGS)}")
     it = options.agent_iterations
