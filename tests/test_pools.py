@@ -18,6 +18,7 @@ from typing import Any
 import pytest
 
 import flowtest_env.random_grid as rg
+from experiments.bench_pools import BURNER, without_timings
 from synthesis import provenance
 from synthesis.pipeline import SynthesisOptions, synthesize
 from synthesis.random_grid import first_consistent, random_problem
@@ -26,15 +27,6 @@ from synthesis.summary import status_text
 ROOT = Path(__file__).resolve().parents[1]
 POOL = (5, "reachability", 1)  # a few seconds per pool of three seeds
 SEEDS = (0, 1, 2)
-
-
-def without_timings(x: Any) -> Any:
-    """A JSON value without its timing fields (``*_seconds``, ``timings``)."""
-    if isinstance(x, dict):
-        return {k: without_timings(v) for k, v in x.items() if not k.endswith("_seconds") and k != "timings"}
-    if isinstance(x, list):
-        return [without_timings(v) for v in x]
-    return x
 
 
 def pool_files(cache: Path) -> dict[str, str]:
@@ -197,9 +189,6 @@ def test_the_suite_never_touches_the_real_home(tmp_path: Path) -> None:
 
 
 # ---------------------------------------------------------------- slow: load and Ray
-
-
-BURNER = "import time\nwhile True:\n    pass\n"
 
 
 @pytest.mark.slow
