@@ -22,7 +22,7 @@ from experiments.bench_pools import BURNER, without_timings
 from synthesis import provenance
 from synthesis.pipeline import SynthesisOptions, synthesize
 from synthesis.random_grid import first_consistent, random_problem
-from synthesis.summary import status_text
+from synthesis.summary import stop_note
 
 ROOT = Path(__file__).resolve().parents[1]
 POOL = (5, "reachability", 1)  # a few seconds per pool of three seeds
@@ -157,12 +157,12 @@ def test_node_limit_is_a_reported_deterministic_budget() -> None:
     for test in runs:
         s = summary_of(test)
         assert (s["status"], s["stopped_by"], s["deterministic"]) == ("feasible", "node_limit", True)
-        assert "node limit" in status_text(s) and test.checks.ok
+        assert "node limit" in stop_note(s) and test.checks.ok
     assert [t.routing.cut_edges.tolist() for t in runs[:1]] == [t.routing.cut_edges.tolist() for t in runs[1:]]
     full = summary_of(synthesize(problem))
     assert (full["status"], full["stopped_by"], full["deterministic"]) == ("optimal", None, True)
     timed = summary_of(synthesize(problem, SynthesisOptions(time_limit=60)))
-    assert timed["deterministic"] is False and "wall-clock" in status_text(timed)
+    assert timed["deterministic"] is False and "wall-clock" in stop_note(timed)
 
 
 def test_progress_bar_goes_to_stderr(cache: Path, capsys: pytest.CaptureFixture[str]) -> None:
