@@ -39,7 +39,7 @@ from scipy.sparse.csgraph import breadth_first_order
 from .errors import InconsistentProblem
 from .products import Products, coreachable, reachable
 from .routing_heuristic import RouteSeed, RoutingGuess, guess_routing
-from .solver_control import Clock, SolveControl, run_highs
+from .solver_control import Clock, SolveControl, run_highs, stdout_guard
 
 MODES = ("static", "reactive", "mixed")
 
@@ -1023,7 +1023,8 @@ class _FeasibilityFlow:
 
 
 def _highs(options: MilpOptions) -> highspy.Highs:
-    h = highspy.Highs()  # HiGHS >= 1.16 prints its banner here: see solver_control.stdout_guard
+    with stdout_guard():  # HiGHS >= 1.16 prints its banner on construction, before any option
+        h = highspy.Highs()
     h.setOptionValue("output_flag", False)
     h.setOptionValue("log_to_console", False)
     if options.threads is not None:

@@ -254,7 +254,8 @@ def solver_version() -> str:
     try:
         return version("highspy")
     except PackageNotFoundError:  # an unpackaged build: ask HiGHS itself
-        return str(highspy.Highs().version())
+        with stdout_guard():  # the banner of HiGHS >= 1.16
+            return str(highspy.Highs().version())
 
 
 def solves_running() -> bool:

@@ -91,3 +91,15 @@ def test_stdout_guard_drops_writes_to_fd_1_and_restores_it(capfd: pytest.Capture
         print("inside too")
     os.write(1, b"after\n")
     assert capfd.readouterr().out == "before\nafter\n"
+
+
+def test_library_synthesis_prints_nothing_on_stdout(capfd: pytest.CaptureFixture[str]) -> None:
+    """Used as a library (``synthesize``, ``gym.make`` of a problem file), FlowTest keeps the
+    caller's standard output clean: HiGHS >= 1.16 prints a banner when a solver object is
+    made, before any option can silence it."""
+    from synthesis.pipeline import synthesize
+    from synthesis.problems import load_problem
+
+    capfd.readouterr()
+    synthesize(load_problem("small-reactive"))
+    assert capfd.readouterr().out == ""
