@@ -6,7 +6,7 @@ command that takes an environment gets its test from :func:`load_test`, which ac
 
 * a **built-in name** (``"maze2"``): its shipped artifact;
 * a **problem file** (``mine.toml``): synthesized once, then cached on disk under a key
-  of its content, FlowTest's and HiGHS's versions (:func:`flowtest_env.keys.cache_key`);
+  of its content, FlowTest's and HiGHS's versions (:func:`synthesis.provenance.content_key`);
   only a proven-optimal answer is cached (a time-limited one depends on the machine's
   speed, so it is synthesized again next time, with a warning);
 * an **artifact file** (``mine.json``, written by ``flowtest synthesize --out``), checked on
@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Union
 
 from synthesis.artifact import FORMAT, TestArtifact, artifact_of
+from synthesis.provenance import content_key
 from synthesis.errors import ProblemError
 from synthesis.pipeline import SynthesizedTest, synthesize
 from synthesis.problems import Problem, load_problem_file
@@ -33,7 +34,6 @@ from synthesis.summary import summary_of
 
 from .artifacts import builtin_game, cache_dir, load_builtin, warn_refused_entry
 from .game import TestGame
-from .keys import cache_key
 
 TestLike = Union[str, "os.PathLike[str]", Problem, SynthesizedTest, TestArtifact]
 """Anything :func:`load_test` accepts."""
@@ -62,7 +62,7 @@ def _is_artifact_file(path: Path, raw: bytes) -> bool:
 
 def problem_cache_path(path: Path, raw: bytes) -> Path:
     """Where the synthesized test of a problem file with content ``raw`` is cached."""
-    return cache_dir() / "problems" / f"{path.stem}-{cache_key('problem', raw)[:24]}.json"
+    return cache_dir() / "problems" / f"{path.stem}-{content_key('problem', raw)[:24]}.json"
 
 
 def _synthesized_artifact(problem: Problem) -> TestArtifact:
@@ -130,7 +130,7 @@ def load_test(test: TestLike) -> TestArtifact:
         raw = path.read_bytes()
     except OSError as exc:
         raise ProblemError(f"cannot read {text!r}: {exc.strerror or exc}") from None
-    key = cache_key("file", raw)
+    key = content_key("file", raw)
     hit = _LOADED.get(key)
     if hit is not None:
         return hit

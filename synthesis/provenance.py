@@ -20,7 +20,7 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any, Mapping
 
-__all__ = ["cache_key", "source_digest", "versions"]
+__all__ = ["cache_key", "content_key", "source_digest", "versions"]
 
 
 def _dist_version(name: str) -> str:
@@ -61,3 +61,9 @@ def cache_key(what: str, params: Mapping[str, Any]) -> str:
     """
     text = json.dumps({"what": what, "params": params, "versions": versions()}, sort_keys=True, separators=(",", ":"))
     return hashlib.sha256(text.encode()).hexdigest()[:24]
+
+
+def content_key(what: str, content: bytes, options: Mapping[str, Any] | None = None) -> str:
+    """:func:`cache_key` of an input given as bytes (a user's problem file): its SHA-256 and
+    ``options`` under the current :func:`versions`."""
+    return cache_key(what, {"sha256": hashlib.sha256(content).hexdigest(), "options": dict(options or {})})

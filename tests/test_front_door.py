@@ -14,7 +14,8 @@ import pytest
 
 import flowtest_env
 from experiments.cli import main
-from flowtest_env import keys, multiagent, sources
+from flowtest_env import multiagent, sources
+from synthesis import provenance
 from synthesis.artifact import TestArtifact, artifact_of
 from synthesis.errors import ProblemError
 from synthesis.pipeline import synthesize
@@ -70,16 +71,16 @@ def test_problem_file_is_synthesized_once_then_cached(cache: Path, problem_file:
 
 
 def test_cache_key_depends_on_content_versions_and_options(monkeypatch: pytest.MonkeyPatch) -> None:
-    k = keys.cache_key("problem", b"a")
-    assert k == keys.cache_key("problem", b"a")
-    assert k != keys.cache_key("problem", b"b")
-    assert k != keys.cache_key("pool", b"a")
-    assert keys.cache_key("problem", b"a", {"x": 1, "y": 2}) == keys.cache_key("problem", b"a", {"y": 2, "x": 1})
-    assert keys.cache_key("problem", b"a", {"x": 1}) != k
-    assert {"flowtest", "highspy", "artifact"} <= set(keys.versions())
-    other = {**keys.versions(), "highspy": "0.0.0-other"}
-    monkeypatch.setattr(keys, "versions", lambda: other)
-    assert keys.cache_key("problem", b"a") != k
+    k = provenance.content_key("problem", b"a")
+    assert k == provenance.content_key("problem", b"a")
+    assert k != provenance.content_key("problem", b"b")
+    assert k != provenance.content_key("pool", b"a")
+    assert provenance.content_key("problem", b"a", {"x": 1, "y": 2}) == provenance.content_key("problem", b"a", {"y": 2, "x": 1})
+    assert provenance.content_key("problem", b"a", {"x": 1}) != k
+    assert {"flowtest", "flowtest_source", "highspy"} <= set(provenance.versions())
+    other = {**provenance.versions(), "highspy": "0.0.0-other"}
+    monkeypatch.setattr(provenance, "versions", lambda: other)
+    assert provenance.content_key("problem", b"a") != k
 
 
 def test_artifact_file_and_python_objects(cache: Path, tmp_path: Path) -> None:
