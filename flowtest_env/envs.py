@@ -25,6 +25,7 @@ from .encoding import Encoder, make_encoder
 from .game import GRID_ACTIONS, MET, VIOLATED, GameError, RunState, TestGame
 from .render import ansi, make_renderer
 from .wrappers import MEMORY_KINDS, DistancePotential, VisitedMemory, position_slice
+from .validation import action_index, finite_float, one_of, positive_int
 
 DEFAULT_MAX_STEPS: dict[str, int] = {
     "example1": 50,
@@ -147,6 +148,7 @@ class FlowTestEnv(gym.Env[np.ndarray, np.int64]):
     ) -> None:
         if problem is not None:  # the older name of `test`
             test = problem
+        one_of("setting", setting, (None, "instantaneous", "accumulative"))
         game = game_for(test, setting)
         self._configure(
             [game], max_steps if max_steps is not None else default_max_steps(game), obs_kind,
@@ -174,12 +176,14 @@ class FlowTestEnv(gym.Env[np.ndarray, np.int64]):
         shaping_gamma: float = 0.99,
         pad_to: int = 8,
     ) -> None:
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"unknown render_mode {render_mode!r}; expected one of {self.metadata['render_modes']}")
-        if view not in ("system", "engineer"):
-            raise ValueError(f"unknown view {view!r}; expected 'system' or 'engineer'")
-        if int(max_steps) < 1:
-            raise ValueError(f"max_steps must be at least 1, not {max_steps}")
+        one_of("render_mode", render_mode, (None, *self.metadata["render_modes"]))
+        one_of("view", view, ("system", "engineer"))
+        max_steps = positive_int("max_steps", max_steps)
+        tile_size = positive_int("tile_size", tile_size)
+        step_cost = finite_float("step_cost", step_cost)
+        restricted_penalty = finite_float("restricted_penalty", restricted_penalty)
+        goal_reward = finite_float("goal_reward", goal_reward)
+        violation_penalty = finite_float("violation_penalty", violation_penalty)
         self.games = games
         self.encoders: list[Encoder] = [make_encoder(g, obs_kind, pad_to) for g in games]
         first = self.encoders[0].space
@@ -255,19 +259,15 @@ class FlowTestEnv(gym.Env[np.ndarray, np.int64]):
         gymnasium.error.ResetNeeded
             Before ``reset()`` or after the episode ended.
         gymnasium.error.InvalidAction
-            If ``action`` is not an action index (a masked action is *not* an error).
+            If ``action`` is not an integer of the action space: a float, a bool, a
+            string or an array of another shape (a masked action is *not* an error).
         """
         run = self.run
         if run is None:
             raise gym.error.ResetNeeded("call reset() before step()")
         if run.done or run.steps >= self.max_steps:
             raise gym.error.ResetNeeded("the episode has ended; call reset()")
-        try:
-            a = int(action)
-        except (TypeError, ValueError):
-            raise gym.error.InvalidAction(f"action {action!r} is not an integer") from None
-        if not (0 <= a < self.game.n_actions):
-            raise gym.error.InvalidAction(f"action {a} is outside {self.action_space}")
+        a = action_index(action, self.game.n_actions)
         out = self.game.step(run, a)
         reward = -self.step_cost
         if out.restricted or out.invalid:
@@ -703,12 +703,26 @@ class RandomGridEnv(FlowTestEnv):
     ) -> None:
         from .random_grid import random_pool
 
-        if kind not in ("static", "reactive"):
-            raise ValueError(f"unknown kind {kind!r}; expected 'static' or 'reactive'")
+        from synthesis.random_grid import FAMILIES
+
+        one_of("family", family, tuple(FAMILIES))
+        one_of("kind", kind, ("static", "reactive"))
+        one_of("setting", setting, (None, "instantaneous", "accumulative"))
+        size = positive_int("size", size)
+        if n is not None:
+            n = positive_int("n", n)
+        if isinstance(seeds, (str, bytes)) or not hasattr(seeds, "__iter__"):
+            raise ValueError(f"seeds must be a list of non-negative integers, not {seeds!r}")
+        seeds = tuple(seeds)
         if not seeds:
             raise ValueError("the seed pool is empty")
+        for s in seeds:
+            if isinstance(s, (bool, np.bool_)) or not isinstance(s, (int, np.integer)) or s < 0:
+                raise ValueError(f"seeds must be non-negative integers, not {s!r}")
+        if max_steps is not None:
+            max_steps = positive_int("max_steps", max_steps)
         n = n if n is not None else (1 if family == "reachability" else 2)
-        pool = random_pool(int(size), family, int(n), tuple(int(s) for s in seeds), kind)
+        pool = random_pool(size, family, n, tuple(int(s) for s in seeds), kind)
         games = [TestGame(a, setting) for a in pool]
         self._configure(
             games, max_steps if max_steps is not None else 4 * size * size, obs_kind, render_mode, view, tile_size,

@@ -84,6 +84,7 @@ from .envs import default_max_steps
 from .game import MET, VIOLATED, RunState, TestGame
 from .render import ansi, make_renderer
 from .sources import TestLike, game_for
+from .validation import action_index, finite_float, one_of, positive_int
 
 TESTER, SYSTEM = "tester_0", "system_0"
 
@@ -145,21 +146,20 @@ class raw_env(AECEnv):  # noqa: N801 - PettingZoo's module shape
         problem: TestLike | None = None,
     ) -> None:
         super().__init__()
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"unknown render_mode {render_mode!r}; expected one of {self.metadata['render_modes']}")
+        one_of("render_mode", render_mode, (None, *self.metadata["render_modes"]))
+        one_of("setting", setting, (None, "instantaneous", "accumulative"))
+        one_of("view", view, ("system", "engineer"))
         if problem is not None:  # the older name of `test`
             test = problem
         game = game_for(test, setting, external_tester=True)
         self.game: TestGame = game
         self.problem = game.artifact.name
-        self.max_cycles = int(max_cycles if max_cycles is not None else default_max_steps(game))
-        if self.max_cycles < 1:
-            raise ValueError(f"max_cycles must be at least 1, not {max_cycles}")
+        self.max_cycles = positive_int("max_cycles", max_cycles if max_cycles is not None else default_max_steps(game))
         self.render_mode = render_mode
         self.view = view
-        self.tile_size = tile_size
-        self.step_cost = float(step_cost)
-        self.restricted_penalty = float(restricted_penalty)
+        self.tile_size = positive_int("tile_size", tile_size)
+        self.step_cost = finite_float("step_cost", step_cost)
+        self.restricted_penalty = finite_float("restricted_penalty", restricted_penalty)
         self.encoder = make_encoder(game, obs_kind)
         system_first = game.has_agent and not game.agent_first
         self.possible_agents = [SYSTEM, TESTER] if system_first else [TESTER, SYSTEM]
@@ -274,14 +274,16 @@ class raw_env(AECEnv):  # noqa: N801 - PettingZoo's module shape
 
     def step(self, action: Any) -> None:
         """Play ``action`` for the selected agent (an illegal one is a penalized no-op)."""
+        if not self.agents and not hasattr(self, "agent_selection"):
+            raise gymnasium.error.ResetNeeded("call reset() before step()")
         agent = self.agent_selection
         if self.terminations[agent] or self.truncations[agent]:
             self._was_dead_step(action)
             return
         g, run = self.game, self.run
         self._cumulative_rewards[agent] = 0.0
-        self.rewards = {a: 0.0 for a in self.agents}
-        a = int(action)
+        self.rewards = {x: 0.0 for x in self.agents}
+        a = action_index(action, int(self._action_spaces[agent].n))
         if agent == TESTER:
             if not self.apply_tester(a):
                 self.rewards[TESTER] -= self.restricted_penalty
@@ -354,15 +356,22 @@ class ParallelFlowTestEnv(ParallelEnv):
         self, actions: dict[str, Any]
     ) -> tuple[dict[str, Any], dict[str, float], dict[str, bool], dict[str, bool], dict[str, Any]]:
         aec = self.aec_env
+        if not self.agents:
+            raise gymnasium.error.ResetNeeded("call reset() before step(): no agent is live (not reset, or the run has ended)")
+        if not isinstance(actions, dict):
+            raise gymnasium.error.InvalidAction(f"actions must be a dict {{agent: action}}, not {type(actions).__name__}")
+        unknown = sorted(set(actions) - set(self.possible_agents), key=str)
+        if unknown:
+            raise gymnasium.error.InvalidAction(f"action for unknown agent {unknown[0]!r}; agents: {self.possible_agents}")
+        for agent in self.agents:  # every live agent's action checked before any is played
+            if agent not in actions:
+                raise gymnasium.error.InvalidAction(f"no action for {agent}")
+            action_index(actions[agent], int(aec.action_space(agent).n))
         rewards = {a: 0.0 for a in self.agents}
         for agent in self.possible_agents:
             if agent not in self.agents or aec.terminations[agent] or aec.truncations[agent]:
                 break
-            if agent not in actions:
-                raise KeyError(f"no action for {agent}")
             action = actions[agent]
-            if not aec.action_space(agent).contains(np.int64(action)):
-                raise ValueError(f"action {action!r} of {agent} is outside {aec.action_space(agent)}")
             aec.agent_selection = agent
             aec.step(action)
             for a in rewards:

@@ -9,7 +9,9 @@ import numpy as np
 from gymnasium import spaces
 
 
-class ActionMaskObservation(gym.Wrapper[dict[str, np.ndarray], np.int64, np.ndarray, np.int64]):
+class ActionMaskObservation(
+    gym.Wrapper[dict[str, np.ndarray], np.int64, np.ndarray, np.int64], gym.utils.RecordConstructorArgs
+):
     """Put the legal-action mask into the observation.
 
     The observation becomes a ``Dict`` with ``"observation"`` (the wrapped env's
@@ -24,6 +26,7 @@ class ActionMaskObservation(gym.Wrapper[dict[str, np.ndarray], np.int64, np.ndar
     """
 
     def __init__(self, env: gym.Env[np.ndarray, np.int64]) -> None:
+        gym.utils.RecordConstructorArgs.__init__(self)  # so gymnasium.make(env.spec) rebuilds it
         super().__init__(env)
         if not isinstance(env.action_space, spaces.Discrete):
             raise TypeError(f"ActionMaskObservation needs a Discrete action space, not {env.action_space}")
@@ -105,7 +108,7 @@ class VisitedMemory:
         return np.concatenate([obs, self._seen])
 
 
-class VisitedPlaces(gym.ObservationWrapper[np.ndarray, np.int64, np.ndarray]):
+class VisitedPlaces(gym.ObservationWrapper[np.ndarray, np.int64, np.ndarray], gym.utils.RecordConstructorArgs):
     """Append the places the SUT has occupied this episode to a flat FlowTest observation.
 
     **Why.** A reactive test answers the *history* of the run, which the observation
@@ -125,6 +128,7 @@ class VisitedPlaces(gym.ObservationWrapper[np.ndarray, np.int64, np.ndarray]):
     """
 
     def __init__(self, env: gym.Env[np.ndarray, np.int64]) -> None:
+        gym.utils.RecordConstructorArgs.__init__(self)  # so gymnasium.make(env.spec) rebuilds it
         super().__init__(env)
         self.memory = VisitedMemory(position_slice(encoder_of(env)))
         n = int(env.observation_space.shape[0]) + self.memory.size
@@ -168,7 +172,7 @@ class DistancePotential:
         return -min(float(d), 4 * self.scale) / self.scale if d < INF else -4.0
 
 
-class DistanceShaping(gym.Wrapper[np.ndarray, np.int64, np.ndarray, np.int64]):
+class DistanceShaping(gym.Wrapper[np.ndarray, np.int64, np.ndarray, np.int64], gym.utils.RecordConstructorArgs):
     """Potential-based reward shaping (Ng et al. 1999, keeps the optimal policies):
     ``r + gamma * phi(s') - phi(s)`` with :class:`DistancePotential` (``phi = 0`` at the
     end of an episode). Off unless asked for: the same as the env option
@@ -179,6 +183,7 @@ class DistanceShaping(gym.Wrapper[np.ndarray, np.int64, np.ndarray, np.int64]):
     """
 
     def __init__(self, env: gym.Env[np.ndarray, np.int64], scale: float = 10.0, gamma: float = 0.99) -> None:
+        gym.utils.RecordConstructorArgs.__init__(self, scale=scale, gamma=gamma)  # gymnasium.make(env.spec) rebuilds it
         super().__init__(env)
         self.potential = DistancePotential(scale)
         self.gamma = float(gamma)
