@@ -596,6 +596,9 @@ def _synthesize_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--threads", metavar="N", type=_positive_int, help="solver threads (default 1: the same answer on every machine; at most the machine's CPUs)")
     p.add_argument("--setting", choices=SETTINGS, help="how reactive obstacles are shown (default: the problem's, else instantaneous)")
     p.add_argument("--force", action="store_true", help="overwrite existing --out/--plot files")
+    p.add_argument("--no-size-limit", action="store_true",
+                   help="synthesize even a problem whose product graph may exceed "
+                        f"{pipeline.MAX_GRAPH_EDGES:,} edges (refused by default, with an estimate)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines on stderr")
     p.add_argument(
         "--progress", metavar="S", nargs="?", type=_positive_float, const=PROGRESS_EVERY,
@@ -629,7 +632,10 @@ def run_synthesize(args: argparse.Namespace) -> int:
     cpus = os.cpu_count() or 1
     if args.threads is not None and args.threads > cpus:
         raise ProblemError(f"--threads {args.threads} is more than the {cpus} CPUs of this machine")
-    problem = _load(load_problem, args.problem)
+    from synthesis.problems import MAX_GRID_CELLS
+
+    max_cells = None if args.no_size_limit else MAX_GRID_CELLS
+    problem = _load(lambda name: load_problem(name, max_cells), args.problem)
     control = SolveControl()
     every = getattr(args, "progress", None)
     # stdout is ours: whatever a library prints meanwhile (HiGHS's banner, a C printf)
@@ -644,6 +650,7 @@ def run_synthesize(args: argparse.Namespace) -> int:
             setting=args.setting,
             progress=progress,
             control=control,
+            max_graph_edges=None if args.no_size_limit else pipeline.MAX_GRAPH_EDGES,
         )
         test = pipeline.synthesize(problem, options)
         summary = json_safe(summary_of(test))

@@ -23,6 +23,7 @@ from typing import Sequence
 
 import numpy as np
 
+from .errors import ProblemTooLarge
 from .specs import Objective, Task, holds, to_text
 
 Label = frozenset[str]
@@ -116,11 +117,16 @@ def task_automaton(task: Task, letters: Sequence[Label]) -> DBA:
 # ----------------------------------------------------------- product and reduction
 
 
-def product(parts: Sequence[DBA], accept_all: bool = True) -> DBA:
+def product(parts: Sequence[DBA], accept_all: bool = True, max_states: int | None = None) -> DBA:
     """Synchronous product of DBAs over the same letters, reachable part only.
 
     With ``accept_all`` the product has one acceptance column (every part accepts);
     otherwise it keeps one column per part (used for B_pi = B_sys x B_test).
+
+    Raises
+    ------
+    ProblemTooLarge
+        If the reachable part has more than ``max_states`` states (``None``: no bound).
     """
     letters = parts[0].letters
     k = len(letters)
@@ -140,6 +146,8 @@ def product(parts: Sequence[DBA], accept_all: bool = True) -> DBA:
             if j is None:
                 j = index[t] = len(order)
                 order.append(t)
+                if max_states is not None and len(order) > max_states:
+                    raise ProblemTooLarge(f"the objectives' automaton has more than {max_states} states")
             row[a] = j
         rows.append(row)
     comps = np.array(order, dtype=np.int32).reshape(len(order), len(parts))
@@ -188,10 +196,10 @@ def minimize(dba: DBA) -> DBA:
     )
 
 
-def objective_automaton(objective: Objective, letters: Sequence[Label]) -> DBA:
+def objective_automaton(objective: Objective, letters: Sequence[Label], max_states: int | None = None) -> DBA:
     """The reduced DBA of a conjunction of tasks."""
     parts = [task_automaton(t, letters) for t in objective.tasks]
-    return minimize(product(parts, accept_all=True))
+    return minimize(product(parts, accept_all=True, max_states=max_states))
 
 
 @dataclass
@@ -233,11 +241,16 @@ class SpecificationProduct:
         return "; ".join(bits) or "start"
 
 
-def specification_product(sys_objective: Objective, test_objective: Objective, letters: Sequence[Label]) -> SpecificationProduct:
-    """Build B_sys, B_test and their reachable product B_pi (method.md §3)."""
-    b_sys = objective_automaton(sys_objective, letters)
-    b_test = objective_automaton(test_objective, letters)
-    pi = product([b_sys, b_test], accept_all=False)
+def specification_product(
+    sys_objective: Objective, test_objective: Objective, letters: Sequence[Label], max_states: int | None = None
+) -> SpecificationProduct:
+    """Build B_sys, B_test and their reachable product B_pi (method.md §3).
+
+    ``max_states`` bounds every product explored (:class:`ProblemTooLarge` beyond it).
+    """
+    b_sys = objective_automaton(sys_objective, letters, max_states)
+    b_test = objective_automaton(test_objective, letters, max_states)
+    pi = product([b_sys, b_test], accept_all=False, max_states=max_states)
     # B_pi's components must stay those of B_sys/B_test (no further merging of
     # histories with different (q_sys, q_test)), so it is not minimised again.
     return SpecificationProduct(pi, b_sys, b_test)

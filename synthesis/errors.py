@@ -17,6 +17,11 @@ class ProblemError(FlowTestError, ValueError):
     """Invalid input: the message says what is wrong and where."""
 
 
+class ProblemTooLarge(ProblemError):
+    """The problem is well formed but far beyond what can be solved (see
+    :mod:`synthesis.limits`); the message gives the estimate and the way to go on."""
+
+
 class InconsistentProblem(FlowTestError):
     """The problem is well formed but has no test.
 

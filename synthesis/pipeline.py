@@ -7,13 +7,14 @@ agent problems continue in :mod:`synthesis.agent` from the same pieces.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Callable
 
 import numpy as np
 
 from .automata import SpecificationProduct, specification_product
 from .errors import ProblemError
+from .limits import MAX_GRAPH_EDGES, check_size
 from .milp import MilpOptions, RoutingResult, solve_routing
 from .problems import Problem
 from .solver_control import SolveControl
@@ -44,6 +45,9 @@ class SynthesisOptions:
     closed_loop: bool = False
     # Ctrl-C and the live solver status, shared with the caller (see solver_control)
     control: SolveControl | None = None
+    # refuse problems whose product graph may exceed this many edges (None: no limit),
+    # before building anything (synthesis.limits)
+    max_graph_edges: int | None = MAX_GRAPH_EDGES
 
 
 MAX_THREADS = 256
@@ -74,6 +78,9 @@ def check_options(options: SynthesisOptions) -> None:
     it = options.agent_iterations
     if it is not None and (isinstance(it, bool) or not isinstance(it, int) or it < 1):
         raise ProblemError(f"option agent_iterations must be a positive integer, not {it!r}")
+    e = options.max_graph_edges
+    if e is not None and (isinstance(e, bool) or not isinstance(e, int) or e < 1):
+        raise ProblemError(f"option max_graph_edges must be a positive integer or None, not {e!r}")
 
 
 @dataclass
@@ -126,6 +133,23 @@ def milp_options(problem: Problem, options: SynthesisOptions) -> MilpOptions:
     )
 
 
+def remaining_time(problem: Problem, options: SynthesisOptions, spent: float) -> SynthesisOptions:
+    """``options`` with the time limit that is left after ``spent`` seconds of graph building:
+    the limit bounds the whole synthesis, not the solve alone.
+
+    Raises
+    ------
+    TimeoutError
+        If the limit is already spent.
+    """
+    limit = options.time_limit if options.time_limit is not None else problem.time_limit
+    if limit is None:
+        return options
+    if spent >= limit:
+        raise TimeoutError(f"building the product graphs took {spent:.1f} s, the whole time limit of {limit:g} s")
+    return replace(options, time_limit=limit - spent)
+
+
 def strategy_from_routing(products: Products, routing: RoutingResult, setting: str) -> TestStrategy:
     """``C(q)`` per history and the static obstacles, as a test strategy (method.md §6)."""
     g, ts = products.virtual, products.ts
@@ -148,6 +172,7 @@ def synthesize(problem: Problem, options: SynthesisOptions | None = None) -> Syn
     """
     options = options or SynthesisOptions()
     check_options(options)
+    check_size(problem, options.max_graph_edges)
     if problem.kind == "agent":
         from .agent import synthesize_agent_test
 
@@ -157,7 +182,7 @@ def synthesize(problem: Problem, options: SynthesisOptions | None = None) -> Syn
     note("building automata and product graphs")
     spec, products = build_graphs(problem)
     graph_seconds = time.perf_counter() - t0
-    routing = solve_routing(products, milp_options(problem, options))
+    routing = solve_routing(products, milp_options(problem, remaining_time(problem, options, graph_seconds)))
     setting = options.setting or problem.extras.get("setting", "instantaneous")
     strategy = strategy_from_routing(products, routing, setting)
     if routing.status != "optimal":

@@ -17,7 +17,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from .errors import ProblemError
+from .errors import ProblemError, ProblemTooLarge
 from .specs import Objective, check_proposition_name, check_propositions, parse_objective
 from .strategy import SETTINGS
 from .systems import Cell, TransitionSystem, graph_system, grid_world
@@ -159,14 +159,31 @@ def _table(d: dict, key: str, where: str) -> dict:
     return v
 
 
-def parse_grid(text: str, where: str = "[system] grid") -> tuple[list[list[str]], int, int]:
-    """Split grid text into rows of tokens; all rows must have the same width."""
+MAX_GRID_CELLS = 125_000
+"""Largest grid loaded by default (about 350x350): beyond it the moves alone (about four per
+cell, times at least two histories) pass the product-graph limit of :mod:`synthesis.limits`,
+and building T itself takes long. ``max_cells=None`` (``--no-size-limit``) lifts it."""
+
+
+def parse_grid(text: str, where: str = "[system] grid", max_cells: int | None = MAX_GRID_CELLS) -> tuple[list[list[str]], int, int]:
+    """Split grid text into rows of tokens; all rows must have the same width.
+
+    Raises
+    ------
+    ProblemError
+        On ragged rows, a token that is not a name, or more than ``max_cells`` cells.
+    """
     if not isinstance(text, str):
         raise ProblemError(f"{where} must be a string of whitespace-separated tokens")
     rows = [line.split() for line in text.strip("\n").splitlines() if line.strip()]
     if not rows:
         raise ProblemError(f"{where} is empty")
     width = len(rows[0])
+    if max_cells is not None and len(rows) * width > max_cells:
+        raise ProblemTooLarge(
+            f"{where} has {len(rows)}x{width} = {len(rows) * width} cells, more than the {max_cells} that can be "
+            "synthesized (its product graph alone would exceed the size limit); pass --no-size-limit to try anyway"
+        )
     for i, r in enumerate(rows):
         if len(r) != width:
             raise ProblemError(f"{where}: row {i} has {len(r)} cells, row 0 has {width}")
@@ -200,7 +217,7 @@ def _cells_of(spec: Any, tokens: dict[str, list[Cell]], where: str, rows: int, c
     raise ProblemError(f"{where}: {spec!r} is neither a token nor a [row, col] cell")
 
 
-def problem_from_dict(data: dict, source: str = "<problem>") -> Problem:
+def problem_from_dict(data: dict, source: str = "<problem>", max_cells: int | None = MAX_GRID_CELLS) -> Problem:
     """Build a problem from the parsed TOML of problem-format.md.
 
     Every section is checked for unknown keys first, so a misspelled key is named
@@ -257,7 +274,7 @@ def problem_from_dict(data: dict, source: str = "<problem>") -> Problem:
     if "agent" in env and kind != "agent":
         raise ProblemError(f"[environment.agent]{where} is for kind = \"agent\" problems, not {kind!r} ones")
     if "grid" in system:
-        ts, cell_of = _grid_from_toml(system, labels, where)
+        ts, cell_of = _grid_from_toml(system, labels, where, max_cells)
     elif "states" in system:
         ts, cell_of = _graph_from_toml(system, labels, where)
     else:
@@ -285,8 +302,10 @@ def problem_from_dict(data: dict, source: str = "<problem>") -> Problem:
     )
 
 
-def _grid_from_toml(system: dict, labels: dict, where: str) -> tuple[TransitionSystem, Callable[[Any, str], list[int]]]:
-    rows, n_rows, n_cols = parse_grid(system["grid"], f"[system] grid{where}")
+def _grid_from_toml(
+    system: dict, labels: dict, where: str, max_cells: int | None = MAX_GRID_CELLS
+) -> tuple[TransitionSystem, Callable[[Any, str], list[int]]]:
+    rows, n_rows, n_cols = parse_grid(system["grid"], f"[system] grid{where}", max_cells)
     tokens: dict[str, list[Cell]] = {}
     free: list[Cell] = []
     named: dict[Cell, str] = {}
@@ -427,7 +446,7 @@ def read_limited(path: str | Path, what: str, limit: int = MAX_FILE_BYTES) -> by
     return raw
 
 
-def load_problem_file(path: str | Path) -> Problem:
+def load_problem_file(path: str | Path, max_cells: int | None = MAX_GRID_CELLS) -> Problem:
     """Read a TOML problem file.
 
     Raises
@@ -445,11 +464,11 @@ def load_problem_file(path: str | Path) -> Problem:
         raise ProblemError(f"{p}: invalid TOML: {exc}") from None
     except RecursionError:
         raise ProblemError(f"{p}: invalid TOML: nested too deeply") from None
-    return problem_from_dict(data, str(p))
+    return problem_from_dict(data, str(p), max_cells)
 
 
-def load_problem(name_or_path: str) -> Problem:
-    """A built-in problem by name, or a TOML file by path."""
+def load_problem(name_or_path: str, max_cells: int | None = MAX_GRID_CELLS) -> Problem:
+    """A built-in problem by name, or a TOML file by path (grids up to ``max_cells`` cells)."""
     from .builtins import BUILTINS
 
     if not isinstance(name_or_path, str) or not name_or_path.strip():
@@ -458,7 +477,7 @@ def load_problem(name_or_path: str) -> Problem:
         return BUILTINS[name_or_path]()
     p = Path(name_or_path)
     if p.suffix.lower() == ".toml" or p.exists():
-        return load_problem_file(p)
+        return load_problem_file(p, max_cells)
     raise ProblemError(
         f"unknown problem {name_or_path!r}: not a file, and not a built-in "
         f"({', '.join(sorted(BUILTINS))})"

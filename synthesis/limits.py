@@ -1,0 +1,111 @@
+"""Resource limits: problems far beyond what can be solved are refused before any work.
+
+The routing MILP has a binary variable per edge of the product graph G = T x B_pi, and
+building G alone holds several arrays per edge; a 1000x1000 grid reached 14 GB before
+this check. :func:`estimate_size` bounds G from the problem alone, cheaply (no automaton
+product is built): at most ``n_moves`` edges per history, and at most the product of the
+sub-task automata's sizes as histories. :func:`check_size` refuses a problem whose bound
+exceeds the limit, with the estimate and the way to go on (``--no-size-limit`` on the
+command line, ``SynthesisOptions(max_graph_edges=None)`` from Python).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from .errors import ProblemTooLarge
+
+MAX_GRAPH_EDGES = 500_000
+"""Default bound on the edges of G (about 6 GB while solving, by :data:`BYTES_PER_EDGE`).
+The largest paper instance (mars-exploration) has 7 759 edges; the bounds of the paper's
+20x20 random grids (|AP| up to 7) stay below 400 000."""
+
+BYTES_PER_EDGE = 12_000
+"""Peak memory per edge of G during synthesis (graphs, MILP model, HiGHS), measured on empty
+60x60 and 120x120 grids (docs/benchmarks.md); used for the estimate in messages only."""
+
+
+@dataclass(frozen=True)
+class SizeEstimate:
+    """Upper bounds on the sizes synthesis would build."""
+
+    states: int
+    moves: int
+    histories: int
+    edges: int
+
+    @property
+    def memory_bytes(self) -> int:
+        return self.edges * BYTES_PER_EDGE
+
+    def describe(self) -> str:
+        gb = self.memory_bytes / 1e9
+        return (
+            f"T has {self.states} states and {self.moves} moves; up to {self.histories} histories, so up to "
+            f"{self.edges} product-graph edges (up to about {gb:.1f} GB while solving)"
+        )
+
+
+def _task_states(task: Any) -> int:
+    """States of a sub-task's automaton (synthesis.automata.task_automaton)."""
+    return len(task.props) + 1 if task.is_visit else 2
+
+
+def estimate_size(problem: Any) -> SizeEstimate:
+    """Bounds on the product graph of ``problem`` (no automaton product is built)."""
+    ts = problem.system
+    histories = 1
+    for objective in (problem.system_objective, problem.test_objective):
+        for task in objective.tasks:
+            histories *= _task_states(task)
+    return SizeEstimate(int(ts.n_states), int(ts.n_moves), histories, int(ts.n_moves) * histories)
+
+
+INTERMEDIATE_FACTOR = 64
+"""How much larger than the final B_pi an objective's unminimised product may grow while
+the exact history count is computed (minimisation shrinks it)."""
+
+
+def check_size(problem: Any, max_edges: int | None) -> SizeEstimate | None:
+    """Refuse ``problem`` if its product graph may exceed ``max_edges`` (``None``: no limit).
+
+    The cheap bound decides when it is small enough; otherwise the histories are counted
+    exactly, with the automaton products explored only up to what the limit allows.
+
+    Raises
+    ------
+    ProblemTooLarge
+        With the estimate and the way to go on anyway.
+    """
+    if max_edges is None:
+        return None
+    est = estimate_size(problem)
+    if est.edges <= max_edges:
+        return est
+    from .automata import specification_product
+
+    way = "pass --no-size-limit (SynthesisOptions(max_graph_edges=None)) to try anyway"
+    if est.moves > max_edges:
+        raise ProblemTooLarge(
+            f"problem {problem.name!r} is too large to synthesize: T alone has {est.moves} moves, so its product "
+            f"graph has more than the limit of {max_edges} edges (more than about {est.moves * BYTES_PER_EDGE / 1e9:.1f} GB "
+            f"while solving); {way}"
+        )
+    cap = max(max_edges // max(est.moves, 1), 1)
+    try:
+        spec = specification_product(problem.system_objective, problem.test_objective, problem.system.letters(),
+                                     max_states=cap * INTERMEDIATE_FACTOR)
+    except ProblemTooLarge:
+        spec = None
+    if spec is None or spec.dba.n_states > cap:
+        raise ProblemTooLarge(
+            f"problem {problem.name!r} is too large to synthesize: T has {est.states} states and {est.moves} moves "
+            f"and its objectives more than {cap} histories, so more than {max_edges} product-graph edges "
+            f"(more than about {max_edges * BYTES_PER_EDGE / 1e9:.1f} GB while solving); {way}"
+        )
+    est = SizeEstimate(est.states, est.moves, spec.dba.n_states, est.moves * spec.dba.n_states)
+    if est.edges > max_edges:
+        raise ProblemTooLarge(f"problem {problem.name!r} is too large to synthesize: {est.describe()}, above the limit of "
+                              f"{max_edges} edges; {way}")
+    return est
