@@ -671,7 +671,10 @@ class RandomGridEnv(FlowTestEnv):
     ``size`` (5), ``family`` (``"reachability"``, ``"reaction"``, ``"safety"``),
     ``n`` (spec size; 1 for reachability, 2 otherwise by default), ``seeds`` (the pool,
     default ``0..7``), ``kind`` (``"reactive"`` or ``"static"``), and the base
-    arguments.
+    arguments. Or ``pool`` (a named pool, e.g. ``"reaction2/7x7"``, see
+    :mod:`flowtest_env.pools`) with ``split`` (``"train"``, ``"validation"``, ``"test"``:
+    seed ranges that never overlap) and ``count`` (its first seeds, default 8): the pool
+    then decides size, family, n, kind and seeds.
 
     ## Registered Configurations
 
@@ -690,6 +693,9 @@ class RandomGridEnv(FlowTestEnv):
         max_steps: int | None = None,
         obs_kind: str = "flat",
         pad_to: int = 8,
+        pool: str | None = None,
+        split: str = "train",
+        count: int = 8,
         render_mode: str | None = None,
         view: str = "system",
         tile_size: int = 32,
@@ -701,29 +707,31 @@ class RandomGridEnv(FlowTestEnv):
         shaping: float = 0.0,
         shaping_gamma: float = 0.99,
     ) -> None:
+        from .pools import random_grid_arguments
         from .random_grid import random_pool
 
         from synthesis.random_grid import FAMILIES
 
+        if isinstance(seeds, (str, bytes)) or not hasattr(seeds, "__iter__"):
+            raise ValueError(f"seeds must be a list of non-negative integers, not {seeds!r}")
+        for s in seeds:
+            if isinstance(s, (bool, np.bool_)) or not isinstance(s, (int, np.integer)) or s < 0:
+                raise ValueError(f"seeds must be non-negative integers, not {s!r}")
+        if pool is None:
+            size = positive_int("size", size)
+            n = None if n is None else positive_int("n", n)
+        size, family, n, seeds, kind = random_grid_arguments(pool, split, count, size, family, n, tuple(seeds), kind)
         one_of("family", family, tuple(FAMILIES))
         one_of("kind", kind, ("static", "reactive"))
         one_of("setting", setting, (None, "instantaneous", "accumulative"))
         size = positive_int("size", size)
-        if n is not None:
-            n = positive_int("n", n)
-        if isinstance(seeds, (str, bytes)) or not hasattr(seeds, "__iter__"):
-            raise ValueError(f"seeds must be a list of non-negative integers, not {seeds!r}")
-        seeds = tuple(seeds)
+        n = positive_int("n", n)
         if not seeds:
             raise ValueError("the seed pool is empty")
-        for s in seeds:
-            if isinstance(s, (bool, np.bool_)) or not isinstance(s, (int, np.integer)) or s < 0:
-                raise ValueError(f"seeds must be non-negative integers, not {s!r}")
         if max_steps is not None:
             max_steps = positive_int("max_steps", max_steps)
-        n = n if n is not None else (1 if family == "reachability" else 2)
-        pool = random_pool(size, family, n, tuple(int(s) for s in seeds), kind)
-        games = [TestGame(a, setting) for a in pool]
+        tests = random_pool(size, family, n, seeds, kind)
+        games = [TestGame(a, setting) for a in tests]
         self._configure(
             games, max_steps if max_steps is not None else 4 * size * size, obs_kind, render_mode, view, tile_size,
             step_cost, restricted_penalty, goal_reward, violation_penalty, memory, shaping, shaping_gamma, pad_to,

@@ -360,17 +360,21 @@ class RandomGridVectorEnv(PoolVectorEnv):
         setting: str | None = None,
         max_steps: int | None = None,
         obs_kind: str = "flat",
+        pool: str | None = None,
+        split: str = "train",
+        count: int = 8,
         **kwargs: Any,
     ) -> None:
+        from .pools import random_grid_arguments
         from .random_grid import random_pool
 
+        size, family, n, seeds, kind = random_grid_arguments(pool, split, count, size, family, n, tuple(seeds), kind)
         if kind not in ("static", "reactive"):
             raise ValueError(f"unknown kind {kind!r}; expected 'static' or 'reactive'")
         if not seeds:
             raise ValueError("the seed pool is empty")
-        n = n if n is not None else (1 if family == "reachability" else 2)
-        pool = random_pool(int(size), family, int(n), tuple(int(s) for s in seeds), kind)
-        games = [TestGame(a, setting) for a in pool]
+        tests = random_pool(size, family, n, seeds, kind)
+        games = [TestGame(a, setting) for a in tests]
         steps = max_steps if max_steps is not None else 4 * size * size
         super().__init__(num_envs, games, max_steps=steps, obs_kind=obs_kind, **kwargs)
         self.problem = f"random-{size}x{size}-{family}{n}"
