@@ -180,6 +180,15 @@ def _progress_callback(total: int) -> Any:
     return Bar()
 
 
+def learn(model: Any, steps: int, curve_callback: Any, progress_bar: bool) -> float:
+    """Train ``model`` for ``steps`` time steps with a learning-curve callback (and a progress
+    bar on stderr when asked); the seconds it took. Shared by system and tester training."""
+    t0 = time.perf_counter()
+    callbacks = [curve_callback] + ([_progress_callback(steps)] if progress_bar else [])
+    model.learn(total_timesteps=steps, callback=callbacks)
+    return time.perf_counter() - t0
+
+
 class _Curve:
     """Records (time step, success, return) at every episode end of every training env,
     as an SB3 callback."""
@@ -275,10 +284,7 @@ def train(env_id: str, steps: int, out: str | Path, seed: int = 0, progress_bar:
     env = make_training_vec_env(env_id, seed, settings)
     model = make_model(env, settings, seed)
     curve = _Curve()
-    t0 = time.perf_counter()
-    callbacks = [curve.callback] + ([_progress_callback(steps)] if progress_bar else [])
-    model.learn(total_timesteps=steps, callback=callbacks)
-    seconds = time.perf_counter() - t0
+    seconds = learn(model, steps, curve.callback, progress_bar)
     write_atomically(model_path, lambda tmp: model.save(str(tmp)))
     png = model_path.with_suffix(".png")
     algo = "RecurrentPPO" if settings["algo"] == "recurrent-ppo" else "MaskablePPO"

@@ -21,7 +21,6 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-import time
 from pathlib import Path
 from typing import Any
 
@@ -30,7 +29,7 @@ import numpy as np
 from synthesis.errors import ProblemError
 
 from .cli import EXIT_OK, check_output_path, command, nonnegative_int, positive_int, write_atomically
-from .train import _progress_callback, _require_rl
+from .train import _require_rl, learn
 
 DEFAULTS: dict[str, Any] = {
     "n_envs": 4,
@@ -198,10 +197,7 @@ def train_tester(problem: str, steps: int, out: str | Path, system: str = "scrip
     model.flowtest_problem = problem
     model.flowtest_system = system
     curve = _Curve()
-    t0 = time.perf_counter()
-    callbacks = [curve.callback] + ([_progress_callback(steps)] if progress_bar else [])
-    model.learn(total_timesteps=steps, callback=callbacks)
-    seconds = time.perf_counter() - t0
+    seconds = learn(model, steps, curve.callback, progress_bar)
     write_atomically(model_path, lambda tmp: model.save(str(tmp)))
     png = model_path.with_suffix(".png")
     write_atomically(png, lambda tmp: plot_tester_curve(curve.points, tmp, f"learned tester on {problem} vs {system} (seed {seed})"))
