@@ -6,7 +6,7 @@ Usage::
     .venv/bin/python -m experiments.bench_heuristic --cells reaction:3:10 reachability:3:20 --instances 20
 
 For each random grid instance of the paper's study (MILP-static: walls tied across
-histories), runs :func:`synthesis.routing_heuristic.guess_routing` on the routing
+histories), runs :func:`synthesis.routing.heuristic.guess_routing` on the routing
 model's edges twice: the greedy growth alone, and with the place-simple route seed. A
 first test (flow >= 1) from the heuristic means the MILP starts from a checked answer,
 so a time-limited solve can never come back empty. Prints a Markdown table: instances
@@ -22,9 +22,9 @@ import time
 
 import numpy as np
 
-from synthesis.milp import cut_groups, model_edges
+from synthesis.routing.milp import cut_groups, model_edges
 from synthesis.pipeline import SynthesisOptions, build_graphs, milp_options
-from synthesis.random_grid import first_consistent, paper_ap
+from synthesis.problems.random_grid import first_consistent, paper_ap
 
 DEFAULT_CELLS = ["reaction:2:5", "reaction:3:5", "reaction:4:5", "reaction:2:10", "reaction:3:10", "reaction:4:10",
                  "reaction:4:20"]

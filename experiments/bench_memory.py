@@ -1,4 +1,4 @@
-"""Peak memory of synthesis per product-graph edge (the estimate of ``synthesis.limits``).
+"""Peak memory of synthesis per product-graph edge (the estimate of ``synthesis.problems.limits``).
 
 Usage::
 

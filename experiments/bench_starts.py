@@ -19,10 +19,10 @@ import sys
 import time
 from dataclasses import replace
 
-from synthesis.milp import solve_routing
+from synthesis.routing.milp import solve_routing
 from synthesis.pipeline import SynthesisOptions, build_graphs, milp_options
-from synthesis.problems import load_problem
-from synthesis.solver_control import solver_version
+from synthesis.problems.problem import load_problem
+from synthesis.routing.solver_control import solver_version
 
 DEFAULT = ("example1", "small-reactive", "beaver-rescue", "motion-primitives", "patrolling", "refueling")
 

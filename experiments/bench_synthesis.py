@@ -14,10 +14,10 @@ import argparse
 import sys
 import time
 
-from synthesis.builtins import BUILTINS
+from synthesis.problems.builtins import BUILTINS
 from synthesis.pipeline import SynthesisOptions, synthesize
-from synthesis.problems import load_problem
-from synthesis.summary import summary_of
+from synthesis.problems.problem import load_problem
+from synthesis.artifacts.summary import summary_of
 
 DEFAULT = ("example1", "small-reactive", "beaver-rescue", "motion-primitives", "refueling", "mars-exploration")
 

@@ -26,7 +26,7 @@ import time
 from pathlib import Path
 
 from flowtest_env.artifacts import ARTIFACT_DIR, ARTIFACT_NODE_LIMIT, synthesize_artifact, write_manifest
-from synthesis.builtins import BUILTINS
+from synthesis.problems.builtins import BUILTINS
 
 
 def build(names: list[str], out: Path, force: bool, node_limit: int | None = None) -> int:

@@ -16,11 +16,11 @@ code  meaning
 ====  =========================================================================
 0     success
 1     an unexpected internal error (traceback printed: a FlowTest bug)
-2     invalid input (:class:`~synthesis.errors.ProblemError`, bad options,
+2     invalid input (:class:`~synthesis.model.errors.ProblemError`, bad options,
       an output file that exists without ``--force``)
-3     inconsistent problem (:class:`~synthesis.errors.InconsistentProblem`)
+3     inconsistent problem (:class:`~synthesis.model.errors.InconsistentProblem`)
 4     a synthesized test failed its independent check
-      (:class:`~synthesis.errors.CheckFailed`, a FlowTest bug)
+      (:class:`~synthesis.model.errors.CheckFailed`, a FlowTest bug)
 5     no solution within the time limit (:class:`TimeoutError`)
 130   interrupted (Ctrl-C)
 ====  =========================================================================
@@ -57,9 +57,9 @@ from typing import Any, Callable, Sequence, TextIO
 import numpy as np
 
 from synthesis import pipeline
-from synthesis.errors import CheckFailed, InconsistentProblem, ProblemError
-from synthesis.solver_control import SolveControl, solves_running, status_line, stdout_guard
-from synthesis.summary import stop_note
+from synthesis.model.errors import CheckFailed, InconsistentProblem, ProblemError
+from synthesis.routing.solver_control import SolveControl, solves_running, status_line, stdout_guard
+from synthesis.artifacts.summary import stop_note
 
 EXIT_OK = 0
 EXIT_INTERNAL = 1
@@ -151,7 +151,7 @@ class StageProgress:
     plain line, because carriage returns make logs unreadable. Nothing is ever written
     to standard output.
 
-    ``status`` (e.g. :func:`synthesis.solver_control.status_line`) says how a running
+    ``status`` (e.g. :func:`synthesis.routing.solver_control.status_line`) says how a running
     solve stands: its best test so far, the bound and the gap. On a terminal it is shown on
     the live line; elsewhere it is printed as a plain line every ``every`` seconds when
     ``every`` is given (``flowtest synthesize --progress``), else not at all.
@@ -575,8 +575,8 @@ PROGRESS_EVERY = 5.0
 
 
 def _synthesize_arguments(p: argparse.ArgumentParser) -> None:
-    from synthesis.builtins import BUILTINS
-    from synthesis.strategy import SETTINGS
+    from synthesis.problems.builtins import BUILTINS
+    from synthesis.model.strategy import SETTINGS
 
     p.add_argument(
         "problem",
@@ -611,9 +611,9 @@ def _synthesize_arguments(p: argparse.ArgumentParser) -> None:
 @command("synthesize", "synthesize a test for a problem (TOML file or built-in name)", _synthesize_arguments)
 def run_synthesize(args: argparse.Namespace) -> int:
     """``flowtest synthesize``: load, synthesize, check, then print and write outputs."""
-    from synthesis.artifact import artifact_of
-    from synthesis.problems import load_problem
-    from synthesis.summary import summary_of
+    from synthesis.artifacts.artifact import artifact_of
+    from synthesis.problems.problem import load_problem
+    from synthesis.artifacts.summary import summary_of
 
     outputs: list[tuple[Path, str]] = []
     if args.out is not None:
@@ -632,7 +632,7 @@ def run_synthesize(args: argparse.Namespace) -> int:
     cpus = os.cpu_count() or 1
     if args.threads is not None and args.threads > cpus:
         raise ProblemError(f"--threads {args.threads} is more than the {cpus} CPUs of this machine")
-    from synthesis.problems import MAX_GRID_CELLS
+    from synthesis.problems.problem import MAX_GRID_CELLS
 
     max_cells = None if args.no_size_limit else MAX_GRID_CELLS
     problem = _load(lambda name: load_problem(name, max_cells), args.problem)

@@ -18,13 +18,13 @@ import sys
 import time
 from pathlib import Path
 
-from synthesis.artifact import artifact_of
+from synthesis.artifacts.artifact import artifact_of
 from synthesis.pipeline import SynthesisOptions, synthesize
-from synthesis.problems import load_problem
-from synthesis.summary import summary_of
+from synthesis.problems.problem import load_problem
+from synthesis.artifacts.summary import summary_of
 
 from .cli import EXIT_OK, StageProgress, command, json_safe, positive_int, prepare_output_folder, write_atomically
-from synthesis.errors import ProblemError
+from synthesis.model.errors import ProblemError
 
 MARKER = ".flowtest-demo"
 #: The examples the demo synthesizes, fastest first.

@@ -57,7 +57,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from synthesis.errors import ProblemError
+from synthesis.model.errors import ProblemError
 
 from .cli import EXIT_OK, command, json_safe, nonnegative_int, positive_int, prepare_output_folder, write_atomically
 from .report import GLOSSARY, TestInfo, fold_rows, outcome_class, render_html, test_name

@@ -42,7 +42,7 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch, Rectangle
 
-from synthesis.errors import ProblemError
+from synthesis.model.errors import ProblemError
 
 #: File formats :func:`plot_test` writes, chosen by the path's suffix.
 FORMATS = ("png", "svg", "pdf")
@@ -112,7 +112,7 @@ def plot_test(test: Any, path: str | Path, *, agent: Any = None, dpi: int = 110)
         An optional test-agent overlay: any object (or mapping) with ``cells`` (places
         of T, ``(row, col)`` cells or state names: where the agent moves) and optionally
         ``parks`` (see :func:`_agent_overlay`). Defaults to ``test.agent``, then
-        ``test.problem.agent`` (a :class:`synthesis.agent.TestAgent`); objects without
+        ``test.problem.agent`` (a :class:`synthesis.agent.loop.TestAgent`); objects without
         ``cells`` are ignored.
     dpi
         Resolution of raster output.
@@ -200,7 +200,7 @@ def _agent_overlay(test: Any, agent: Any) -> _Overlay | None:
     """Read a duck-typed agent overlay; ``None`` when there is nothing to draw.
 
     ``cells`` items are places of T (indices into ``ts.places``, which are the state
-    indices on grid and graph systems, as :class:`synthesis.agent.TestAgent` keeps
+    indices on grid and graph systems, as :class:`synthesis.agent.loop.TestAgent` keeps
     them), ``(row, col)`` cells or state names. ``parks`` items are objects or
     mappings with a ``name`` and ``entries`` (indices into ``cells``) or ``from``
     (cells), or plain places/cells drawn as parks.

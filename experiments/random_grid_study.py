@@ -10,7 +10,7 @@ Usage::
     .venv/bin/python -m experiments.random_grid_study --report DIR [DIR ...]   # tables of earlier runs
     .venv/bin/python -m experiments.random_grid_study --graphs-only         # graph construction only
 
-Every spec family of the paper (:data:`synthesis.random_grid.PAPER_SPECS`) times every
+Every spec family of the paper (:data:`synthesis.problems.random_grid.PAPER_SPECS`) times every
 grid size times ``--instances`` seeded instances, each solved with MILP-static and
 MILP-reactive through :func:`synthesis.pipeline.synthesize`, whose independent checks
 (bypass flow 0, flow, no trapped entry node) must pass: a failed check is recorded as
@@ -66,9 +66,9 @@ from typing import Any, Callable, Iterable
 
 import numpy as np
 
-from synthesis.errors import CheckFailed, InconsistentProblem
+from synthesis.model.errors import CheckFailed, InconsistentProblem
 from synthesis.pipeline import SynthesisOptions, build_graphs, synthesize
-from synthesis.random_grid import FAMILIES, PAPER_SIZES, PAPER_SPECS, first_consistent, paper_ap, random_problem
+from synthesis.problems.random_grid import FAMILIES, PAPER_SIZES, PAPER_SPECS, first_consistent, paper_ap, random_problem
 
 MILPS: tuple[str, ...] = ("static", "reactive")
 PAPER_FIRST_LIMIT = 600.0  # the paper's budget: 10 minutes to a first solution,

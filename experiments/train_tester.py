@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from synthesis.errors import ProblemError
+from synthesis.model.errors import ProblemError
 
 from .cli import EXIT_OK, check_output_path, command, nonnegative_int, positive_int, write_atomically
 from .train import _require_rl, learn

@@ -73,9 +73,9 @@ def make_env(test: TestLike, **options: Any) -> FlowTestEnv:
     """A single-agent environment of ``test``, without Gymnasium's registry.
 
     ``test`` is anything :func:`flowtest_env.sources.load_test` accepts: a built-in name,
-    a problem or artifact file path, a :class:`~synthesis.problems.Problem`, a
+    a problem or artifact file path, a :class:`~synthesis.problems.problem.Problem`, a
     :class:`~synthesis.pipeline.SynthesizedTest` or a
-    :class:`~synthesis.artifact.TestArtifact`; ``options`` are :class:`FlowTestEnv`'s
+    :class:`~synthesis.artifacts.artifact.TestArtifact`; ``options`` are :class:`FlowTestEnv`'s
     arguments (``obs_kind``, ``max_steps``, ``render_mode``, ...). Equivalent to
     ``gymnasium.make("FlowTest-v0", test=test, **options).unwrapped``, without
     Gymnasium's checker wrappers.

@@ -15,7 +15,7 @@ Loaded artifacts and their :class:`~flowtest_env.game.TestGame` tables are kept 
 memory per process: they are read-only, so every env of a problem shares them.
 
 Nothing loaded here is trusted. A cache entry is checked in full on load
-(:meth:`synthesis.artifact.TestArtifact.load`: schema, source hash, automata,
+(:meth:`synthesis.artifacts.artifact.TestArtifact.load`: schema, source hash, automata,
 restrictions against its own product graphs). A shipped artifact must have exactly the
 bytes FlowTest shipped (:data:`MANIFEST`, the SHA-256 of each file, checked in full by
 the test suite and written by ``experiments/build_artifacts.py``), then its schema,
@@ -32,8 +32,8 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
-from synthesis.artifact import TestArtifact, problem_source_hash, verify_artifact
-from synthesis.errors import ProblemError
+from synthesis.artifacts.artifact import TestArtifact, problem_source_hash, verify_artifact
+from synthesis.model.errors import ProblemError
 
 from .game import TestGame
 
@@ -85,12 +85,12 @@ def synthesize_artifact(name: str, node_limit: int | None = None) -> TestArtifac
     KeyError
         If ``name`` is not a built-in problem.
     """
-    from synthesis.artifact import artifact_of
-    from synthesis.builtins import BUILTINS
+    from synthesis.artifacts.artifact import artifact_of
+    from synthesis.problems.builtins import BUILTINS
     from synthesis.pipeline import SynthesisOptions, synthesize
-    from synthesis.provenance import versions
-    from synthesis.solver_control import solver_version
-    from synthesis.summary import summary_of
+    from synthesis.artifacts.provenance import versions
+    from synthesis.routing.solver_control import solver_version
+    from synthesis.artifacts.summary import summary_of
 
     if name not in BUILTINS:
         raise KeyError(f"unknown built-in problem {name!r}; known: {', '.join(sorted(BUILTINS))}")
@@ -111,7 +111,7 @@ SOLVER_KEY = "made_with"
 def builtin_cache_path(name: str) -> Path:
     """The cache file of a built-in's artifact synthesized on this machine, under a key
     of its name, the options and the current versions."""
-    from synthesis.provenance import cache_key
+    from synthesis.artifacts.provenance import cache_key
 
     return cache_dir() / "builtins" / name / f"{cache_key('builtin', {'name': name, 'options': artifact_options()})}.json"
 
@@ -201,7 +201,7 @@ def load_builtin(name: str) -> TestArtifact:
     ProblemError
         If the shipped artifact or the cache entry fails its checks (see module docstring).
     """
-    from synthesis.builtins import BUILTINS
+    from synthesis.problems.builtins import BUILTINS
 
     if name not in BUILTINS:
         raise ProblemError(f"unknown built-in problem {name!r}; known: {', '.join(sorted(BUILTINS))}")

@@ -43,7 +43,7 @@ from __future__ import annotations
 import numpy as np
 from gymnasium import spaces
 
-from synthesis.specs import parse_formula, propositions
+from synthesis.model.specs import parse_formula, propositions
 
 from .game import GRID_ACTIONS, RunState, TestGame
 

@@ -18,7 +18,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from synthesis.artifact import TestArtifact
+from synthesis.artifacts.artifact import TestArtifact
 
 from .sources import TestLike, game_for
 from .encoding import Encoder, make_encoder
@@ -710,7 +710,7 @@ class RandomGridEnv(FlowTestEnv):
         from .pools import random_grid_arguments
         from .random_grid import random_pool
 
-        from synthesis.random_grid import FAMILIES
+        from synthesis.problems.random_grid import FAMILIES
 
         if isinstance(seeds, (str, bytes)) or not hasattr(seeds, "__iter__"):
             raise ValueError(f"seeds must be a list of non-negative integers, not {seeds!r}")

@@ -1,6 +1,6 @@
 """The test game: the rules of one synthesized test run, shared by every FlowTest environment.
 
-A :class:`TestGame` is built once from a :class:`~synthesis.artifact.TestArtifact` and
+A :class:`TestGame` is built once from a :class:`~synthesis.artifacts.artifact.TestArtifact` and
 holds only look-up tables; a :class:`RunState` is the small mutable state of one run.
 Every rule below is a table or dictionary look-up, so nothing is solved at step time
 (design.md: "a step is a few array or dictionary look-ups").
@@ -19,7 +19,7 @@ Rules (method.md §6-7)
 * **Attempts.** An invalid or restricted action leaves the SUT in place (as a stay)
   and is counted in ``blocked_attempts``; the legal-action mask never offers one.
 * **The test agent** answers every SUT step from its synthesized table
-  (:class:`synthesis.agent.AgentController`); when it moves first it also answers once
+  (:class:`synthesis.agent.loop.AgentController`); when it moves first it also answers once
   at reset.
 * **Termination.** The run ends when the system objective is *met* (the history's
   ``q_sys`` accepts) or *violated*: no run from the SUT's state and history that
@@ -42,7 +42,7 @@ from typing import Any
 
 import numpy as np
 
-from synthesis.artifact import TestArtifact
+from synthesis.artifacts.artifact import TestArtifact
 
 GRID_ACTIONS: tuple[str, ...] = ("N", "S", "E", "W")
 """Action names of grid problems, in action order; action 4 is ``stay``."""
@@ -226,7 +226,7 @@ class TestGame:
         if artifact.kind == "agent":
             if not artifact.agent or "controller" not in artifact.agent:
                 raise GameError(f"agent artifact {artifact.name!r} has no test agent controller")
-            from synthesis.agent import AgentController
+            from synthesis.agent.loop import AgentController
 
             self.agent_controller = AgentController.from_dict(artifact.agent["controller"])
             enforced = np.broadcast_to(strat.static_obstacles[None, :], strat.blocked.shape)

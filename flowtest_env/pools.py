@@ -2,7 +2,7 @@
 
 A pool is a seeded family of random grid problems, named ``<family><n>/<size>x<size>``
 with an optional ``/static`` (default reactive), e.g. ``reachability1/5x5`` or
-``reaction2/7x7/static``; the families are those of :mod:`synthesis.random_grid`. A split
+``reaction2/7x7/static``; the families are those of :mod:`synthesis.problems.random_grid`. A split
 is a range of seeds, and the ranges never overlap: ``train`` holds seeds
 ``0 .. SPLIT_SPAN - 1``, ``validation`` the next :data:`SPLIT_SPAN`, ``test`` the next. A
 policy trained on a pool's train split and scored on its test split never met a test of
@@ -17,8 +17,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from synthesis.artifact import TestArtifact
-from synthesis.random_grid import FAMILIES, family_objectives
+from synthesis.artifacts.artifact import TestArtifact
+from synthesis.problems.random_grid import FAMILIES, family_objectives
 
 from .random_grid import build_pool
 

@@ -1,7 +1,7 @@
 """Seeded random grid worlds (the paper's scalability study, paper-examples.md) as test pools.
 
 The instances themselves (spec families, seeded draws, redraws) live in the pure
-:mod:`synthesis.random_grid`; this module synthesizes them into artifacts and caches
+:mod:`synthesis.problems.random_grid`; this module synthesizes them into artifacts and caches
 the pools. A pool instance is the first attempt of its seed for which a test of the
 pool's kind is synthesized within the pool budget (an inconsistent attempt, or one
 without a test within the budget, is redrawn), so a seed always names the same test.
@@ -12,7 +12,7 @@ the routing heuristic's work budget), never a wall-clock limit, so a pool is the
 every machine under any load, and every pool test is bounded in work.
 
 **Cached by version.** Each pool lives on disk under ``cache_dir()/random-grid/<pool>/<key>``
-where ``key`` is :func:`synthesis.provenance.cache_key` of the pool's parameters and
+where ``key`` is :func:`synthesis.artifacts.provenance.cache_key` of the pool's parameters and
 options under the current FlowTest, highspy, NumPy and SciPy versions: a pool built under
 another version is never reused, it is rebuilt. Within a process pools are also kept in
 memory.
@@ -31,13 +31,13 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any, Iterable
 
-from synthesis.artifact import TestArtifact, artifact_of
-from synthesis.errors import InconsistentProblem, ProblemError
+from synthesis.artifacts.artifact import TestArtifact, artifact_of
+from synthesis.model.errors import InconsistentProblem, ProblemError
 from synthesis.pipeline import SynthesisOptions, synthesize
-from synthesis.problems import Problem
-from synthesis.provenance import cache_key, versions
-from synthesis.random_grid import FAMILIES, MAX_ATTEMPTS, family_objectives, first_consistent, random_problem
-from synthesis.summary import summary_of
+from synthesis.problems.problem import Problem
+from synthesis.artifacts.provenance import cache_key, versions
+from synthesis.problems.random_grid import FAMILIES, MAX_ATTEMPTS, family_objectives, first_consistent, random_problem
+from synthesis.artifacts.summary import summary_of
 
 from .artifacts import cache_dir, warn_refused_entry
 

@@ -143,7 +143,7 @@ def marked_places(game: TestGame, prop: str, majority: bool = True) -> list[int]
 def hidden_propositions(game: TestGame) -> set[str]:
     """Propositions of the hidden test objective that the system objective does not
     mention (those it does are drawn as the system's own cells)."""
-    from synthesis.specs import parse_formula, propositions
+    from synthesis.model.specs import parse_formula, propositions
 
     from .encoding import system_propositions
 

@@ -6,13 +6,13 @@ command that takes an environment gets its test from :func:`load_test`, which ac
 
 * a **built-in name** (``"maze2"``): its shipped artifact;
 * a **problem file** (``mine.toml``): synthesized once, then cached on disk under a key
-  of its content, FlowTest's and HiGHS's versions (:func:`synthesis.provenance.content_key`);
+  of its content, FlowTest's and HiGHS's versions (:func:`synthesis.artifacts.provenance.content_key`);
   only a proven-optimal answer is cached (a time-limited one depends on the machine's
   speed, so it is synthesized again next time, with a warning);
 * an **artifact file** (``mine.json``, written by ``flowtest synthesize --out``), checked on
-  load like every artifact (:func:`synthesis.artifact.verify_artifact`);
-* a :class:`~synthesis.problems.Problem`, a :class:`~synthesis.pipeline.SynthesizedTest`
-  or a :class:`~synthesis.artifact.TestArtifact` object.
+  load like every artifact (:func:`synthesis.artifacts.artifact.verify_artifact`);
+* a :class:`~synthesis.problems.problem.Problem`, a :class:`~synthesis.pipeline.SynthesizedTest`
+  or a :class:`~synthesis.artifacts.artifact.TestArtifact` object.
 
 Loaded tests are kept in memory per process (by content key), so the envs of one test
 share one artifact and one :class:`~flowtest_env.game.TestGame`.
@@ -25,12 +25,12 @@ import os
 from pathlib import Path
 from typing import Union
 
-from synthesis.artifact import FORMAT, TestArtifact, artifact_of
-from synthesis.provenance import content_key
-from synthesis.errors import ProblemError
+from synthesis.artifacts.artifact import FORMAT, TestArtifact, artifact_of
+from synthesis.artifacts.provenance import content_key
+from synthesis.model.errors import ProblemError
 from synthesis.pipeline import SynthesizedTest, synthesize
-from synthesis.problems import Problem, load_problem_file
-from synthesis.summary import summary_of
+from synthesis.problems.problem import Problem, load_problem_file
+from synthesis.artifacts.summary import summary_of
 
 from .artifacts import builtin_game, cache_dir, load_builtin, warn_refused_entry
 from .game import TestGame
@@ -44,7 +44,7 @@ _GAMES: dict[tuple[int, str | None, bool], tuple[TestArtifact, TestGame]] = {}
 
 def builtin_names() -> list[str]:
     """The built-in problem names, sorted."""
-    from synthesis.builtins import BUILTINS
+    from synthesis.problems.builtins import BUILTINS
 
     return sorted(BUILTINS)
 
@@ -104,7 +104,7 @@ def load_test(test: TestLike) -> TestArtifact:
     ProblemError
         If ``test`` is a string that is neither a built-in name nor an existing file, or
         the file is not a valid problem or artifact (the message says what and where).
-    synthesis.errors.InconsistentProblem, synthesis.errors.CheckFailed, TimeoutError
+    synthesis.model.errors.InconsistentProblem, synthesis.model.errors.CheckFailed, TimeoutError
         From synthesizing a problem, as ``flowtest synthesize``.
     """
     if isinstance(test, TestArtifact):

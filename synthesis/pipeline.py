@@ -1,7 +1,7 @@
 """From a problem to a checked test: automata, products, routing MILP, strategy, checks.
 
 :func:`synthesize` is the one entry point for static, reactive and mixed problems;
-agent problems continue in :mod:`synthesis.agent` from the same pieces.
+agent problems continue in :mod:`synthesis.agent.loop` from the same pieces.
 """
 
 from __future__ import annotations
@@ -12,15 +12,15 @@ from typing import Any, Callable
 
 import numpy as np
 
-from .automata import SpecificationProduct, specification_product
-from .errors import ProblemError
-from .limits import MAX_GRAPH_EDGES, check_size
-from .milp import MilpOptions, RoutingResult, solve_routing
-from .problems import Problem
-from .solver_control import SolveControl
-from .products import Products, build_products
-from .strategy import TestStrategy
-from .verify import CheckReport, check_test, restricted_edges, routed_flow
+from .checks.verify import CheckReport, check_test, restricted_edges, routed_flow
+from .graphs.automata import SpecificationProduct, specification_product
+from .graphs.products import Products, build_products
+from .model.errors import ProblemError
+from .model.strategy import TestStrategy
+from .problems.limits import MAX_GRAPH_EDGES, check_size
+from .problems.problem import Problem
+from .routing.milp import MilpOptions, RoutingResult, solve_routing
+from .routing.solver_control import SolveControl
 
 
 @dataclass
@@ -46,7 +46,7 @@ class SynthesisOptions:
     # Ctrl-C and the live solver status, shared with the caller (see solver_control)
     control: SolveControl | None = None
     # refuse problems whose product graph may exceed this many edges (None: no limit),
-    # before building anything (synthesis.limits)
+    # before building anything (synthesis.problems.limits)
     max_graph_edges: int | None = MAX_GRAPH_EDGES
 
 
@@ -58,7 +58,7 @@ def check_options(options: SynthesisOptions) -> None:
     """Refuse bad options before any work (raises :class:`ProblemError` naming the option)."""
     import math
 
-    from .strategy import SETTINGS
+    from .model.strategy import SETTINGS
 
     for name in ("time_limit", "after_first"):
         v = getattr(options, name)
@@ -174,7 +174,7 @@ def synthesize(problem: Problem, options: SynthesisOptions | None = None) -> Syn
     check_options(options)
     check_size(problem, options.max_graph_edges)
     if problem.kind == "agent":
-        from .agent import synthesize_agent_test
+        from .agent.loop import synthesize_agent_test
 
         return synthesize_agent_test(problem, options)
     note = options.progress or (lambda msg: None)

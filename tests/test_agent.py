@@ -9,20 +9,20 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from synthesis import gr1
-from synthesis.agent import (
+from synthesis.agent import gr1
+from synthesis.agent.game import blocking_places, build_agent_game
+from synthesis.agent.loop import (
     AgentController,
     AgentSynthesis,
     make_test_agent,
     places_of_cells,
     verify_closed_loop,
 )
-from synthesis.agent_game import blocking_places, build_agent_game
-from synthesis.artifact import TestArtifact, artifact_of
-from synthesis.errors import CheckFailed, InconsistentProblem, ProblemError
-from synthesis.pipeline import SynthesizedTest, SynthesisOptions, synthesize
-from synthesis.problems import Problem, load_problem, load_problem_file
-from synthesis.summary import summary_of
+from synthesis.artifacts.artifact import TestArtifact, artifact_of
+from synthesis.artifacts.summary import summary_of
+from synthesis.model.errors import CheckFailed, InconsistentProblem, ProblemError
+from synthesis.pipeline import SynthesisOptions, SynthesizedTest, synthesize
+from synthesis.problems.problem import Problem, load_problem, load_problem_file
 
 AGENT_BUILTINS = ("maze1", "maze2", "patrolling")
 
@@ -96,7 +96,7 @@ def test_counterexamples_are_reported(tests: dict[str, SynthesizedTest]) -> None
 
 def test_prefilter_only_saves_solves() -> None:
     """Without the a-priori exclusions maze1 rejects a cut set on rows the agent cannot hold."""
-    from synthesis.agent import synthesize_agent_test
+    from synthesis.agent.loop import synthesize_agent_test
 
     plain = synthesize_agent_test(load_problem("maze1"), prefilter=False)
     assert plain.agent.counterexamples >= 1

@@ -21,9 +21,9 @@ import pytest
 
 import flowtest_env  # noqa: F401  (registers the envs)
 import flowtest_env.artifacts as artifacts
-from synthesis.artifact import TestArtifact, problem_source_hash, source_hash
-from synthesis.builtins import BUILTINS
-from synthesis.errors import ProblemError
+from synthesis.artifacts.artifact import TestArtifact, problem_source_hash, source_hash
+from synthesis.model.errors import ProblemError
+from synthesis.problems.builtins import BUILTINS
 
 SHIPPED = Path(artifacts.__file__).parent / "artifacts"
 NAMES = sorted(p.stem for p in SHIPPED.glob("*.json"))

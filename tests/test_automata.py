@@ -1,4 +1,4 @@
-"""Tests of :mod:`synthesis.automata` against an independent semantics of the fragment.
+"""Tests of :mod:`synthesis.graphs.automata` against an independent semantics of the fragment.
 
 A finite execution ``w = l_0 ... l_n`` is read as the infinite word
 ``l_0 ... l_n l_n l_n ...`` (method.md §2). :func:`holds_on` evaluates every pattern
@@ -23,8 +23,8 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from synthesis.automata import DBA, minimize, objective_automaton, product, specification_product, task_automaton
-from synthesis.specs import BinOp, Const, Formula, Not, Prop, parse_formula, parse_objective
+from synthesis.graphs.automata import DBA, minimize, objective_automaton, product, specification_product, task_automaton
+from synthesis.model.specs import BinOp, Const, Formula, Not, Prop, parse_formula, parse_objective
 
 Label = frozenset[str]
 NAMES = ["a", "b", "c", "d"]

@@ -23,9 +23,9 @@ import pytest
 
 from experiments import cli
 from experiments.cli import StageProgress, main
-from synthesis.artifact import TestArtifact
-from synthesis.errors import CheckFailed, InconsistentProblem
-from synthesis.problems import load_problem
+from synthesis.artifacts.artifact import TestArtifact
+from synthesis.model.errors import CheckFailed, InconsistentProblem
+from synthesis.problems.problem import load_problem
 
 DATA = Path(__file__).parent / "data"
 FLOWTEST = Path(sys.executable).parent / "flowtest"

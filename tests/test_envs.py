@@ -25,7 +25,7 @@ from flowtest_env import ActionMaskObservation
 from flowtest_env.artifacts import SOLVER_KEY, artifact_path, builtin_game, synthesize_artifact
 from flowtest_env.envs import BUILTIN_ENVS
 from flowtest_env.game import MET, RunState, TestGame
-from synthesis.solver_control import solver_version
+from synthesis.routing.solver_control import solver_version
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -578,7 +578,7 @@ SLOW_ARTIFACTS = {"refueling", "mars-exploration"}
 def test_shipped_artifact_equals_a_fresh_synthesis(name: str) -> None:
     """What ``gym.make`` loads is what the synthesis computes today (the slow problems'
     syntheses are marked slow)."""
-    from synthesis.artifact import TestArtifact
+    from synthesis.artifacts.artifact import TestArtifact
 
     art = TestArtifact.load(artifact_path(name))
     if art.summary["status"] != "optimal":
@@ -607,10 +607,10 @@ def test_shipped_artifact_equals_a_fresh_synthesis(name: str) -> None:
 def test_shipped_artifact_passes_the_checks(name: str) -> None:
     """Every shipped test, optimal or time-limited, passes the independent checks on
     freshly built product graphs: bypass flow 0, the flow it claims, no trapped entry."""
-    from synthesis.artifact import TestArtifact
-    from synthesis.builtins import BUILTINS
+    from synthesis.artifacts.artifact import TestArtifact
+    from synthesis.checks.verify import check_test
     from synthesis.pipeline import build_graphs
-    from synthesis.verify import check_test
+    from synthesis.problems.builtins import BUILTINS
 
     art = TestArtifact.load(artifact_path(name))
     _, products = build_graphs(BUILTINS[name]())
@@ -640,7 +640,7 @@ def test_missing_artifact_is_synthesized_once_and_cached(no_shipped_artifacts: P
     small-reactive: the first ``make`` warns and synthesizes, later ones (in a new
     process: here, with the memo emptied) read the cache silently."""
     import flowtest_env.artifacts as artifacts
-    from synthesis.artifact import TestArtifact
+    from synthesis.artifacts.artifact import TestArtifact
 
     with pytest.warns(UserWarning, match="no shipped artifact for 'small-reactive'"):
         env = gym.make("FlowTest-SmallReactive-v0")
@@ -661,7 +661,7 @@ def test_cached_builtin_from_another_version_is_rebuilt(no_shipped_artifacts: Pa
     """A built-in's cached artifact is filed under the FlowTest and solver versions: under
     another highspy (or FlowTest) version it is synthesized again, not reused."""
     import flowtest_env.artifacts as artifacts
-    from synthesis import provenance
+    from synthesis.artifacts import provenance
 
     with pytest.warns(UserWarning, match="synthesizing it now"):
         artifacts.load_builtin("small-reactive")
@@ -689,7 +689,7 @@ time-limited solve; its rebuild under a node limit is under way. Nothing else ma
 def test_shipped_artifacts_say_how_they_were_made() -> None:
     """Every shipped artifact was made with deterministic budgets only (no wall clock,
     one HiGHS thread, a node limit) and records the versions it was made under."""
-    from synthesis.artifact import TestArtifact
+    from synthesis.artifacts.artifact import TestArtifact
 
     for name in BUILTIN_ENVS:
         if not artifact_path(name).exists() or name in TIME_LIMITED_ARTIFACTS:

@@ -7,9 +7,8 @@ import json
 import shlex
 from pathlib import Path
 
-import pytest
-
 import gymnasium as gym
+import pytest
 
 from agents.base import make_policy
 from experiments.cli import main

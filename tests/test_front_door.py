@@ -15,12 +15,12 @@ import pytest
 import flowtest_env
 from experiments.cli import main
 from flowtest_env import multiagent, sources
-from synthesis import provenance
-from synthesis.artifact import TestArtifact, artifact_of
-from synthesis.errors import ProblemError
+from synthesis.artifacts import provenance
+from synthesis.artifacts.artifact import TestArtifact, artifact_of
+from synthesis.artifacts.summary import summary_of
+from synthesis.model.errors import ProblemError
 from synthesis.pipeline import synthesize
-from synthesis.problems import load_problem_file
-from synthesis.summary import summary_of
+from synthesis.problems.problem import load_problem_file
 
 DATA = Path(__file__).resolve().parent / "data"
 

@@ -37,9 +37,9 @@ from hypothesis import strategies as st
 
 import flowtest_env  # noqa: F401  (registers the envs)
 from experiments.cli import main
-from synthesis.artifact import TestArtifact
-from synthesis.errors import ProblemError
-from synthesis.problems import problem_from_dict
+from synthesis.artifacts.artifact import TestArtifact
+from synthesis.model.errors import ProblemError
+from synthesis.problems.problem import problem_from_dict
 
 DATA = Path(__file__).parent / "data"
 ARTIFACTS = Path(flowtest_env.__file__).parent / "artifacts"

@@ -14,7 +14,7 @@ of test_optimality agrees). Options: HiGHS's defaults (presolve on).
   start, not the postsolved optimum. With presolve off, or without the start, it is right.
 
 So a start that is feasible (checked row by row) is not enough; FlowTest's defence
-(:func:`synthesis.milp._run`) checks the returned solution against the model and its
+(:func:`synthesis.routing.milp._run`) checks the returned solution against the model and its
 objective against HiGHS's report and dual bound, and solves again without the start when
 they disagree. ``test_raw_highs_returns_its_proven_solution`` is the reproducer itself: it
 is expected to fail on exactly 1.16.0 (strict: should a 1.16 build return the right
@@ -31,7 +31,7 @@ import highspy
 import numpy as np
 import pytest
 
-from synthesis.milp import MilpOptions, _ModelView, _run, _set_solution, _violation
+from synthesis.routing.milp import MilpOptions, _ModelView, _run, _set_solution, _violation
 
 DATA = Path(__file__).parent / "data"
 MODEL = DATA / "highs_start_presolve.mps"

@@ -11,9 +11,9 @@ from pathlib import Path
 
 import pytest
 
-from synthesis.errors import ProblemError
-from synthesis.problems import MAX_FILE_BYTES, load_problem_file, problem_from_dict
-from synthesis.specs import MAX_FORMULA_DEPTH, parse_objective
+from synthesis.model.errors import ProblemError
+from synthesis.model.specs import MAX_FORMULA_DEPTH, parse_objective
+from synthesis.problems.problem import MAX_FILE_BYTES, load_problem_file, problem_from_dict
 
 GRID = '''name = "t"
 [system]

@@ -8,11 +8,11 @@ from pathlib import Path
 import pytest
 
 from experiments.cli import main
-from synthesis.builtins import BUILTINS
-from synthesis.errors import ProblemTooLarge
-from synthesis.limits import MAX_GRAPH_EDGES, check_size, estimate_size
+from synthesis.model.errors import ProblemTooLarge
 from synthesis.pipeline import SynthesisOptions, remaining_time, synthesize
-from synthesis.problems import load_problem, problem_from_dict
+from synthesis.problems.builtins import BUILTINS
+from synthesis.problems.limits import MAX_GRAPH_EDGES, check_size, estimate_size
+from synthesis.problems.problem import load_problem, problem_from_dict
 
 
 def grid_problem(n: int, test: str = "F I1 & F I2") -> dict:

@@ -33,11 +33,11 @@ import networkx as nx
 import numpy as np
 import pytest
 
-from synthesis.errors import CheckFailed, InconsistentProblem
+from synthesis.graphs.products import Products
+from synthesis.model.errors import CheckFailed, InconsistentProblem
+from synthesis.model.systems import TransitionSystem, graph_system, grid_world
 from synthesis.pipeline import SynthesisOptions, SynthesizedTest, build_graphs, synthesize
-from synthesis.problems import Problem, make_problem
-from synthesis.products import Products
-from synthesis.systems import TransitionSystem, graph_system, grid_world
+from synthesis.problems.problem import Problem, make_problem
 
 #: The brute force enumerates method.md §5 exactly (entry-node feasibility only).
 METHOD_EXACT = SynthesisOptions(closed_loop=False)
@@ -811,8 +811,8 @@ def test_static_walls_are_on_the_map() -> None:
     the game calls a run that enters p anyway violated by the system, not trapped by the test.
     With ``closed_loop`` the stricter optimum, which traps no configuration at all."""
     from flowtest_env.game import TestGame
-    from synthesis.artifact import artifact_of
-    from synthesis.summary import summary_of
+    from synthesis.artifacts.artifact import artifact_of
+    from synthesis.artifacts.summary import summary_of
 
     res = synthesize(trap_instance(), METHOD_EXACT)
     assert (res.routing.flow, int(res.routing.cut_edges.size)) == (1, 2)

@@ -18,10 +18,10 @@ import numpy as np
 import pytest
 
 from experiments.plots import _fuel_note, check_plot_format, layered_positions, panels_of, plot_test
-from synthesis.errors import InconsistentProblem, ProblemError
+from synthesis.model.errors import InconsistentProblem, ProblemError
+from synthesis.model.strategy import TestStrategy
 from synthesis.pipeline import SynthesisOptions, SynthesizedTest, synthesize
-from synthesis.problems import load_problem
-from synthesis.strategy import TestStrategy
+from synthesis.problems.problem import load_problem
 
 DATA = Path(__file__).parent / "data"
 
@@ -151,8 +151,8 @@ def test_fuel_grid_with_reactive_restrictions(tmp_path: Path) -> None:
 def test_agent_overlay(name: str, tmp_path: Path) -> None:
     test = synthesized(name)
     ts = test.problem.system
-    cells = np.array([0, 1, len(ts.places) - 1])  # places of T, as synthesis.agent keeps them
-    # parks as synthesis.agent.Park (a name, entries into `cells`) and as plain cells/places
+    cells = np.array([0, 1, len(ts.places) - 1])  # places of T, as synthesis.agent.loop keeps them
+    # parks as synthesis.agent.loop.Park (a name, entries into `cells`) and as plain cells/places
     parks: list[Any] = [SimpleNamespace(name="above", entries=(0, 1)), (2, 5) if ts.kind == "grid" else 0]
     plain, overlaid, via_test = tmp_path / "plain.png", tmp_path / "agent.png", tmp_path / "via_test.png"
     plot_test(test, plain, dpi=50)

@@ -19,10 +19,10 @@ import pytest
 
 import flowtest_env.random_grid as rg
 from experiments.bench_pools import BURNER, without_timings
-from synthesis import provenance
+from synthesis.artifacts import provenance
+from synthesis.artifacts.summary import stop_note
 from synthesis.pipeline import SynthesisOptions, synthesize
-from synthesis.random_grid import first_consistent, random_problem
-from synthesis.summary import stop_note
+from synthesis.problems.random_grid import first_consistent, random_problem
 
 ROOT = Path(__file__).resolve().parents[1]
 POOL = (5, "reachability", 1)  # a few seconds per pool of three seeds
@@ -149,7 +149,7 @@ def test_bad_pool_arguments_raise() -> None:
 def test_node_limit_is_a_reported_deterministic_budget() -> None:
     """A solve stopped by the node limit says so and is deterministic; a wall-clock
     limit makes the answer depend on the machine, and the summary says that too."""
-    from synthesis.summary import summary_of
+    from synthesis.artifacts.summary import summary_of
 
     attempt, _, _ = first_consistent(5, "reachability", 1, 0)
     problem = random_problem(5, "reachability", 1, 0, attempt, "reactive")

@@ -1,4 +1,4 @@
-"""Tests of :mod:`synthesis.products` against a naive breadth-first product.
+"""Tests of :mod:`synthesis.graphs.products` against a naive breadth-first product.
 
 For random small grids and graphs with random labels and objectives, the bulk product
 ``build_product`` must have exactly the reachable ``(s, q)`` nodes and the edges
@@ -16,10 +16,10 @@ from collections import deque
 import numpy as np
 import pytest
 
-from synthesis.automata import DBA, specification_product
-from synthesis.products import ProductGraph, build_product, build_products, coreachable, reachable
-from synthesis.specs import parse_objective
-from synthesis.systems import MOVES, TransitionSystem, graph_system, grid_world
+from synthesis.graphs.automata import DBA, specification_product
+from synthesis.graphs.products import ProductGraph, build_product, build_products, coreachable, reachable
+from synthesis.model.specs import parse_objective
+from synthesis.model.systems import MOVES, TransitionSystem, graph_system, grid_world
 
 Node = tuple[int, int]
 

@@ -4,7 +4,7 @@ For random problems (grids up to 5x5 with blocked cells, random graphs; 1-3 test
 propositions in visits and sequenced visits; system objectives with safety,
 instantaneous and delayed reactions), static and reactive:
 
-* an answer passes checks recomputed here with networkx, not with ``synthesis.verify``:
+* an answer passes checks recomputed here with networkx, not with ``synthesis.checks.verify``:
   bypass flow 0, max flow equal to the reported F (and at least 1), every kept entry
   node of every history reaches ``Tgt_sys`` in ``G_sys`` avoiding the moves restricted
   under that history; the restrictions are exactly the reported cuts;
@@ -29,11 +29,11 @@ import networkx as nx
 import numpy as np
 import pytest
 
-from synthesis.errors import InconsistentProblem
+from synthesis.graphs.products import Products
+from synthesis.model.errors import InconsistentProblem
+from synthesis.model.systems import TransitionSystem, graph_system, grid_world
 from synthesis.pipeline import SynthesisOptions, SynthesizedTest, build_graphs, synthesize
-from synthesis.problems import Problem, make_problem
-from synthesis.products import Products
-from synthesis.systems import TransitionSystem, graph_system, grid_world
+from synthesis.problems.problem import Problem, make_problem
 
 Cell = tuple[int, int]
 
@@ -477,8 +477,8 @@ def test_sweep_grid_answers_hold(seed: int, kind: str) -> None:
 @pytest.mark.parametrize("seed", range(12))
 def test_feasibility_flows_eager_or_lazy_give_the_same_optimum(seed: int, kind: str) -> None:
     """Adding c6-c8 all at once or only where they bind is the same MILP optimum."""
-    from synthesis.milp import solve_routing
     from synthesis.pipeline import milp_options
+    from synthesis.routing.milp import solve_routing
 
     problem = grid_problem(40_000 + seed, kind)
     _, products = build_graphs(problem)
@@ -497,7 +497,7 @@ def test_feasibility_flows_eager_or_lazy_give_the_same_optimum(seed: int, kind: 
 
 
 def test_unknown_feasibility_option_is_rejected() -> None:
-    from synthesis.milp import MilpOptions, solve_routing
+    from synthesis.routing.milp import MilpOptions, solve_routing
 
     _, products = build_graphs(grid_problem(40_000, "reactive"))
     with pytest.raises(ValueError, match="feasibility"):
@@ -510,7 +510,7 @@ def test_time_limited_answer_reports_the_flow_its_restrictions_let_through(monke
     import dataclasses
 
     import synthesis.pipeline as pipeline
-    from synthesis.builtins import BUILTINS
+    from synthesis.problems.builtins import BUILTINS
 
     real = pipeline.solve_routing
 

@@ -15,21 +15,21 @@ import pytest
 
 from experiments import random_grid_study as study
 from experiments.random_grid_study import ANSWER_FIELDS, Task, run_in_process, run_task
-from synthesis.errors import InconsistentProblem
-from synthesis.milp import check_consistency
+from synthesis.model.errors import InconsistentProblem
 from synthesis.pipeline import build_graphs
-from synthesis.random_grid import PAPER_SPECS, first_consistent, paper_ap, random_problem
+from synthesis.problems.random_grid import PAPER_SPECS, first_consistent, paper_ap, random_problem
+from synthesis.routing.milp import check_consistency
 
 #: fast instances (5x5, |AP| = 2): seeds whose both MILPs finish in well under a second
 FAST = [Task("reachability", 1, 5, i, m, 60.0, 1) for i in (1, 3) for m in ("static", "reactive")]
 
 
 def test_generator_is_pure_and_shared_with_the_environments() -> None:
-    code = "import sys, synthesis.random_grid; print(any(m.split('.')[0] in ('gymnasium', 'flowtest_env', 'pettingzoo') for m in sys.modules))"
+    code = "import sys, synthesis.problems.random_grid; print(any(m.split('.')[0] in ('gymnasium', 'flowtest_env', 'pettingzoo') for m in sys.modules))"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "False"
     from flowtest_env import random_grid as env_rg
-    from synthesis import random_grid as pure
+    from synthesis.problems import random_grid as pure
 
     assert env_rg.random_problem is pure.random_problem
     assert env_rg.family_objectives is pure.family_objectives
@@ -78,7 +78,7 @@ def test_one_instance_is_solved_and_checked() -> None:
 def test_a_failed_check_is_a_failure(monkeypatch: pytest.MonkeyPatch) -> None:
     """A test that fails its independent checks is recorded as ``check-failed``, never as solved."""
     import synthesis.pipeline as pipeline
-    from synthesis.errors import CheckFailed
+    from synthesis.model.errors import CheckFailed
 
     real = pipeline.check_test
 

@@ -18,8 +18,8 @@ from __future__ import annotations
 import pytest
 
 from synthesis.pipeline import SynthesisOptions, synthesize
-from synthesis.problems import load_problem
-from synthesis.random_grid import first_consistent, random_problem
+from synthesis.problems.problem import load_problem
+from synthesis.problems.random_grid import first_consistent, random_problem
 
 #: built-in example -> (flow, cut edges of G); measured with the two-phase MILP, proven optimal
 EXAMPLES: dict[str, tuple[int, int]] = {

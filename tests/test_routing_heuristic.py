@@ -1,6 +1,6 @@
 """The routing MILP's primal heuristic and its time budget.
 
-* :func:`synthesis.routing_heuristic.simple_route`: on random grids of the paper's study,
+* :func:`synthesis.routing.heuristic.simple_route`: on random grids of the paper's study,
   every route it returns starts at ``Src``, follows edges of G, passes I, ends in
   ``Tgt`` and never returns to a cell, and its moves alone leave no ``Src -> Tgt`` path
   outside I; with it, the heuristic finds a first test where the greedy growth alone
@@ -17,13 +17,13 @@ import time
 import numpy as np
 import pytest
 
-from synthesis.milp import ModelEdges, cut_groups, model_edges
+from synthesis.graphs.products import Products, reachable
 from synthesis.pipeline import SynthesisOptions, build_graphs, milp_options, synthesize
-from synthesis.problems import Problem
-from synthesis.products import Products, reachable
-from synthesis.random_grid import first_consistent
-from synthesis.routing_heuristic import RouteSeed, RoutingGuess, guess_routing, simple_route
-from synthesis.solver_control import Clock
+from synthesis.problems.problem import Problem
+from synthesis.problems.random_grid import first_consistent
+from synthesis.routing.heuristic import RouteSeed, RoutingGuess, guess_routing, simple_route
+from synthesis.routing.milp import ModelEdges, cut_groups, model_edges
+from synthesis.routing.solver_control import Clock
 
 
 def _instance(size: int, family: str, n: int, seed: int, kind: str = "static") -> tuple[Products, ModelEdges, Problem]:
@@ -102,7 +102,7 @@ def test_after_first_stops_soon_after_highs_finds_a_first_test(monkeypatch: pyte
     """Without a heuristic start, the first test comes from HiGHS's maximum-flow phase; the
     solve still ends ``after_first`` seconds after it (the interrupt callback), not at the
     overall limit."""
-    import synthesis.milp as milp
+    import synthesis.routing.milp as milp
 
     def no_guess(n, src, eu, ev, grp, c5, has_var, target, **kw):  # type: ignore[no-untyped-def]
         g = guess_routing(n, src, eu, ev, grp, c5, has_var, target)
@@ -163,7 +163,7 @@ def test_reactive_guess_traps_no_entry_node(size: int, family: str, n: int, seed
     (it starts from a trapping cut set), so the answer comes from the route seed; before,
     the trapping answer was returned, was unusable as a start, and HiGHS found no test in
     600 s."""
-    import synthesis.milp as milp
+    import synthesis.routing.milp as milp
 
     products, me, problem = _instance(size, family, n, seed, kind="reactive")
     groups = cut_groups(products, milp_options(problem, SynthesisOptions()))

@@ -1,4 +1,4 @@
-"""synthesis.solver_control: stop requests, live status, time budget, the stdout guard."""
+"""synthesis.routing.solver_control: stop requests, live status, time budget, the stdout guard."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from synthesis.solver_control import Clock, SolveControl, SolveStatus, run_highs, solves_running, status_line, stdout_guard
+from synthesis.routing.solver_control import Clock, SolveControl, SolveStatus, run_highs, solves_running, status_line, stdout_guard
 
 
 def market_split(m: int = 4, n: int = 40, seed: int = 0) -> highspy.Highs:
@@ -98,7 +98,7 @@ def test_library_synthesis_prints_nothing_on_stdout(capfd: pytest.CaptureFixture
     caller's standard output clean: HiGHS >= 1.16 prints a banner when a solver object is
     made, before any option can silence it."""
     from synthesis.pipeline import synthesize
-    from synthesis.problems import load_problem
+    from synthesis.problems.problem import load_problem
 
     capfd.readouterr()
     synthesize(load_problem("small-reactive"))

@@ -1,4 +1,4 @@
-"""Tests of :mod:`synthesis.specs`: the formula parser and the pattern classifier.
+"""Tests of :mod:`synthesis.model.specs`: the formula parser and the pattern classifier.
 
 The parser is checked against an independent printer that writes a syntax tree with
 the *fewest* parentheses the documented precedence allows
@@ -13,12 +13,13 @@ from __future__ import annotations
 
 import random
 import re
+
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from synthesis.errors import ProblemError
-from synthesis.specs import (
+from synthesis.model.errors import ProblemError
+from synthesis.model.specs import (
     BinOp,
     Const,
     Formula,

@@ -176,7 +176,7 @@ def test_learned_tester_of_another_problem_is_refused(learned: Path) -> None:
     with pytest.raises(PolicyError, match="trained on 'maze2'"):
         VersusTesterEnv("small-reactive", f"ppo:{learned / 'maze2'}.zip")
     with pytest.raises(PolicyError, match="is not a tester"):
-        from experiments.train import make_model, make_training_vec_env, DEFAULTS
+        from experiments.train import DEFAULTS, make_model, make_training_vec_env
 
         sut_model = make_model(make_training_vec_env("FlowTest-Maze2-v0", 0, {**DEFAULTS, "n_envs": 1}), DEFAULTS, 0)
         from agents.testers import PPOTester

@@ -16,8 +16,8 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order
 
+from ..model.systems import TransitionSystem
 from .automata import DBA, SpecificationProduct
-from .systems import TransitionSystem
 
 
 @dataclass

@@ -4,7 +4,7 @@
 object is built from it, so a damaged or edited file is refused with a message that
 names the field (``automata.test.delta[3][1]: 9 is outside 0..4``), never with a raw
 ``KeyError``/``IndexError`` from deep inside the environment. It checks shape only;
-:func:`synthesis.artifact.verify_artifact` then checks meaning (the source hash, the
+:func:`synthesis.artifacts.artifact.verify_artifact` then checks meaning (the source hash, the
 automata against the objectives, the restrictions against the product graphs).
 """
 
@@ -13,9 +13,9 @@ from __future__ import annotations
 import re
 from typing import Any
 
-from .errors import ProblemError
-from .problems import KINDS
-from .strategy import SETTINGS
+from ..model.errors import ProblemError
+from ..model.strategy import SETTINGS
+from ..problems.problem import KINDS
 
 SYSTEM_KINDS = ("grid", "fuel", "graph")
 _HEX64 = re.compile(r"[0-9a-f]{64}")

@@ -17,10 +17,10 @@ from typing import Any, Callable
 
 import numpy as np
 
-from .errors import ProblemError, ProblemTooLarge
-from .specs import Objective, check_proposition_name, check_propositions, parse_objective
-from .strategy import SETTINGS
-from .systems import Cell, TransitionSystem, graph_system, grid_world
+from ..model.errors import ProblemError, ProblemTooLarge
+from ..model.specs import Objective, check_proposition_name, check_propositions, parse_objective
+from ..model.strategy import SETTINGS
+from ..model.systems import Cell, TransitionSystem, graph_system, grid_world
 
 KINDS = ("static", "reactive", "mixed", "agent")
 
@@ -48,7 +48,7 @@ class Problem:
     time_limit
         Default solver time limit in seconds (``None``: none).
     agent
-        The test agent of an agent problem (see :mod:`synthesis.agent`).
+        The test agent of an agent problem (see :mod:`synthesis.agent.loop`).
     description
         One paragraph for people.
     """
@@ -106,7 +106,7 @@ def make_problem(
 
 def _check_goal_terminal(ts: TransitionSystem, objective: Objective) -> None:
     """method.md §2: some visit task's last proposition holds only at terminal states."""
-    from .specs import holds
+    from ..model.specs import holds
 
     for task in objective.tasks:
         if not task.is_visit:
@@ -161,7 +161,7 @@ def _table(d: dict, key: str, where: str) -> dict:
 
 MAX_GRID_CELLS = 125_000
 """Largest grid loaded by default (about 350x350): beyond it the moves alone (about four per
-cell, times at least two histories) pass the product-graph limit of :mod:`synthesis.limits`,
+cell, times at least two histories) pass the product-graph limit of :mod:`synthesis.problems.limits`,
 and building T itself takes long. ``max_cells=None`` (``--no-size-limit``) lifts it."""
 
 
@@ -289,7 +289,7 @@ def problem_from_dict(data: dict, source: str = "<problem>", max_cells: int | No
         extras["setting"] = env["setting"]
     kw: dict[str, Any] = {"static_moves": static_moves, "time_limit": time_limit, "extras": extras}
     if "agent" in env:
-        from .agent import agent_from_toml  # the test agent's own section
+        from ..agent.loop import agent_from_toml  # the test agent's own section
 
         kw["agent"] = agent_from_toml(env["agent"], ts, cell_of, f"[environment.agent]{where}")
         if kind == "agent" and static_moves is None:

@@ -25,9 +25,9 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import maximum_flow
 
-from .errors import CheckFailed
-from .products import Products, coreachable, reachable
-from .strategy import TestStrategy
+from ..graphs.products import Products, coreachable, reachable
+from ..model.errors import CheckFailed
+from ..model.strategy import TestStrategy
 
 
 def restricted_edges(products: Products, strategy: TestStrategy) -> np.ndarray:

@@ -23,8 +23,8 @@ from typing import Sequence
 
 import numpy as np
 
-from .errors import ProblemTooLarge
-from .specs import Objective, Task, holds, to_text
+from ..model.errors import ProblemTooLarge
+from ..model.specs import Objective, Task, holds, to_text
 
 Label = frozenset[str]
 

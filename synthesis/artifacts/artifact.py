@@ -6,10 +6,10 @@ test agent's strategy table, and the synthesis summary (the JSON of
 ``flowtest synthesize``). Loading gives a :class:`TestArtifact`.
 
 An artifact cannot lie: loading checks every field against the schema
-(:mod:`synthesis.artifact_schema`), then :func:`verify_artifact` checks its meaning: the
+(:mod:`synthesis.artifacts.schema`), then :func:`verify_artifact` checks its meaning: the
 ``source`` hash of what it was synthesized from (system, objectives, kind) matches its
 content, its automata are those of its objectives, and its restrictions pass the
-independent checks of :mod:`synthesis.verify` on its own product graphs (bypass flow 0,
+independent checks of :mod:`synthesis.checks.verify` on its own product graphs (bypass flow 0,
 the flow of its summary, feasibility). Any failure is a :class:`ProblemError` that names
 what is wrong; an edited test never runs.
 """
@@ -24,10 +24,10 @@ from typing import Any
 
 import numpy as np
 
-from .automata import DBA
-from .errors import ProblemError
-from .strategy import TestStrategy
-from .systems import TransitionSystem
+from ..graphs.automata import DBA
+from ..model.errors import ProblemError
+from ..model.strategy import TestStrategy
+from ..model.systems import TransitionSystem
 
 FORMAT = "flowtest-test"
 VERSION = 1
@@ -43,7 +43,7 @@ def source_hash(system: dict, objectives: dict, kind: str) -> str:
 
 
 def problem_source_hash(problem: Any) -> str:
-    """:func:`source_hash` of a :class:`~synthesis.problems.Problem` (before synthesis)."""
+    """:func:`source_hash` of a :class:`~synthesis.problems.problem.Problem` (before synthesis)."""
     return source_hash(problem.system.to_dict(),
                        {"system": problem.system_objective.text, "test": problem.test_objective.text}, problem.kind)
 
@@ -153,7 +153,7 @@ class TestArtifact:
             Naming the field or the check that fails. ``verify=False`` skips the
             checks of meaning (:func:`verify_artifact`), never the schema.
         """
-        from .artifact_schema import validate_artifact
+        from .schema import validate_artifact
 
         validate_artifact(d, source, FORMAT, VERSION)
         try:
@@ -187,7 +187,7 @@ class TestArtifact:
     @classmethod
     def load(cls, path: str | Path, verify: bool = True) -> "TestArtifact":
         """Read and check an artifact file (see :meth:`from_dict`)."""
-        from .problems import read_limited
+        from ..problems.problem import read_limited
 
         p = Path(path)
         raw = read_limited(p, "artifact")
@@ -222,7 +222,7 @@ def verify_artifact(
     * its ``source`` hash equals the hash of its own system, objectives and kind (and
       ``expected_source`` when given: a cache entry must be the problem asked for);
     * its alphabet is its system's labels and its automata are those of its objectives;
-    * its restrictions pass :func:`synthesis.verify.check_test` on its own product
+    * its restrictions pass :func:`synthesis.checks.verify.check_test` on its own product
       graphs: bypass flow 0, the flow its summary states, no history's entry trapped
       (skipped with ``restrictions=False``: for files whose every byte is already known
       good, the shipped artifacts, so that ``gym.make`` needs no graph library).
@@ -232,8 +232,8 @@ def verify_artifact(
     ProblemError
         Naming the check that fails (the artifact was edited or made for another problem).
     """
-    from .automata import specification_product
-    from .specs import parse_objective
+    from ..graphs.automata import specification_product
+    from ..model.specs import parse_objective
 
     where = f"artifact {source}"
     own = source_hash(art.system.to_dict(), art.objectives, art.kind)
@@ -256,8 +256,8 @@ def verify_artifact(
                                "(edited, or another problem's automata)")
     if not restrictions:
         return
-    from .products import build_products
-    from .verify import check_test
+    from ..checks.verify import check_test
+    from ..graphs.products import build_products
 
     report = check_test(build_products(art.system, spec), art.strategy, int(art.summary["flow"]), raise_on_failure=False)
     if not report.ok:

@@ -5,7 +5,7 @@ Players and turns
 The test agent is the controlled player (the GR(1) *system*); the system under test
 (SUT) is its environment. A game *position* is a configuration at the SUT's turn,
 ``(v, a)`` with ``v = (x_sys, q_hist)`` a node of the virtual product graph G and ``a``
-an agent state (a cell of the agent or a park). One round of :class:`~synthesis.gr1.GR1Game`
+an agent state (a cell of the agent or a park). One round of :class:`~synthesis.agent.gr1.GR1Game`
 is one SUT step followed by one agent step, so ``turn`` (g3, g4, a3) is built into the
 rounds and needs no variable:
 
@@ -70,9 +70,9 @@ from typing import Protocol
 
 import numpy as np
 
+from ..graphs.products import Products, coreachable, reachable
+from ..model.strategy import TestStrategy
 from .gr1 import GR1Game
-from .products import Products, coreachable, reachable
-from .strategy import TestStrategy
 
 __all__ = [
     "AgentGame",
@@ -86,7 +86,7 @@ __all__ = [
 
 
 class TestAgentLike(Protocol):
-    """What :func:`build_agent_game` reads of a test agent (see :class:`synthesis.agent.TestAgent`)."""
+    """What :func:`build_agent_game` reads of a test agent (see :class:`synthesis.agent.loop.TestAgent`)."""
 
     n_states: int
     place_of_state: np.ndarray
@@ -419,7 +419,7 @@ def realizability_exclusions(products: Products, agent: TestAgentLike, groups: C
         The test agent.
     groups
         The MILP's cut groups (``of_edge``, ``keys``, ``restrictable``, ``static``), from
-        :func:`synthesis.milp.cut_groups`.
+        :func:`synthesis.routing.milp.cut_groups`.
 
     Returns
     -------

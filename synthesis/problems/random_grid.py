@@ -29,9 +29,9 @@ from typing import Callable, TypeVar
 
 import numpy as np
 
-from .errors import InconsistentProblem
-from .problems import Problem, make_problem
-from .systems import grid_world
+from ..model.errors import InconsistentProblem
+from ..model.systems import grid_world
+from .problem import Problem, make_problem
 
 FAMILIES: tuple[str, ...] = ("reachability", "reaction", "safety")
 MAX_ATTEMPTS = 50
@@ -121,8 +121,8 @@ def graph_consistency(problem: Problem) -> None:
     Decided on the product graphs only (no MILP): the goal is unreachable, or no
     ``Src -> Tgt`` path passes ``I``. Independent of the environment kind.
     """
-    from .milp import check_consistency
-    from .pipeline import build_graphs
+    from ..pipeline import build_graphs
+    from ..routing.milp import check_consistency
 
     _, products = build_graphs(problem)
     check_consistency(products)

@@ -10,8 +10,8 @@ from __future__ import annotations
 import tomllib
 from typing import Callable
 
-from .problems import Problem, make_problem, problem_from_dict
-from .systems import Cell, fuel_grid_world, graph_system
+from ..model.systems import Cell, fuel_grid_world, graph_system
+from .problem import Problem, make_problem, problem_from_dict
 
 EXAMPLE1 = """
 name = "example1"
@@ -187,8 +187,8 @@ def maze1() -> Problem:
     grid to a park above (0, 2). On rows 6, 4, 2 and 0 it may not stay: when it is its
     turn there, it moves up (paper-examples.md). The system moves first.
     """
-    from .agent import make_test_agent, places_of_cells
-    from .systems import grid_world
+    from ..agent.loop import make_test_agent, places_of_cells
+    from ..model.systems import grid_world
 
     rows, cols = 7, 5
     blocked = {(1, 0), (1, 1), (1, 3), (3, 1), (3, 3), (3, 4), (5, 0), (5, 1), (5, 3)}
@@ -219,8 +219,8 @@ def maze2() -> Problem:
     and moves first: one step along the plus, or stays. Four absorbing parks lie off
     the ends of the plus. Static area: every free cell off the plus.
     """
-    from .agent import make_test_agent, places_of_cells
-    from .systems import grid_world
+    from ..agent.loop import make_test_agent, places_of_cells
+    from ..model.systems import grid_world
 
     rows, cols = 5, 5
     blocked = {(1, 1), (1, 3), (3, 1), (3, 3)}
@@ -262,7 +262,7 @@ def patrolling() -> Problem:
     only, and tying them here makes the routing MILP intractable (phase 1 unproven
     after 60 s).
     """
-    from .agent import make_test_agent, places_of_cells
+    from ..agent.loop import make_test_agent, places_of_cells
 
     rows, cols = 6, 6
     goal, start, refuel = (5, 0), (5, 5), (1, 5)

@@ -36,9 +36,9 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order
 
-from .errors import InconsistentProblem
-from .products import Products, coreachable, reachable
-from .routing_heuristic import RouteSeed, RoutingGuess, guess_routing
+from ..graphs.products import Products, coreachable, reachable
+from ..model.errors import InconsistentProblem
+from .heuristic import RouteSeed, RoutingGuess, guess_routing
 from .solver_control import Clock, SolveControl, run_highs, stdout_guard
 
 MODES = ("static", "reactive", "mixed")
@@ -100,7 +100,7 @@ class MilpOptions:
     control
         Shared with the caller while HiGHS runs: Ctrl-C / stop requests, and the live
         status (best answer, bound, gap) a progress line shows (see
-        :mod:`synthesis.solver_control`).
+        :mod:`synthesis.routing.solver_control`).
     """
 
     mode: str = "reactive"
@@ -343,7 +343,7 @@ def solve_routing(products: Products, options: MilpOptions | None = None) -> Rou
         ``unreachable`` or ``unroutable`` (including a MILP without solution, or
         maximum flow 0: every routing cut set would trap the system).
     """
-    from .verify import trapped_configurations, trapped_entries_of
+    from ..checks.verify import trapped_configurations, trapped_entries_of
 
     options = options or MilpOptions()
     # small reactive models start with every history's flows (adding them lazily costs
@@ -593,7 +593,7 @@ def _solve_once(
 
     missing = {q: v for q, v in required.items() if q not in entries}
     if missing:
-        from .verify import trapped_entries_of
+        from ..checks.verify import trapped_entries_of
 
         cut1 = np.zeros(groups.keys.size, dtype=bool)
         cut1[var_groups] = x[group_col[var_groups]] > 0.5
@@ -789,7 +789,7 @@ def _trap_test(products: Products, groups: CutGroups, entries: dict[int, np.ndar
     """Whether a cut set (``bool`` per group) traps an entry node, for the heuristic."""
     if not entries:
         return None
-    from .verify import trapped_entries_of
+    from ..checks.verify import trapped_entries_of
 
     def traps(cut: np.ndarray) -> bool:
         blocked = _blocked_of_edges(products, np.flatnonzero(cut[groups.of_edge]))
@@ -1062,7 +1062,7 @@ def _run(
     is at most ``"feasible"``, with the gap its own objective leaves to the bound.
 
     Raises ``TimeoutError`` when HiGHS stopped with no solution, ``KeyboardInterrupt``
-    on Ctrl-C or a stop request (see :func:`synthesis.solver_control.run_highs`).
+    on Ctrl-C or a stop request (see :func:`synthesis.routing.solver_control.run_highs`).
     """
     for attempt in (1, 2):
         run_highs(h, deadline, clock=clock, control=options.control, phase=phase, flow=flow, watch_first=watch_first)

@@ -19,7 +19,7 @@ class ProblemError(FlowTestError, ValueError):
 
 class ProblemTooLarge(ProblemError):
     """The problem is well formed but far beyond what can be solved (see
-    :mod:`synthesis.limits`); the message gives the estimate and the way to go on."""
+    :mod:`synthesis.problems.limits`); the message gives the estimate and the way to go on."""
 
 
 class InconsistentProblem(FlowTestError):

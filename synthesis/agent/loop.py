@@ -8,11 +8,11 @@ The pieces, in the order :func:`synthesize_agent_test` uses them:
   *park* states outside ``T`` from which it blocks nothing. Built from a problem file's
   ``[environment.agent]`` table (:func:`agent_from_toml`) or in Python
   (:func:`make_test_agent`, used by the built-ins ``maze1``, ``maze2``, ``patrolling``).
-* **MILP-agent**: the routing MILP of :mod:`synthesis.milp` in mode ``"mixed"`` with the
+* **MILP-agent**: the routing MILP of :mod:`synthesis.routing.milp` in mode ``"mixed"`` with the
   static area ``E_static = {(u, v) in T.E : v not an agent cell}``, the blocked-state
   penalties (``block_states``) and the exclusion rows of rejected cut sets.
-* the **test-agent game** of :mod:`synthesis.agent_game`, a GR(1) game solved with
-  :mod:`synthesis.gr1`;
+* the **test-agent game** of :mod:`synthesis.agent.game`, a GR(1) game solved with
+  :mod:`synthesis.agent.gr1`;
 * the **counterexample-guided loop**: a cut set the agent cannot realize is excluded
   (``sum_{e in C} d_e <= |C| - 1``) and the MILP solved again;
 * **closed-loop verification** (:func:`verify_closed_loop`), independent of the solver;
@@ -23,23 +23,22 @@ The pieces, in the order :func:`synthesize_agent_test` uses them:
 from __future__ import annotations
 
 import json
-
 import time
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any, Callable, Iterable, Sequence
 
 import numpy as np
 
-from .errors import CheckFailed, InconsistentProblem, ProblemError
-from .systems import TransitionSystem
+from ..model.errors import CheckFailed, InconsistentProblem, ProblemError
+from ..model.systems import TransitionSystem
 
 if TYPE_CHECKING:  # imported lazily at run time: pipeline and problems import this module
-    from .agent_game import AgentGame
+    from ..graphs.products import Products
+    from ..model.strategy import TestStrategy
+    from ..pipeline import SynthesisOptions, SynthesizedTest
+    from ..problems.problem import Problem
+    from .game import AgentGame
     from .gr1 import GR1Strategy
-    from .pipeline import SynthesisOptions, SynthesizedTest
-    from .problems import Problem
-    from .products import Products
-    from .strategy import TestStrategy
 
 FIRST_PLAYERS = ("system", "agent")
 MOVE_RULES = ("4-neighbour", "system")
@@ -705,8 +704,8 @@ def verify_closed_loop(
     CheckFailed
         With the first violation found (a FlowTest bug).
     """
-    from .agent_game import blocking_places, ended_nodes, reactive_restrictions
-    from .products import coreachable
+    from ..graphs.products import coreachable
+    from .game import blocking_places, ended_nodes, reactive_restrictions
 
     g, ts = products.virtual, products.ts
     n, n_agent, n_mem = g.n_nodes, agent.n_states, controller.n_memory
@@ -929,12 +928,12 @@ def synthesize_agent_test(
     The loop: exclude what no agent can realize (a move into a place the agent can
     never occupy at the system's turn is unrestrictable; cuts it could never hold are
     excluded); solve MILP-agent; reject the cut set if it traps the system somewhere
-    reachable (:func:`~synthesis.agent_game.trapped_nodes`); build the test-agent game
+    reachable (:func:`~synthesis.agent.game.trapped_nodes`); build the test-agent game
     from ``R(q)`` and ``Obs`` and solve it; if the agent cannot win, exclude the cut set
     (``sum_{e in C} d_e <= |C| - 1``) and solve again. The winning strategy is tabulated
     (:class:`AgentController`) and checked in closed loop (:func:`verify_closed_loop`),
-    by :func:`synthesis.gr1.verify_strategy` and by the routing checks of
-    :mod:`synthesis.verify`.
+    by :func:`synthesis.agent.gr1.verify_strategy` and by the routing checks of
+    :mod:`synthesis.checks.verify`.
 
     Parameters
     ----------
@@ -947,7 +946,7 @@ def synthesize_agent_test(
         agent's ``max_iterations`` (100 unless the problem says otherwise).
     prefilter
         Exclude, before the first solve, the cuts no agent can hold
-        (:func:`~synthesis.agent_game.realizability_exclusions`); this never changes the
+        (:func:`~synthesis.agent.game.realizability_exclusions`); this never changes the
         optimum, only which equally good cut set is tried first and how many solves the
         loop needs.
 
@@ -966,11 +965,11 @@ def synthesize_agent_test(
     CheckFailed
         If the result fails an independent check (a FlowTest bug).
     """
+    from ..checks.verify import check_test
+    from ..pipeline import SynthesisOptions, SynthesizedTest, build_graphs, milp_options, strategy_from_routing
+    from ..routing.milp import cut_groups, solve_routing
     from . import gr1
-    from .agent_game import build_agent_game, realizability_exclusions, trapped_nodes
-    from .milp import cut_groups, solve_routing
-    from .pipeline import SynthesisOptions, SynthesizedTest, build_graphs, milp_options, strategy_from_routing
-    from .verify import check_test
+    from .game import build_agent_game, realizability_exclusions, trapped_nodes
 
     options = options or SynthesisOptions()
     note: Callable[[str], None] = options.progress or (lambda msg: None)

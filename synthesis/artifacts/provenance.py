@@ -32,10 +32,12 @@ def _dist_version(name: str) -> str:
 
 @lru_cache(maxsize=1)
 def source_digest() -> str:
-    """SHA-256 (first 16 hex digits) of the ``synthesis`` package's sources, by file name."""
+    """SHA-256 (first 16 hex digits) of the ``synthesis`` package's sources (every module of
+    every sub-package), by path inside the package."""
+    root = Path(__file__).resolve().parents[1]
     h = hashlib.sha256()
-    for path in sorted(Path(__file__).resolve().parent.glob("*.py")):
-        h.update(path.name.encode() + b"\0" + path.read_bytes() + b"\0")
+    for path in sorted(root.rglob("*.py"), key=lambda p: p.relative_to(root).as_posix()):
+        h.update(path.relative_to(root).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
     return h.hexdigest()[:16]
 
 

@@ -14,7 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from .errors import ProblemTooLarge
+from ..model.errors import ProblemTooLarge
 
 MAX_GRAPH_EDGES = 500_000
 """Default bound on the edges of G (about 6 GB while solving, by :data:`BYTES_PER_EDGE`).
@@ -48,7 +48,7 @@ class SizeEstimate:
 
 
 def _task_states(task: Any) -> int:
-    """States of a sub-task's automaton (synthesis.automata.task_automaton)."""
+    """States of a sub-task's automaton (synthesis.graphs.automata.task_automaton)."""
     return len(task.props) + 1 if task.is_visit else 2
 
 
@@ -83,7 +83,7 @@ def check_size(problem: Any, max_edges: int | None) -> SizeEstimate | None:
     est = estimate_size(problem)
     if est.edges <= max_edges:
         return est
-    from .automata import specification_product
+    from ..graphs.automata import specification_product
 
     way = "pass --no-size-limit (SynthesisOptions(max_graph_edges=None)) to try anyway"
     if est.moves > max_edges:

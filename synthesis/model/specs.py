@@ -14,7 +14,7 @@ pattern                    formula                         allowed in
 =========================  ==============================  ==============
 
 where ``p``, ``q`` are Boolean combinations of propositions. Anything else is
-rejected with a :class:`~synthesis.errors.ProblemError` that quotes the part.
+rejected with a :class:`~synthesis.model.errors.ProblemError` that quotes the part.
 """
 
 from __future__ import annotations

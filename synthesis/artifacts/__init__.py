@@ -1,0 +1,1 @@
+"""What a synthesized test is stored as: summary JSON, versioned artifact, cache keys."""

@@ -1,0 +1,1 @@
+"""The model of a problem: transition systems, objectives, test strategies, errors."""

@@ -1,0 +1,1 @@
+"""The routing MILP (method.md §5), its greedy heuristic and the HiGHS runner."""
