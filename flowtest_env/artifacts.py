@@ -28,7 +28,7 @@ is refused with a message naming what is wrong.
 from __future__ import annotations
 
 import os
-from functools import lru_cache
+from functools import cache
 from pathlib import Path
 from typing import Any
 
@@ -86,11 +86,11 @@ def synthesize_artifact(name: str, node_limit: int | None = None) -> TestArtifac
         If ``name`` is not a built-in problem.
     """
     from synthesis.artifacts.artifact import artifact_of
-    from synthesis.problems.builtins import BUILTINS
-    from synthesis.pipeline import SynthesisOptions, synthesize
     from synthesis.artifacts.provenance import versions
-    from synthesis.routing.solver_control import solver_version
     from synthesis.artifacts.summary import summary_of
+    from synthesis.pipeline import SynthesisOptions, synthesize
+    from synthesis.problems.builtins import BUILTINS
+    from synthesis.routing.solver_control import solver_version
 
     if name not in BUILTINS:
         raise KeyError(f"unknown built-in problem {name!r}; known: {', '.join(sorted(BUILTINS))}")
@@ -192,7 +192,7 @@ def load_checked(path: Path, expected_source: str, what: str) -> TestArtifact:
     return art
 
 
-@lru_cache(maxsize=None)
+@cache
 def load_builtin(name: str) -> TestArtifact:
     """The artifact of a built-in problem: shipped, else cached, else synthesized now.
 
@@ -229,15 +229,25 @@ def load_builtin(name: str) -> TestArtifact:
     return art
 
 
-def builtin_game(name: str, setting: str | None = None, external_tester: bool = False) -> TestGame:
+class _BuiltinGames:
     """The shared :class:`TestGame` of a built-in problem (see :class:`TestGame`): one per
-    name, setting and tester, however the arguments are passed."""
-    return _builtin_game(name, setting, bool(external_tester))
+    name, setting and tester, however the arguments are passed; ``cache_clear()`` forgets
+    them (as ``load_builtin.cache_clear()`` does the artifacts)."""
+
+    def __init__(self) -> None:
+        self._games: dict[tuple[str, str | None, bool], TestGame] = {}
+
+    def __call__(self, name: str, setting: str | None = None, external_tester: bool = False) -> TestGame:
+        key = (name, setting, bool(external_tester))
+        game = self._games.get(key)
+        if game is None:
+            game = self._games[key] = TestGame(load_builtin(name), setting, bool(external_tester))
+        return game
+
+    def cache_clear(self) -> None:
+        self._games.clear()
 
 
-builtin_game.cache_clear = lambda: _builtin_game.cache_clear()  # type: ignore[attr-defined]
-
-
-@lru_cache(maxsize=None)
-def _builtin_game(name: str, setting: str | None, external_tester: bool) -> TestGame:
-    return TestGame(load_builtin(name), setting, external_tester)
+builtin_game = _BuiltinGames()
+"""``builtin_game(name, setting=None, external_tester=False)``: the shared
+:class:`TestGame` of a built-in problem (see :class:`_BuiltinGames`)."""

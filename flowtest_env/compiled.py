@@ -105,7 +105,8 @@ def _agent_bits(game: TestGame, n_agent: int) -> np.ndarray:
     place = np.asarray(game.agent_place, dtype=np.int64)  # -1: a park
     into = (game.dst_place[:, None, :] == place[None, :, None]) & (place >= 0)[None, :, None]  # [s, a, slot]
     weights = np.int64(1) << np.arange(game.n_slots, dtype=np.int64)
-    return into.astype(np.int64) @ weights
+    bits: np.ndarray = into.astype(np.int64) @ weights
+    return bits
 
 
 def _transitions(game: TestGame, n_actions: int) -> dict[str, np.ndarray]:
@@ -169,7 +170,11 @@ def _transitions(game: TestGame, n_actions: int) -> dict[str, np.ndarray]:
     mask = ((legal_z[..., None] >> cols) & 1).astype(np.int8)
     mask = np.where((outcome != 0)[..., None], np.int8(0), np.broadcast_to(mask, (n, nh, na, nm, n_actions)))
     Z = n * nh * na * nm
-    full = lambda x: np.broadcast_to(x, (n, nh, na, nm)).reshape(Z)  # noqa: E731
+
+    def full(x: np.ndarray) -> np.ndarray:
+        """A per-configuration value, broadcast over the axes it does not depend on, flat."""
+        return np.broadcast_to(x, (n, nh, na, nm)).reshape(Z)
+
     return {
         "next_z": next_z.reshape(Z, n_actions),
         "refused": (refused | invalid).reshape(Z, n_actions),
@@ -324,7 +329,7 @@ def compile_pool(games: list[TestGame], encoders: list[Encoder]) -> CompiledPool
     if not games or len(games) != len(encoders):
         raise ValueError("a pool needs at least one test and one encoder per test")
     n_actions = max(g.n_actions for g in games)
-    tests = tuple(compile_test(g, e, n_actions) for g, e in zip(games, encoders))
+    tests = tuple(compile_test(g, e, n_actions) for g, e in zip(games, encoders, strict=True))
     ndim = {t.obs.ndim for t in tests}
     if len(ndim) != 1:
         raise ValueError("the pool's tests have observations of different ranks (mix of 'grid' and 'flat'?)")
@@ -337,7 +342,7 @@ def compile_pool(games: list[TestGame], encoders: list[Encoder]) -> CompiledPool
     row_sizes = np.array([t.obs.shape[0] for t in tests], dtype=np.int64)
     row_offset = np.concatenate([[0], np.cumsum(row_sizes)[:-1]]).astype(np.int64)
     states: list[Any] = []
-    for g, t in zip(games, tests):
+    for g, t in zip(games, tests, strict=True):
         names = [g.state_json(s) for s in range(g.ts.n_states)]
         states.extend(names[s] for s in t.system.tolist())
     system_state = np.empty(len(states), dtype=object)
@@ -349,13 +354,13 @@ def compile_pool(games: list[TestGame], encoders: list[Encoder]) -> CompiledPool
         offset=offset,
         initial=offset + np.array([t.initial for t in tests], dtype=np.int64),
         test_of=np.repeat(np.arange(len(tests), dtype=np.int64), sizes),
-        next_z=np.concatenate([t.next_z + o for t, o in zip(tests, offset)]).reshape(-1),
+        next_z=np.concatenate([t.next_z + o for t, o in zip(tests, offset, strict=True)]).reshape(-1),
         refused=np.concatenate([t.refused for t in tests]).reshape(-1),
         restricted=np.concatenate([t.restricted for t in tests]),
         outcome=np.concatenate([t.outcome for t in tests]),
         test_realized=np.concatenate([t.test_realized for t in tests]),
         mask=np.concatenate([t.mask for t in tests]),
-        obs_row=np.concatenate([t.obs_row + o for t, o in zip(tests, row_offset)]),
+        obs_row=np.concatenate([t.obs_row + o for t, o in zip(tests, row_offset, strict=True)]),
         obs=np.concatenate([_pad_to(t.obs, obs_shape) for t in tests]),
         system_state=system_state,
     )

@@ -68,13 +68,6 @@ def system_propositions(game: TestGame) -> list[str]:
     return out
 
 
-def _fuel_of(game: TestGame) -> np.ndarray:
-    ts = game.ts
-    if ts.kind == "fuel":
-        return np.array([int(k[1]) for k in ts.states], dtype=np.int64)
-    return np.zeros(ts.n_states, dtype=np.int64)
-
-
 class Encoder:
     """Common interface of the encoders."""
 
@@ -103,7 +96,7 @@ class GridEncoder(Encoder):
         lay = ts.layout
         assert lay is not None
         self.rows, self.cols = H, W = lay.rows, lay.cols
-        self.fuel = _fuel_of(game)
+        self.fuel = np.array(game.fuel, dtype=np.int64)
         self.max_fuel = int(ts.max_fuel or 0)
         self.sys_props = system_propositions(game)
         names = ["free", *(f"wall_{d}" for d in DIRS), *(f"door_{d}" for d in DIRS), "test_agent", "system", "goal"]
@@ -120,7 +113,7 @@ class GridEncoder(Encoder):
         self.channels: list[str] = names
         ch = {n: i for i, n in enumerate(names)}
         self.ch = ch
-        cell = [tuple(p) for p in ts.places]
+        cell = game.cells
         self.cell_r = np.array([c[0] for c in cell], dtype=np.int64)
         self.cell_c = np.array([c[1] for c in cell], dtype=np.int64)
         base = np.zeros((len(names), H, W), dtype=np.uint8)

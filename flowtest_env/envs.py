@@ -20,12 +20,12 @@ from gymnasium import spaces
 
 from synthesis.artifacts.artifact import TestArtifact
 
-from .sources import TestLike, game_for
 from .encoding import Encoder, make_encoder
 from .game import GRID_ACTIONS, MET, VIOLATED, GameError, RunState, TestGame
-from .render import ansi, make_renderer
-from .wrappers import MEMORY_KINDS, DistancePotential, VisitedMemory, position_slice
+from .render import Renderer, ansi, make_renderer
+from .sources import TestLike, game_for
 from .validation import action_index, finite_float, one_of, positive_int
+from .wrappers import MEMORY_KINDS, DistancePotential, VisitedMemory, position_slice
 
 DEFAULT_MAX_STEPS: dict[str, int] = {
     "example1": 50,
@@ -187,7 +187,7 @@ class FlowTestEnv(gym.Env[np.ndarray, np.int64]):
         self.games = games
         self.encoders: list[Encoder] = [make_encoder(g, obs_kind, pad_to) for g in games]
         first = self.encoders[0].space
-        for g, e in zip(games, self.encoders):
+        for g, e in zip(games, self.encoders, strict=True):
             if e.space != first or g.n_actions != games[0].n_actions:
                 raise GameError(f"problem {g.artifact.name!r} does not share the pool's observation or action space")
         if memory not in MEMORY_KINDS:
@@ -217,7 +217,7 @@ class FlowTestEnv(gym.Env[np.ndarray, np.int64]):
         self._index = 0
         self.game = games[0]
         self.encoder = self.encoders[0]
-        self._renderers: dict[int, Any] = {}
+        self._renderers: dict[int, Renderer] = {}
         self.run: RunState | None = None
 
     # ------------------------------------------------------------------ API
@@ -307,7 +307,7 @@ class FlowTestEnv(gym.Env[np.ndarray, np.int64]):
         s = self.run.system if self.run is not None else int(self.game.ts.initial)
         return [self.game.action_name(s, a) for a in range(self.game.n_actions)]
 
-    def render(self) -> Any:
+    def render(self) -> np.ndarray | str | None:
         if self.render_mode is None:
             gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array' or 'ansi' to make()")
             return None
@@ -707,10 +707,10 @@ class RandomGridEnv(FlowTestEnv):
         shaping: float = 0.0,
         shaping_gamma: float = 0.99,
     ) -> None:
+        from synthesis.problems.random_grid import FAMILIES
+
         from .pools import random_grid_arguments
         from .random_grid import random_pool
-
-        from synthesis.problems.random_grid import FAMILIES
 
         if isinstance(seeds, (str, bytes)) or not hasattr(seeds, "__iter__"):
             raise ValueError(f"seeds must be a list of non-negative integers, not {seeds!r}")

@@ -26,8 +26,8 @@ The rules are played through the environment itself (:meth:`raw_env.apply_tester
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 

@@ -37,11 +37,13 @@ Rules (method.md §6-7)
 
 from __future__ import annotations
 
+from collections.abc import Hashable
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
+from synthesis.agent.loop import AgentController
 from synthesis.artifacts.artifact import TestArtifact
 
 GRID_ACTIONS: tuple[str, ...] = ("N", "S", "E", "W")
@@ -52,6 +54,21 @@ OPEN, MET, VIOLATED = "open", "met", "violated"
 
 class GameError(ValueError):
     """An artifact or a call the test game cannot honour (bad action index, bad agent move)."""
+
+
+def grid_cell(place: Hashable) -> tuple[int, int]:
+    """The ``(row, col)`` of a place of a grid system (its places are cells)."""
+    if not (isinstance(place, tuple) and len(place) == 2):
+        raise GameError(f"place {place!r} is not a grid cell (row, col)")
+    row, col = place
+    return int(row), int(col)
+
+
+def fuel_level(state: Hashable) -> int:
+    """The fuel of a state of a fuel grid (its states are ``((row, col), fuel)``)."""
+    if not (isinstance(state, tuple) and len(state) == 2):
+        raise GameError(f"state {state!r} is not a fuel-grid state ((row, col), fuel)")
+    return int(state[1])
 
 
 @dataclass
@@ -92,7 +109,7 @@ class RunState:
     outcome: str = OPEN
     override: int | None = None
 
-    def copy(self) -> "RunState":
+    def copy(self) -> RunState:
         """An independent copy (for search over runs)."""
         return RunState(
             self.system, self.history, self.agent, self.memory, set(self.visited), self.steps,
@@ -165,7 +182,8 @@ def _permanent_walls(artifact: TestArtifact) -> np.ndarray:
     key = ts.place[ts.src].astype(np.int64) * n_places + ts.place[ts.dst]
     open_somewhere = np.zeros(n_places * n_places, dtype=bool)
     np.logical_or.at(open_somewhere, key, reach[ts.src] & ~static)
-    return static & ~open_somewhere[key]
+    permanent: np.ndarray = static & ~open_somewhere[key]
+    return permanent
 
 
 class TestGame:
@@ -198,6 +216,10 @@ class TestGame:
             raise GameError(f"unknown obstacle setting {setting!r}; expected 'instantaneous' or 'accumulative'")
         self.setting = setting
         self.is_grid = ts.kind in ("grid", "fuel") and ts.layout is not None
+        self.cells: list[tuple[int, int]] = [grid_cell(p) for p in ts.places] if self.is_grid else []
+        """``cells[p]``: the ``(row, col)`` of place ``p`` (grids; empty on graphs)."""
+        self.fuel: list[int] = [fuel_level(k) for k in ts.states] if ts.kind == "fuel" else [0] * ts.n_states
+        """``fuel[s]``: the fuel of state ``s`` (fuel grids; 0 elsewhere)."""
         n, n_moves = ts.n_states, ts.n_moves
         # ---- action slots
         out: list[list[int]] = [[] for _ in range(n)]
@@ -222,12 +244,10 @@ class TestGame:
         self.dst_place = np.where(exists, ts.place[self.successor], -2).astype(np.int64)
         # ---- restrictions per (history, state) as slot bitmasks
         strat = artifact.strategy
-        self.agent_controller: Any = None
+        self.agent_controller: AgentController | None = None
         if artifact.kind == "agent":
             if not artifact.agent or "controller" not in artifact.agent:
                 raise GameError(f"agent artifact {artifact.name!r} has no test agent controller")
-            from synthesis.agent.loop import AgentController
-
             self.agent_controller = AgentController.from_dict(artifact.agent["controller"])
             enforced = np.broadcast_to(strat.static_obstacles[None, :], strat.blocked.shape)
         else:
@@ -290,7 +310,7 @@ class TestGame:
             ctl = self.agent_controller
             self.agent_place: list[int] = [-1 if p is None else int(p) for p in ctl.agent_places]
             self.agent_first = ctl.first == "agent"
-            moves = np.asarray(artifact.agent.get("moves", []), dtype=np.int64).reshape(-1, 2)
+            moves = np.asarray((artifact.agent or {}).get("moves", []), dtype=np.int64).reshape(-1, 2)
             na = len(ctl.agent_places)
             self.agent_moves = np.zeros((na, na), dtype=bool)
             self.agent_moves[moves[:, 0], moves[:, 1]] = True
@@ -346,7 +366,8 @@ class TestGame:
     def mask_of_bits(self, bits: int) -> np.ndarray:
         """``int8[n_actions]`` mask of a bitmask (a fresh array)."""
         if self._mask_table is not None:
-            return self._mask_table[bits].copy()
+            row: np.ndarray = self._mask_table[bits].copy()
+            return row
         return np.array([(bits >> a) & 1 for a in range(self.n_actions)], dtype=np.int8)
 
     def action_mask(self, run: RunState) -> np.ndarray:
@@ -361,11 +382,8 @@ class TestGame:
         accumulative setting). Test-agent blocks are not included: the agent is shown.
         With a tester's override, the restrictions it chose on the current state."""
         if run.override is not None:
-            s, bits, out = run.system, run.override | self.static_bits[run.system], []
-            for k in range(self.n_slots):
-                if (bits >> k) & 1 and self.slot_list[s][k] >= 0:
-                    out.append(self.slot_list[s][k])
-            return out
+            s, bits = run.system, run.override | self.static_bits[run.system]
+            return [self.slot_list[s][k] for k in range(self.n_slots) if (bits >> k) & 1 and self.slot_list[s][k] >= 0]
         h = run.history
         states = (run.system,) if self.setting == "instantaneous" else run.visited | {run.system}
         out: list[int] = []
@@ -398,7 +416,7 @@ class TestGame:
         s0 = int(self.ts.initial)
         h0 = self.artifact.initial_history()
         run = RunState(system=s0, history=h0, visited={s0})
-        if self.has_agent:
+        if self.agent_controller is not None:
             run.agent, run.memory = self.agent_controller.reset()
             if self.agent_first and agent_first_move:
                 self.agent_respond(run)
@@ -407,6 +425,8 @@ class TestGame:
 
     def synthesized_agent_move(self, run: RunState) -> tuple[int, int]:
         """The synthesized test agent's answer ``(agent_state, memory)`` to the run now."""
+        if self.agent_controller is None:
+            raise GameError(f"test {self.artifact.name!r} has no test agent")
         return self.agent_controller.respond(run.agent, run.memory, run.system, run.history)
 
     def agent_respond(self, run: RunState) -> None:
@@ -416,7 +436,7 @@ class TestGame:
     def agent_legal(self, run: RunState) -> np.ndarray:
         """``bool[n_agent]``: the agent's legal moves now (along its transition system,
         never into the SUT's place)."""
-        ok = self.agent_moves[run.agent].copy()
+        ok: np.ndarray = self.agent_moves[run.agent].copy()
         sp = self.place_list[run.system]
         for a in np.flatnonzero(ok):
             if self.agent_place[a] == sp:

@@ -71,7 +71,8 @@ tester, use the AEC version.
 
 from __future__ import annotations
 
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import gymnasium
 import numpy as np
@@ -82,7 +83,7 @@ from pettingzoo.utils import wrappers
 from .encoding import make_encoder
 from .envs import default_max_steps
 from .game import MET, VIOLATED, RunState, TestGame
-from .render import ansi, make_renderer
+from .render import Renderer, ansi, make_renderer
 from .sources import TestLike, game_for
 from .validation import action_index, finite_float, one_of, positive_int
 
@@ -97,14 +98,15 @@ def env(**kwargs: Any) -> AECEnv:
     return e
 
 
-def parallel_env(**kwargs: Any) -> "ParallelFlowTestEnv":
+def parallel_env(**kwargs: Any) -> ParallelFlowTestEnv:
     """The parallel version: one ``step`` plays one round, the agents' actions applied in
     turn order (so the system's action is chosen before it sees this round's tester
     choice when the tester moves first)."""
     return ParallelFlowTestEnv(**kwargs)
 
 
-class raw_env(AECEnv):  # noqa: N801 - PettingZoo's module shape
+# pettingzoo ships no type information (AECEnv, ParallelEnv are Any to mypy)
+class raw_env(AECEnv):  # type: ignore[misc]  # noqa: N801 - PettingZoo's module shape
     """The AEC tester-vs-system environment (see the module docstring).
 
     Parameters
@@ -166,7 +168,8 @@ class raw_env(AECEnv):  # noqa: N801 - PettingZoo's module shape
         n_test = game.n_agent_states if game.has_agent else 1 << game.n_slots
         self._n_hist = int(game.artifact.histories.n_states)
         self._n_states = game.ts.n_states
-        tester_obs = spaces.Box(0.0, 1.0, shape=(self._n_states + self._n_hist + game.n_agent_states,), dtype=np.float32)
+        self._n_tester_obs = self._n_states + self._n_hist + game.n_agent_states
+        tester_obs = spaces.Box(0.0, 1.0, shape=(self._n_tester_obs,), dtype=np.float32)
         self._action_spaces: dict[str, spaces.Discrete] = {
             TESTER: spaces.Discrete(n_test),
             SYSTEM: spaces.Discrete(game.n_actions),
@@ -180,17 +183,17 @@ class raw_env(AECEnv):  # noqa: N801 - PettingZoo's module shape
         if not game.has_agent:
             bits = np.arange(n_test)
             self._choice_bits = bits
-        self._renderer: Any = None
+        self._renderer: Renderer | None = None
         self.run: RunState = game.reset(agent_first_move=False)
-        self.agents = []
+        self.agents: list[str] = []
 
     # ------------------------------------------------------------------ spaces
 
-    def observation_space(self, agent: str) -> spaces.Space:
+    def observation_space(self, agent: str) -> spaces.Dict:
         """The (cached, built once) observation space of ``agent``."""
         return self._observation_spaces[agent]
 
-    def action_space(self, agent: str) -> spaces.Space:
+    def action_space(self, agent: str) -> spaces.Discrete:
         """The (cached, built once) action space of ``agent``."""
         return self._action_spaces[agent]
 
@@ -208,7 +211,7 @@ class raw_env(AECEnv):  # noqa: N801 - PettingZoo's module shape
         allowed = g.choosable_bits[s]
         open_moves = g.exists_bits[s] & ~(1 << g.stay_action) & ~g.static_bits[s] & ~g.agent_bits(run)
         c = self._choice_bits
-        ok = (c & ~allowed) == 0
+        ok: np.ndarray = (c & ~allowed) == 0
         if open_moves:
             ok &= (open_moves & ~c) != 0
         return ok.astype(np.int8)
@@ -253,7 +256,7 @@ class raw_env(AECEnv):  # noqa: N801 - PettingZoo's module shape
         if agent == SYSTEM:
             return {"observation": self.encoder.encode(self.run), "action_mask": self.system_mask()}
         run = self.run
-        obs = np.zeros(self._observation_spaces[TESTER]["observation"].shape, dtype=np.float32)
+        obs = np.zeros(self._n_tester_obs, dtype=np.float32)
         obs[run.system] = 1.0
         obs[self._n_states + run.history] = 1.0
         if run.agent >= 0:
@@ -325,7 +328,7 @@ class raw_env(AECEnv):  # noqa: N801 - PettingZoo's module shape
         self._renderer = None
 
 
-class ParallelFlowTestEnv(ParallelEnv):
+class ParallelFlowTestEnv(ParallelEnv):  # type: ignore[misc]  # pettingzoo ships no type information
     """The parallel API over :class:`raw_env` (same arguments).
 
     A round applies the actions in turn order; when the run ends in the middle of a
@@ -341,10 +344,10 @@ class ParallelFlowTestEnv(ParallelEnv):
         self.render_mode = self.aec_env.render_mode
         self.agents: list[str] = []
 
-    def observation_space(self, agent: str) -> spaces.Space:
+    def observation_space(self, agent: str) -> spaces.Dict:
         return self.aec_env.observation_space(agent)
 
-    def action_space(self, agent: str) -> spaces.Space:
+    def action_space(self, agent: str) -> spaces.Discrete:
         return self.aec_env.action_space(agent)
 
     def reset(self, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[dict[str, Any], dict[str, Any]]:

@@ -27,17 +27,18 @@ from __future__ import annotations
 import json
 import os
 import sys
+from collections.abc import Iterable
 from dataclasses import asdict
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any
 
 from synthesis.artifacts.artifact import TestArtifact, artifact_of
-from synthesis.model.errors import InconsistentProblem, ProblemError
-from synthesis.pipeline import SynthesisOptions, synthesize
-from synthesis.problems.problem import Problem
 from synthesis.artifacts.provenance import cache_key, versions
-from synthesis.problems.random_grid import FAMILIES, MAX_ATTEMPTS, family_objectives, first_consistent, random_problem
 from synthesis.artifacts.summary import summary_of
+from synthesis.model.errors import InconsistentProblem, ProblemError
+from synthesis.pipeline import SynthesisOptions, SynthesizedTest, synthesize
+from synthesis.problems.problem import Problem
+from synthesis.problems.random_grid import FAMILIES, MAX_ATTEMPTS, family_objectives, first_consistent, random_problem
 
 from .artifacts import cache_dir, warn_refused_entry
 
@@ -103,7 +104,7 @@ def pool_path(size: int, family: str, n: int, seed: int, kind: str) -> Path:
     return pool_dir(size, family, n, kind) / f"seed{seed}.json"
 
 
-def _accept(problem: Problem) -> Any:
+def _accept(problem: Problem) -> SynthesizedTest:
     """Synthesize a pool attempt; no test within the budget counts as no test (redraw)."""
     try:
         return synthesize(problem, pool_options())
@@ -127,12 +128,12 @@ def random_artifact(size: int, family: str, n: int, seed: int, kind: str = "reac
     return art
 
 
-def build_artifact_dict(size: int, family: str, n: int, seed: int, kind: str) -> dict:
+def build_artifact_dict(size: int, family: str, n: int, seed: int, kind: str) -> dict[str, Any]:
     """:func:`random_artifact` as a JSON-ready dict (what a Ray task returns)."""
     return random_artifact(size, family, n, seed, kind).to_dict()
 
 
-def _write(path: Path, data: dict) -> None:
+def _write(path: Path, data: dict[str, Any]) -> None:
     """Write a cache file atomically (parallel builders of one pool are safe)."""
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
@@ -236,7 +237,7 @@ def build_pool(
 
 def _synthesize_seeds(
     size: int, family: str, n: int, seeds: list[int], kind: str, parallel: str | None, workers: int | None
-) -> Iterable[tuple[int, dict]]:
+) -> Iterable[tuple[int, dict[str, Any]]]:
     """``(seed, artifact dict)`` for every seed, in the order they finish."""
     if parallel is None:
         for seed in seeds:

@@ -47,17 +47,20 @@ _TILES: dict[tuple[Any, ...], np.ndarray] = {}
 def _disk(size: int, radius: float) -> np.ndarray:
     yy, xx = np.mgrid[0:size, 0:size] + 0.5
     c = size / 2
-    return (yy - c) ** 2 + (xx - c) ** 2 <= (radius * size) ** 2
+    mask: np.ndarray = (yy - c) ** 2 + (xx - c) ** 2 <= (radius * size) ** 2
+    return mask
 
 
 def _diamond(size: int, radius: float) -> np.ndarray:
     yy, xx = np.mgrid[0:size, 0:size] + 0.5
     c = size / 2
-    return np.abs(yy - c) + np.abs(xx - c) <= radius * size
+    mask: np.ndarray = np.abs(yy - c) + np.abs(xx - c) <= radius * size
+    return mask
 
 
 def _ring(size: int, outer: float, inner: float) -> np.ndarray:
-    return _disk(size, outer) & ~_disk(size, inner)
+    mask: np.ndarray = _disk(size, outer) & ~_disk(size, inner)
+    return mask
 
 
 def _square(size: int, margin: float) -> np.ndarray:
@@ -72,7 +75,8 @@ def _cross(size: int, width: float, length: float) -> np.ndarray:
     c = size / 2
     a = (np.abs(yy - c) <= width * size) & (np.abs(xx - c) <= length * size)
     b = (np.abs(xx - c) <= width * size) & (np.abs(yy - c) <= length * size)
-    return a | b
+    mask: np.ndarray = a | b
+    return mask
 
 
 def shape_mask(kind: str, size: int) -> np.ndarray:
@@ -161,7 +165,7 @@ def fuel_test_places(game: TestGame, props: set[str]) -> tuple[dict[int, list[in
     holds: dict[int, set[int]] = {}
     for s in range(ts.n_states):
         if ts.labels[s] & props and not ts.terminal[s]:
-            holds.setdefault(int(ts.states[s][1]), set()).add(int(ts.place[s]))
+            holds.setdefault(game.fuel[s], set()).add(int(ts.place[s]))
     now: dict[int, list[int]] = {}
     later: dict[int, list[int]] = {}
     below: set[int] = set()
@@ -206,17 +210,17 @@ class GridRenderer:
             for c in range(self.cols):
                 blocked = (r, c) in lay.blocked
                 img[r * size : (r + 1) * size, c * size : (c + 1) * size] = floor_tile(size, BLOCKED if blocked else FLOOR)
-        cells = [tuple(p) for p in ts.places]
+        cells = game.cells
         for p in np.unique(ts.place[ts.terminal]):
-            _paint(img, *cells[p], size, shape_mask("goal", size), GOAL)
+            _paint(img, *cells[int(p)], size, shape_mask("goal", size), GOAL)
         props = system_propositions(game)
         for i, name in enumerate(props):
             for p in marked_places(game, name):
                 _paint(img, *cells[p], size, shape_mask("mark", size), PALETTE[i % len(PALETTE)])
         if self.is_fuel:
-            fuel = np.array([k[1] for k in ts.states])
+            fuel = np.array(game.fuel, dtype=np.int64)
             for p in np.unique(ts.place[ts.dst[fuel[ts.dst] == self.max_fuel]]):
-                _paint(img, *cells[p], size, shape_mask("refuel", size), REFUEL)
+                _paint(img, *cells[int(p)], size, shape_mask("refuel", size), REFUEL)
         # hidden test cells (engineer view): fixed on plain grids; on fuel grids they
         # depend on the fuel level (see fuel_test_places), so frame() draws them
         self.test_now: dict[int, list[int]] = {}
@@ -245,7 +249,7 @@ class GridRenderer:
         ts = g.ts
         img = self.background.copy()
         if self.is_fuel and self.view == "engineer":
-            fuel = int(ts.states[run.system][1])
+            fuel = g.fuel[run.system]
             for p in self.test_later.get(fuel, ()):
                 _paint(img, *self.cells[p], size, shape_mask("test", size), TEST_CELL_LATER)
             for p in self.test_now.get(fuel, ()):
@@ -261,12 +265,17 @@ class GridRenderer:
             _paint(img, *self.cells[g.agent_place[run.agent]], size, shape_mask("agent", size), AGENT)
         _paint(img, *self.cells[g.place_list[run.system]], size, shape_mask("system", size), SYSTEM)
         if self.is_fuel:
-            fuel = int(ts.states[run.system][1])
+            fuel = g.fuel[run.system]
             y0 = self.rows * size
             h = img.shape[0] - y0
             width = int(round(img.shape[1] * fuel / max(self.max_fuel, 1)))
             img[y0 + h // 4 : y0 + h - h // 4, :width] = FUEL_BAR
         return img
+
+
+def _unit_rgb(color: RGB) -> tuple[float, float, float]:
+    """A colour as matplotlib's floats in ``[0, 1]``."""
+    return color[0] / 255, color[1] / 255, color[2] / 255
 
 
 ARC_RAD = 0.12
@@ -282,7 +291,7 @@ def _arc_middles(disp: np.ndarray, src: np.ndarray, dst: np.ndarray, rad: float,
     arrow rather than on the straight chord.
     """
     out: list[np.ndarray] = []
-    for a, b in zip(disp[src], disp[dst]):
+    for a, b in zip(disp[src], disp[dst], strict=True):
         d = b - a
         ctl = (a + b) / 2 + rad * np.array([d[1], -d[0]])
         n = max(2, int(np.hypot(*d)))
@@ -309,7 +318,7 @@ class GraphRenderer:
         ts = game.ts
         g = nx.DiGraph()
         g.add_nodes_from(range(ts.n_states))
-        g.add_edges_from(zip(ts.src.tolist(), ts.dst.tolist()))
+        g.add_edges_from(zip(ts.src.tolist(), ts.dst.tolist(), strict=True))
         pos = nx.kamada_kawai_layout(g.to_undirected()) if ts.n_states > 1 else {0: np.zeros(2)}
         xy = np.array([pos[i] for i in range(ts.n_states)], dtype=float)
         px = max(240, 15 * tile_size)
@@ -320,8 +329,8 @@ class GraphRenderer:
         ax.set_ylim(xy[:, 1].min() - 0.25, xy[:, 1].max() + 0.25)
         ax.set_aspect("equal")
         ax.axis("off")
-        fig.patch.set_facecolor(np.array(FLOOR) / 255)
-        for a, b in zip(ts.src.tolist(), ts.dst.tolist()):
+        fig.patch.set_facecolor(_unit_rgb(FLOOR))
+        for a, b in zip(ts.src.tolist(), ts.dst.tolist(), strict=True):
             ax.annotate(
                 "", xy=xy[b], xytext=xy[a],
                 arrowprops={"arrowstyle": "-|>", "color": "0.55", "lw": 1.2, "shrinkA": 14, "shrinkB": 14,
@@ -329,13 +338,14 @@ class GraphRenderer:
             )
         test_props = hidden_propositions(game) if view == "engineer" else set()
         for s in range(ts.n_states):
-            face = np.array(GOAL) / 255 if ts.terminal[s] else "white"
-            edge = np.array(TEST_CELL) / 255 if ts.labels[s] & test_props else "0.3"
+            face = _unit_rgb(GOAL) if ts.terminal[s] else "white"
+            edge = _unit_rgb(TEST_CELL) if ts.labels[s] & test_props else "0.3"
             ax.scatter([xy[s, 0]], [xy[s, 1]], s=520, c=[face] if not isinstance(face, str) else face,
                        edgecolors=[edge] if not isinstance(edge, str) else edge, linewidths=2.5, zorder=3)
             ax.text(xy[s, 0], xy[s, 1] - 0.13, str(ts.states[s]), ha="center", va="top", fontsize=8, zorder=4)
-        canvas.draw()
-        self.background = np.asarray(canvas.buffer_rgba())[:, :, :3].copy()
+        # matplotlib ships no type hints for backend_agg (FigureCanvasAgg's methods are untyped)
+        canvas.draw()  # type: ignore[no-untyped-call]
+        self.background = np.asarray(canvas.buffer_rgba())[:, :, :3].copy()  # type: ignore[no-untyped-call]
         # pixel coordinates of nodes (data -> display, y flipped)
         disp = ax.transData.transform(xy)
         h = self.background.shape[0]
@@ -379,7 +389,11 @@ class GraphRenderer:
         return img
 
 
-def make_renderer(game: TestGame, tile_size: int = 32, view: str = "system") -> GridRenderer | GraphRenderer:
+Renderer = GridRenderer | GraphRenderer
+"""A picture maker of one game (:func:`make_renderer`)."""
+
+
+def make_renderer(game: TestGame, tile_size: int = 32, view: str = "system") -> Renderer:
     """The renderer of a game's kind."""
     if game.is_grid:
         return GridRenderer(game, tile_size, view)
@@ -407,13 +421,13 @@ def ansi(game: TestGame, run: RunState, view: str = "system") -> str:
         lay = ts.layout
         assert lay is not None
         grid = [["#" if (r, c) in lay.blocked else "." for c in range(lay.cols)] for r in range(lay.rows)]
-        cells = [tuple(p) for p in ts.places]
-        for s in np.flatnonzero(ts.terminal):
-            r, c = cells[int(ts.place[s])]
+        cells = game.cells
+        for goal in np.flatnonzero(ts.terminal):
+            r, c = cells[int(ts.place[goal])]
             grid[r][c] = "T"
         if ts.kind == "fuel":  # as in the pictures: per fuel level, see fuel_test_places
             now, later = fuel_test_places(game, test_props)
-            fuel = int(ts.states[run.system][1])
+            fuel = game.fuel[run.system]
             for mark, places in (("~", later.get(fuel, [])), ("?", now.get(fuel, []))):
                 for p in places:
                     r, c = cells[p]
@@ -427,9 +441,9 @@ def ansi(game: TestGame, run: RunState, view: str = "system") -> str:
                 r, c = cells[p]
                 grid[r][c] = name[0]
         if ts.kind == "fuel":
-            fuel = np.array([k[1] for k in ts.states])
-            for p in np.unique(ts.place[ts.dst[fuel[ts.dst] == ts.max_fuel]]):
-                r, c = cells[p]
+            fuel_of = np.array(game.fuel, dtype=np.int64)
+            for refuel in np.unique(ts.place[ts.dst[fuel_of[ts.dst] == ts.max_fuel]]):
+                r, c = cells[int(refuel)]
                 grid[r][c] = "R"
         if ap >= 0:
             r, c = cells[ap]

@@ -36,7 +36,8 @@ the states visited, not on the configuration); ``AutoresetMode.NEXT_STEP`` only.
 
 from __future__ import annotations
 
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -47,8 +48,8 @@ from gymnasium.vector.utils import batch_space
 
 from .compiled import OUTCOMES, CompiledPool, compile_pool
 from .encoding import make_encoder
-from .game import TestGame
-from .render import make_renderer
+from .game import RunState, TestGame
+from .render import Renderer, make_renderer
 
 DRAWS_PER_REFILL = 64
 """Test draws taken from each env's generator at a time (a batch of draws gives the same
@@ -129,7 +130,7 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         self._draws = np.zeros((self.num_envs, DRAWS_PER_REFILL), dtype=np.int64)
         self._next_draw = np.zeros(self.num_envs, dtype=np.int64)
         self._started = False
-        self._renderers: dict[int, Any] = {}
+        self._renderers: dict[int, Renderer] = {}
 
     # ------------------------------------------------------------------ tests per episode
 
@@ -150,7 +151,8 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
             self._refill(empty)
         k = self._next_draw[envs]
         self._next_draw[envs] = k + 1
-        return self._draws[envs, k]
+        drawn: np.ndarray = self._draws[envs, k]
+        return drawn
 
     def _start(self, envs: np.ndarray) -> None:
         tests = self._choose_tests(envs)
@@ -237,7 +239,8 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         return a
 
     def _observe(self, z: np.ndarray) -> np.ndarray:
-        return np.take(self.pool.obs, self.pool.obs_row[z], axis=0)  # faster than fancy indexing
+        obs: np.ndarray = np.take(self.pool.obs, self.pool.obs_row[z], axis=0)  # faster than fancy indexing
+        return obs
 
     def _infos(self, z: np.ndarray) -> dict[str, Any]:
         """``system_state`` (an object array of the single env's values, gathered from one
@@ -293,7 +296,7 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
             "steps": self._steps.copy(),
         }
 
-    def run_state(self, i: int) -> Any:
+    def run_state(self, i: int) -> RunState:
         """The :class:`~flowtest_env.game.RunState` of env ``i`` now (for pictures)."""
         t, local = self.pool.locate(int(self._z[i]))
         return self.pool.tests[t].run_state(
@@ -399,7 +402,8 @@ class VectorActionMaskObservation(gym.vector.VectorWrapper):
     def reset(
         self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-        obs, infos = self.env.reset(seed=seed, options=options)
+        # gymnasium 1.4 types VectorEnv.reset's seed as int | None; its vector envs and ours take a list too
+        obs, infos = self.env.reset(seed=seed, options=options)  # type: ignore[arg-type]
         return {"observation": obs, "action_mask": infos["action_mask"]}, infos
 
     def step(self, actions: Any) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:

@@ -2,11 +2,40 @@
 
 from __future__ import annotations
 
-from typing import Any, SupportsFloat
+from typing import Any, Protocol, SupportsFloat, runtime_checkable
 
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
+
+from .encoding import Encoder
+from .game import RunState, TestGame
+from .system_product import INF, SystemProduct
+
+
+@runtime_checkable
+class PlaysTestGame(Protocol):
+    """What the wrappers read of an unwrapped FlowTest env (:class:`~flowtest_env.envs.FlowTestEnv`):
+    its game, the current run and the legal-action mask."""
+
+    game: TestGame
+    run: RunState | None
+
+    def action_masks(self) -> np.ndarray: ...
+
+
+def _flowtest_env(env: gym.Env[np.ndarray, np.int64]) -> PlaysTestGame:
+    """The unwrapped FlowTest env behind ``env``.
+
+    Raises
+    ------
+    TypeError
+        If ``env`` does not wrap a FlowTest env.
+    """
+    inner = env.unwrapped
+    if not isinstance(inner, PlaysTestGame):
+        raise TypeError(f"{type(inner).__name__} is not a FlowTest env (no game, run and action_masks)")
+    return inner
 
 
 class ActionMaskObservation(
@@ -27,20 +56,24 @@ class ActionMaskObservation(
 
     def __init__(self, env: gym.Env[np.ndarray, np.int64]) -> None:
         gym.utils.RecordConstructorArgs.__init__(self)  # so gymnasium.make(env.spec) rebuilds it
-        super().__init__(env)
+        # gymnasium 1.4 types Wrapper.__init__'s env (and Wrapper.env) with the wrapper's own
+        # observation type instead of the wrapped env's; `_inner` keeps the wrapped env's types
+        super().__init__(env)  # type: ignore[arg-type]
+        self._inner = env
         if not isinstance(env.action_space, spaces.Discrete):
             raise TypeError(f"ActionMaskObservation needs a Discrete action space, not {env.action_space}")
         n = int(env.action_space.n)
-        self.observation_space = spaces.Dict(
+        # gymnasium 1.4 types spaces.Dict as a Space of dicts of spaces, not of samples
+        self.observation_space = spaces.Dict(  # type: ignore[assignment]
             {"observation": env.observation_space, "action_mask": spaces.Box(0, 1, shape=(n,), dtype=np.int8)}
         )
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-        obs, info = self.env.reset(seed=seed, options=options)
+        obs, info = self._inner.reset(seed=seed, options=options)
         return {"observation": obs, "action_mask": np.asarray(info["action_mask"], dtype=np.int8)}, info
 
     def step(self, action: np.int64) -> tuple[dict[str, np.ndarray], SupportsFloat, bool, bool, dict[str, Any]]:
-        obs, reward, terminated, truncated, info = self.env.step(action)
+        obs, reward, terminated, truncated, info = self._inner.step(action)
         return {"observation": obs, "action_mask": np.asarray(info["action_mask"], dtype=np.int8)}, reward, terminated, truncated, info
 
 
@@ -52,7 +85,7 @@ MEMORY_KINDS = ("none", "visited")
 occupied (:class:`VisitedPlaces`)."""
 
 
-def encoder_of(env: Any) -> Any:
+def encoder_of(env: object) -> Encoder:
     """The observation encoder behind a FlowTest env (Gymnasium or PettingZoo, wrapped or not).
 
     Raises
@@ -63,17 +96,17 @@ def encoder_of(env: Any) -> Any:
     obj, seen = env, 0
     while obj is not None and seen < 16:
         enc = getattr(obj, "encoder", None)
-        if enc is not None:
+        if isinstance(enc, Encoder):
             return enc
         obj = getattr(obj, "env", None) or getattr(obj, "aec_env", None)
         seen += 1
     enc = getattr(getattr(env, "unwrapped", None), "encoder", None)
-    if enc is None:
+    if not isinstance(enc, Encoder):
         raise TypeError(f"{type(env).__name__} exposes no FlowTest observation encoder")
     return enc
 
 
-def position_slice(encoder: Any) -> slice:
+def position_slice(encoder: Encoder) -> slice:
     """Where a flat FlowTest observation holds the one-hot of the SUT's own place: the
     ``system`` plane on grids, the first block on graphs (:mod:`flowtest_env.encoding`).
 
@@ -131,7 +164,10 @@ class VisitedPlaces(gym.ObservationWrapper[np.ndarray, np.int64, np.ndarray], gy
         gym.utils.RecordConstructorArgs.__init__(self)  # so gymnasium.make(env.spec) rebuilds it
         super().__init__(env)
         self.memory = VisitedMemory(position_slice(encoder_of(env)))
-        n = int(env.observation_space.shape[0]) + self.memory.size
+        shape = env.observation_space.shape
+        if shape is None or len(shape) != 1:
+            raise ValueError(f"the visited-places memory needs a flat observation, not shape {shape}")
+        n = int(shape[0]) + self.memory.size
         self.observation_space = spaces.Box(0.0, 1.0, shape=(n,), dtype=np.float32)
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
@@ -143,7 +179,7 @@ class VisitedPlaces(gym.ObservationWrapper[np.ndarray, np.int64, np.ndarray], gy
 
     def action_masks(self) -> np.ndarray:
         """The wrapped env's legal actions (sb3-contrib's MaskablePPO convention)."""
-        return self.env.unwrapped.action_masks()
+        return _flowtest_env(self.env).action_masks()
 
 
 # ---------------------------------------------------------------- reward shaping
@@ -159,11 +195,9 @@ class DistancePotential:
         if scale <= 0:
             raise ValueError(f"the shaping scale must be positive, not {scale}")
         self.scale = float(scale)
-        self._products: dict[int, Any] = {}
+        self._products: dict[int, SystemProduct] = {}
 
-    def __call__(self, game: Any, run: Any) -> float:
-        from .system_product import INF, SystemProduct
-
+    def __call__(self, game: TestGame, run: RunState) -> float:
         prod = self._products.get(id(game))
         if prod is None:
             prod = self._products[id(game)] = SystemProduct(game)
@@ -190,7 +224,9 @@ class DistanceShaping(gym.Wrapper[np.ndarray, np.int64, np.ndarray, np.int64], g
         self._last = 0.0
 
     def _phi(self) -> float:
-        u = self.env.unwrapped
+        u = _flowtest_env(self.env)
+        if u.run is None:
+            raise gym.error.ResetNeeded("call reset() before step()")
         return self.potential(u.game, u.run)
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
@@ -207,4 +243,4 @@ class DistanceShaping(gym.Wrapper[np.ndarray, np.int64, np.ndarray, np.int64], g
 
     def action_masks(self) -> np.ndarray:
         """The wrapped env's legal actions (sb3-contrib's MaskablePPO convention)."""
-        return self.env.unwrapped.action_masks()
+        return _flowtest_env(self.env).action_masks()

@@ -114,7 +114,7 @@ def test_controller_round_trip(tests: dict[str, SynthesizedTest], name: str) -> 
     g = test.products.virtual
     rng = np.random.default_rng(0)
     mem, rows, agents = np.nonzero(ctrl.next_agent >= 0)
-    queries = [(int(a), int(m), int(g.state[v]), int(g.hist[v])) for m, v, a in zip(mem, rows, agents)]
+    queries = [(int(a), int(m), int(g.state[v]), int(g.hist[v])) for m, v, a in zip(mem, rows, agents, strict=True)]
     n_agent = len(ctrl.agent_names)
     for _ in range(300):  # also outside the table (fallback moves)
         v = int(rng.integers(g.n_nodes))
@@ -134,7 +134,7 @@ def test_controller_round_trip(tests: dict[str, SynthesizedTest], name: str) -> 
 def test_random_runs_through_the_public_protocol(tests: dict[str, SynthesizedTest], name: str) -> None:
     """Drive the controller as an environment does: reset, (first move), respond per step."""
     test = tests[name]
-    ts, spec = test.problem.system, test.spec
+    ts = test.problem.system
     art = TestArtifact.from_dict(json.loads(json.dumps(artifact_of(test, summary_of(test)).to_dict())))
     ctrl = AgentController.from_dict(art.agent["controller"])
     static = test.strategy.static_obstacles

@@ -99,7 +99,7 @@ def holds_on(task: RefTask, word: list[Label]) -> bool:
     if task.kind == "safety":
         return all(t[0])
     if task.kind == "reaction":
-        return all((not x) or y for x, y in zip(t[0], t[1]))
+        return all((not x) or y for x, y in zip(t[0], t[1], strict=True))
     if task.kind == "delayed":
         # for every i with p: some j >= i with q; positions after n repeat position n-1
         return all(not t[0][i] or any(t[1][i:]) for i in range(n))
@@ -300,7 +300,7 @@ def test_minimisation_preserves_language_and_is_minimal(seed: int) -> None:
         for q in range(raw.n_states):
             for a in range(len(letters)):
                 nxt = raw.components[int(raw.delta[q, a])]
-                assert [int(p.delta[c, a]) for p, c in zip(parts, raw.components[q])] == list(nxt)
+                assert [int(p.delta[c, a]) for p, c in zip(parts, raw.components[q], strict=True)] == list(nxt)
         # idempotence survives product and minimisation
         for a in range(len(letters)):
             assert np.array_equal(small.delta[small.delta[:, a], a], small.delta[:, a])

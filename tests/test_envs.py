@@ -463,7 +463,7 @@ def test_synthesized_test_keeps_its_guarantees_exhaustively(name: str) -> None:
         if grow.size == 0:
             break
         can[grow] = True
-    trapped = [game.state_json(s.system) for s, ok in zip(states, can & live | ~live) if not ok]
+    trapped = [game.state_json(s.system) for s, ok in zip(states, can & live | ~live, strict=True) if not ok]
     assert not trapped, f"{name}: the system is trapped at {trapped[:5]}"
 
 

@@ -41,7 +41,7 @@ def test_memory_wrapper_and_env_option_agree_and_remember_only_own_places() -> N
     a, _ = _rollout(wrapped, MOVES)
     b, _ = _rollout(option, MOVES)
     p, _ = _rollout(plain, MOVES)
-    for x, y, z in zip(a, b, p):
+    for x, y, z in zip(a, b, p, strict=True):
         np.testing.assert_array_equal(x, y)
         np.testing.assert_array_equal(x[:n], z)  # the env's own observation is unchanged
     pos = flowtest_env.wrappers.position_slice(plain.unwrapped.encoder)

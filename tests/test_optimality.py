@@ -34,7 +34,7 @@ import numpy as np
 import pytest
 
 from synthesis.graphs.products import Products
-from synthesis.model.errors import CheckFailed, InconsistentProblem
+from synthesis.model.errors import InconsistentProblem
 from synthesis.model.systems import TransitionSystem, graph_system, grid_world
 from synthesis.pipeline import SynthesisOptions, SynthesizedTest, build_graphs, synthesize
 from synthesis.problems.problem import Problem, make_problem
@@ -101,7 +101,7 @@ def view_of(p: Products) -> View:
         s_dst=gs.dst.tolist(),
         s_out=s_out,
         s_tgt=set(np.flatnonzero(p.system_target).tolist()),
-        s_index={(int(s), int(q)): i for i, (s, q) in enumerate(zip(gs.state, gs.hist))},
+        s_index={(int(s), int(q)): i for i, (s, q) in enumerate(zip(gs.state, gs.hist, strict=True))},
         sys_of_hist=p.spec.sys_state.tolist(),
         restrictable_move=p.ts.restrictable.tolist(),
         move=g.move.tolist(),
@@ -283,7 +283,7 @@ def walls(v: View, ts: TransitionSystem, bidirectional: bool) -> list[tuple[froz
     """
     moves: dict[object, set[tuple[int, int]]] = {}
     allowed: dict[object, bool] = {}
-    for mv, (a, b) in enumerate(zip(ts.src.tolist(), ts.dst.tolist())):
+    for mv, (a, b) in enumerate(zip(ts.src.tolist(), ts.dst.tolist(), strict=True)):
         key = frozenset((a, b)) if bidirectional else (a, b)
         moves.setdefault(key, set()).add((a, b))
         allowed[key] = allowed.get(key, True) and bool(ts.restrictable[mv])
@@ -557,7 +557,7 @@ def graph_instance(seed: int) -> Problem:
     middle = names[1:-1]
     rng.shuffle(middle)
     spine = [start] + middle[: rng.randint(1, len(middle))] + [goal]
-    for a, b in zip(spine, spine[1:]):
+    for a, b in itertools.pairwise(spine):
         edges += [(a, b), (b, a)] if rng.random() < 0.8 else [(a, b)]
     for i in range(n - 1):
         for j in range(i + 1, n):

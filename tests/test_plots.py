@@ -99,7 +99,7 @@ def test_one_panel_per_restricting_history() -> None:
     reactive = test.strategy.restrictions & ~test.strategy.static_obstacles[None, :]
     restricting = [q for q in range(test.strategy.n_hist) if reactive[q].any()]
     assert len(panels) == len(restricting) >= 1
-    for panel, q in zip(panels, restricting):
+    for panel, q in zip(panels, restricting, strict=True):
         assert test.spec.history_name(q) in panel.title and test.spec.describe(q) in panel.title
         assert np.array_equal(panel.restricted, reactive[q])
 
@@ -123,7 +123,7 @@ def test_graph_layout_is_layered_and_deterministic() -> None:
 
 def test_fuel_restriction_notes_fuel_levels() -> None:
     ts = load_problem("refueling").system
-    moves = np.flatnonzero((ts.place[ts.src] != ts.place[ts.dst]))
+    moves = np.flatnonzero(ts.place[ts.src] != ts.place[ts.dst])
     m = int(moves[0])
     a, b = int(ts.place[ts.src[m]]), int(ts.place[ts.dst[m]])
     mask = np.zeros(ts.n_moves, dtype=bool)

@@ -105,7 +105,7 @@ def random_case(seed: int):
 def naive_product(ts: TransitionSystem, dba: DBA) -> tuple[Node, set[Node], set[tuple[Node, Node]]]:
     """BFS product from ``(s0, delta(q0, L(s0)))`` over the moves of ``ts``."""
     succ: dict[int, list[int]] = {}
-    for a, b in zip(ts.src.tolist(), ts.dst.tolist()):
+    for a, b in zip(ts.src.tolist(), ts.dst.tolist(), strict=True):
         succ.setdefault(a, []).append(b)
     init = (ts.initial, dba.step(dba.initial, ts.labels[ts.initial]))
     nodes = {init}
@@ -123,8 +123,8 @@ def naive_product(ts: TransitionSystem, dba: DBA) -> tuple[Node, set[Node], set[
 
 
 def graph_sets(g: ProductGraph) -> tuple[Node, set[Node], list[tuple[Node, Node]]]:
-    key = [(int(s), int(q)) for s, q in zip(g.state, g.hist)]
-    edges = [(key[u], key[v]) for u, v in zip(g.src.tolist(), g.dst.tolist())]
+    key = [(int(s), int(q)) for s, q in zip(g.state, g.hist, strict=True)]
+    edges = [(key[u], key[v]) for u, v in zip(g.src.tolist(), g.dst.tolist(), strict=True)]
     return key[g.initial], set(key), edges
 
 
@@ -155,7 +155,7 @@ def test_grid_moves_are_the_four_neighbours() -> None:
             for dr, dc in MOVES.values()
             if (a[0] + dr, a[1] + dc) in raw["free"]
         }
-        got = [(ts.states[a], ts.states[b]) for a, b in zip(ts.src.tolist(), ts.dst.tolist())]
+        got = [(ts.states[a], ts.states[b]) for a, b in zip(ts.src.tolist(), ts.dst.tolist(), strict=True)]
         assert len(got) == len(set(got)) and set(got) == want
         for e, (a, b) in enumerate(got):
             assert MOVES[ts.action[e]] == (b[0] - a[0], b[1] - a[1])
@@ -166,7 +166,7 @@ def test_graph_moves_drop_self_loops_and_duplicates() -> None:
     rng = random.Random(2)
     for _ in range(40):
         ts, raw = random_graph(rng)
-        got = list(zip(ts.src.tolist(), ts.dst.tolist()))
+        got = list(zip(ts.src.tolist(), ts.dst.tolist(), strict=True))
         assert len(got) == len(set(got)) and set(got) == raw["edges"]
 
 
@@ -229,25 +229,24 @@ def test_node_sets_projection_and_entries(seed: int) -> None:
     for e in range(g.n_edges):
         assert p.touches_intermediate[e] == bool(p.intermediate[g.src[e]] or p.intermediate[g.dst[e]])
     # projection: same state, sys component of the history; edges map to edges; onto G_sys
-    gs_key = {(int(s), int(q)): v for v, (s, q) in enumerate(zip(gs.state, gs.hist))}
     for v in range(g.n_nodes):
         w = int(p.projection[v])
         assert gs.state[w] == g.state[v] and gs.hist[w] == spec.sys_state[g.hist[v]]
-    gs_edges = set(zip(gs.src.tolist(), gs.dst.tolist()))
-    for u, v in zip(g.src.tolist(), g.dst.tolist()):
+    gs_edges = set(zip(gs.src.tolist(), gs.dst.tolist(), strict=True))
+    for u, v in zip(g.src.tolist(), g.dst.tolist(), strict=True):
         assert (int(p.projection[u]), int(p.projection[v])) in gs_edges
     assert set(p.projection.tolist()) == set(range(gs.n_nodes)), "projection must be onto G_sys"
     assert p.projection[g.initial] == gs.initial
     # entry nodes: the initial node and the heads of edges that change the history
     want: dict[int, set[int]] = {int(g.hist[g.initial]): {g.initial}}
-    for u, v in zip(g.src.tolist(), g.dst.tolist()):
+    for u, v in zip(g.src.tolist(), g.dst.tolist(), strict=True):
         if g.hist[u] != g.hist[v]:
             want.setdefault(int(g.hist[v]), set()).add(v)
     got = {h: set(nodes.tolist()) for h, nodes in g.entry_nodes.items()}
     assert got == want, texts
     # kept entries: projections that can reach Tgt_sys in G_sys
     radj: dict[Node, list[Node]] = {}
-    for u, v in zip(gs.src.tolist(), gs.dst.tolist()):
+    for u, v in zip(gs.src.tolist(), gs.dst.tolist(), strict=True):
         radj.setdefault(v, []).append(u)
     co = bfs(radj, [v for v in range(gs.n_nodes) if p.system_target[v]])
     kept_want = {}

@@ -23,7 +23,8 @@ from __future__ import annotations
 
 import random
 from collections import deque
-from typing import Callable
+from collections.abc import Callable
+from itertools import pairwise
 
 import networkx as nx
 import numpy as np
@@ -118,7 +119,7 @@ def graph_problem(seed: int, kind: str) -> Problem:
     rng.shuffle(middle)
     spine = [start] + middle[: rng.randint(1, len(middle))] + [goal]
     edges = []
-    for a, b in zip(spine, spine[1:]):
+    for a, b in pairwise(spine):
         edges += [(a, b)] + ([(b, a)] if b != goal and rng.random() < 0.8 else [])
     two_way = seed % 2 == 0  # even seeds: reversible, as method.md §2 assumes
     for a in names[:-1]:
@@ -169,25 +170,25 @@ def flow_value(p: Products, keep: np.ndarray) -> int:
 def edges_blocked_by(p: Products, blocked: np.ndarray) -> np.ndarray:
     """Edges of G whose move is restricted (``blocked[q, move]``) under the tail's history."""
     g = p.virtual
-    return np.array([bool(blocked[g.hist[u], m]) for u, m in zip(g.src.tolist(), g.move.tolist())], dtype=bool)
+    return np.array([bool(blocked[g.hist[u], m]) for u, m in zip(g.src.tolist(), g.move.tolist(), strict=True)], dtype=bool)
 
 
 def touches_i(p: Products) -> np.ndarray:
     g = p.virtual
-    return np.array([bool(p.intermediate[u] or p.intermediate[v]) for u, v in zip(g.src, g.dst)], dtype=bool)
+    return np.array([bool(p.intermediate[u] or p.intermediate[v]) for u, v in zip(g.src, g.dst, strict=True)], dtype=bool)
 
 
 def entry_projections(p: Products) -> dict[int, set[int]]:
     """Per history, the G_sys projections of its entry nodes that can reach Tgt_sys."""
     g, gs = p.virtual, p.system
     heads: dict[int, set[int]] = {int(g.hist[g.initial]): {int(g.initial)}}
-    for u, v in zip(g.src.tolist(), g.dst.tolist()):
+    for u, v in zip(g.src.tolist(), g.dst.tolist(), strict=True):
         if g.hist[u] != g.hist[v]:
             heads.setdefault(int(g.hist[v]), set()).add(v)
-    index = {(int(s), int(q)): i for i, (s, q) in enumerate(zip(gs.state, gs.hist))}
+    index = {(int(s), int(q)): i for i, (s, q) in enumerate(zip(gs.state, gs.hist, strict=True))}
     sys_graph = nx.DiGraph()
     sys_graph.add_nodes_from(range(gs.n_nodes))
-    sys_graph.add_edges_from(zip(gs.src.tolist(), gs.dst.tolist()))
+    sys_graph.add_edges_from(zip(gs.src.tolist(), gs.dst.tolist(), strict=True))
     tgt = set(np.flatnonzero(p.system_target).tolist())
     co = set(tgt)
     for t in tgt:
@@ -234,7 +235,7 @@ def closed_loop(p: Products, blocked: np.ndarray) -> tuple[set[tuple[int, int, b
     acc_sys, acc_test = p.spec.accepting_sys, p.spec.accepting_test
     letter = {a: i for i, a in enumerate(pi.letters)}
     out: dict[int, list[tuple[int, int]]] = {}
-    for m, (a, b) in enumerate(zip(ts.src.tolist(), ts.dst.tolist())):
+    for m, (a, b) in enumerate(zip(ts.src.tolist(), ts.dst.tolist(), strict=True)):
         out.setdefault(a, []).append((m, b))
     q0 = int(pi.delta[pi.initial, letter[ts.labels[ts.initial]]])
 
@@ -273,7 +274,7 @@ def trapped_configurations(p: Products, blocked: np.ndarray) -> list[tuple[int, 
     acc_sys = p.spec.accepting_sys
     letter = {a: i for i, a in enumerate(pi.letters)}
     out: dict[int, list[tuple[int, int]]] = {}
-    for m, (a, b) in enumerate(zip(ts.src.tolist(), ts.dst.tolist())):
+    for m, (a, b) in enumerate(zip(ts.src.tolist(), ts.dst.tolist(), strict=True)):
         out.setdefault(a, []).append((m, b))
 
     def succ(x: tuple[int, int], restricted: bool) -> list[tuple[int, int]]:
@@ -305,7 +306,7 @@ def trapped_configurations(p: Products, blocked: np.ndarray) -> list[tuple[int, 
 
 def reversible(ts) -> bool:
     """method.md §2's assumption: every move is bidirectional unless it enters a terminal state."""
-    moves = set(zip(ts.src.tolist(), ts.dst.tolist()))
+    moves = set(zip(ts.src.tolist(), ts.dst.tolist(), strict=True))
     return all((b, a) in moves for a, b in moves if not ts.terminal[b])
 
 

@@ -15,7 +15,7 @@ from experiments.cli import main
 from flowtest_env.artifacts import artifact_path
 from flowtest_env.envs import BUILTIN_ENVS
 from flowtest_env.fairness import can_still_meet, check_tester
-from flowtest_env.multiagent import TESTER, raw_env
+from flowtest_env.multiagent import raw_env
 
 PROBLEMS = [n for n in BUILTIN_ENVS if artifact_path(n).exists()]
 TESTED = ["maze1", "maze2", "patrolling", "small-reactive", "beaver-rescue", "motion-primitives"]

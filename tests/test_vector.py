@@ -8,8 +8,9 @@ do not exist), over many autoresets (short step budgets force truncations too).
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
