@@ -416,7 +416,7 @@ class BeaverRescueEnv(FlowTestEnv):
 
     ## Observation Space
 
-    Flat ``float32`` only.
+    Flat ``float32[45]`` only (a graph has no image-like encoding).
 
     ## Rewards
 
@@ -445,11 +445,12 @@ class MotionPrimitivesEnv(FlowTestEnv):
 
     ## Action Space
 
-    ``Discrete(k + 1)``: one action per outgoing-edge slot, and stay.
+    ``Discrete(4)``: one action per outgoing-edge slot (three: the largest out-degree),
+    and stay.
 
     ## Observation Space
 
-    Flat ``float32`` only.
+    Flat ``float32[77]`` only (a graph has no image-like encoding).
 
     ## Rewards
 
@@ -481,8 +482,8 @@ class RefuelingEnv(FlowTestEnv):
 
     ## Observation Space
 
-    Flat ``float32`` (default) or ``obs_kind="grid"`` with ``unsafe``, ``refuel`` and
-    ``fuel`` planes.
+    Flat ``float32[358]`` (default) or ``obs_kind="grid"``: ``uint8[18, 5, 5]``, with
+    ``unsafe``, ``refuel`` and ``fuel`` planes.
 
     ## Rewards
 
@@ -552,7 +553,8 @@ class Maze1Env(FlowTestEnv):
 
     ## Observation Space
 
-    Flat ``float32`` (default) or ``obs_kind="grid"`` (``test_agent`` plane).
+    Flat ``float32[426]`` (default) or ``obs_kind="grid"``: ``uint8[14, 7, 5]``, with a
+    ``test_agent`` plane.
 
     ## Rewards
 
@@ -617,7 +619,8 @@ class PatrollingEnv(FlowTestEnv):
 
     ## Observation Space
 
-    Flat ``float32`` (default) or ``obs_kind="grid"``.
+    Flat ``float32[512]`` (default) or ``obs_kind="grid"``: ``uint8[18, 6, 6]``, with
+    ``test_agent``, ``refuel`` and ``fuel`` planes.
 
     ## Rewards
 
@@ -654,8 +657,9 @@ class RandomGridEnv(FlowTestEnv):
 
     ## Observation Space
 
-    Flat ``float32`` (default) or ``obs_kind="grid"``; the layout (goal, system
-    propositions) is part of the observation because it changes between episodes.
+    Flat (default) or ``obs_kind="grid"``; the layout (goal, system propositions) is
+    part of the observation because it changes between episodes. The registered
+    configuration (5x5, reachability): flat ``float32[306]``, grid ``uint8[14, 5, 5]``.
 
     ## Rewards
 
