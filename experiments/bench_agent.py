@@ -23,7 +23,7 @@ from typing import Sequence
 from synthesis.agent import gr1
 from synthesis.agent.game import build_agent_game
 from synthesis.pipeline import synthesize
-from synthesis.problems.problem import load_problem
+from synthesis.problems.load import load_problem
 
 PROBLEMS = ("maze1", "maze2", "patrolling")
 END_TO_END_TARGET = 5.0

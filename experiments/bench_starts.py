@@ -20,8 +20,9 @@ import time
 from dataclasses import replace
 
 from synthesis.routing.milp import solve_routing
-from synthesis.pipeline import SynthesisOptions, build_graphs, milp_options
-from synthesis.problems.problem import load_problem
+from synthesis.pipeline import SynthesisOptions, milp_options
+from synthesis.problems.problem import build_graphs
+from synthesis.problems.load import load_problem
 from synthesis.routing.solver_control import solver_version
 
 DEFAULT = ("example1", "small-reactive", "beaver-rescue", "motion-primitives", "patrolling", "refueling")

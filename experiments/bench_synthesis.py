@@ -16,7 +16,7 @@ import time
 
 from synthesis.problems.builtins import BUILTINS
 from synthesis.pipeline import SynthesisOptions, synthesize
-from synthesis.problems.problem import load_problem
+from synthesis.problems.load import load_problem
 from synthesis.artifacts.summary import summary_of
 
 DEFAULT = ("example1", "small-reactive", "beaver-rescue", "motion-primitives", "refueling", "mars-exploration")

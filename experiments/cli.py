@@ -612,7 +612,7 @@ def _synthesize_arguments(p: argparse.ArgumentParser) -> None:
 def run_synthesize(args: argparse.Namespace) -> int:
     """``flowtest synthesize``: load, synthesize, check, then print and write outputs."""
     from synthesis.artifacts.artifact import artifact_of
-    from synthesis.problems.problem import load_problem
+    from synthesis.problems.load import load_problem
     from synthesis.artifacts.summary import summary_of
 
     outputs: list[tuple[Path, str]] = []
@@ -632,7 +632,7 @@ def run_synthesize(args: argparse.Namespace) -> int:
     cpus = os.cpu_count() or 1
     if args.threads is not None and args.threads > cpus:
         raise ProblemError(f"--threads {args.threads} is more than the {cpus} CPUs of this machine")
-    from synthesis.problems.problem import MAX_GRID_CELLS
+    from synthesis.problems.files import MAX_GRID_CELLS
 
     max_cells = None if args.no_size_limit else MAX_GRID_CELLS
     problem = _load(lambda name: load_problem(name, max_cells), args.problem)

@@ -20,7 +20,7 @@ from pathlib import Path
 
 from synthesis.artifacts.artifact import artifact_of
 from synthesis.pipeline import SynthesisOptions, synthesize
-from synthesis.problems.problem import load_problem
+from synthesis.problems.load import load_problem
 from synthesis.artifacts.summary import summary_of
 
 from .cli import EXIT_OK, StageProgress, command, json_safe, positive_int, prepare_output_folder, write_atomically

@@ -67,7 +67,8 @@ from typing import Any, Callable, Iterable
 import numpy as np
 
 from synthesis.model.errors import CheckFailed, InconsistentProblem
-from synthesis.pipeline import SynthesisOptions, build_graphs, synthesize
+from synthesis.pipeline import SynthesisOptions, synthesize
+from synthesis.problems.problem import build_graphs
 from synthesis.problems.random_grid import FAMILIES, PAPER_SIZES, PAPER_SPECS, first_consistent, paper_ap, random_problem
 
 MILPS: tuple[str, ...] = ("static", "reactive")

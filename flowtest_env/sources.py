@@ -30,7 +30,8 @@ from synthesis.artifacts.provenance import content_key
 from synthesis.artifacts.summary import summary_of
 from synthesis.model.errors import ProblemError
 from synthesis.pipeline import SynthesizedTest, synthesize
-from synthesis.problems.problem import Problem, load_problem_file
+from synthesis.problems.files import load_problem_file
+from synthesis.problems.problem import Problem
 
 from .artifacts import builtin_game, cache_dir, load_builtin, warn_refused_entry
 from .game import TestGame

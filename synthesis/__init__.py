@@ -23,7 +23,9 @@ from .model.strategy import TestStrategy
 from .model.systems import TransitionSystem
 from .pipeline import SynthesisOptions, SynthesizedTest, synthesize
 from .problems.builtins import BUILTINS
-from .problems.problem import Problem, load_problem, load_problem_file, make_problem
+from .problems.files import load_problem_file
+from .problems.load import load_problem
+from .problems.problem import Problem, make_problem
 from .routing.milp import RoutingResult
 from .routing.solver_control import SolveControl
 

@@ -1,29 +1,35 @@
 """From a problem to a checked test: automata, products, routing MILP, strategy, checks.
 
-:func:`synthesize` is the one entry point for static, reactive and mixed problems;
-agent problems continue in :mod:`synthesis.agent.loop` from the same pieces.
+:func:`synthesize` is the one entry point for every kind of problem; agent problems go
+through :func:`synthesize_agent_test`, which runs the counterexample-guided loop of
+:mod:`synthesis.agent.loop` on the same graphs and MILP options.
 """
 
 from __future__ import annotations
 
+import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
+from .agent.loop import AgentSynthesis, counterexample_loop
 from .checks.verify import CheckReport, check_test, restricted_edges, routed_flow
-from .graphs.automata import SpecificationProduct, specification_product
-from .graphs.products import Products, build_products
+from .graphs.automata import SpecificationProduct
+from .graphs.products import Products
 from .model.errors import ProblemError
-from .model.strategy import TestStrategy
+from .model.strategy import SETTINGS, TestStrategy
+from .model.test_agent import TestAgent
 from .problems.limits import MAX_GRAPH_EDGES, check_size
-from .problems.problem import Problem
+from .problems.problem import Problem, build_graphs
 from .routing.milp import MilpOptions, RoutingResult, solve_routing
+from .routing.restrictions import strategy_from_routing
 from .routing.solver_control import SolveControl
 
 
-@dataclass
+@dataclass(frozen=True)
 class SynthesisOptions:
     """User-facing solver options (``None`` fields fall back to the problem's)."""
 
@@ -56,10 +62,6 @@ MAX_THREADS = 256
 
 def check_options(options: SynthesisOptions) -> None:
     """Refuse bad options before any work (raises :class:`ProblemError` naming the option)."""
-    import math
-
-    from .model.strategy import SETTINGS
-
     for name in ("time_limit", "after_first"):
         v = getattr(options, name)
         if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0):
@@ -83,7 +85,7 @@ def check_options(options: SynthesisOptions) -> None:
         raise ProblemError(f"option max_graph_edges must be a positive integer or None, not {e!r}")
 
 
-@dataclass
+@dataclass(frozen=True)
 class SynthesizedTest:
     """A synthesized, checked test: everything an environment or a report needs."""
 
@@ -96,21 +98,14 @@ class SynthesizedTest:
     strategy: TestStrategy
     checks: CheckReport
     graph_seconds: float
-    agent: Any = None  # the test agent's synthesized strategy (agent problems)
-    extra_stats: dict = field(default_factory=dict)
+    agent: AgentSynthesis | None = None  # the test agent's synthesized strategy (agent problems)
+    extra_stats: dict[str, Any] = field(default_factory=dict)
 
     @property
     def cut_edges_outside_intermediate(self) -> np.ndarray:
         """The cut set C: cut edges of G outside ``E(I)``."""
         e = self.routing.cut_edges
         return e[~self.products.touches_intermediate[e]]
-
-
-def build_graphs(problem: Problem) -> tuple[SpecificationProduct, Products]:
-    """Automata and product graphs of a problem (method.md §3-4)."""
-    ts = problem.system
-    spec = specification_product(problem.system_objective, problem.test_objective, ts.letters())
-    return spec, build_products(ts, spec)
 
 
 def milp_options(problem: Problem, options: SynthesisOptions) -> MilpOptions:
@@ -150,16 +145,6 @@ def remaining_time(problem: Problem, options: SynthesisOptions, spent: float) ->
     return replace(options, time_limit=limit - spent)
 
 
-def strategy_from_routing(products: Products, routing: RoutingResult, setting: str) -> TestStrategy:
-    """``C(q)`` per history and the static obstacles, as a test strategy (method.md §6)."""
-    g, ts = products.virtual, products.ts
-    e = routing.cut_edges
-    e = e[~products.touches_intermediate[e]]
-    restrictions = np.zeros((g.n_hist, ts.n_moves), dtype=bool)
-    restrictions[g.hist[g.src[e]], g.move[e]] = True
-    return TestStrategy(routing.static_moves_cut.copy(), restrictions, setting)
-
-
 def synthesize(problem: Problem, options: SynthesisOptions | None = None) -> SynthesizedTest:
     """Synthesize and check the least-restrictive test of a static, reactive or mixed problem.
 
@@ -174,8 +159,6 @@ def synthesize(problem: Problem, options: SynthesisOptions | None = None) -> Syn
     check_options(options)
     check_size(problem, options.max_graph_edges)
     if problem.kind == "agent":
-        from .agent.loop import synthesize_agent_test
-
         return synthesize_agent_test(problem, options)
     note = options.progress or (lambda msg: None)
     t0 = time.perf_counter()
@@ -188,7 +171,77 @@ def synthesize(problem: Problem, options: SynthesisOptions | None = None) -> Syn
     if routing.status != "optimal":
         # a time-limited answer's flow variables need not be a maximum flow of its own
         # cut set; the test's flow is what its restrictions let through
-        routing.flow = routed_flow(products, restricted_edges(products, strategy))
+        routing = replace(routing, flow=routed_flow(products, restricted_edges(products, strategy)))
     note("checking the test (bypass flow, feasibility)")
     checks = check_test(products, strategy, routing.flow, closed_loop=options.closed_loop)
     return SynthesizedTest(problem, spec, products, routing, strategy, checks, graph_seconds)
+
+
+def synthesize_agent_test(
+    problem: Problem,
+    options: SynthesisOptions | None = None,
+    max_iterations: int | None = None,
+    prefilter: bool = True,
+) -> SynthesizedTest:
+    """Synthesize a test agent strategy for an agent problem (method.md §7).
+
+    Builds the graphs and the problem's MILP options and runs
+    :func:`synthesis.agent.loop.counterexample_loop` on them.
+
+    Parameters
+    ----------
+    problem
+        A problem of kind ``"agent"`` with ``problem.agent`` a :class:`TestAgent`.
+    options
+        Time limit, gap, threads, progress, setting, closed-loop checks.
+    max_iterations
+        Bound on MILP solves; default: ``options.agent_iterations`` if set, else the
+        agent's ``max_iterations`` (100 unless the problem says otherwise).
+    prefilter
+        Exclude, before the first solve, the cuts no agent can hold (see
+        :func:`~synthesis.agent.loop.counterexample_loop`).
+
+    Returns
+    -------
+    SynthesizedTest
+        With ``agent`` an :class:`~synthesis.agent.loop.AgentSynthesis`.
+
+    Raises
+    ------
+    ProblemError
+        If the problem has no test agent or no static area.
+    InconsistentProblem
+        ``unreachable``/``unroutable`` when the first MILP says so; ``infeasible`` when no
+        cut set remains after counterexamples, or the iteration bound is reached.
+    CheckFailed
+        If the result fails an independent check (a FlowTest bug).
+    """
+    options = options or SynthesisOptions()
+    agent = problem.agent
+    if not isinstance(agent, TestAgent):
+        raise ProblemError(f"problem {problem.name!r} is an agent problem without a test agent; add [environment.agent]")
+    if problem.static_moves is None:
+        raise ProblemError(f"agent problem {problem.name!r} has no static area (static_moves)")
+    bound = max_iterations or options.agent_iterations or agent.max_iterations
+    note = options.progress or (lambda msg: None)
+    t0 = time.perf_counter()
+    note("building automata and product graphs")
+    spec, products = build_graphs(problem)
+    graph_seconds = time.perf_counter() - t0
+    outcome = counterexample_loop(
+        products,
+        agent,
+        milp_options(problem, options),
+        problem.static_moves,
+        setting=options.setting or problem.extras.get("setting", "instantaneous"),
+        bound=bound,
+        prefilter=prefilter,
+        closed_loop=options.closed_loop,
+        note=note,
+        graph_seconds=graph_seconds,
+    )
+    timings = outcome.solution.timings
+    return SynthesizedTest(
+        problem, spec, products, outcome.routing, outcome.strategy, outcome.checks, graph_seconds,
+        agent=outcome.solution, extra_stats={"agent_seconds": dict(timings)},
+    )

@@ -10,19 +10,18 @@ import numpy as np
 import pytest
 
 from synthesis.agent import gr1
+from synthesis.agent.closed_loop import verify_closed_loop
+from synthesis.agent.controller import AgentController
 from synthesis.agent.game import blocking_places, build_agent_game
-from synthesis.agent.loop import (
-    AgentController,
-    AgentSynthesis,
-    make_test_agent,
-    places_of_cells,
-    verify_closed_loop,
-)
+from synthesis.agent.loop import AgentSynthesis
 from synthesis.artifacts.artifact import TestArtifact, artifact_of
 from synthesis.artifacts.summary import summary_of
 from synthesis.model.errors import CheckFailed, InconsistentProblem, ProblemError
+from synthesis.model.test_agent import make_test_agent, places_of_cells
 from synthesis.pipeline import SynthesisOptions, SynthesizedTest, synthesize
-from synthesis.problems.problem import Problem, load_problem, load_problem_file
+from synthesis.problems.files import load_problem_file
+from synthesis.problems.load import load_problem
+from synthesis.problems.problem import Problem
 
 AGENT_BUILTINS = ("maze1", "maze2", "patrolling")
 
@@ -96,7 +95,7 @@ def test_counterexamples_are_reported(tests: dict[str, SynthesizedTest]) -> None
 
 def test_prefilter_only_saves_solves() -> None:
     """Without the a-priori exclusions maze1 rejects a cut set on rows the agent cannot hold."""
-    from synthesis.agent.loop import synthesize_agent_test
+    from synthesis.pipeline import synthesize_agent_test
 
     plain = synthesize_agent_test(load_problem("maze1"), prefilter=False)
     assert plain.agent.counterexamples >= 1

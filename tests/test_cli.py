@@ -25,7 +25,7 @@ from experiments import cli
 from experiments.cli import StageProgress, main
 from synthesis.artifacts.artifact import TestArtifact
 from synthesis.model.errors import CheckFailed, InconsistentProblem
-from synthesis.problems.problem import load_problem
+from synthesis.problems.load import load_problem
 
 DATA = Path(__file__).parent / "data"
 FLOWTEST = Path(sys.executable).parent / "flowtest"

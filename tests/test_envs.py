@@ -609,8 +609,8 @@ def test_shipped_artifact_passes_the_checks(name: str) -> None:
     freshly built product graphs: bypass flow 0, the flow it claims, no trapped entry."""
     from synthesis.artifacts.artifact import TestArtifact
     from synthesis.checks.verify import check_test
-    from synthesis.pipeline import build_graphs
     from synthesis.problems.builtins import BUILTINS
+    from synthesis.problems.problem import build_graphs
 
     art = TestArtifact.load(artifact_path(name))
     _, products = build_graphs(BUILTINS[name]())

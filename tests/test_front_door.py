@@ -20,7 +20,7 @@ from synthesis.artifacts.artifact import TestArtifact, artifact_of
 from synthesis.artifacts.summary import summary_of
 from synthesis.model.errors import ProblemError
 from synthesis.pipeline import synthesize
-from synthesis.problems.problem import load_problem_file
+from synthesis.problems.files import load_problem_file
 
 DATA = Path(__file__).resolve().parent / "data"
 

@@ -39,7 +39,7 @@ import flowtest_env  # noqa: F401  (registers the envs)
 from experiments.cli import main
 from synthesis.artifacts.artifact import TestArtifact
 from synthesis.model.errors import ProblemError
-from synthesis.problems.problem import problem_from_dict
+from synthesis.problems.files import problem_from_dict
 
 DATA = Path(__file__).parent / "data"
 ARTIFACTS = Path(flowtest_env.__file__).parent / "artifacts"

@@ -13,7 +13,7 @@ import pytest
 
 from synthesis.model.errors import ProblemError
 from synthesis.model.specs import MAX_FORMULA_DEPTH, parse_objective
-from synthesis.problems.problem import MAX_FILE_BYTES, load_problem_file, problem_from_dict
+from synthesis.problems.files import MAX_FILE_BYTES, load_problem_file, problem_from_dict
 
 GRID = '''name = "t"
 [system]

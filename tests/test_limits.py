@@ -11,8 +11,9 @@ from experiments.cli import main
 from synthesis.model.errors import ProblemTooLarge
 from synthesis.pipeline import SynthesisOptions, remaining_time, synthesize
 from synthesis.problems.builtins import BUILTINS
+from synthesis.problems.files import problem_from_dict
 from synthesis.problems.limits import MAX_GRAPH_EDGES, check_size, estimate_size
-from synthesis.problems.problem import load_problem, problem_from_dict
+from synthesis.problems.load import load_problem
 
 
 def grid_problem(n: int, test: str = "F I1 & F I2") -> dict:

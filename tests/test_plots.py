@@ -21,7 +21,7 @@ from experiments.plots import _fuel_note, check_plot_format, layered_positions, 
 from synthesis.model.errors import InconsistentProblem, ProblemError
 from synthesis.model.strategy import TestStrategy
 from synthesis.pipeline import SynthesisOptions, SynthesizedTest, synthesize
-from synthesis.problems.problem import load_problem
+from synthesis.problems.load import load_problem
 
 DATA = Path(__file__).parent / "data"
 

@@ -10,10 +10,10 @@ from pathlib import Path
 
 import pytest
 
-from synthesis.agent import loop as agent_mod
 from synthesis.model.errors import ProblemError
-from synthesis.problems import problem as problems
-from synthesis.problems.problem import load_problem_file
+from synthesis.problems import agent_section as agent_mod
+from synthesis.problems import files as problems
+from synthesis.problems.files import load_problem_file
 
 DOC = Path(__file__).resolve().parents[1] / "docs" / "problem-format.md"
 TEXT = DOC.read_text()

@@ -33,8 +33,8 @@ import pytest
 from synthesis.graphs.products import Products
 from synthesis.model.errors import InconsistentProblem
 from synthesis.model.systems import TransitionSystem, graph_system, grid_world
-from synthesis.pipeline import SynthesisOptions, SynthesizedTest, build_graphs, synthesize
-from synthesis.problems.problem import Problem, make_problem
+from synthesis.pipeline import SynthesisOptions, SynthesizedTest, synthesize
+from synthesis.problems.problem import Problem, build_graphs, make_problem
 
 Cell = tuple[int, int]
 

@@ -15,10 +15,10 @@ import pytest
 
 from experiments import random_grid_study as study
 from experiments.random_grid_study import ANSWER_FIELDS, Task, run_in_process, run_task
+from synthesis.graphs.consistency import check_consistency
 from synthesis.model.errors import InconsistentProblem
-from synthesis.pipeline import build_graphs
+from synthesis.problems.problem import build_graphs
 from synthesis.problems.random_grid import PAPER_SPECS, first_consistent, paper_ap, random_problem
-from synthesis.routing.milp import check_consistency
 
 #: fast instances (5x5, |AP| = 2): seeds whose both MILPs finish in well under a second
 FAST = [Task("reachability", 1, 5, i, m, 60.0, 1) for i in (1, 3) for m in ("static", "reactive")]

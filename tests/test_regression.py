@@ -18,7 +18,7 @@ from __future__ import annotations
 import pytest
 
 from synthesis.pipeline import SynthesisOptions, synthesize
-from synthesis.problems.problem import load_problem
+from synthesis.problems.load import load_problem
 from synthesis.problems.random_grid import first_consistent, random_problem
 
 #: built-in example -> (flow, cut edges of G); measured with the two-phase MILP, proven optimal

@@ -18,8 +18,8 @@ import numpy as np
 import pytest
 
 from synthesis.graphs.products import Products, reachable
-from synthesis.pipeline import SynthesisOptions, build_graphs, milp_options, synthesize
-from synthesis.problems.problem import Problem
+from synthesis.pipeline import SynthesisOptions, milp_options, synthesize
+from synthesis.problems.problem import Problem, build_graphs
 from synthesis.problems.random_grid import first_consistent
 from synthesis.routing.heuristic import RouteSeed, RoutingGuess, guess_routing, simple_route
 from synthesis.routing.milp import ModelEdges, cut_groups, model_edges

@@ -98,7 +98,7 @@ def test_library_synthesis_prints_nothing_on_stdout(capfd: pytest.CaptureFixture
     caller's standard output clean: HiGHS >= 1.16 prints a banner when a solver object is
     made, before any option can silence it."""
     from synthesis.pipeline import synthesize
-    from synthesis.problems.problem import load_problem
+    from synthesis.problems.load import load_problem
 
     capfd.readouterr()
     synthesize(load_problem("small-reactive"))

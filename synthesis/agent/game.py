@@ -66,12 +66,13 @@ such a place means staying there again at its own turn, which g8 forbids (Maze 1
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Protocol
 
 import numpy as np
 
 from ..graphs.products import Products, coreachable, reachable
 from ..model.strategy import TestStrategy
+from ..model.test_agent import TestAgent
+from ..routing.milp import CutGroups
 from .gr1 import GR1Game
 
 __all__ = [
@@ -83,25 +84,6 @@ __all__ = [
     "reactive_restrictions",
     "realizability_exclusions",
 ]
-
-
-class TestAgentLike(Protocol):
-    """What :func:`build_agent_game` reads of a test agent (see :class:`synthesis.agent.loop.TestAgent`)."""
-
-    n_states: int
-    place_of_state: np.ndarray
-    moves: np.ndarray
-    start: int
-    first: str
-
-
-class CutGroupsLike(Protocol):
-    """What :func:`realizability_exclusions` reads of the MILP's cut groups."""
-
-    of_edge: np.ndarray
-    keys: np.ndarray
-    restrictable: np.ndarray
-    static: np.ndarray
 
 
 def _ranges(ptr: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -279,7 +261,7 @@ def legal_positions(
     return no_collision & (ended[:, None] | exact)
 
 
-def build_agent_game(products: Products, strategy: TestStrategy, agent: TestAgentLike) -> AgentGame:
+def build_agent_game(products: Products, strategy: TestStrategy, agent: TestAgent) -> AgentGame:
     """Build the test-agent game for the restrictions of ``strategy`` (method.md §7).
 
     Parameters
@@ -392,7 +374,7 @@ def build_agent_game(products: Products, strategy: TestStrategy, agent: TestAgen
 
 
 
-def realizability_exclusions(products: Products, agent: TestAgentLike, groups: CutGroupsLike) -> list[list[int]]:
+def realizability_exclusions(products: Products, agent: TestAgent, groups: CutGroups) -> list[list[int]]:
     """Cuts no test agent can hold, as MILP exclusion rows ``d_g <= 0`` (before the first solve).
 
     A cut group ``g`` is excluded when every edge of it leaves a node ``v = (s, q)``

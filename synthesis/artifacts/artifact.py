@@ -24,10 +24,17 @@ from typing import Any
 
 import numpy as np
 
-from ..graphs.automata import DBA
+from ..checks.verify import check_test
+from ..graphs.automata import DBA, specification_product
+from ..graphs.products import build_products
 from ..model.errors import ProblemError
+from ..model.specs import parse_objective
 from ..model.strategy import TestStrategy
 from ..model.systems import TransitionSystem
+from ..pipeline import SynthesizedTest
+from ..problems.files import read_limited
+from ..problems.problem import Problem
+from .schema import validate_artifact
 
 FORMAT = "flowtest-test"
 VERSION = 1
@@ -42,7 +49,7 @@ def source_hash(system: dict, objectives: dict, kind: str) -> str:
     return hashlib.sha256(text.encode("ascii")).hexdigest()
 
 
-def problem_source_hash(problem: Any) -> str:
+def problem_source_hash(problem: Problem) -> str:
     """:func:`source_hash` of a :class:`~synthesis.problems.problem.Problem` (before synthesis)."""
     return source_hash(problem.system.to_dict(),
                        {"system": problem.system_objective.text, "test": problem.test_objective.text}, problem.kind)
@@ -153,8 +160,6 @@ class TestArtifact:
             Naming the field or the check that fails. ``verify=False`` skips the
             checks of meaning (:func:`verify_artifact`), never the schema.
         """
-        from .schema import validate_artifact
-
         validate_artifact(d, source, FORMAT, VERSION)
         try:
             letters = tuple(frozenset(a) for a in d["letters"])
@@ -187,8 +192,6 @@ class TestArtifact:
     @classmethod
     def load(cls, path: str | Path, verify: bool = True) -> "TestArtifact":
         """Read and check an artifact file (see :meth:`from_dict`)."""
-        from ..problems.problem import read_limited
-
         p = Path(path)
         raw = read_limited(p, "artifact")
         try:
@@ -232,9 +235,6 @@ def verify_artifact(
     ProblemError
         Naming the check that fails (the artifact was edited or made for another problem).
     """
-    from ..graphs.automata import specification_product
-    from ..model.specs import parse_objective
-
     where = f"artifact {source}"
     own = source_hash(art.system.to_dict(), art.objectives, art.kind)
     if art.source != own:
@@ -256,15 +256,12 @@ def verify_artifact(
                                "(edited, or another problem's automata)")
     if not restrictions:
         return
-    from ..checks.verify import check_test
-    from ..graphs.products import build_products
-
     report = check_test(build_products(art.system, spec), art.strategy, int(art.summary["flow"]), raise_on_failure=False)
     if not report.ok:
         raise ProblemError(f"{where}: its restrictions fail the independent check: " + "; ".join(report.problems()))
 
 
-def artifact_of(test: Any, summary: dict) -> TestArtifact:
+def artifact_of(test: SynthesizedTest, summary: dict[str, Any]) -> TestArtifact:
     """The artifact of a :class:`~synthesis.pipeline.SynthesizedTest` and its summary."""
     p = test.problem
     spec = test.spec

@@ -114,7 +114,7 @@ def trapped_configurations(products: Products, blocked: np.ndarray) -> np.ndarra
     return np.flatnonzero(reach & can & ~can_restricted)
 
 
-@dataclass
+@dataclass(frozen=True)
 class CheckReport:
     """Outcome of the checks; ``ok`` when every one holds."""
 

@@ -14,7 +14,7 @@ Obstacle settings, which differ in what is *shown*, never in what is restricted:
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Iterable
 
 import numpy as np
@@ -22,7 +22,7 @@ import numpy as np
 SETTINGS = ("instantaneous", "accumulative")
 
 
-@dataclass
+@dataclass(frozen=True)
 class TestStrategy:
     """Restrictions per history over the moves of a transition system.
 
@@ -42,11 +42,14 @@ class TestStrategy:
     static_obstacles: np.ndarray
     restrictions: np.ndarray
     setting: str = "instantaneous"
+    blocked: np.ndarray = field(init=False, repr=False, compare=False)
+    """``bool[n_hist, n_moves]``: every move restricted under each history (derived)."""
 
     def __post_init__(self) -> None:
         if self.setting not in SETTINGS:
             raise ValueError(f"unknown obstacle setting {self.setting!r}; expected one of {SETTINGS}")
-        self.blocked = self.restrictions | self.static_obstacles[None, :]
+        # a frozen dataclass's derived field is set once, here
+        object.__setattr__(self, "blocked", self.restrictions | self.static_obstacles[None, :])
 
     @property
     def n_hist(self) -> int:

@@ -8,10 +8,12 @@ primitives, test agents) are built in Python.
 from __future__ import annotations
 
 import tomllib
-from typing import Callable
+from collections.abc import Callable
 
-from ..model.systems import Cell, fuel_grid_world, graph_system
-from .problem import Problem, make_problem, problem_from_dict
+from ..model.systems import Cell, fuel_grid_world, graph_system, grid_world
+from ..model.test_agent import make_test_agent, places_of_cells
+from .files import problem_from_dict
+from .problem import Problem, make_problem
 
 EXAMPLE1 = """
 name = "example1"
@@ -167,14 +169,6 @@ def mars_exploration() -> Problem:
     )
 
 
-BUILTINS: dict[str, Callable[[], Problem]] = {
-    "example1": example1,
-    "small-reactive": small_reactive,
-    "beaver-rescue": beaver_rescue,
-    "motion-primitives": motion_primitives,
-    "refueling": refueling,
-    "mars-exploration": mars_exploration,
-}
 
 
 # ------------------------------------------------------------ dynamic test agents
@@ -187,9 +181,6 @@ def maze1() -> Problem:
     grid to a park above (0, 2). On rows 6, 4, 2 and 0 it may not stay: when it is its
     turn there, it moves up (paper-examples.md). The system moves first.
     """
-    from ..agent.loop import make_test_agent, places_of_cells
-    from ..model.systems import grid_world
-
     rows, cols = 7, 5
     blocked = {(1, 0), (1, 1), (1, 3), (3, 1), (3, 3), (3, 4), (5, 0), (5, 1), (5, 3)}
     goal, start = (0, 0), (6, 0)
@@ -207,7 +198,6 @@ def maze1() -> Problem:
     )
     return make_problem(
         "maze1", ts, "F goal", "F I1 & F I2 & F I3", "agent", agent=agent,
-        static_moves=agent.static_moves(ts),
         description="A maze with three test cells; a test agent climbing the middle column blocks shortcuts.",
     )
 
@@ -219,9 +209,6 @@ def maze2() -> Problem:
     and moves first: one step along the plus, or stays. Four absorbing parks lie off
     the ends of the plus. Static area: every free cell off the plus.
     """
-    from ..agent.loop import make_test_agent, places_of_cells
-    from ..model.systems import grid_world
-
     rows, cols = 5, 5
     blocked = {(1, 1), (1, 3), (3, 1), (3, 3)}
     goal, start = (0, 4), (4, 0)
@@ -243,7 +230,6 @@ def maze2() -> Problem:
     )
     return make_problem(
         "maze2", ts, "F goal", "F I1 & F I2", "agent", agent=agent,
-        static_moves=agent.static_moves(ts),
         description="The headline maze: a test agent on the central plus makes the system visit I1 and I2.",
     )
 
@@ -262,8 +248,6 @@ def patrolling() -> Problem:
     only, and tying them here makes the routing MILP intractable (phase 1 unproven
     after 60 s).
     """
-    from ..agent.loop import make_test_agent, places_of_cells
-
     rows, cols = 6, 6
     goal, start, refuel = (5, 0), (5, 5), (1, 5)
 
@@ -288,9 +272,18 @@ def patrolling() -> Problem:
     )
     return make_problem(
         "patrolling", ts, "F goal & G !empty", "F lowfuel", "agent", agent=agent,
-        static_moves=agent.static_moves(ts),
         description="A test agent patrolling column 2 pushes a fuel-limited robot to run low far from the goal.",
     )
 
 
-BUILTINS.update({"maze1": maze1, "maze2": maze2, "patrolling": patrolling})
+BUILTINS: dict[str, Callable[[], Problem]] = {
+    "example1": example1,
+    "small-reactive": small_reactive,
+    "beaver-rescue": beaver_rescue,
+    "motion-primitives": motion_primitives,
+    "refueling": refueling,
+    "mars-exploration": mars_exploration,
+    "maze1": maze1,
+    "maze2": maze2,
+    "patrolling": patrolling,
+}

@@ -12,9 +12,11 @@ command line, ``SynthesisOptions(max_graph_edges=None)`` from Python).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
+from ..graphs.automata import specification_product
 from ..model.errors import ProblemTooLarge
+from ..model.specs import Task
+from .problem import Problem
 
 MAX_GRAPH_EDGES = 500_000
 """Default bound on the edges of G (about 6 GB while solving, by :data:`BYTES_PER_EDGE`).
@@ -47,12 +49,12 @@ class SizeEstimate:
         )
 
 
-def _task_states(task: Any) -> int:
+def _task_states(task: Task) -> int:
     """States of a sub-task's automaton (synthesis.graphs.automata.task_automaton)."""
     return len(task.props) + 1 if task.is_visit else 2
 
 
-def estimate_size(problem: Any) -> SizeEstimate:
+def estimate_size(problem: Problem) -> SizeEstimate:
     """Bounds on the product graph of ``problem`` (no automaton product is built)."""
     ts = problem.system
     histories = 1
@@ -67,7 +69,7 @@ INTERMEDIATE_FACTOR = 64
 the exact history count is computed (minimisation shrinks it)."""
 
 
-def check_size(problem: Any, max_edges: int | None) -> SizeEstimate | None:
+def check_size(problem: Problem, max_edges: int | None) -> SizeEstimate | None:
     """Refuse ``problem`` if its product graph may exceed ``max_edges`` (``None``: no limit).
 
     The cheap bound decides when it is small enough; otherwise the histories are counted
@@ -83,8 +85,6 @@ def check_size(problem: Any, max_edges: int | None) -> SizeEstimate | None:
     est = estimate_size(problem)
     if est.edges <= max_edges:
         return est
-    from ..graphs.automata import specification_product
-
     way = "pass --no-size-limit (SynthesisOptions(max_graph_edges=None)) to try anyway"
     if est.moves > max_edges:
         raise ProblemTooLarge(

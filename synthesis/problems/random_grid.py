@@ -25,13 +25,15 @@ This module is pure: no Gymnasium, no environment code.
 
 from __future__ import annotations
 
-from typing import Callable, TypeVar
+from collections.abc import Callable
+from typing import TypeVar
 
 import numpy as np
 
+from ..graphs.consistency import check_consistency
 from ..model.errors import InconsistentProblem
 from ..model.systems import grid_world
-from .problem import Problem, make_problem
+from .problem import Problem, build_graphs, make_problem
 
 FAMILIES: tuple[str, ...] = ("reachability", "reaction", "safety")
 MAX_ATTEMPTS = 50
@@ -121,9 +123,6 @@ def graph_consistency(problem: Problem) -> None:
     Decided on the product graphs only (no MILP): the goal is unreachable, or no
     ``Src -> Tgt`` path passes ``I``. Independent of the environment kind.
     """
-    from ..pipeline import build_graphs
-    from ..routing.milp import check_consistency
-
     _, products = build_graphs(problem)
     check_consistency(products)
 

@@ -28,7 +28,7 @@ Reductions, none of which changes the optimum of method.md §5:
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable
 
 import highspy
@@ -36,10 +36,12 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order
 
-from ..graphs.products import Products, coreachable, reachable
+from ..graphs.consistency import check_consistency
+from ..graphs.products import Products, reachable
 from ..model.errors import InconsistentProblem
 from .heuristic import RouteSeed, RoutingGuess, guess_routing
 from .solver_control import Clock, SolveControl, run_highs, stdout_guard
+from .traps import trapped_configurations, trapped_entries
 
 MODES = ("static", "reactive", "mixed")
 
@@ -128,7 +130,7 @@ class MilpOptions:
         return self.time_limit is None and self.after_first is None and bool(self.threads)
 
 
-@dataclass
+@dataclass(frozen=True)
 class RoutingResult:
     """The answer of the routing MILP.
 
@@ -231,7 +233,7 @@ class _Model:
         return int(sum(int(x.sum()) for x in self.integer))
 
 
-@dataclass
+@dataclass(frozen=True)
 class CutGroups:
     """Edges of G grouped by shared cut value.
 
@@ -291,26 +293,6 @@ def _static_moves(products: Products, options: MilpOptions) -> np.ndarray:
     raise ValueError(f"unknown MILP mode {options.mode!r}; expected one of {MODES}")
 
 
-def check_consistency(products: Products) -> np.ndarray:
-    """Raise :class:`InconsistentProblem` for the two cases of method.md §5.
-
-    Returns the mask of G's nodes that can reach ``Tgt``.
-    """
-    g = products.virtual
-    co = coreachable(g.n_nodes, g.src, g.dst, products.target)
-    if not co[g.initial]:
-        raise InconsistentProblem(
-            "unreachable", "the system objective cannot be met: no execution from the start reaches the goal"
-        )
-    if not np.any(products.intermediate & co):
-        raise InconsistentProblem(
-            "unroutable",
-            "the test objective cannot be routed: no execution that meets the system objective "
-            "also meets the test objective",
-        )
-    return co
-
-
 EAGER_FLOW_LIMIT = 200_000  # histories x G_sys edges up to which all feasibility flows go in at once
 
 
@@ -343,8 +325,6 @@ def solve_routing(products: Products, options: MilpOptions | None = None) -> Rou
         ``unreachable`` or ``unroutable`` (including a MILP without solution, or
         maximum flow 0: every routing cut set would trap the system).
     """
-    from ..checks.verify import trapped_configurations, trapped_entries_of
-
     options = options or MilpOptions()
     # small reactive models start with every history's flows (adding them lazily costs
     # more rounds than it saves there); reactive ones whose flows would swamp the model
@@ -367,13 +347,11 @@ def solve_routing(products: Products, options: MilpOptions | None = None) -> Rou
             trapped = more.trapped
         else:
             blocked = blocked_by(products, result)
-            trapped = trapped_entries_of(products, blocked, _with_extra(required, entries))
+            trapped = trapped_entries(products, blocked, _with_extra(required, entries))
         if not trapped:
             traps = trapped_configurations(products, blocked) if options.closed_loop else np.zeros(0, dtype=np.int64)
             if traps.size == 0:
-                result.stats["feasibility_rounds"] = rounds
-                result.stats["feasibility_histories"] = len(entries)
-                return result
+                return _with_rounds(result, rounds, entries)
             trapped = {}
             for q in np.unique(products.virtual.hist[traps]):
                 trapped[int(q)] = products.projection[traps[products.virtual.hist[traps] == q]]
@@ -386,11 +364,14 @@ def solve_routing(products: Products, options: MilpOptions | None = None) -> Rou
         if not grew:
             # the model already holds these flows: the answer cannot change, and the
             # independent checks will report the disagreement as a FlowTest bug
-            result.stats["feasibility_rounds"] = rounds
-            result.stats["feasibility_histories"] = len(entries)
-            return result
+            return _with_rounds(result, rounds, entries)
         if options.progress:
             options.progress(f"routing MILP: adding feasibility flows for {len(trapped)} trapped histories")
+
+
+def _with_rounds(result: RoutingResult, rounds: int, entries: dict[int, np.ndarray]) -> RoutingResult:
+    """``result`` with the feasibility rounds and histories of its solve in its stats."""
+    return replace(result, stats={**result.stats, "feasibility_rounds": rounds, "feasibility_histories": len(entries)})
 
 
 def required_entries(products: Products, options: MilpOptions) -> dict[int, np.ndarray]:
@@ -593,13 +574,11 @@ def _solve_once(
 
     missing = {q: v for q, v in required.items() if q not in entries}
     if missing:
-        from ..checks.verify import trapped_entries_of
-
         cut1 = np.zeros(groups.keys.size, dtype=bool)
         cut1[var_groups] = x[group_col[var_groups]] > 0.5
         blocked1 = _blocked_of_edges(products, np.flatnonzero(cut1[groups.of_edge]))
         blocked1 |= (np.isin(groups.move_key, groups.keys[cut1 & groups.static]) & _static_moves(products, options))[None, :]
-        trapped1 = trapped_entries_of(products, blocked1, missing)
+        trapped1 = trapped_entries(products, blocked1, missing)
         if trapped1:
             raise _FlowsBind(trapped1)
 
@@ -662,7 +641,7 @@ def _solve_once(
     )
 
 
-@dataclass
+@dataclass(frozen=True)
 class ModelEdges:
     """The edges of G the routing model keeps, and what the model knows of each.
 
@@ -709,7 +688,7 @@ class ModelEdges:
 
 def model_edges(products: Products, groups: CutGroups, keep_node: np.ndarray | None = None) -> ModelEdges:
     """The routing model's edges (see :class:`ModelEdges`); ``keep_node`` is what
-    :func:`check_consistency` returns (computed when not given)."""
+    :func:`~synthesis.graphs.consistency.check_consistency` returns (computed when not given)."""
     g = products.virtual
     if keep_node is None:
         keep_node = check_consistency(products)
@@ -789,11 +768,9 @@ def _trap_test(products: Products, groups: CutGroups, entries: dict[int, np.ndar
     """Whether a cut set (``bool`` per group) traps an entry node, for the heuristic."""
     if not entries:
         return None
-    from ..checks.verify import trapped_entries_of
-
     def traps(cut: np.ndarray) -> bool:
         blocked = _blocked_of_edges(products, np.flatnonzero(cut[groups.of_edge]))
-        return bool(trapped_entries_of(products, blocked, entries))
+        return bool(trapped_entries(products, blocked, entries))
 
     return traps
 

@@ -1,0 +1,25 @@
+"""One name for every problem: a built-in by its name, or a problem file by its path."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ..model.errors import ProblemError
+from .builtins import BUILTINS
+from .files import MAX_GRID_CELLS, load_problem_file
+from .problem import Problem
+
+
+def load_problem(name_or_path: str, max_cells: int | None = MAX_GRID_CELLS) -> Problem:
+    """A built-in problem by name, or a TOML file by path (grids up to ``max_cells`` cells)."""
+    if not isinstance(name_or_path, str) or not name_or_path.strip():
+        raise ProblemError("empty problem name: give a TOML file or a built-in name")
+    if name_or_path in BUILTINS:
+        return BUILTINS[name_or_path]()
+    p = Path(name_or_path)
+    if p.suffix.lower() == ".toml" or p.exists():
+        return load_problem_file(p, max_cells)
+    raise ProblemError(
+        f"unknown problem {name_or_path!r}: not a file, and not a built-in "
+        f"({', '.join(sorted(BUILTINS))})"
+    )
