@@ -674,11 +674,13 @@ class RandomGridEnv(FlowTestEnv):
 
     ``size`` (5), ``family`` (``"reachability"``, ``"reaction"``, ``"safety"``),
     ``n`` (spec size; 1 for reachability, 2 otherwise by default), ``seeds`` (the pool,
-    default ``0..7``), ``kind`` (``"reactive"`` or ``"static"``), and the base
-    arguments. Or ``pool`` (a named pool, e.g. ``"reaction2/7x7"``, see
-    :mod:`flowtest_env.pools`) with ``split`` (``"train"``, ``"validation"``, ``"test"``:
-    seed ranges that never overlap) and ``count`` (its first seeds, default 8): the pool
-    then decides size, family, n, kind and seeds.
+    default ``0..7``), ``kind`` (``"reactive"``: reactive doors, ``"static"``: walls, or
+    ``"agent"``: a test agent), ``world`` (``"empty"``, ``"blocked"``: blocked cells,
+    ``"fuel"``: a fuel grid; :mod:`synthesis.problems.random_worlds`), and the base arguments. Or
+    ``pool`` (a named pool, e.g. ``"reaction2/7x7"`` or ``"reachability1/5x5/fuel/agent"``,
+    see :mod:`flowtest_env.pools`) with ``split`` (``"train"``, ``"validation"``,
+    ``"test"``: seed ranges that never overlap) and ``count`` (its first seeds, default
+    8): the pool then decides size, family, n, world, kind and seeds.
 
     ## Registered Configurations
 
@@ -700,6 +702,7 @@ class RandomGridEnv(FlowTestEnv):
         pool: str | None = None,
         split: str = "train",
         count: int = 8,
+        world: str = "empty",
         render_mode: str | None = None,
         view: str = "system",
         tile_size: int = 32,
@@ -712,6 +715,7 @@ class RandomGridEnv(FlowTestEnv):
         shaping_gamma: float = 0.99,
     ) -> None:
         from synthesis.problems.random_grid import FAMILIES
+        from synthesis.problems.random_worlds import POOL_KINDS, WORLDS
 
         from .pools import random_grid_arguments
         from .random_grid import random_pool
@@ -724,9 +728,10 @@ class RandomGridEnv(FlowTestEnv):
         if pool is None:
             size = positive_int("size", size)
             n = None if n is None else positive_int("n", n)
-        size, family, n, seeds, kind = random_grid_arguments(pool, split, count, size, family, n, tuple(seeds), kind)
+        size, family, n, seeds, kind, world = random_grid_arguments(pool, split, count, size, family, n, tuple(seeds), kind, world)
         one_of("family", family, tuple(FAMILIES))
-        one_of("kind", kind, ("static", "reactive"))
+        one_of("kind", kind, POOL_KINDS)
+        one_of("world", world, WORLDS)
         one_of("setting", setting, (None, "instantaneous", "accumulative"))
         size = positive_int("size", size)
         n = positive_int("n", n)
@@ -734,13 +739,13 @@ class RandomGridEnv(FlowTestEnv):
             raise ValueError("the seed pool is empty")
         if max_steps is not None:
             max_steps = positive_int("max_steps", max_steps)
-        tests = random_pool(size, family, n, seeds, kind)
+        tests = random_pool(size, family, n, seeds, kind, world=world)
         games = [TestGame(a, setting) for a in tests]
         self._configure(
             games, max_steps if max_steps is not None else 4 * size * size, obs_kind, render_mode, view, tile_size,
             step_cost, restricted_penalty, goal_reward, violation_penalty, memory, shaping, shaping_gamma, pad_to,
         )
-        self.problem = f"random-{size}x{size}-{family}{n}"
+        self.problem = f"random-{size}x{size}-{family}{n}" + ("" if world == "empty" else f"-{world}")
 
     def _choose_game(self) -> int:
         return int(self.np_random.integers(len(self.games)))

@@ -1,25 +1,38 @@
-"""Seeded random grid worlds (the paper's scalability study, paper-examples.md) as test pools.
+"""Seeded random grid worlds (the paper's scalability study and its extensions) as test pools.
 
-The instances themselves (spec families, seeded draws, redraws) live in the pure
-:mod:`synthesis.problems.random_grid`; this module synthesizes them into artifacts and caches
-the pools. A pool instance is the first attempt of its seed for which a test of the
-pool's kind is synthesized within the pool budget (an inconsistent attempt, or one
-without a test within the budget, is redrawn), so a seed always names the same test.
+The instances themselves (spec families, worlds with blocked cells or fuel, test agents,
+seeded draws, redraws) live in the pure :mod:`synthesis.problems.random_grid` and
+:mod:`synthesis.problems.random_worlds`; this module synthesizes them and stores the pools. A pool
+instance is the first attempt of its seed for which a test of the pool's kind is
+synthesized within the pool budget (an inconsistent attempt, or one without a test
+within the budget, is redrawn), so a seed always names the same test.
 
 **Deterministic.** Pools are synthesized with deterministic budgets only
 (:func:`pool_options`: one HiGHS thread, a fixed random seed, a node limit per HiGHS run,
-the routing heuristic's work budget), never a wall-clock limit, so a pool is the same on
-every machine under any load, and every pool test is bounded in work.
+the routing heuristic's work budget, at most
+:data:`synthesis.problems.random_worlds.AGENT_ITERATIONS` MILP solves for a test agent), never a
+wall-clock limit, so a pool is the same on every machine under any load, and every pool
+test is bounded in work.
 
-**Cached by version.** Each pool lives on disk under ``cache_dir()/random-grid/<pool>/<key>``
-where ``key`` is :func:`synthesis.artifacts.provenance.cache_key` of the pool's parameters and
-options under the current FlowTest, highspy, NumPy and SciPy versions: a pool built under
-another version is never reused, it is rebuilt. Within a process pools are also kept in
-memory.
+**Stored compactly.** A pool's problems come back from their seeds, so a pool stores only
+what does not: one record per seed (:mod:`synthesis.artifacts.pool_records`: the attempt, the cut
+edges, the static obstacles, the solver's summary without timings), one JSON line each,
+in one file per split (``train.jsonl``, ``validation.jsonl``, ``test.jsonl``; seeds beyond
+the three splits in ``block<k>.jsonl``), sorted by seed. Loading rebuilds every test from
+its record and checks it as a fresh synthesis is checked (bypass flow 0, the flow, a way
+to the goal from every history's entry nodes; a test agent's GR(1) strategy solved
+again, checked and tabulated); a record that fails is refused with a warning and
+synthesized again. Two builds of the same seeds write byte-identical files.
+
+**Cached by version.** The files live under ``cache_dir()/random-grid/<pool>/<key>`` where
+``key`` is :func:`synthesis.artifacts.provenance.cache_key` of the pool's parameters and options
+under the current FlowTest, highspy, NumPy and SciPy versions (``key.json`` says which):
+a pool built under another version is never reused, it is rebuilt. Within a process
+pools are also kept in memory.
 
 **Built in parallel when asked.** :func:`build_pool` synthesizes the missing seeds in
-process, or as Ray tasks (``parallel="ray"``); the answers do not depend on the dispatch.
-A progress bar (tqdm, on standard error) counts the seeds.
+process, or as Ray tasks (``parallel="ray"``, each returns a record); the answers do not
+depend on the dispatch. A progress bar (tqdm, on standard error) counts the seeds.
 """
 
 from __future__ import annotations
@@ -27,41 +40,54 @@ from __future__ import annotations
 import json
 import os
 import sys
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
-from synthesis.artifacts.artifact import TestArtifact, artifact_of
+from synthesis.artifacts.artifact import TestArtifact
+from synthesis.artifacts.pool_records import rebuild_artifact, record_of
 from synthesis.artifacts.provenance import cache_key, versions
 from synthesis.artifacts.summary import summary_of
 from synthesis.model.errors import InconsistentProblem, ProblemError
 from synthesis.pipeline import SynthesisOptions, SynthesizedTest, synthesize
 from synthesis.problems.problem import Problem
-from synthesis.problems.random_grid import FAMILIES, MAX_ATTEMPTS, family_objectives, first_consistent, random_problem
+from synthesis.problems.random_grid import FAMILIES, MAX_ATTEMPTS, family_objectives, random_problem
+from synthesis.problems.random_worlds import AGENT_ITERATIONS, POOL_KINDS, WORLDS, first_accepted, world_problem
 
 from .artifacts import cache_dir, warn_refused_entry
 
 __all__ = [
     "FAMILIES",
     "MAX_ATTEMPTS",
+    "POOL_KINDS",
     "POOL_NODE_LIMIT",
+    "SPLITS",
+    "SPLIT_SPAN",
+    "WORLDS",
     "build_pool",
     "family_objectives",
     "pool_dir",
     "pool_key",
     "pool_options",
     "pool_path",
+    "pool_record",
     "random_artifact",
     "random_pool",
     "random_problem",
+    "split_of",
+    "world_problem",
 ]
 
-POOL_FORMAT = 2
+POOL_FORMAT = 3
 POOL_NODE_LIMIT = 1000
 """Branch-and-bound nodes per HiGHS run for pool tests: bounds the work per test (an
 8x8 reachability instance whose maximum flow HiGHS cannot prove in minutes stops at it
 with a checked, feasible test)."""
+
+SPLITS: tuple[str, ...] = ("train", "validation", "test")
+SPLIT_SPAN = 1_000_000
+"""Seeds per split: split ``k`` of :data:`SPLITS` holds seeds ``k * SPLIT_SPAN`` onwards."""
 
 
 def pool_options() -> SynthesisOptions:
@@ -73,10 +99,19 @@ def _options_record(options: SynthesisOptions) -> dict[str, Any]:
     """The answer-changing fields of synthesis options, as JSON."""
     d = asdict(options)
     d.pop("progress", None)
+    d.pop("control", None)
     return d
 
 
-def pool_params(size: int, family: str, n: int, kind: str) -> dict[str, Any]:
+def _check_pool(family: str, n: int, kind: str, world: str) -> None:
+    family_objectives(family, n)  # validates family and n
+    if kind not in POOL_KINDS:
+        raise ValueError(f"unknown kind {kind!r}; expected one of {', '.join(map(repr, POOL_KINDS))}")
+    if world not in WORLDS:
+        raise ValueError(f"unknown world {world!r}; expected one of {', '.join(map(repr, WORLDS))}")
+
+
+def pool_params(size: int, family: str, n: int, kind: str, world: str = "empty") -> dict[str, Any]:
     """Everything besides the versions that decides a pool's tests."""
     return {
         "format": POOL_FORMAT,
@@ -84,24 +119,33 @@ def pool_params(size: int, family: str, n: int, kind: str) -> dict[str, Any]:
         "family": family,
         "n": int(n),
         "kind": kind,
+        "world": world,
         "max_attempts": MAX_ATTEMPTS,
+        "agent_iterations": AGENT_ITERATIONS,
         "options": _options_record(pool_options()),
     }
 
 
-def pool_key(size: int, family: str, n: int, kind: str) -> str:
+def pool_key(size: int, family: str, n: int, kind: str, world: str = "empty") -> str:
     """The cache key of a pool: its parameters, options and the FlowTest and solver versions."""
-    return cache_key("random-grid-pool", pool_params(size, family, n, kind))
+    return cache_key("random-grid-pool", pool_params(size, family, n, kind, world))
 
 
-def pool_dir(size: int, family: str, n: int, kind: str) -> Path:
-    """The cache folder of a pool's tests under the current versions."""
-    return cache_dir() / "random-grid" / f"{size}x{size}-{family}{n}-{kind}" / pool_key(size, family, n, kind)
+def pool_dir(size: int, family: str, n: int, kind: str, world: str = "empty") -> Path:
+    """The cache folder of a pool's records under the current versions."""
+    middle = kind if world == "empty" else f"{world}-{kind}"
+    return cache_dir() / "random-grid" / f"{size}x{size}-{family}{n}-{middle}" / pool_key(size, family, n, kind, world)
 
 
-def pool_path(size: int, family: str, n: int, seed: int, kind: str) -> Path:
-    """The cache file of one pool test under the current versions."""
-    return pool_dir(size, family, n, kind) / f"seed{seed}.json"
+def split_of(seed: int) -> str:
+    """The name of the split (or block of :data:`SPLIT_SPAN` seeds) a seed belongs to."""
+    k = int(seed) // SPLIT_SPAN
+    return SPLITS[k] if k < len(SPLITS) else f"block{k}"
+
+
+def pool_path(size: int, family: str, n: int, seed: int, kind: str, world: str = "empty") -> Path:
+    """The file that holds the record of one pool seed (its split's file)."""
+    return pool_dir(size, family, n, kind, world) / f"{split_of(seed)}.jsonl"
 
 
 def _accept(problem: Problem) -> SynthesizedTest:
@@ -112,48 +156,95 @@ def _accept(problem: Problem) -> SynthesizedTest:
         raise InconsistentProblem("budget", f"no test within the pool budget: {exc}") from None
 
 
-def random_artifact(size: int, family: str, n: int, seed: int, kind: str = "reactive") -> TestArtifact:
-    """Synthesize the pool test of a seed: its first attempt with a test within the budget.
+def pool_record(size: int, family: str, n: int, seed: int, kind: str = "reactive", world: str = "empty") -> dict[str, Any]:
+    """Synthesize the pool test of a seed (its first attempt with a test within the budget)
+    and give its compact record (:func:`synthesis.artifacts.pool_records.record_of`; what a Ray task
+    returns).
 
     Raises
     ------
     RuntimeError
         If no attempt among :data:`MAX_ATTEMPTS` has one.
     """
-    family_objectives(family, n)  # validates before any work
-    _, _, test = first_consistent(size, family, n, seed, kind, accept=_accept)
-    assert test is not None  # _accept returns a test or raises
-    art = artifact_of(test, summary_of(test))
-    art.extras["provenance"] = {"pool": pool_params(size, family, n, kind), "versions": versions()}
+    _check_pool(family, n, kind, world)
+    attempt, _, test = first_accepted(size, family, n, seed, world, kind, _accept)
+    return record_of(seed, attempt, test, summary_of(test))
+
+
+def _artifact(record: dict[str, Any], size: int, family: str, n: int, kind: str, world: str) -> TestArtifact:
+    """The checked test of a record, with its provenance (raises ProblemError)."""
+    art = rebuild_artifact(record, size, family, n, world, kind)
+    art.extras["provenance"] = {"pool": pool_params(size, family, n, kind, world), "versions": versions()}
     return art
 
 
-def build_artifact_dict(size: int, family: str, n: int, seed: int, kind: str) -> dict[str, Any]:
-    """:func:`random_artifact` as a JSON-ready dict (what a Ray task returns)."""
-    return random_artifact(size, family, n, seed, kind).to_dict()
+def random_artifact(size: int, family: str, n: int, seed: int, kind: str = "reactive", world: str = "empty") -> TestArtifact:
+    """Synthesize the pool test of a seed, rebuilt from its record and checked.
+
+    Raises
+    ------
+    RuntimeError
+        If no attempt among :data:`MAX_ATTEMPTS` has one.
+    """
+    return _artifact(pool_record(size, family, n, seed, kind, world), size, family, n, kind, world)
 
 
-def _write(path: Path, data: dict[str, Any]) -> None:
-    """Write a cache file atomically (parallel builders of one pool are safe)."""
+def _line(record: dict[str, Any]) -> str:
+    """A record as one canonical JSON line (sorted keys, no spaces)."""
+    return json.dumps(record, sort_keys=True, separators=(",", ":")) + "\n"
+
+
+def _append(path: Path, record: dict[str, Any]) -> None:
+    """Append one record to a split file (one write: parallel builders of a pool are safe)."""
     path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "a+b") as f:  # appends go to the end whatever the read position
+        end = f.seek(0, os.SEEK_END)
+        torn = end > 0 and f.seek(end - 1) >= 0 and f.read(1) != b"\n"  # a damaged last line stays apart
+        f.write((b"\n" if torn else b"") + _line(record).encode("utf-8"))
+
+
+def _read(path: Path, warn: bool = True) -> dict[int, dict[str, Any]]:
+    """The records of a split file by seed (a later line wins); a line that is not a
+    record of this file's seeds is refused (with a warning if ``warn``)."""
+    out: dict[int, dict[str, Any]] = {}
+    if not path.exists():
+        return out
+    for k, text in enumerate(path.read_text(encoding="utf-8", errors="replace").splitlines(), 1):
+        if not text.strip():
+            continue
+        try:
+            rec = json.loads(text)
+            seed = rec["seed"] if isinstance(rec, dict) else None
+            if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0 or split_of(seed) != path.stem:
+                raise ValueError("not a record of this file's seeds")
+        except (ValueError, KeyError, RecursionError) as exc:
+            if warn:
+                warn_refused_entry(ProblemError(f"{path}, line {k}: {exc}; its seed will be synthesized again"))
+            continue
+        out[seed] = rec
+    return out
+
+
+def _compact(path: Path) -> None:
+    """Rewrite a split file sorted by seed, one line per seed (atomically): the bytes of
+    a pool depend on its seeds only, not on the order they were built in."""
+    if not path.exists():
+        return
+    records = _read(path, warn=False)
     tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
-    tmp.write_text(json.dumps(data, separators=(",", ":")))
+    tmp.write_text("".join(_line(records[s]) for s in sorted(records)), encoding="utf-8")
     tmp.replace(path)
 
 
-def _load(path: Path, size: int, family: str, n: int, seed: int, kind: str) -> TestArtifact | None:
-    """A cache entry, checked in full; one that fails its checks (edited, damaged, another
-    instance's) is refused, with a warning saying why, and ``None`` returned."""
-    if not path.exists():
-        return None
-    try:
-        art = TestArtifact.load(path)
-        if art.name != random_problem(size, family, n, seed, 0, kind).name:
-            raise ProblemError(f"cache entry {str(path)!r} holds the test {art.name!r}, not the instance of seed {seed}")
-    except ProblemError as exc:
-        warn_refused_entry(ProblemError(f"{exc}; synthesizing it again"))
-        return None
-    return art
+def _write_key(folder: Path, params: dict[str, Any]) -> None:
+    """The pool's parameters and versions next to its records (atomically)."""
+    path = folder / "key.json"
+    if path.exists():
+        return
+    folder.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
+    tmp.write_text(json.dumps({"params": params, "versions": versions()}, sort_keys=True, separators=(",", ":")))
+    tmp.replace(path)
 
 
 def _progress_bar(total: int, initial: int, desc: str, enabled: bool | None) -> Any:
@@ -190,11 +281,15 @@ def build_pool(
     parallel: str | None = None,
     workers: int | None = None,
     progress: bool | None = None,
+    world: str = "empty",
 ) -> list[TestArtifact]:
-    """The pool tests of ``seeds``, from the cache where present, else synthesized and cached.
+    """The checked pool tests of ``seeds``, rebuilt from the stored records where present,
+    else synthesized and stored.
 
     Parameters
     ----------
+    kind, world
+        The pool's environment kind (:data:`POOL_KINDS`) and world (:data:`WORLDS`).
     parallel
         ``None``: synthesize the missing seeds in this process; ``"ray"``: as Ray tasks
         (a local Ray runtime with ``workers`` CPUs unless one is running). The tests do
@@ -205,43 +300,53 @@ def build_pool(
     Raises
     ------
     ValueError
-        On an unknown family, ``n``, kind or ``parallel``.
+        On an unknown family, ``n``, kind, world or ``parallel``.
     """
-    if kind not in ("static", "reactive"):
-        raise ValueError(f"unknown kind {kind!r}; expected 'static' or 'reactive'")
+    _check_pool(family, n, kind, world)
     if parallel not in (None, "ray"):
         raise ValueError(f"unknown parallel backend {parallel!r}; expected None or 'ray'")
-    family_objectives(family, n)
     seeds = [int(s) for s in seeds]
-    folder = pool_dir(size, family, n, kind)
+    folder = pool_dir(size, family, n, kind, world)
     found: dict[int, TestArtifact] = {}
+    files: dict[str, dict[int, dict[str, Any]]] = {}
     for seed in dict.fromkeys(seeds):
-        art = _load(folder / f"seed{seed}.json", size, family, n, seed, kind)
-        if art is not None:
-            found[seed] = art
+        split = split_of(seed)
+        if split not in files:
+            files[split] = _read(folder / f"{split}.jsonl")
+        rec = files[split].get(seed)
+        if rec is None:
+            continue
+        try:
+            found[seed] = _artifact(rec, size, family, n, kind, world)
+        except ProblemError as exc:
+            warn_refused_entry(ProblemError(f"{folder / f'{split}.jsonl'}: {exc}; synthesizing it again"))
     missing = [s for s in dict.fromkeys(seeds) if s not in found]
     if missing:
-        key_file = folder / "key.json"
-        if not key_file.exists():
-            _write(key_file, {"params": pool_params(size, family, n, kind), "versions": versions()})
-        bar = _progress_bar(len(found) + len(missing), len(found), f"pool {size}x{size} {family}{n} {kind}", progress)
+        _write_key(folder, pool_params(size, family, n, kind, world))
+        desc = f"pool {size}x{size} {family}{n} {kind}" + ("" if world == "empty" else f" {world}")
+        bar = _progress_bar(len(found) + len(missing), len(found), desc, progress)
+        touched: set[Path] = set()
         try:
-            for seed, data in _synthesize_seeds(size, family, n, missing, kind, parallel, workers):
-                _write(folder / f"seed{seed}.json", data)
-                found[seed] = TestArtifact.from_dict(data, f"pool test of seed {seed}", verify=False)  # ours, just made
+            for seed, rec in _synthesize_seeds(size, family, n, missing, kind, world, parallel, workers):
+                path = folder / f"{split_of(seed)}.jsonl"
+                _append(path, rec)
+                touched.add(path)
+                found[seed] = _artifact(rec, size, family, n, kind, world)  # checked like any stored record
                 bar.update(1)
         finally:
             bar.close()
+            for path in sorted(touched):
+                _compact(path)
     return [found[s] for s in seeds]
 
 
 def _synthesize_seeds(
-    size: int, family: str, n: int, seeds: list[int], kind: str, parallel: str | None, workers: int | None
-) -> Iterable[tuple[int, dict[str, Any]]]:
-    """``(seed, artifact dict)`` for every seed, in the order they finish."""
+    size: int, family: str, n: int, seeds: list[int], kind: str, world: str, parallel: str | None, workers: int | None
+) -> Iterator[tuple[int, dict[str, Any]]]:
+    """``(seed, record)`` for every seed, in the order they finish."""
     if parallel is None:
         for seed in seeds:
-            yield seed, build_artifact_dict(size, family, n, seed, kind)
+            yield seed, pool_record(size, family, n, seed, kind, world)
         return
     import ray
 
@@ -249,8 +354,8 @@ def _synthesize_seeds(
     if started:
         ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False)
     try:
-        remote = ray.remote(num_cpus=1, max_retries=0)(build_artifact_dict)
-        pending = {remote.remote(size, family, n, seed, kind): seed for seed in seeds}
+        remote = ray.remote(num_cpus=1, max_retries=0)(pool_record)
+        pending = {remote.remote(size, family, n, seed, kind, world): seed for seed in seeds}
         while pending:
             done, _ = ray.wait(list(pending), num_returns=1)
             for ref in done:
@@ -264,11 +369,17 @@ _POOLS: dict[tuple[str, tuple[int, ...]], list[TestArtifact]] = {}
 
 
 def random_pool(
-    size: int, family: str, n: int, seeds: tuple[int, ...], kind: str = "reactive", parallel: str | None = None
+    size: int,
+    family: str,
+    n: int,
+    seeds: tuple[int, ...],
+    kind: str = "reactive",
+    parallel: str | None = None,
+    world: str = "empty",
 ) -> list[TestArtifact]:
     """The artifacts of a seed pool (:func:`build_pool`), kept in memory per process."""
-    key = (str(pool_dir(size, family, n, kind)), tuple(int(s) for s in seeds))
+    key = (str(pool_dir(size, family, n, kind, world)), tuple(int(s) for s in seeds))
     pool = _POOLS.get(key)
     if pool is None:
-        pool = _POOLS[key] = build_pool(size, family, n, seeds, kind, parallel=parallel)
+        pool = _POOLS[key] = build_pool(size, family, n, seeds, kind, parallel=parallel, world=world)
     return pool

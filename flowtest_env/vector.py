@@ -366,21 +366,24 @@ class RandomGridVectorEnv(PoolVectorEnv):
         pool: str | None = None,
         split: str = "train",
         count: int = 8,
+        world: str = "empty",
         **kwargs: Any,
     ) -> None:
         from .pools import random_grid_arguments
-        from .random_grid import random_pool
+        from .random_grid import POOL_KINDS, WORLDS, random_pool
 
-        size, family, n, seeds, kind = random_grid_arguments(pool, split, count, size, family, n, tuple(seeds), kind)
-        if kind not in ("static", "reactive"):
-            raise ValueError(f"unknown kind {kind!r}; expected 'static' or 'reactive'")
+        size, family, n, seeds, kind, world = random_grid_arguments(pool, split, count, size, family, n, tuple(seeds), kind, world)
+        if kind not in POOL_KINDS:
+            raise ValueError(f"unknown kind {kind!r}; expected one of {', '.join(map(repr, POOL_KINDS))}")
+        if world not in WORLDS:
+            raise ValueError(f"unknown world {world!r}; expected one of {', '.join(map(repr, WORLDS))}")
         if not seeds:
             raise ValueError("the seed pool is empty")
-        tests = random_pool(size, family, n, seeds, kind)
+        tests = random_pool(size, family, n, seeds, kind, world=world)
         games = [TestGame(a, setting) for a in tests]
         steps = max_steps if max_steps is not None else 4 * size * size
         super().__init__(num_envs, games, max_steps=steps, obs_kind=obs_kind, **kwargs)
-        self.problem = f"random-{size}x{size}-{family}{n}"
+        self.problem = f"random-{size}x{size}-{family}{n}" + ("" if world == "empty" else f"-{world}")
 
 
 class VectorActionMaskObservation(gym.vector.VectorWrapper):

@@ -14,7 +14,12 @@ from flowtest_env.pools import SPLIT_SPAN, SPLITS, PoolName, load_pool, parse_po
 def test_pool_names_parse_and_print_back() -> None:
     assert parse_pool("reachability1/5x5") == PoolName("reachability", 1, 5, "reactive")
     assert parse_pool("reaction2/7x7/static") == PoolName("reaction", 2, 7, "static")
-    for name in ("reachability1/5x5", "reaction2/7x7/static", "safety3/10x10"):
+    assert parse_pool("reachability2/7x7/blocked") == PoolName("reachability", 2, 7, "reactive", "blocked")
+    assert parse_pool("safety2/5x5/fuel/agent") == PoolName("safety", 2, 5, "agent", "fuel")
+    assert parse_pool("safety2/5x5/agent/fuel") == parse_pool("safety2/5x5/fuel/agent")
+    assert parse_pool("reachability1/5x5/empty/reactive") == parse_pool("reachability1/5x5")
+    for name in ("reachability1/5x5", "reaction2/7x7/static", "safety3/10x10", "reachability1/5x5/agent",
+                 "reachability1/7x7/blocked", "reaction2/10x10/fuel/static"):
         assert str(parse_pool(name)) == name
 
 
@@ -26,7 +31,10 @@ def test_pool_names_parse_and_print_back() -> None:
         ("reachability/5x5", "unknown family"),
         ("reachability1/5x6", "square"),
         ("reachability1/axa", "square"),
-        ("reachability1/5x5/agent", "unknown kind"),
+        ("reachability1/5x5/lava", "unknown part 'lava'"),
+        ("reachability1/5x5/blocked/fuel", "more than one world"),
+        ("reachability1/5x5/static/agent", "more than one kind"),
+        ("reachability1/5x5/blocked/static/x", "expected"),
         ("reaction1/5x5", "out of range"),
     ],
 )

@@ -29,12 +29,9 @@ POOL = (5, "reachability", 1)  # a few seconds per pool of three seeds
 SEEDS = (0, 1, 2)
 
 
-def pool_files(cache: Path) -> dict[str, str]:
-    """Every file of a cache folder, relative name -> its JSON without timings, as text."""
-    return {
-        str(p.relative_to(cache)): json.dumps(without_timings(json.loads(p.read_text())), sort_keys=True)
-        for p in sorted(cache.rglob("*.json"))
-    }
+def pool_files(cache: Path) -> dict[str, bytes]:
+    """Every file of a cache folder, relative name -> its bytes (pool files hold no timings)."""
+    return {str(p.relative_to(cache)): p.read_bytes() for p in sorted(cache.rglob("*")) if p.is_file()}
 
 
 @pytest.fixture
@@ -48,17 +45,17 @@ def cache(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
 def count_syntheses(monkeypatch: pytest.MonkeyPatch) -> list[int]:
     """Record the seeds :mod:`flowtest_env.random_grid` synthesizes from now on."""
     seen: list[int] = []
-    real = rg.build_artifact_dict
+    real = rg.pool_record
 
-    def counted(size: int, family: str, n: int, seed: int, kind: str) -> dict:
+    def counted(size: int, family: str, n: int, seed: int, kind: str = "reactive", world: str = "empty") -> dict[str, Any]:
         seen.append(seed)
-        return real(size, family, n, seed, kind)
+        return real(size, family, n, seed, kind, world)
 
-    monkeypatch.setattr(rg, "build_artifact_dict", counted)
+    monkeypatch.setattr(rg, "pool_record", counted)
     return seen
 
 
-def build_in(cache: Path, monkeypatch: pytest.MonkeyPatch, **kw: Any) -> dict[str, str]:
+def build_in(cache: Path, monkeypatch: pytest.MonkeyPatch, **kw: Any) -> dict[str, bytes]:
     monkeypatch.setenv("FLOWTEST_CACHE_DIR", str(cache))
     rg.build_pool(*POOL, SEEDS, "reactive", progress=False, **kw)
     return pool_files(cache)
@@ -76,22 +73,27 @@ def test_the_suite_runs_in_a_sandbox() -> None:
 
 
 def test_pool_is_deterministic_and_keyed(cache: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    """Two builds of one pool give the same files apart from timings; each test records
-    its budget (deterministic, no wall clock) and the versions it was made under."""
+    """Two builds of one pool give byte-identical files: one compact record per seed
+    (no timings) in its split's file, and the pool's budget (deterministic, no wall
+    clock) and the versions it was made under in ``key.json``."""
     first = build_in(tmp_path / "a", monkeypatch)
     second = build_in(tmp_path / "b", monkeypatch)
     assert first == second
     names = sorted(first)
     key = rg.pool_key(*POOL, "reactive")
-    assert names == sorted(
-        f"random-grid/5x5-reachability1-reactive/{key}/{f}" for f in ["key.json"] + [f"seed{s}.json" for s in SEEDS]
-    )
-    for name in names[1:]:
-        art = json.loads(first[name])
-        assert art["summary"]["deterministic"] is True
-        assert art["extras"]["provenance"]["versions"] == provenance.versions()
-        assert art["extras"]["provenance"]["pool"]["options"]["node_limit"] == rg.POOL_NODE_LIMIT
-        assert art["extras"]["provenance"]["pool"]["options"]["time_limit"] is None
+    assert names == sorted(f"random-grid/5x5-reachability1-reactive/{key}/{f}" for f in ["key.json", "train.jsonl"])
+    info = json.loads(first[names[0]])
+    assert info["versions"] == provenance.versions()
+    assert info["params"]["options"]["node_limit"] == rg.POOL_NODE_LIMIT
+    assert info["params"]["options"]["time_limit"] is None
+    records = [json.loads(line) for line in first[names[1]].decode().splitlines()]
+    assert [r["seed"] for r in records] == list(SEEDS)
+    for r in records:
+        assert r["summary"]["deterministic"] is True
+        assert without_timings(r) == r
+    for art in rg.build_pool(*POOL, SEEDS, progress=False):
+        assert art.extras["provenance"]["versions"] == provenance.versions()
+        assert art.extras["provenance"]["pool"]["options"]["node_limit"] == rg.POOL_NODE_LIMIT
 
 
 def test_pool_is_reused_under_the_same_versions_and_rebuilt_under_others(
@@ -128,13 +130,14 @@ def test_pool_key_carries_versions_and_options(monkeypatch: pytest.MonkeyPatch) 
 
 def test_damaged_cache_entry_is_rebuilt(cache: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     rg.build_pool(*POOL, (0,), progress=False)
-    path = rg.pool_dir(*POOL, "reactive") / "seed0.json"
+    path = rg.pool_path(*POOL, 0, "reactive")
     good = path.read_text()
     path.write_text(good[: len(good) // 2])
     seen = count_syntheses(monkeypatch)
-    (art,) = rg.build_pool(*POOL, (0,), progress=False)
+    with pytest.warns(UserWarning, match="refused a cache entry"):
+        (art,) = rg.build_pool(*POOL, (0,), progress=False)
     assert seen == [0] and art.name.startswith("random-5x5")
-    assert without_timings(json.loads(path.read_text())) == without_timings(json.loads(good))
+    assert path.read_text() == good
 
 
 def test_bad_pool_arguments_raise() -> None:
@@ -143,7 +146,9 @@ def test_bad_pool_arguments_raise() -> None:
     with pytest.raises(ValueError, match="parallel"):
         rg.build_pool(*POOL, (0,), parallel="threads")
     with pytest.raises(ValueError, match="kind"):
-        rg.build_pool(*POOL, (0,), kind="agent")
+        rg.build_pool(*POOL, (0,), kind="mixed")
+    with pytest.raises(ValueError, match="world"):
+        rg.build_pool(*POOL, (0,), world="lava")
 
 
 def test_node_limit_is_a_reported_deterministic_budget() -> None:

@@ -34,7 +34,7 @@ from ..routing.restrictions import strategy_from_routing
 from . import gr1
 from .closed_loop import ClosedLoopReport, verify_closed_loop
 from .controller import AgentController, controller_from_strategy
-from .game import build_agent_game, realizability_exclusions, trapped_nodes
+from .game import AgentGame, build_agent_game, realizability_exclusions, trapped_nodes
 
 # ------------------------------------------------------ the counterexample-guided loop
 
@@ -297,3 +297,33 @@ def counterexample_loop(
         timings=timings,
     )
     return AgentOutcome(routing, strategy, checks, solution)
+
+
+def realize_agent_strategy(
+    products: Products, strategy: TestStrategy, agent: TestAgent
+) -> tuple[AgentGame, AgentController, ClosedLoopReport]:
+    """The test agent's strategy for a routing strategy already known to be realizable
+    (a stored test's restrictions): the test-agent game solved again, its GR(1) strategy
+    checked (:func:`synthesis.agent.gr1.verify_strategy`), tabulated and checked in closed loop,
+    exactly as :func:`counterexample_loop` does for its last cut set. Deterministic:
+    the same restrictions give the same table.
+
+    Raises
+    ------
+    CheckFailed
+        If the restrictions trap the system, the agent cannot realize them, or the
+        strategy fails a check.
+    """
+    if trapped_nodes(products, strategy).size:
+        raise CheckFailed("the restrictions trap the system somewhere reachable")
+    game = build_agent_game(products, strategy, agent)
+    result = gr1.solve(game.game)
+    if not result.realizable or result.strategy is None:
+        raise CheckFailed("the test agent cannot realize the restrictions (the GR(1) game is lost)")
+    try:
+        gr1.verify_strategy(game.game, result.strategy)
+    except gr1.StrategyError as exc:
+        raise CheckFailed(f"the test agent's GR(1) strategy is not winning: {exc}") from None
+    full = controller_from_strategy(products, game, result.strategy, agent)
+    report = verify_closed_loop(products, strategy, agent, full)
+    return game, full.restricted(*report.entries), report

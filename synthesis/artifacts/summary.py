@@ -7,40 +7,65 @@ from typing import Any
 import numpy as np
 
 
-def summary_of(test: Any) -> dict:
-    """The problem-format.md JSON object of a :class:`~synthesis.pipeline.SynthesizedTest`."""
-    p, spec, prods, r = test.problem, test.spec, test.products, test.routing
-    ts, g = p.system, prods.virtual
+DERIVED_KEYS: tuple[str, ...] = ("problem", "environment", "cuts", "restrictions", "static_obstacles", "bypass_flow", "histories")
+"""Summary fields that come back from the problem, its product graphs and the test's cuts
+(:func:`derived_summary`); the rest says how the solver got there."""
+DERIVED_STATS: tuple[str, ...] = ("transition_system", "automaton", "graph", "system_graph")
+"""``stats`` fields that come back the same way (graph sizes)."""
+
+
+def derived_summary(problem: Any, spec: Any, products: Any, cut_edges: np.ndarray, strategy: Any, bypass_flow: int) -> dict[str, Any]:
+    """The summary fields of :data:`DERIVED_KEYS` (and ``stats`` of :data:`DERIVED_STATS`) of
+    a test: what its problem, product graphs, cut edges of G and strategy determine."""
+    ts, g = problem.system, products.virtual
     hist = spec.history_name
     w = ts.to_json_state
     cuts = [
         {"from": [w(int(g.state[g.src[e]])), hist(int(g.hist[g.src[e]]))], "to": [w(int(g.state[g.dst[e]])), hist(int(g.hist[g.dst[e]]))]}
-        for e in r.cut_edges
+        for e in cut_edges
     ]
     restrictions = {
-        hist(q): [[w(int(ts.src[m])), w(int(ts.dst[m]))] for m in np.flatnonzero(test.strategy.restrictions[q])]
-        for q in range(test.strategy.n_hist)
-        if test.strategy.restrictions[q].any()
+        hist(q): [[w(int(ts.src[m])), w(int(ts.dst[m]))] for m in np.flatnonzero(strategy.restrictions[q])]
+        for q in range(strategy.n_hist)
+        if strategy.restrictions[q].any()
     }
-    static = [[w(int(ts.src[m])), w(int(ts.dst[m]))] for m in np.flatnonzero(test.strategy.static_obstacles)]
+    static = [[w(int(ts.src[m])), w(int(ts.dst[m]))] for m in np.flatnonzero(strategy.static_obstacles)]
+    return {
+        "problem": problem.name,
+        "environment": problem.kind,
+        "cuts": cuts,
+        "restrictions": restrictions,
+        "static_obstacles": static,
+        "bypass_flow": bypass_flow,
+        "stats": {
+            "transition_system": {"states": ts.n_states, "transitions": ts.n_moves},
+            "automaton": {"states": spec.dba.n_states, "transitions": spec.dba.n_transitions},
+            "graph": {"nodes": g.n_nodes, "edges": g.n_edges},
+            "system_graph": {"nodes": products.system.n_nodes, "edges": products.system.n_edges},
+        },
+        "histories": {hist(h): spec.describe(h) for h in range(spec.dba.n_states)},
+    }
+
+
+def summary_of(test: Any) -> dict[str, Any]:
+    """The problem-format.md JSON object of a :class:`~synthesis.pipeline.SynthesizedTest`."""
+    p, spec, prods, r = test.problem, test.spec, test.products, test.routing
+    d = derived_summary(p, spec, prods, r.cut_edges, test.strategy, test.checks.bypass_flow)
     stats = dict(r.stats)
-    out: dict = {
-        "problem": p.name,
-        "environment": p.kind,
+    out: dict[str, Any] = {
+        "problem": d["problem"],
+        "environment": d["environment"],
         "status": r.status,
         "stopped_by": stats.pop("stopped_by", None),
         "deterministic": stats.pop("deterministic", False),
         "flow": r.flow,
         "n_cuts": int(r.cut_edges.size),
-        "cuts": cuts,
-        "restrictions": restrictions,
-        "static_obstacles": static,
-        "bypass_flow": test.checks.bypass_flow,
+        "cuts": d["cuts"],
+        "restrictions": d["restrictions"],
+        "static_obstacles": d["static_obstacles"],
+        "bypass_flow": d["bypass_flow"],
         "stats": {
-            "transition_system": {"states": ts.n_states, "transitions": ts.n_moves},
-            "automaton": {"states": spec.dba.n_states, "transitions": spec.dba.n_transitions},
-            "graph": {"nodes": g.n_nodes, "edges": g.n_edges},
-            "system_graph": {"nodes": prods.system.n_nodes, "edges": prods.system.n_edges},
+            **d["stats"],
             "binary_vars": stats.pop("binary_vars"),
             "continuous_vars": stats.pop("continuous_vars"),
             "constraints": stats.pop("constraints"),
@@ -51,11 +76,21 @@ def summary_of(test: Any) -> dict:
             **stats,
             **test.extra_stats,
         },
-        "histories": {hist(h): spec.describe(h) for h in range(spec.dba.n_states)},
+        "histories": d["histories"],
     }
     if test.agent is not None:
         out.update(test.agent.summary())
     return out
+
+
+def without_timings(x: Any) -> Any:
+    """A JSON value without its timing fields (keys ending in ``_seconds``, ``timings``):
+    what stays the same between two runs of one deterministic synthesis."""
+    if isinstance(x, dict):
+        return {k: without_timings(v) for k, v in x.items() if not k.endswith("_seconds") and k != "timings"}
+    if isinstance(x, list):
+        return [without_timings(v) for v in x]
+    return x
 
 
 def stop_note(summary: dict) -> str:

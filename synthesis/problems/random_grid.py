@@ -25,7 +25,7 @@ This module is pure: no Gymnasium, no environment code.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from typing import TypeVar
 
 import numpy as np
@@ -90,6 +90,27 @@ def paper_ap(family: str, n: int) -> int:
     return 2 * n - 1 if family == "reaction" else n + 1
 
 
+def draw_special_cells(
+    size: int, n_props: int, seed: int, attempt: int
+) -> tuple[np.random.Generator, tuple[int, int], tuple[int, int], list[tuple[int, int]]]:
+    """``(generator, start, goal, proposition cells)`` of ``(seed, attempt)``: distinct cells
+    drawn uniformly, start first, then the goal, then one per proposition; the generator
+    (seeded with ``[seed, attempt]``) continues for whatever else an instance draws
+    (:mod:`synthesis.problems.random_worlds`).
+
+    Raises
+    ------
+    ValueError
+        If the grid is too small for the special cells.
+    """
+    cells = [(r, c) for r in range(size) for c in range(size)]
+    if len(cells) < n_props + 2:
+        raise ValueError(f"a {size}x{size} grid has too few cells for {n_props + 2} special cells")
+    rng = np.random.default_rng([seed, attempt])
+    pick = rng.choice(len(cells), size=n_props + 2, replace=False)
+    return rng, cells[int(pick[0])], cells[int(pick[1])], [cells[int(i)] for i in pick[2:]]
+
+
 def random_problem(size: int, family: str, n: int, seed: int, attempt: int = 0, kind: str = "reactive") -> Problem:
     """The random grid instance of ``(size, family, n, seed, attempt)``, as a ``kind`` problem.
 
@@ -101,17 +122,13 @@ def random_problem(size: int, family: str, n: int, seed: int, attempt: int = 0, 
         If the grid is too small for the special cells.
     """
     sys_obj, test_obj, props, goal_prop = family_objectives(family, n)
-    cells = [(r, c) for r in range(size) for c in range(size)]
-    if len(cells) < len(props) + 2:
-        raise ValueError(f"a {size}x{size} grid has too few cells for {len(props) + 2} special cells")
-    rng = np.random.default_rng([seed, attempt])
-    pick = rng.choice(len(cells), size=len(props) + 2, replace=False)
-    start, goal = cells[int(pick[0])], cells[int(pick[1])]
-    labels: dict[tuple[int, int], list[str]] = {goal: [goal_prop]}
+    _, start, goal, prop_cells = draw_special_cells(size, len(props), seed, attempt)
+    labels: dict[tuple[int, int], Iterable[str]] = {goal: [goal_prop]}
     tokens = {start: "S", goal: "T"}
-    for p, i in zip(props, pick[2:]):
-        labels[cells[int(i)]] = [p]
-        tokens[cells[int(i)]] = p
+    for p, cell in zip(props, prop_cells, strict=True):
+        labels[cell] = [p]
+        tokens[cell] = p
+    cells = [(r, c) for r in range(size) for c in range(size)]
     ts = grid_world(cells, size, size, start, [goal], labels, tokens)
     name = f"random-{size}x{size}-{family}{n}-{kind}-s{seed}"
     return make_problem(name, ts, sys_obj, test_obj, kind, description=f"random grid, seed {seed}, attempt {attempt}")
