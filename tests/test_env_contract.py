@@ -52,7 +52,7 @@ def test_single_env_arguments_are_named(kwargs: dict, words: str) -> None:
     "kwargs,words",
     [({"size": 0}, "size"), ({"size": 2.0}, "size"), ({"n": True}, "n"), ({"seeds": []}, "seed"),
      ({"seeds": [-1]}, "seeds"), ({"seeds": [1.5]}, "seeds"), ({"seeds": "01"}, "seeds"),
-     ({"family": ["reachability"]}, "family"), ({"kind": "agent"}, "kind")],
+     ({"family": ["reachability"]}, "family"), ({"kind": "mixed"}, "kind"), ({"world": "lava"}, "world")],
 )
 def test_random_grid_arguments_are_named(kwargs: dict, words: str) -> None:
     with pytest.raises(ValueError, match=words):
