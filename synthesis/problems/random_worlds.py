@@ -35,7 +35,7 @@ special cells of the empty instance of the same seed and attempt; ``static`` and
 
 An attempt whose problem has no test is redrawn from the next attempt
 (:func:`first_accepted`): what "no test" means is the caller's ``accept``. An attempt
-whose drawn agent column is cut off from the start (a fuel grid's far cells may be
+whose goal or agent column is cut off from the start (a fuel grid's far cells may be
 out of reach) is inconsistent by construction and redrawn too.
 
 This module is pure: no Gymnasium, no environment code.
@@ -115,8 +115,8 @@ def world_problem(
     ValueError
         On an unknown family, ``n``, world or kind, or a grid too small for its cells.
     InconsistentProblem
-        ``"unreachable"`` if the agent's column is out of the system's reach (fuel
-        worlds): the attempt has no test and is redrawn.
+        ``"unreachable"`` if the goal or the agent's column is out of the system's reach
+        (fuel worlds): the attempt has no test and is redrawn.
     """
     _check_world(world, kind)
     if world == "empty" and kind != "agent":
@@ -180,7 +180,10 @@ def _fuel_world(
         return [p] if p is not None else []
 
     cells = [(r, c) for r in range(size) for c in range(size)]
-    return fuel_grid_world(cells, size, size, start, fuel_capacity(size), refuel, [goal], label, tokens)
+    try:
+        return fuel_grid_world(cells, size, size, start, fuel_capacity(size), refuel, [goal], label, tokens)
+    except ProblemError as exc:  # the goal is out of the fuel's reach: no state of it, none terminal
+        raise InconsistentProblem("unreachable", f"the goal is out of the fuel's reach: {exc}") from None
 
 
 def _column_agent(ts: TransitionSystem, column: list[Cell], start: Cell) -> TestAgent:
