@@ -23,7 +23,6 @@ attempt's problem; whether earlier attempts had none is what its builder found).
 
 from __future__ import annotations
 
-from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -110,7 +109,7 @@ def _rebuild(record: dict[str, Any], size: int, family: str, n: int, world: str,
         raise ProblemError("field static disagrees with the cuts")
     checks = check_test(products, strategy, flow)  # bypass flow 0, the flow, feasibility
     agent = None
-    if problem.kind == "agent":
+    if problem.agent is not None:
         game, controller, report = realize_agent_strategy(products, strategy, problem.agent)
         stated = rest["agent_strategy"]
         got = {"game": game.size(), "table_entries": controller.n_entries, "closed_loop_positions": report.positions}
@@ -122,5 +121,6 @@ def _rebuild(record: dict[str, Any], size: int, family: str, n: int, world: str,
         )
     derived = derived_summary(problem, spec, products, cuts, strategy, checks.bypass_flow)
     summary = {**derived, **{k: v for k, v in rest.items() if k != "stats"}, "stats": {**derived["stats"], **rest["stats"]}}
-    test = SimpleNamespace(problem=problem, spec=spec, strategy=strategy, agent=agent)
+    # graph_seconds: not measured here; a rebuilt test's summary holds no timings
+    test = SynthesizedTest(problem, spec, products, routing, strategy, checks, graph_seconds=0.0, agent=agent)
     return artifact_of(test, summary)
