@@ -23,13 +23,22 @@ Reductions, none of which changes the optimum of method.md §5:
   unit reaches ``Tgt_sys`` over uncut edges, and conversely ``K`` paths give such a
   flow, so the feasible cut sets are the same. Each flow lives on the part of
   G_sys reachable from its entries and co-reachable to ``Tgt_sys``.
+
+Layout of one solve (:func:`_solve_once`): :func:`_build_model` adds named column blocks
+(:class:`_Columns`: flows ``f``, cut binaries ``d``, reachability ``mu``, the feasibility
+flows, MILP-agent's ``d_state``) and row blocks (:class:`_Rows`: c2, c3, c4-c5, the
+couplings, MILP-agent's place rows, the exclusions), always in the same order; then
+:func:`_phase1` (maximum flow), :func:`_phase2` (fewest cuts at that flow) and
+:func:`_result`. Which histories need their feasibility flows is found by the MILP's own
+trap search (:mod:`synthesis.routing.traps`), never by the checks it is held to.
 """
 
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from typing import Callable
+from typing import Any
 
 import highspy
 import numpy as np
@@ -161,7 +170,7 @@ class RoutingResult:
     static_moves_cut: np.ndarray
     blocked_places: np.ndarray
     mip_gap: float
-    stats: dict
+    stats: dict[str, Any]
 
 
 class _Model:
@@ -209,7 +218,10 @@ class _Model:
         lp.col_upper_ = np.concatenate(self.upper) if self.upper else np.zeros(0)
         lp.row_lower_ = np.concatenate(self.row_lo) if self.row_lo else np.zeros(0)
         lp.row_upper_ = np.concatenate(self.row_hi) if self.row_hi else np.zeros(0)
-        cat = lambda xs, dt: np.concatenate(xs).astype(dt) if xs else np.zeros(0, dtype=dt)  # noqa: E731
+
+        def cat(xs: list[np.ndarray], dt: type) -> np.ndarray:
+            return np.concatenate(xs).astype(dt) if xs else np.zeros(0, dtype=dt)
+
         a = sp.csc_matrix(
             (cat(self.vals, float), (cat(self.rows, np.int64), cat(self.cols, np.int64))),
             shape=(self.n_row, self.n_col),
@@ -390,7 +402,8 @@ def _with_extra(kept: dict[int, np.ndarray], extra: dict[int, np.ndarray]) -> di
 
 def blocked_by(products: Products, result: RoutingResult) -> np.ndarray:
     """``bool[n_hist, n_moves]``: the moves a routing answer restricts under each history."""
-    return _blocked_of_edges(products, result.cut_edges) | result.static_moves_cut[None, :]
+    out: np.ndarray = _blocked_of_edges(products, result.cut_edges) | result.static_moves_cut[None, :]
+    return out
 
 
 def _blocked_of_edges(products: Products, edges: np.ndarray) -> np.ndarray:
@@ -409,62 +422,178 @@ class _FlowsBind(Exception):
         self.trapped = trapped
 
 
-def _solve_once(
-    products: Products,
-    options: MilpOptions,
-    entries: dict[int, np.ndarray],
-    required: dict[int, np.ndarray],
-    clock: Clock,
-) -> RoutingResult:
-    """One solve of the routing MILP with feasibility flows for the given entry nodes.
+@dataclass(frozen=True)
+class _Columns:
+    """The routing model's column blocks, as column indices (``-1`` where an item has none).
 
-    Raises :class:`_FlowsBind` when the maximum-flow answer already traps ``required``
-    entry nodes outside ``entries`` (before the costlier fewest-cuts phase)."""
-    note = options.progress or (lambda msg: None)
-    t0 = time.perf_counter()
+    Attributes
+    ----------
+    flow
+        (c1) ``f_e``, one per model edge (:class:`ModelEdges`).
+    cut
+        ``d``, one binary per cut group that may be cut on some c5 edge.
+    reach
+        (c4, c5) ``mu_v``, one per node of G outside ``Src``, ``I`` and ``Tgt``.
+    feasibility
+        (c6-c8) the aggregated feasibility flow of each history with entry nodes.
+    blocked_place
+        MILP-agent: ``d_state``, one binary per place of :attr:`places`.
+    places
+        The places a cut may enter (MILP-agent), in the order of :attr:`blocked_place`.
+    """
+
+    flow: np.ndarray
+    cut: np.ndarray
+    reach: np.ndarray
+    feasibility: list[_FeasibilityFlow]
+    blocked_place: np.ndarray
+    places: np.ndarray
+
+
+@dataclass(frozen=True)
+class _Rows:
+    """The routing model's row blocks, as row indices (``-1`` where an item has none).
+
+    Attributes
+    ----------
+    conservation
+        (c2) one per node of G outside ``Src`` and ``Tgt``.
+    cut_stops_flow
+        (c3) ``f_e + d_e <= 1``, one per model edge with a cut binary.
+    path_cut
+        (c4, c5) ``d_uv - mu_u + mu_v >= [u = Src]`` on the c5 edges.
+    coupling
+        ``f_uv <= mu_u`` and ``f_uv <= mu_v`` outside ``I`` (tails, then heads).
+    place_of_cut
+        MILP-agent: ``d_state(p) >= d`` for each cut group entering place ``p``.
+    exclusions
+        ``sum_{g in C} d_g <= |C| - 1``, one per rejected cut set still cuttable.
+    """
+
+    conservation: np.ndarray
+    cut_stops_flow: np.ndarray
+    path_cut: np.ndarray
+    coupling: tuple[np.ndarray, np.ndarray]
+    place_of_cut: np.ndarray
+    exclusions: list[np.ndarray]
+
+
+@dataclass(frozen=True)
+class _RoutingModel:
+    """The routing MILP of one solve: its edges, cut groups, column and row blocks."""
+
+    model: _Model
+    edges: ModelEdges
+    groups: CutGroups
+    cols: _Columns
+    rows: _Rows
+    out_src: np.ndarray  # model edges leaving Src: their flow is F
+
+    @property
+    def n_col(self) -> int:
+        return self.model.n_col
+
+    @property
+    def var_groups(self) -> np.ndarray:
+        """The cut groups with a binary."""
+        return np.flatnonzero(self.cols.cut >= 0)
+
+    def flow_of(self, x: np.ndarray) -> float:
+        """The flow value F of a solution."""
+        return float(x[self.cols.flow[self.out_src]].sum())
+
+    def cut_of(self, x: np.ndarray) -> np.ndarray:
+        """``bool`` per cut group: cut in solution ``x``."""
+        cut = np.zeros(self.groups.keys.size, dtype=bool)
+        var = self.var_groups
+        cut[var] = x[self.cols.cut[var]] > 0.5
+        return cut
+
+
+def _build_model(
+    products: Products, options: MilpOptions, entries: dict[int, np.ndarray], keep_node: np.ndarray
+) -> _RoutingModel:
+    """Assemble the routing MILP (method.md §5, §7) as column and row blocks.
+
+    The blocks go in in a fixed order (columns f, d, mu; rows c2, c3, c4-c5, couplings;
+    the feasibility flows; MILP-agent's places; the exclusions), so the model, and with it
+    HiGHS's answer, is the same on every run."""
     g = products.virtual
-    ts = products.ts
-    src_node = g.initial
-    inter = products.intermediate
-    tgt = products.target
-    keep_node = check_consistency(products)
     groups = cut_groups(products, options)
-    feasibility = bool(entries)
     me = model_edges(products, groups, keep_node)
-    edges, eu, ev, c5_edges, grp, has_var = me.edges, me.eu, me.ev, me.c5, me.grp, me.has_var
-    group_col = np.full(groups.keys.size, -1, dtype=np.int64)
-
     m = _Model()
-    f_col = m.add_cols(edges.size, 0.0, 1.0, )
-    var_groups = np.flatnonzero(has_var)
-    group_col[var_groups] = m.add_cols(var_groups.size, 0.0, 1.0, integer=True)
-    mu_nodes = np.flatnonzero(keep_node & ~inter & ~tgt)
-    mu_nodes = mu_nodes[mu_nodes != src_node]
-    mu_col = np.full(g.n_nodes, -1, dtype=np.int64)
-    mu_col[mu_nodes] = m.add_cols(mu_nodes.size, 0.0, 1.0)
+    flow, cut, reach = _add_columns(m, products, groups, me, keep_node)
+    conservation = _add_conservation(m, products, me, flow, keep_node)
+    cut_stops_flow = _add_cut_stops_flow(m, me, flow, cut)
+    path_cut = _add_path_cuts(m, g.initial, me, cut, reach)
+    coupling = _add_coupling(m, me, flow, reach)
+    feasibility = _add_feasibility(m, products, groups, cut, entries) if entries else []
+    blocked_place, places, place_of_cut = _add_blocked_places(m, products, groups, cut) if options.block_states else (
+        np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64))
+    exclusions = _add_exclusions(m, groups, cut, options.exclusions)
+    return _RoutingModel(
+        model=m,
+        edges=me,
+        groups=groups,
+        cols=_Columns(flow, cut, reach, feasibility, blocked_place, places),
+        rows=_Rows(conservation, cut_stops_flow, path_cut, coupling, place_of_cut, exclusions),
+        out_src=np.flatnonzero(me.eu == g.initial),
+    )
 
-    # (c2) conservation at nodes outside Src and Tgt
-    cons_nodes = np.flatnonzero(keep_node & ~tgt)
-    cons_nodes = cons_nodes[cons_nodes != src_node]
-    cons_row = np.full(g.n_nodes, -1, dtype=np.int64)
-    cons_row[cons_nodes] = m.add_rows(0.0, 0.0, cons_nodes.size)
-    out_ok = cons_row[eu] >= 0
-    m.add_terms(cons_row[eu[out_ok]], f_col[out_ok], 1.0)
-    in_ok = cons_row[ev] >= 0
-    m.add_terms(cons_row[ev[in_ok]], f_col[in_ok], -1.0)
 
-    # (c3) a cut edge carries no flow
-    dcol = group_col[grp]
+def _add_columns(
+    m: _Model, products: Products, groups: CutGroups, me: ModelEdges, keep_node: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(c1) the flow ``f_e`` per model edge, the cut binaries ``d`` per group, and ``mu_v``."""
+    g = products.virtual
+    flow = m.add_cols(me.edges.size, 0.0, 1.0)
+    cut = np.full(groups.keys.size, -1, dtype=np.int64)
+    var_groups = np.flatnonzero(me.has_var)
+    cut[var_groups] = m.add_cols(var_groups.size, 0.0, 1.0, integer=True)
+    mu_nodes = np.flatnonzero(keep_node & ~products.intermediate & ~products.target)
+    mu_nodes = mu_nodes[mu_nodes != g.initial]
+    reach = np.full(g.n_nodes, -1, dtype=np.int64)
+    reach[mu_nodes] = m.add_cols(mu_nodes.size, 0.0, 1.0)
+    return flow, cut, reach
+
+
+def _add_conservation(m: _Model, products: Products, me: ModelEdges, flow: np.ndarray, keep_node: np.ndarray) -> np.ndarray:
+    """(c2) flow conservation at the nodes outside ``Src`` and ``Tgt``."""
+    g = products.virtual
+    nodes = np.flatnonzero(keep_node & ~products.target)
+    nodes = nodes[nodes != g.initial]
+    row = np.full(g.n_nodes, -1, dtype=np.int64)
+    row[nodes] = m.add_rows(0.0, 0.0, nodes.size)
+    out_ok = row[me.eu] >= 0
+    m.add_terms(row[me.eu[out_ok]], flow[out_ok], 1.0)
+    in_ok = row[me.ev] >= 0
+    m.add_terms(row[me.ev[in_ok]], flow[in_ok], -1.0)
+    return row
+
+
+def _add_cut_stops_flow(m: _Model, me: ModelEdges, flow: np.ndarray, cut: np.ndarray) -> np.ndarray:
+    """(c3) a cut edge carries no flow: ``f_e + d_e <= 1``."""
+    dcol = cut[me.grp]
     with_d = np.flatnonzero(dcol >= 0)
     r = m.add_rows(-np.inf, 1.0, with_d.size)
-    m.add_terms(r, f_col[with_d], 1.0)
+    m.add_terms(r, flow[with_d], 1.0)
     m.add_terms(r, dcol[with_d], 1.0)
+    return r
 
-    # (c4, c5) every Src -> Tgt path avoiding I holds a cut: d_uv - mu_u + mu_v >= 0
-    k = np.flatnonzero(c5_edges)
-    u, v, dk = eu[k], ev[k], dcol[k]
-    rhs = np.where(u == src_node, 1.0, 0.0)  # mu_src = 1 moves to the right-hand side
-    no_vars = (dk < 0) & (mu_col[u] < 0) & (mu_col[v] < 0)
+
+def _add_path_cuts(m: _Model, src_node: int, me: ModelEdges, cut: np.ndarray, reach: np.ndarray) -> np.ndarray:
+    """(c4, c5) every ``Src -> Tgt`` path avoiding I holds a cut: ``d_uv - mu_u + mu_v >= 0``
+    (``mu_Src = 1`` moved to the right-hand side).
+
+    Raises
+    ------
+    InconsistentProblem
+        If an unrestrictable move leads from ``Src`` straight to the goal.
+    """
+    k = np.flatnonzero(me.c5)
+    u, v, dk = me.eu[k], me.ev[k], cut[me.grp[k]]
+    rhs = np.where(u == src_node, 1.0, 0.0)
+    no_vars = (dk < 0) & (reach[u] < 0) & (reach[v] < 0)
     if np.any(no_vars & (rhs > 0)):
         raise InconsistentProblem(
             "unroutable",
@@ -475,122 +604,191 @@ def _solve_once(
     r = m.add_rows(rhs, np.inf, k.size)
     sel = dk >= 0
     m.add_terms(r[sel], dk[sel], 1.0)
-    sel = mu_col[u] >= 0
-    m.add_terms(r[sel], mu_col[u[sel]], -1.0)
-    sel = mu_col[v] >= 0
-    m.add_terms(r[sel], mu_col[v[sel]], 1.0)
+    sel = reach[u] >= 0
+    m.add_terms(r[sel], reach[u[sel]], -1.0)
+    sel = reach[v] >= 0
+    m.add_terms(r[sel], reach[v[sel]], 1.0)
+    return r
 
-    # Strengthening (valid, optimum unchanged): some optimal solution has mu_v = 1
-    # exactly on the nodes reachable from Src outside I over uncut edges, and flow
-    # outside I runs only on those nodes, so f_uv <= mu_u and f_uv <= mu_v there.
-    for ends in (eu, ev):
-        sel = np.flatnonzero(mu_col[ends] >= 0)
+
+def _add_coupling(m: _Model, me: ModelEdges, flow: np.ndarray, reach: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Strengthening (valid, optimum unchanged): some optimal solution has ``mu_v = 1``
+    exactly on the nodes reachable from ``Src`` outside I over uncut edges, and flow
+    outside I runs only on those nodes, so ``f_uv <= mu_u`` and ``f_uv <= mu_v`` there."""
+    rows = []
+    for ends in (me.eu, me.ev):
+        sel = np.flatnonzero(reach[ends] >= 0)
         r = m.add_rows(-np.inf, 0.0, sel.size)
-        m.add_terms(r, f_col[sel], 1.0)
-        m.add_terms(r, mu_col[ends[sel]], -1.0)
+        m.add_terms(r, flow[sel], 1.0)
+        m.add_terms(r, reach[ends[sel]], -1.0)
+        rows.append(r)
+    return rows[0], rows[1]
 
-    # (c6-c8) feasibility flows on G_sys, one aggregated flow per history
-    flows = _add_feasibility(m, products, groups, group_col, entries) if feasibility else []
-    n_feas_cols = sum(fl.cols.size for fl in flows)
 
-    # MILP-agent: d_state per place entered by a cut, and the exclusions
-    place_col = np.zeros(0, dtype=np.int64)
-    state_places = np.zeros(0, dtype=np.int64)
-    if options.block_states:
-        # every edge of G in a group with a binary enters the place of its head
-        e_all = np.flatnonzero(group_col[groups.of_edge] >= 0)
-        pl = ts.place[ts.dst[g.move[e_all]]].astype(np.int64)
-        pairs = np.unique(np.stack([pl, groups.of_edge[e_all]], axis=1), axis=0)
-        state_places = np.unique(pairs[:, 0])
-        place_col = m.add_cols(state_places.size, 0.0, 1.0, integer=True)
-        pc = place_col[np.searchsorted(state_places, pairs[:, 0])]
-        r = m.add_rows(0.0, np.inf, pairs.shape[0])
-        m.add_terms(r, pc, 1.0)
-        m.add_terms(r, group_col[pairs[:, 1]], -1.0)
-    for excluded in options.exclusions:
+def _add_blocked_places(
+    m: _Model, products: Products, groups: CutGroups, cut: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """MILP-agent (method.md §7): a binary ``d_state`` per place entered by a cut, at least
+    every cut into it. Returns ``(columns, places, rows)``."""
+    g, ts = products.virtual, products.ts
+    # every edge of G in a group with a binary enters the place of its head
+    e_all = np.flatnonzero(cut[groups.of_edge] >= 0)
+    pl = ts.place[ts.dst[g.move[e_all]]].astype(np.int64)
+    pairs = np.unique(np.stack([pl, groups.of_edge[e_all]], axis=1), axis=0)
+    places = np.unique(pairs[:, 0])
+    cols = m.add_cols(places.size, 0.0, 1.0, integer=True)
+    pc = cols[np.searchsorted(places, pairs[:, 0])]
+    r = m.add_rows(0.0, np.inf, pairs.shape[0])
+    m.add_terms(r, pc, 1.0)
+    m.add_terms(r, cut[pairs[:, 1]], -1.0)
+    return cols, places, r
+
+
+def _add_exclusions(m: _Model, groups: CutGroups, cut: np.ndarray, exclusions: list[list[int]]) -> list[np.ndarray]:
+    """One row ``sum d <= |C| - 1`` per rejected cut set ``C`` (a list of group keys)."""
+    rows = []
+    for excluded in exclusions:
         pos = np.searchsorted(groups.keys, np.asarray(excluded, dtype=np.int64))
         ok = (pos < groups.keys.size) & (groups.keys[np.minimum(pos, groups.keys.size - 1)] == excluded)
-        cols = group_col[pos[ok]]
+        cols = cut[pos[ok]]
         if not ok.all() or np.any(cols < 0):
             # a group of the rejected set cannot be cut in this model: the set is already excluded
             continue
         r = m.add_rows(-np.inf, float(cols.size - 1), 1)
         m.add_terms(np.repeat(r, cols.size), cols, 1.0)
+        rows.append(r)
+    return rows
 
+
+@dataclass(frozen=True)
+class _Phase:
+    """What a phase of the solve ends with."""
+
+    x: np.ndarray
+    status: str
+    gap: float
+    stopped_by: str | None
+
+
+def _solve_once(
+    products: Products,
+    options: MilpOptions,
+    entries: dict[int, np.ndarray],
+    required: dict[int, np.ndarray],
+    clock: Clock,
+) -> RoutingResult:
+    """One solve of the routing MILP with feasibility flows for the given entry nodes:
+    build the model, phase 1 (maximum flow), phase 2 (fewest cuts at that flow).
+
+    Raises :class:`_FlowsBind` when the maximum-flow answer already traps ``required``
+    entry nodes outside ``entries`` (before the costlier fewest-cuts phase)."""
+    note = options.progress or (lambda msg: None)
+    t0 = time.perf_counter()
+    rm = _build_model(products, options, entries, check_consistency(products))
     graph_seconds = time.perf_counter() - t0
-    lp = m.to_highs(np.zeros(m.n_col), maximize=True)
     h = _highs(options)
-    h.passModel(lp)
-    out_src = np.flatnonzero(eu == src_node)
+    h.passModel(rm.model.to_highs(np.zeros(rm.n_col), maximize=True))
     t_solve = time.perf_counter()
-    layout = _Layout(edges, eu, ev, c5_edges, grp, group_col, f_col, mu_col, m.n_col, groups.of_edge, flows)
-
-    # ---- phase 1: maximum flow
     note("routing MILP, phase 1 of 2: maximum flow")
-    guess = me.guess(products, traps=_trap_test(products, groups, entries))
-    x_guess = _guess_solution(products, layout, guess, entries, options, place_col, state_places, groups)
+    first = _phase1(h, rm, products, options, entries, clock)
+    flow = _flow_of_phase1(rm, first)
+    _raise_if_flows_bind(rm, products, options, first.x, {q: v for q, v in required.items() if q not in entries})
+    note(f"routing MILP, phase 2 of 2: fewest cuts at flow {flow}")
+    second = _phase2(h, rm, first.x, flow, options, clock)
+    return _result(rm, products, options, first, second, flow, graph_seconds, time.perf_counter() - t_solve)
+
+
+def _phase1(
+    h: highspy.Highs, rm: _RoutingModel, products: Products, options: MilpOptions, entries: dict[int, np.ndarray], clock: Clock
+) -> _Phase:
+    """Phase 1, maximum flow: proven by the heuristic when it attains the flow upper bound,
+    else solved by HiGHS (seeded by the heuristic's answer, kept as the fallback)."""
+    guess = rm.edges.guess(products, traps=_trap_test(products, rm.groups, entries))
+    x_guess = _guess_solution(products, rm, guess, options)
     if x_guess is not None:
         clock.first_test()
-    stopped_by: str | None = None
     if x_guess is not None and guess.flow == guess.upper_bound:
-        x, status1, gap1 = x_guess, "optimal", 0.0  # the flow upper bound is attained: proven
-    else:
-        cost = np.zeros(m.n_col)
-        cost[f_col[out_src]] = 1.0
-        h.changeColsCost(m.n_col, np.arange(m.n_col, dtype=np.int32), cost)
-        # a route-seeded start is kept as the fallback but not handed to HiGHS: from
-        # it, HiGHS's neighbourhood heuristics stay near the lone route (mars-exploration:
-        # no flow 2 in 300 s, against 170 s from scratch)
-        if x_guess is not None and not guess.from_route and options.offer_starts:
-            _set_solution(h, x_guess)
-        watch = clock.watching_first()
-        try:
-            status1, gap1, x1 = _run(
-                h, clock.latest(), options, phase="phase 1 (maximum flow)", clock=clock, watch_first=watch
-            )
-        except TimeoutError:
-            if x_guess is None:
-                raise
-            status1, gap1, x1 = "feasible", float("inf"), None
-        stopped_by = _stopped_by(h)
-        if status1 == "infeasible":
-            raise InconsistentProblem(
-                "unroutable",
-                "the test objective cannot be routed without trapping the system: no cut set "
-                "routes every successful execution through it while leaving a way to the goal",
-            )
-        x = x1 if x1 is not None else x_guess
-        if x_guess is not None and guess.flow > float(x[f_col[out_src]].sum()) + 0.5:
-            x, status1 = x_guess, "feasible"  # HiGHS stopped below the heuristic's flow
-    flow = int(round(float(x[f_col[out_src]].sum())))
+        return _Phase(x_guess, "optimal", 0.0, None)  # the flow upper bound is attained: proven
+    cost = np.zeros(rm.n_col)
+    cost[rm.cols.flow[rm.out_src]] = 1.0
+    h.changeColsCost(rm.n_col, np.arange(rm.n_col, dtype=np.int32), cost)
+    # a route-seeded start is kept as the fallback but not handed to HiGHS: from
+    # it, HiGHS's neighbourhood heuristics stay near the lone route (mars-exploration:
+    # no flow 2 in 300 s, against 170 s from scratch)
+    if x_guess is not None and not guess.from_route and options.offer_starts:
+        _set_solution(h, x_guess)
+    watch = clock.watching_first()
+    try:
+        status, gap, x1 = _run(h, clock.latest(), options, phase="phase 1 (maximum flow)", clock=clock, watch_first=watch)
+    except TimeoutError:
+        if x_guess is None:
+            raise
+        status, gap, x1 = "feasible", float("inf"), None
+    stopped_by = _stopped_by(h)
+    if status == "infeasible":
+        raise InconsistentProblem(
+            "unroutable",
+            "the test objective cannot be routed without trapping the system: no cut set "
+            "routes every successful execution through it while leaving a way to the goal",
+        )
+    x = x1 if x1 is not None else x_guess
+    if x is None:  # _run returns a solution unless it raised
+        raise RuntimeError("phase 1 of the routing MILP ended without a solution")
+    if x_guess is not None and guess.flow > rm.flow_of(x) + 0.5:
+        return _Phase(x_guess, "feasible", gap, stopped_by)  # HiGHS stopped below the heuristic's flow
+    return _Phase(x, status, gap, stopped_by)
+
+
+def _flow_of_phase1(rm: _RoutingModel, first: _Phase) -> int:
+    """Phase 1's flow F, which must be at least 1.
+
+    Raises
+    ------
+    TimeoutError
+        If a limit stopped phase 1 before any test with flow >= 1.
+    InconsistentProblem
+        If the maximum flow is proven 0 (every cut set traps the system).
+    """
+    flow = int(round(rm.flow_of(first.x)))
     if flow < 1:
-        if status1 != "optimal":
-            raise TimeoutError(f"no test with flow >= 1 was found within the {_LIMIT_TEXT.get(stopped_by, 'time limit')}")
+        if first.status != "optimal":
+            raise TimeoutError(f"no test with flow >= 1 was found within the {_LIMIT_TEXT.get(first.stopped_by or '', 'time limit')}")
         raise InconsistentProblem(
             "unroutable",
             "the test objective cannot be routed without trapping the system: every routing "
             "cut set blocks all executions to the goal",
         )
+    return flow
 
-    missing = {q: v for q, v in required.items() if q not in entries}
-    if missing:
-        cut1 = np.zeros(groups.keys.size, dtype=bool)
-        cut1[var_groups] = x[group_col[var_groups]] > 0.5
-        blocked1 = _blocked_of_edges(products, np.flatnonzero(cut1[groups.of_edge]))
-        blocked1 |= (np.isin(groups.move_key, groups.keys[cut1 & groups.static]) & _static_moves(products, options))[None, :]
-        trapped1 = trapped_entries(products, blocked1, missing)
-        if trapped1:
-            raise _FlowsBind(trapped1)
 
-    # ---- phase 2: fewest cuts (for the agent: fewest blocked states first) at flow F
-    note(f"routing MILP, phase 2 of 2: fewest cuts at flow {flow}")
-    h.addRow(flow - 0.5, highspy.kHighsInf, out_src.size, f_col[out_src].astype(np.int32), np.ones(out_src.size))
-    cost2 = np.zeros(m.n_col)
-    cost2[group_col[var_groups]] = groups.weight[var_groups]
-    if options.block_states and place_col.size:
-        cost2[place_col] = float(groups.weight[var_groups].sum() + 1)
+def _raise_if_flows_bind(
+    rm: _RoutingModel, products: Products, options: MilpOptions, x: np.ndarray, missing: dict[int, np.ndarray]
+) -> None:
+    """Raise :class:`_FlowsBind` if phase 1's cuts trap entry nodes of ``missing`` (histories
+    whose feasibility flows the model lacks)."""
+    if not missing:
+        return
+    groups = rm.groups
+    cut1 = rm.cut_of(x)
+    blocked1 = _blocked_of_edges(products, np.flatnonzero(cut1[groups.of_edge]))
+    blocked1 |= (np.isin(groups.move_key, groups.keys[cut1 & groups.static]) & _static_moves(products, options))[None, :]
+    trapped1 = trapped_entries(products, blocked1, missing)
+    if trapped1:
+        raise _FlowsBind(trapped1)
+
+
+def _phase2(h: highspy.Highs, rm: _RoutingModel, x: np.ndarray, flow: int, options: MilpOptions, clock: Clock) -> _Phase:
+    """Phase 2, fewest cuts (for the agent: fewest blocked places first) at flow ``flow``,
+    seeded by the fewest-cuts answer with phase 1's flow held fixed."""
+    f_col = rm.cols.flow
+    h.addRow(flow - 0.5, highspy.kHighsInf, rm.out_src.size, f_col[rm.out_src].astype(np.int32), np.ones(rm.out_src.size))
+    var_groups = rm.var_groups
+    cost = np.zeros(rm.n_col)
+    cost[rm.cols.cut[var_groups]] = rm.groups.weight[var_groups]
+    if options.block_states and rm.cols.blocked_place.size:
+        cost[rm.cols.blocked_place] = float(rm.groups.weight[var_groups].sum() + 1)
     h.changeObjectiveSense(highspy.ObjSense.kMinimize)
-    h.changeColsCost(m.n_col, np.arange(m.n_col, dtype=np.int32), cost2)
+    h.changeColsCost(rm.n_col, np.arange(rm.n_col, dtype=np.int32), cost)
     clock.first_test()
     if clock.deadline is None:  # no wall clock: a deterministic budget for the helper solve
         x = _incumbent(h, x, f_col, None, options, flow, _min_limit(INCUMBENT_NODES, options.node_limit))
@@ -601,42 +799,53 @@ def _solve_once(
     else:
         h.clearSolver()
     try:
-        status2, gap2, x2 = _run(h, clock.deadline, options, phase="phase 2 (fewest cuts)", flow=flow)
+        status, gap, x2 = _run(h, clock.deadline, options, phase="phase 2 (fewest cuts)", flow=flow)
     except TimeoutError:  # HiGHS kept no solution: the start is the answer
-        status2, gap2, x2 = "feasible", float("inf"), x
-    stopped_by = stopped_by or _stopped_by(h)
-    if status2 == "infeasible" or x2 is None:  # cannot happen: phase 1's solution is feasible
+        status, gap, x2 = "feasible", float("inf"), x
+    if status == "infeasible" or x2 is None:  # cannot happen: phase 1's solution is feasible
         raise RuntimeError("phase 2 of the routing MILP lost the phase-1 solution")
-    x = x2
-    solve_seconds = time.perf_counter() - t_solve
+    return _Phase(x2, status, gap, _stopped_by(h))
 
-    cut = np.zeros(groups.keys.size, dtype=bool)
-    cut[var_groups] = x[group_col[var_groups]] > 0.5
-    cut_edges = np.flatnonzero(cut[groups.of_edge])
-    static_cut_keys = groups.keys[cut & groups.static]
-    static_moves_cut = np.isin(groups.move_key, static_cut_keys) & _static_moves(products, options)
-    blocked = state_places[x[place_col] > 0.5] if place_col.size else np.zeros(0, dtype=np.int64)
-    status = "optimal" if status1 == status2 == "optimal" else "feasible"
-    stats = {
+
+def _result(
+    rm: _RoutingModel,
+    products: Products,
+    options: MilpOptions,
+    first: _Phase,
+    second: _Phase,
+    flow: int,
+    graph_seconds: float,
+    solve_seconds: float,
+) -> RoutingResult:
+    """The routing answer of phase 2's solution, with the model's sizes and times."""
+    groups, x = rm.groups, second.x
+    cut = rm.cut_of(x)
+    static_moves_cut = np.isin(groups.move_key, groups.keys[cut & groups.static]) & _static_moves(products, options)
+    place_cols = rm.cols.blocked_place
+    blocked = rm.cols.places[x[place_cols] > 0.5] if place_cols.size else np.zeros(0, dtype=np.int64)
+    status = "optimal" if first.status == second.status == "optimal" else "feasible"
+    mip_gap = float(max(first.gap, second.gap)) if status != "optimal" else 0.0
+    m = rm.model
+    stats: dict[str, Any] = {
         "binary_vars": m.n_integer,
         "continuous_vars": m.n_col - m.n_integer,
         "constraints": m.n_row + 1,
-        "feasibility_vars": n_feas_cols,
-        "model_edges": int(edges.size),
+        "feasibility_vars": sum(fl.cols.size for fl in rm.cols.feasibility),
+        "model_edges": int(rm.edges.edges.size),
         "graph_seconds": graph_seconds,
         "solve_seconds": solve_seconds,
-        "mip_gap": float(max(gap1, gap2)) if status != "optimal" else 0.0,
-        "stopped_by": None if status == "optimal" else stopped_by,
+        "mip_gap": mip_gap,
+        "stopped_by": None if status == "optimal" else (first.stopped_by or second.stopped_by),
         "deterministic": options.deterministic,
     }
     return RoutingResult(
         status=status,
         flow=flow,
-        cut_edges=cut_edges,
+        cut_edges=np.flatnonzero(cut[groups.of_edge]),
         cut_group_keys=[int(k) for k in groups.keys[cut]],
         static_moves_cut=static_moves_cut,
         blocked_places=blocked,
-        mip_gap=stats["mip_gap"],
+        mip_gap=mip_gap,
         stats=stats,
     )
 
@@ -702,33 +911,7 @@ def model_edges(products: Products, groups: CutGroups, keep_node: np.ndarray | N
     return ModelEdges(edges, eu, ev, c5, grp, useful & groups.restrictable)
 
 
-@dataclass
-class _Layout:
-    """Where the model keeps what: edges of the model and their columns."""
-
-    edges: np.ndarray
-    eu: np.ndarray
-    ev: np.ndarray
-    c5: np.ndarray
-    grp: np.ndarray
-    group_col: np.ndarray
-    f_col: np.ndarray
-    mu_col: np.ndarray
-    n_col: int
-    group_of_edge: np.ndarray
-    flows: list["_FeasibilityFlow"]
-
-
-def _guess_solution(
-    products: Products,
-    lay: "_Layout",
-    guess: RoutingGuess,
-    entries: dict[int, np.ndarray],
-    options: MilpOptions,
-    place_col: np.ndarray,
-    state_places: np.ndarray,
-    groups: CutGroups,
-) -> np.ndarray | None:
+def _guess_solution(products: Products, rm: _RoutingModel, guess: RoutingGuess, options: MilpOptions) -> np.ndarray | None:
     """The heuristic's cut set as a full model solution, or ``None`` if it is unusable.
 
     Unusable: no flow, a rejected cut set (an exclusion row), or, with feasibility
@@ -738,25 +921,26 @@ def _guess_solution(
     """
     if guess.flow < 1:
         return None
-    cut_mask = guess.cut_groups & (lay.group_col >= 0)
+    cols, groups = rm.cols, rm.groups
+    cut_mask = guess.cut_groups & (cols.cut >= 0)
     cut_keys = set(groups.keys[cut_mask].tolist())
     for excluded in options.exclusions:
         if excluded and set(excluded) <= cut_keys:
             return None
     g, ts = products.virtual, products.ts
-    x = np.zeros(lay.n_col)
-    x[lay.f_col] = guess.edge_flow
-    cols = np.flatnonzero(lay.group_col >= 0)
-    x[lay.group_col[cols]] = cut_mask[cols].astype(float)
-    has_mu = lay.mu_col >= 0
-    x[lay.mu_col[has_mu]] = guess.reach[has_mu].astype(float)
-    if place_col.size:
-        e_all = np.flatnonzero(cut_mask[lay.group_of_edge])
+    x = np.zeros(rm.n_col)
+    x[cols.flow] = guess.edge_flow
+    with_d = np.flatnonzero(cols.cut >= 0)
+    x[cols.cut[with_d]] = cut_mask[with_d].astype(float)
+    has_mu = cols.reach >= 0
+    x[cols.reach[has_mu]] = guess.reach[has_mu].astype(float)
+    if cols.blocked_place.size:
+        e_all = np.flatnonzero(cut_mask[groups.of_edge])
         pl = ts.place[ts.dst[g.move[e_all]]]
-        x[place_col] = np.isin(state_places, pl).astype(float)
+        x[cols.blocked_place] = np.isin(cols.places, pl).astype(float)
     is_cut = x > 0.5
     sys_targets = products.system_target
-    for fl in lay.flows:
+    for fl in cols.feasibility:
         value = fl.tree_flow(products.system.n_nodes, is_cut, sys_targets)
         if value is None:  # the cuts trap an entry node of this history
             return None
@@ -808,7 +992,7 @@ class _ModelView:
     cost: np.ndarray
 
     @classmethod
-    def of(cls, h: highspy.Highs) -> "_ModelView":
+    def of(cls, h: highspy.Highs) -> _ModelView:
         lp = h.getLp()
         n, m = int(lp.num_col_), int(lp.num_row_)
         a = sp.csc_matrix(
@@ -903,9 +1087,9 @@ def _add_feasibility(
     m: _Model,
     products: Products,
     groups: CutGroups,
-    group_col: np.ndarray,
+    cut: np.ndarray,
     entries: dict[int, np.ndarray],
-) -> list["_FeasibilityFlow"]:
+) -> list[_FeasibilityFlow]:
     """Add c6-c8 as one aggregated flow per history; returns where each flow lives.
 
     A flow edge over move ``t`` under history ``q`` is closed by the cut of the G edge
@@ -942,7 +1126,7 @@ def _add_feasibility(
         pos = np.minimum(pos, gkey_sorted.size - 1)
         found = gkey_sorted[pos] == want
         dcol = np.full(e.size, -1, dtype=np.int64)
-        dcol[found] = group_col[groups.of_edge[gorder[pos[found]]]]
+        dcol[found] = cut[groups.of_edge[gorder[pos[found]]]]
         sel = np.flatnonzero(dcol >= 0)
         r = m.add_rows(-np.inf, cap, sel.size)
         m.add_terms(r, cols[sel], 1.0)
