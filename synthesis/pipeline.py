@@ -105,7 +105,8 @@ class SynthesizedTest:
     def cut_edges_outside_intermediate(self) -> np.ndarray:
         """The cut set C: cut edges of G outside ``E(I)``."""
         e = self.routing.cut_edges
-        return e[~self.products.touches_intermediate[e]]
+        out: np.ndarray = e[~self.products.touches_intermediate[e]]
+        return out
 
 
 def milp_options(problem: Problem, options: SynthesisOptions) -> MilpOptions:

@@ -95,13 +95,22 @@ def verify_closed_loop(
 
     a0, m0 = controller.reset()
     v0 = np.array([g.initial], dtype=np.int64)
-    used_m, used_v, used_a = [], [], []
+    used_m: list[np.ndarray] = []
+    used_v: list[np.ndarray] = []
+    used_a: list[np.ndarray] = []
     if controller.first == "agent":
         a_arr, m_arr = answer(np.array([m0]), v0, np.array([a0]))
-        used_m.append(np.array([m0])), used_v.append(v0), used_a.append(np.array([a0]))
+        used_m.append(np.array([m0]))
+        used_v.append(v0)
+        used_a.append(np.array([a0]))
     else:
         a_arr, m_arr = np.array([a0]), np.array([m0])
-    key = lambda v, a, m: (v * n_agent + a) * n_mem + m  # noqa: E731
+
+    def key(v: np.ndarray, a: np.ndarray, m: np.ndarray) -> np.ndarray:
+        """The index of configuration ``(v, a)`` with memory ``m``."""
+        out: np.ndarray = (v * n_agent + a) * n_mem + m
+        return out
+
     visited = np.zeros(n * n_agent * n_mem, dtype=bool)
     frontier = np.unique(key(v0, a_arr, m_arr))
     visited[frontier] = True
@@ -138,7 +147,9 @@ def verify_closed_loop(
         s_row = np.concatenate([row[open_], stay])
         s_dst = np.concatenate([dst[open_], v[stay]])
         na, nm = answer(m[s_row], s_dst, a[s_row])
-        used_m.append(m[s_row]), used_v.append(s_dst), used_a.append(a[s_row])
+        used_m.append(m[s_row])
+        used_v.append(s_dst)
+        used_a.append(a[s_row])
         nxt = key(s_dst, na, nm)
         srcs.append(fk[s_row])
         dsts.append(nxt)
@@ -164,7 +175,8 @@ def verify_closed_loop(
         raise CheckFailed(
             f"a run reaches the goal without the test objective, from {where(k // (n_mem * n_agent), (k // n_mem) % n_agent)}"
         )
-    entries = tuple(np.concatenate(x) if x else np.zeros(0, dtype=np.int64) for x in (used_m, used_v, used_a))
+    used_m_all, used_v_all, used_a_all = (np.concatenate(x) if x else np.zeros(0, dtype=np.int64) for x in (used_m, used_v, used_a))
+    entries = (used_m_all, used_v_all, used_a_all)
     return ClosedLoopReport(
         positions=int(states.size), transitions=int(src.size), goal_positions=int(goal.sum()), entries=entries
     )

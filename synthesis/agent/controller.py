@@ -5,6 +5,7 @@ strategy of the test-agent game (:func:`controller_from_strategy`)."""
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -102,7 +103,7 @@ class AgentController:
         m[ok] = self.next_memory[memory[ok], row[ok], agent_state[ok]]
         return a, m
 
-    def restricted(self, memory: np.ndarray, rows: np.ndarray, agents: np.ndarray) -> "AgentController":
+    def restricted(self, memory: np.ndarray, rows: np.ndarray, agents: np.ndarray) -> AgentController:
         """A copy whose table keeps only the entries ``(memory, row, agent)`` listed."""
         na = np.full_like(self.next_agent, -1)
         nm = np.full_like(self.next_memory, -1)
@@ -110,7 +111,7 @@ class AgentController:
         nm[memory, rows, agents] = self.next_memory[memory, rows, agents]
         return replace(self, next_agent=na, next_memory=nm)
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         """Compact plain data: only defined entries, over the rows they use."""
         mem, row, agt = np.nonzero(self.next_agent >= 0)
         used, row_new = np.unique(row, return_inverse=True)
@@ -143,7 +144,7 @@ class AgentController:
         }
 
     @classmethod
-    def from_dict(cls, d: dict) -> "AgentController":
+    def from_dict(cls, d: dict[str, Any]) -> AgentController:
         """Rebuild a controller written by :meth:`to_dict`.
 
         Raises

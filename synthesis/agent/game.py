@@ -108,14 +108,16 @@ def _csr(keys: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
 
 def reactive_restrictions(strategy: TestStrategy) -> np.ndarray:
     """``bool[n_hist, n_moves]``: ``R(q)``, the restrictions of ``C(q)`` that are not static obstacles."""
-    return strategy.restrictions & ~strategy.static_obstacles[None, :]
+    out: np.ndarray = strategy.restrictions & ~strategy.static_obstacles[None, :]
+    return out
 
 
 def ended_nodes(products: Products) -> np.ndarray:
     """``bool[n_nodes]``: nodes of G where the test is over (``Tgt``, or ``Tgt`` unreachable)."""
     g = products.virtual
     viable = coreachable(g.n_nodes, g.src, g.dst, products.target)
-    return products.target | ~viable
+    out: np.ndarray = products.target | ~viable
+    return out
 
 
 def blocking_places(products: Products, static_obstacles: np.ndarray, places: np.ndarray) -> np.ndarray:
@@ -258,7 +260,8 @@ def legal_positions(
     agents = np.arange(n_agent)
     exact = ~forbidden & ~impossible[:, None] & ((required[:, None] < 0) | (agents[None, :] == required[:, None]))
     no_collision = agent_place[None, :] != node_place[:, None]
-    return no_collision & (ended[:, None] | exact)
+    out: np.ndarray = no_collision & (ended[:, None] | exact)
+    return out
 
 
 def build_agent_game(products: Products, strategy: TestStrategy, agent: TestAgent) -> AgentGame:

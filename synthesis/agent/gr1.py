@@ -476,11 +476,13 @@ class _GameIndex:
             return items
         k = np.arange(items.size)
         self._stamp[items] = k
-        return items[self._stamp[items] == k]
+        out: np.ndarray = items[self._stamp[items] == k]
+        return out
 
     def count_in(self, target: np.ndarray) -> np.ndarray:
         """Return, for every choice, its number of successors in ``target``."""
-        return self.matrix @ target.view(np.int8)
+        out: np.ndarray = self.matrix @ target.view(np.int8)
+        return out
 
     def cpre(self, target: np.ndarray) -> np.ndarray:
         """Controllable predecessor of a position set.
@@ -497,7 +499,8 @@ class _GameIndex:
             has a successor in ``target`` (positions without choices included).
         """
         failing = self.owner[self.count_in(target) == 0]
-        return np.bincount(failing, minlength=self.n) == 0
+        out: np.ndarray = np.bincount(failing, minlength=self.n) == 0
+        return out
 
     def persist_or_reach(
         self, reach: np.ndarray, live: np.ndarray, domain: np.ndarray | None = None

@@ -70,12 +70,12 @@ class AgentSynthesis:
     controller: AgentController
     system: TransitionSystem
     counterexamples: int
-    iterations: list[dict]
+    iterations: list[dict[str, Any]]
     game_size: dict[str, int]
     closed_loop: ClosedLoopReport
     timings: dict[str, float]
 
-    def summary(self) -> dict:
+    def summary(self) -> dict[str, Any]:
         """The agent's part of ``flowtest synthesize --json``."""
         return {
             "counterexamples": self.counterexamples,
@@ -96,7 +96,7 @@ class AgentSynthesis:
             },
         }
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         """``artifact["agent"]``: the controller plus the agent's cells and parks for drawing."""
         return {
             "controller": self.controller.to_dict(),
@@ -113,10 +113,11 @@ def _restrictable_for_agent(ts: TransitionSystem, agent: TestAgent, static: np.n
     reach = agent.occupiable_states() & (agent.place_of_state >= 0)
     reach_place = np.zeros(len(ts.places), dtype=bool)
     reach_place[agent.place_of_state[reach]] = True
-    return ts.restrictable & (static | reach_place[ts.place[ts.dst]])
+    out: np.ndarray = ts.restrictable & (static | reach_place[ts.place[ts.dst]])
+    return out
 
 
-def _rejected_text(iterations: list[dict], shown: int = 4) -> str:
+def _rejected_text(iterations: list[dict[str, Any]], shown: int = 4) -> str:
     """Which restrictions the test agent could not realize: the places each rejected cut
     set needed it to block, and why (it could not be there in time, or the cuts trap the
     system), the last ``shown`` of them."""

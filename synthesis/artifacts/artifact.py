@@ -40,7 +40,7 @@ FORMAT = "flowtest-test"
 VERSION = 1
 
 
-def source_hash(system: dict, objectives: dict, kind: str) -> str:
+def source_hash(system: dict[str, Any], objectives: dict[str, Any], kind: str) -> str:
     """SHA-256 of what a test is synthesized from: the transition system (as the artifact
     writes it), the two objective texts and the environment kind, as canonical JSON."""
     doc = {"format": FORMAT, "system": system, "objectives": {"system": objectives["system"], "test": objectives["test"]},
@@ -55,7 +55,7 @@ def problem_source_hash(problem: Problem) -> str:
                        {"system": problem.system_objective.text, "test": problem.test_objective.text}, problem.kind)
 
 
-def dba_to_dict(dba: DBA) -> dict:
+def dba_to_dict(dba: DBA) -> dict[str, Any]:
     return {
         "delta": dba.delta.tolist(),
         "initial": dba.initial,
@@ -65,7 +65,7 @@ def dba_to_dict(dba: DBA) -> dict:
     }
 
 
-def dba_from_dict(d: dict, letters: tuple[frozenset[str], ...]) -> DBA:
+def dba_from_dict(d: dict[str, Any], letters: tuple[frozenset[str], ...]) -> DBA:
     comps = d.get("components")
     return DBA(
         delta=np.asarray(d["delta"], dtype=np.int32).reshape(-1, len(letters)),
@@ -111,10 +111,10 @@ class TestArtifact:
     test_automaton: DBA
     histories: DBA
     strategy: TestStrategy
-    summary: dict
-    objectives: dict
-    agent: dict | None = None
-    extras: dict = field(default_factory=dict)
+    summary: dict[str, Any]
+    objectives: dict[str, Any]
+    agent: dict[str, Any] | None = None
+    extras: dict[str, Any] = field(default_factory=dict)
     source: str = ""  # source_hash of what it was synthesized from
 
     def initial_history(self) -> int:
@@ -129,7 +129,7 @@ class TestArtifact:
     def __post_init__(self) -> None:
         self._letter = self.system.letter_of_state(self.letters)
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         return {
             "format": FORMAT,
             "version": VERSION,
@@ -151,7 +151,7 @@ class TestArtifact:
         }
 
     @classmethod
-    def from_dict(cls, d: dict, source: str = "<artifact>", verify: bool = True) -> "TestArtifact":
+    def from_dict(cls, d: dict[str, Any], source: str = "<artifact>", verify: bool = True) -> TestArtifact:
         """Build an artifact from its plain data, checked first (see the module docstring).
 
         Raises
@@ -190,7 +190,7 @@ class TestArtifact:
         Path(path).write_text(json.dumps(self.to_dict(), separators=(",", ":")))
 
     @classmethod
-    def load(cls, path: str | Path, verify: bool = True) -> "TestArtifact":
+    def load(cls, path: str | Path, verify: bool = True) -> TestArtifact:
         """Read and check an artifact file (see :meth:`from_dict`)."""
         p = Path(path)
         raw = read_limited(p, "artifact")
@@ -212,8 +212,10 @@ def _same_dba(a: DBA, b: DBA) -> bool:
         and bool(np.array_equal(a.delta, b.delta))
         and a.accepting.shape == b.accepting.shape
         and bool(np.array_equal(a.accepting, b.accepting))
-        and (a.components is None) == (b.components is None)
-        and (a.components is None or bool(np.array_equal(a.components, b.components)))
+        and (
+            (a.components is None and b.components is None)
+            or (a.components is not None and b.components is not None and bool(np.array_equal(a.components, b.components)))
+        )
     )
 
 

@@ -35,19 +35,19 @@ def _is_int(x: Any) -> bool:
     return isinstance(x, int) and not isinstance(x, bool)
 
 
-def _get(w: _Where, d: dict, key: str, path: str) -> Any:
+def _get(w: _Where, d: dict[str, Any], key: str, path: str) -> Any:
     if key not in d:
         raise w.fail(f"{path}.{key}" if path else key, "missing")
     return d[key]
 
 
-def _dict(w: _Where, v: Any, path: str) -> dict:
+def _dict(w: _Where, v: Any, path: str) -> dict[str, Any]:
     if not isinstance(v, dict):
         raise w.fail(path, f"must be an object, not {type(v).__name__}")
     return v
 
 
-def _list(w: _Where, v: Any, path: str, length: int | None = None) -> list:
+def _list(w: _Where, v: Any, path: str, length: int | None = None) -> list[Any]:
     if not isinstance(v, list):
         raise w.fail(path, f"must be a list, not {type(v).__name__}")
     if length is not None and len(v) != length:
@@ -68,13 +68,14 @@ def _int(w: _Where, v: Any, path: str, lo: int = 0, hi: int | None = None) -> in
     if v < lo or (hi is not None and v >= hi):
         span = f"{lo}..{hi - 1}" if hi is not None else f">= {lo}"
         raise w.fail(path, f"{v} is outside {span}")
-    return v
+    return int(v)
 
 
 def _ints(w: _Where, v: Any, path: str, lo: int, hi: int | None, length: int | None = None) -> list[int]:
-    for i, x in enumerate(_list(w, v, path, length)):
+    items = _list(w, v, path, length)
+    for i, x in enumerate(items):
         _int(w, x, f"{path}[{i}]", lo, hi)
-    return v
+    return items
 
 
 def _bits(w: _Where, v: Any, path: str, length: int) -> list[int]:
@@ -82,9 +83,10 @@ def _bits(w: _Where, v: Any, path: str, length: int) -> list[int]:
 
 
 def _strs(w: _Where, v: Any, path: str, length: int | None = None) -> list[str]:
-    for i, x in enumerate(_list(w, v, path, length)):
+    items = _list(w, v, path, length)
+    for i, x in enumerate(items):
         _str(w, x, f"{path}[{i}]")
-    return v
+    return items
 
 
 def _cell(w: _Where, v: Any, path: str) -> None:
@@ -175,7 +177,7 @@ def _dba(w: _Where, d: Any, path: str, n_letters: int, parts: list[int] | None =
         comps = _list(w, comps, f"{path}.components", nq)
         for i, row in enumerate(comps):
             row = _list(w, row, f"{path}.components[{i}]", len(parts))
-            for j, (x, k) in enumerate(zip(row, parts)):
+            for j, (x, k) in enumerate(zip(row, parts, strict=True)):
                 _int(w, x, f"{path}.components[{i}][{j}]", 0, k)
     elif comps is not None:
         for i, row in enumerate(_list(w, comps, f"{path}.components", nq)):

@@ -93,7 +93,7 @@ def without_timings(x: Any) -> Any:
     return x
 
 
-def stop_note(summary: dict) -> str:
+def stop_note(summary: dict[str, Any]) -> str:
     """What a person should know after the status: what stopped a solve short of its
     proof, and whether the answer would be the same on another machine ("" if nothing)."""
     stopped = summary.get("stopped_by")

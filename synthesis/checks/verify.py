@@ -33,7 +33,8 @@ from ..model.strategy import TestStrategy
 def restricted_edges(products: Products, strategy: TestStrategy) -> np.ndarray:
     """``bool[m]``: the edges of G blocked by the strategy (history of the tail)."""
     g = products.virtual
-    return strategy.blocked[g.hist[g.src], g.move]
+    out: np.ndarray = strategy.blocked[g.hist[g.src], g.move]
+    return out
 
 
 def max_flow(n: int, src: np.ndarray, dst: np.ndarray, source: int, targets: np.ndarray) -> int:

@@ -18,13 +18,13 @@ Conventions (method.md §3):
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Sequence
 
 import numpy as np
 
 from ..model.errors import ProblemTooLarge
-from ..model.specs import Objective, Task, holds, to_text
+from ..model.specs import Formula, Objective, Task, holds, to_text
 
 Label = frozenset[str]
 
@@ -77,7 +77,7 @@ class DBA:
 # -------------------------------------------------------------- pattern automata
 
 
-def _truth(f, letters: Sequence[Label]) -> np.ndarray:
+def _truth(f: Formula, letters: Sequence[Label]) -> np.ndarray:
     return np.fromiter((holds(f, a) for a in letters), dtype=bool, count=len(letters))
 
 
@@ -138,7 +138,7 @@ def product(parts: Sequence[DBA], accept_all: bool = True, max_states: int | Non
     while head < len(order):
         state = order[head]
         head += 1
-        succ = np.stack([p.delta[s] for p, s in zip(parts, state)], axis=1)  # [k, n_parts]
+        succ = np.stack([p.delta[s] for p, s in zip(parts, state, strict=True)], axis=1)  # [k, n_parts]
         row = np.empty(k, dtype=np.int32)
         for a in range(k):
             t = tuple(int(x) for x in succ[a])
@@ -153,10 +153,10 @@ def product(parts: Sequence[DBA], accept_all: bool = True, max_states: int | Non
     comps = np.array(order, dtype=np.int32).reshape(len(order), len(parts))
     acc = np.stack([p.accepting[comps[:, i], 0] for i, p in enumerate(parts)], axis=1)
     if accept_all:
-        acc = acc.all(axis=1, keepdims=True)
+        acc = np.asarray(acc.all(axis=1, keepdims=True))
     names = []
     for t in order:
-        bits = [p.names[s] for p, s in zip(parts, t) if p.names[s]]
+        bits = [p.names[s] for p, s in zip(parts, t, strict=True) if p.names[s]]
         names.append("; ".join(bits))
     return DBA(np.array(rows, dtype=np.int32).reshape(len(order), k), 0, acc, letters, names, comps)
 
@@ -215,12 +215,20 @@ class SpecificationProduct:
     test: DBA
 
     @property
+    def components(self) -> np.ndarray:
+        """``int32[n_hist, 2]``: the ``(q_sys, q_test)`` of each history (a product always has them)."""
+        comps = self.dba.components
+        if comps is None:
+            raise ValueError("the specification product lost its components")
+        return comps
+
+    @property
     def sys_state(self) -> np.ndarray:
-        return self.dba.components[:, 0]
+        return self.components[:, 0]
 
     @property
     def test_state(self) -> np.ndarray:
-        return self.dba.components[:, 1]
+        return self.components[:, 1]
 
     @property
     def accepting_sys(self) -> np.ndarray:
@@ -236,7 +244,7 @@ class SpecificationProduct:
 
     def describe(self, h: int) -> str:
         """What history ``h`` means, in words (the progress of both objectives)."""
-        s, t = self.dba.components[h]
+        s, t = self.components[h]
         bits = [b for b in (self.sys.names[s], self.test.names[t]) if b]
         return "; ".join(bits) or "start"
 

@@ -59,7 +59,7 @@ class ProductGraph:
         return sp.csr_matrix((np.ones(src.size, dtype=np.int8), (src, dst)), shape=(n, n))
 
     def node_index(self) -> dict[tuple[int, int], int]:
-        return {(int(s), int(q)): v for v, (s, q) in enumerate(zip(self.state, self.hist))}
+        return {(int(s), int(q)): v for v, (s, q) in enumerate(zip(self.state, self.hist, strict=True))}
 
     @cached_property
     def entry_nodes(self) -> dict[int, np.ndarray]:
@@ -159,7 +159,8 @@ class Products:
     def touches_intermediate(self) -> np.ndarray:
         """``bool[m]``: the edges ``E(I)`` of G, with an end in I."""
         g = self.virtual
-        return self.intermediate[g.src] | self.intermediate[g.dst]
+        out: np.ndarray = self.intermediate[g.src] | self.intermediate[g.dst]
+        return out
 
     @cached_property
     def system_coreachable(self) -> np.ndarray:

@@ -20,8 +20,8 @@ rejected with a :class:`~synthesis.model.errors.ProblemError` that quotes the pa
 from __future__ import annotations
 
 import re
+from collections.abc import Iterable
 from dataclasses import dataclass
-from typing import Iterable, Union
 
 from .errors import ProblemError
 
@@ -40,23 +40,23 @@ class Const:
 
 @dataclass(frozen=True)
 class Not:
-    arg: "Formula"
+    arg: Formula
 
 
 @dataclass(frozen=True)
 class BinOp:
     op: str  # "&", "|", "->", "U"
-    left: "Formula"
-    right: "Formula"
+    left: Formula
+    right: Formula
 
 
 @dataclass(frozen=True)
 class Temporal:
     op: str  # "F", "G", "X"
-    arg: "Formula"
+    arg: Formula
 
 
-Formula = Union[Prop, Const, Not, BinOp, Temporal]
+Formula = Prop | Const | Not | BinOp | Temporal
 
 _TOKEN = re.compile(r"\s*(->|[()!&|]|[A-Za-z_][A-Za-z0-9_]*|\S)")
 _BINDING = {"->": 1, "|": 2, "&": 3, "U": 4}

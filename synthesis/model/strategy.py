@@ -14,8 +14,9 @@ Obstacle settings, which differ in what is *shown*, never in what is restricted:
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass, field
-from typing import Iterable
+from typing import Any
 
 import numpy as np
 
@@ -57,7 +58,8 @@ class TestStrategy:
 
     def blocked_moves(self, history: int) -> np.ndarray:
         """``bool[n_moves]``: the moves restricted under ``history``."""
-        return self.blocked[history]
+        out: np.ndarray = self.blocked[history]
+        return out
 
     def active_obstacles(
         self, history: int, state: int, visited: Iterable[int], out_moves: list[np.ndarray]
@@ -69,9 +71,10 @@ class TestStrategy:
         """
         states = [state] if self.setting == "instantaneous" else sorted(set(visited) | {state})
         moves = np.concatenate([out_moves[s] for s in states]) if states else np.zeros(0, dtype=np.int64)
-        return moves[self.blocked[history, moves]]
+        out: np.ndarray = moves[self.blocked[history, moves]]
+        return out
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         return {
             "setting": self.setting,
             "static_obstacles": np.flatnonzero(self.static_obstacles).tolist(),
@@ -85,7 +88,7 @@ class TestStrategy:
         }
 
     @classmethod
-    def from_dict(cls, d: dict) -> "TestStrategy":
+    def from_dict(cls, d: dict[str, Any]) -> TestStrategy:
         n_moves, n_hist = int(d["n_moves"]), int(d["n_hist"])
         static = np.zeros(n_moves, dtype=bool)
         static[d["static_obstacles"]] = True

@@ -11,8 +11,9 @@ a graph), which ties cuts across fuel levels and draws pictures.
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Callable, Hashable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Callable, Hashable, Iterable, Sequence
+from typing import Any, cast
 
 import numpy as np
 
@@ -20,6 +21,8 @@ from .errors import ProblemError
 
 State = Hashable
 Cell = tuple[int, int]
+FuelState = tuple[Cell, int]
+"""A state of a fuel grid: its cell and its fuel level."""
 
 MOVES: dict[str, Cell] = {"N": (-1, 0), "S": (1, 0), "E": (0, 1), "W": (0, -1)}
 
@@ -108,19 +111,20 @@ class TransitionSystem:
 
     def move_index(self) -> dict[tuple[int, int], int]:
         """``(s, s') -> e`` for every move."""
-        return {(int(a), int(b)): e for e, (a, b) in enumerate(zip(self.src, self.dst))}
+        return {(int(a), int(b)): e for e, (a, b) in enumerate(zip(self.src, self.dst, strict=True))}
 
     def to_json_state(self, s: int) -> object:
         """State ``s`` written as in problem-format.md."""
         key = self.states[s]
         if self.kind == "grid":
-            return [key[0], key[1]]
+            r, c = cast(Cell, key)
+            return [r, c]
         if self.kind == "fuel":
-            (r, c), f = key
+            (r, c), f = cast(FuelState, key)
             return [[r, c], f]
         return key
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         """Plain data for the synthesized-test artifact."""
         return {
             "kind": self.kind,
@@ -146,7 +150,7 @@ class TransitionSystem:
         }
 
     @classmethod
-    def from_dict(cls, d: dict) -> "TransitionSystem":
+    def from_dict(cls, d: dict[str, Any]) -> TransitionSystem:
         kind = d["kind"]
         if kind == "grid":
             states: list[State] = [tuple(s) for s in d["states"]]
@@ -190,7 +194,7 @@ class TransitionSystem:
 
 def _finish(
     kind: str,
-    states: list[State],
+    states: Sequence[State],
     moves: list[tuple[int, int, str]],
     initial: int,
     labels: list[frozenset[str]],
@@ -216,7 +220,7 @@ def _finish(
     stay = stay & ~terminal
     return TransitionSystem(
         kind=kind,
-        states=states,
+        states=list(states),
         src=src,
         dst=dst,
         action=action,
@@ -238,7 +242,7 @@ def grid_world(
     cols: int,
     start: Cell,
     terminal: Iterable[Cell],
-    labels: dict[Cell, Iterable[str]],
+    labels: Mapping[Cell, Iterable[str]],
     tokens: dict[Cell, str] | None = None,
 ) -> TransitionSystem:
     """A grid world: moves N, S, E, W between free cells, stay on non-terminal cells.
@@ -256,10 +260,10 @@ def grid_world(
     if start not in index:
         raise ProblemError(f"the start cell {list(start)} is blocked or outside the grid")
     term = np.zeros(len(cells), dtype=bool)
-    for c in terminal:
-        if c not in index:
-            raise ProblemError(f"the terminal cell {list(c)} is blocked or outside the grid")
-        term[index[c]] = True
+    for cell in terminal:
+        if cell not in index:
+            raise ProblemError(f"the terminal cell {list(cell)} is blocked or outside the grid")
+        term[index[cell]] = True
     moves: list[tuple[int, int, str]] = []
     for i, (r, c) in enumerate(cells):
         if term[i]:
@@ -301,8 +305,8 @@ def fuel_grid_world(
     if start not in cells:
         raise ProblemError(f"the start cell {list(start)} is blocked or outside the grid")
     s0 = (start, start_fuel)
-    index: dict[State, int] = {s0: 0}
-    states: list[State] = [s0]
+    index: dict[FuelState, int] = {s0: 0}
+    states: list[FuelState] = [s0]
     moves: list[tuple[int, int, str]] = []
     queue = deque([s0])
     while queue:
@@ -326,7 +330,7 @@ def fuel_grid_world(
     blocked = frozenset((r, c) for r in range(rows) for c in range(cols)) - cells
     layout = GridLayout(rows, cols, blocked, dict(tokens or {}))
     stay = np.ones(len(states), dtype=bool)
-    return _finish("fuel", states, moves, 0, lab, term, stay, lambda s: s[0], layout, max_fuel=max_fuel)
+    return _finish("fuel", states, moves, 0, lab, term, stay, lambda s: cast(FuelState, s)[0], layout, max_fuel=max_fuel)
 
 
 def graph_system(
@@ -334,7 +338,7 @@ def graph_system(
     edges: Iterable[tuple[str, str]],
     start: str,
     terminal: Iterable[str],
-    labels: dict[str, Iterable[str]],
+    labels: Mapping[str, Iterable[str]],
     stay: bool = True,
 ) -> TransitionSystem:
     """An arbitrary directed graph of named states.

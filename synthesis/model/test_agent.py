@@ -13,12 +13,12 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
 from .errors import ProblemError
-from .systems import TransitionSystem
+from .systems import Cell, TransitionSystem
 
 FIRST_PLAYERS = ("system", "agent")
 MOVE_RULES = ("4-neighbour", "system")
@@ -101,7 +101,8 @@ class TestAgent:
 
     def static_moves(self, ts: TransitionSystem) -> np.ndarray:
         """The static area ``E_static = {(u, v) in T.E : v not an agent cell}`` as a move mask."""
-        return ~self.agent_places(len(ts.places))[ts.place[ts.dst]]
+        out: np.ndarray = ~self.agent_places(len(ts.places))[ts.place[ts.dst]]
+        return out
 
     def occupiable_states(self) -> np.ndarray:
         """``bool[n_states]``: agent states the agent can be in at a turn of the system.
@@ -121,7 +122,7 @@ class TestAgent:
             frontier = nxt
         return seen
 
-    def to_dict(self, ts: TransitionSystem) -> dict:
+    def to_dict(self, ts: TransitionSystem) -> dict[str, Any]:
         """Plain data for pictures and the artifact: cells as written in the problem."""
         return {
             "cells": [place_json(ts, int(p)) for p in self.cells],
@@ -257,19 +258,18 @@ def make_test_agent(
         if moves not in MOVE_RULES:
             raise ProblemError(f"{where}: unknown `moves` rule {moves!r}; expected one of {', '.join(MOVE_RULES)} or a list of [from, to] moves")
         if moves == "4-neighbour":
-            if not all(isinstance(ts.places[p], tuple) and len(ts.places[p]) == 2 for p in cell_list):
+            grid_cells = [ts.places[p] for p in cell_list]
+            if not all(isinstance(cell, tuple) and len(cell) == 2 for cell in grid_cells):
                 raise ProblemError(f"{where}: `moves = \"4-neighbour\"` needs a grid; use \"system\" or a list of moves")
-            for i, p in enumerate(cell_list):
-                r, c = ts.places[p]
-                for j, p2 in enumerate(cell_list):
-                    r2, c2 = ts.places[p2]
+            for i, (r, c) in enumerate(cast(list[Cell], grid_cells)):
+                for j, (r2, c2) in enumerate(cast(list[Cell], grid_cells)):
                     if abs(r - r2) + abs(c - c2) == 1:
                         pairs.add((i, j))
         else:
             agent_place = np.zeros(len(ts.places), dtype=bool)
             agent_place[cell_list] = True
             a, b = ts.place[ts.src], ts.place[ts.dst]
-            for u, v in zip(a.tolist(), b.tolist()):
+            for u, v in zip(a.tolist(), b.tolist(), strict=True):
                 if u != v and agent_place[u] and agent_place[v]:
                     pairs.add((state_of[u], state_of[v]))
     else:
@@ -280,10 +280,10 @@ def make_test_agent(
                     raise ProblemError(f"{where}: the move [{place_name(ts, u)}, {place_name(ts, v)}] leaves the agent's cells")
             if u != v:
                 pairs.add((state_of[u], state_of[v]))
+    stay_states: list[int] = []
     if isinstance(stay, bool):
-        stay_states = range(len(cell_list)) if stay else range(0)
+        stay_states = list(range(len(cell_list))) if stay else []
     else:
-        stay_states = []
         for p in stay:
             if int(p) not in state_of:
                 raise ProblemError(f"{where}: `stay` lists {place_name(ts, int(p))}, which is not an agent cell")

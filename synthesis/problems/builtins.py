@@ -107,7 +107,7 @@ def motion_primitives() -> Problem:
     )
 
 
-def _grid_cells(rows: int, cols: int, blocked: set[Cell] = frozenset()) -> list[Cell]:
+def _grid_cells(rows: int, cols: int, blocked: frozenset[Cell] | set[Cell] = frozenset()) -> list[Cell]:
     return [(r, c) for r in range(rows) for c in range(cols) if (r, c) not in blocked]
 
 

@@ -32,7 +32,7 @@ _OBJ_KEYS = {"system", "test"}
 _ENV_KEYS = {"kind", "static", "bidirectional_cuts", "time_limit", "setting", "agent"}
 
 
-def _unknown(section: str, got: dict, allowed: set[str]) -> None:
+def _unknown(section: str, got: dict[str, Any], allowed: set[str]) -> None:
     extra = sorted(set(got) - allowed)
     if extra:
         raise ProblemError(
@@ -52,7 +52,7 @@ def _is_cell(x: Any) -> bool:
 _TOKEN_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 
 
-def _table(d: dict, key: str, where: str) -> dict:
+def _table(d: dict[str, Any], key: str, where: str) -> dict[str, Any]:
     v = d.get(key)
     if v is None:
         raise ProblemError(f"missing section [{key}]{where}")
@@ -119,7 +119,7 @@ def _cells_of(spec: Any, tokens: dict[str, list[Cell]], where: str, rows: int, c
     raise ProblemError(f"{where}: {spec!r} is neither a token nor a [row, col] cell")
 
 
-def problem_from_dict(data: dict, source: str = "<problem>", max_cells: int | None = MAX_GRID_CELLS) -> Problem:
+def problem_from_dict(data: dict[str, Any], source: str = "<problem>", max_cells: int | None = MAX_GRID_CELLS) -> Problem:
     """Build a problem from the parsed TOML of problem-format.md.
 
     Every section is checked for unknown keys first, so a misspelled key is named
@@ -186,7 +186,7 @@ def problem_from_dict(data: dict, source: str = "<problem>", max_cells: int | No
         static_moves = _moves_mask(ts, env["static"], cell_of, f"[environment] static{where}")
     if "restrictable" in system:
         ts.restrictable = _moves_mask(ts, system["restrictable"], cell_of, f"[system] restrictable{where}")
-    extras: dict = {}
+    extras: dict[str, Any] = {}
     if "setting" in env:
         extras["setting"] = env["setting"]
     kw: dict[str, Any] = {"static_moves": static_moves, "time_limit": time_limit, "extras": extras}
@@ -201,7 +201,7 @@ def problem_from_dict(data: dict, source: str = "<problem>", max_cells: int | No
 
 
 def _grid_from_toml(
-    system: dict, labels: dict, where: str, max_cells: int | None = MAX_GRID_CELLS
+    system: dict[str, Any], labels: dict[str, Any], where: str, max_cells: int | None = MAX_GRID_CELLS
 ) -> tuple[TransitionSystem, Callable[[Any, str], list[int]]]:
     rows, n_rows, n_cols = parse_grid(system["grid"], f"[system] grid{where}", max_cells)
     tokens: dict[str, list[Cell]] = {}
@@ -227,15 +227,15 @@ def _grid_from_toml(
     if not terminal:
         raise ProblemError(f"[system] terminal{where} is empty: a test must be able to end")
     free_set = set(free)
-    for c in terminal:
-        if c not in free_set:
-            raise ProblemError(f"[system] terminal{where}: cell {list(c)} is blocked")
+    for cell in terminal:
+        if cell not in free_set:
+            raise ProblemError(f"[system] terminal{where}: cell {list(cell)} is blocked")
     lab: dict[Cell, set[str]] = {}
     for prop, spec in labels.items():
-        for c in _cells_of(spec, tokens, f"[labels] {prop}{where}", n_rows, n_cols):
-            if c not in free_set:
-                raise ProblemError(f"[labels] {prop}{where}: cell {list(c)} is blocked")
-            lab.setdefault(c, set()).add(prop)
+        for cell in _cells_of(spec, tokens, f"[labels] {prop}{where}", n_rows, n_cols):
+            if cell not in free_set:
+                raise ProblemError(f"[labels] {prop}{where}: cell {list(cell)} is blocked")
+            lab.setdefault(cell, set()).add(prop)
     ts = grid_world(free, n_rows, n_cols, start, terminal, lab, named)
 
     def cell_of(spec: Any, at: str) -> list[int]:
@@ -250,7 +250,7 @@ def _grid_from_toml(
     return ts, cell_of
 
 
-def _graph_from_toml(system: dict, labels: dict, where: str) -> tuple[TransitionSystem, Callable[[Any, str], list[int]]]:
+def _graph_from_toml(system: dict[str, Any], labels: dict[str, Any], where: str) -> tuple[TransitionSystem, Callable[[Any, str], list[int]]]:
     states = system["states"]
     if not isinstance(states, list) or not all(isinstance(s, str) and s.strip() and s.isprintable() for s in states):
         raise ProblemError(f"[system] states{where} must be a list of state names (non-empty one-line strings)")

@@ -167,7 +167,11 @@ def first_consistent(
     for attempt in range(max_attempts):
         problem = random_problem(size, family, n, seed, attempt, kind)
         try:
-            value = accept(problem) if accept is not None else graph_consistency(problem)
+            if accept is None:
+                graph_consistency(problem)
+                value = None
+            else:
+                value = accept(problem)
         except InconsistentProblem:
             continue
         return attempt, problem, value

@@ -27,8 +27,8 @@ from __future__ import annotations
 
 import heapq
 from collections import deque
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
-from typing import Callable, Iterator
 
 import numpy as np
 import scipy.sparse as sp
@@ -78,7 +78,7 @@ def guess_routing(
     target: np.ndarray,
     max_rounds: int = 200,
     traps: Callable[[np.ndarray], bool] | None = None,
-    route_seed: "RouteSeed | None" = None,
+    route_seed: RouteSeed | None = None,
 ) -> RoutingGuess:
     """Greedy valid cut set with large flow (see the module docstring).
 
@@ -122,7 +122,7 @@ def guess_routing(
     if not separated(~has_var)[0]:  # even cutting every cuttable group leaves a path outside I
         return RoutingGuess(0, upper, np.zeros(m), np.zeros(has_var.size, dtype=bool), np.zeros(n, dtype=bool))
 
-    def grow(is_open: np.ndarray, f: np.ndarray, flow: int, work: "Work | None" = None) -> tuple[int, np.ndarray, np.ndarray]:
+    def grow(is_open: np.ndarray, f: np.ndarray, flow: int, work: Work | None = None) -> tuple[int, np.ndarray, np.ndarray]:
         f = f.copy()
         forbidden = np.zeros(has_var.size, dtype=bool)
         _, reach = separated(is_open)
@@ -388,16 +388,20 @@ class _RouteSearch:
                 return seg
             end = int(self.ev[seg[-1]])
             now_used = used.union(places)
-            if _shortest(self, end, lambda v: bool(self.target[v]), lambda v: int(self.place[v]) not in now_used) is None:
+            if _shortest(self, end, lambda v: bool(self.target[v]), self._outside(now_used)) is None:
                 continue  # this segment walls the goal off
             rest = self.through(changes, k + 1, end, now_used, randomized)
             if rest is not None:
                 return seg + rest
         return None
 
+    def _outside(self, used: frozenset[int]) -> Callable[[int], bool]:
+        """Whether a node's place is outside ``used`` (bound now, not at call time)."""
+        return lambda v: int(self.place[v]) not in used
+
 
 def _shortest(
-    graph: "_RouteSearch",
+    graph: _RouteSearch,
     start: int,
     goal: Callable[[int], bool],
     inside: Callable[[int], bool],

@@ -24,10 +24,11 @@ import os
 import sys
 import threading
 import time
+from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from importlib.metadata import PackageNotFoundError, version
-from typing import Iterator
+from typing import Any
 
 import highspy
 import numpy as np
@@ -185,7 +186,7 @@ def run_highs(
 
     mip_kind = int(highspy.cb.HighsCallbackType.kCallbackMipInterrupt)
 
-    def on_interrupt(kind, message, data_out, data_in, user_data) -> None:  # noqa: ANN001
+    def on_interrupt(kind: Any, message: str, data_out: Any, data_in: Any, user_data: Any) -> None:
         if int(kind) == mip_kind:  # some versions pass the type as a plain int
             primal = float(data_out.mip_primal_bound)
             if watch_first and clock is not None and np.isfinite(primal) and primal >= 1.0 - 1e-6:
