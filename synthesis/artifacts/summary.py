@@ -6,7 +6,6 @@ from typing import Any
 
 import numpy as np
 
-
 DERIVED_KEYS: tuple[str, ...] = ("problem", "environment", "cuts", "restrictions", "static_obstacles", "bypass_flow", "histories")
 """Summary fields that come back from the problem, its product graphs and the test's cuts
 (:func:`derived_summary`); the rest says how the solver got there."""
