@@ -18,7 +18,7 @@ from __future__ import annotations
 import argparse
 import statistics
 import time
-from typing import Sequence
+from collections.abc import Sequence
 
 from synthesis.agent import gr1
 from synthesis.agent.game import build_agent_game

@@ -30,7 +30,6 @@ import time
 from typing import Any
 
 import gymnasium as gym
-import numpy as np
 
 
 def steps_per_second(env_id: str, steps: int, masked: bool, seed: int = 0, **kwargs: Any) -> float:

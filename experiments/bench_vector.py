@@ -31,7 +31,8 @@ import os
 import platform
 import statistics
 import time
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -100,7 +101,9 @@ def main(argv: list[str] | None = None) -> int:
         rows.append(
             ("`FlowTest-RandomGrid-v0` (8 tests)", "NumPy vector env, flat obs", lambda: gym.make_vec("FlowTest-RandomGrid-v0", n, vec), args.steps, True)
         )
-    rows.append(("`FlowTest-Maze2-v0`", "`SyncVectorEnv` of the single env, flat obs", lambda: gym.make_vec("FlowTest-Maze2-v0", n, "sync"), args.sync_steps, True))
+    rows.append(
+        ("`FlowTest-Maze2-v0`", "`SyncVectorEnv` of the single env, flat obs", lambda: gym.make_vec("FlowTest-Maze2-v0", n, "sync"), args.sync_steps, True)
+    )
     if have_minigrid:
         rows.append(
             ("`MiniGrid-Empty-8x8-v0`", "`SyncVectorEnv`, default obs", lambda: gym.make_vec("MiniGrid-Empty-8x8-v0", n, "sync"), args.sync_steps, False)
@@ -124,7 +127,7 @@ def main(argv: list[str] | None = None) -> int:
         "| environment | implementation | best steps/s | median steps/s |",
         "| --- | --- | ---: | ---: |",
     ]
-    for (name, how, _, _, _), res in zip(rows, results):
+    for (name, how, _, _, _), res in zip(rows, results, strict=True):
         lines.append(f"| {name} | {how} | {max(res):,.0f} | {statistics.median(res):,.0f} |")
     sync_best = max(results[[h for _, h, _, _, _ in rows].index("`SyncVectorEnv` of the single env, flat obs")])
     lines += ["", f"NumPy Maze 2 (flat) over the `SyncVectorEnv` of the same env: {max(results[0]) / sync_best:,.0f}x (best), "

@@ -12,8 +12,9 @@ frames and an even sample of the others.
 from __future__ import annotations
 
 import textwrap
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -82,7 +83,7 @@ def filmstrip(game: Any, states: Sequence[Any], actions: Sequence[int], title: s
     for ax in axes.ravel():
         ax.set_axis_off()
     prev = 0
-    for ax, i, img in zip(axes.ravel(), shown, frames):
+    for ax, i, img in zip(axes.ravel(), shown, frames, strict=False):  # spare axes stay blank
         ax.imshow(img)
         label = "start" if i == 0 else events[i]
         quiet = i - prev - 1

@@ -31,9 +31,10 @@ from __future__ import annotations
 import math
 import textwrap
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 from matplotlib.axes import Axes
@@ -272,7 +273,7 @@ def _cell_of_place(ts: Any, p: int) -> Cell:
 def _place_pairs(ts: Any, mask: np.ndarray) -> set[tuple[int, int]]:
     """Directed place pairs of the moves in ``mask`` (fuel levels merged)."""
     m = np.flatnonzero(mask)
-    return set(zip(ts.place[ts.src[m]].tolist(), ts.place[ts.dst[m]].tolist()))
+    return set(zip(ts.place[ts.src[m]].tolist(), ts.place[ts.dst[m]].tolist(), strict=True))
 
 
 def _border(a: Cell, b: Cell) -> tuple[tuple[float, float], tuple[float, float]]:
@@ -403,7 +404,7 @@ def _grid_figure(test: Any, panels: Sequence[Panel], overlay: _Overlay | None) -
     fig = Figure(figsize=(max(ncols * pw, 6.0), nrows * ph + 1.7), layout="constrained")
     axes = fig.subplots(nrows, ncols, squeeze=False)
     width = max(24, int(pw * 11))
-    for ax, panel in zip(axes.flat, panels):
+    for ax, panel in zip(axes.flat, panels, strict=False):  # spare axes stay blank
         _draw_grid_panel(ax, test, panel, overlay)
         ax.set_title(_wrap(panel.title, width), fontsize=9)
     for ax in list(axes.flat)[len(panels):]:
@@ -450,7 +451,7 @@ def layered_positions(ts: Any) -> dict[int, tuple[float, float]]:
     n = len(ts.places)
     succ: list[list[int]] = [[] for _ in range(n)]
     pred: list[list[int]] = [[] for _ in range(n)]
-    for a, b in zip(ts.place[ts.src].tolist(), ts.place[ts.dst].tolist()):
+    for a, b in zip(ts.place[ts.src].tolist(), ts.place[ts.dst].tolist(), strict=True):
         if a != b:
             succ[a].append(b)
             pred[b].append(a)
@@ -496,7 +497,7 @@ def _draw_graph_panel(ax: Axes, test: Any, panel: Panel, overlay: _Overlay | Non
     terminal = set(np.unique(ts.place[ts.terminal]).tolist())
     static = _place_pairs(ts, test.strategy.static_obstacles)
     restricted = _place_pairs(ts, panel.restricted)
-    pairs = sorted(set(zip(ts.place[ts.src].tolist(), ts.place[ts.dst].tolist())))
+    pairs = sorted(set(zip(ts.place[ts.src].tolist(), ts.place[ts.dst].tolist(), strict=True)))
     pair_set = set(pairs)
     radius_pt = 19.0  # node radius in points
     for a, b in pairs:
@@ -575,7 +576,7 @@ def _graph_figure(test: Any, panels: Sequence[Panel], overlay: _Overlay | None) 
     nrows, ncols = _layout_grid(len(panels), 3)
     fig = Figure(figsize=(max(ncols * pw, 6.0), nrows * ph + 1.2), layout="constrained")
     axes = fig.subplots(nrows, ncols, squeeze=False)
-    for ax, panel in zip(axes.flat, panels):
+    for ax, panel in zip(axes.flat, panels, strict=False):  # spare axes stay blank
         _draw_graph_panel(ax, test, panel, overlay, pos)
         ax.set_title(_wrap(panel.title, max(26, int(pw * 10))), fontsize=9)
     for ax in list(axes.flat)[len(panels):]:

@@ -22,8 +22,9 @@ The data comes from :mod:`experiments.evaluate` (its ``results.json`` records, p
 from __future__ import annotations
 
 import html
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Sequence
+from typing import Any
 
 
 @dataclass(frozen=True)
