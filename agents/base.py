@@ -6,17 +6,9 @@ the Dict-observation wrapper, from ``observation["action_mask"]``) and, when it 
 its own state from ``info["system_state"]``. The same object therefore drives the
 Gymnasium env, the PettingZoo env (as ``system_0``) and the evaluator.
 
-Policies are named by plain strings on the command line (:func:`make_policy`):
-
-==========================  ============================================================
-``random``                  uniform over the legal actions (seeded)
-``scripted:replanner``      the correct scripted SUT (:mod:`agents.scripted`)
-``scripted:committed``      faulty: plans once, never replans
-``scripted:fuel-blind``     faulty: ignores fuel, safety and its own sub-goals
-``scripted:greedy``         faulty: one-step greedy, can walk into dead ends
-``gr1``                     GR(1)-synthesized controller (:mod:`agents.gr1_sut`)
-``ppo:PATH``                a saved stable-baselines3 (Maskable)PPO model
-==========================  ============================================================
+Policies are named by plain strings on the command line (``random``,
+``scripted:replanner``, ``gr1``, ``ppo:PATH``, ...); :mod:`agents.registry` builds them by
+name. This module knows none of them but :class:`RandomPolicy`.
 
 Planning policies need the rules of the test they play (the transition system and
 their own objective's automaton, never the hidden test objective): :func:`game_of`
@@ -25,8 +17,7 @@ finds the :class:`~flowtest_env.game.TestGame` behind an env.
 
 from __future__ import annotations
 
-import re
-from typing import Any, Callable, Protocol, runtime_checkable
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -125,50 +116,3 @@ class RandomPolicy:
     def act(self, observation: Any, info: dict[str, Any]) -> int:
         legal = np.flatnonzero(action_mask_of(observation, info))
         return int(self.rng.choice(legal)) if legal.size else 0
-
-
-_FACTORIES: dict[str, Callable[[Any, str], Policy]] = {}
-
-
-def register_policy(prefix: str) -> Callable[[Callable[[Any, str], Policy]], Callable[[Any, str], Policy]]:
-    """Register a factory ``(env, argument) -> Policy`` for names ``prefix`` or ``prefix:ARG``."""
-
-    def deco(fn: Callable[[Any, str], Policy]) -> Callable[[Any, str], Policy]:
-        _FACTORIES[prefix] = fn
-        return fn
-
-    return deco
-
-
-def policy_names() -> list[str]:
-    """The registered name prefixes (for help texts and errors)."""
-    _load_builtin_factories()
-    return sorted(_FACTORIES)
-
-
-def _load_builtin_factories() -> None:
-    from . import gr1_sut as _g  # noqa: F401  (registers "gr1")
-    from . import ppo as _p  # noqa: F401  (registers "ppo")
-    from . import scripted as _s  # noqa: F401  (registers "scripted")
-
-
-register_policy("random")(lambda env, arg: RandomPolicy())
-
-_NAME = re.compile(r"^([a-z0-9_-]+)(?::(.*))?$")
-
-
-def make_policy(name: str, env: Any) -> Policy:
-    """Build the policy called ``name`` for ``env`` (see the module docstring).
-
-    Raises
-    ------
-    PolicyError
-        On an unknown name or an env the policy cannot play.
-    """
-    _load_builtin_factories()
-    m = _NAME.match(name.strip())
-    if not m or m.group(1) not in _FACTORIES:
-        raise PolicyError(f"unknown policy {name!r}; known: random, scripted:<name>, gr1, ppo:PATH")
-    policy = _FACTORIES[m.group(1)](env, m.group(2) or "")
-    policy.name = name
-    return policy

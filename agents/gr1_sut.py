@@ -4,7 +4,7 @@ The controller is a winning strategy of an explicit GR(1) game solved with
 :func:`synthesis.agent.gr1.solve` (and checked with :func:`synthesis.agent.gr1.verify_strategy`):
 
 * **positions** — the nodes ``(s, q_sys)`` of the SUT's own product graph
-  ``G_sys = T x B_sys`` (:class:`agents.scripted.SystemProduct`); the hidden test
+  ``G_sys = T x B_sys`` (:class:`flowtest_env.system_product.SystemProduct`); the hidden test
   objective is not part of it;
 * **environment** (the test) — at each position it makes the one choice the SUT assumes
   it makes: the restrictions the SUT knows of (the static walls, which every
@@ -43,10 +43,11 @@ from typing import Any
 
 import numpy as np
 
+from flowtest_env.system_product import SystemProduct
 from synthesis.agent.gr1 import GR1Game, GR1Strategy, solve, verify_strategy
 
-from .base import Policy, register_policy
-from .scripted import SystemProduct, _safe_wait, _Tracked
+from .base import Policy
+from .planning import Tracked, safe_wait
 
 Blocked = frozenset[tuple[int, int]]
 
@@ -91,7 +92,7 @@ def synthesize_controller(product: SystemProduct, blocked: Blocked, start: int, 
     return result.strategy
 
 
-class GR1SUT(_Tracked):
+class GR1SUT(Tracked):
     """The GR(1)-synthesized SUT (see the module docstring)."""
 
     def __init__(self, env: Any, verify: bool = False) -> None:
@@ -131,16 +132,16 @@ class GR1SUT(_Tracked):
             self.known = now
             strat = self._controller(frozenset(self.known), v)
         if strat is None or strat.next_position[0, v] < 0:
-            return _safe_wait(game, prod, v, mask, prod.distances())
+            return safe_wait(game, prod, v, mask, prod.distances())
         w, self.memory = strat.move(0, v)
         for a in range(game.n_actions):
             if mask[a] and prod.next_node[v, a] == w:
                 return a
-        return _safe_wait(game, prod, v, mask, prod.distances())  # pragma: no cover - strategy uses legal moves
+        return safe_wait(game, prod, v, mask, prod.distances())  # pragma: no cover - strategy uses legal moves
 
 
-@register_policy("gr1")
-def _make_gr1(env: Any, arg: str) -> Policy:
+def make_gr1(env: Any, arg: str) -> Policy:
+    """The GR(1) SUT for ``env`` (``gr1``; ``gr1:verify`` checks every synthesized strategy)."""
     policy = GR1SUT(env, verify=arg == "verify")
     policy.reset(None)
     return policy  # type: ignore[return-value]

@@ -32,7 +32,8 @@ from flowtest_env.encoding import EncodingError, make_encoder
 from flowtest_env.wrappers import MEMORY_KINDS, VisitedMemory, VisitedPlaces, encoder_of
 from flowtest_env.wrappers import position_slice as _position_slice
 
-from .base import Policy, PolicyError, action_mask_of, game_of, register_policy
+from .base import Policy, PolicyError, action_mask_of, game_of
+
 
 def position_slice(env: Any) -> slice:
     """Where a flat FlowTest observation of ``env`` holds the SUT's own place
@@ -211,8 +212,14 @@ class PPOPolicy:
         return int(np.asarray(action).item())
 
 
-@register_policy("ppo")
-def _make_ppo(env: Any, arg: str) -> Policy:
+def make_ppo(env: Any, arg: str) -> Policy:
+    """The saved model ``ppo:<arg>`` as a SUT for ``env``.
+
+    Raises
+    ------
+    PolicyError
+        Without a path, or for a model that cannot be loaded or does not fit ``env``.
+    """
     if not arg:
         raise PolicyError("ppo needs a model path: ppo:PATH")
     return PPOPolicy(load_model(arg), f"ppo:{arg}", env)

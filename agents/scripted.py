@@ -41,78 +41,13 @@ from typing import Any
 import numpy as np
 
 from flowtest_env.game import TestGame
-from flowtest_env.system_product import INF, SystemProduct
+from flowtest_env.system_product import INF
 
-from .base import Policy, PolicyError, action_mask_of, game_of, register_policy, state_index
-
-
-
-class _Tracked:
-    """Shared bookkeeping: the env's game, the SUT's state and its ``B_sys`` state."""
-
-    name = "scripted"
-
-    def __init__(self, env: Any) -> None:
-        self.env = env
-        self.game: TestGame | None = None
-        self.product: SystemProduct | None = None
-        self.q: int | None = None
-        self.known: set[tuple[int, int]] = set()  # (state, action) restrictions seen and not seen lifted
-        self._refresh()
-
-    def _refresh(self) -> None:
-        g = game_of(self.env)
-        if g is not self.game:
-            self.game = g
-            self.product = SystemProduct(g)
-
-    def reset(self, seed: int | None = None) -> None:
-        self._refresh()
-        self.q = None
-        self.known = set()
-
-    def _remember(self, s: int, v: int, mask: np.ndarray) -> set[tuple[int, int]]:
-        """Update the remembered restrictions from the mask at product node ``v``.
-
-        A restriction seen now is remembered; one seen lifted is forgotten. Returns the
-        restrictions active now.
-        """
-        assert self.game is not None and self.product is not None
-        now: set[tuple[int, int]] = set()
-        for a in range(self.game.n_slots):
-            if self.product.next_node[v, a] < 0:
-                continue
-            if mask[a]:
-                self.known.discard((s, a))
-            else:
-                now.add((s, a))
-        self.known |= now
-        return now
-
-    def _observe(self, info: dict[str, Any]) -> tuple[int, int]:
-        """The current state index and ``B_sys`` state (updated by the state entered)."""
-        if "system_state" not in info:
-            raise PolicyError("a scripted SUT needs info['system_state']")
-        assert self.game is not None and self.product is not None
-        s = state_index(self.game, info["system_state"])
-        self.q = self.product.step_q(self.product.q0 if self.q is None else self.q, s)
-        return s, self.q
-
-    def _situation(
-        self, observation: Any, info: dict[str, Any]
-    ) -> tuple[TestGame, SystemProduct, int, np.ndarray, set[tuple[int, int]]]:
-        """What a product-graph SUT knows before it acts: the game, its product graph,
-        its node there, the legal-action mask and the restrictions active now (also
-        remembered, see :meth:`_remember`)."""
-        s, q = self._observe(info)
-        mask = action_mask_of(observation, info)
-        game, prod = self.game, self.product
-        assert game is not None and prod is not None
-        v = prod.node(s, q)
-        return game, prod, v, mask, self._remember(s, v, mask)
+from .base import Policy, PolicyError, action_mask_of
+from .planning import Tracked, safe_wait
 
 
-class Replanner(_Tracked):
+class Replanner(Tracked):
     """The correct scripted SUT (see the module docstring)."""
 
     def act(self, observation: Any, info: dict[str, Any]) -> int:
@@ -122,25 +57,16 @@ class Replanner(_Tracked):
             self.known = set(now_blocked)
             dist = prod.distances(frozenset(self.known))
         if dist[v] >= INF:  # every path blocked now: wait for the test to open one
-            return _safe_wait(game, prod, v, mask, prod.distances())
+            return safe_wait(game, prod, v, mask, prod.distances())
         best, best_d = -1, INF
         for a in range(game.n_actions):
             w = prod.next_node[v, a]
             if mask[a] and w >= 0 and dist[w] < best_d:
                 best, best_d = a, int(dist[w])
-        return best if best >= 0 else _safe_wait(game, prod, v, mask, prod.distances())
+        return best if best >= 0 else safe_wait(game, prod, v, mask, prod.distances())
 
 
-def _safe_wait(game: TestGame, prod: SystemProduct, v: int, mask: np.ndarray, free_dist: np.ndarray) -> int:
-    """Stay if allowed; otherwise the legal action that keeps the objective reachable."""
-    if mask[game.stay_action]:
-        return game.stay_action
-    legal = [a for a in range(game.n_actions) if mask[a] and prod.next_node[v, a] >= 0]
-    legal.sort(key=lambda a: free_dist[prod.next_node[v, a]])
-    return legal[0] if legal else game.stay_action
-
-
-class Committed(_Tracked):
+class Committed(Tracked):
     """Faulty: plans once at reset, never replans (see the module docstring)."""
 
     def __init__(self, env: Any) -> None:
@@ -177,7 +103,7 @@ def _place_distances(game: TestGame, blocked: frozenset[tuple[int, int]] = froze
     goal = np.zeros(n_places, dtype=bool)
     goal[ts.place[ts.terminal]] = True
     radj: list[set[int]] = [set() for _ in range(n_places)]
-    for a, b, w in zip(ts.place[ts.src].tolist(), ts.place[ts.dst].tolist(), walls.tolist()):
+    for a, b, w in zip(ts.place[ts.src].tolist(), ts.place[ts.dst].tolist(), walls.tolist(), strict=True):
         if a != b and not w and (a, b) not in blocked:
             radj[b].add(a)
     dist = np.full(n_places, INF, dtype=np.int64)
@@ -192,7 +118,7 @@ def _place_distances(game: TestGame, blocked: frozenset[tuple[int, int]] = froze
     return dist
 
 
-class FuelBlind(_Tracked):
+class FuelBlind(Tracked):
     """Faulty: shortest path in cells to the goal, ignoring fuel, safety and sub-goals."""
 
     def __init__(self, env: Any) -> None:
@@ -238,7 +164,7 @@ def _any_legal(game: TestGame, mask: np.ndarray) -> int:
     return int(legal[0]) if legal.size else game.stay_action
 
 
-class Greedy(_Tracked):
+class Greedy(Tracked):
     """Faulty: one-step greedy descent on a goal-distance estimate; stuck at local minima."""
 
     def reset(self, seed: int | None = None) -> None:
@@ -273,7 +199,7 @@ class Greedy(_Tracked):
         return best
 
 
-SCRIPTED: dict[str, type[_Tracked]] = {
+SCRIPTED: dict[str, type[Tracked]] = {
     "replanner": Replanner,
     "committed": Committed,
     "fuel-blind": FuelBlind,
@@ -282,8 +208,14 @@ SCRIPTED: dict[str, type[_Tracked]] = {
 """The scripted SUTs by name (``scripted:<name>``)."""
 
 
-@register_policy("scripted")
-def _make_scripted(env: Any, arg: str) -> Policy:
+def make_scripted(env: Any, arg: str) -> Policy:
+    """The scripted SUT ``scripted:<arg>`` (``replanner`` when ``arg`` is empty) for ``env``.
+
+    Raises
+    ------
+    PolicyError
+        On an unknown name.
+    """
     cls = SCRIPTED.get(arg or "replanner")
     if cls is None:
         raise PolicyError(f"unknown scripted SUT {arg!r}; known: {', '.join(SCRIPTED)}")

@@ -41,7 +41,9 @@ from flowtest_env.fairness import can_still_meet
 from flowtest_env.game import MET, RunState, TestGame
 from flowtest_env.multiagent import SYSTEM, TESTER, raw_env
 
-from .base import Policy, PolicyError, make_policy
+from .base import Policy, PolicyError
+from .ppo import load_model
+from .registry import make_policy
 
 TESTER_ROLE = "tester"
 """The value of a learned tester model's ``flowtest_role`` attribute (a model trained as a
@@ -113,8 +115,6 @@ def make_tester(name: str, env: raw_env) -> Tester:
     if name == "synthesized":
         return SynthesizedTester()
     if name.startswith("ppo:") and len(name) > 4:
-        from .ppo import load_model
-
         path = Path(name[4:])
         if path.is_dir():  # one learned tester per problem: DIR/<problem>.zip
             path = path / f"{env.problem}.zip"

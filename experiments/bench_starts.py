@@ -19,10 +19,10 @@ import sys
 import time
 from dataclasses import replace
 
-from synthesis.routing.milp import solve_routing
 from synthesis.pipeline import SynthesisOptions, milp_options
-from synthesis.problems.problem import build_graphs
 from synthesis.problems.load import load_problem
+from synthesis.problems.problem import build_graphs
+from synthesis.routing.milp import solve_routing
 from synthesis.routing.solver_control import solver_version
 
 DEFAULT = ("example1", "small-reactive", "beaver-rescue", "motion-primitives", "patrolling", "refueling")

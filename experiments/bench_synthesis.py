@@ -14,10 +14,10 @@ import argparse
 import sys
 import time
 
-from synthesis.problems.builtins import BUILTINS
-from synthesis.pipeline import SynthesisOptions, synthesize
-from synthesis.problems.load import load_problem
 from synthesis.artifacts.summary import summary_of
+from synthesis.pipeline import SynthesisOptions, synthesize
+from synthesis.problems.builtins import BUILTINS
+from synthesis.problems.load import load_problem
 
 DEFAULT = ("example1", "small-reactive", "beaver-rescue", "motion-primitives", "refueling", "mars-exploration")
 

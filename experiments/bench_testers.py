@@ -35,15 +35,15 @@ SUTS = ["scripted:replanner", "gr1", "scripted:committed", "scripted:fuel-blind"
 
 
 def witness_trace(problem: str, tester: str, env_id: str, kind: str = "trap", extra_steps: int = 20) -> Any:
-    """A :class:`experiments.evaluate.Trace` of the exhaustive search's shortest witness
+    """A :class:`experiments.episodes.Trace` of the exhaustive search's shortest witness
     against ``tester``: into its first trap (``kind="trap"``; then the correct replanner
     tries for ``extra_steps`` steps from there), or a run that meets the system objective
     without the test objective (``kind="bypass"``). ``None`` if there is no such run."""
-    from agents.base import make_policy
+    from agents.registry import make_policy
     from agents.testers import VersusTesterEnv
     from flowtest_env.fairness import check_tester
 
-    from .evaluate import Trace
+    from .episodes import Trace
 
     env = VersusTesterEnv(problem, tester, max_steps=10_000)
     report = check_tester(env.ma, env.tester)
@@ -74,11 +74,11 @@ def witness_trace(problem: str, tester: str, env_id: str, kind: str = "trap", ex
 def draw(out: Path, figures: Path | None, seed: int) -> None:
     """Pictures of every learned tester's shortest trap and bypass witnesses, with the
     correct replanner's run against the synthesized test of the same problem."""
+    import flowtest_env
     from agents.testers import problem_of
 
-    import flowtest_env
-
-    from .evaluate import _policy, make_tester_env, run_episode, trace_picture
+    from .episodes import make_tester_env, run_episode, sut_policy
+    from .trace_picture import trace_picture
 
     tester = f"ppo:{out / 'testers'}"
     for problem in PROBLEMS:
@@ -95,7 +95,7 @@ def draw(out: Path, figures: Path | None, seed: int) -> None:
         if not drawn:
             continue
         env = make_tester_env(env_id, "synthesized")
-        syn = run_episode(env, _policy("scripted:replanner", env), env_id, "scripted:replanner", seed)
+        syn = run_episode(env, sut_policy("scripted:replanner", env), env_id, "scripted:replanner", seed)
         png = out / f"synthesized-{problem}.png"
         trace_picture(syn, png)
         drawn.append(png)

@@ -16,22 +16,35 @@ import json
 import re
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 from synthesis.artifacts.artifact import artifact_of
+from synthesis.artifacts.summary import summary_of
 from synthesis.pipeline import SynthesisOptions, synthesize
 from synthesis.problems.load import load_problem
-from synthesis.artifacts.summary import summary_of
 
-from .cli import EXIT_OK, StageProgress, command, json_safe, positive_int, prepare_output_folder, write_atomically
-from synthesis.model.errors import ProblemError
+from .arguments import positive_int
+from .command import Command
+from .evaluate import evaluate, write_report
+from .exits import EXIT_OK
+from .outputs import json_safe, prepare_output_folder, write_atomically
+from .progress import StageProgress
+from .train import train
+from .training import rl_installed
 
 MARKER = ".flowtest-demo"
 #: The examples the demo synthesizes, fastest first.
 DEMO_PROBLEMS = ("maze2", "small-reactive", "example1", "beaver-rescue", "motion-primitives", "refueling")
 
 
-def _arguments(p: argparse.ArgumentParser) -> None:
+DEMO_PPO_STEPS = 16_384
+"""Training steps of the demo's PPO system (about ten seconds; ``python -m
+experiments.bench_ppo`` measures how many it needs, see docs/benchmarks.md)."""
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """Declare ``flowtest demo``'s arguments."""
     p.add_argument("--out", type=Path, default=Path("flowtest-demo"), help="output folder (default: flowtest-demo)")
     p.add_argument(
         "--problems", nargs="+", default=list(DEMO_PROBLEMS), metavar="NAME", help="problems to synthesize"
@@ -65,8 +78,26 @@ def file_stems(names: list[str]) -> list[str]:
     return stems
 
 
-@command("demo", "synthesize and draw the built-in examples into a folder", _arguments)
-def run_demo(args: argparse.Namespace) -> int:
+def run_evaluation_demo(out_dir: str | Path, episodes: int = 5, progress: Callable[[str], None] | None = None) -> Path:
+    """Evaluate the correct, faulty and GR(1) SUTs on ``FlowTest-Maze2-v0``, and, when the
+    ``rl`` extra is installed, a PPO SUT: the model at ``<out_dir>/ppo-maze2.zip``, trained
+    there first (:data:`DEMO_PPO_STEPS` steps, seed 0) if there is none. Write the report
+    and return the path of ``report.html``."""
+    out = Path(out_dir)
+    suts = ["scripted:replanner", "gr1", "scripted:committed", "scripted:fuel-blind", "scripted:greedy", "random"]
+    model = (out / "ppo-maze2.zip").resolve()  # absolute: the replay commands work from anywhere
+    if not model.exists() and rl_installed():
+        if progress is not None:
+            progress(f"training a PPO system under test on FlowTest-Maze2-v0 ({DEMO_PPO_STEPS} steps)")
+        train("FlowTest-Maze2-v0", DEMO_PPO_STEPS, model, seed=0, progress_bar=False, eval_episodes=0)
+    if model.exists():
+        suts.append(f"ppo:{model}")
+    cells = evaluate(["FlowTest-Maze2-v0"], suts, episodes, 0, progress)
+    write_report(cells, out)
+    return out / "report.html"
+
+
+def run(args: argparse.Namespace) -> int:
     """Synthesize each demo problem, write its picture, artifact and a summary."""
     from .plots import plot_test
 
@@ -76,19 +107,17 @@ def run_demo(args: argparse.Namespace) -> int:
     prepare_folder(out)
     rows = []
     with StageProgress(enabled=not args.quiet) as progress:
-        for problem, name in zip(problems, stems):
+        for problem, name in zip(problems, stems, strict=True):
             progress(f"synthesizing {problem.name} ({problem.kind} test)")
             t0 = time.perf_counter()
             test = synthesize(problem, SynthesisOptions(progress=progress))
             seconds = time.perf_counter() - t0
             summary = json_safe(summary_of(test))
             write_atomically(out / f"{name}.json", artifact_of(test, summary).save)
-            write_atomically(out / f"{name}.png", lambda tmp: plot_test(test, tmp))
+            write_atomically(out / f"{name}.png", lambda tmp, test=test: plot_test(test, tmp))
             rows.append((name, problem.kind, summary, seconds))
         report = None
         if not args.no_evaluation:
-            from .evaluate import run_evaluation_demo
-
             progress("evaluating systems under test against FlowTest-Maze2-v0")
             report = run_evaluation_demo(out / "evaluation", episodes=args.episodes, progress=progress)
         progress.done(f"done in {progress.elapsed():.1f} s")
@@ -110,3 +139,6 @@ def run_demo(args: argparse.Namespace) -> int:
     if report is not None:
         sys.stdout.write(f"evaluation report (open in a browser): {Path(report).resolve()}\n")
     return EXIT_OK
+
+
+COMMAND = Command("demo", "synthesize and draw the built-in examples into a folder", add_arguments, run)

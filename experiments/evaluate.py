@@ -1,6 +1,6 @@
 """``flowtest evaluate``: run systems under test against synthesized tests and report.
 
-Every SUT (a policy name, :func:`agents.base.make_policy`) plays every env for
+Every SUT (a policy name, :func:`agents.registry.make_policy`) plays every env for
 ``--episodes`` episodes; episode ``i`` uses seed ``S + i`` for both the env and the
 policy, so each run can be replayed exactly with
 ``flowtest evaluate --env ID --sut POLICY --episodes 1 --seed S+i --replay``.
@@ -30,17 +30,10 @@ by itself) and ``tester_fairness`` (the tester's exhaustive check,
 :func:`flowtest_env.fairness.check_tester`; with more than one tester, or another one);
 with several testers the report opens with a side-by-side table.
 
-Two kinds of failure are told apart:
-
-* a **SUT failure**: the system objective was violated, or not met within the step
-  budget (``open``). The test never helps the SUT, so this is the SUT's fault.
-* a **test failure** (a FlowTest bug, reported loudly): a run that met the system
-  objective without realizing the test objective (the routing guarantee broke), or a
-  *trapped* system: a run (violated, or still open when the step budget ran out) that
-  stopped where no sequence of SUT actions can meet the system objective any more
-  against the test as it really answers (its reactive restrictions, its test agent),
-  although the static walls alone would still let the system through — the test, not
-  the SUT, closed every way (:func:`can_still_meet`).
+Two kinds of failure are told apart (:mod:`experiments.episodes`): a **SUT failure** (the
+system objective violated, or not met within the step budget: the SUT's fault) and a
+**test failure** (a FlowTest bug, reported loudly: a run that met the system objective
+without realizing the test objective, or a system the test trapped).
 """
 
 from __future__ import annotations
@@ -51,16 +44,22 @@ import json
 import shlex
 import sys
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any
 
 import numpy as np
 
 from synthesis.model.errors import ProblemError
 
-from .cli import EXIT_OK, command, json_safe, nonnegative_int, positive_int, prepare_output_folder, write_atomically
+from .arguments import nonnegative_int, positive_int
+from .command import Command
+from .episodes import Trace, make_env, make_tester_env, run_episode, sut_policy
+from .exits import EXIT_CHECK_FAILED, EXIT_OK
+from .outputs import json_safe, prepare_output_folder, write_atomically
 from .report import GLOSSARY, TestInfo, fold_rows, outcome_class, render_html, test_name
+from .trace_picture import trace_picture
 
 REPORT_MARKER = ".flowtest-evaluation"
 """The file that marks a report folder as FlowTest's: ``--out`` refuses any other
@@ -69,30 +68,11 @@ non-empty folder unless ``--force``."""
 MAX_LISTED = 20
 """How many failures a results record lists (``n_failures`` counts all)."""
 
-EXIT_TEST_FAILED = 4
+EXIT_TEST_FAILED = EXIT_CHECK_FAILED
 """A test failure was found (a FlowTest bug), as ``flowtest synthesize``'s failed check."""
 
 
 # --------------------------------------------------------------------------- runs
-
-
-@dataclass
-class Trace:
-    """One run: the seed, the run states after reset and every step, actions, verdict."""
-
-    env_id: str
-    sut: str
-    seed: int
-    states: list[Any] = field(default_factory=list)
-    actions: list[int] = field(default_factory=list)
-    verdict: dict[str, Any] = field(default_factory=dict)
-    kind: str = "pass"
-    reason: str = ""
-    tester: str = "synthesized"
-
-    @property
-    def failed(self) -> bool:
-        return self.kind != "pass"
 
 
 def replay_command(env_id: str, sut: str, seed: int, tester: str = "synthesized") -> str:
@@ -100,29 +80,6 @@ def replay_command(env_id: str, sut: str, seed: int, tester: str = "synthesized"
     against = "" if tester == "synthesized" else f" --tester {shlex.quote(tester)}"
     return (f"flowtest evaluate --env {shlex.quote(env_id)} --sut {shlex.quote(sut)}{against} "
             f"--episodes 1 --seed {seed} --replay")
-
-
-def make_tester_env(env_id: str, tester: str) -> Any:
-    """The env ``env_id`` with ``tester`` on the environment side: :func:`make_env` for
-    ``synthesized`` (the synthesized test as the single-agent env plays it), else
-    :class:`agents.testers.VersusTesterEnv` on the same problem and step budget.
-
-    Raises
-    ------
-    ProblemError
-        On an unknown tester, or one that cannot play ``env_id``.
-    """
-    if tester == "synthesized":
-        return make_env(env_id)
-    from agents.base import PolicyError
-    from agents.testers import VersusTesterEnv, problem_of
-
-    make_env(env_id).close()  # an unknown ID is reported as make_env reports it
-    try:
-        problem, max_steps = problem_of(env_id)
-        return VersusTesterEnv(problem, tester, max_steps=max_steps)
-    except PolicyError as exc:
-        raise ProblemError(f"--tester {tester}: {exc}") from None
 
 
 def tester_fairness(env_id: str, tester: str) -> dict[str, Any] | None:
@@ -138,141 +95,6 @@ def tester_fairness(env_id: str, tester: str) -> dict[str, Any] | None:
     except PolicyError:
         return None
     return check_tester(env.ma, env.tester).summary()
-
-
-def make_env(env_id: str, **options: Any) -> Any:
-    """The environment named by ``env_id``: a registered Gymnasium ID
-    (``FlowTest-Maze2-v0``), else ``gymnasium.make("FlowTest-v0", test=env_id)``: a
-    built-in name, a problem file (synthesized once, then cached) or an artifact file.
-    ``options`` are env options (``memory``, ``obs_kind``, ...).
-
-    Raises
-    ------
-    ProblemError
-        If ``env_id`` is none of these (or the file is not a valid problem or artifact).
-    """
-    import gymnasium as gym
-
-    import flowtest_env
-
-    if env_id in gym.registry:
-        known = ", ".join(flowtest_env.ENV_IDS)
-        spec = gym.spec(env_id)
-        entry = spec.entry_point if isinstance(spec.entry_point, str) else getattr(spec.entry_point, "__module__", "")
-        if not str(entry).startswith("flowtest_env"):
-            raise ProblemError(f"{env_id!r} is not a FlowTest environment; known: {known}")
-        try:
-            env = gym.make(env_id, **options)
-        except gym.error.Error as exc:
-            raise ProblemError(f"environment {env_id!r}: {exc}") from None
-        if not isinstance(env.unwrapped, flowtest_env.FlowTestEnv):
-            env.close()
-            raise ProblemError(f"{env_id!r} is not a FlowTest environment; known: {known}")
-        return env
-    try:
-        return gym.make(flowtest_env.ANY_TEST_ID, test=env_id, **options)
-    except ProblemError as exc:
-        if Path(env_id).suffix or Path(env_id).exists():
-            raise
-        known = ", ".join(flowtest_env.ENV_IDS)
-        raise ProblemError(
-            f"unknown environment {env_id!r}: not a registered ID ({known}), a built-in name or a file"
-        ) from exc
-
-
-def classify(env: Any, verdict: dict[str, Any]) -> tuple[str, str]:
-    """``(kind, reason)`` of a finished run: ``pass``, ``sut`` (a SUT failure) or ``test``
-    (a FlowTest bug); see the module docstring."""
-    met = verdict["system_objective"] == "met"
-    u = env.unwrapped
-    if hasattr(u, "trapped"):  # another tester than the synthesized one: no guarantee to break
-        if met:
-            return "pass", ""
-        if u.trapped():
-            return "trap", "trapped: the tester closed every way to the goal (an unfair test)"
-        if verdict["system_objective"] == "violated":
-            return "sut", "violated the system objective"
-        return "sut", f"did not meet the system objective within {verdict['steps']} steps"
-    if met and not verdict["test_objective_realized"]:
-        return "test", "met the system objective without realizing the test objective"
-    if met:
-        return "pass", ""
-    game, run = u.game, u.run
-    if not can_still_meet(game, run) and _reachable_past_walls(game, run.history, run.system):
-        return "test", "trapped: the test's restrictions closed every way to the goal"
-    if verdict["system_objective"] == "violated":
-        return "sut", "violated the system objective"
-    return "sut", f"did not meet the system objective within {verdict['steps']} steps"
-
-
-def can_still_meet(game: Any, run: Any) -> bool:
-    """Whether some sequence of legal SUT actions from ``run`` meets the system objective,
-    against the test as it really answers: its restrictions per history and its test
-    agent moving by the synthesized strategy (no step budget).
-
-    The test is deterministic, so this is a search over the run states
-    ``(system, history, agent, memory)`` reachable from ``run``; ``run`` is not changed.
-    A run that ends where this is false, although the static walls alone would let the
-    system through (:func:`_reachable_past_walls`), was trapped by the test.
-    """
-    if run.outcome == "met":
-        return True
-    if run.done:
-        return False
-    seen = {run.key()}
-    frontier = [run.copy()]
-    while frontier:
-        nxt = []
-        for r in frontier:
-            for a in np.flatnonzero(game.action_mask(r)):
-                r2 = r.copy()
-                game.step(r2, int(a))
-                if r2.outcome == "met":
-                    return True
-                k = r2.key()
-                if r2.done or k in seen:
-                    continue
-                seen.add(k)
-                nxt.append(r2)
-        frontier = nxt
-    return False
-
-
-_WALL_GAMES: dict[int, Any] = {}
-
-
-def _reachable_past_walls(game: Any, history: int, state: int) -> bool:
-    """Whether the system objective is reachable from ``(state, history)`` when only the
-    static walls are enforced (the game with an external tester computes exactly this)."""
-    from flowtest_env.game import TestGame
-
-    key = id(game.artifact)
-    walls = _WALL_GAMES.get(key)
-    if walls is None:
-        walls = _WALL_GAMES[key] = TestGame(game.artifact, game.setting, external_tester=True)
-    return not walls.doomed[history][state]
-
-
-def run_episode(env: Any, policy: Any, env_id: str, sut: str, seed: int, record: bool = True,
-                tester: str = "synthesized") -> Trace:
-    """Play one seeded episode; the trace keeps copies of the run states when ``record``."""
-    obs, info = env.reset(seed=seed)
-    policy.reset(seed)
-    u = env.unwrapped
-    trace = Trace(env_id, sut, seed, tester=tester)
-    if record:
-        trace.states.append(u.run.copy())
-    while True:
-        action = int(policy.act(obs, info))
-        obs, _, terminated, truncated, info = env.step(action)
-        trace.actions.append(action)
-        if record:
-            trace.states.append(u.run.copy())
-        if terminated or truncated:
-            break
-    trace.verdict = dict(info["verdict"])
-    trace.kind, trace.reason = classify(env, trace.verdict)
-    return trace
 
 
 @dataclass
@@ -337,7 +159,7 @@ def check_sut_names(suts: Sequence[str]) -> None:
     ProblemError
         On an unknown name.
     """
-    from agents.base import policy_names
+    from agents.registry import policy_names
     from agents.scripted import SCRIPTED
 
     known = set(policy_names())
@@ -347,17 +169,6 @@ def check_sut_names(suts: Sequence[str]) -> None:
             raise ProblemError(f"--sut {sut}: unknown policy; known: random, scripted:<name>, gr1, ppo:PATH")
         if prefix == "scripted" and (arg or "replanner") not in SCRIPTED:
             raise ProblemError(f"--sut {sut}: unknown scripted SUT {arg!r}; known: {', '.join(SCRIPTED)}")
-
-
-def _policy(sut: str, env: Any) -> Any:
-    """:func:`agents.base.make_policy`, its errors (unknown name, a model that does not fit
-    the env) reported as invalid input."""
-    from agents.base import PolicyError, make_policy
-
-    try:
-        return make_policy(sut, env)
-    except PolicyError as exc:
-        raise ProblemError(f"--sut {sut}: {exc}") from None
 
 
 def evaluate(
@@ -382,7 +193,8 @@ def evaluate(
         Before anything runs, if an env or a SUT name is invalid input (not a test, an
         unknown policy), or ``episodes < 1``.
     """
-    from agents.base import PolicyError, make_policy
+    from agents.base import PolicyError
+    from agents.registry import make_policy
 
     if episodes < 1:
         raise ProblemError("--episodes must be at least 1")
@@ -425,101 +237,6 @@ def evaluate(
 def _slug(text: str) -> str:
     return "".join(ch if ch.isalnum() else "-" for ch in text).strip("-").lower()
 
-
-def _trace_legend(ax: Any, game: Any) -> list[Any]:
-    """Legend entries for the path markers and the renderer's symbols, so a newcomer can
-    read a trace picture without the env docs."""
-    from matplotlib.lines import Line2D
-    from matplotlib.patches import Patch
-
-    from flowtest_env import render
-
-    def rgb(c: tuple[int, int, int]) -> tuple[float, ...]:
-        return tuple(x / 255 for x in c)
-
-    handles, _ = ax.get_legend_handles_labels()
-    marker = {"linestyle": "", "markersize": 10}
-    handles += [
-        Line2D([], [], marker="o", color=rgb(render.SYSTEM), label="system under test", **marker),
-        Patch(facecolor=rgb(render.GOAL), label="goal"),
-        Line2D([], [], marker="o", markerfacecolor="none", markeredgewidth=2, color=rgb(render.TEST_CELL),
-               label="hidden test cell", **marker),
-        Patch(facecolor=rgb(render.BLOCKED), label="blocked cell"),
-        Line2D([], [], color=rgb(render.WALL), lw=4, label="wall"),
-    ]
-    if game.artifact.kind == "agent":
-        handles.append(Line2D([], [], marker="D", color=rgb(render.AGENT), label="test agent", **marker))
-    return handles
-
-
-def trace_picture(trace: Trace, path: Path) -> None:
-    """Draw a run: on grids the engineer's view (walls, hidden test cells) at the end of
-    the run with the SUT's path numbered step by step; on graphs a strip of frames."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from flowtest_env.render import make_renderer
-
-    env = make_env(trace.env_id)
-    game = env.unwrapped.game
-    env.close()
-    tile = 48
-    renderer = make_renderer(game, tile, "engineer")
-    v = trace.verdict
-    against = "" if trace.tester == "synthesized" else f" vs tester {trace.tester}"
-    title = (
-        f"{trace.sut} on {trace.env_id}{against} (seed {trace.seed})\n"
-        f"system objective {v['system_objective']}, test objective "
-        f"{'realized' if v['test_objective_realized'] else 'not realized'}, {v['steps']} steps, "
-        f"{v['restrictions']} restricted decisions"
-    )
-    if game.is_grid:
-        fig, ax = plt.subplots(figsize=(7, 7.6))
-        ax.imshow(renderer.frame(trace.states[-1]))
-        cells = [game.ts.places[int(game.ts.place[r.system])] for r in trace.states]
-        xs = np.array([(c[1] + 0.5) * tile for c in cells], dtype=float)
-        ys = np.array([(c[0] + 0.5) * tile for c in cells], dtype=float)
-        # keep consecutive duplicates (waits) out of the line, jitter revisits slightly
-        ax.plot(xs, ys, "-", color="#1f3b99", lw=2.5, alpha=0.8, zorder=3)
-        ax.plot(xs[0], ys[0], "o", ms=14, color="#2ca02c", zorder=4, label="start")
-        ax.plot(xs[-1], ys[-1], "X", ms=16, color="#d62728" if trace.failed else "#1f3b99", zorder=4, label="end")
-        seen: dict[tuple[float, float], int] = {}
-        last = None
-        for step, (x, y) in enumerate(zip(xs, ys)):
-            if last == (x, y):
-                continue
-            last = (x, y)
-            n = seen.get((x, y), 0)
-            seen[(x, y)] = n + 1
-            if n < 3:
-                ax.annotate(str(step), (x + (n - 1) * tile * 0.22, y - tile * 0.28), color="black", fontsize=9,
-                            ha="center", va="center", zorder=5,
-                            bbox={"boxstyle": "round,pad=0.12", "fc": "white", "ec": "none", "alpha": 0.8})
-        ax.legend(handles=_trace_legend(ax, game), loc="upper center", bbox_to_anchor=(0.5, -0.01), ncol=4,
-                  fontsize=8, frameon=False)
-        ax.set_axis_off()
-        ax.set_title(title, fontsize=10)
-    else:
-        # frames where the system moved (plus start and end), at most six, in two rows
-        moves = [0] + [i for i in range(1, len(trace.states)) if trace.states[i].system != trace.states[i - 1].system]
-        moves.append(len(trace.states) - 1)
-        moves = sorted(set(moves))
-        if len(moves) > 6:
-            moves = [moves[int(round(j))] for j in np.linspace(0, len(moves) - 1, 6)]
-        n_cols = min(3, len(moves))
-        n_rows = (len(moves) + n_cols - 1) // n_cols
-        fig, axes = plt.subplots(n_rows, n_cols, figsize=(4.6 * n_cols, 4.6 * n_rows + 0.8), squeeze=False)
-        for ax in axes.ravel():
-            ax.set_axis_off()
-        for ax, i in zip(axes.ravel(), moves):
-            ax.imshow(renderer.frame(trace.states[i]))
-            ax.set_title(f"step {i}: at {game.ts.states[trace.states[i].system]}", fontsize=12)
-        fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
 
 
 # --------------------------------------------------------------------------- reports
@@ -712,7 +429,8 @@ def _markdown(records: Sequence[dict[str, Any]]) -> str:
 # --------------------------------------------------------------------------- command line
 
 
-def _arguments(p: argparse.ArgumentParser) -> None:
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """Declare ``flowtest evaluate``'s arguments."""
     p.add_argument("--env", nargs="+", required=True, metavar="ENV",
                    help="environments: registered IDs (FlowTest-Maze2-v0), built-in names (maze2), problem files "
                         "(mine.toml, synthesized once and cached) or artifact files (flowtest synthesize --out)")
@@ -736,7 +454,7 @@ def replay(env_id: str, sut: str, seed: int, stream: Any = None, tester: str = "
     to ``stream`` (standard output by default)."""
     stream = sys.stdout if stream is None else stream
     env = make_tester_env(env_id, tester)
-    policy = _policy(sut, env)
+    policy = sut_policy(sut, env)
     trace = run_episode(env, policy, env_id, sut, seed, tester=tester)
     game = env.unwrapped.game
     against = "" if tester == "synthesized" else f" against tester {tester}"
@@ -752,8 +470,7 @@ def replay(env_id: str, sut: str, seed: int, stream: Any = None, tester: str = "
     return trace
 
 
-@command("evaluate", "run systems under test against synthesized tests and write a report", _arguments)
-def run_evaluate(args: argparse.Namespace) -> int:
+def run(args: argparse.Namespace) -> int:
     """Evaluate (or replay); exit 4 if a test failed its guarantee (a FlowTest bug)."""
     if args.replay:
         bug = False
@@ -773,7 +490,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
         first: ProblemError | None = None
         for env in envs:
             try:
-                _policy(sut, env)
+                sut_policy(sut, env)
                 break
             except ProblemError as exc:
                 first = first or exc
@@ -808,37 +525,4 @@ def run_evaluate(args: argparse.Namespace) -> int:
     return EXIT_TEST_FAILED if bugs else EXIT_OK
 
 
-DEMO_PPO_STEPS = 16_384
-"""Training steps of the demo's PPO system (about ten seconds; ``python -m
-experiments.bench_ppo`` measures how many it needs, see docs/benchmarks.md)."""
-
-
-def _rl_installed() -> bool:
-    import importlib.util
-
-    return all(importlib.util.find_spec(m) is not None for m in ("torch", "stable_baselines3", "sb3_contrib"))
-
-
-def run_evaluation_demo(out_dir: str | Path, episodes: int = 5, progress: Callable[[str], None] | None = None) -> Path:
-    """The demo hook: evaluate the correct, faulty and GR(1) SUTs on ``FlowTest-Maze2-v0``,
-    and, when the ``rl`` extra is installed, a PPO SUT: the model at
-    ``<out_dir>/ppo-maze2.zip``, trained there first (:data:`DEMO_PPO_STEPS` steps, seed 0)
-    if there is none. Write the report and return the path of ``report.html``."""
-    out = Path(out_dir)
-    suts = ["scripted:replanner", "gr1", "scripted:committed", "scripted:fuel-blind", "scripted:greedy", "random"]
-    model = (out / "ppo-maze2.zip").resolve()  # absolute: the replay commands work from anywhere
-    if not model.exists() and _rl_installed():
-        from .train import train
-
-        if progress is not None:
-            progress(f"training a PPO system under test on FlowTest-Maze2-v0 ({DEMO_PPO_STEPS} steps)")
-        train("FlowTest-Maze2-v0", DEMO_PPO_STEPS, model, seed=0, progress_bar=False, eval_episodes=0)
-    if model.exists():
-        suts.append(f"ppo:{model}")
-    cells = evaluate(["FlowTest-Maze2-v0"], suts, episodes, 0, progress)
-    write_report(cells, out)
-    return out / "report.html"
-
-
-# `flowtest train` lives in its own module; importing it here registers it with the single cli hook.
-from . import train as _train  # noqa: E402,F401
+COMMAND = Command("evaluate", "run systems under test against synthesized tests and write a report", add_arguments, run)

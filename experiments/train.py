@@ -29,7 +29,6 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-import time
 from pathlib import Path
 from typing import Any
 
@@ -37,7 +36,12 @@ import numpy as np
 
 from synthesis.model.errors import ProblemError
 
-from .cli import EXIT_OK, check_output_path, command, nonnegative_int, positive_int, write_atomically
+from .arguments import nonnegative_int, positive_int
+from .command import Command
+from .episodes import make_env, run_episode
+from .exits import EXIT_OK
+from .outputs import check_output_path, write_atomically
+from .training import EpisodeCurve, EpisodeEnd, learn, make_ppo, moving_average, require_rl
 
 ALGOS = ("maskable-ppo", "recurrent-ppo")
 """``--algo`` choices: sb3-contrib's MaskablePPO (MLP policy, action masks) and
@@ -67,14 +71,6 @@ ENV_OPTION_KEYS = ("memory", "shaping", "obs_kind", "pad_to")
 """The settings that are env options (the rest configure the algorithm)."""
 
 
-def _require_rl() -> None:
-    try:
-        import sb3_contrib  # noqa: F401
-        import stable_baselines3  # noqa: F401
-    except ImportError:
-        raise ProblemError("training needs the rl extra: pip install 'flowtest[rl]'") from None
-
-
 def env_options(settings: dict[str, Any]) -> dict[str, Any]:
     """The env options of ``settings`` (keyword arguments of :class:`flowtest_env.FlowTestEnv`)."""
     opts: dict[str, Any] = {
@@ -90,8 +86,6 @@ def make_training_env(env_id: str, seed: int, settings: dict[str, Any]) -> Any:
     """The env with the env options of ``settings`` (:func:`env_options`), seeded;
     wrapped for MaskablePPO (:class:`sb3_contrib.common.wrappers.ActionMasker`) unless
     the algorithm is RecurrentPPO."""
-    from .evaluate import make_env
-
     env = make_env(env_id, **env_options(settings))
     env.reset(seed=seed)
     env.action_space.seed(seed)
@@ -144,85 +138,15 @@ def make_model(env: Any, settings: dict[str, Any], seed: int) -> Any:
     """A ``MaskablePPO`` or ``RecurrentPPO`` on ``env`` with ``settings`` (see
     :data:`DEFAULTS`), on the CPU, one torch thread, seeded; it records the env options it
     was trained with, which :class:`agents.ppo.PPOPolicy` rebuilds when it plays."""
-    import torch
-    from sb3_contrib import MaskablePPO, RecurrentPPO
-
-    torch.manual_seed(seed)
-    torch.set_num_threads(1)
-    cls, policy = (RecurrentPPO, "MlpLstmPolicy") if settings["algo"] == "recurrent-ppo" else (MaskablePPO, "MlpPolicy")
-    model = cls(
-        policy, env, seed=seed, verbose=0, device="cpu",
-        n_steps=settings["n_steps"], batch_size=settings["batch_size"], learning_rate=settings["learning_rate"],
-        gamma=settings["gamma"], ent_coef=settings["ent_coef"], n_epochs=settings["n_epochs"],
-        policy_kwargs={"net_arch": list(settings["net_arch"])},
-    )
+    model = make_ppo(env, settings, seed, recurrent=settings["algo"] == "recurrent-ppo")
     model.flowtest_memory = settings["memory"]  # saved with the model, read by PPOPolicy
     model.flowtest_obs = {"obs_kind": settings["obs_kind"], "pad_to": int(settings["pad_to"])}
     return model
 
 
-def _progress_callback(total: int) -> Any:
-    """A tqdm progress bar on stderr as an SB3 callback (SB3's own needs ``rich`` too)."""
-    from stable_baselines3.common.callbacks import BaseCallback
-    from tqdm import tqdm
-
-    class Bar(BaseCallback):
-        def _on_training_start(self) -> None:
-            self.bar = tqdm(total=total, unit="step", desc="training", file=sys.stderr, mininterval=1.0)
-
-        def _on_step(self) -> bool:
-            self.bar.update(self.num_timesteps - self.bar.n)  # one call per step of all envs
-            return True
-
-        def _on_training_end(self) -> None:
-            self.bar.close()
-
-    return Bar()
-
-
-def learn(model: Any, steps: int, curve_callback: Any, progress_bar: bool) -> float:
-    """Train ``model`` for ``steps`` time steps with a learning-curve callback (and a progress
-    bar on stderr when asked); the seconds it took. Shared by system and tester training."""
-    t0 = time.perf_counter()
-    callbacks = [curve_callback] + ([_progress_callback(steps)] if progress_bar else [])
-    model.learn(total_timesteps=steps, callback=callbacks)
-    return time.perf_counter() - t0
-
-
-class _Curve:
-    """Records (time step, success, return) at every episode end of every training env,
-    as an SB3 callback."""
-
-    def __init__(self) -> None:
-        from stable_baselines3.common.callbacks import BaseCallback
-
-        curve = self
-
-        class Callback(BaseCallback):
-            def __init__(self) -> None:
-                super().__init__()
-                self.ret: np.ndarray | None = None
-
-            def _on_step(self) -> bool:
-                rewards, dones, infos = self.locals["rewards"], self.locals["dones"], self.locals["infos"]
-                if self.ret is None:
-                    self.ret = np.zeros(len(rewards))
-                self.ret += rewards
-                for i in np.flatnonzero(dones):
-                    verdict = infos[i].get("verdict", {})
-                    curve.points.append((self.num_timesteps, verdict.get("system_objective") == "met", float(self.ret[i])))
-                    self.ret[i] = 0.0
-                return True
-
-        self.points: list[tuple[int, bool, float]] = []
-        self.callback = Callback()
-
-
 def success_rate(model: Any, env_id: str, episodes: int = 100, seed: int = 10_000) -> float:
     """Share of ``episodes`` seeded runs (deterministic policy) that meet the system objective."""
     from agents.ppo import PPOPolicy
-
-    from .evaluate import make_env, run_episode
 
     env = make_env(env_id)
     policy = PPOPolicy(model, "ppo", env)
@@ -234,7 +158,7 @@ def success_rate(model: Any, env_id: str, episodes: int = 100, seed: int = 10_00
     return met / episodes
 
 
-def plot_curve(points: list[tuple[int, bool, float]], path: Path, title: str) -> None:
+def plot_curve(points: list[EpisodeEnd], path: Path, title: str) -> None:
     """Success rate and return (moving averages over 20 episodes) against time steps."""
     import matplotlib
 
@@ -243,13 +167,11 @@ def plot_curve(points: list[tuple[int, bool, float]], path: Path, title: str) ->
 
     fig, (a1, a2) = plt.subplots(2, 1, figsize=(7, 5.5), sharex=True)
     if points:
-        steps = np.array([p[0] for p in points])
-        win = min(20, len(points))
-        kernel = np.ones(win) / win
-        succ = np.convolve([float(p[1]) for p in points], kernel, mode="valid")
-        ret = np.convolve([p[2] for p in points], kernel, mode="valid")
-        a1.plot(steps[win - 1 :], 100 * succ, color="#2ca02c")
-        a2.plot(steps[win - 1 :], ret, color="#1f77b4")
+        steps = np.array([p.step for p in points])
+        succ = moving_average([float(p.met) for p in points])
+        ret = moving_average([p.ret for p in points])
+        a1.plot(steps[len(steps) - len(succ) :], 100 * succ, color="#2ca02c")
+        a2.plot(steps[len(steps) - len(ret) :], ret, color="#1f77b4")
     a1.set_ylabel("system objective met (%)")
     a1.set_ylim(-5, 105)
     a2.set_ylabel("episode return")
@@ -274,7 +196,7 @@ def train(env_id: str, steps: int, out: str | Path, seed: int = 0, progress_bar:
         ``env``, ``steps`` (taken), ``seed``, ``seconds`` (training wall time), ``success_rate``
         (over ``eval_episodes`` evaluation runs, ``None`` if 0), ``model``, ``curve``.
     """
-    _require_rl()
+    require_rl()
     if steps < 1:
         raise ProblemError("--steps must be at least 1")
     settings = {**DEFAULTS, **overrides}
@@ -283,8 +205,8 @@ def train(env_id: str, steps: int, out: str | Path, seed: int = 0, progress_bar:
     model_path = out if out.suffix == ".zip" else out.with_suffix(".zip")
     env = make_training_vec_env(env_id, seed, settings)
     model = make_model(env, settings, seed)
-    curve = _Curve()
-    seconds = learn(model, steps, curve.callback, progress_bar)
+    curve = EpisodeCurve()
+    seconds = learn(model, steps, curve, progress_bar)
     write_atomically(model_path, lambda tmp: model.save(str(tmp)))
     png = model_path.with_suffix(".png")
     algo = "RecurrentPPO" if settings["algo"] == "recurrent-ppo" else "MaskablePPO"
@@ -295,7 +217,7 @@ def train(env_id: str, steps: int, out: str | Path, seed: int = 0, progress_bar:
         "eval_episodes": eval_episodes, "settings": settings, "env_options": env_options(settings),
         "model": str(model_path), "curve": str(png),
         "episodes": len(curve.points),
-        "points": [[s, bool(m), round(r, 4)] for s, m, r in curve.points],
+        "points": [[p.step, p.met, round(p.ret, 4)] for p in curve.points],
     }
     write_atomically(model_path.with_suffix(".json"), lambda tmp: tmp.write_text(json.dumps(summary) + "\n"))
     return summary
@@ -322,7 +244,8 @@ SETTING_HELP: dict[str, str] = {
 }
 
 
-def _arguments(p: argparse.ArgumentParser) -> None:
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """Declare ``flowtest train``'s arguments."""
     p.add_argument("ENV", help="environment: a registered ID (FlowTest-Maze2-v0), a built-in name (maze2), a problem "
                                "file (mine.toml) or an artifact file")
     p.add_argument("--steps", type=positive_int, default=50_000, help="training time steps (default 50000)")
@@ -344,11 +267,8 @@ def _arguments(p: argparse.ArgumentParser) -> None:
         g.add_argument(_flag(key), dest=key, **kw)
 
 
-@command("train", "train a PPO system under test against a synthesized test", _arguments)
-def run_train(args: argparse.Namespace) -> int:
+def run(args: argparse.Namespace) -> int:
     """Train, save, evaluate; print the settings used, then where the model and its curve are."""
-    from .evaluate import make_env
-
     overrides = {k: getattr(args, k) for k in DEFAULTS if getattr(args, k) is not None}
     settings = {**DEFAULTS, **overrides}
     check_settings(settings)
@@ -370,3 +290,6 @@ def run_train(args: argparse.Namespace) -> int:
         f"settings and curve data: {Path(s['model']).with_suffix('.json')}\n"
     )
     return EXIT_OK
+
+
+COMMAND = Command("train", "train a PPO system under test against a synthesized test", add_arguments, run)

@@ -28,8 +28,11 @@ import numpy as np
 
 from synthesis.model.errors import ProblemError
 
-from .cli import EXIT_OK, check_output_path, command, nonnegative_int, positive_int, write_atomically
-from .train import _require_rl, learn
+from .arguments import nonnegative_int, positive_int
+from .command import Command
+from .exits import EXIT_OK
+from .outputs import check_output_path, write_atomically
+from .training import EpisodeCurve, EpisodeEnd, learn, make_ppo, moving_average, require_rl
 
 DEFAULTS: dict[str, Any] = {
     "n_envs": 4,
@@ -87,28 +90,7 @@ def make_tester_vec_env(problem: str, system: str, seed: int, settings: dict[str
     return DummyVecEnv([(lambda i=i: make(i)) for i in range(n)])
 
 
-class _Curve:
-    """Records (time step, realized before the goal, unfinished) at every episode end, as
-    an SB3 callback."""
-
-    def __init__(self) -> None:
-        from stable_baselines3.common.callbacks import BaseCallback
-
-        curve = self
-
-        class Callback(BaseCallback):
-            def _on_step(self) -> bool:
-                for i in np.flatnonzero(self.locals["dones"]):
-                    v = self.locals["infos"][i].get("verdict", {})
-                    met = v.get("system_objective") == "met"
-                    curve.points.append((self.num_timesteps, met and bool(v.get("test_objective_realized")), not met))
-                return True
-
-        self.points: list[tuple[int, bool, bool]] = []
-        self.callback = Callback()
-
-
-def plot_tester_curve(points: list[tuple[int, bool, bool]], path: Path, title: str) -> None:
+def plot_tester_curve(points: list[EpisodeEnd], path: Path, title: str) -> None:
     """Realized-before-goal and unfinished runs (moving averages over 20 episodes)."""
     import matplotlib
 
@@ -117,12 +99,12 @@ def plot_tester_curve(points: list[tuple[int, bool, bool]], path: Path, title: s
 
     fig, ax = plt.subplots(figsize=(7, 3.6))
     if points:
-        steps = np.array([p[0] for p in points])
-        win = min(20, len(points))
-        kernel = np.ones(win) / win
-        for k, label, color in ((1, "met, test objective realized", "#2ca02c"), (2, "not met (stalled or trapped)", "#d62728")):
-            ax.plot(steps[win - 1:], 100 * np.convolve([float(p[k]) for p in points], kernel, mode="valid"),
-                    color=color, label=label)
+        steps = np.array([p.step for p in points])
+        realized = moving_average([float(p.met and p.realized) for p in points])
+        unfinished = moving_average([float(not p.met) for p in points])
+        for share, label, color in ((realized, "met, test objective realized", "#2ca02c"),
+                                    (unfinished, "not met (stalled or trapped)", "#d62728")):
+            ax.plot(steps[len(steps) - len(share):], 100 * share, color=color, label=label)
     ax.set_ylabel("share of episodes (%)")
     ax.set_xlabel("time steps")
     ax.set_ylim(-5, 105)
@@ -137,7 +119,7 @@ def plot_tester_curve(points: list[tuple[int, bool, bool]], path: Path, title: s
 def assess(model_path: str | Path, problem: str, system: str, episodes: int, seed: int = 10_000) -> dict[str, Any]:
     """The saved tester, deterministic, against ``system`` for ``episodes`` seeded runs, and
     its exhaustive fairness check (:func:`flowtest_env.fairness.check_tester`)."""
-    from agents.base import make_policy
+    from agents.registry import make_policy
     from agents.testers import VersusTesterEnv
     from flowtest_env.fairness import check_tester
 
@@ -171,10 +153,7 @@ def train_tester(problem: str, steps: int, out: str | Path, system: str = "scrip
         ``problem``, ``system``, ``steps``, ``seed``, ``seconds``, ``model``, ``curve`` and the
         assessment (:func:`assess`).
     """
-    _require_rl()
-    import torch
-    from sb3_contrib import MaskablePPO
-
+    require_rl()
     from agents.testers import TESTER_ROLE
 
     if steps < 1:
@@ -184,20 +163,13 @@ def train_tester(problem: str, steps: int, out: str | Path, system: str = "scrip
     out = Path(out)
     model_path = out if out.suffix == ".zip" else out.with_suffix(".zip")
     env = make_tester_vec_env(problem, system, seed, settings)
-    torch.manual_seed(seed)
-    torch.set_num_threads(1)
-    model = MaskablePPO(
-        "MlpPolicy", env, seed=seed, verbose=0, device="cpu",
-        n_steps=settings["n_steps"], batch_size=settings["batch_size"], learning_rate=settings["learning_rate"],
-        gamma=settings["gamma"], ent_coef=settings["ent_coef"], n_epochs=settings["n_epochs"],
-        policy_kwargs={"net_arch": list(settings["net_arch"])},
-    )
+    model = make_ppo(env, settings, seed)
     # saved with the model, read by agents.testers.PPOTester
     model.flowtest_role = TESTER_ROLE
     model.flowtest_problem = problem
     model.flowtest_system = system
-    curve = _Curve()
-    seconds = learn(model, steps, curve.callback, progress_bar)
+    curve = EpisodeCurve()
+    seconds = learn(model, steps, curve, progress_bar)
     write_atomically(model_path, lambda tmp: model.save(str(tmp)))
     png = model_path.with_suffix(".png")
     write_atomically(png, lambda tmp: plot_tester_curve(curve.points, tmp, f"learned tester on {problem} vs {system} (seed {seed})"))
@@ -206,13 +178,14 @@ def train_tester(problem: str, steps: int, out: str | Path, system: str = "scrip
         "seconds": round(seconds, 2), "settings": settings, "model": str(model_path), "curve": str(png),
         "episodes": len(curve.points),
         **assess(model_path, problem, system, eval_episodes),
-        "points": [[s, bool(r), bool(u)] for s, r, u in curve.points],
+        "points": [[p.step, p.met and p.realized, not p.met] for p in curve.points],
     }
     write_atomically(model_path.with_suffix(".json"), lambda tmp: tmp.write_text(json.dumps(summary) + "\n"))
     return summary
 
 
-def _arguments(p: argparse.ArgumentParser) -> None:
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """Declare ``flowtest train-tester``'s arguments."""
     p.add_argument("PROBLEM", help="a built-in problem with a test agent or reactive doors (maze2, small-reactive, ...) "
                                    "or its env ID")
     p.add_argument("--against", default="scripted:replanner", metavar="POLICY",
@@ -227,8 +200,7 @@ def _arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
 
 
-@command("train-tester", "train a PPO tester (tester_0 of the PettingZoo game) against a fixed system", _arguments)
-def run_train_tester(args: argparse.Namespace) -> int:
+def run(args: argparse.Namespace) -> int:
     """Train, save, check; print where the model is and what the fairness check found."""
     from agents.base import PolicyError
 
@@ -252,3 +224,7 @@ def run_train_tester(args: argparse.Namespace) -> int:
         f"model: {s['model']} (use --tester ppo:{s['model']})\ncurve: {s['curve']}\n"
     )
     return EXIT_OK
+
+
+COMMAND = Command("train-tester", "train a PPO tester (tester_0 of the PettingZoo game) against a fixed system",
+                  add_arguments, run)

@@ -7,8 +7,9 @@ import numpy as np
 import pytest
 
 import flowtest_env
-from agents.base import Policy, PolicyError, make_policy
-from experiments.evaluate import run_episode
+from agents.base import Policy, PolicyError
+from agents.registry import make_policy
+from experiments.episodes import run_episode
 from flowtest_env.artifacts import artifact_path
 
 SHIPPED_IDS = [

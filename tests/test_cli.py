@@ -11,6 +11,7 @@ import ctypes
 import io
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -22,7 +23,11 @@ import numpy as np
 import pytest
 
 from experiments import cli
-from experiments.cli import StageProgress, main
+from experiments.cli import main
+from experiments.command import Command
+from experiments.commands import COMMANDS
+from experiments.progress import StageProgress
+from synthesis import pipeline
 from synthesis.artifacts.artifact import TestArtifact
 from synthesis.model.errors import CheckFailed, InconsistentProblem
 from synthesis.problems.load import load_problem
@@ -167,7 +172,7 @@ def test_console_script_json_stdout_only() -> None:
 def test_json_stdout_whatever_a_library_prints(capfd: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
     """A library that writes to file descriptor 1 during synthesis -- ``write(1, ...)``,
     C's ``printf``, Python's ``print`` -- does not reach stdout: it holds only our JSON."""
-    real = cli.pipeline.synthesize
+    real = pipeline.synthesize
 
     def noisy(problem: Any, options: Any = None) -> Any:
         os.write(1, b"noise from write(1)\n")
@@ -177,7 +182,7 @@ def test_json_stdout_whatever_a_library_prints(capfd: pytest.CaptureFixture[str]
         os.write(1, b"noise after the solve\n")
         return test
 
-    monkeypatch.setattr(cli.pipeline, "synthesize", noisy)
+    monkeypatch.setattr(pipeline, "synthesize", noisy)
     code = main(["synthesize", "small-reactive", "--json", "--quiet"])
     out, err = capfd.readouterr()
     assert code == 0, err
@@ -227,13 +232,13 @@ def test_human_summary(capsys: pytest.CaptureFixture[str]) -> None:
 
 def test_options_reach_the_solver(capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
     seen: dict[str, Any] = {}
-    real = cli.pipeline.synthesize
+    real = pipeline.synthesize
 
     def spy(problem: Any, options: Any) -> Any:
         seen.update(vars(options))
         return real(problem, options)
 
-    monkeypatch.setattr(cli.pipeline, "synthesize", spy)
+    monkeypatch.setattr(pipeline, "synthesize", spy)
     argv = ["synthesize", "small-reactive", "--json", "--time-limit", "30", "--gap", "0.01",
             "--threads", "1", "--setting", "accumulative", "--after-first", "5"]
     code, out, err = run(argv, capsys)
@@ -358,21 +363,21 @@ def _raising(exc: BaseException) -> Any:
 
 
 def test_check_failed_exit_4(capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(cli.pipeline, "synthesize", _raising(CheckFailed("bypass flow 1")))
+    monkeypatch.setattr(pipeline, "synthesize", _raising(CheckFailed("bypass flow 1")))
     code, out, err = run(["synthesize", "small-reactive", "--json"], capsys)
     line = assert_one_error_line(code, out, err, 4, "bypass flow 1")
     assert "FLOWTEST BUG" in line
 
 
 def test_timeout_exit_5(capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(cli.pipeline, "synthesize", _raising(TimeoutError("no solution within the time limit")))
+    monkeypatch.setattr(pipeline, "synthesize", _raising(TimeoutError("no solution within the time limit")))
     code, out, err = run(["synthesize", "small-reactive", "--json", "--time-limit", "1"], capsys)
     line = assert_one_error_line(code, out, err, 5, "time limit")
     assert "--time-limit" in line
 
 
 def test_keyboard_interrupt_exit_130(capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(cli.pipeline, "synthesize", _raising(KeyboardInterrupt()))
+    monkeypatch.setattr(pipeline, "synthesize", _raising(KeyboardInterrupt()))
     code, out, err = run(["synthesize", "small-reactive", "--json"], capsys)
     assert code == 130 and out == ""
     assert "Traceback" not in err and "error:" not in err
@@ -409,13 +414,13 @@ def test_ctrl_c_on_the_console_script(tmp_path: Path) -> None:
 
 
 def test_infeasible_agent_reason_is_named(capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(cli.pipeline, "synthesize", _raising(InconsistentProblem("infeasible", "no agent strategy")))
+    monkeypatch.setattr(pipeline, "synthesize", _raising(InconsistentProblem("infeasible", "no agent strategy")))
     code, out, err = run(["synthesize", "small-reactive"], capsys)
     assert_one_error_line(code, out, err, 3, "infeasible", "no agent strategy")
 
 
 def test_unexpected_error_is_a_bug_with_traceback(capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(cli.pipeline, "synthesize", _raising(RuntimeError("HiGHS stopped")))
+    monkeypatch.setattr(pipeline, "synthesize", _raising(RuntimeError("HiGHS stopped")))
     code, out, err = run(["synthesize", "small-reactive"], capsys)
     assert code == 1 and out == ""
     assert "Traceback" in err and "error: internal error" in err
@@ -513,6 +518,23 @@ def test_progress_plain_lines_elsewhere() -> None:
 
 
 def test_parser_has_room_for_more_commands() -> None:
-    assert "synthesize" in cli.COMMANDS
-    with pytest.raises(ValueError):
-        cli.command("synthesize", "again", lambda p: None)(lambda a: 0)
+    assert "synthesize" in [c.name for c in COMMANDS]
+    with pytest.raises(ValueError):  # a second command of the same name is refused
+        cli.build_parser([*COMMANDS, Command("synthesize", "again", lambda p: None, lambda a: 0)])
+
+
+def _listed_commands(help_text: str) -> list[str]:
+    """The subcommand names a ``--help`` text lists (one per line, indented under COMMAND)."""
+    return re.findall(r"^ {4}(\S+)", help_text, flags=re.MULTILINE)
+
+
+def test_every_entry_point_lists_the_same_commands() -> None:
+    """``flowtest --help`` and ``python -m experiments.cli --help`` list every command of
+    the one list (``python -m experiments.cli`` once listed only ``synthesize``)."""
+    names = [c.name for c in COMMANDS]
+    assert names[0] == "synthesize" and {"demo", "evaluate", "train", "train-tester"} <= set(names)
+    for argv in ([str(FLOWTEST), "--help"], [sys.executable, "-m", "experiments.cli", "--help"],
+                 [sys.executable, "-m", "experiments", "--help"]):
+        proc = subprocess.run(argv, capture_output=True, text=True, timeout=120)
+        assert proc.returncode == 0, proc.stderr
+        assert _listed_commands(proc.stdout) == names, (argv, proc.stdout)

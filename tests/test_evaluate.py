@@ -10,9 +10,10 @@ from pathlib import Path
 import gymnasium as gym
 import pytest
 
-from agents.base import make_policy
+from agents.registry import make_policy
 from experiments.cli import main
-from experiments.evaluate import can_still_meet, evaluate, replay, run_episode, write_report
+from experiments.episodes import can_still_meet, run_episode
+from experiments.evaluate import evaluate, replay, write_report
 from flowtest_env.game import TestGame
 
 FAULTY_CASES = [
@@ -145,7 +146,7 @@ def test_replay_command_quotes_a_model_path_with_spaces() -> None:
 
 def test_demo_evaluation_includes_a_ppo_system(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     pytest.importorskip("sb3_contrib")
-    import experiments.evaluate as ev
+    import experiments.demo as ev
 
     monkeypatch.setattr(ev, "DEMO_PPO_STEPS", 256)  # the demo trains 16384 steps; here only the plumbing
     report = ev.run_evaluation_demo(tmp_path, episodes=1)
@@ -160,7 +161,7 @@ def test_demo_evaluation_includes_a_ppo_system(tmp_path: Path, monkeypatch: pyte
 @pytest.mark.slow
 def test_demo_ppo_system_passes_maze2(tmp_path: Path) -> None:
     pytest.importorskip("sb3_contrib")
-    from experiments.evaluate import run_evaluation_demo
+    from experiments.demo import run_evaluation_demo
 
     run_evaluation_demo(tmp_path, episodes=2)
     records = json.loads((tmp_path / "results.json").read_text())

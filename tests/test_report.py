@@ -9,8 +9,9 @@ from pathlib import Path
 import gymnasium as gym
 import pytest
 
-from agents.base import make_policy
-from experiments.evaluate import evaluate, run_episode, write_report
+from agents.registry import make_policy
+from experiments.episodes import run_episode
+from experiments.evaluate import evaluate, write_report
 from experiments.filmstrip import MAX_FRAMES, frames_to_show
 from experiments.report import fold_rows, outcome_class
 

@@ -9,7 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from agents.base import PolicyError, make_policy
+from agents.base import PolicyError
+from agents.registry import make_policy
 from agents.testers import SynthesizedTester, TesterView, VersusTesterEnv, make_tester, problem_of
 from experiments.cli import main
 from flowtest_env.artifacts import artifact_path
@@ -84,7 +85,7 @@ def test_fairness_check_finds_a_trap_reached_only_by_some_system_moves() -> None
 
 
 def test_versus_env_with_the_synthesized_tester_matches_the_single_agent_env() -> None:
-    from experiments.evaluate import make_env, run_episode
+    from experiments.episodes import make_env, run_episode
 
     for env_id in ("FlowTest-Maze2-v0", "FlowTest-SmallReactive-v0"):
         single = make_env(env_id)

@@ -1,0 +1,231 @@
+"""Running systems under test through tests, one seeded episode at a time.
+
+What ``flowtest evaluate`` and ``flowtest train`` (its success rate) both need: the env
+named on the command line (:func:`make_env`, :func:`make_tester_env`), the SUT named
+there (:func:`sut_policy`), one run (:func:`run_episode`, a :class:`Trace`) and what its
+outcome means (:func:`classify`). Episode ``i`` of a series uses seed ``S + i`` for both
+the env and the policy, so each run can be replayed exactly.
+
+Two kinds of failure are told apart:
+
+* a **SUT failure**: the system objective was violated, or not met within the step
+  budget (``open``). The test never helps the SUT, so this is the SUT's fault.
+* a **test failure** (a FlowTest bug, reported loudly): a run that met the system
+  objective without realizing the test objective (the routing guarantee broke), or a
+  *trapped* system: a run (violated, or still open when the step budget ran out) that
+  stopped where no sequence of SUT actions can meet the system objective any more
+  against the test as it really answers (its reactive restrictions, its test agent),
+  although the static walls alone would still let the system through — the test, not
+  the SUT, closed every way (:func:`can_still_meet`).
+
+With a tester other than the synthesized one (:mod:`agents.testers`) a run that ends
+where the system can no longer meet its objective is ``trap``: an unfair test, not a
+FlowTest bug.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from synthesis.model.errors import ProblemError
+
+
+@dataclass
+class Trace:
+    """One run: the seed, the run states after reset and every step, actions, verdict."""
+
+    env_id: str
+    sut: str
+    seed: int
+    states: list[Any] = field(default_factory=list)
+    actions: list[int] = field(default_factory=list)
+    verdict: dict[str, Any] = field(default_factory=dict)
+    kind: str = "pass"
+    reason: str = ""
+    tester: str = "synthesized"
+
+    @property
+    def failed(self) -> bool:
+        return self.kind != "pass"
+
+
+
+def make_tester_env(env_id: str, tester: str) -> Any:
+    """The env ``env_id`` with ``tester`` on the environment side: :func:`make_env` for
+    ``synthesized`` (the synthesized test as the single-agent env plays it), else
+    :class:`agents.testers.VersusTesterEnv` on the same problem and step budget.
+
+    Raises
+    ------
+    ProblemError
+        On an unknown tester, or one that cannot play ``env_id``.
+    """
+    if tester == "synthesized":
+        return make_env(env_id)
+    from agents.base import PolicyError
+    from agents.testers import VersusTesterEnv, problem_of
+
+    make_env(env_id).close()  # an unknown ID is reported as make_env reports it
+    try:
+        problem, max_steps = problem_of(env_id)
+        return VersusTesterEnv(problem, tester, max_steps=max_steps)
+    except PolicyError as exc:
+        raise ProblemError(f"--tester {tester}: {exc}") from None
+
+
+
+def make_env(env_id: str, **options: Any) -> Any:
+    """The environment named by ``env_id``: a registered Gymnasium ID
+    (``FlowTest-Maze2-v0``), else ``gymnasium.make("FlowTest-v0", test=env_id)``: a
+    built-in name, a problem file (synthesized once, then cached) or an artifact file.
+    ``options`` are env options (``memory``, ``obs_kind``, ...).
+
+    Raises
+    ------
+    ProblemError
+        If ``env_id`` is none of these (or the file is not a valid problem or artifact).
+    """
+    import gymnasium as gym
+
+    import flowtest_env
+
+    if env_id in gym.registry:
+        known = ", ".join(flowtest_env.ENV_IDS)
+        spec = gym.spec(env_id)
+        entry = spec.entry_point if isinstance(spec.entry_point, str) else getattr(spec.entry_point, "__module__", "")
+        if not str(entry).startswith("flowtest_env"):
+            raise ProblemError(f"{env_id!r} is not a FlowTest environment; known: {known}")
+        try:
+            env = gym.make(env_id, **options)
+        except gym.error.Error as exc:
+            raise ProblemError(f"environment {env_id!r}: {exc}") from None
+        if not isinstance(env.unwrapped, flowtest_env.FlowTestEnv):
+            env.close()
+            raise ProblemError(f"{env_id!r} is not a FlowTest environment; known: {known}")
+        return env
+    try:
+        return gym.make(flowtest_env.ANY_TEST_ID, test=env_id, **options)
+    except ProblemError as exc:
+        if Path(env_id).suffix or Path(env_id).exists():
+            raise
+        known = ", ".join(flowtest_env.ENV_IDS)
+        raise ProblemError(
+            f"unknown environment {env_id!r}: not a registered ID ({known}), a built-in name or a file"
+        ) from exc
+
+
+def classify(env: Any, verdict: dict[str, Any]) -> tuple[str, str]:
+    """``(kind, reason)`` of a finished run: ``pass``, ``sut`` (a SUT failure) or ``test``
+    (a FlowTest bug); see the module docstring."""
+    met = verdict["system_objective"] == "met"
+    u = env.unwrapped
+    if hasattr(u, "trapped"):  # another tester than the synthesized one: no guarantee to break
+        if met:
+            return "pass", ""
+        if u.trapped():
+            return "trap", "trapped: the tester closed every way to the goal (an unfair test)"
+        if verdict["system_objective"] == "violated":
+            return "sut", "violated the system objective"
+        return "sut", f"did not meet the system objective within {verdict['steps']} steps"
+    if met and not verdict["test_objective_realized"]:
+        return "test", "met the system objective without realizing the test objective"
+    if met:
+        return "pass", ""
+    game, run = u.game, u.run
+    if not can_still_meet(game, run) and _reachable_past_walls(game, run.history, run.system):
+        return "test", "trapped: the test's restrictions closed every way to the goal"
+    if verdict["system_objective"] == "violated":
+        return "sut", "violated the system objective"
+    return "sut", f"did not meet the system objective within {verdict['steps']} steps"
+
+
+def can_still_meet(game: Any, run: Any) -> bool:
+    """Whether some sequence of legal SUT actions from ``run`` meets the system objective,
+    against the test as it really answers: its restrictions per history and its test
+    agent moving by the synthesized strategy (no step budget).
+
+    The test is deterministic, so this is a search over the run states
+    ``(system, history, agent, memory)`` reachable from ``run``; ``run`` is not changed.
+    A run that ends where this is false, although the static walls alone would let the
+    system through (:func:`_reachable_past_walls`), was trapped by the test.
+    """
+    if run.outcome == "met":
+        return True
+    if run.done:
+        return False
+    seen = {run.key()}
+    frontier = [run.copy()]
+    while frontier:
+        nxt = []
+        for r in frontier:
+            for a in np.flatnonzero(game.action_mask(r)):
+                r2 = r.copy()
+                game.step(r2, int(a))
+                if r2.outcome == "met":
+                    return True
+                k = r2.key()
+                if r2.done or k in seen:
+                    continue
+                seen.add(k)
+                nxt.append(r2)
+        frontier = nxt
+    return False
+
+
+_WALL_GAMES: dict[int, Any] = {}
+
+
+def _reachable_past_walls(game: Any, history: int, state: int) -> bool:
+    """Whether the system objective is reachable from ``(state, history)`` when only the
+    static walls are enforced (the game with an external tester computes exactly this)."""
+    from flowtest_env.game import TestGame
+
+    key = id(game.artifact)
+    walls = _WALL_GAMES.get(key)
+    if walls is None:
+        walls = _WALL_GAMES[key] = TestGame(game.artifact, game.setting, external_tester=True)
+    return not walls.doomed[history][state]
+
+
+def run_episode(env: Any, policy: Any, env_id: str, sut: str, seed: int, record: bool = True,
+                tester: str = "synthesized") -> Trace:
+    """Play one seeded episode; the trace keeps copies of the run states when ``record``."""
+    obs, info = env.reset(seed=seed)
+    policy.reset(seed)
+    u = env.unwrapped
+    trace = Trace(env_id, sut, seed, tester=tester)
+    if record:
+        trace.states.append(u.run.copy())
+    while True:
+        action = int(policy.act(obs, info))
+        obs, _, terminated, truncated, info = env.step(action)
+        trace.actions.append(action)
+        if record:
+            trace.states.append(u.run.copy())
+        if terminated or truncated:
+            break
+    trace.verdict = dict(info["verdict"])
+    trace.kind, trace.reason = classify(env, trace.verdict)
+    return trace
+
+
+def sut_policy(sut: str, env: Any) -> Any:
+    """The SUT called ``sut`` for ``env`` (:func:`agents.registry.make_policy`), its errors
+    (unknown name, a model that does not fit the env) reported as invalid input.
+
+    Raises
+    ------
+    ProblemError
+        If ``sut`` names no policy or one that cannot play ``env``.
+    """
+    from agents.base import PolicyError
+    from agents.registry import make_policy
+
+    try:
+        return make_policy(sut, env)
+    except PolicyError as exc:
+        raise ProblemError(f"--sut {sut}: {exc}") from None

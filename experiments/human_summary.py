@@ -1,0 +1,99 @@
+"""The few lines a person reads after ``flowtest synthesize`` (without ``--json``)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from synthesis.artifacts.summary import stop_note
+
+
+def _state_text(ts: Any, s: int) -> str:
+    """A state as people write it: ``(r,c)``, ``(r,c)@fuel`` or the state's name."""
+    key = ts.states[s]
+    if ts.kind == "grid":
+        return f"({key[0]},{key[1]})"
+    if ts.kind == "fuel":
+        (r, c), f = key
+        return f"({r},{c})@{f}"
+    return str(key)
+
+
+def _place_text(ts: Any, p: int) -> str:
+    place = ts.places[p]
+    if isinstance(place, tuple) and len(place) == 2:
+        return f"({place[0]},{place[1]})"
+    return str(place)
+
+
+def _limited(items: Sequence[str], limit: int = 10) -> str:
+    if len(items) <= limit:
+        return ", ".join(items)
+    return ", ".join(items[:limit]) + f", ... ({len(items) - limit} more)"
+
+
+def _moves_text(ts: Any, mask: np.ndarray) -> list[str]:
+    """Restricted moves as ``a -> b``, one per move (fuel levels kept apart)."""
+    return [f"{_state_text(ts, int(ts.src[m]))} -> {_state_text(ts, int(ts.dst[m]))}" for m in np.flatnonzero(mask)]
+
+
+def _walls_text(ts: Any, mask: np.ndarray) -> list[str]:
+    """Blocked moves merged by place: ``a | b`` when both directions are blocked."""
+    pairs = {(int(ts.place[ts.src[m]]), int(ts.place[ts.dst[m]])) for m in np.flatnonzero(mask)}
+    out: list[str] = []
+    for a, b in sorted(pairs, key=lambda ab: (str(ts.places[ab[0]]), str(ts.places[ab[1]]))):
+        if (b, a) in pairs:
+            if str(ts.places[a]) < str(ts.places[b]):
+                out.append(f"{_place_text(ts, a)} | {_place_text(ts, b)}")
+        else:
+            out.append(f"{_place_text(ts, a)} -> {_place_text(ts, b)}")
+    return out
+
+
+def human_summary(test: Any, summary: dict) -> str:
+    """A few lines a person reads after ``flowtest synthesize`` (without ``--json``)."""
+    p, ts, strategy = test.problem, test.problem.system, test.strategy
+    stats = summary["stats"]
+    gap = stats.get("mip_gap")
+    if summary["status"] == "optimal":
+        status = "optimal (proven, gap 0)"
+    else:
+        status = f"{summary['status']} (gap {'unknown' if gap is None else f'{gap:.2%}'})"
+    lines = [
+        f"{p.name}: {p.kind} test, {status}{stop_note(summary)}",
+        f"  objectives   system: {p.system_objective.text}   test: {p.test_objective.text}",
+        f"  flow         {summary['flow']} (edge-disjoint ways through the test)",
+        f"  cuts         {summary['n_cuts']} edges of the product graph",
+    ]
+    reactive = strategy.restrictions & ~strategy.static_obstacles[None, :]
+    histories = [q for q in range(strategy.n_hist) if reactive[q].any()]
+    if histories:
+        lines.append("  restrictions by history (moves the test blocks while the history holds):")
+        for q in histories:
+            lines.append(f"    {test.spec.history_name(q)} [{test.spec.describe(q)}]: {_limited(_moves_text(ts, reactive[q]))}")
+    elif p.kind != "static":
+        lines.append("  restrictions none")
+    walls = _walls_text(ts, strategy.static_obstacles)
+    lines.append(f"  static walls {_limited(walls) if walls else 'none'}")
+    if test.agent is not None and "counterexamples" in summary:
+        lines.append(f"  test agent   {summary['counterexamples']} counterexample(s)")
+    graph = stats["graph"]
+    lines.append(
+        f"  model        graph {graph['nodes']} nodes / {graph['edges']} edges; MILP {stats['binary_vars']} binary, "
+        f"{stats['continuous_vars']} continuous, {stats['constraints']} constraints"
+    )
+    gap_text = "" if summary["status"] == "optimal" or gap is None else f", gap {gap:.2%}"
+    loop = stats.get("agent_seconds")
+    if loop:  # the counterexample-guided loop: many MILP solves, GR(1) games, the closed-loop check
+        n = len(test.agent.iterations)
+        lines.append(
+            f"  time         graphs {loop['graphs']:.2f} s, agent loop {loop['total'] - loop['graphs']:.2f} s "
+            f"({n} MILP solve(s) {loop['milp']:.2f} s, games and GR(1) {loop['game'] + loop['gr1']:.2f} s, checks "
+            f"{loop['verify']:.2f} s){gap_text}; total {loop['total']:.2f} s"
+        )
+    else:
+        lines.append(f"  time         graphs {stats['graph_seconds']:.2f} s, solve {stats['solve_seconds']:.2f} s{gap_text}")
+    lines.append(f"  check        bypass flow {summary['bypass_flow']} (must be 0), feasibility flows ok")
+    return "\n".join(lines)

@@ -1,0 +1,142 @@
+"""``flowtest synthesize PROBLEM``: turn a problem into a checked test.
+
+The problem is a TOML file or a built-in name. The command prints a summary (or, with
+``--json``, exactly the JSON object that problem-format.md fixes), and can write the test
+artifact (``--out``) and a picture (``--plot``). Progress goes to standard error only, so
+standard output stays clean for scripts; whatever a library prints while the solver runs
+is kept off it (:func:`synthesis.routing.solver_control.stdout_guard`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from synthesis import pipeline
+from synthesis.model.errors import ProblemError
+from synthesis.routing.solver_control import SolveControl, status_line, stdout_guard
+
+from .arguments import positive_int, positive_seconds, relative_gap
+from .command import Command
+from .exits import EXIT_OK
+from .human_summary import human_summary
+from .outputs import check_output_path, json_safe, print_json, write_atomically
+from .progress import PROGRESS_EVERY, StageProgress
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """Declare ``flowtest synthesize``'s arguments."""
+    from synthesis.model.strategy import SETTINGS
+    from synthesis.problems.builtins import BUILTINS
+
+    p.add_argument(
+        "problem",
+        metavar="PROBLEM",
+        help=f"a TOML problem file, or a built-in problem: {', '.join(BUILTINS)}",
+    )
+    p.add_argument("--json", action="store_true", help="print the JSON summary of problem-format.md (only it) on stdout")
+    p.add_argument("--out", metavar="ARTIFACT", type=Path, help="write the synthesized-test artifact (JSON) here")
+    p.add_argument("--plot", metavar="PNG", type=Path, help="draw the test (PNG, SVG or PDF by the file's suffix)")
+    p.add_argument("--time-limit", metavar="S", type=positive_seconds, help="solver time limit in seconds (default: the problem's, else none)")
+    p.add_argument(
+        "--after-first", metavar="S", type=positive_seconds,
+        help="stop S seconds after the first test is found (--time-limit then bounds the time to it; "
+        "the paper's budget: --time-limit 600 --after-first 60)",
+    )
+    p.add_argument("--gap", metavar="G", type=relative_gap, default=0.0, help="relative MIP gap at which to stop (default 0: prove optimality)")
+    p.add_argument("--threads", metavar="N", type=positive_int, help="solver threads (default 1: the same answer on every machine; at most the machine's CPUs)")
+    p.add_argument("--setting", choices=SETTINGS, help="how reactive obstacles are shown (default: the problem's, else instantaneous)")
+    p.add_argument("--force", action="store_true", help="overwrite existing --out/--plot files")
+    p.add_argument("--no-size-limit", action="store_true",
+                   help="synthesize even a problem whose product graph may exceed "
+                        f"{pipeline.MAX_GRAPH_EDGES:,} edges (refused by default, with an estimate)")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress lines on stderr")
+    p.add_argument(
+        "--progress", metavar="S", nargs="?", type=positive_seconds, const=PROGRESS_EVERY,
+        help="also when stderr is not a terminal (a log, a pipe), print the solver's status (best "
+        f"test, bound, gap) on stderr every S seconds (default {PROGRESS_EVERY:g}); on a terminal "
+        "the live line always shows it",
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    """``flowtest synthesize``: load, synthesize, check, then print and write outputs."""
+    from synthesis.artifacts.artifact import artifact_of
+    from synthesis.artifacts.summary import summary_of
+    from synthesis.problems.load import load_problem
+
+    outputs: list[tuple[Path, str]] = []
+    if args.out is not None:
+        outputs.append((args.out, "artifact"))
+    if args.plot is not None:
+        outputs.append((args.plot, "plot"))
+    if len(outputs) == 2 and args.out.resolve() == args.plot.resolve():
+        raise ProblemError("--out and --plot name the same file")
+    for path, what in outputs:  # refuse before spending time on synthesis
+        check_output_path(path, args.force, what)
+    if args.plot is not None:
+        from .plots import check_plot_format
+
+        check_plot_format(args.plot)
+
+    cpus = os.cpu_count() or 1
+    if args.threads is not None and args.threads > cpus:
+        raise ProblemError(f"--threads {args.threads} is more than the {cpus} CPUs of this machine")
+    from synthesis.problems.files import MAX_GRID_CELLS
+
+    max_cells = None if args.no_size_limit else MAX_GRID_CELLS
+    problem = _load(lambda name: load_problem(name, max_cells), args.problem)
+    control = SolveControl()
+    every = getattr(args, "progress", None)
+    # stdout is ours: whatever a library prints meanwhile (HiGHS's banner, a C printf)
+    # goes to /dev/null, and only our summary reaches the real stdout, after
+    with stdout_guard(), StageProgress(enabled=not args.quiet, status=lambda: status_line(control), every=every) as progress:
+        progress(f"synthesizing {problem.name} ({problem.kind} test)")
+        options = pipeline.SynthesisOptions(
+            time_limit=args.time_limit,
+            after_first=args.after_first,
+            mip_rel_gap=args.gap,
+            threads=args.threads,
+            setting=args.setting,
+            progress=progress,
+            control=control,
+            max_graph_edges=None if args.no_size_limit else pipeline.MAX_GRAPH_EDGES,
+        )
+        test = pipeline.synthesize(problem, options)
+        summary = json_safe(summary_of(test))
+        if args.out is not None:
+            progress(f"writing the artifact {args.out}")
+            check_output_path(args.out, args.force, "artifact")
+            write_atomically(args.out, artifact_of(test, summary).save)
+        if args.plot is not None:
+            progress(f"drawing {args.plot}")
+            from .plots import plot_test
+
+            check_output_path(args.plot, args.force, "plot")
+            write_atomically(args.plot, lambda tmp: plot_test(test, tmp))
+        progress.done(f"done in {progress.elapsed():.1f} s")
+
+    if args.json:
+        print_json(summary)
+    else:
+        sys.stdout.write(human_summary(test, summary) + "\n")
+        sys.stdout.flush()
+    return EXIT_OK
+
+
+def _load(load_problem: Callable[[str], Any], name: str) -> Any:
+    """Load a problem; prefix errors with the file name when the message lacks it."""
+    try:
+        return load_problem(name)
+    except ProblemError as exc:
+        message = str(exc)
+        if name not in message and Path(name).name not in message and Path(name).exists():
+            raise ProblemError(f"{name}: {message}") from None
+        raise
+
+
+COMMAND = Command("synthesize", "synthesize a test for a problem (TOML file or built-in name)", add_arguments, run)
