@@ -52,7 +52,7 @@ def _walls_text(ts: Any, mask: np.ndarray) -> list[str]:
     return out
 
 
-def human_summary(test: Any, summary: dict) -> str:
+def human_summary(test: Any, summary: dict[str, Any]) -> str:
     """A few lines a person reads after ``flowtest synthesize`` (without ``--json``)."""
     p, ts, strategy = test.problem, test.problem.system, test.strategy
     stats = summary["stats"]

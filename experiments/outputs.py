@@ -104,7 +104,7 @@ def prepare_output_folder(folder: Path, marker: str, force: bool, what: str, hin
         write_atomically(mark, lambda tmp: tmp.write_text(f"written by FlowTest ({what}); its files may be overwritten by the next run\n"))
 
 
-def write_atomically(path: Path, write: Callable[[Path], None]) -> None:
+def write_atomically(path: Path, write: Callable[[Path], object]) -> None:
     """Create ``path``'s parent directories and write it through a temporary file.
 
     ``write`` writes a given path; the result replaces ``path`` only once complete, so
