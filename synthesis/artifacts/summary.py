@@ -6,6 +6,12 @@ from typing import Any
 
 import numpy as np
 
+from ..graphs.automata import SpecificationProduct
+from ..graphs.products import Products
+from ..model.strategy import TestStrategy
+from ..pipeline import SynthesizedTest
+from ..problems.problem import Problem
+
 DERIVED_KEYS: tuple[str, ...] = ("problem", "environment", "cuts", "restrictions", "static_obstacles", "bypass_flow", "histories")
 """Summary fields that come back from the problem, its product graphs and the test's cuts
 (:func:`derived_summary`); the rest says how the solver got there."""
@@ -13,7 +19,9 @@ DERIVED_STATS: tuple[str, ...] = ("transition_system", "automaton", "graph", "sy
 """``stats`` fields that come back the same way (graph sizes)."""
 
 
-def derived_summary(problem: Any, spec: Any, products: Any, cut_edges: np.ndarray, strategy: Any, bypass_flow: int) -> dict[str, Any]:
+def derived_summary(
+    problem: Problem, spec: SpecificationProduct, products: Products, cut_edges: np.ndarray, strategy: TestStrategy, bypass_flow: int
+) -> dict[str, Any]:
     """The summary fields of :data:`DERIVED_KEYS` (and ``stats`` of :data:`DERIVED_STATS`) of
     a test: what its problem, product graphs, cut edges of G and strategy determine."""
     ts, g = problem.system, products.virtual
@@ -46,7 +54,7 @@ def derived_summary(problem: Any, spec: Any, products: Any, cut_edges: np.ndarra
     }
 
 
-def summary_of(test: Any) -> dict[str, Any]:
+def summary_of(test: SynthesizedTest) -> dict[str, Any]:
     """The problem-format.md JSON object of a :class:`~synthesis.pipeline.SynthesizedTest`."""
     p, spec, prods, r = test.problem, test.spec, test.products, test.routing
     d = derived_summary(p, spec, prods, r.cut_edges, test.strategy, test.checks.bypass_flow)
