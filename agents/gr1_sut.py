@@ -144,4 +144,4 @@ def make_gr1(env: Any, arg: str) -> Policy:
     """The GR(1) SUT for ``env`` (``gr1``; ``gr1:verify`` checks every synthesized strategy)."""
     policy = GR1SUT(env, verify=arg == "verify")
     policy.reset(None)
-    return policy  # type: ignore[return-value]
+    return policy

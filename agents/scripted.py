@@ -40,7 +40,7 @@ from typing import Any
 
 import numpy as np
 
-from flowtest_env.game import TestGame
+from flowtest_env.game import TestGame, grid_cell
 from flowtest_env.system_product import INF
 
 from .base import Policy, PolicyError, action_mask_of
@@ -173,9 +173,10 @@ class Greedy(Tracked):
         assert game is not None
         ts = game.ts
         if ts.layout is not None:
-            goals = [ts.places[int(p)] for p in np.unique(ts.place[ts.terminal])]
+            goals = [grid_cell(ts.places[int(p)]) for p in np.unique(ts.place[ts.terminal])]
+            cells = [grid_cell(place) for place in ts.places]
             self.h = np.array(
-                [min(abs(c[0] - g[0]) + abs(c[1] - g[1]) for g in goals) if goals else 0 for c in ts.places],
+                [min(abs(c[0] - g[0]) + abs(c[1] - g[1]) for g in goals) if goals else 0 for c in cells],
                 dtype=np.int64,
             )
         else:

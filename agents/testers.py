@@ -81,13 +81,13 @@ class PPOTester:
     def __init__(self, model: Any, name: str, env: raw_env) -> None:
         if getattr(model, "flowtest_role", None) != TESTER_ROLE:
             raise PolicyError(f"model {name!r} is not a tester (train one with `flowtest train-tester`)")
-        obs_shape = env.observation_space(TESTER)["observation"].shape
+        obs_shape = tuple(env.observation_space(TESTER)["observation"].shape or ())
         n = int(env.action_space(TESTER).n)
-        if tuple(model.observation_space.shape) != tuple(obs_shape) or int(model.action_space.n) != n:
+        if tuple(model.observation_space.shape) != obs_shape or int(model.action_space.n) != n:
             raise PolicyError(
                 f"tester {name!r} was trained on {getattr(model, 'flowtest_problem', 'another problem')!r} "
                 f"(observations {tuple(model.observation_space.shape)}, {int(model.action_space.n)} actions); "
-                f"{env.problem!r} has {tuple(obs_shape)} and {n}"
+                f"{env.problem!r} has {obs_shape} and {n}"
             )
         self.model = model
         self.name = name
