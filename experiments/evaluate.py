@@ -141,7 +141,7 @@ class Cell:
                     "kind": t.kind,
                     "reason": t.reason,
                     "verdict": t.verdict,
-                    "replay": replay_command(self.env_id, self.sut, t.seed, self.tester),
+                    "replay": replay_command(t.env_id, self.sut, t.seed, self.tester),
                 }
                 for t in fails[:MAX_LISTED]
             ],
@@ -281,9 +281,14 @@ def _filmstrip(trace: Trace, path: Path) -> None:
     filmstrip(game, trace.states, trace.actions, title, path)
 
 
-def write_report(cells: Sequence[Cell], out: Path) -> list[dict[str, Any]]:
+def write_report(cells: Sequence[Cell], out: Path, tests: Sequence[TestInfo] | None = None) -> list[dict[str, Any]]:
     """Write ``results.json``, ``report.md``, ``report.html``, the trace pictures and
-    filmstrips (``traces/``) and a picture of each test (``tests/``)."""
+    filmstrips (``traces/``) and a picture of each test (``tests/``).
+
+    A cell may gather runs of several tests (``flowtest benchmark``: one cell per system
+    and pool split): each run's picture and replay command use the run's own
+    ``Trace.env_id``, and ``tests`` then describes the cells' columns (default: one
+    :class:`TestInfo` per cell ``env_id``, drawn by :func:`test_infos`)."""
     out.mkdir(parents=True, exist_ok=True)
     (out / "traces").mkdir(exist_ok=True)
     for cell in cells:
@@ -300,7 +305,8 @@ def write_report(cells: Sequence[Cell], out: Path) -> list[dict[str, Any]]:
             name = f"traces/{_slug(cell.sut)}--{_slug(cell_name)}--filmstrip.png"
             write_atomically(out / name, lambda tmp, tr=failing: _filmstrip(tr, tmp))
             cell.pictures["filmstrip"] = name
-    tests = test_infos(list(dict.fromkeys(c.env_id for c in cells)), out)
+    if tests is None:
+        tests = test_infos(list(dict.fromkeys(c.env_id for c in cells)), out)
     records = [cell.record() for cell in cells]
     write_atomically(out / "results.json", lambda tmp: tmp.write_text(json.dumps(json_safe(records), indent=1) + "\n"))
     md, body = _markdown(records), render_html(records, tests, (TESTER_COLUMNS, tester_comparison_rows(records)))

@@ -57,6 +57,7 @@ DEFAULTS: dict[str, Any] = {
     "ent_coef": 0.01,
     "n_epochs": 10,
     "net_arch": [64, 64],
+    "lstm_hidden_size": 256,
     "shaping": 10.0,
     "memory": "visited",
     "obs_kind": "flat",
@@ -64,8 +65,9 @@ DEFAULTS: dict[str, Any] = {
 }
 """Training settings: the algorithm; 8 envs stepped in one process (one batched policy
 call per step of all eight), rollouts of 8 x 128 steps, a small network, a high learning
-rate; the env options: the shaping scale (0 = off), the SUT's memory, the observation
-(``pad_to`` is used by ``obs_kind="padded"`` only)."""
+rate; the LSTM's width (RecurrentPPO only; sb3-contrib's default); the env options: the
+shaping scale (0 = off), the SUT's memory, the observation (``pad_to`` is used by
+``obs_kind="padded"`` only)."""
 
 ENV_OPTION_KEYS = ("memory", "shaping", "obs_kind", "pad_to")
 """The settings that are env options (the rest configure the algorithm)."""
@@ -82,11 +84,12 @@ def env_options(settings: dict[str, Any]) -> dict[str, Any]:
     return opts
 
 
-def make_training_env(env_id: str, seed: int, settings: dict[str, Any]) -> Any:
-    """The env with the env options of ``settings`` (:func:`env_options`), seeded;
-    wrapped for MaskablePPO (:class:`sb3_contrib.common.wrappers.ActionMasker`) unless
-    the algorithm is RecurrentPPO."""
-    env = make_env(env_id, **env_options(settings))
+def make_training_env(env_id: str, seed: int, settings: dict[str, Any], env_kwargs: dict[str, Any] | None = None) -> Any:
+    """The env with the env options of ``settings`` (:func:`env_options`) and any further
+    ``env_kwargs`` (e.g. a named pool's ``pool``, ``split``, ``count``), seeded; wrapped for
+    MaskablePPO (:class:`sb3_contrib.common.wrappers.ActionMasker`) unless the algorithm
+    is RecurrentPPO."""
+    env = make_env(env_id, **env_options(settings), **(env_kwargs or {}))
     env.reset(seed=seed)
     env.action_space.seed(seed)
     if settings["algo"] == "recurrent-ppo":
@@ -96,8 +99,9 @@ def make_training_env(env_id: str, seed: int, settings: dict[str, Any]) -> Any:
     return ActionMasker(env, lambda e: e.unwrapped.action_masks())
 
 
-def make_training_vec_env(env_id: str, seed: int, settings: dict[str, Any]) -> Any:
-    """``settings["n_envs"]`` training envs (seeds ``seed``, ``seed + 1``, ...) in one
+def make_training_vec_env(env_id: str, seed: int, settings: dict[str, Any], env_kwargs: dict[str, Any] | None = None) -> Any:
+    """``settings["n_envs"]`` training envs (seeds ``seed``, ``seed + 1``, ...; ``env_kwargs``
+    as for :func:`make_training_env`) in one
     process (SB3's ``DummyVecEnv``): the envs step in microseconds, the policy network is
     the cost, and it runs once per step for all of them."""
     from stable_baselines3.common.vec_env import DummyVecEnv
@@ -105,7 +109,7 @@ def make_training_vec_env(env_id: str, seed: int, settings: dict[str, Any]) -> A
     n = int(settings["n_envs"])
     if n < 1:
         raise ProblemError("n_envs must be at least 1")
-    return DummyVecEnv([(lambda i=i: make_training_env(env_id, seed + i, settings)) for i in range(n)])
+    return DummyVecEnv([(lambda i=i: make_training_env(env_id, seed + i, settings, env_kwargs)) for i in range(n)])
 
 
 def check_settings(settings: dict[str, Any]) -> None:
@@ -121,7 +125,7 @@ def check_settings(settings: dict[str, Any]) -> None:
         raise ProblemError(f"unknown training settings {sorted(unknown)}; known: {', '.join(DEFAULTS)}")
     if settings["algo"] not in ALGOS:
         raise ProblemError(f"unknown --algo {settings['algo']!r}; expected one of {', '.join(ALGOS)}")
-    for key in ("n_envs", "n_steps", "batch_size", "n_epochs"):
+    for key in ("n_envs", "n_steps", "batch_size", "n_epochs", "lstm_hidden_size"):
         if int(settings[key]) < 1:
             raise ProblemError(f"--{key.replace('_', '-')} must be at least 1")
     if not 0 < float(settings["gamma"]) <= 1:
@@ -238,7 +242,8 @@ SETTING_HELP: dict[str, str] = {
     "algo": f"algorithm: {', '.join(ALGOS)}",
     "n_envs": "envs stepped together", "n_steps": "rollout steps per env", "batch_size": "minibatch size",
     "learning_rate": "learning rate", "gamma": "discount", "ent_coef": "entropy bonus", "n_epochs": "epochs per rollout",
-    "net_arch": "hidden layer widths, comma-separated", "shaping": "env option: shaping scale, 0 = off",
+    "net_arch": "hidden layer widths, comma-separated", "lstm_hidden_size": "LSTM width (recurrent-ppo only)",
+    "shaping": "env option: shaping scale, 0 = off",
     "memory": "env option: the SUT's memory, none or visited", "obs_kind": "env option: flat, grid or padded",
     "pad_to": "env option: grid side of obs_kind=padded",
 }

@@ -14,7 +14,7 @@ import importlib.util
 import sys
 import time
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -48,18 +48,22 @@ def make_ppo(env: Any, settings: dict[str, Any], seed: int, recurrent: bool = Fa
     """A ``MaskablePPO`` (MLP policy, action masks) or, with ``recurrent``, a
     ``RecurrentPPO`` (LSTM policy) on ``env`` with the algorithm's ``settings``
     (``n_steps``, ``batch_size``, ``learning_rate``, ``gamma``, ``ent_coef``, ``n_epochs``,
-    ``net_arch``): on the CPU, one torch thread, seeded, so a seed gives the same model."""
+    ``net_arch``, and ``lstm_hidden_size`` when recurrent): on the CPU, one torch thread,
+    seeded, so a seed gives the same model."""
     import torch
     from sb3_contrib import MaskablePPO, RecurrentPPO
 
     torch.manual_seed(seed)
     torch.set_num_threads(1)
     cls, policy = (RecurrentPPO, "MlpLstmPolicy") if recurrent else (MaskablePPO, "MlpPolicy")
+    policy_kwargs: dict[str, Any] = {"net_arch": list(settings["net_arch"])}
+    if recurrent:
+        policy_kwargs["lstm_hidden_size"] = int(settings["lstm_hidden_size"])
     return cls(
         policy, env, seed=seed, verbose=0, device="cpu",
         n_steps=settings["n_steps"], batch_size=settings["batch_size"], learning_rate=settings["learning_rate"],
         gamma=settings["gamma"], ent_coef=settings["ent_coef"], n_epochs=settings["n_epochs"],
-        policy_kwargs={"net_arch": list(settings["net_arch"])},
+        policy_kwargs=policy_kwargs,
     )
 
 
@@ -135,7 +139,14 @@ def _progress_callback(total: int) -> Any:
     return Bar()
 
 
-def learn(model: Any, steps: int, curve: EpisodeCurve, progress_bar: bool) -> float:
+class Recorder(Protocol):
+    """What :func:`learn` records with: an SB3 callback (:class:`EpisodeCurve`, or the
+    held-out learning curve of ``flowtest benchmark``)."""
+
+    callback: Any
+
+
+def learn(model: Any, steps: int, curve: Recorder, progress_bar: bool) -> float:
     """Train ``model`` for ``steps`` time steps, recording ``curve`` (and showing a progress
     bar on stderr when asked); the seconds it took."""
     t0 = time.perf_counter()
