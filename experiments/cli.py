@@ -22,8 +22,6 @@ import os
 import sys
 from collections.abc import Sequence
 
-from synthesis.routing.solver_control import solves_running
-
 from .arguments import ArgumentParser
 from .command import Command
 from .commands import COMMANDS
@@ -63,11 +61,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         # the user's own act, not an error: one plain line, no traceback
         say(f"{PROG}: interrupted")
-        if argv is None and solves_running():
-            # we are the process (the console script), and a solver thread has not
-            # reached a point where it notices the stop yet: exiting normally would wait
-            # for it at interpreter shutdown, so leave now (outputs are written
-            # atomically, so no partial file is left behind)
+        if argv is None:
+            # we are the process (the console script): leave now. Exiting normally would
+            # wait at interpreter shutdown for a solver thread that has not yet reached a
+            # point where it notices the stop (solver_control.solves_running()), and
+            # tearing torch down after a training run takes seconds under load. Outputs
+            # are written atomically and their temporary files removed while the
+            # interrupt unwound, so no partial file is left behind.
             flush_and_exit(EXIT_INTERRUPTED)
         return EXIT_INTERRUPTED
     except BrokenPipeError:
