@@ -10,7 +10,7 @@ Layers, each importing only downward::
 
     cli (parser, main)          this module
     commands (the list)         experiments/commands.py
-    one module per command      synthesize, demo, evaluate, train, train_tester
+    one module per command      synthesize, demo, evaluate, train, train_tester, benchmark
     episode running, training   experiments/episodes.py, experiments/training.py
     plumbing                    exits, arguments, outputs, progress, command
 """

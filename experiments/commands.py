@@ -6,7 +6,7 @@ adding a command is one import and one entry here.
 
 from __future__ import annotations
 
-from . import demo, evaluate, synthesize, train, train_tester
+from . import benchmark, demo, evaluate, synthesize, train, train_tester
 from .command import Command
 
 COMMANDS: tuple[Command, ...] = (
@@ -15,5 +15,6 @@ COMMANDS: tuple[Command, ...] = (
     evaluate.COMMAND,
     train.COMMAND,
     train_tester.COMMAND,
+    benchmark.COMMAND,
 )
 """Every subcommand of ``flowtest``."""
