@@ -27,13 +27,21 @@ is refused with a message naming what is wrong.
 
 from __future__ import annotations
 
+import hashlib
 import os
 from functools import cache
 from pathlib import Path
 from typing import Any
 
-from synthesis.artifacts.artifact import TestArtifact, problem_source_hash, verify_artifact
+from gymnasium import logger
+
+from synthesis.artifacts.artifact import TestArtifact, artifact_of, problem_source_hash, verify_artifact
+from synthesis.artifacts.provenance import cache_key, versions
+from synthesis.artifacts.summary import summary_of
 from synthesis.model.errors import ProblemError
+from synthesis.pipeline import SynthesisOptions, synthesize
+from synthesis.problems.builtins import BUILTINS
+from synthesis.routing.solver_control import solver_version
 
 from .game import TestGame
 
@@ -85,13 +93,6 @@ def synthesize_artifact(name: str, node_limit: int | None = None) -> TestArtifac
     KeyError
         If ``name`` is not a built-in problem.
     """
-    from synthesis.artifacts.artifact import artifact_of
-    from synthesis.artifacts.provenance import versions
-    from synthesis.artifacts.summary import summary_of
-    from synthesis.pipeline import SynthesisOptions, synthesize
-    from synthesis.problems.builtins import BUILTINS
-    from synthesis.routing.solver_control import solver_version
-
     if name not in BUILTINS:
         raise KeyError(f"unknown built-in problem {name!r}; known: {', '.join(sorted(BUILTINS))}")
     options = artifact_options(node_limit)
@@ -111,15 +112,11 @@ SOLVER_KEY = "made_with"
 def builtin_cache_path(name: str) -> Path:
     """The cache file of a built-in's artifact synthesized on this machine, under a key
     of its name, the options and the current versions."""
-    from synthesis.artifacts.provenance import cache_key
-
     return cache_dir() / "builtins" / name / f"{cache_key('builtin', {'name': name, 'options': artifact_options()})}.json"
 
 
 def file_sha256(path: Path) -> str:
     """The SHA-256 hex digest of a file's bytes."""
-    import hashlib
-
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
@@ -170,8 +167,6 @@ def load_shipped(path: Path, expected_source: str) -> TestArtifact:
 
 def warn_refused_entry(exc: ProblemError) -> None:
     """Say that a cache entry was refused (and why) before it is synthesized again."""
-    from gymnasium import logger
-
     logger.warn(f"refused a cache entry: {exc}")
 
 
@@ -201,8 +196,6 @@ def load_builtin(name: str) -> TestArtifact:
     ProblemError
         If the shipped artifact or the cache entry fails its checks (see module docstring).
     """
-    from synthesis.problems.builtins import BUILTINS
-
     if name not in BUILTINS:
         raise ProblemError(f"unknown built-in problem {name!r}; known: {', '.join(sorted(BUILTINS))}")
     expected = problem_source_hash(BUILTINS[name]())
@@ -215,8 +208,6 @@ def load_builtin(name: str) -> TestArtifact:
             return load_checked(cached, expected, "synthesizing it again")
         except ProblemError as exc:  # FlowTest's own file: refused, said why, rebuilt
             warn_refused_entry(exc)
-    from gymnasium import logger
-
     logger.warn(
         f"no shipped artifact for {name!r}: synthesizing it now (this can take minutes for large problems); "
         f"`python -m experiments.build_artifacts {name}` ships it, the result is cached in {cached}"

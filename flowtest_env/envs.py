@@ -19,9 +19,13 @@ import numpy as np
 from gymnasium import spaces
 
 from synthesis.artifacts.artifact import TestArtifact
+from synthesis.problems.random_grid import FAMILIES
+from synthesis.problems.random_worlds import POOL_KINDS, WORLDS
 
 from .encoding import Encoder, make_encoder
 from .game import GRID_ACTIONS, MET, VIOLATED, GameError, RunState, TestGame
+from .pools import random_grid_arguments
+from .random_grid import random_pool
 from .render import Renderer, ansi, make_renderer
 from .sources import TestLike, game_for
 from .validation import action_index, finite_float, one_of, positive_int
@@ -714,12 +718,6 @@ class RandomGridEnv(FlowTestEnv):
         shaping: float = 0.0,
         shaping_gamma: float = 0.99,
     ) -> None:
-        from synthesis.problems.random_grid import FAMILIES
-        from synthesis.problems.random_worlds import POOL_KINDS, WORLDS
-
-        from .pools import random_grid_arguments
-        from .random_grid import random_pool
-
         if isinstance(seeds, (str, bytes)) or not hasattr(seeds, "__iter__"):
             raise ValueError(f"seeds must be a list of non-negative integers, not {seeds!r}")
         for s in seeds:

@@ -348,7 +348,7 @@ def _synthesize_seeds(
         for seed in seeds:
             yield seed, pool_record(size, family, n, seed, kind, world)
         return
-    import ray
+    import ray  # the optional parallel path: Ray is not a core dependency
 
     started = not ray.is_initialized()
     if started:

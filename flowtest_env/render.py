@@ -22,6 +22,9 @@ from typing import Any
 
 import numpy as np
 
+from synthesis.model.specs import parse_formula, propositions
+
+from .encoding import system_propositions
 from .game import GRID_ACTIONS, RunState, TestGame
 
 RGB = tuple[int, int, int]
@@ -147,10 +150,6 @@ def marked_places(game: TestGame, prop: str, majority: bool = True) -> list[int]
 def hidden_propositions(game: TestGame) -> set[str]:
     """Propositions of the hidden test objective that the system objective does not
     mention (those it does are drawn as the system's own cells)."""
-    from synthesis.model.specs import parse_formula, propositions
-
-    from .encoding import system_propositions
-
     objectives = game.artifact.objectives
     return propositions(parse_formula(objectives["test"])) - set(system_propositions(game))
 
@@ -193,8 +192,6 @@ class GridRenderer:
     def __init__(self, game: TestGame, tile_size: int = 32, view: str = "system") -> None:
         if view not in ("system", "engineer"):
             raise ValueError(f"unknown view {view!r}; expected 'system' or 'engineer'")
-        from .encoding import system_propositions
-
         self.game, self.size, self.view = game, tile_size, view
         ts = game.ts
         lay = ts.layout
@@ -307,6 +304,7 @@ class GraphRenderer:
     def __init__(self, game: TestGame, tile_size: int = 32, view: str = "system") -> None:
         if view not in ("system", "engineer"):
             raise ValueError(f"unknown view {view!r}; expected 'system' or 'engineer'")
+        # matplotlib is imported only when a graph is drawn: it costs start-up time to every env
         import matplotlib
 
         matplotlib.use("Agg", force=False)
@@ -413,8 +411,6 @@ def ansi(game: TestGame, run: RunState, view: str = "system") -> str:
     ts = game.ts
     lines: list[str] = []
     ap = game.agent_place[run.agent] if run.agent >= 0 else -1
-    from .encoding import system_propositions
-
     props = system_propositions(game)
     test_props = hidden_propositions(game) if view == "engineer" else set()
     if game.is_grid:

@@ -25,11 +25,14 @@ import os
 from pathlib import Path
 from typing import Union
 
+from gymnasium import logger
+
 from synthesis.artifacts.artifact import FORMAT, TestArtifact, artifact_of
 from synthesis.artifacts.provenance import content_key
 from synthesis.artifacts.summary import summary_of
 from synthesis.model.errors import ProblemError
 from synthesis.pipeline import SynthesizedTest, synthesize
+from synthesis.problems.builtins import BUILTINS
 from synthesis.problems.files import load_problem_file
 from synthesis.problems.problem import Problem
 
@@ -45,8 +48,6 @@ _GAMES: dict[tuple[int, str | None, bool], tuple[TestArtifact, TestGame]] = {}
 
 def builtin_names() -> list[str]:
     """The built-in problem names, sorted."""
-    from synthesis.problems.builtins import BUILTINS
-
     return sorted(BUILTINS)
 
 
@@ -88,8 +89,6 @@ def _problem_file_artifact(path: Path, raw: bytes) -> TestArtifact:
         art.save(tmp)
         tmp.replace(cached)
     else:
-        from gymnasium import logger
-
         logger.warn(
             f"{path}: the synthesized test is not proven optimal (status {art.summary.get('status')!r}, "
             "a time limit): it is not cached; write it once with `flowtest synthesize --out` and pass that file"

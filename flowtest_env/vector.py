@@ -48,8 +48,12 @@ from gymnasium.vector.utils import batch_space
 
 from .compiled import OUTCOMES, CompiledPool, compile_pool
 from .encoding import make_encoder
+from .envs import default_max_steps
 from .game import RunState, TestGame
+from .pools import random_grid_arguments
+from .random_grid import POOL_KINDS, WORLDS, random_pool
 from .render import Renderer, make_renderer
+from .sources import game_for
 
 DRAWS_PER_REFILL = 64
 """Test draws taken from each env's generator at a time (a batch of draws gives the same
@@ -336,9 +340,6 @@ class FlowTestVectorEnv(PoolVectorEnv):
         problem: Any = None,
         **kwargs: Any,
     ) -> None:
-        from .envs import default_max_steps
-        from .sources import game_for
-
         if problem is not None:
             test = problem
         game = game_for(test, setting)
@@ -369,9 +370,6 @@ class RandomGridVectorEnv(PoolVectorEnv):
         world: str = "empty",
         **kwargs: Any,
     ) -> None:
-        from .pools import random_grid_arguments
-        from .random_grid import POOL_KINDS, WORLDS, random_pool
-
         size, family, n, seeds, kind, world = random_grid_arguments(pool, split, count, size, family, n, tuple(seeds), kind, world)
         if kind not in POOL_KINDS:
             raise ValueError(f"unknown kind {kind!r}; expected one of {', '.join(map(repr, POOL_KINDS))}")
