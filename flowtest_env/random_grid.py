@@ -301,6 +301,9 @@ def build_pool(
     ------
     ValueError
         On an unknown family, ``n``, kind, world or ``parallel``.
+    RuntimeError
+        If a seed has no test in :data:`MAX_ATTEMPTS` draws (the records of the seeds
+        built before it are kept: building again resumes).
     """
     _check_pool(family, n, kind, world)
     if parallel not in (None, "ray"):

@@ -164,7 +164,7 @@ def test_each_family_pool_is_byte_identical_under_load_and_through_ray(
 ) -> None:
     """Issue 16's acceptance: the same pool built idle in process, with every core busy,
     and through Ray, gives the same bytes."""
-    seeds = range(3)
+    seeds = range(2) if name.endswith("agent") else range(3)  # an empty-grid agent test takes about a CPU minute
     quiet = build_files(tmp_path / "quiet", monkeypatch, name, seeds)
     burners = [subprocess.Popen([sys.executable, "-c", BURNER]) for _ in range(os.cpu_count() or 2)]
     try:
