@@ -24,7 +24,8 @@ from .model.strategy import SETTINGS, TestStrategy
 from .model.test_agent import TestAgent
 from .problems.limits import MAX_GRAPH_EDGES, check_size
 from .problems.problem import Problem, build_graphs
-from .routing.milp import MilpOptions, RoutingResult, solve_routing
+from .routing.milp import RoutingResult, solve_routing
+from .routing.model import MilpOptions
 from .routing.restrictions import strategy_from_routing
 from .routing.solver_control import SolveControl
 

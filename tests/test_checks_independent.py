@@ -27,6 +27,7 @@ from synthesis.problems.builtins import BUILTINS
 from synthesis.problems.problem import build_graphs
 from synthesis.routing import traps
 from synthesis.routing.milp import solve_routing
+from synthesis.routing.model import MilpOptions
 from synthesis.routing.restrictions import strategy_from_routing
 
 PACKAGE = Path(synthesis.__file__).parent
@@ -57,7 +58,7 @@ def test_routing_and_checks_do_not_import_each_other() -> None:
     assert "synthesis.graphs.products.coreachable" in routing & checks
 
 
-def _small_reactive() -> tuple[Products, milp.MilpOptions]:
+def _small_reactive() -> tuple[Products, MilpOptions]:
     problem = BUILTINS["small-reactive"]()
     _, products = build_graphs(problem)
     return products, replace(milp_options(problem, SynthesisOptions()), feasibility="lazy")

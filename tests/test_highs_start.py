@@ -31,7 +31,8 @@ import highspy
 import numpy as np
 import pytest
 
-from synthesis.routing.milp import MilpOptions, _ModelView, _run, _set_solution, _violation
+from synthesis.routing.milp import _ModelView, _run, _set_solution, _violation
+from synthesis.routing.model import MilpOptions
 
 DATA = Path(__file__).parent / "data"
 MODEL = DATA / "highs_start_presolve.mps"

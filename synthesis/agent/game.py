@@ -72,7 +72,7 @@ import numpy as np
 from ..graphs.products import Products, coreachable, reachable
 from ..model.strategy import TestStrategy
 from ..model.test_agent import TestAgent
-from ..routing.milp import CutGroups
+from ..routing.model import CutGroups
 from .gr1 import GR1Game
 
 __all__ = [
@@ -404,7 +404,7 @@ def realizability_exclusions(products: Products, agent: TestAgent, groups: CutGr
         The test agent.
     groups
         The MILP's cut groups (``of_edge``, ``keys``, ``restrictable``, ``static``), from
-        :func:`synthesis.routing.milp.cut_groups`.
+        :func:`synthesis.routing.model.cut_groups`.
 
     Returns
     -------

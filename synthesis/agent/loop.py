@@ -29,7 +29,8 @@ from ..model.errors import CheckFailed, InconsistentProblem
 from ..model.strategy import TestStrategy
 from ..model.systems import TransitionSystem
 from ..model.test_agent import TestAgent, place_json
-from ..routing.milp import MilpOptions, RoutingResult, cut_groups, solve_routing
+from ..routing.milp import RoutingResult, solve_routing
+from ..routing.model import MilpOptions, cut_groups
 from ..routing.restrictions import strategy_from_routing
 from . import gr1
 from .closed_loop import ClosedLoopReport, verify_closed_loop
