@@ -109,8 +109,13 @@ class SolveControl:
         return self._stop.is_set()
 
     def report(self, status: SolveStatus | None) -> None:
-        """Publish the status of the running solve (``None``: no solve runs)."""
+        """Publish the status of the running solve (``None``: no solve runs).
+
+        Once a stop is requested only ``None`` is kept: a HiGHS thread still winding down
+        after its caller gave up (:data:`STOP_GRACE`) cannot publish a status again."""
         with self._lock:
+            if status is not None and self._stop.is_set():
+                return
             self._status = status
 
     @property
