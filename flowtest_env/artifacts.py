@@ -97,12 +97,10 @@ def synthesize_artifact(name: str, node_limit: int | None = None) -> TestArtifac
         raise KeyError(f"unknown built-in problem {name!r}; known: {', '.join(sorted(BUILTINS))}")
     options = artifact_options(node_limit)
     test = synthesize(BUILTINS[name](), SynthesisOptions(**options))
-    art = artifact_of(test, summary_of(test))
     # which solver made it: with ties between optimal answers, another HiGHS release may
     # pick another one, so a shipped artifact equals a fresh synthesis under this version
-    art.extras[SOLVER_KEY] = {"highspy": solver_version()}
-    art.extras["provenance"] = {"options": options, "versions": versions()}
-    return art
+    made = {SOLVER_KEY: {"highspy": solver_version()}, "provenance": {"options": options, "versions": versions()}}
+    return artifact_of(test, summary_of(test), made)
 
 
 SOLVER_KEY = "made_with"

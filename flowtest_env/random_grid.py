@@ -173,9 +173,8 @@ def pool_record(size: int, family: str, n: int, seed: int, kind: str = "reactive
 
 def _artifact(record: dict[str, Any], size: int, family: str, n: int, kind: str, world: str) -> TestArtifact:
     """The checked test of a record, with its provenance (raises ProblemError)."""
-    art = rebuild_artifact(record, size, family, n, world, kind)
-    art.extras["provenance"] = {"pool": pool_params(size, family, n, kind, world), "versions": versions()}
-    return art
+    provenance = {"pool": pool_params(size, family, n, kind, world), "versions": versions()}
+    return rebuild_artifact(record, size, family, n, world, kind, {"provenance": provenance})
 
 
 def random_artifact(size: int, family: str, n: int, seed: int, kind: str = "reactive", world: str = "empty") -> TestArtifact:

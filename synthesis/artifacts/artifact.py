@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -77,9 +78,9 @@ def dba_from_dict(d: dict[str, Any], letters: tuple[frozenset[str], ...]) -> DBA
     )
 
 
-@dataclass
+@dataclass(frozen=True)
 class TestArtifact:
-    """A loaded synthesized test.
+    """A loaded synthesized test (immutable: a changed test is a new value).
 
     Attributes
     ----------
@@ -116,6 +117,7 @@ class TestArtifact:
     agent: dict[str, Any] | None = None
     extras: dict[str, Any] = field(default_factory=dict)
     source: str = ""  # source_hash of what it was synthesized from
+    _letter: np.ndarray = field(init=False, repr=False, compare=False)  # letter index of each state
 
     def initial_history(self) -> int:
         """The history after reading ``L(s0)``."""
@@ -127,7 +129,8 @@ class TestArtifact:
         return int(self.histories.delta[history, self._letter[state]])
 
     def __post_init__(self) -> None:
-        self._letter = self.system.letter_of_state(self.letters)
+        # a derived lookup table, not a field: computed once from the frozen fields
+        object.__setattr__(self, "_letter", self.system.letter_of_state(self.letters))
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -263,8 +266,9 @@ def verify_artifact(
         raise ProblemError(f"{where}: its restrictions fail the independent check: " + "; ".join(report.problems()))
 
 
-def artifact_of(test: SynthesizedTest, summary: dict[str, Any]) -> TestArtifact:
-    """The artifact of a :class:`~synthesis.pipeline.SynthesizedTest` and its summary."""
+def artifact_of(test: SynthesizedTest, summary: dict[str, Any], extras: Mapping[str, Any] | None = None) -> TestArtifact:
+    """The artifact of a :class:`~synthesis.pipeline.SynthesizedTest` and its summary, with
+    ``extras`` (e.g. provenance) added to its own."""
     p = test.problem
     spec = test.spec
     return TestArtifact(
@@ -279,6 +283,6 @@ def artifact_of(test: SynthesizedTest, summary: dict[str, Any]) -> TestArtifact:
         summary=summary,
         objectives={"system": p.system_objective.text, "test": p.test_objective.text},
         agent=None if test.agent is None else test.agent.to_dict(),
-        extras={"history_descriptions": [spec.describe(h) for h in range(spec.dba.n_states)]},
+        extras={"history_descriptions": [spec.describe(h) for h in range(spec.dba.n_states)], **(extras or {})},
         source=problem_source_hash(p),
     )

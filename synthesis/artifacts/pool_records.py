@@ -23,6 +23,7 @@ attempt's problem; whether earlier attempts had none is what its builder found).
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -68,8 +69,11 @@ def _indices(values: Any, bound: int, what: str) -> np.ndarray:
     return arr
 
 
-def rebuild_artifact(record: dict[str, Any], size: int, family: str, n: int, world: str, kind: str) -> TestArtifact:
-    """The checked test of a record (see the module docstring).
+def rebuild_artifact(
+    record: dict[str, Any], size: int, family: str, n: int, world: str, kind: str, extras: Mapping[str, Any] | None = None
+) -> TestArtifact:
+    """The checked test of a record (see the module docstring), with ``extras`` added to the
+    artifact's own.
 
     Raises
     ------
@@ -77,14 +81,16 @@ def rebuild_artifact(record: dict[str, Any], size: int, family: str, n: int, wor
         If the record is malformed or its test fails a check.
     """
     try:
-        return _rebuild(record, size, family, n, world, kind)
+        return _rebuild(record, size, family, n, world, kind, extras)
     except (CheckFailed, InconsistentProblem) as exc:
         raise ProblemError(f"pool record of seed {record.get('seed')!r} fails its check: {exc}") from None
     except (KeyError, TypeError, ValueError, AttributeError, IndexError) as exc:
         raise ProblemError(f"pool record of seed {record.get('seed')!r} is malformed ({type(exc).__name__}: {exc})") from None
 
 
-def _rebuild(record: dict[str, Any], size: int, family: str, n: int, world: str, kind: str) -> TestArtifact:
+def _rebuild(
+    record: dict[str, Any], size: int, family: str, n: int, world: str, kind: str, extras: Mapping[str, Any] | None
+) -> TestArtifact:
     if not isinstance(record, dict) or sorted(record) != sorted(RECORD_KEYS):
         raise ProblemError(f"a pool record has the fields {', '.join(RECORD_KEYS)}")
     seed, attempt, rest = record["seed"], record["attempt"], record["summary"]
@@ -123,4 +129,4 @@ def _rebuild(record: dict[str, Any], size: int, family: str, n: int, world: str,
     summary = {**derived, **{k: v for k, v in rest.items() if k != "stats"}, "stats": {**derived["stats"], **rest["stats"]}}
     # graph_seconds: not measured here; a rebuilt test's summary holds no timings
     test = SynthesizedTest(problem, spec, products, routing, strategy, checks, graph_seconds=0.0, agent=agent)
-    return artifact_of(test, summary)
+    return artifact_of(test, summary, extras)
