@@ -278,13 +278,7 @@ def counterexample_loop(
     say("checking the agent strategy in closed loop")
     if result.strategy is None:  # a realizable game always has a strategy
         raise CheckFailed("the GR(1) solver reported a realizable game without a strategy")
-    try:
-        gr1.verify_strategy(game.game, result.strategy)
-    except gr1.StrategyError as exc:
-        raise CheckFailed(f"the test agent's GR(1) strategy is not winning: {exc}") from None
-    full = controller_from_strategy(products, game, result.strategy, agent)
-    report = verify_closed_loop(products, strategy, agent, full)
-    controller = full.restricted(*report.entries)
+    controller, report = checked_controller(products, strategy, agent, game, result.strategy)
     checks = check_test(products, strategy, routing.flow, closed_loop=closed_loop)
     timings["verify"] = time.perf_counter() - t
     timings["total"] = graph_seconds + time.perf_counter() - t_start
@@ -322,10 +316,25 @@ def realize_agent_strategy(
     result = gr1.solve(game.game)
     if not result.realizable or result.strategy is None:
         raise CheckFailed("the test agent cannot realize the restrictions (the GR(1) game is lost)")
+    controller, report = checked_controller(products, strategy, agent, game, result.strategy)
+    return game, controller, report
+
+
+def checked_controller(
+    products: Products, strategy: TestStrategy, agent: TestAgent, game: AgentGame, gr1_strategy: gr1.GR1Strategy
+) -> tuple[AgentController, ClosedLoopReport]:
+    """The test agent's table of a GR(1) strategy, after checking the strategy wins the game
+    and the table keeps the restrictions in closed loop (restricted to the entries it uses).
+
+    Raises
+    ------
+    CheckFailed
+        If the strategy is not winning or fails the closed-loop check.
+    """
     try:
-        gr1.verify_strategy(game.game, result.strategy)
+        gr1.verify_strategy(game.game, gr1_strategy)
     except gr1.StrategyError as exc:
         raise CheckFailed(f"the test agent's GR(1) strategy is not winning: {exc}") from None
-    full = controller_from_strategy(products, game, result.strategy, agent)
+    full = controller_from_strategy(products, game, gr1_strategy, agent)
     report = verify_closed_loop(products, strategy, agent, full)
-    return game, full.restricted(*report.entries), report
+    return full.restricted(*report.entries), report
