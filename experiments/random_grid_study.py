@@ -9,6 +9,7 @@ Usage::
     .venv/bin/python -m experiments.random_grid_study --gurobi              # vs Gurobi, 5x5..9x9 static
     .venv/bin/python -m experiments.random_grid_study --report DIR [DIR ...]   # tables of earlier runs
     .venv/bin/python -m experiments.random_grid_study --graphs-only         # graph construction only
+    .venv/bin/python -m experiments.random_grid_study --backend highs       # one routing solver backend
 
 Every spec family of the paper (:data:`synthesis.problems.random_grid.PAPER_SPECS`) times every
 grid size times ``--instances`` seeded instances, each solved with MILP-static and
@@ -26,6 +27,12 @@ the routing solve (model, both phases, feasibility rounds) stops 60 s after its 
 checked test (flow >= 1), or at 600 s without one, a failure. A solve stopped with a test
 counts as solved but not proven optimal. ``--time-limit S`` alone is one overall limit
 instead; with ``--after-first A`` too, ``S`` is the limit to the first test.
+
+**Backend.** ``--backend NAME`` passes ``SynthesisOptions(backend=NAME)`` (the routing
+solver: ``auto``, ``highs``, ``cover``, ``cpsat``; see :mod:`synthesis.pipeline`); without it
+the default applies. Each record keeps the option asked for (``backend``) and the backend
+the solve reports in its statistics (``solver_backend``), and ``--resume`` keeps the
+records of the same backend only.
 
 **Outcomes.** ``optimal`` (a checked test, proven optimal), ``feasible`` (a checked test,
 budget ran out before the proof), ``timeout`` (no test within the budget), ``no-test``
@@ -61,7 +68,7 @@ import sys
 import time
 import traceback
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
@@ -96,18 +103,22 @@ class Task:
     threads: int | None
     gurobi: bool = False
     after_first: float | None = None  # see SynthesisOptions.after_first
+    backend: str | None = None  # SynthesisOptions.backend; None: the default
 
     @property
     def key(self) -> tuple:
         """Identifies the task's record (for ``--resume`` and for ordering)."""
-        return (self.family, self.n, self.size, self.instance, self.milp, self.time_limit, self.gurobi, self.after_first)
+        return (
+            self.family, self.n, self.size, self.instance, self.milp, self.time_limit, self.gurobi, self.after_first,
+            self.backend,
+        )
 
 
 def record_key(rec: dict) -> tuple:
     """The :attr:`Task.key` of a record."""
     return (
         rec["family"], rec["n"], rec["size"], rec["instance"], rec["milp"], rec["time_limit"], rec["gurobi"],
-        rec.get("after_first"),
+        rec.get("after_first"), rec.get("backend"),
     )
 
 
@@ -135,6 +146,8 @@ def run_task(task: Task) -> dict:
         "time_limit": task.time_limit,
         "after_first": task.after_first,
         "gurobi": task.gurobi,
+        "backend": task.backend,
+        "solver_backend": None,
         "attempt": None,
         "outcome": "error",
         "status": None,
@@ -185,8 +198,9 @@ def run_task(task: Task) -> dict:
         if msg.startswith("checking"):
             stamps.setdefault("check", time.perf_counter())
 
+    backend: dict[str, Any] = {} if task.backend is None else {"backend": task.backend}
     options = SynthesisOptions(
-        time_limit=task.time_limit, after_first=task.after_first, threads=task.threads, progress=progress
+        time_limit=task.time_limit, after_first=task.after_first, threads=task.threads, progress=progress, **backend
     )
     capture_ctx = None
     if task.gurobi:
@@ -232,6 +246,7 @@ def run_task(task: Task) -> dict:
         constraints=int(r.stats["constraints"]),
         feasibility_rounds=int(r.stats.get("feasibility_rounds", 1)),
         mip_gap=float(r.mip_gap),
+        solver_backend=r.stats.get("backend"),
     )
     if task.gurobi:
         try:
@@ -313,7 +328,7 @@ def run_task_failed(task: Task, message: str) -> dict:
     return {
         "family": task.family, "n": task.n, "ap": paper_ap(task.family, task.n), "size": task.size,
         "instance": task.instance, "milp": task.milp, "time_limit": task.time_limit,
-        "after_first": task.after_first, "gurobi": task.gurobi,
+        "after_first": task.after_first, "gurobi": task.gurobi, "backend": task.backend,
         "outcome": "error", "message": message,
     }
 
@@ -445,7 +460,7 @@ def gurobi_table(records: list[dict]) -> str:
 
 
 CSV_FIELDS = [
-    "family", "n", "ap", "size", "instance", "milp", "time_limit", "after_first", "attempt", "outcome", "status", "flow", "n_cuts",
+    "family", "n", "ap", "size", "instance", "milp", "time_limit", "after_first", "backend", "solver_backend", "attempt", "outcome", "status", "flow", "n_cuts",
     "cut_digest", "graph_s", "solve_s", "check_s", "total_s", "g_nodes", "g_edges", "bpi_states", "binary_vars",
     "continuous_vars", "constraints", "feasibility_rounds", "mip_gap", "load1", "host", "gurobi", "model_cols",
     "model_rows", "gurobi_model_rounds", "gurobi_outcome", "gurobi_flow", "gurobi_n_cuts", "gurobi_s", "highs1_outcome", "highs1_flow",
@@ -511,11 +526,11 @@ def parse_specs(tokens: Iterable[str] | None) -> list[tuple[str, int]]:
 
 def make_tasks(
     specs: list[tuple[str, int]], sizes: list[int], instances: int, milps: list[str], time_limit: float | None,
-    threads: int | None, gurobi: bool, after_first: float | None = None,
+    threads: int | None, gurobi: bool, after_first: float | None = None, backend: str | None = None,
 ) -> list[Task]:
     """Every (spec, size, instance, MILP), small grids first so the table fills from the top."""
     return [
-        Task(fam, n, size, i, m, time_limit, threads, gurobi, after_first)
+        Task(fam, n, size, i, m, time_limit, threads, gurobi, after_first, backend)
         for size in sizes
         for fam, n in specs
         for i in range(instances)
@@ -576,6 +591,10 @@ def main(argv: list[str] | None = None) -> int:
         help="seconds of improvement once a first test is found (default: the paper's budget, see --time-limit)",
     )
     ap.add_argument("--threads", type=int, default=1, help="solver threads per instance (default 1)")
+    ap.add_argument(
+        "--backend", default=None, metavar="NAME",
+        help="routing solver backend (SynthesisOptions.backend: auto, highs, cover, cpsat; default: FlowTest's default)",
+    )
     ap.add_argument("--out", type=Path, default=Path("random-grid-study"), help="output directory")
     ap.add_argument("--resume", action="store_true", help="keep the records already in OUT/records.jsonl, run the rest")
     ap.add_argument("--ray", action="store_true", help="dispatch the instances as Ray tasks")
@@ -620,12 +639,14 @@ def main(argv: list[str] | None = None) -> int:
             import gurobipy  # noqa: F401
         except ImportError:
             ap.error("--gurobi needs gurobipy: pip install -e '.[bench]'")
+    if args.backend is not None and "backend" not in {f.name for f in fields(SynthesisOptions)}:
+        ap.error("--backend: this FlowTest has no solver backend option (SynthesisOptions.backend)")
     if args.time_limit is None and args.after_first is None:
         time_limit, after_first = PAPER_FIRST_LIMIT, PAPER_AFTER_FIRST
     else:
         time_limit = args.time_limit if args.time_limit and args.time_limit > 0 else None
         after_first = args.after_first if args.after_first is not None and args.after_first >= 0 else None
-    tasks = make_tasks(specs, sizes, args.instances, milps, time_limit, args.threads, args.gurobi, after_first)
+    tasks = make_tasks(specs, sizes, args.instances, milps, time_limit, args.threads, args.gurobi, after_first, args.backend)
 
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
@@ -642,7 +663,7 @@ def main(argv: list[str] | None = None) -> int:
     config = {
         "command": "python -m experiments.random_grid_study " + " ".join(argv if argv is not None else sys.argv[1:]),
         "specs": specs, "sizes": sizes, "instances": args.instances, "milps": milps, "time_limit": time_limit,
-        "after_first": after_first,
+        "after_first": after_first, "backend": args.backend,
         "threads": args.threads, "dispatch": ("ray " + (args.ray_address or "local")) if use_ray else "in-process",
         "machine": {"cpus": os.cpu_count(), "load_at_start": os.getloadavg(), "python": platform.python_version()},
     }

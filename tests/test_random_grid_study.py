@@ -148,3 +148,21 @@ def test_gurobi_solves_the_same_model_to_the_same_optimum() -> None:
     assert (rec["gurobi_flow"], rec["gurobi_n_cuts"]) == (rec["flow"], rec["n_cuts"])
     assert rec["highs1_outcome"] == "optimal"
     assert (rec["highs1_flow"], rec["highs1_n_cuts"]) == (rec["flow"], rec["n_cuts"])
+
+
+def test_backend_option_reaches_the_solve(tmp_path: Path) -> None:
+    """``--backend NAME`` becomes ``SynthesisOptions(backend=NAME)`` and is kept in the record;
+    a FlowTest without that option refuses it with one clear error (exit code 2)."""
+    from dataclasses import fields
+
+    from synthesis.pipeline import SynthesisOptions
+
+    if "backend" not in {f.name for f in fields(SynthesisOptions)}:
+        with pytest.raises(SystemExit) as exc:
+            study.main(["--backend", "highs", "--sizes", "5", "--instances", "1", "--out", str(tmp_path), "-q"])
+        assert exc.value.code == 2
+        return
+    task = Task("reachability", 1, 5, 1, "static", 60.0, 1, backend="highs")
+    rec = run_task(task)
+    assert rec["outcome"] == "optimal" and rec["backend"] == "highs"
+    assert rec["solver_backend"] == "highs"

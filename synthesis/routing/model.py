@@ -22,6 +22,7 @@ from ..graphs.consistency import check_consistency
 from ..graphs.products import Products, reachable
 from ..model.errors import InconsistentProblem
 from .heuristic import RouteSeed, RoutingGuess, guess_routing
+from .reductions import Reductions, reduce_groups
 from .solver_control import SolveControl
 
 MODES = ("static", "reactive", "mixed")
@@ -75,6 +76,9 @@ class MilpOptions:
         When the feasibility flows (c6-c8) enter the model: ``"auto"`` (see
         :func:`solve_routing`), ``"eager"`` (all at once: one round, and every
         incumbent of a time-limited solve is trap-free) or ``"lazy"`` (where they bind).
+    reductions
+        Fix open, before any solve, the cut groups that :mod:`synthesis.routing.reductions`
+        proves some optimum leaves open (column upper bound 0); off only to measure them.
     offer_starts
         Offer HiGHS the heuristic's answer (phase 1) and the phase-1 answer (phase 2) as
         starts (each checked against the model first). Without, they are still kept as
@@ -103,6 +107,7 @@ class MilpOptions:
     random_seed: int = 0
     control: SolveControl | None = None
     offer_starts: bool = True
+    reductions: bool = True
 
     @property
     def deterministic(self) -> bool:
@@ -126,11 +131,11 @@ class _Model:
         self.row_lo: list[np.ndarray] = []
         self.row_hi: list[np.ndarray] = []
 
-    def add_cols(self, n: int, lo: float, hi: float, integer: bool = False) -> np.ndarray:
+    def add_cols(self, n: int, lo: float, hi: float | np.ndarray, integer: bool = False) -> np.ndarray:
         idx = np.arange(self.n_col, self.n_col + n)
         self.n_col += n
         self.lower.append(np.full(n, lo, dtype=float))
-        self.upper.append(np.full(n, hi, dtype=float))
+        self.upper.append(np.broadcast_to(np.asarray(hi, dtype=float), (n,)).copy())
         self.integer.append(np.full(n, integer, dtype=bool))
         return idx
 
@@ -270,9 +275,15 @@ class ModelEdges:
     grp: np.ndarray
     has_var: np.ndarray
 
-    def guess(self, products: Products, traps: Callable[[np.ndarray], bool] | None = None, route_seed: bool = True) -> RoutingGuess:
+    def guess(
+        self,
+        products: Products,
+        traps: Callable[[np.ndarray], bool] | None = None,
+        route_seed: bool = True,
+        fixed_open: np.ndarray | None = None,
+    ) -> RoutingGuess:
         """The routing heuristic on these edges (with the place-simple route seed unless
-        ``route_seed`` is false)."""
+        ``route_seed`` is false), cutting no group of ``fixed_open`` (``bool`` per group)."""
         g = products.virtual
         return guess_routing(
             g.n_nodes,
@@ -281,7 +292,7 @@ class ModelEdges:
             self.ev,
             self.grp,
             self.c5,
-            self.has_var,
+            self.has_var if fixed_open is None else self.has_var & ~fixed_open,
             products.target,
             traps=traps,
             route_seed=RouteSeed(products.ts.place[g.state], g.hist, products.intermediate) if route_seed else None,
@@ -370,6 +381,11 @@ class RoutingModel:
     cols: Columns
     rows: Rows
     out_src: np.ndarray  # model edges leaving Src: their flow is F
+    reductions: Reductions  # the cut groups fixed open (d = 0) before the solve
+
+    def guess(self, products: Products, traps: Callable[[np.ndarray], bool] | None = None) -> RoutingGuess:
+        """The routing heuristic on this model: its edges, no group fixed open cut."""
+        return self.edges.guess(products, traps=traps, fixed_open=self.reductions.fixed_open)
 
     @property
     def n_col(self) -> int:
@@ -377,8 +393,13 @@ class RoutingModel:
 
     @property
     def var_groups(self) -> np.ndarray:
-        """The cut groups with a binary."""
+        """The cut groups with a binary (fixed open ones included: their upper bound is 0)."""
         return np.flatnonzero(self.cols.cut >= 0)
+
+    @property
+    def free_groups(self) -> np.ndarray:
+        """The cut groups with a binary that the reductions leave free."""
+        return np.flatnonzero((self.cols.cut >= 0) & ~self.reductions.fixed_open)
 
     def flow_of(self, x: np.ndarray) -> float:
         """The flow value F of a solution."""
@@ -399,12 +420,14 @@ def build_model(
 
     The blocks go in in a fixed order (columns f, d, mu; rows c2, c3, c4-c5, couplings;
     the feasibility flows; MILP-agent's places; the exclusions), so the model, and with it
-    HiGHS's answer, is the same on every run."""
+    HiGHS's answer, is the same on every run. The cut groups that
+    :func:`~synthesis.routing.reductions.reduce_groups` fixes open get upper bound 0."""
     g = products.virtual
     groups = cut_groups(products, options)
     me = model_edges(products, groups, keep_node)
+    reductions = group_reductions(products, options, groups, me, bool(entries))
     m = _Model()
-    flow, cut, reach = _add_columns(m, products, groups, me, keep_node)
+    flow, cut, reach = _add_columns(m, products, groups, me, keep_node, reductions.fixed_open)
     conservation = _add_conservation(m, products, me, flow, keep_node)
     cut_stops_flow = _add_cut_stops_flow(m, me, flow, cut)
     path_cut = _add_path_cuts(m, g.initial, me, cut, reach)
@@ -420,18 +443,38 @@ def build_model(
         cols=Columns(flow, cut, reach, feasibility, blocked_place, places),
         rows=Rows(conservation, cut_stops_flow, path_cut, coupling, place_of_cut, exclusions),
         out_src=np.flatnonzero(me.eu == g.initial),
+        reductions=reductions,
     )
 
 
+def group_reductions(
+    products: Products, options: MilpOptions, groups: CutGroups, me: ModelEdges, with_feasibility: bool
+) -> Reductions:
+    """The reductions of this model's cut groups (none with ``options.reductions`` off);
+    the dominance rule only where its proof holds: MILP-static without feasibility flows,
+    ``closed_loop``, MILP-agent places or exclusions."""
+    if not options.reductions:
+        return Reductions.none(groups.keys.size)
+    dominance = (
+        options.mode == "static"
+        and not with_feasibility
+        and not options.closed_loop
+        and not options.block_states
+        and not options.exclusions
+    )
+    return reduce_groups(products, me.eu, me.ev, me.grp, me.c5, me.has_var, groups.weight, dominance)
+
+
 def _add_columns(
-    m: _Model, products: Products, groups: CutGroups, me: ModelEdges, keep_node: np.ndarray
+    m: _Model, products: Products, groups: CutGroups, me: ModelEdges, keep_node: np.ndarray, fixed_open: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(c1) the flow ``f_e`` per model edge, the cut binaries ``d`` per group, and ``mu_v``."""
+    """(c1) the flow ``f_e`` per model edge, the cut binaries ``d`` per group (upper bound 0
+    where ``fixed_open``), and ``mu_v``."""
     g = products.virtual
     flow = m.add_cols(me.edges.size, 0.0, 1.0)
     cut = np.full(groups.keys.size, -1, dtype=np.int64)
     var_groups = np.flatnonzero(me.has_var)
-    cut[var_groups] = m.add_cols(var_groups.size, 0.0, 1.0, integer=True)
+    cut[var_groups] = m.add_cols(var_groups.size, 0.0, np.where(fixed_open[var_groups], 0.0, 1.0), integer=True)
     mu_nodes = np.flatnonzero(keep_node & ~products.intermediate & ~products.target)
     mu_nodes = mu_nodes[mu_nodes != g.initial]
     reach = np.full(g.n_nodes, -1, dtype=np.int64)
