@@ -84,6 +84,9 @@ def human_summary(test: Any, summary: dict[str, Any]) -> str:
         f"  model        graph {graph['nodes']} nodes / {graph['edges']} edges; MILP {stats['binary_vars']} binary, "
         f"{stats['continuous_vars']} continuous, {stats['constraints']} constraints"
     )
+    if "backend" in stats:
+        package = {"highs": "HiGHS, highspy", "cpsat": "OR-Tools CP-SAT, ortools"}.get(stats["backend"], stats["backend"])
+        lines.append(f"  solver       {stats['backend']} ({package} {stats.get('solver_version', '?')})")
     gap_text = "" if summary["status"] == "optimal" or gap is None else f", gap {gap:.2%}"
     loop = stats.get("agent_seconds")
     if loop:  # the counterexample-guided loop: many MILP solves, GR(1) games, the closed-loop check

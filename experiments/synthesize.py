@@ -32,6 +32,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     """Declare ``flowtest synthesize``'s arguments."""
     from synthesis.model.strategy import SETTINGS
     from synthesis.problems.builtins import BUILTINS
+    from synthesis.routing.model import BACKENDS
 
     p.add_argument(
         "problem",
@@ -49,6 +50,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--gap", metavar="G", type=relative_gap, default=0.0, help="relative MIP gap at which to stop (default 0: prove optimality)")
     p.add_argument("--threads", metavar="N", type=positive_int, help="solver threads (default 1: the same answer on every machine; at most the machine's CPUs)")
+    p.add_argument(
+        "--backend", choices=BACKENDS, default="auto",
+        help="the solver of the routing model: highs, cpsat (OR-Tools CP-SAT, the extra flowtest[cpsat]) "
+        "or auto (default: chosen per problem)",
+    )
     p.add_argument("--setting", choices=SETTINGS, help="how reactive obstacles are shown (default: the problem's, else instantaneous)")
     p.add_argument("--force", action="store_true", help="overwrite existing --out/--plot files")
     p.add_argument("--no-size-limit", action="store_true",
@@ -86,6 +92,10 @@ def run(args: argparse.Namespace) -> int:
     cpus = os.cpu_count() or 1
     if args.threads is not None and args.threads > cpus:
         raise ProblemError(f"--threads {args.threads} is more than the {cpus} CPUs of this machine")
+    if args.backend == "cpsat":  # refused before any work when the extra is missing
+        from synthesis.routing.cpsat import require
+
+        require()
     from synthesis.problems.files import MAX_GRID_CELLS
 
     max_cells = None if args.no_size_limit else MAX_GRID_CELLS
@@ -101,6 +111,7 @@ def run(args: argparse.Namespace) -> int:
             after_first=args.after_first,
             mip_rel_gap=args.gap,
             threads=args.threads,
+            backend=args.backend,
             setting=args.setting,
             progress=progress,
             control=control,

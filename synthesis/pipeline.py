@@ -24,8 +24,9 @@ from .model.strategy import SETTINGS, TestStrategy
 from .model.test_agent import TestAgent
 from .problems.limits import MAX_GRAPH_EDGES, check_size
 from .problems.problem import Problem, build_graphs
+from .routing import cpsat
 from .routing.milp import RoutingResult, solve_routing
-from .routing.model import MilpOptions
+from .routing.model import BACKENDS, MilpOptions
 from .routing.restrictions import strategy_from_routing
 from .routing.solver_control import SolveControl
 
@@ -55,6 +56,10 @@ class SynthesisOptions:
     # refuse problems whose product graph may exceed this many edges (None: no limit),
     # before building anything (synthesis.problems.limits)
     max_graph_edges: int | None = MAX_GRAPH_EDGES
+    # the solver of the routing model: "auto", "highs" or "cpsat" (the extra flowtest[cpsat])
+    backend: str = "auto"
+    # CP-SAT's deterministic budget per phase (its max_deterministic_time; see MilpOptions)
+    work_limit: float | None = None
 
 
 MAX_THREADS = 256
@@ -81,6 +86,13 @@ def check_options(options: SynthesisOptions) -> None:
     it = options.agent_iterations
     if it is not None and (isinstance(it, bool) or not isinstance(it, int) or it < 1):
         raise ProblemError(f"option agent_iterations must be a positive integer, not {it!r}")
+    if options.backend not in BACKENDS:
+        raise ProblemError(f"unknown solver backend {options.backend!r}; expected one of {', '.join(BACKENDS)}")
+    if options.backend == "cpsat":
+        cpsat.require()
+    w = options.work_limit
+    if w is not None and (isinstance(w, bool) or not isinstance(w, (int, float)) or not math.isfinite(w) or w <= 0):
+        raise ProblemError(f"option work_limit must be a positive finite number, not {w!r}")
     e = options.max_graph_edges
     if e is not None and (isinstance(e, bool) or not isinstance(e, int) or e < 1):
         raise ProblemError(f"option max_graph_edges must be a positive integer or None, not {e!r}")
@@ -127,6 +139,8 @@ def milp_options(problem: Problem, options: SynthesisOptions) -> MilpOptions:
         progress=options.progress,
         closed_loop=options.closed_loop,
         control=options.control,
+        backend=options.backend,
+        work_limit=options.work_limit,
     )
 
 

@@ -27,7 +27,7 @@ from __future__ import annotations
 import itertools
 import random
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import networkx as nx
 import numpy as np
@@ -38,9 +38,21 @@ from synthesis.model.errors import InconsistentProblem
 from synthesis.model.systems import TransitionSystem, graph_system, grid_world
 from synthesis.pipeline import SynthesisOptions, SynthesizedTest, synthesize
 from synthesis.problems.problem import Problem, build_graphs, make_problem
+from synthesis.routing import cpsat
 
 #: The brute force enumerates method.md §5 exactly (entry-node feasibility only).
 METHOD_EXACT = SynthesisOptions(closed_loop=False)
+
+#: Every solver backend installed answers the same exhaustive comparisons (issue 18).
+BACKENDS = [
+    "highs",
+    pytest.param("cpsat", marks=pytest.mark.skipif(not cpsat.available(), reason="OR-Tools is not installed (the extra flowtest[cpsat])")),
+]
+
+
+def exact(backend: str) -> SynthesisOptions:
+    """:data:`METHOD_EXACT` on one solver backend."""
+    return replace(METHOD_EXACT, backend=backend)
 
 # ----------------------------------------------------------------------- plain views
 
@@ -595,14 +607,14 @@ def graph_instance(seed: int) -> Problem:
 # -------------------------------------------------------------------------- checks
 
 
-def compare_static(problem: Problem, max_sets: int = 1 << 14) -> None:
+def compare_static(problem: Problem, max_sets: int = 1 << 14, backend: str = "highs") -> None:
     """The MILP-static answer equals the exhaustive optimum over wall sets."""
     _, products = build_graphs(problem)
     v = view_of(products)
     best, n_sets = static_optimum(v, problem.system, problem.bidirectional_cuts)
     assert n_sets <= max_sets
     try:
-        res = synthesize(problem, METHOD_EXACT)
+        res = synthesize(problem, exact(backend))
     except InconsistentProblem as exc:
         assert best is None, f"MILP says {exc.reason!r}, brute force found {best}"
         assert (exc.reason == "unreachable") == (not any_path(v, 0)), exc.reason
@@ -622,7 +634,7 @@ def compare_static(problem: Problem, max_sets: int = 1 << 14) -> None:
     assert_proven_optimal(res)
 
 
-def compare_reactive(problem: Problem, max_candidates: int = 16, max_side_bits: int = 14) -> bool:
+def compare_reactive(problem: Problem, max_candidates: int = 16, max_side_bits: int = 14, backend: str = "highs") -> bool:
     """The MILP-reactive answer equals the exhaustive optimum; ``False`` if skipped (too big).
 
     Up to three exact enumerations run, whichever are small enough, and must agree:
@@ -646,7 +658,7 @@ def compare_reactive(problem: Problem, max_candidates: int = 16, max_side_bits: 
     assert len(set(values.values())) == 1, f"the enumerations disagree: {values}"
     best = answers[0][1]
     try:
-        res = synthesize(problem, METHOD_EXACT)
+        res = synthesize(problem, exact(backend))
     except InconsistentProblem as exc:
         assert best is None, f"MILP says {exc.reason!r}, brute force found {(best.flow, best.n_cuts)}"
         assert (exc.reason == "unreachable") == (not any_path(v, 0)), exc.reason
@@ -675,37 +687,42 @@ def assert_proven_optimal(res: SynthesizedTest) -> None:
 N = 40
 
 
+@pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("seed", range(N))
-def test_static_3x3_walls_both_ways(seed: int) -> None:
+def test_static_3x3_walls_both_ways(seed: int, backend: str) -> None:
     """MILP-static with c14 on 3x3 grids: all 2^12 wall sets (fewer with a blocked cell)."""
-    compare_static(grid_instance(100 + seed, 3, 3, "static", True), max_sets=1 << 12)
+    compare_static(grid_instance(100 + seed, 3, 3, "static", True), max_sets=1 << 12, backend=backend)
 
 
+@pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("seed", range(N))
-def test_static_2x3_one_way_walls(seed: int) -> None:
+def test_static_2x3_one_way_walls(seed: int, backend: str) -> None:
     """MILP-static without c14 on 2x3 grids: every set of directed walls."""
-    compare_static(grid_instance(300 + seed, 2, 3, "static", False), max_sets=1 << 14)
+    compare_static(grid_instance(300 + seed, 2, 3, "static", False), max_sets=1 << 14, backend=backend)
 
 
+@pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("seed", range(N))
-def test_reactive_small_graphs(seed: int) -> None:
+def test_reactive_small_graphs(seed: int, backend: str) -> None:
     """MILP-reactive on random graphs of 4-6 states."""
-    assert compare_reactive(graph_instance(500 + seed)), "instance too large for the enumeration"
+    assert compare_reactive(graph_instance(500 + seed), backend=backend), "instance too large for the enumeration"
 
 
+@pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("seed", range(N))
-def test_reactive_small_grids(seed: int) -> None:
+def test_reactive_small_grids(seed: int, backend: str) -> None:
     """MILP-reactive on 2x2 and 2x3 grids (instances with over 16 candidate edges are skipped)."""
     rows, cols = (2, 2) if seed % 3 == 0 else (2, 3)
-    done = compare_reactive(grid_instance(700 + seed, rows, cols, "reactive", None))
+    done = compare_reactive(grid_instance(700 + seed, rows, cols, "reactive", None), backend=backend)
     if not done:
         pytest.skip("more than 16 candidate edges")
 
 
+@pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("seed", range(N))
-def test_reactive_3x3_grids(seed: int) -> None:
+def test_reactive_3x3_grids(seed: int, backend: str) -> None:
     """MILP-reactive on 3x3 grids (skipped when every enumeration would be too large)."""
-    if not compare_reactive(grid_instance(1100 + seed, 3, 3, "reactive", None)):
+    if not compare_reactive(grid_instance(1100 + seed, 3, 3, "reactive", None), backend=backend):
         pytest.skip("too large for the enumerations")
 
 
@@ -747,7 +764,8 @@ def test_max_flow_helper_matches_networkx() -> None:
             assert max_flow(v, cut) == want
 
 
-def test_known_instance_small_reactive() -> None:
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_known_instance_small_reactive(backend: str) -> None:
     """The paper's small-reactive example (2x3): flow 2 with 4 cuts, by enumeration and by the MILP."""
     free = [(r, c) for r in range(2) for c in range(3)]
     ts = grid_world(free, 2, 3, (1, 0), [(0, 2)], {(0, 0): {"I1"}, (1, 2): {"I2"}, (0, 2): {"goal"}})
@@ -755,18 +773,19 @@ def test_known_instance_small_reactive() -> None:
     _, products = build_graphs(problem)
     best = reactive_optimum_by_sides(view_of(products))
     assert best is not None and (best.flow, best.n_cuts) == (2, 4)
-    assert compare_reactive(problem)
+    assert compare_reactive(problem, backend=backend)
 
 
+@pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("kind", ["static", "reactive"])
-def test_status_optimal_without_binaries(kind: str) -> None:
+def test_status_optimal_without_binaries(kind: str, backend: str) -> None:
     """Start on the test cell (Src in I): nothing to cut, no binary, yet the answer is proven optimal.
 
     (Regression: HiGHS leaves ``mip_dual_bound`` at 0 on a model without integer
     columns, which once made such answers ``feasible`` with ``mip_gap`` inf.)
     """
     ts = grid_world([(0, 0), (0, 1)], 1, 2, (0, 0), [(0, 1)], {(0, 0): {"I"}, (0, 1): {"goal"}})
-    res = synthesize(make_problem("no-binaries", ts, "F goal", "F I", kind))
+    res = synthesize(make_problem("no-binaries", ts, "F goal", "F I", kind), SynthesisOptions(backend=backend))
     assert res.routing.flow == 1 and res.routing.stats["binary_vars"] == 0
     assert res.routing.status == "optimal"
     assert res.routing.mip_gap == 0.0
@@ -829,21 +848,24 @@ def test_static_walls_are_on_the_map() -> None:
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("seed", range(200))
-def test_sweep_static_3x3(seed: int) -> None:
+def test_sweep_static_3x3(seed: int, backend: str) -> None:
     """A larger static sweep."""
-    compare_static(grid_instance(10_000 + seed, 3, 3, "static", True), max_sets=1 << 12)
+    compare_static(grid_instance(10_000 + seed, 3, 3, "static", True), max_sets=1 << 12, backend=backend)
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("seed", range(200))
-def test_sweep_reactive_graphs(seed: int) -> None:
+def test_sweep_reactive_graphs(seed: int, backend: str) -> None:
     """A larger reactive sweep on graphs."""
-    compare_reactive(graph_instance(20_000 + seed), max_candidates=18)
+    compare_reactive(graph_instance(20_000 + seed), max_candidates=18, backend=backend)
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("seed", range(200))
-def test_sweep_reactive_grids(seed: int) -> None:
+def test_sweep_reactive_grids(seed: int, backend: str) -> None:
     """A larger reactive sweep on 2x3 grids."""
-    compare_reactive(grid_instance(30_000 + seed, 2, 3, "reactive", None), max_candidates=18)
+    compare_reactive(grid_instance(30_000 + seed, 2, 3, "reactive", None), max_candidates=18, backend=backend)

@@ -108,6 +108,8 @@ def stop_note(summary: dict[str, Any]) -> str:
         return "; time limit reached: the answer depends on this machine's speed and load"
     if stopped == "node_limit":
         return "; node limit reached (deterministic)"
+    if stopped == "work_limit":
+        return "; work limit reached (deterministic)"
     if not summary.get("deterministic", True):
         return "; wall-clock budget set: not guaranteed the same on another machine"
     return ""

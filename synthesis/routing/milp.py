@@ -48,9 +48,10 @@ import scipy.sparse as sp
 from ..graphs.consistency import check_consistency
 from ..graphs.products import Products
 from ..model.errors import InconsistentProblem
+from . import cpsat
 from .heuristic import RoutingGuess
-from .model import CutGroups, MilpOptions, RoutingModel, build_model, static_moves_of
-from .solver_control import Clock, run_highs, stdout_guard
+from .model import BACKENDS, CutGroups, MilpOptions, RoutingModel, build_model, static_moves_of
+from .solver_control import Clock, run_highs, solver_version, stdout_guard
 from .traps import trapped_configurations, trapped_entries
 
 
@@ -121,6 +122,7 @@ def solve_routing(products: Products, options: MilpOptions | None = None) -> Rou
         maximum flow 0: every routing cut set would trap the system).
     """
     options = options or MilpOptions()
+    options = replace(options, backend=chosen_backend(products, options))
     # small reactive models start with every history's flows (adding them lazily costs
     # more rounds than it saves there); reactive ones whose flows would swamp the model
     # start without
@@ -162,6 +164,31 @@ def solve_routing(products: Products, options: MilpOptions | None = None) -> Rou
             return _with_rounds(result, rounds, entries)
         if options.progress:
             options.progress(f"routing MILP: adding feasibility flows for {len(trapped)} trapped histories")
+
+
+def chosen_backend(products: Products, options: MilpOptions) -> str:
+    """The solver that runs the model: ``options.backend``, or for ``"auto"`` HiGHS (the
+    rule that picks another backend where it wins is issue 18's ``cover`` work).
+
+    Raises
+    ------
+    ValueError
+        For an unknown backend name.
+    ProblemError
+        For ``"cpsat"`` without OR-Tools installed (:data:`synthesis.routing.cpsat.MISSING`).
+    """
+    if options.backend not in BACKENDS:
+        raise ValueError(f"unknown routing backend {options.backend!r}; expected one of {', '.join(BACKENDS)}")
+    if options.backend == "cpsat":
+        cpsat.require()
+    return "highs" if options.backend == "auto" else options.backend
+
+
+def backend_version(backend: str) -> str:
+    """The version of the package a backend's answers depend on (highspy, OR-Tools)."""
+    if backend == "cpsat":
+        return cpsat.ortools_version() or "unknown"
+    return solver_version()
 
 
 def _with_rounds(result: RoutingResult, rounds: int, entries: dict[int, np.ndarray]) -> RoutingResult:
@@ -231,6 +258,8 @@ def _solve_once(
     t0 = time.perf_counter()
     rm = build_model(products, options, entries, check_consistency(products))
     graph_seconds = time.perf_counter() - t0
+    if options.backend == "cpsat":
+        return _solve_once_cpsat(rm, products, options, entries, required, clock, graph_seconds)
     h = _highs(options)
     h.passModel(rm.model.to_highs(np.zeros(rm.n_col), maximize=True))
     t_solve = time.perf_counter()
@@ -271,17 +300,124 @@ def _phase1(
         status, gap, x1 = "feasible", float("inf"), None
     stopped_by = _stopped_by(h)
     if status == "infeasible":
-        raise InconsistentProblem(
-            "unroutable",
-            "the test objective cannot be routed without trapping the system: no cut set "
-            "routes every successful execution through it while leaving a way to the goal",
-        )
+        raise _no_cut_set()
     x = x1 if x1 is not None else x_guess
     if x is None:  # _run returns a solution unless it raised
         raise RuntimeError("phase 1 of the routing MILP ended without a solution")
     if x_guess is not None and guess.flow > rm.flow_of(x) + 0.5:
         return _Phase(x_guess, "feasible", gap, stopped_by)  # HiGHS stopped below the heuristic's flow
     return _Phase(x, status, gap, stopped_by)
+
+
+def _no_cut_set() -> InconsistentProblem:
+    """The answer when phase 1's model has no solution at all."""
+    return InconsistentProblem(
+        "unroutable",
+        "the test objective cannot be routed without trapping the system: no cut set "
+        "routes every successful execution through it while leaving a way to the goal",
+    )
+
+
+def _solve_once_cpsat(
+    rm: RoutingModel,
+    products: Products,
+    options: MilpOptions,
+    entries: dict[int, np.ndarray],
+    required: dict[int, np.ndarray],
+    clock: Clock,
+    graph_seconds: float,
+) -> RoutingResult:
+    """:func:`_solve_once` on CP-SAT (:mod:`synthesis.routing.cpsat`): the same model and
+    phases, in a child process that holds the model between them."""
+    note = options.progress or (lambda msg: None)
+    a = rm.model.matrix().tocsr()
+    col_lo, col_hi, row_lo, row_hi = rm.model.bounds()
+    t_solve = time.perf_counter()
+    with cpsat.CpSatSession(cpsat.ModelArrays(a, row_lo, row_hi, col_lo, col_hi), options.control) as session:
+        note("routing MILP (CP-SAT), phase 1 of 2: maximum flow")
+        first, runs = _phase1_cpsat(session, rm, products, options, entries, clock)
+        flow = _flow_of_phase1(rm, first)
+        _raise_if_flows_bind(rm, products, options, first.x, {q: v for q, v in required.items() if q not in entries})
+        note(f"routing MILP (CP-SAT), phase 2 of 2: fewest cuts at flow {flow}")
+        second, more = _phase2_cpsat(session, rm, first.x, flow, options, clock)
+        spawn = session.spawn_seconds
+    result = _result(rm, products, options, first, second, flow, graph_seconds, time.perf_counter() - t_solve)
+    runs = runs + more
+    figures = {
+        "spawn_seconds": spawn,
+        "runs": len(runs),
+        **{k: sum(r[k] for r in runs) for k in ("wall_seconds", "cpu_seconds", "deterministic_time", "conflicts", "branches")},
+    }
+    return replace(result, stats={**result.stats, "cpsat": figures})
+
+
+def _cpsat_budget(clock: Clock) -> tuple[float | None, float | None]:
+    """``(seconds, after_first)`` of a CP-SAT run under ``clock``: the wall-clock limits the
+    user asked for (none: ``(None, None)``)."""
+    now = time.perf_counter()
+    seconds = None if clock.deadline is None else max(clock.deadline - now, 0.01)
+    return seconds, (clock.after_first if clock.watching_first() else None)
+
+
+def _phase1_cpsat(
+    session: cpsat.CpSatSession, rm: RoutingModel, products: Products, options: MilpOptions, entries: dict[int, np.ndarray], clock: Clock
+) -> tuple[_Phase, list[dict[str, Any]]]:
+    """:func:`_phase1` on CP-SAT: the heuristic's answer proves the maximum flow when it
+    attains the upper bound, else CP-SAT maximises the flow from it (as a hint)."""
+    guess = rm.edges.guess(products, traps=_trap_test(products, rm.groups, entries))
+    x_guess = _guess_solution(products, rm, guess, options)
+    if x_guess is not None:
+        clock.first_test()
+    if x_guess is not None and guess.flow == guess.upper_bound:
+        return _Phase(x_guess, "optimal", 0.0, None), []
+    cost = np.zeros(rm.n_col)
+    cost[rm.cols.flow[rm.out_src]] = 1.0
+    seconds, after_first = _cpsat_budget(clock)
+    ans = session.solve(
+        cost, True, x_guess if options.offer_starts else None, seconds=seconds, after_first=after_first,
+        work_limit=options.work_limit, rel_gap=options.mip_rel_gap, random_seed=options.random_seed, phase="phase 1 (maximum flow)",
+    )
+    if ans.first_age is not None:
+        clock.first_test(at=time.perf_counter() - ans.first_age)
+    if ans.status == "infeasible":
+        raise _no_cut_set()
+    x = ans.x if ans.x is not None else x_guess
+    if x is None:
+        raise TimeoutError(f"the routing MILP found no solution within the {_LIMIT_TEXT.get(ans.stopped_by or '', 'time limit')}")
+    if x_guess is not None and guess.flow > rm.flow_of(x) + 0.5:
+        return _Phase(x_guess, "feasible", ans.gap, ans.stopped_by), [ans.stats]
+    return _Phase(x, ans.status if ans.x is not None else "feasible", ans.gap, ans.stopped_by), [ans.stats]
+
+
+def _phase2_cpsat(
+    session: cpsat.CpSatSession, rm: RoutingModel, x: np.ndarray, flow: int, options: MilpOptions, clock: Clock
+) -> tuple[_Phase, list[dict[str, Any]]]:
+    """:func:`_phase2` on CP-SAT: fewest cuts (fewest blocked places first) at flow
+    ``flow``, from phase 1's answer as a hint (kept if CP-SAT finds nothing better)."""
+    out = rm.cols.flow[rm.out_src]
+    session.add_row(out, np.ones(out.size), flow - 0.5, np.inf)
+    clock.first_test()
+    seconds, _ = _cpsat_budget(clock)
+    ans = session.solve(
+        _phase2_cost(rm, options), False, x, seconds=seconds, after_first=None, work_limit=options.work_limit,
+        rel_gap=options.mip_rel_gap, random_seed=options.random_seed, phase="phase 2 (fewest cuts)", flow=flow,
+    )
+    if ans.status == "infeasible":  # cannot happen: phase 1's solution is feasible
+        raise RuntimeError("phase 2 of the routing MILP lost the phase-1 solution")
+    if ans.x is None:
+        return _Phase(x, "feasible", float("inf"), ans.stopped_by), [ans.stats]
+    return _Phase(ans.x, ans.status, ans.gap, ans.stopped_by), [ans.stats]
+
+
+def _phase2_cost(rm: RoutingModel, options: MilpOptions) -> np.ndarray:
+    """Phase 2's objective: the cut groups by the edges they stand for; for MILP-agent, a
+    blocked place costs more than every cut together (fewest blocked places first)."""
+    var_groups = rm.var_groups
+    cost = np.zeros(rm.n_col)
+    cost[rm.cols.cut[var_groups]] = rm.groups.weight[var_groups]
+    if options.block_states and rm.cols.blocked_place.size:
+        cost[rm.cols.blocked_place] = float(rm.groups.weight[var_groups].sum() + 1)
+    return cost
 
 
 def _flow_of_phase1(rm: RoutingModel, first: _Phase) -> int:
@@ -327,11 +463,7 @@ def _phase2(h: highspy.Highs, rm: RoutingModel, x: np.ndarray, flow: int, option
     seeded by the fewest-cuts answer with phase 1's flow held fixed."""
     f_col = rm.cols.flow
     h.addRow(flow - 0.5, highspy.kHighsInf, rm.out_src.size, f_col[rm.out_src].astype(np.int32), np.ones(rm.out_src.size))
-    var_groups = rm.var_groups
-    cost = np.zeros(rm.n_col)
-    cost[rm.cols.cut[var_groups]] = rm.groups.weight[var_groups]
-    if options.block_states and rm.cols.blocked_place.size:
-        cost[rm.cols.blocked_place] = float(rm.groups.weight[var_groups].sum() + 1)
+    cost = _phase2_cost(rm, options)
     h.changeObjectiveSense(highspy.ObjSense.kMinimize)
     h.changeColsCost(rm.n_col, np.arange(rm.n_col, dtype=np.int32), cost)
     clock.first_test()
@@ -383,6 +515,8 @@ def _result(
         "mip_gap": mip_gap,
         "stopped_by": None if status == "optimal" else (first.stopped_by or second.stopped_by),
         "deterministic": options.deterministic,
+        "backend": options.backend,
+        "solver_version": backend_version(options.backend),
     }
     return RoutingResult(
         status=status,
@@ -653,7 +787,7 @@ def _read_solution(h: highspy.Highs) -> tuple[str, float, np.ndarray | None, boo
     return "feasible", float(gap), x, agrees
 
 
-_LIMIT_TEXT = {"time_limit": "time limit", "node_limit": "node limit"}
+_LIMIT_TEXT = {"time_limit": "time limit", "node_limit": "node limit", "work_limit": "work limit"}
 
 
 def _stopped_by(h: highspy.Highs) -> str | None:

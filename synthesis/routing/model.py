@@ -27,6 +27,9 @@ from .solver_control import SolveControl
 
 MODES = ("static", "reactive", "mixed")
 
+BACKENDS = ("auto", "highs", "cpsat")
+"""The solvers of the routing model (``MilpOptions.backend``; ``flowtest synthesize --backend``)."""
+
 
 @dataclass
 class MilpOptions:
@@ -88,6 +91,15 @@ class MilpOptions:
         Shared with the caller while HiGHS runs: Ctrl-C / stop requests, and the live
         status (best answer, bound, gap) a progress line shows (see
         :mod:`synthesis.routing.solver_control`).
+    backend
+        The solver of the model (:data:`BACKENDS`): ``"highs"`` (HiGHS's branch and cut),
+        ``"cpsat"`` (OR-Tools CP-SAT in a child process, the optional extra
+        ``flowtest[cpsat]``: :mod:`synthesis.routing.cpsat`), or ``"auto"`` (the
+        default: :func:`synthesis.routing.milp.chosen_backend` decides).
+    work_limit
+        CP-SAT's budget per phase in its deterministic seconds (``max_deterministic_time``;
+        ``None``: no limit): a deterministic budget, as ``node_limit`` is for HiGHS. A run
+        stopped by it returns its best test (``"feasible"``).
     """
 
     mode: str = "reactive"
@@ -108,6 +120,8 @@ class MilpOptions:
     control: SolveControl | None = None
     offer_starts: bool = True
     reductions: bool = True
+    backend: str = "auto"
+    work_limit: float | None = None
 
     @property
     def deterministic(self) -> bool:
@@ -152,15 +166,8 @@ class _Model:
         self.cols.append(np.asarray(cols, dtype=np.int64))
         self.vals.append(np.broadcast_to(np.asarray(vals, dtype=float), rows.shape).copy())
 
-    def to_highs(self, cost: np.ndarray, maximize: bool) -> highspy.HighsLp:
-        lp = highspy.HighsLp()
-        lp.num_col_ = self.n_col
-        lp.num_row_ = self.n_row
-        lp.col_cost_ = cost
-        lp.col_lower_ = np.concatenate(self.lower) if self.lower else np.zeros(0)
-        lp.col_upper_ = np.concatenate(self.upper) if self.upper else np.zeros(0)
-        lp.row_lower_ = np.concatenate(self.row_lo) if self.row_lo else np.zeros(0)
-        lp.row_upper_ = np.concatenate(self.row_hi) if self.row_hi else np.zeros(0)
+    def matrix(self) -> sp.csc_matrix:
+        """The constraint matrix (rows x columns), duplicates summed."""
 
         def cat(xs: list[np.ndarray], dt: type) -> np.ndarray:
             return np.concatenate(xs).astype(dt) if xs else np.zeros(0, dtype=dt)
@@ -170,6 +177,23 @@ class _Model:
             shape=(self.n_row, self.n_col),
         )
         a.sum_duplicates()
+        return a
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``(col_lo, col_hi, row_lo, row_hi)``."""
+
+        def cat(xs: list[np.ndarray]) -> np.ndarray:
+            return np.concatenate(xs) if xs else np.zeros(0)
+
+        return cat(self.lower), cat(self.upper), cat(self.row_lo), cat(self.row_hi)
+
+    def to_highs(self, cost: np.ndarray, maximize: bool) -> highspy.HighsLp:
+        lp = highspy.HighsLp()
+        lp.num_col_ = self.n_col
+        lp.num_row_ = self.n_row
+        lp.col_cost_ = cost
+        lp.col_lower_, lp.col_upper_, lp.row_lower_, lp.row_upper_ = self.bounds()
+        a = self.matrix()
         lp.a_matrix_.format_ = highspy.MatrixFormat.kColwise
         lp.a_matrix_.start_ = a.indptr.astype(np.int32)
         lp.a_matrix_.index_ = a.indices.astype(np.int32)

@@ -134,13 +134,14 @@ class Clock:
         self.after_first = after_first
         self.found = False
 
-    def first_test(self) -> None:
-        """A first test is in hand: from now on, only ``after_first`` seconds more."""
+    def first_test(self, at: float | None = None) -> None:
+        """A first test is in hand (since ``perf_counter()`` time ``at``, default now): from
+        then on, only ``after_first`` seconds more."""
         if self.found:
             return
         self.found = True
         if self.after_first is not None:
-            self.deadline = time.perf_counter() + self.after_first
+            self.deadline = (time.perf_counter() if at is None else at) + self.after_first
 
     def watching_first(self) -> bool:
         """Whether a run must watch for its first test with flow >= 1 (and then move the

@@ -1,0 +1,353 @@
+"""OR-Tools CP-SAT as a solver of the routing model (``MilpOptions.backend = "cpsat"``).
+
+The optional extra ``flowtest[cpsat]`` installs OR-Tools. CP-SAT gets exactly the model
+:func:`synthesis.routing.model.build_model` builds for HiGHS (both phases, the exclusions,
+MILP-agent's places, the feasibility flows) with every column integral. That keeps the
+optimum: once the cut binaries are fixed, what is left is a unit-capacity flow (integral
+by max-flow integrality), aggregated feasibility flows with integral supplies and
+capacities ``K (1 - d)`` (integral for the same reason), MILP-agent's place binaries
+(integral already), and the potentials ``mu``, which may be taken as the 0/1
+reachability from ``Src`` outside I (the fact the coupling rows of
+:mod:`synthesis.routing.model` rest on). Every coefficient is integral, so a row
+``lo <= a x <= hi`` is ``ceil(lo) <= a x <= floor(hi)``. The exhaustive-optimality tests
+(``tests/test_optimality.py``) hold this backend to that claim.
+
+CP-SAT runs in a child process (:mod:`synthesis.routing.cpsat_worker`): OR-Tools bundles
+its own ``libhighs.so.1``, which cannot share a process with highspy. The model goes over
+as arrays; the child keeps it between the two phases. Its search is deterministic: one
+worker, a fixed ``random_seed``, and as a budget CP-SAT's deterministic time
+(``MilpOptions.work_limit``); a wall-clock limit only when the user asks for one
+(``time_limit`` / ``after_first``), and then the answer is reported non-deterministic as
+with HiGHS. Ctrl-C (or a stop request through :class:`SolveControl`) kills the child at
+once and is raised as ``KeyboardInterrupt``. Every solution the child returns is checked
+against the model here (bounds, rows, integrality, objective) before it is used.
+"""
+
+from __future__ import annotations
+
+import os
+import select
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from dataclasses import dataclass
+from importlib.metadata import PackageNotFoundError, version
+from importlib.util import find_spec
+from pathlib import Path
+from typing import IO, Any
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..model.errors import ProblemError
+from .cpsat_worker import receive, send
+from .solver_control import POLL, SolveControl, SolveStatus
+
+WORKER = Path(__file__).resolve().with_name("cpsat_worker.py")
+"""The child's program, started by its path so the ``synthesis`` package (and highspy) never loads there."""
+
+MISSING = "the cpsat backend needs OR-Tools, which is not installed: pip install 'flowtest[cpsat]' (see docs/install.md)"
+"""The one-line error when ``--backend cpsat`` is asked for without the extra."""
+
+FEASIBILITY_TOLERANCE = 1e-6
+"""Largest violation of a bound or row accepted in a CP-SAT solution (they are integral: 0)."""
+
+
+def available() -> bool:
+    """Whether OR-Tools is installed (without importing it: it cannot share a process with highspy)."""
+    return find_spec("ortools") is not None
+
+
+def require() -> None:
+    """Raise :class:`ProblemError` (:data:`MISSING`) when OR-Tools is not installed."""
+    if not available():
+        raise ProblemError(MISSING)
+
+
+def ortools_version() -> str | None:
+    """The installed OR-Tools version (``None``: not installed); part of the cache key."""
+    try:
+        return version("ortools")
+    except PackageNotFoundError:
+        return None
+
+
+@dataclass(frozen=True)
+class ModelArrays:
+    """The routing model as plain arrays: what goes to the child, and what its answers
+    are checked against."""
+
+    a: sp.csr_matrix
+    row_lo: np.ndarray
+    row_hi: np.ndarray
+    col_lo: np.ndarray
+    col_hi: np.ndarray
+
+    def violation(self, x: np.ndarray) -> float:
+        """The largest violation by ``x`` of a column bound, a row or integrality."""
+        ax = self.a @ x
+        parts = [self.col_lo - x, x - self.col_hi, self.row_lo - ax, ax - self.row_hi, np.abs(x - np.round(x))]
+        return float(max((float(np.max(p)) for p in parts if p.size), default=0.0))
+
+    def with_row(self, idx: np.ndarray, val: np.ndarray, lo: float, hi: float) -> ModelArrays:
+        """These arrays with one more row."""
+        row = sp.csr_matrix((np.asarray(val, dtype=float), (np.zeros(len(idx), dtype=np.int64), np.asarray(idx))), shape=(1, self.a.shape[1]))
+        return ModelArrays(
+            sp.vstack([self.a, row], format="csr"),
+            np.append(self.row_lo, lo),
+            np.append(self.row_hi, hi),
+            self.col_lo,
+            self.col_hi,
+        )
+
+
+@dataclass(frozen=True)
+class CpSatAnswer:
+    """One CP-SAT run, checked: ``status`` (``optimal``, ``feasible``, ``infeasible``,
+    ``unknown``: stopped without a solution), the solution ``x`` (``None`` without one), its
+    relative ``gap`` to CP-SAT's bound, what stopped it short of a proof (``stopped_by``:
+    ``"time_limit"``, ``"work_limit"`` or ``None``), how many seconds before its end the first
+    solution of objective >= 1 came (``first_age``), and the child's own figures
+    (``stats``: wall, CPU and deterministic seconds, conflicts, branches)."""
+
+    status: str
+    x: np.ndarray | None
+    gap: float
+    stopped_by: str | None
+    first_age: float | None
+    stats: dict[str, Any]
+
+
+class _Worker:
+    """One child process running :mod:`synthesis.routing.cpsat_worker`."""
+
+    def __init__(self) -> None:
+        self.stderr = tempfile.TemporaryFile()
+        self.proc = subprocess.Popen(
+            [sys.executable, "-P", str(WORKER), str(os.getpid())],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=self.stderr,
+            bufsize=0,  # unbuffered: select() on the pipe sees every byte not read yet
+        )
+
+    @property
+    def alive(self) -> bool:
+        return self.proc.poll() is None
+
+    def stderr_tail(self) -> str:
+        """The last line the child wrote to its standard error (``""``: none)."""
+        try:
+            self.stderr.seek(0)
+            lines = self.stderr.read().decode(errors="replace").strip().splitlines()
+        except (OSError, ValueError):
+            return ""
+        return f": {lines[-1]}" if lines else ""
+
+    def close(self) -> None:
+        """End the child (killed if it still runs) and free its pipes."""
+        proc = self.proc
+        if proc.poll() is None:
+            proc.kill()
+        proc.wait()
+        for stream in (proc.stdin, proc.stdout):
+            if stream is not None:
+                try:
+                    stream.close()
+                except OSError:
+                    pass
+        self.stderr.close()
+
+
+_idle: list[_Worker] = []
+_idle_lock = threading.Lock()
+
+
+def _take_worker() -> tuple[_Worker, bool]:
+    """An idle child from an earlier solve of this process, else a new one (and whether
+    it is new): importing OR-Tools in a fresh child takes most of a second, which the
+    counterexample loop of an agent problem, with its many solves, would pay each time.
+    A child holds no state between models (each solve builds its own CP-SAT model)."""
+    with _idle_lock:
+        while _idle:
+            worker = _idle.pop()
+            if worker.alive:
+                return worker, False
+            worker.close()
+    return _Worker(), True
+
+
+def _give_back(worker: _Worker) -> None:
+    with _idle_lock:
+        if worker.alive and not _idle:
+            _idle.append(worker)
+            return
+    worker.close()
+
+
+def close_idle_workers() -> None:
+    """End the idle child kept for later solves (tests; a child also ends with its parent)."""
+    with _idle_lock:
+        workers = list(_idle)
+        _idle.clear()
+    for worker in workers:
+        worker.close()
+
+
+class CpSatSession:
+    """The routing model on CP-SAT in a child process, kept between the two phases.
+
+    Use as a context manager: on a normal exit the child goes back to an idle pool for
+    the next solve of this process; after an error, Ctrl-C or a stop request it is
+    killed. ``control`` carries Ctrl-C / stop requests and receives the live status, as
+    with HiGHS.
+    """
+
+    def __init__(self, arrays: ModelArrays, control: SolveControl | None = None) -> None:
+        require()
+        self.arrays = arrays
+        self.control = control
+        self.started = time.perf_counter()
+        self._worker, self.fresh = _take_worker()
+        self._broken = False
+        self._closed = False
+        a = arrays.a
+        self._call(
+            ("build", {"indptr": a.indptr, "indices": a.indices, "data": a.data, "shape": np.array(a.shape),
+                       "row_lo": arrays.row_lo, "row_hi": arrays.row_hi, "col_lo": arrays.col_lo, "col_hi": arrays.col_hi}),
+        )
+        self.spawn_seconds = time.perf_counter() - self.started
+
+    def __enter__(self) -> CpSatSession:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    @property
+    def pid(self) -> int:
+        """The child's process id."""
+        return int(self._worker.proc.pid)
+
+    def add_row(self, idx: np.ndarray, val: np.ndarray, lo: float, hi: float) -> None:
+        """Add one row (phase 2's ``F >= F*``), here and in the child."""
+        self._call(("row", np.asarray(idx, dtype=np.int64), np.asarray(val, dtype=float), float(lo), float(hi)))
+        self.arrays = self.arrays.with_row(idx, val, lo, hi)
+
+    def solve(
+        self,
+        cost: np.ndarray,
+        maximize: bool,
+        hint: np.ndarray | None,
+        *,
+        seconds: float | None,
+        after_first: float | None,
+        work_limit: float | None,
+        rel_gap: float,
+        random_seed: int,
+        phase: str,
+        flow: int | None = None,
+    ) -> CpSatAnswer:
+        """Optimise ``cost . x`` (integral) from ``hint`` (used only if it satisfies the
+        model), under the budgets (see the module docstring), and check the answer.
+
+        Raises ``KeyboardInterrupt`` on Ctrl-C or a stop request (the child is killed)."""
+        if hint is not None and self.arrays.violation(hint) > FEASIBILITY_TOLERANCE:
+            hint = None
+        params = {"random_seed": int(random_seed), "deterministic_time": work_limit, "seconds": seconds,
+                  "after_first": after_first, "rel_gap": float(rel_gap), "first_at": 1.0}
+        sense = "max" if maximize else "min"
+        t0 = time.perf_counter()
+        if self.control is not None:
+            self.control.report(SolveStatus(phase, sense, None, None, t0, flow))
+        try:
+            raw = self._call(("solve", np.asarray(cost, dtype=float), bool(maximize), hint, params), progress=(phase, sense, t0, flow))
+        finally:
+            if self.control is not None:
+                self.control.report(None)
+        return self._checked(raw, cost, seconds, work_limit)
+
+    def _checked(self, raw: dict[str, Any], cost: np.ndarray, seconds: float | None, work_limit: float | None) -> CpSatAnswer:
+        """The child's answer as a :class:`CpSatAnswer`, its solution checked against the model."""
+        stats = {k: raw[k] for k in ("wall_seconds", "cpu_seconds", "deterministic_time", "conflicts", "branches")}
+        status = str(raw["status"])
+        stopped_by = None
+        if status in ("feasible", "unknown"):
+            hit_work = work_limit is not None and raw["deterministic_time"] >= 0.999 * work_limit
+            stopped_by = "work_limit" if hit_work or seconds is None else "time_limit"
+        x = raw["x"]
+        if x is None:
+            return CpSatAnswer(status, None, float("inf"), stopped_by, raw["first_age"], stats)
+        x = np.asarray(x, dtype=float)
+        if x.size != self.arrays.col_lo.size or self.arrays.violation(x) > FEASIBILITY_TOLERANCE:
+            raise RuntimeError("CP-SAT returned a solution that violates the routing model")
+        objective = float(np.asarray(cost, dtype=float) @ x)
+        if abs(objective - float(raw["objective"])) > 1e-6 * max(1.0, abs(objective)):
+            raise RuntimeError("CP-SAT reported another objective than its solution has")
+        bound = raw["bound"]
+        # integral objective: within less than 1 of the bound is a proof
+        proven = bound is not None and np.isfinite(bound) and abs(objective - float(bound)) < 1.0 - 1e-6
+        if status == "optimal" and proven:
+            return CpSatAnswer("optimal", x, 0.0, None, raw["first_age"], stats)
+        gap = abs(objective - float(bound)) / max(abs(objective), 1.0) if bound is not None and np.isfinite(bound) else float("inf")
+        return CpSatAnswer("feasible", x, float(gap), stopped_by, raw["first_age"], stats)
+
+    def _call(self, message: tuple[Any, ...], progress: tuple[str, str, float, int | None] | None = None) -> Any:
+        """Send a request and wait for its answer, in short steps so Ctrl-C and stop
+        requests are seen within :data:`POLL` seconds; progress lines go to ``control``.
+        Any failure, Ctrl-C included, kills the child."""
+        proc = self._worker.proc
+        if proc.stdin is None or proc.stdout is None:
+            raise RuntimeError("the CP-SAT worker has no pipes")
+        try:
+            send(proc.stdin, message)
+            while True:
+                self._wait_readable(proc.stdout)
+                kind, *rest = receive(proc.stdout)
+                if kind == "progress":
+                    if progress is not None and self.control is not None:
+                        phase, sense, t0, flow = progress
+                        self.control.report(SolveStatus(phase, sense, rest[0], rest[1], t0, flow))
+                    continue
+                if kind == "error":
+                    raise RuntimeError(f"the CP-SAT worker failed: {rest[0]}")
+                return rest[0]
+        except (EOFError, BrokenPipeError) as exc:
+            self._broken = True
+            self.close()
+            raise RuntimeError(f"the CP-SAT worker ended unexpectedly{self._worker.stderr_tail()}") from exc
+        except KeyboardInterrupt:
+            if self.control is not None:
+                self.control.request_stop()
+            self._broken = True
+            self.close()
+            raise
+        except BaseException:
+            self._broken = True
+            self.close()
+            raise
+
+    def _wait_readable(self, stream: IO[bytes]) -> None:
+        """Block until the child has written, raising ``KeyboardInterrupt`` on a stop request."""
+        fd = stream.fileno()
+        while True:
+            if self.control is not None and self.control.stop_requested:
+                raise KeyboardInterrupt
+            ready, _, _ = select.select([fd], [], [], POLL)
+            if ready:
+                return
+
+    def close(self) -> None:
+        """Hand the child back for the next solve, or end it after a failure (once)."""
+        if self._closed:
+            return
+        self._closed = True
+        if self._broken:
+            self._worker.close()
+        else:
+            _give_back(self._worker)
+
+
+__all__ = ["MISSING", "CpSatAnswer", "CpSatSession", "ModelArrays", "available", "close_idle_workers", "ortools_version", "require"]

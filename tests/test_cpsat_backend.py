@@ -1,0 +1,204 @@
+"""The CP-SAT solver backend (``backend="cpsat"``, the extra ``flowtest[cpsat]``; issue 18 pt 2).
+
+Its exhaustive optimality is ``tests/test_optimality.py`` (parametrized over the installed
+backends). Here: the same answers as HiGHS on built-ins both prove, determinism under a
+deterministic budget, Ctrl-C and stop requests, the child process's output kept off our
+stdout, and the one-line error when the extra is missing.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from experiments.cli import main
+from synthesis.artifacts.summary import summary_of, without_timings
+from synthesis.model.errors import ProblemError
+from synthesis.pipeline import SynthesisOptions, synthesize
+from synthesis.problems.load import load_problem
+from synthesis.routing import cpsat
+from synthesis.routing.solver_control import SolveControl
+
+FLOWTEST = Path(sys.executable).parent / "flowtest"
+
+needs_ortools = pytest.mark.skipif(not cpsat.available(), reason="OR-Tools is not installed (the extra flowtest[cpsat])")
+
+
+def _answer(name: str, backend: str) -> tuple[str, int, int, list[int]]:
+    test = synthesize(load_problem(name), SynthesisOptions(backend=backend))
+    assert test.checks.bypass_flow == 0
+    assert test.routing.stats["backend"] == backend
+    return test.routing.status, test.routing.flow, int(test.routing.cut_edges.size), sorted(test.routing.cut_group_keys)
+
+
+@needs_ortools
+@pytest.mark.parametrize(
+    "name", ["small-reactive", "example1", "beaver-rescue", "motion-primitives", "maze2", pytest.param("refueling", marks=pytest.mark.slow)]
+)
+def test_same_answers_as_highs_on_builtins(name: str) -> None:
+    """Built-ins both backends prove: the same status, flow and number of cuts (which cuts
+    may differ where several optima tie; both answers are checked)."""
+    highs, cp = _answer(name, "highs"), _answer(name, "cpsat")
+    assert highs[0] == cp[0] == "optimal"
+    assert highs[1:3] == cp[1:3], f"{name}: HiGHS {highs[1:3]}, CP-SAT {cp[1:3]}"
+
+
+@needs_ortools
+def test_refueling_proven_by_cpsat() -> None:
+    """The paper's refueling example: flow 2 with 101 cuts, proven (HiGHS's answer,
+    docs/benchmarks.md), in a fraction of HiGHS's time."""
+    test = synthesize(load_problem("refueling"), SynthesisOptions(backend="cpsat"))
+    assert (test.routing.status, test.routing.flow, int(test.routing.cut_edges.size)) == ("optimal", 2, 101)
+    assert test.routing.stats["solver_version"] == cpsat.ortools_version()
+    assert test.checks.bypass_flow == 0
+
+
+@needs_ortools
+def test_deterministic_budget_gives_the_same_test() -> None:
+    """One worker, a fixed seed and CP-SAT's deterministic time as the budget: a solve
+    stopped by the work limit gives the same (checked) test twice, and says so."""
+    options = SynthesisOptions(backend="cpsat", work_limit=0.05)
+    a, b = (synthesize(load_problem("refueling"), options) for _ in range(2))
+    assert a.routing.stats["stopped_by"] == "work_limit" and a.routing.status == "feasible"
+    assert a.routing.stats["deterministic"] is True
+    assert a.checks.bypass_flow == 0
+    assert without_timings(summary_of(a)) == without_timings(summary_of(b))
+    assert np.array_equal(a.routing.cut_edges, b.routing.cut_edges)
+
+
+@needs_ortools
+def test_a_stop_request_kills_the_child_within_a_second() -> None:
+    """A stop request (what Ctrl-C sends) during a long CP-SAT search: ``KeyboardInterrupt``
+    within a second, and the child process is gone."""
+    control = SolveControl()
+    pids: list[int] = []
+    real = cpsat.CpSatSession.__init__
+
+    def remember(self: cpsat.CpSatSession, *args: object, **kwargs: object) -> None:
+        real(self, *args, **kwargs)  # type: ignore[arg-type]
+        pids.append(self.pid)
+
+    problem = load_problem("mars-exploration")  # phase 1 takes CP-SAT minutes
+    stopped: list[float] = []
+
+    def stop_once_running() -> None:
+        while control.status is None or control.status.phase != "phase 1 (maximum flow)":
+            time.sleep(0.05)
+        time.sleep(0.5)
+        stopped.append(time.perf_counter())
+        control.request_stop()
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(cpsat.CpSatSession, "__init__", remember)
+        threading.Thread(target=stop_once_running, daemon=True).start()
+        with pytest.raises(KeyboardInterrupt):
+            synthesize(problem, SynthesisOptions(backend="cpsat", control=control))
+    assert stopped and time.perf_counter() - stopped[0] < 1.0
+    assert pids
+    with pytest.raises(ProcessLookupError):
+        os.kill(pids[0], 0)  # killed and reaped
+
+
+@needs_ortools
+def test_ctrl_c_on_the_console_script_ends_the_child(tmp_path: Path) -> None:
+    """SIGINT while CP-SAT runs (mars-exploration, phase 1): exit 130 within 2 s, nothing
+    on stdout, no output file, and the child process is gone within a second."""
+    art = tmp_path / "mars.json"
+    proc = subprocess.Popen(
+        [str(FLOWTEST), "synthesize", "mars-exploration", "--backend", "cpsat", "--json", "--out", str(art), "--progress", "0.3"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
+    assert proc.stderr is not None
+    seen = []
+    for line in proc.stderr:
+        seen.append(line)
+        if "phase 1 (maximum flow): best" in line:
+            break
+    else:
+        pytest.fail("no solver status line: " + "".join(seen))
+    children = Path(f"/proc/{proc.pid}/task/{proc.pid}/children")
+    kids = [int(p) for p in children.read_text().split()] if children.exists() else []
+    t0 = time.perf_counter()
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert time.perf_counter() - t0 < 2.0
+    assert out == "" and "Traceback" not in err
+    assert err.splitlines()[-1] == "flowtest: interrupted"
+    assert list(tmp_path.iterdir()) == []
+    assert kids, "the CP-SAT child was not found"
+    deadline = time.perf_counter() + 1.0
+    while any(Path(f"/proc/{k}").exists() and "Z" not in _state(k) for k in kids):
+        assert time.perf_counter() < deadline, "the CP-SAT child outlived flowtest by over a second"
+        time.sleep(0.05)
+
+
+def _state(pid: int) -> str:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except (OSError, IndexError):
+        return "Z"
+
+
+@needs_ortools
+def test_json_stdout_only_with_cpsat() -> None:
+    """With ``--json`` stdout holds the JSON document alone: the child's output never reaches it."""
+    proc = subprocess.run([str(FLOWTEST), "synthesize", "small-reactive", "--backend", "cpsat", "--json"],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    summary = json.loads(proc.stdout)
+    assert summary["status"] == "optimal" and summary["stats"]["backend"] == "cpsat"
+
+
+def test_missing_extra_is_one_clear_error(capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    """``--backend cpsat`` without OR-Tools: exit 2, one ``error:`` line naming the extra,
+    before any work; the library raises :class:`ProblemError` with the same words."""
+    monkeypatch.setattr(cpsat, "find_spec", lambda name: None)
+    code = main(["synthesize", "small-reactive", "--backend", "cpsat", "--json"])
+    out, err = capsys.readouterr()
+    assert code == 2 and out == ""
+    errors = [line for line in err.splitlines() if not line.startswith("flowtest: ")]
+    assert errors == [f"error: {cpsat.MISSING}"], err
+    assert "flowtest[cpsat]" in errors[0]
+    with pytest.raises(ProblemError, match=r"flowtest\[cpsat\]"):
+        synthesize(load_problem("small-reactive"), SynthesisOptions(backend="cpsat"))
+
+
+def test_unknown_backend_is_refused() -> None:
+    with pytest.raises(ProblemError, match="unknown solver backend 'gurobi'"):
+        synthesize(load_problem("small-reactive"), SynthesisOptions(backend="gurobi"))
+    with pytest.raises(ProblemError, match="work_limit"):
+        synthesize(load_problem("small-reactive"), replace(SynthesisOptions(), work_limit=-1.0))
+
+
+def test_highs_names_itself() -> None:
+    """The summary says which solver made the answer, with its version."""
+    from importlib.metadata import version
+
+    test = synthesize(load_problem("small-reactive"), SynthesisOptions(backend="highs"))
+    assert test.routing.stats["backend"] == "highs"
+    assert test.routing.stats["solver_version"] == version("highspy")
+
+
+@needs_ortools
+def test_the_child_never_imports_highspy() -> None:
+    """The worker module loads NumPy, SciPy and OR-Tools only: highspy cannot share a
+    process with OR-Tools' own HiGHS build."""
+    code = (
+        "import runpy, sys; runpy.run_path(sys.argv[1], run_name='not_main'); "
+        "from ortools.sat.python import cp_model; print('highspy' in sys.modules)"
+    )
+    proc = subprocess.run([sys.executable, "-P", "-c", code, str(cpsat.WORKER)], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip() == "False"
