@@ -26,7 +26,6 @@ against the model here (bounds, rows, integrality, objective) before it is used.
 from __future__ import annotations
 
 import os
-import select
 import subprocess
 import sys
 import tempfile
@@ -35,14 +34,14 @@ import time
 from dataclasses import dataclass
 from importlib.metadata import PackageNotFoundError, version
 from importlib.util import find_spec
+from multiprocessing.connection import Connection
 from pathlib import Path
-from typing import IO, Any
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
 
 from ..model.errors import ProblemError
-from .cpsat_worker import receive, send
 from .solver_control import POLL, SolveControl, SolveStatus
 
 WORKER = Path(__file__).resolve().with_name("cpsat_worker.py")
@@ -121,7 +120,8 @@ class CpSatAnswer:
 
 
 class _Worker:
-    """One child process running :mod:`synthesis.routing.cpsat_worker`."""
+    """One child process running :mod:`synthesis.routing.cpsat_worker`, and the two ends
+    of the pipes to it (:class:`multiprocessing.connection.Connection`)."""
 
     def __init__(self) -> None:
         self.stderr = tempfile.TemporaryFile()
@@ -130,8 +130,13 @@ class _Worker:
             stdin=subprocess.PIPE,
             stdout=subprocess.PIPE,
             stderr=self.stderr,
-            bufsize=0,  # unbuffered: select() on the pipe sees every byte not read yet
         )
+        if self.proc.stdin is None or self.proc.stdout is None:
+            raise RuntimeError("the CP-SAT worker has no pipes")
+        self.to_child = Connection(os.dup(self.proc.stdin.fileno()), readable=False)
+        self.from_child = Connection(os.dup(self.proc.stdout.fileno()), writable=False)
+        self.proc.stdin.close()
+        self.proc.stdout.close()
 
     @property
     def alive(self) -> bool:
@@ -148,16 +153,11 @@ class _Worker:
 
     def close(self) -> None:
         """End the child (killed if it still runs) and free its pipes."""
-        proc = self.proc
-        if proc.poll() is None:
-            proc.kill()
-        proc.wait()
-        for stream in (proc.stdin, proc.stdout):
-            if stream is not None:
-                try:
-                    stream.close()
-                except OSError:
-                    pass
+        if self.proc.poll() is None:
+            self.proc.kill()
+        self.proc.wait()
+        for conn in (self.to_child, self.from_child):
+            conn.close()
         self.stderr.close()
 
 
@@ -298,14 +298,14 @@ class CpSatSession:
         """Send a request and wait for its answer, in short steps so Ctrl-C and stop
         requests are seen within :data:`POLL` seconds; progress lines go to ``control``.
         Any failure, Ctrl-C included, kills the child."""
-        proc = self._worker.proc
-        if proc.stdin is None or proc.stdout is None:
-            raise RuntimeError("the CP-SAT worker has no pipes")
+        worker = self._worker
         try:
-            send(proc.stdin, message)
+            worker.to_child.send(message)
             while True:
-                self._wait_readable(proc.stdout)
-                kind, *rest = receive(proc.stdout)
+                while not worker.from_child.poll(POLL):
+                    if self.control is not None and self.control.stop_requested:
+                        raise KeyboardInterrupt
+                kind, *rest = worker.from_child.recv()
                 if kind == "progress":
                     if progress is not None and self.control is not None:
                         phase, sense, t0, flow = progress
@@ -314,10 +314,10 @@ class CpSatSession:
                 if kind == "error":
                     raise RuntimeError(f"the CP-SAT worker failed: {rest[0]}")
                 return rest[0]
-        except (EOFError, BrokenPipeError) as exc:
+        except (EOFError, BrokenPipeError, ConnectionResetError) as exc:
             self._broken = True
             self.close()
-            raise RuntimeError(f"the CP-SAT worker ended unexpectedly{self._worker.stderr_tail()}") from exc
+            raise RuntimeError(f"the CP-SAT worker ended unexpectedly{worker.stderr_tail()}") from exc
         except KeyboardInterrupt:
             if self.control is not None:
                 self.control.request_stop()
@@ -328,16 +328,6 @@ class CpSatSession:
             self._broken = True
             self.close()
             raise
-
-    def _wait_readable(self, stream: IO[bytes]) -> None:
-        """Block until the child has written, raising ``KeyboardInterrupt`` on a stop request."""
-        fd = stream.fileno()
-        while True:
-            if self.control is not None and self.control.stop_requested:
-                raise KeyboardInterrupt
-            ready, _, _ = select.select([fd], [], [], POLL)
-            if ready:
-                return
 
     def close(self) -> None:
         """Hand the child back for the next solve, or end it after a failure (once)."""

@@ -5,10 +5,12 @@ of highspy cannot be loaded into one process (with OR-Tools 9.15 and highspy 1.1
 whichever is imported second fails with an undefined symbol). So this module imports
 NumPy, SciPy and OR-Tools only, never ``synthesis`` (whose package imports highspy), and
 :mod:`synthesis.routing.cpsat` starts it by its file path (``python -P PATH``), not as
-``-m synthesis...``, so the package's ``__init__`` never runs here.
+``-m synthesis...``, so the package's ``__init__`` never runs here. Importing this module into a process that
+holds highspy fails for the same reason: nothing in FlowTest imports it.
 
 The protocol is a pipe each way (the child's standard input and output), each message a
-pickled tuple behind its length (8 bytes, little endian). Requests: ``("build", arrays)``,
+tuple sent with :class:`multiprocessing.connection.Connection` (pickled, behind its length), so
+the parent needs nothing of this module, which it must never import. Requests: ``("build", arrays)``,
 ``("row", idx, val, lo, hi)``, ``("solve", cost, maximize, hint, params)``. Answers:
 ``("ok", value)`` or ``("error", text)``; during a solve ``("progress", best, bound)``
 lines come first. The protocol keeps its own copy of file descriptor 1, and descriptor 1
@@ -23,51 +25,19 @@ why that keeps the optimum is said in :mod:`synthesis.routing.cpsat`.
 from __future__ import annotations
 
 import os
-import pickle
 import signal
-import struct
 import sys
 import threading
 import time
-from typing import IO, Any
+from multiprocessing.connection import Connection
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
+from ortools.sat.python import cp_model
 
 #: Seconds between two looks of the child at whether its parent is still alive.
 PARENT_POLL = 0.2
-
-
-def send(stream: IO[bytes], message: tuple[Any, ...]) -> None:
-    """Write one message (a pickled tuple behind its length); an unbuffered stream may
-    take it in several writes."""
-    data = pickle.dumps(message, protocol=pickle.HIGHEST_PROTOCOL)
-    view = memoryview(struct.pack("<Q", len(data)) + data)
-    while view:
-        n = stream.write(view)
-        view = view[n if n is not None else 0 :]
-    stream.flush()
-
-
-def receive(stream: IO[bytes]) -> tuple[Any, ...]:
-    """Read one message; ``EOFError`` when the other side closed the pipe."""
-    head = _read_exactly(stream, 8)
-    (size,) = struct.unpack("<Q", head)
-    message = pickle.loads(_read_exactly(stream, size))
-    if not isinstance(message, tuple):
-        raise EOFError("a message that is not a tuple")
-    return message
-
-
-def _read_exactly(stream: IO[bytes], n: int) -> bytes:
-    chunks: list[bytes] = []
-    while n > 0:
-        chunk = stream.read(n)
-        if not chunk:
-            raise EOFError("the pipe closed")
-        chunks.append(chunk)
-        n -= len(chunk)
-    return b"".join(chunks)
 
 
 class CpSatModel:
@@ -75,8 +45,6 @@ class CpSatModel:
     one linear constraint per row; the objective and extra rows come per phase."""
 
     def __init__(self, arrays: dict[str, np.ndarray]) -> None:
-        from ortools.sat.python import cp_model
-
         self._cp = cp_model
         self.model = cp_model.CpModel()
         lo = np.ceil(arrays["col_lo"] - 1e-9).astype(np.int64)
@@ -101,7 +69,7 @@ class CpSatModel:
         ihi = span if not np.isfinite(hi) else int(np.floor(hi + 1e-9))
         self.model.add_linear_constraint(expr, ilo, ihi)
 
-    def solve(self, cost: np.ndarray, maximize: bool, hint: np.ndarray | None, params: dict[str, Any], out: IO[bytes]) -> dict[str, Any]:
+    def solve(self, cost: np.ndarray, maximize: bool, hint: np.ndarray | None, params: dict[str, Any], out: Connection) -> dict[str, Any]:
         """Optimise ``cost . x`` (integral costs) from ``hint`` under ``params``; progress
         lines go to ``out`` as solutions and bounds come.
 
@@ -170,7 +138,7 @@ class _Watch:
     ``after_first`` seconds after its first solution of objective >= ``first_at``, or at
     ``seconds`` without one."""
 
-    def __init__(self, solver: Any, out: IO[bytes], maximize: bool, after_first: float | None, first_at: float, base: type) -> None:
+    def __init__(self, solver: Any, out: Connection, maximize: bool, after_first: float | None, first_at: float, base: type) -> None:
         self.solver = solver
         self.out = out
         self.maximize = maximize
@@ -216,7 +184,7 @@ class _Watch:
 
     def _report(self) -> None:
         try:
-            send(self.out, ("progress", self.best, self.bound))
+            self.out.send(("progress", self.best, self.bound))
         except (OSError, ValueError):  # the parent went away: the watchdog ends us
             pass
 
@@ -229,30 +197,30 @@ def _watch_parent(parent: int) -> None:
             os._exit(1)
 
 
-def serve(inp: IO[bytes], out: IO[bytes]) -> None:
+def serve(inp: Connection, out: Connection) -> None:
     """The child's loop: build the model, then add rows and solve on request, until the
     parent closes the pipe."""
     model: CpSatModel | None = None
     while True:
         try:
-            message = receive(inp)
-        except EOFError:
+            message = inp.recv()
+        except (EOFError, OSError):
             return
         try:
             kind = message[0]
             if kind == "build":
                 model = CpSatModel(message[1])
-                send(out, ("ok", None))
+                out.send(("ok", None))
             elif kind == "row" and model is not None:
                 model.add_row(*message[1:])
-                send(out, ("ok", None))
+                out.send(("ok", None))
             elif kind == "solve" and model is not None:
                 cost, maximize, hint, params = message[1:]
-                send(out, ("ok", model.solve(cost, maximize, hint, params, out)))
+                out.send(("ok", model.solve(cost, maximize, hint, params, out)))
             else:
-                send(out, ("error", f"unexpected request {kind!r}"))
+                out.send(("error", f"unexpected request {kind!r}"))
         except Exception as exc:  # noqa: BLE001 - reported to the parent, which raises
-            send(out, ("error", f"{type(exc).__name__}: {exc}"))
+            out.send(("error", f"{type(exc).__name__}: {exc}"))
 
 
 def main() -> None:
@@ -260,10 +228,11 @@ def main() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     parent = int(sys.argv[1]) if len(sys.argv) > 1 else os.getppid()
     threading.Thread(target=_watch_parent, args=(parent,), daemon=True).start()
-    protocol = os.fdopen(os.dup(1), "wb")
+    inp = Connection(os.dup(0), writable=False)
+    out = Connection(os.dup(1), readable=False)
     os.dup2(2, 1)  # a library's print goes to stderr, never into the protocol
     sys.stdout = sys.stderr
-    serve(sys.stdin.buffer, protocol)
+    serve(inp, out)
 
 
 if __name__ == "__main__":
