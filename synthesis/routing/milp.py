@@ -364,7 +364,7 @@ def _phase1_cpsat(
 ) -> tuple[_Phase, list[dict[str, Any]]]:
     """:func:`_phase1` on CP-SAT: the heuristic's answer proves the maximum flow when it
     attains the upper bound, else CP-SAT maximises the flow from it (as a hint)."""
-    guess = rm.edges.guess(products, traps=_trap_test(products, rm.groups, entries))
+    guess = rm.guess(products, traps=_trap_test(products, rm.groups, entries))
     x_guess = _guess_solution(products, rm, guess, options)
     if x_guess is not None:
         clock.first_test()
