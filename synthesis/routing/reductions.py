@@ -64,9 +64,11 @@ from scipy.sparse.csgraph import breadth_first_order
 
 from ..graphs.products import Products, coreachable, reachable
 
-#: Static models with more cut groups with a binary than this skip the dominance rule
-#: (it costs four graph searches per group); a fixed count, so the model stays deterministic.
-DOMINANCE_MAX_GROUPS = 400
+#: Static models with more cut groups with a binary than this skip the dominance rule: it
+#: costs four graph searches per group (0.4-3 s on the 10x10 grids' 164-180 walls, measured
+#: under load) and fixed none there (docs/benchmarks.md). A count, so the model stays
+#: deterministic.
+DOMINANCE_MAX_GROUPS = 100
 
 
 @dataclass(frozen=True)
