@@ -198,6 +198,7 @@ def synthesize_agent_test(
     options: SynthesisOptions | None = None,
     max_iterations: int | None = None,
     prefilter: bool = True,
+    reasons: bool = True,
 ) -> SynthesizedTest:
     """Synthesize a test agent strategy for an agent problem (method.md §7).
 
@@ -216,6 +217,10 @@ def synthesize_agent_test(
     prefilter
         Exclude, before the first solve, the cuts no agent can hold (see
         :func:`~synthesis.agent.loop.counterexample_loop`).
+    reasons
+        Exclude with each rejected cut set every cut set rejected for the same reason
+        (see :func:`~synthesis.agent.loop.counterexample_loop`); ``False`` excludes the cut
+        set alone (the loop of method.md §7 as written; same answer, more solves).
 
     Returns
     -------
@@ -252,6 +257,7 @@ def synthesize_agent_test(
         setting=options.setting or problem.extras.get("setting", "instantaneous"),
         bound=bound,
         prefilter=prefilter,
+        reasons=reasons,
         closed_loop=options.closed_loop,
         note=note,
         graph_seconds=graph_seconds,

@@ -77,7 +77,10 @@ from .gr1 import GR1Game
 
 __all__ = [
     "AgentGame",
+    "GameRules",
     "build_agent_game",
+    "build_game",
+    "rules_of_strategy",
     "ended_nodes",
     "blocking_places",
     "trapped_nodes",
@@ -126,13 +129,22 @@ def blocking_places(products: Products, static_obstacles: np.ndarray, places: np
     That is: ``Tgt`` is reachable from ``v`` in G without the static obstacles, but not
     when every move into the place is removed too (g8). Ended nodes block nothing.
     """
+    free = ~static_obstacles[products.virtual.move]
+    return _blocking(products, free, free, places)
+
+
+def _blocking(products: Products, base_edges: np.ndarray, keep_edges: np.ndarray, places: np.ndarray) -> np.ndarray:
+    """g8's "blocks every path", from two edge sets of G: ``Tgt`` reachable from ``v`` over
+    ``base_edges``, and not over ``keep_edges`` once every move into the place is removed.
+    With both the edges that are not static obstacles this is :func:`blocking_places`;
+    :func:`build_game` passes the edges that are surely not obstacles and the edges that
+    are not surely obstacles (a sure answer for every cut set its rules stand for)."""
     g, ts = products.virtual, products.ts
-    free = ~static_obstacles[g.move]
-    base = coreachable(g.n_nodes, g.src[free], g.dst[free], products.target) & ~ended_nodes(products)
+    base = coreachable(g.n_nodes, g.src[base_edges], g.dst[base_edges], products.target) & ~ended_nodes(products)
     head_place = ts.place[g.state[g.dst]]
     out = np.zeros((g.n_nodes, places.size), dtype=bool)
     for k, p in enumerate(places.tolist()):
-        keep = free & (head_place != p)
+        keep = keep_edges & (head_place != p)
         out[:, k] = base & ~coreachable(g.n_nodes, g.src[keep], g.dst[keep], products.target)
     return out
 
@@ -158,6 +170,42 @@ def trapped_nodes(products: Products, strategy: TestStrategy) -> np.ndarray:
     return np.flatnonzero(seen & ~ended & ~alive)
 
 
+@dataclass(frozen=True)
+class GameRules:
+    """What the test-agent game needs to know of a cut set, per edge of G.
+
+    ``cut`` edges are restricted (reactive ones: the agent must stand on their head's
+    place, g6; ``static`` ones are walls), ``open`` edges are free (the SUT may take
+    them, so the agent must not stand on their head's place, g7). For one cut set
+    (:func:`rules_of_strategy`) every edge is one or the other. A set of rules that
+    leaves some edges *undecided* (neither) stands for every cut set that cuts the
+    ``cut`` edges and leaves the ``open`` ones open: its game lets the SUT take only
+    the open edges and holds the agent only to what every such cut set asks, so an
+    agent that wins one of those cut sets' games wins this one too
+    (:mod:`synthesis.agent.reasons` uses that to exclude all of them at once).
+
+    Attributes
+    ----------
+    cut, open
+        ``bool[n_edges]`` over G, disjoint.
+    static
+        ``bool[n_edges]``: edges whose cut is a wall (a static obstacle), not a
+        restriction the agent realizes.
+    """
+
+    cut: np.ndarray
+    open: np.ndarray
+    static: np.ndarray
+
+
+def rules_of_strategy(products: Products, strategy: TestStrategy) -> GameRules:
+    """The rules of one test strategy: its blocked edges cut (walls where they are static
+    obstacles), every other edge open."""
+    g = products.virtual
+    cut = strategy.blocked[g.hist[g.src], g.move]
+    return GameRules(cut=cut, open=~cut, static=strategy.static_obstacles[g.move])
+
+
 @dataclass
 class AgentGame:
     """The test-agent game and the tables that translate it back to the test.
@@ -176,6 +224,8 @@ class AgentGame:
         ``int64[n_choices]``: the configuration ``v' * n_agent + a`` each SUT choice leads to.
     choice_config_index
         ``int64[n_choices]``: index of that configuration in :attr:`configs`.
+    choice_edge
+        ``int64[n_choices]``: the edge of G each SUT choice takes (-1 for a stay).
     configs
         ``int64[n_configs]``: the configurations (``v' * n_agent + a``) where the agent decides.
     initial_config
@@ -186,10 +236,8 @@ class AgentGame:
         ``bool[n_nodes]``: nodes where the test is over.
     blocking
         ``bool[n_nodes, n_agent]``: g8's "blocks every path" (False for parks).
-    reactive
-        ``bool[n_hist, n_moves]``: ``R(q)``.
-    static_obstacles
-        ``bool[n_moves]``: ``Obs``.
+    rules
+        The cut and open edges the game was built from.
     """
 
     game: GR1Game
@@ -199,13 +247,13 @@ class AgentGame:
     position_index: np.ndarray
     choice_config: np.ndarray
     choice_config_index: np.ndarray
+    choice_edge: np.ndarray
     configs: np.ndarray
     initial_config: int
     legal: np.ndarray
     ended: np.ndarray
     blocking: np.ndarray
-    reactive: np.ndarray
-    static_obstacles: np.ndarray
+    rules: GameRules
 
     @property
     def n_positions(self) -> int:
@@ -221,14 +269,9 @@ class AgentGame:
         }
 
 
-def legal_positions(
-    products: Products,
-    reactive: np.ndarray,
-    static_obstacles: np.ndarray,
-    agent_place: np.ndarray,
-    ended: np.ndarray,
-) -> np.ndarray:
-    """``bool[n_nodes, n_agent]``: positions where the agent blocks exactly ``R(q)`` (g5-g7).
+def legal_positions(products: Products, rules: GameRules, agent_place: np.ndarray, ended: np.ndarray) -> np.ndarray:
+    """``bool[n_nodes, n_agent]``: positions where the agent blocks exactly ``R(q)`` (g5-g7):
+    on the place of every cut reactive edge out of the node, on no place of an open one.
 
     ``agent_place[a]`` is the place of agent state ``a`` (-1 for a park).
     """
@@ -239,11 +282,9 @@ def legal_positions(
     cells = np.flatnonzero(agent_place >= 0)
     agent_of_place[agent_place[cells]] = cells
     node_place = ts.place[g.state].astype(np.int64)
-    live = ~ended[g.src] & ~static_obstacles[g.move]
     head_agent = agent_of_place[node_place[g.dst]]
-    restricted = reactive[g.hist[g.src], g.move]
     # g6: the agent must stand on the place of every restricted move out of s
-    need = live & restricted
+    need = ~ended[g.src] & rules.cut & ~rules.static
     impossible = np.zeros(n, dtype=bool)
     impossible[g.src[need & (head_agent < 0)]] = True
     ok = need & (head_agent >= 0)
@@ -254,7 +295,7 @@ def legal_positions(
     impossible |= (req_hi >= 0) & (req_lo != req_hi)
     required = np.where(req_hi >= 0, req_hi, -1)
     # g7: and on no place of an unrestricted move out of s
-    forbid = live & ~restricted & (head_agent >= 0)
+    forbid = ~ended[g.src] & rules.open & (head_agent >= 0)
     forbidden = np.zeros((n, n_agent), dtype=bool)
     forbidden[g.src[forbid], head_agent[forbid]] = True
     agents = np.arange(n_agent)
@@ -281,16 +322,28 @@ def build_agent_game(products: Products, strategy: TestStrategy, agent: TestAgen
     AgentGame
         The game (a safety game: no liveness sets) and its translation tables.
     """
+    return build_game(products, rules_of_strategy(products, strategy), agent)
+
+
+def build_game(products: Products, rules: GameRules, agent: TestAgent) -> AgentGame:
+    """Build the test-agent game of a set of :class:`GameRules` (the module docstring's game;
+    for the rules of one strategy, exactly :func:`build_agent_game`).
+
+    The SUT takes open edges (or stays); the agent must stand where the cut reactive edges
+    out of the SUT's node lead (g6) and nowhere an open edge leads (g7); g8 forbids a
+    second step in a place that surely blocks every path of the SUT: ``Tgt`` reachable
+    over edges that are surely no wall (open, or outside the static area), and not
+    reachable, without the moves into the place, over the edges that are not surely walls.
+    """
     g, ts = products.virtual, products.ts
     n, n_agent = g.n_nodes, agent.n_states
     agent_place = agent.place_of_state
-    obs = strategy.static_obstacles
-    reactive = reactive_restrictions(strategy)
     ended = ended_nodes(products)
-    legal = legal_positions(products, reactive, obs, agent_place, ended)
+    legal = legal_positions(products, rules, agent_place, ended)
     blocking = np.zeros((n, n_agent), dtype=bool)
     cells = np.flatnonzero(agent_place >= 0)
-    blocking[:, cells] = blocking_places(products, obs, agent_place[cells])
+    wall = rules.cut & rules.static
+    blocking[:, cells] = _blocking(products, rules.open | ~rules.static, ~wall, agent_place[cells])
 
     flat_legal = legal.ravel()
     positions = np.flatnonzero(flat_legal)
@@ -300,22 +353,25 @@ def build_agent_game(products: Products, strategy: TestStrategy, agent: TestAgen
     pos_agent = positions % n_agent
     node_place = ts.place[g.state].astype(np.int64)
 
-    # the SUT's moves: edges of G (minus static obstacles) and stays
+    # the SUT's moves: open edges of G (a cut reactive edge leads onto the agent) and stays
     stay_nodes = np.flatnonzero(ts.stay[g.state] & ~ended)
-    free = ~obs[g.move]
+    free = np.flatnonzero(rules.open)
     m_src = np.concatenate([g.src[free].astype(np.int64), stay_nodes])
     m_dst = np.concatenate([g.dst[free].astype(np.int64), stay_nodes])
+    m_edge = np.concatenate([free.astype(np.int64), np.full(stay_nodes.size, -1, dtype=np.int64)])
     m_order, m_ptr = _csr(m_src, n)
     m_dst = m_dst[m_order]
+    m_edge = m_edge[m_order]
 
     # choices: from every legal position at a node where the test goes on (a2, a5)
     owners = np.flatnonzero(~ended[pos_node])
     row, idx = _ranges(m_ptr, pos_node[owners])
     c_owner = owners[row]
     c_dst = m_dst[idx]
+    c_edge = m_edge[idx]
     c_agent = pos_agent[c_owner]
     keep = node_place[c_dst] != agent_place[c_agent]
-    c_owner, c_dst, c_agent = c_owner[keep], c_dst[keep], c_agent[keep]
+    c_owner, c_dst, c_agent, c_edge = c_owner[keep], c_dst[keep], c_agent[keep], c_edge[keep]
     c_config = c_dst * n_agent + c_agent
 
     # configurations: the agent's answers (g2, g5 via legality, g6/g7, g8)
@@ -365,13 +421,13 @@ def build_agent_game(products: Products, strategy: TestStrategy, agent: TestAgen
         position_index=position_index,
         choice_config=c_config,
         choice_config_index=choice_config_index,
+        choice_edge=c_edge,
         configs=configs,
         initial_config=int(initial_config),
         legal=legal,
         ended=ended,
         blocking=blocking,
-        reactive=reactive,
-        static_obstacles=obs,
+        rules=rules,
     )
 
 

@@ -30,12 +30,13 @@ from ..model.strategy import TestStrategy
 from ..model.systems import TransitionSystem
 from ..model.test_agent import TestAgent, place_json
 from ..routing.milp import RoutingResult, solve_routing
-from ..routing.model import MilpOptions, cut_groups
+from ..routing.model import Exclusion, MilpOptions, cut_groups
 from ..routing.restrictions import strategy_from_routing
 from . import gr1
 from .closed_loop import ClosedLoopReport, verify_closed_loop
 from .controller import AgentController, controller_from_strategy
 from .game import AgentGame, build_agent_game, realizability_exclusions, trapped_nodes
+from .reasons import Reason, trap_reason, unrealizable_reason
 
 # ------------------------------------------------------ the counterexample-guided loop
 
@@ -152,6 +153,7 @@ def counterexample_loop(
     setting: str,
     bound: int,
     prefilter: bool = True,
+    reasons: bool = True,
     closed_loop: bool = False,
     note: Callable[[str], None] | None = None,
     graph_seconds: float = 0.0,
@@ -163,7 +165,8 @@ def counterexample_loop(
     excluded); solve MILP-agent; reject the cut set if it traps the system somewhere
     reachable (:func:`~synthesis.agent.game.trapped_nodes`); build the test-agent game
     from ``R(q)`` and ``Obs`` and solve it; if the agent cannot win, exclude the cut set
-    (``sum_{e in C} d_e <= |C| - 1``) and solve again. The winning strategy is tabulated
+    with every cut set rejected for the same reason (:mod:`synthesis.agent.reasons`; with
+    ``reasons=False`` the cut set alone, ``sum_{e in C} d_e <= |C| - 1``) and solve again. The winning strategy is tabulated
     (:class:`AgentController`) and checked in closed loop (:func:`verify_closed_loop`),
     by :func:`synthesis.agent.gr1.verify_strategy` and by the routing checks of
     :mod:`synthesis.checks.verify`.
@@ -189,6 +192,11 @@ def counterexample_loop(
         (:func:`~synthesis.agent.game.realizability_exclusions`); this never changes the
         optimum, only which equally good cut set is tried first and how many solves the
         loop needs.
+    reasons
+        Exclude with each rejected cut set every cut set rejected for the same reason
+        (:mod:`synthesis.agent.reasons`: a core of cuts and the groups that must stay
+        open), not the cut set alone; sound, so the answer keeps its flow and cost, and
+        the loop needs fewer solves.
     closed_loop
         Passed to :func:`~synthesis.checks.verify.check_test`.
     note
@@ -206,7 +214,7 @@ def counterexample_loop(
     """
     say: Callable[[str], None] = note or (lambda msg: None)
     t_start = time.perf_counter()
-    timings = {"graphs": graph_seconds, "milp": 0.0, "game": 0.0, "gr1": 0.0, "verify": 0.0, "total": 0.0}
+    timings = {"graphs": graph_seconds, "milp": 0.0, "game": 0.0, "gr1": 0.0, "reasons": 0.0, "verify": 0.0, "total": 0.0}
     ts = products.ts
     mopts = replace(milp, mode="mixed", static_moves=static_moves, block_states=True, exclusions=list(milp.exclusions))
     harness = _restrictable_for_agent(ts, agent, static_moves)
@@ -214,8 +222,9 @@ def counterexample_loop(
     milp_products = replace(products, ts=replace(ts, restrictable=harness))
     if prefilter:
         necessary = realizability_exclusions(milp_products, agent, cut_groups(milp_products, mopts))
-        mopts = replace(mopts, exclusions=[*mopts.exclusions, *necessary])
+        mopts = replace(mopts, exclusions=[*mopts.exclusions, *(Exclusion(tuple(k)) for k in necessary)])
         pruned = pruned or bool(necessary)
+    groups = cut_groups(milp_products, mopts)
     iterations: list[dict[str, Any]] = []
     for it in range(1, bound + 1):
         t = time.perf_counter()
@@ -247,9 +256,15 @@ def counterexample_loop(
         }
         iterations.append(record)
         trapped = trapped_nodes(products, strategy)
+        reason: Reason | None = None
+        cut_mask = np.isin(groups.keys, np.asarray(routing.cut_group_keys, dtype=np.int64))
         if trapped.size:
             v = int(trapped[0])
             record["verdict"] = f"traps the system at {ts.states[int(products.virtual.state[v])]}"
+            if reasons:
+                t = time.perf_counter()
+                reason = trap_reason(products, groups, cut_mask, strategy, v)
+                timings["reasons"] += time.perf_counter() - t
         else:
             t = time.perf_counter()
             game = build_agent_game(products, strategy, agent)
@@ -260,13 +275,21 @@ def counterexample_loop(
             timings["gr1"] += record["gr1_seconds"]
             record["positions"] = game.n_positions
             record["verdict"] = "realizable" if result.realizable else "unrealizable"
+            if reasons and not result.realizable:
+                t = time.perf_counter()
+                reason = unrealizable_reason(products, groups, cut_mask, agent)
+                timings["reasons"] += time.perf_counter() - t
         say(
             f"agent loop {it}/{bound}: flow {routing.flow}, {routing.cut_edges.size} cuts, blocked places "
             f"{record['blocked_places']}: {record['verdict']}"
         )
         if record["verdict"] == "realizable":
             break
-        mopts = replace(mopts, exclusions=[*mopts.exclusions, list(routing.cut_group_keys)])
+        exclusion = Exclusion(tuple(routing.cut_group_keys))
+        if reason is not None and reason.exclusion.excludes(set(routing.cut_group_keys)):
+            exclusion = reason.exclusion
+            record["reason"] = {"cut": len(exclusion.cut), "open": len(exclusion.open), "games": reason.games}
+        mopts = replace(mopts, exclusions=[*mopts.exclusions, exclusion])
     else:
         raise InconsistentProblem(
             "infeasible",

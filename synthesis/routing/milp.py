@@ -543,9 +543,8 @@ def _guess_solution(products: Products, rm: RoutingModel, guess: RoutingGuess, o
     cols, groups = rm.cols, rm.groups
     cut_mask = guess.cut_groups & (cols.cut >= 0)
     cut_keys = set(groups.keys[cut_mask].tolist())
-    for excluded in options.exclusions:
-        if excluded and set(excluded) <= cut_keys:
-            return None
+    if any(excluded.excludes(cut_keys) for excluded in options.exclusions):
+        return None
     g, ts = products.virtual, products.ts
     x = np.zeros(rm.n_col)
     x[cols.flow] = guess.edge_flow

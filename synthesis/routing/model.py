@@ -31,6 +31,25 @@ BACKENDS = ("auto", "highs", "cpsat")
 """The solvers of the routing model (``MilpOptions.backend``; ``flowtest synthesize --backend``)."""
 
 
+@dataclass(frozen=True)
+class Exclusion:
+    """Cut sets the routing MILP must not return: every cut set that cuts all of
+    :attr:`cut` and none of :attr:`open` (cut-group keys, see :func:`cut_groups`).
+
+    A rejected cut set ``C`` alone is ``Exclusion(C)``; the counterexample loop of
+    :mod:`synthesis.agent.loop` excludes, with the reason the agent lost
+    (:mod:`synthesis.agent.reasons`), a small core of ``C`` and the groups that must stay
+    open for the reason to hold.
+    """
+
+    cut: tuple[int, ...]
+    open: tuple[int, ...] = ()
+
+    def excludes(self, cut_keys: set[int]) -> bool:
+        """Whether the cut set with these group keys is excluded."""
+        return set(self.cut) <= cut_keys and not cut_keys.intersection(self.open)
+
+
 @dataclass
 class MilpOptions:
     """Options of the routing MILP.
@@ -51,8 +70,9 @@ class MilpOptions:
         MILP-agent: add ``d_state`` per place entered by a cut and minimise them
         before the cuts (method.md §7).
     exclusions
-        Rejected cut sets, each as a list of cut-group keys; each gets the row
-        ``sum d <= |C| - 1``.
+        Rejected cut sets (:class:`Exclusion`): each excludes every cut set that cuts
+        all its ``cut`` groups and none of its ``open`` groups, with the row
+        ``sum_{cut} d - sum_{open} d <= |cut| - 1``.
     time_limit
         Seconds for both phases together (``None``: no limit); with ``after_first``,
         seconds to a first test.
@@ -107,7 +127,7 @@ class MilpOptions:
     bidirectional: bool = False
     tie_places: bool = False
     block_states: bool = False
-    exclusions: list[list[int]] = field(default_factory=list)
+    exclusions: list[Exclusion] = field(default_factory=list)
     time_limit: float | None = None
     after_first: float | None = None
     mip_rel_gap: float = 0.0
@@ -593,20 +613,34 @@ def _add_blocked_places(
     return cols, places, r
 
 
-def _add_exclusions(m: _Model, groups: CutGroups, cut: np.ndarray, exclusions: list[list[int]]) -> list[np.ndarray]:
-    """One row ``sum d <= |C| - 1`` per rejected cut set ``C`` (a list of group keys)."""
+def _add_exclusions(m: _Model, groups: CutGroups, cut: np.ndarray, exclusions: list[Exclusion]) -> list[np.ndarray]:
+    """One row ``sum_{cut} d - sum_{open} d <= |cut| - 1`` per :class:`Exclusion`."""
     rows = []
     for excluded in exclusions:
-        pos = np.searchsorted(groups.keys, np.asarray(excluded, dtype=np.int64))
-        ok = (pos < groups.keys.size) & (groups.keys[np.minimum(pos, groups.keys.size - 1)] == excluded)
-        cols = cut[pos[ok]]
-        if not ok.all() or np.any(cols < 0):
-            # a group of the rejected set cannot be cut in this model: the set is already excluded
+        cut_cols = _cut_columns(groups, cut, excluded.cut)
+        if cut_cols is None:
+            # a group it needs cut cannot be cut in this model: nothing to exclude
             continue
-        r = m.add_rows(-np.inf, float(cols.size - 1), 1)
-        m.add_terms(np.repeat(r, cols.size), cols, 1.0)
+        open_cols = _cut_columns(groups, cut, excluded.open, keep_missing=True)
+        assert open_cols is not None
+        r = m.add_rows(-np.inf, float(cut_cols.size - 1), 1)
+        m.add_terms(np.repeat(r, cut_cols.size), cut_cols, 1.0)
+        m.add_terms(np.repeat(r, open_cols.size), open_cols, -1.0)
         rows.append(r)
     return rows
+
+
+def _cut_columns(groups: CutGroups, cut: np.ndarray, keys: tuple[int, ...], keep_missing: bool = False) -> np.ndarray | None:
+    """The ``d`` columns of the groups with these keys; ``None`` if one has none (a group
+    that cannot be cut), unless ``keep_missing``, which skips such groups (never cut)."""
+    want = np.asarray(keys, dtype=np.int64)
+    pos = np.searchsorted(groups.keys, want)
+    ok = (pos < groups.keys.size) & (groups.keys[np.minimum(pos, groups.keys.size - 1)] == want)
+    cols = np.where(ok, cut[np.minimum(pos, groups.keys.size - 1)], -1)
+    if not keep_missing and np.any(cols < 0):
+        return None
+    out: np.ndarray = cols[cols >= 0]
+    return out
 
 
 def _add_feasibility(
