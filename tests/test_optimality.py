@@ -46,6 +46,7 @@ METHOD_EXACT = SynthesisOptions(closed_loop=False)
 #: Every solver backend installed answers the same exhaustive comparisons (issue 18).
 BACKENDS = [
     "highs",
+    "cover",
     pytest.param("cpsat", marks=pytest.mark.skipif(not cpsat.available(), reason="OR-Tools is not installed (the extra flowtest[cpsat])")),
 ]
 

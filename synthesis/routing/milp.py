@@ -48,46 +48,14 @@ import scipy.sparse as sp
 from ..graphs.consistency import check_consistency
 from ..graphs.products import Products
 from ..model.errors import InconsistentProblem
-from . import cpsat
+from . import cpsat, wall_cover
 from .heuristic import RoutingGuess
 from .model import BACKENDS, CutGroups, MilpOptions, RoutingModel, build_model, static_moves_of
+from .result import RoutingResult as RoutingResult
+from .result import blocked_by as blocked_by
+from .result import blocked_of_edges, required_entries
 from .solver_control import Clock, run_highs, solver_version, stdout_guard
 from .traps import trapped_configurations, trapped_entries
-
-
-@dataclass(frozen=True)
-class RoutingResult:
-    """The answer of the routing MILP.
-
-    Attributes
-    ----------
-    status
-        ``"optimal"`` only when both phases were proven optimal, else ``"feasible"``.
-    flow
-        The flow value F.
-    cut_edges
-        Indices of the edges of G with ``d_e = 1`` (tied copies included).
-    cut_group_keys
-        The keys of the cut groups (used to exclude this cut set later).
-    static_moves_cut
-        ``bool`` mask over T's moves: moves blocked for the whole test.
-    blocked_places
-        Places with ``d_state = 1`` (MILP-agent only).
-    mip_gap
-        Relative gap of the last phase.
-    stats
-        Model sizes and times (problem-format.md's names).
-    """
-
-    status: str
-    flow: int
-    cut_edges: np.ndarray
-    cut_group_keys: list[int]
-    static_moves_cut: np.ndarray
-    blocked_places: np.ndarray
-    mip_gap: float
-    stats: dict[str, Any]
-
 
 EAGER_FLOW_LIMIT = 200_000  # histories x G_sys edges up to which all feasibility flows go in at once
 
@@ -123,6 +91,9 @@ def solve_routing(products: Products, options: MilpOptions | None = None) -> Rou
     """
     options = options or MilpOptions()
     options = replace(options, backend=chosen_backend(products, options))
+    if options.backend == "cover":
+        result = wall_cover.solve_cover(products, options)
+        return replace(result, stats={**result.stats, "solver_version": backend_version("cover")})
     # small reactive models start with every history's flows (adding them lazily costs
     # more rounds than it saves there); reactive ones whose flows would swamp the model
     # start without
@@ -196,32 +167,11 @@ def _with_rounds(result: RoutingResult, rounds: int, entries: dict[int, np.ndarr
     return replace(result, stats={**result.stats, "feasibility_rounds": rounds, "feasibility_histories": len(entries)})
 
 
-def required_entries(products: Products, options: MilpOptions) -> dict[int, np.ndarray]:
-    """Per history, the G_sys entry nodes the feasibility flows must serve: none for
-    MILP-static (its walls are on the map, see :func:`solve_routing`), else the kept
-    entry nodes of method.md §5."""
-    return {} if options.mode == "static" else products.kept_entries
-
-
 def _with_extra(kept: dict[int, np.ndarray], extra: dict[int, np.ndarray]) -> dict[int, np.ndarray]:
     out = dict(kept)
     for q, nodes in extra.items():
         out[q] = np.union1d(out.get(q, np.zeros(0, dtype=np.int64)), nodes)
     return out
-
-
-def blocked_by(products: Products, result: RoutingResult) -> np.ndarray:
-    """``bool[n_hist, n_moves]``: the moves a routing answer restricts under each history."""
-    out: np.ndarray = _blocked_of_edges(products, result.cut_edges) | result.static_moves_cut[None, :]
-    return out
-
-
-def _blocked_of_edges(products: Products, edges: np.ndarray) -> np.ndarray:
-    """``bool[n_hist, n_moves]``: the moves cut edges of G restrict, under the history of their tail."""
-    g = products.virtual
-    blocked = np.zeros((g.n_hist, products.ts.n_moves), dtype=bool)
-    blocked[g.hist[g.src[edges]], g.move[edges]] = True
-    return blocked
 
 
 class _FlowsBind(Exception):
@@ -451,7 +401,7 @@ def _raise_if_flows_bind(
         return
     groups = rm.groups
     cut1 = rm.cut_of(x)
-    blocked1 = _blocked_of_edges(products, np.flatnonzero(cut1[groups.of_edge]))
+    blocked1 = blocked_of_edges(products, np.flatnonzero(cut1[groups.of_edge]))
     blocked1 |= (np.isin(groups.move_key, groups.keys[cut1 & groups.static]) & static_moves_of(products, options))[None, :]
     trapped1 = trapped_entries(products, blocked1, missing)
     if trapped1:
@@ -571,7 +521,7 @@ def _trap_test(products: Products, groups: CutGroups, entries: dict[int, np.ndar
     if not entries:
         return None
     def traps(cut: np.ndarray) -> bool:
-        blocked = _blocked_of_edges(products, np.flatnonzero(cut[groups.of_edge]))
+        blocked = blocked_of_edges(products, np.flatnonzero(cut[groups.of_edge]))
         return bool(trapped_entries(products, blocked, entries))
 
     return traps

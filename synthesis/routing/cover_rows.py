@@ -1,0 +1,403 @@
+"""The rows of the wall-cover master (:mod:`synthesis.routing.wall_cover`): which checks a
+cut set fails, and the valid row over the cut binaries each failure gives.
+
+A cut set is a ``bool`` per cut group (:class:`~synthesis.routing.model.CutGroups`); the
+master's columns are the groups with a binary, then (MILP-agent) one ``d_state`` per place
+a cut may enter. The checks, all graph searches in bulk (SciPy's ``csgraph``):
+
+* bypass (c4-c5): cheapest open ``Src -> Tgt`` paths over the c5 edges, each group with a
+  binary costing 1, the groups of a found path closed before the next search (so the
+  rows of one round have disjoint supports);
+* flow: a maximum flow over the open model edges and, below the level, the minimum cut on
+  the source side (a :class:`FlowCut`, kept to be re-instantiated at other levels) and on
+  the sink side;
+* traps (c6-c8): :func:`synthesis.routing.traps.trapped_entries` on the restrictions of
+  the cut set (plus :func:`~synthesis.routing.traps.trapped_configurations` with
+  ``closed_loop``), and per trapped node the set it still reaches.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import breadth_first_order, dijkstra, maximum_flow
+
+from ..graphs.products import Products
+from .heuristic import RoutingGuess
+from .model import CutGroups, MilpOptions, ModelEdges, static_moves_of
+from .result import blocked_of_edges
+from .traps import trapped_configurations, trapped_entries
+
+#: Group-disjoint bypass paths separated per round.
+PATHS_PER_ROUND = 16
+
+#: Trapped nodes per history turned into rows per round.
+TRAPS_PER_HISTORY = 8
+
+
+@dataclass(frozen=True)
+class Row:
+    """``lo <= sum vals * x[cols] <= hi`` over the master's columns."""
+
+    cols: np.ndarray
+    vals: np.ndarray
+    lo: float
+    hi: float
+
+
+def _at_least_one_cut(cols: np.ndarray) -> Row:
+    """``sum d >= 1`` over distinct columns."""
+    cols = np.unique(cols)
+    return Row(cols, np.ones(cols.size), 1.0, np.inf)
+
+
+def _not_all_cut(cols: np.ndarray) -> Row:
+    """``sum d <= |cols| - 1`` over distinct columns."""
+    cols = np.unique(cols)
+    return Row(cols, np.ones(cols.size), -np.inf, float(cols.size - 1))
+
+
+@dataclass(frozen=True)
+class FlowCut:
+    """A set ``K`` of model edges that every unit of flow crosses (an ``Src``-``Tgt`` cut):
+    ``count[i]`` of its edges lie in the group of master column ``cols[i]``, ``fixed`` have
+    no binary (never cut)."""
+
+    cols: np.ndarray
+    count: np.ndarray
+    fixed: int
+
+    def row(self, flow: int) -> Row:
+        """``sum_g min(n_g, F) (1 - d_g) + fixed >= F``, valid for every cut set whose
+        flow is at least ``F``."""
+        c = np.minimum(self.count, flow).astype(float)
+        return Row(self.cols, c, -np.inf, float(c.sum() + self.fixed - flow))
+
+
+class CoverSeparator:
+    """The checks of a cut set and the rows its failures give (see the module docstring)."""
+
+    def __init__(
+        self,
+        products: Products,
+        options: MilpOptions,
+        groups: CutGroups,
+        me: ModelEdges,
+        required: dict[int, np.ndarray],
+    ) -> None:
+        self.products, self.options, self.groups, self.me = products, options, groups, me
+        self.required = required
+        g, ts = products.virtual, products.ts
+        self.var = np.flatnonzero(me.has_var)
+        self.col_of = np.full(groups.keys.size, -1, dtype=np.int64)
+        self.col_of[self.var] = np.arange(self.var.size)
+        nv = self.var.size
+        # MILP-agent: d_state per place entered by a group with a binary
+        if options.block_states:
+            e_all = np.flatnonzero(self.col_of[groups.of_edge] >= 0)
+            pl = ts.place[ts.dst[g.move[e_all]]].astype(np.int64)
+            pairs = np.unique(np.stack([pl, groups.of_edge[e_all]], axis=1), axis=0)
+            self.places = np.unique(pairs[:, 0])
+            self.place_pairs = pairs
+        else:
+            self.places = np.zeros(0, dtype=np.int64)
+            self.place_pairs = np.zeros((0, 2), dtype=np.int64)
+        self.n_col = nv + self.places.size
+        weight = groups.weight[self.var].astype(float)
+        self.place_cost = float(weight.sum() + 1)
+        self.cost = np.concatenate([weight, np.full(self.places.size, self.place_cost)])
+        self.n = g.n_nodes
+        self.src = int(g.initial)
+        self.target = products.target
+        # model edges (flow) and their columns
+        self.mcol = self.col_of[me.grp]
+        c5 = np.flatnonzero(me.c5)
+        self.c5u, self.c5v, self.c5col = me.eu[c5], me.ev[c5], self.mcol[c5]
+        # c5 edges into Tgt cannot carry flow in a valid answer; nothing else needs them here
+        self.static_moves = static_moves_of(products, options)
+        self._closing = _ClosingGroups(products, groups, self.static_moves)
+
+    # ------------------------------------------------------------------ cut sets
+
+    def cut_of_point(self, x: np.ndarray) -> np.ndarray:
+        """``bool`` per group: the master's binaries at ``x``."""
+        cut = np.zeros(self.groups.keys.size, dtype=bool)
+        cut[self.var] = x[: self.var.size] > 0.5
+        return cut
+
+    def blocked_places(self, cut: np.ndarray) -> np.ndarray:
+        """The places a cut set enters (MILP-agent's ``d_state = 1``)."""
+        if self.places.size == 0:
+            return np.zeros(0, dtype=np.int64)
+        hit = cut[self.place_pairs[:, 1]]
+        return np.unique(self.place_pairs[hit, 0])
+
+    def master_point(self, cut: np.ndarray) -> np.ndarray:
+        """The master's columns for a cut set (``d_state`` at its least value)."""
+        x = np.zeros(self.n_col)
+        x[: self.var.size] = cut[self.var]
+        if self.places.size:
+            x[self.var.size :] = np.isin(self.places, self.blocked_places(cut))
+        return x
+
+    def cost_of(self, cut: np.ndarray) -> float:
+        """The master objective of a cut set."""
+        return float(self.groups.weight[cut].sum() + self.place_cost * self.blocked_places(cut).size)
+
+    def guess(self) -> RoutingGuess:
+        """The routing heuristic's answer (traps tested on the required entry nodes)."""
+        return self.me.guess(self.products, traps=self._trap_test() if self.required else None)
+
+    def guess_cut(self, guess: RoutingGuess) -> np.ndarray | None:
+        """The heuristic's cut set, or ``None`` when an exclusion rejects it."""
+        cut: np.ndarray = guess.cut_groups & self.me.has_var
+        keys = set(self.groups.keys[cut].tolist())
+        for excluded in self.options.exclusions:
+            if excluded and set(excluded) <= keys:
+                return None
+        return cut
+
+    def _trap_test(self) -> Callable[[np.ndarray], bool]:
+        def traps(cut: np.ndarray) -> bool:
+            return bool(trapped_entries(self.products, self.blocked(cut), self.required))
+
+        return traps
+
+    # ------------------------------------------------------------------ rows up front
+
+    def exclusion_rows(self) -> list[Row]:
+        """(d) ``sum d <= |C| - 1`` per rejected cut set that can still be cut whole."""
+        rows = []
+        keys = self.groups.keys
+        for excluded in self.options.exclusions:
+            want = np.asarray(excluded, dtype=np.int64)
+            pos = np.minimum(np.searchsorted(keys, want), keys.size - 1)
+            if want.size == 0 or not np.all(keys[pos] == want) or np.any(self.col_of[pos] < 0):
+                continue  # a group of it cannot be cut here: the set is excluded already
+            rows.append(_not_all_cut(self.col_of[pos]))
+        return rows
+
+    def place_rows(self) -> list[Row]:
+        """MILP-agent: ``d_state(p) - d_g >= 0`` for each group entering place ``p``."""
+        nv = self.var.size
+        out = []
+        for p, grp in self.place_pairs.tolist():
+            pc = nv + int(np.searchsorted(self.places, p))
+            out.append(Row(np.array([pc, self.col_of[grp]]), np.array([1.0, -1.0]), 0.0, np.inf))
+        return out
+
+    # ------------------------------------------------------------------ separation
+
+    def bypass_with_all_cut(self) -> bool:
+        """Whether a bypass path stays open with every group with a binary cut."""
+        return self._bypass_paths(np.ones(self.groups.keys.size, dtype=bool), 1) != []
+
+    def separate(self, cut: np.ndarray, flow: int) -> tuple[list[tuple[str, Row]], list[FlowCut]]:
+        """What a cut set violates at flow level ``flow``: the ``(kind, row)`` pairs of
+        bypass cover and traps, and the minimum cuts of a too small flow (source side and
+        sink side; none when the flow is at least ``flow``)."""
+        rows: list[tuple[str, Row]] = [("cover", _at_least_one_cut(c)) for c in self._bypass_paths(cut, PATHS_PER_ROUND)]
+        rows += [("trap", r) for r in self._trap_rows(cut)]
+        return rows, self._flow_cuts(cut, flow)
+
+    def checks_pass(self, cut: np.ndarray, flow: int) -> bool:
+        """Whether a cut set passes every check at flow level ``flow``."""
+        rows, cuts = self.separate(cut, flow)
+        return not rows and not cuts
+
+    def _bypass_paths(self, cut: np.ndarray, limit: int) -> list[np.ndarray]:
+        """Up to ``limit`` open bypass paths, as the master columns on each: group-disjoint
+        ones first, then detours around each group of the first path."""
+        col = self.c5col
+        is_cut = np.zeros(self.n_col + 1, dtype=bool)
+        is_cut[: self.var.size] = cut[self.var]
+        open_ = (col < 0) | ~is_cut[np.maximum(col, 0)]
+        out: list[np.ndarray] = []
+        seen: set[tuple[int, ...]] = set()
+        first = self._cheapest_path(open_)
+        if first is None:
+            return out
+        out.append(first)
+        seen.add(tuple(first.tolist()))
+        if first.size == 0:
+            return out
+        rest = open_.copy()
+        while len(out) < limit:  # group-disjoint paths
+            on = np.zeros(self.n_col + 1, dtype=bool)
+            on[np.concatenate(out)] = True
+            rest = open_ & ~((col >= 0) & on[np.maximum(col, 0)])
+            p = self._cheapest_path(rest)
+            if p is None or p.size == 0:
+                break
+            out.append(p)
+            seen.add(tuple(p.tolist()))
+        for c in first.tolist():  # detours around each group of the first path
+            if len(out) >= limit:
+                break
+            p = self._cheapest_path(open_ & (col != c))
+            if p is not None and p.size and tuple(p.tolist()) not in seen:
+                seen.add(tuple(p.tolist()))
+                out.append(p)
+        return out
+
+    def _cheapest_path(self, open_: np.ndarray) -> np.ndarray | None:
+        """The master columns on a cheapest ``Src -> Tgt`` path over the open c5 edges
+        (each edge with a binary costs 1, others almost nothing), or ``None``."""
+        col = self.c5col
+        e = np.flatnonzero(open_)
+        if e.size == 0:
+            return None
+        eps = 1.0 / (self.c5u.size + 2)
+        weight = np.where(col[e] >= 0, 1.0, eps)
+        graph = sp.csr_matrix((weight, (self.c5u[e], self.c5v[e])), shape=(self.n, self.n))
+        dist, pred = dijkstra(graph, indices=self.src, return_predecessors=True)
+        tnodes = np.flatnonzero(self.target)
+        reach_t = tnodes[np.isfinite(dist[tnodes])]
+        if reach_t.size == 0:
+            return None
+        t = int(reach_t[np.argmin(dist[reach_t])])
+        nodes = [t]
+        while nodes[-1] != self.src:
+            nodes.append(int(pred[nodes[-1]]))
+        nodes.reverse()
+        return self._path_cols(np.array(nodes[:-1]), np.array(nodes[1:]), e)
+
+    def _path_cols(self, u: np.ndarray, v: np.ndarray, e: np.ndarray) -> np.ndarray:
+        """The master columns of the open c5 edges ``u -> v`` (cheapest one per pair)."""
+        key = self.c5u[e].astype(np.int64) * self.n + self.c5v[e]
+        # prefer an edge without a binary, then the lowest index, among parallel edges
+        order = np.lexsort((e, self.c5col[e] >= 0, key))
+        ks = key[order]
+        pos = np.searchsorted(ks, u.astype(np.int64) * self.n + v)
+        cols = self.c5col[e[order[pos]]]
+        out: np.ndarray = np.unique(cols[cols >= 0])
+        return out
+
+    def _max_flow(self, cut: np.ndarray) -> tuple[int, sp.csr_matrix, sp.csr_matrix]:
+        """Max flow over the open model edges; (value, capacities, flows) with a super sink."""
+        is_cut = np.zeros(self.n_col + 1, dtype=bool)
+        is_cut[: self.var.size] = cut[self.var]
+        col = self.mcol
+        ok = np.flatnonzero((col < 0) | ~is_cut[np.maximum(col, 0)])
+        eu, ev = self.me.eu[ok], self.me.ev[ok]
+        t = np.flatnonzero(self.target)
+        n = self.n
+        big = max(int(ok.size), 1)
+        rows = np.concatenate([eu, t])
+        cols = np.concatenate([ev, np.full(t.size, n)])
+        caps = np.concatenate([np.ones(eu.size, dtype=np.int32), np.full(t.size, big, dtype=np.int32)])
+        cap = sp.csr_matrix((caps, (rows, cols)), shape=(n + 1, n + 1))
+        cap.sum_duplicates()
+        res = maximum_flow(cap, self.src, n)
+        return int(res.flow_value), cap, res.flow
+
+    def _flow_cuts(self, cut: np.ndarray, flow: int) -> list[FlowCut]:
+        """The minimum cuts next to ``Src`` and next to ``Tgt`` when the maximum flow over
+        the open model edges is below ``flow`` (one when they coincide), else none."""
+        value, cap, f = self._max_flow(cut)
+        if value >= flow:
+            return []
+        residual = (cap - f).tocsr()
+        residual.data = (residual.data > 0).astype(np.int8)
+        residual.eliminate_zeros()
+        near_src = np.zeros(self.n + 1, dtype=bool)
+        near_src[breadth_first_order(residual, self.src, directed=True, return_predecessors=False)] = True
+        to_sink = np.zeros(self.n + 1, dtype=bool)
+        to_sink[breadth_first_order(residual.T.tocsr(), self.n, directed=True, return_predecessors=False)] = True
+        out = [self._cut_of_side(near_src[: self.n])]
+        far = ~to_sink[: self.n]
+        if not np.array_equal(far, near_src[: self.n]):
+            out.append(self._cut_of_side(far))
+        return out
+
+    def _cut_of_side(self, side: np.ndarray) -> FlowCut:
+        """The model edges from ``side`` out of it, by master column."""
+        k = np.flatnonzero(side[self.me.eu] & ~side[self.me.ev])
+        col = self.mcol[k]
+        fixed = int(np.count_nonzero(col < 0))
+        cols, count = np.unique(col[col >= 0], return_counts=True)
+        return FlowCut(cols.astype(np.int64), count.astype(np.int64), fixed)
+
+    def blocked(self, cut: np.ndarray) -> np.ndarray:
+        """``bool[n_hist, n_moves]``: the moves a cut set restricts under each history
+        (as :func:`synthesis.routing.result.blocked_by` reads an answer)."""
+        groups = self.groups
+        blocked = blocked_of_edges(self.products, np.flatnonzero(cut[groups.of_edge]))
+        static_cut = np.isin(groups.move_key, groups.keys[cut & groups.static]) & self.static_moves
+        out: np.ndarray = blocked | static_cut[None, :]
+        return out
+
+    def _trap_rows(self, cut: np.ndarray) -> list[Row]:
+        if not self.required and not self.options.closed_loop:
+            return []
+        products = self.products
+        blocked = self.blocked(cut)
+        trapped = trapped_entries(products, blocked, self.required) if self.required else {}
+        if self.options.closed_loop:
+            traps = trapped_configurations(products, blocked)
+            hist = products.virtual.hist[traps]
+            for q in np.unique(hist):
+                nodes = products.projection[traps[hist == q]]
+                trapped[int(q)] = np.union1d(trapped.get(int(q), np.zeros(0, dtype=np.int64)), nodes)
+        gs = products.system
+        rows: list[Row] = []
+        seen: set[tuple[int, ...]] = set()
+        for q, nodes in trapped.items():
+            open_edge = ~blocked[q, gs.move]
+            e = np.flatnonzero(open_edge)
+            graph = sp.csr_matrix((np.ones(e.size, dtype=np.int8), (gs.src[e], gs.dst[e])), shape=(gs.n_nodes, gs.n_nodes))
+            covered = np.zeros(gs.n_nodes, dtype=bool)
+            done = 0
+            for v in nodes.tolist():
+                if covered[v] or done >= TRAPS_PER_HISTORY:
+                    continue
+                done += 1
+                inside = np.zeros(gs.n_nodes, dtype=bool)
+                inside[breadth_first_order(graph, v, directed=True, return_predecessors=False)] = True
+                covered |= inside
+                leave = np.flatnonzero(inside[gs.src] & ~inside[gs.dst])
+                grp = self._closing.of(q, gs.move[leave])
+                if np.any(grp < 0):
+                    continue  # an edge nothing closes leaves R: cannot happen for a trapped node
+                cols = self.col_of[grp]
+                if np.any(cols < 0):
+                    continue
+                ucols = np.unique(cols)
+                if tuple(ucols.tolist()) in seen:
+                    continue
+                seen.add(tuple(ucols.tolist()))
+                rows.append(_not_all_cut(ucols))
+        return rows
+
+
+class _ClosingGroups:
+    """The cut group that closes a move of T under a history (``-1``: none), as
+    :meth:`CoverSeparator.blocked` applies restrictions: a static move's tied group,
+    else the group of G's edge of ``Gr(q)`` over the move."""
+
+    def __init__(self, products: Products, groups: CutGroups, static_moves: np.ndarray) -> None:
+        g, ts = products.virtual, products.ts
+        self.n_moves = ts.n_moves
+        gkey = g.hist.astype(np.int64)[g.src] * ts.n_moves + g.move
+        self.order = np.argsort(gkey, kind="stable")
+        self.sorted = gkey[self.order]
+        self.of_edge = groups.of_edge
+        pos = np.minimum(np.searchsorted(groups.keys, groups.move_key), groups.keys.size - 1)
+        found = groups.keys[pos] == groups.move_key
+        self.static_group = np.where(static_moves & found, pos, -1)
+        self.static_moves = static_moves
+
+    def of(self, q: int, moves: np.ndarray) -> np.ndarray:
+        """The closing group of each move under history ``q``."""
+        out: np.ndarray = self.static_group[moves].astype(np.int64)
+        reactive = ~self.static_moves[moves]
+        if np.any(reactive) and self.sorted.size:
+            want = np.int64(q) * self.n_moves + moves[reactive]
+            pos = np.minimum(np.searchsorted(self.sorted, want), self.sorted.size - 1)
+            hit = self.sorted[pos] == want
+            grp = np.where(hit, self.of_edge[self.order[pos]], -1)
+            out[reactive] = grp
+        return out
