@@ -18,6 +18,7 @@ from synthesis.pipeline import SynthesisOptions, milp_options, synthesize
 from synthesis.problems.problem import build_graphs
 from synthesis.routing.cover_rows import FlowCut
 from synthesis.routing.milp import solve_routing
+from synthesis.routing.model import Exclusion
 from synthesis.routing.solver_control import SolveControl, solves_running
 from synthesis.routing.wall_cover import solve_cover
 
@@ -50,7 +51,7 @@ def test_exclusions_give_the_next_best_cut_set() -> None:
     _, products = build_graphs(load_problem("small-reactive"))
     options = milp_options(load_problem("small-reactive"), SynthesisOptions())
     first = solve_cover(products, options)
-    excluded = replace(options, exclusions=[first.cut_group_keys])
+    excluded = replace(options, exclusions=[Exclusion(tuple(first.cut_group_keys))])
     cover = solve_cover(products, excluded)
     highs = solve_routing(products, replace(excluded, backend="highs"))
     assert cover.cut_group_keys != first.cut_group_keys

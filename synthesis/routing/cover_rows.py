@@ -155,9 +155,8 @@ class CoverSeparator:
         """The heuristic's cut set, or ``None`` when an exclusion rejects it."""
         cut: np.ndarray = guess.cut_groups & self.me.has_var
         keys = set(self.groups.keys[cut].tolist())
-        for excluded in self.options.exclusions:
-            if excluded and set(excluded) <= keys:
-                return None
+        if any(excluded.excludes(keys) for excluded in self.options.exclusions):
+            return None
         return cut
 
     def _trap_test(self) -> Callable[[np.ndarray], bool]:
@@ -169,16 +168,27 @@ class CoverSeparator:
     # ------------------------------------------------------------------ rows up front
 
     def exclusion_rows(self) -> list[Row]:
-        """(d) ``sum d <= |C| - 1`` per rejected cut set that can still be cut whole."""
+        """(d) ``sum_{cut} d - sum_{open} d <= |cut| - 1`` per :class:`~.model.Exclusion`
+        whose ``cut`` groups can all be cut here (else it excludes nothing); ``open``
+        groups that can never be cut drop out."""
         rows = []
-        keys = self.groups.keys
         for excluded in self.options.exclusions:
-            want = np.asarray(excluded, dtype=np.int64)
-            pos = np.minimum(np.searchsorted(keys, want), keys.size - 1)
-            if want.size == 0 or not np.all(keys[pos] == want) or np.any(self.col_of[pos] < 0):
-                continue  # a group of it cannot be cut here: the set is excluded already
-            rows.append(_not_all_cut(self.col_of[pos]))
+            cut_cols = self._cols_of(excluded.cut)
+            if excluded.cut and np.all(cut_cols >= 0):
+                open_cols = self._cols_of(excluded.open)
+                open_cols = np.unique(open_cols[open_cols >= 0])
+                cut_cols = np.unique(cut_cols)
+                vals = np.concatenate([np.ones(cut_cols.size), -np.ones(open_cols.size)])
+                rows.append(Row(np.concatenate([cut_cols, open_cols]), vals, -np.inf, float(cut_cols.size - 1)))
         return rows
+
+    def _cols_of(self, keys: tuple[int, ...]) -> np.ndarray:
+        """The master column of each cut-group key (``-1``: no binary, or no such group)."""
+        allk = self.groups.keys
+        want = np.asarray(keys, dtype=np.int64)
+        pos = np.minimum(np.searchsorted(allk, want), allk.size - 1)
+        out: np.ndarray = np.where(allk[pos] == want, self.col_of[pos], -1)
+        return out
 
     def place_rows(self) -> list[Row]:
         """MILP-agent: ``d_state(p) - d_g >= 0`` for each group entering place ``p``."""
