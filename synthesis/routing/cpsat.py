@@ -137,6 +137,7 @@ class _Worker:
         self.from_child = Connection(os.dup(self.proc.stdout.fileno()), writable=False)
         self.proc.stdin.close()
         self.proc.stdout.close()
+        self.cpu = 0.0  # the child's CPU seconds at its last answer
 
     @property
     def alive(self) -> bool:
@@ -213,12 +214,19 @@ class CpSatSession:
         self._worker, self.fresh = _take_worker()
         self._broken = False
         self._closed = False
+        self._cpu_before = self._worker.cpu
         a = arrays.a
-        self._call(
+        self._worker.cpu = self._call(
             ("build", {"indptr": a.indptr, "indices": a.indices, "data": a.data, "shape": np.array(a.shape),
                        "row_lo": arrays.row_lo, "row_hi": arrays.row_hi, "col_lo": arrays.col_lo, "col_hi": arrays.col_hi}),
         )
         self.spawn_seconds = time.perf_counter() - self.started
+        self.spawn_cpu_seconds = self._worker.cpu - self._cpu_before
+
+    @property
+    def child_cpu_seconds(self) -> float:
+        """CPU seconds the child spent for this session (start-up of a fresh child, the model, the solves)."""
+        return self._worker.cpu - self._cpu_before
 
     def __enter__(self) -> CpSatSession:
         return self
@@ -233,7 +241,7 @@ class CpSatSession:
 
     def add_row(self, idx: np.ndarray, val: np.ndarray, lo: float, hi: float) -> None:
         """Add one row (phase 2's ``F >= F*``), here and in the child."""
-        self._call(("row", np.asarray(idx, dtype=np.int64), np.asarray(val, dtype=float), float(lo), float(hi)))
+        self._worker.cpu = self._call(("row", np.asarray(idx, dtype=np.int64), np.asarray(val, dtype=float), float(lo), float(hi)))
         self.arrays = self.arrays.with_row(idx, val, lo, hi)
 
     def solve(
@@ -267,6 +275,7 @@ class CpSatSession:
         finally:
             if self.control is not None:
                 self.control.report(None)
+        self._worker.cpu = float(raw["process_cpu_seconds"])
         return self._checked(raw, cost, seconds, work_limit)
 
     def _checked(self, raw: dict[str, Any], cost: np.ndarray, seconds: float | None, work_limit: float | None) -> CpSatAnswer:

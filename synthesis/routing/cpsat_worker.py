@@ -110,6 +110,7 @@ class CpSatModel:
         watch = _Watch(solver, out, maximize, after_first, first_at, cp.CpSolverSolutionCallback)
         solver.best_bound_callback = watch.on_bound
         timers = watch.start(seconds)
+        cpu0 = time.process_time()
         try:
             status = solver.solve(self.model, watch.callback)
         finally:
@@ -122,7 +123,8 @@ class CpSatModel:
             "bound": float(solver.best_objective_bound) if status in (cp.OPTIMAL, cp.FEASIBLE) else None,
             "first_age": None if watch.first is None else time.perf_counter() - watch.first,
             "wall_seconds": float(solver.wall_time),
-            "cpu_seconds": float(solver.user_time),
+            "cpu_seconds": time.process_time() - cpu0,  # this solve's CPU time (CP-SAT's user_time is a wall time)
+            "process_cpu_seconds": time.process_time(),  # this child's CPU seconds so far
             "deterministic_time": float(solver.deterministic_time),
             "conflicts": int(solver.num_conflicts),
             "branches": int(solver.num_branches),
@@ -210,10 +212,10 @@ def serve(inp: Connection, out: Connection) -> None:
             kind = message[0]
             if kind == "build":
                 model = CpSatModel(message[1])
-                out.send(("ok", None))
+                out.send(("ok", time.process_time()))  # this child's CPU seconds so far
             elif kind == "row" and model is not None:
                 model.add_row(*message[1:])
-                out.send(("ok", None))
+                out.send(("ok", time.process_time()))
             elif kind == "solve" and model is not None:
                 cost, maximize, hint, params = message[1:]
                 out.send(("ok", model.solve(cost, maximize, hint, params, out)))

@@ -290,11 +290,13 @@ def _solve_once_cpsat(
         _raise_if_flows_bind(rm, products, options, first.x, {q: v for q, v in required.items() if q not in entries})
         note(f"routing MILP (CP-SAT), phase 2 of 2: fewest cuts at flow {flow}")
         second, more = _phase2_cpsat(session, rm, first.x, flow, options, clock)
-        spawn = session.spawn_seconds
+        spawn, spawn_cpu, child_cpu = session.spawn_seconds, session.spawn_cpu_seconds, session.child_cpu_seconds
     result = _result(rm, products, options, first, second, flow, graph_seconds, time.perf_counter() - t_solve)
     runs = runs + more
     figures = {
         "spawn_seconds": spawn,
+        "spawn_cpu_seconds": spawn_cpu,
+        "child_cpu_seconds": child_cpu,
         "runs": len(runs),
         **{k: sum(r[k] for r in runs) for k in ("wall_seconds", "cpu_seconds", "deterministic_time", "conflicts", "branches")},
     }

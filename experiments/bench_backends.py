@@ -1,0 +1,137 @@
+"""Benchmark: the routing solver backends (HiGHS, OR-Tools CP-SAT) on the same problems.
+
+Usage::
+
+    nice -n 10 .venv/bin/python -m experiments.bench_backends [--time-limit S] [--seeds N]
+        [--builtins NAME ...] [--sizes 5 10] [--families reachability reaction] [--json FILE]
+
+For each problem (built-ins, then seeded random grids of every size, family and kind static /
+reactive, the first consistent attempt of seeds 0..N-1) and each backend, one synthesis in this
+process under a wall-clock ``--time-limit`` (a benchmark budget: the answers are checked, and a
+solve it stops says ``feasible``). Per run: status, flow, cuts, the solve's wall seconds, the
+CPU seconds it used (this process's, plus the CP-SAT child's, which it reports), and for CP-SAT
+the child's start-up and model transfer (``spawn``: a fresh child each run here, as the first
+solve of a process pays; later solves of a process reuse it). Prints a Markdown table and, per
+group, how many runs each backend proved and its total solve time; ``--json`` keeps the rows.
+Needs the extra ``flowtest[cpsat]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from synthesis.model.errors import InconsistentProblem
+from synthesis.pipeline import SynthesisOptions, synthesize
+from synthesis.problems.load import load_problem
+from synthesis.problems.problem import Problem
+from synthesis.problems.random_grid import first_consistent
+from synthesis.routing import cpsat
+
+BUILTINS = ("small-reactive", "example1", "beaver-rescue", "motion-primitives", "maze1", "maze2", "patrolling", "refueling", "mars-exploration")
+BACKENDS = ("highs", "cpsat")
+
+
+def run(problem: Problem, backend: str, time_limit: float | None) -> dict[str, Any]:
+    """One synthesis of ``problem`` on ``backend``: its answer and costs."""
+    cpsat.close_idle_workers()  # every CP-SAT run starts a fresh child: the first solve's cost
+    cpu0 = time.process_time()
+    t0 = time.perf_counter()
+    try:
+        test = synthesize(problem, SynthesisOptions(backend=backend, time_limit=time_limit))
+    except TimeoutError:
+        return {"status": "no test", "flow": None, "n_cuts": None, "wall_s": time.perf_counter() - t0, "cpu_s": time.process_time() - cpu0}
+    except InconsistentProblem as exc:
+        return {"status": exc.reason, "flow": None, "n_cuts": None, "wall_s": time.perf_counter() - t0, "cpu_s": time.process_time() - cpu0}
+    wall = time.perf_counter() - t0
+    r = test.routing
+    assert test.checks.bypass_flow == 0
+    child = r.stats.get("cpsat") or {}
+    agent = test.extra_stats.get("agent_seconds")
+    return {
+        "status": r.status,
+        "flow": r.flow,
+        "n_cuts": int(r.cut_edges.size),
+        "solve_s": agent["milp"] if agent else r.stats["solve_seconds"],
+        "wall_s": wall,
+        "cpu_s": time.process_time() - cpu0 + float(child.get("child_cpu_seconds", 0.0)),
+        "spawn_cpu_s": child.get("spawn_cpu_seconds"),
+        "spawn_s": child.get("spawn_seconds"),
+        "cpsat_wall_s": child.get("wall_seconds"),
+        "rounds": len(test.agent.iterations) if test.agent is not None else 1,
+        "binaries": r.stats["binary_vars"],
+    }
+
+
+def cases(builtins: list[str], sizes: list[int], families: list[str], seeds: int) -> list[tuple[str, str, Problem]]:
+    """``(group, label, problem)`` of every problem benchmarked."""
+    out = [("built-in", name, load_problem(name)) for name in builtins]
+    n_of = {"reachability": 2, "reaction": 2, "safety": 2}
+    for size in sizes:
+        for kind in ("static", "reactive"):
+            for family in families:
+                for seed in range(seeds):
+                    attempt, problem, _ = first_consistent(size, family, n_of[family], seed, kind)
+                    out.append((f"{size}x{size} {kind}", f"{family}{n_of[family]} s{seed}", problem))
+    return out
+
+
+def _fmt(v: Any) -> str:
+    if v is None:
+        return "-"
+    if isinstance(v, float):
+        return f"{v:.2f}"
+    return str(v)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
+    ap.add_argument("--time-limit", type=float, default=120.0, help="wall-clock seconds per synthesis (default 120)")
+    ap.add_argument("--seeds", type=int, default=3, help="random instances per (size, kind, family) (default 3)")
+    ap.add_argument("--builtins", nargs="*", default=list(BUILTINS))
+    ap.add_argument("--sizes", nargs="*", type=int, default=[5, 10])
+    ap.add_argument("--families", nargs="*", default=["reachability", "reaction"])
+    ap.add_argument("--backends", nargs="*", default=list(BACKENDS), choices=BACKENDS)
+    ap.add_argument("--json", type=Path, default=None, help="write the rows here as JSON")
+    args = ap.parse_args(argv)
+    if "cpsat" in args.backends:
+        cpsat.require()
+    rows: list[dict[str, Any]] = []
+    print(f"ortools {cpsat.ortools_version()}, time limit {args.time_limit:g} s per synthesis\n", flush=True)
+    head = "| group | problem | backend | status | flow | cuts | solve s | CPU s | child start s |"
+    print(head)
+    print("|---" * (head.count("|") - 1) + "|", flush=True)
+    for group, label, problem in cases(args.builtins, args.sizes, args.families, args.seeds):
+        for backend in args.backends:
+            row = {"group": group, "problem": label, "backend": backend, **run(problem, backend, args.time_limit)}
+            rows.append(row)
+            print(
+                f"| {group} | {label} | {backend} | {row['status']} | {_fmt(row['flow'])} | {_fmt(row['n_cuts'])} | "
+                f"{_fmt(row.get('solve_s'))} | {_fmt(row['cpu_s'])} | {_fmt(row.get('spawn_s'))} |",
+                flush=True,
+            )
+    print("\n| group | backend | runs | proven | same answer as the other backend (both proven) | total solve s | total CPU s |")
+    print("|---|---|---|---|---|---|---|")
+    for group in dict.fromkeys(r["group"] for r in rows):
+        for backend in args.backends:
+            mine = [r for r in rows if r["group"] == group and r["backend"] == backend]
+            same = 0
+            for r in mine:
+                other = [o for o in rows if o["group"] == group and o["problem"] == r["problem"] and o["backend"] != backend]
+                if other and r["status"] == other[0]["status"] == "optimal" and (r["flow"], r["n_cuts"]) == (other[0]["flow"], other[0]["n_cuts"]):
+                    same += 1
+            proven = sum(r["status"] == "optimal" for r in mine)
+            solve = sum(r.get("solve_s") or r["wall_s"] for r in mine)
+            cpu = sum(r["cpu_s"] for r in mine)
+            print(f"| {group} | {backend} | {len(mine)} | {proven} | {same} | {solve:.1f} | {cpu:.1f} |")
+    if args.json is not None:
+        args.json.write_text(json.dumps(rows, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
