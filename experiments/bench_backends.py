@@ -11,7 +11,9 @@ process under a wall-clock ``--time-limit`` (a benchmark budget: the answers are
 solve it stops says ``feasible``). Per run: status, flow, cuts, the solve's wall seconds, the
 CPU seconds it used (this process's, plus the CP-SAT child's, which it reports), and for CP-SAT
 the child's start-up and model transfer (``spawn``: a fresh child each run here, as the first
-solve of a process pays; later solves of a process reuse it). Prints a Markdown table and, per
+solve of a process pays; later solves of a process, such as an agent problem's rounds, reuse it;
+the figure is the last round's). CPU seconds are the load-independent figure: wall times on a
+shared machine are upper bounds. Prints a Markdown table and, per
 group, how many runs each backend proved and its total solve time; ``--json`` keeps the rows.
 Needs the extra ``flowtest[cpsat]``.
 """
@@ -20,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import resource
 import sys
 import time
 from pathlib import Path
@@ -39,15 +42,16 @@ BACKENDS = ("highs", "cpsat")
 def run(problem: Problem, backend: str, time_limit: float | None) -> dict[str, Any]:
     """One synthesis of ``problem`` on ``backend``: its answer and costs."""
     cpsat.close_idle_workers()  # every CP-SAT run starts a fresh child: the first solve's cost
-    cpu0 = time.process_time()
+    cpu0 = time.process_time() + _children_cpu()
     t0 = time.perf_counter()
     try:
         test = synthesize(problem, SynthesisOptions(backend=backend, time_limit=time_limit))
-    except TimeoutError:
-        return {"status": "no test", "flow": None, "n_cuts": None, "wall_s": time.perf_counter() - t0, "cpu_s": time.process_time() - cpu0}
-    except InconsistentProblem as exc:
-        return {"status": exc.reason, "flow": None, "n_cuts": None, "wall_s": time.perf_counter() - t0, "cpu_s": time.process_time() - cpu0}
+    except (TimeoutError, InconsistentProblem) as exc:
+        cpsat.close_idle_workers()
+        status = exc.reason if isinstance(exc, InconsistentProblem) else "no test"
+        return {"status": status, "flow": None, "n_cuts": None, "wall_s": time.perf_counter() - t0, "cpu_s": time.process_time() + _children_cpu() - cpu0}
     wall = time.perf_counter() - t0
+    cpsat.close_idle_workers()  # reaped: its CPU seconds are counted in RUSAGE_CHILDREN
     r = test.routing
     assert test.checks.bypass_flow == 0
     child = r.stats.get("cpsat") or {}
@@ -58,13 +62,19 @@ def run(problem: Problem, backend: str, time_limit: float | None) -> dict[str, A
         "n_cuts": int(r.cut_edges.size),
         "solve_s": agent["milp"] if agent else r.stats["solve_seconds"],
         "wall_s": wall,
-        "cpu_s": time.process_time() - cpu0 + float(child.get("child_cpu_seconds", 0.0)),
+        "cpu_s": time.process_time() + _children_cpu() - cpu0,
         "spawn_cpu_s": child.get("spawn_cpu_seconds"),
         "spawn_s": child.get("spawn_seconds"),
         "cpsat_wall_s": child.get("wall_seconds"),
         "rounds": len(test.agent.iterations) if test.agent is not None else 1,
         "binaries": r.stats["binary_vars"],
     }
+
+
+def _children_cpu() -> float:
+    """CPU seconds of this process's reaped children (the CP-SAT child, once closed)."""
+    ru = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return float(ru.ru_utime + ru.ru_stime)
 
 
 def cases(builtins: list[str], sizes: list[int], families: list[str], seeds: int) -> list[tuple[str, str, Problem]]:

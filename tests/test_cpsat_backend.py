@@ -202,3 +202,13 @@ def test_the_child_never_imports_highspy() -> None:
     proc = subprocess.run([sys.executable, "-P", "-c", code, str(cpsat.WORKER)], capture_output=True, text=True, timeout=60)
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.strip() == "False"
+
+
+@needs_ortools
+def test_wall_clock_budget_is_reported_non_deterministic() -> None:
+    """The paper's budget rule (``time_limit`` to a first test, then ``after_first``) on
+    CP-SAT: a checked test, reported as depending on the wall clock."""
+    test = synthesize(load_problem("refueling"), SynthesisOptions(backend="cpsat", time_limit=120, after_first=30))
+    assert test.routing.flow == 2 and test.checks.bypass_flow == 0
+    assert test.routing.stats["deterministic"] is False
+    assert summary_of(test)["deterministic"] is False
