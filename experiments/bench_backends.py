@@ -68,6 +68,7 @@ def run(problem: Problem, backend: str, time_limit: float | None) -> dict[str, A
         "cpsat_wall_s": child.get("wall_seconds"),
         "rounds": len(test.agent.iterations) if test.agent is not None else 1,
         "binaries": r.stats["binary_vars"],
+        "rows": r.stats["constraints"],
     }
 
 

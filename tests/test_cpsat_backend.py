@@ -212,3 +212,11 @@ def test_wall_clock_budget_is_reported_non_deterministic() -> None:
     assert test.routing.flow == 2 and test.checks.bypass_flow == 0
     assert test.routing.stats["deterministic"] is False
     assert summary_of(test)["deterministic"] is False
+
+
+@needs_ortools
+def test_human_summary_names_the_solver(capsys: pytest.CaptureFixture[str]) -> None:
+    code = main(["synthesize", "small-reactive", "--backend", "cpsat", "--quiet"])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    assert f"solver       cpsat (OR-Tools CP-SAT, ortools {cpsat.ortools_version()})" in out
