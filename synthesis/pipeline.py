@@ -177,6 +177,8 @@ def synthesize(problem: Problem, options: SynthesisOptions | None = None) -> Syn
     if problem.kind == "agent":
         return synthesize_agent_test(problem, options)
     note = options.progress or (lambda msg: None)
+    if options.backend == "cpsat":
+        cpsat.prestart()  # OR-Tools loads in the child while the graphs are built
     t0 = time.perf_counter()
     note("building automata and product graphs")
     spec, products = build_graphs(problem)
@@ -245,6 +247,8 @@ def synthesize_agent_test(
         raise ProblemError(f"agent problem {problem.name!r} has no static area (static_moves)")
     bound = max_iterations or options.agent_iterations or agent.max_iterations
     note = options.progress or (lambda msg: None)
+    if options.backend == "cpsat":
+        cpsat.prestart()  # OR-Tools loads in the child while the graphs are built
     t0 = time.perf_counter()
     note("building automata and product graphs")
     spec, products = build_graphs(problem)

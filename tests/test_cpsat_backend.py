@@ -17,6 +17,7 @@ import threading
 import time
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -220,3 +221,26 @@ def test_human_summary_names_the_solver(capsys: pytest.CaptureFixture[str]) -> N
     out, err = capsys.readouterr()
     assert code == 0, err
     assert f"solver       cpsat (OR-Tools CP-SAT, ortools {cpsat.ortools_version()})" in out
+
+
+def _flow_in_fork(queue: Any) -> None:
+    test = synthesize(load_problem("small-reactive"), SynthesisOptions(backend="cpsat"))
+    queue.put((test.routing.flow, test.routing.status))
+
+
+@needs_ortools
+def test_a_forked_process_starts_its_own_child() -> None:
+    """The idle child kept for later solves belongs to its process: a fork forgets it (the
+    pipes would be shared) and both processes solve on their own children."""
+    import multiprocessing
+
+    synthesize(load_problem("small-reactive"), SynthesisOptions(backend="cpsat"))  # leaves an idle child
+    ctx = multiprocessing.get_context("fork")
+    queue = ctx.Queue()
+    proc = ctx.Process(target=_flow_in_fork, args=(queue,))
+    proc.start()
+    assert queue.get(timeout=120) == (2, "optimal")
+    proc.join(timeout=30)
+    assert proc.exitcode == 0
+    again = synthesize(load_problem("small-reactive"), SynthesisOptions(backend="cpsat"))
+    assert (again.routing.flow, again.routing.status) == (2, "optimal")

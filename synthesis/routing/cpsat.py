@@ -166,6 +166,27 @@ _idle: list[_Worker] = []
 _idle_lock = threading.Lock()
 
 
+def _forget_idle_in_fork_child() -> None:
+    """A forked process must not talk to its parent's idle child (the pipes are shared): it
+    forgets it, without ending it, and starts its own when it needs one."""
+    global _idle_lock
+    _idle.clear()
+    _idle_lock = threading.Lock()
+
+
+os.register_at_fork(after_in_child=_forget_idle_in_fork_child)
+
+
+def prestart() -> None:
+    """Start an idle child now, if none waits, so importing OR-Tools there overlaps with
+    the caller's work (building the product graphs and the model) instead of following it."""
+    with _idle_lock:
+        if any(w.alive for w in _idle):
+            return
+    worker = _Worker()
+    _give_back(worker)
+
+
 def _take_worker() -> tuple[_Worker, bool]:
     """An idle child from an earlier solve of this process, else a new one (and whether
     it is new): importing OR-Tools in a fresh child takes most of a second, which the
@@ -349,4 +370,4 @@ class CpSatSession:
             _give_back(self._worker)
 
 
-__all__ = ["MISSING", "CpSatAnswer", "CpSatSession", "ModelArrays", "available", "close_idle_workers", "ortools_version", "require"]
+__all__ = ["MISSING", "CpSatAnswer", "CpSatSession", "ModelArrays", "available", "close_idle_workers", "ortools_version", "prestart", "require"]
