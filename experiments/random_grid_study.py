@@ -8,6 +8,7 @@ Usage::
     .venv/bin/python -m experiments.random_grid_study --ray [--ray-address HOST:PORT] [--workers 2]
     .venv/bin/python -m experiments.random_grid_study --gurobi              # vs Gurobi, 5x5..9x9 static
     .venv/bin/python -m experiments.random_grid_study --report DIR [DIR ...]   # tables of earlier runs
+    .venv/bin/python -m experiments.random_grid_study --report DIR --compare-to OLD.csv  # shares proven, side by side
     .venv/bin/python -m experiments.random_grid_study --graphs-only         # graph construction only
     .venv/bin/python -m experiments.random_grid_study --backend highs       # one routing solver backend
 
@@ -456,6 +457,39 @@ def gurobi_table(records: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def compare_table(records: list[dict], baseline: list[dict]) -> str:
+    """Per cell of ``records``: the share solved and proven optimal, per MILP, next to the
+    same cell of ``baseline`` (earlier records, e.g. a ``results.csv`` under another budget or
+    backend); cells of ``records`` only, and a cell counts only its finished instances."""
+    def shares(recs: list[dict], cell: tuple, milp: str) -> str:
+        rs = [r for r in recs if (r["family"], int(r["n"]), int(r["size"])) == cell and r["milp"] == milp]
+        if not rs:
+            return "—"
+        ok = sum(r["outcome"] in SOLVED for r in rs)
+        opt = sum(r["outcome"] == "optimal" for r in rs)
+        return f"{opt}/{len(rs)} ({_pct(opt, len(rs))}), solved {ok}"
+
+    recs = [r for r in records if not r.get("gurobi") and r["milp"] in MILPS]
+    base = [r for r in baseline if str(r.get("gurobi")) in ("False", "", "None") and r["milp"] in MILPS]
+    cells = sorted({(r["family"], int(r["n"]), int(r["size"])) for r in recs}, key=lambda c: (c[2], FAMILIES.index(c[0]), c[1]))
+    head = ["spec", r"\|AP\|", "grid"]
+    for m in MILPS:
+        head += [f"{m}: optimal before", f"{m}: optimal now"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for cell in cells:
+        row = [cell[0], str(paper_ap(cell[0], cell[1])), f"{cell[2]}x{cell[2]}"]
+        for m in MILPS:
+            row += [shares(base, cell, m), shares(recs, cell, m)]
+        lines.append("| " + " | ".join(row) + " |")
+    return "\n".join(lines)
+
+
+def read_csv_records(path: Path) -> list[dict]:
+    """The records of a ``results.csv`` (values as text, enough for :func:`compare_table`)."""
+    with open(path, newline="") as f:
+        return list(csv.DictReader(f))
+
+
 # ------------------------------------------------------------------------------ output
 
 
@@ -610,6 +644,10 @@ def main(argv: list[str] | None = None) -> int:
         "--report", nargs="+", type=Path, metavar="DIR",
         help="run nothing: print the tables of the records in these output directories together",
     )
+    ap.add_argument(
+        "--compare-to", type=Path, metavar="CSV",
+        help="with --report: also the shares proven optimal per cell next to those of this earlier results.csv",
+    )
     args = ap.parse_args(argv)
 
     if args.report:
@@ -621,6 +659,8 @@ def main(argv: list[str] | None = None) -> int:
                 print(study_table(recs) + "\n")
         if any(r.get("gurobi") for r in recs):
             print(gurobi_table(recs))
+        if args.compare_to is not None:
+            print("\n" + compare_table(recs, read_csv_records(args.compare_to)))
         return 0
 
     if args.instances < 1:

@@ -6,6 +6,7 @@ The instances are the paper's (paper-examples.md, "Random grid worlds"); the har
 
 from __future__ import annotations
 
+import csv
 import json
 import subprocess
 import sys
@@ -166,3 +167,21 @@ def test_backend_option_reaches_the_solve(tmp_path: Path) -> None:
     rec = run_task(task)
     assert rec["outcome"] == "optimal" and rec["backend"] == "highs"
     assert rec["solver_backend"] == "highs"
+
+
+def test_compare_table_puts_shares_side_by_side(tmp_path: Path) -> None:
+    """``--report DIR --compare-to CSV``: per cell of the run, proven/finished per MILP, now and before."""
+    def rec(i: int, milp: str, outcome: str) -> dict:
+        return {"family": "reachability", "n": 1, "size": 5, "instance": i, "milp": milp, "outcome": outcome, "gurobi": False}
+
+    now = [rec(0, "static", "optimal"), rec(1, "static", "feasible"), rec(0, "reactive", "optimal")]
+    before = [rec(0, "static", "feasible"), rec(1, "static", "timeout"), rec(0, "reactive", "optimal"),
+              {**rec(0, "static", "optimal"), "size": 10}]
+    csv_path = tmp_path / "before.csv"
+    with open(csv_path, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=study.CSV_FIELDS, extrasaction="ignore")
+        w.writeheader()
+        w.writerows(before)
+    table = study.compare_table(now, study.read_csv_records(csv_path))
+    rows = [line for line in table.splitlines() if line.startswith("| reachability")]
+    assert rows == ["| reachability | 2 | 5x5 | 0/2 (0%), solved 1 | 1/2 (50%), solved 2 | 1/1 (100%), solved 1 | 1/1 (100%), solved 1 |"]
