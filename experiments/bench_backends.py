@@ -15,7 +15,7 @@ solve of a process pays; later solves of a process, such as an agent problem's r
 the figure is the last round's). CPU seconds are the load-independent figure: wall times on a
 shared machine are upper bounds. Prints a Markdown table and, per
 group, how many runs each backend proved and its total solve time; ``--json`` keeps the rows.
-Needs the extra ``flowtest[cpsat]``.
+Needs OR-Tools (a core dependency).
 """
 
 from __future__ import annotations

@@ -52,8 +52,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--threads", metavar="N", type=positive_int, help="solver threads (default 1: the same answer on every machine; at most the machine's CPUs)")
     p.add_argument(
         "--backend", choices=BACKENDS, default="auto",
-        help="the solver of the routing model: highs, cpsat (OR-Tools CP-SAT, the extra flowtest[cpsat]) "
-        "or auto (default: chosen per problem)",
+        help="the solver of the routing model: highs, cpsat (OR-Tools CP-SAT), cover (wall-cover master) "
+        "or auto (default: CP-SAT for static and reactive models of 900-3,000 rows, else HiGHS)",
     )
     p.add_argument("--setting", choices=SETTINGS, help="how reactive obstacles are shown (default: the problem's, else instantaneous)")
     p.add_argument("--force", action="store_true", help="overwrite existing --out/--plot files")

@@ -41,7 +41,7 @@ from synthesis.artifacts.summary import summary_of
 from synthesis.model.errors import ProblemError
 from synthesis.pipeline import SynthesisOptions, synthesize
 from synthesis.problems.builtins import BUILTINS
-from synthesis.routing.solver_control import solver_version
+from synthesis.routing.milp import backend_version
 
 from .game import TestGame
 
@@ -97,14 +97,21 @@ def synthesize_artifact(name: str, node_limit: int | None = None) -> TestArtifac
         raise KeyError(f"unknown built-in problem {name!r}; known: {', '.join(sorted(BUILTINS))}")
     options = artifact_options(node_limit)
     test = synthesize(BUILTINS[name](), SynthesisOptions(**options))
-    # which solver made it: with ties between optimal answers, another HiGHS release may
-    # pick another one, so a shipped artifact equals a fresh synthesis under this version
-    made = {SOLVER_KEY: {"highspy": solver_version()}, "provenance": {"options": options, "versions": versions()}}
+    # which solver made it: with ties between optimal answers, another solver or release may
+    # pick another one, so a shipped artifact equals a fresh synthesis under the same one
+    made = {SOLVER_KEY: made_with(test.routing.stats), "provenance": {"options": options, "versions": versions()}}
     return artifact_of(test, summary_of(test), made)
 
 
 SOLVER_KEY = "made_with"
-"""The key of :attr:`TestArtifact.extras` naming the solver version that made a shipped artifact."""
+"""The key of :attr:`TestArtifact.extras` naming the solver and its version that made a shipped artifact."""
+
+
+def made_with(stats: dict[str, Any]) -> dict[str, str]:
+    """``{"backend": ..., "version": ...}``: the routing solver a synthesis ran (its stats
+    name the one ``auto`` chose) and that solver's package version."""
+    backend = str(stats.get("backend", "highs"))
+    return {"backend": backend, "version": backend_version(backend)}
 
 
 def builtin_cache_path(name: str) -> Path:

@@ -56,7 +56,7 @@ class SynthesisOptions:
     # refuse problems whose product graph may exceed this many edges (None: no limit),
     # before building anything (synthesis.problems.limits)
     max_graph_edges: int | None = MAX_GRAPH_EDGES
-    # the solver of the routing model: "auto", "highs" or "cpsat" (the extra flowtest[cpsat])
+    # the solver of the routing model: "auto", "highs" or "cpsat" ("auto": chosen on the model's size)
     backend: str = "auto"
     # CP-SAT's deterministic budget per phase (its max_deterministic_time; see MilpOptions)
     work_limit: float | None = None

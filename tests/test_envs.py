@@ -22,10 +22,9 @@ from gymnasium.utils.env_checker import check_env, data_equivalence
 
 import flowtest_env
 from flowtest_env import ActionMaskObservation
-from flowtest_env.artifacts import SOLVER_KEY, artifact_path, builtin_game, synthesize_artifact
+from flowtest_env.artifacts import SOLVER_KEY, artifact_path, builtin_game, made_with, synthesize_artifact
 from flowtest_env.envs import BUILTIN_ENVS
 from flowtest_env.game import MET, RunState, TestGame
-from synthesis.routing.solver_control import solver_version
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -583,11 +582,11 @@ def test_shipped_artifact_equals_a_fresh_synthesis(name: str) -> None:
     art = TestArtifact.load(artifact_path(name))
     if art.summary["status"] != "optimal":
         pytest.skip(f"{name} ships a time-limited answer: test_shipped_artifact_passes_the_checks covers it")
-    made_with = art.extras.get(SOLVER_KEY, {}).get("highspy")
-    assert made_with, f"{name}: the shipped artifact does not record its solver version; rebuild with build_artifacts --force"
+    made = art.extras.get(SOLVER_KEY, {})
+    assert made.get("backend") and made.get("version"), f"{name}: the shipped artifact does not record its solver; rebuild with build_artifacts --force"
     fresh_art = synthesize_artifact(name)
-    if made_with != solver_version():
-        # where several answers are optimal, another HiGHS release may pick another one
+    if made != made_with(fresh_art.summary["stats"]):
+        # where several answers are optimal, another solver or release may pick another one
         # (maze2 under 1.16.0: 7 counterexamples instead of 3); what must still hold is
         # a proven optimum of the same value (the agent loop's value depends on the
         # order of its counterexamples, so only its status), and the checks, which ran

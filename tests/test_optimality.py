@@ -47,7 +47,7 @@ METHOD_EXACT = SynthesisOptions(closed_loop=False)
 BACKENDS = [
     "highs",
     "cover",
-    pytest.param("cpsat", marks=pytest.mark.skipif(not cpsat.available(), reason="OR-Tools is not installed (the extra flowtest[cpsat])")),
+    pytest.param("cpsat", marks=pytest.mark.skipif(not cpsat.available(), reason="OR-Tools is not installed (a core dependency, missing here)")),
 ]
 
 

@@ -1,6 +1,6 @@
 """OR-Tools CP-SAT as a solver of the routing model (``MilpOptions.backend = "cpsat"``).
 
-The optional extra ``flowtest[cpsat]`` installs OR-Tools. CP-SAT gets exactly the model
+OR-Tools is a core dependency (``auto`` picks CP-SAT for mid-sized models). CP-SAT gets exactly the model
 :func:`synthesis.routing.model.build_model` builds for HiGHS (both phases, the exclusions,
 MILP-agent's places, the feasibility flows) with every column integral. That keeps the
 optimum: once the cut binaries are fixed, what is left is a unit-capacity flow (integral
@@ -47,7 +47,7 @@ from .solver_control import POLL, SolveControl, SolveStatus
 WORKER = Path(__file__).resolve().with_name("cpsat_worker.py")
 """The child's program, started by its path so the ``synthesis`` package (and highspy) never loads there."""
 
-MISSING = "the cpsat backend needs OR-Tools, which is not installed: pip install 'flowtest[cpsat]' (see docs/install.md)"
+MISSING = "the cpsat backend needs OR-Tools, which is not installed: pip install 'ortools>=9.15,<9.16' (see docs/install.md)"
 """The one-line error when ``--backend cpsat`` is asked for without the extra."""
 
 FEASIBILITY_TOLERANCE = 1e-6

@@ -138,8 +138,8 @@ def solve_routing(products: Products, options: MilpOptions | None = None) -> Rou
 
 
 def chosen_backend(products: Products, options: MilpOptions) -> str:
-    """The solver that runs the model: ``options.backend``, or for ``"auto"`` HiGHS (the
-    rule that picks another backend where it wins is issue 18's ``cover`` work).
+    """The solver asked for: ``options.backend``, checked; ``"auto"`` stays ``"auto"`` until
+    the model is built (:func:`auto_backend` decides on its size).
 
     Raises
     ------
@@ -152,7 +152,27 @@ def chosen_backend(products: Products, options: MilpOptions) -> str:
         raise ValueError(f"unknown routing backend {options.backend!r}; expected one of {', '.join(BACKENDS)}")
     if options.backend == "cpsat":
         cpsat.require()
-    return "highs" if options.backend == "auto" else options.backend
+    return options.backend
+
+
+AUTO_CPSAT_ROWS = (900, 3_000)
+"""The model sizes (rows, inclusive) at which ``"auto"`` runs CP-SAT on a static or reactive
+problem; HiGHS elsewhere. Measured (docs/benchmarks.md, "CP-SAT against HiGHS"): in this
+band CP-SAT proved refueling and every random 5x5 instance in 0.6-1.2 CPU s against HiGHS's
+0.7-26.6; below it a CP-SAT child's start-up (about 0.4 CPU s) is more than HiGHS's whole
+solve; above it neither proves the 10x10 grids in 60 s and only HiGHS reaches flow 2 on
+mars-exploration. Agent problems (mixed, many small MILPs) stay on HiGHS. The
+``cover`` backend is never chosen: it proved nothing faster than HiGHS."""
+
+
+def auto_backend(rm: RoutingModel, options: MilpOptions) -> str:
+    """The backend ``"auto"`` runs on a built model (see :data:`AUTO_CPSAT_ROWS`); HiGHS when
+    OR-Tools is missing. A function of the model and options only, so the choice, and with
+    it the answer, is the same on every machine with the locked install."""
+    lo, hi = AUTO_CPSAT_ROWS
+    if options.mode in ("static", "reactive") and lo <= rm.model.n_row <= hi and cpsat.available():
+        return "cpsat"
+    return "highs"
 
 
 def backend_version(backend: str) -> str:
@@ -208,6 +228,8 @@ def _solve_once(
     t0 = time.perf_counter()
     rm = build_model(products, options, entries, check_consistency(products))
     graph_seconds = time.perf_counter() - t0
+    if options.backend == "auto":
+        options = replace(options, backend=auto_backend(rm, options))
     if options.backend == "cpsat":
         return _solve_once_cpsat(rm, products, options, entries, required, clock, graph_seconds)
     h = _highs(options)
