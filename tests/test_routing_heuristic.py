@@ -120,7 +120,7 @@ def test_after_first_stops_soon_after_highs_finds_a_first_test(monkeypatch: pyte
     monkeypatch.setattr(Clock, "first_test", first_test)
     _, problem, _ = first_consistent(10, "reachability", 1, 0, kind="static")
     t0 = time.perf_counter()
-    test = synthesize(problem, SynthesisOptions(time_limit=600.0, after_first=1.0))
+    test = synthesize(problem, SynthesisOptions(time_limit=600.0, after_first=1.0, backend="highs"))
     t_end = time.perf_counter()
     assert test.routing.flow >= 1 and test.checks.ok
     # the first test's time depends on HiGHS's search (about 10 s with 1.15, 20-40 s with
