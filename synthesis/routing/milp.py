@@ -168,7 +168,9 @@ mars-exploration. Agent problems (mixed, many small MILPs) stay on HiGHS. The
 def auto_backend(rm: RoutingModel, options: MilpOptions) -> str:
     """The backend ``"auto"`` runs on a built model (see :data:`AUTO_CPSAT_ROWS`); HiGHS when
     OR-Tools is missing. A function of the model and options only, so the choice, and with
-    it the answer, is the same on every machine with the locked install."""
+    it the answer, is the same on every machine with the locked install. Never ``"cover"``:
+    the wall-cover master proved nothing HiGHS did not and was slower wherever a solve took
+    more than a tenth of a second (docs/benchmarks.md, "The ``cover`` backend")."""
     lo, hi = AUTO_CPSAT_ROWS
     if options.mode in ("static", "reactive") and lo <= rm.model.n_row <= hi and cpsat.available():
         return "cpsat"
