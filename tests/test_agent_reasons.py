@@ -23,6 +23,7 @@ from synthesis.problems.files import load_problem_file
 from synthesis.problems.load import load_problem
 from synthesis.problems.problem import Problem
 from synthesis.problems.random_worlds import world_problem
+from synthesis.routing import cpsat
 from synthesis.routing.milp import RoutingResult
 from synthesis.routing.model import CutGroups, Exclusion, MilpOptions, cut_groups
 from synthesis.routing.restrictions import strategy_from_routing
@@ -138,11 +139,12 @@ def test_exclusion_rows_cut_and_open() -> None:
     assert Exclusion(cut=()).excludes(set())
 
 
-def _same_answer(problem: Problem) -> tuple[int, int]:
+def _same_answer(problem: Problem, backend: str = "auto") -> tuple[int, int]:
     """The loop with reasons and without: same flow, blocked places and cuts (the MILP's
     objective); returns the number of solves of each."""
-    with_reasons = synthesize_agent_test(problem, reasons=True)
-    plain = synthesize_agent_test(problem, reasons=False)
+    options = SynthesisOptions(backend=backend)
+    with_reasons = synthesize_agent_test(problem, options, reasons=True)
+    plain = synthesize_agent_test(problem, options, reasons=False)
     for t in (with_reasons, plain):
         assert t.checks is not None and t.agent is not None
     a, b = with_reasons.routing, plain.routing
@@ -155,6 +157,12 @@ def _same_answer(problem: Problem) -> tuple[int, int]:
 @pytest.mark.parametrize("name", ["maze1", "maze2", "patrolling"])
 def test_reasons_keep_the_answer_builtins(name: str) -> None:
     _same_answer(load_problem(name))
+
+
+@pytest.mark.skipif(not cpsat.available(), reason="OR-Tools is not installed (the extra flowtest[cpsat])")
+def test_reasons_keep_the_answer_on_cpsat() -> None:
+    """The exclusion rows with open groups reach CP-SAT through the same model."""
+    _same_answer(load_problem("maze2"), backend="cpsat")
 
 
 @pytest.mark.slow
