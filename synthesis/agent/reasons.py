@@ -33,7 +33,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order
 
-from ..graphs.products import Products, reachable
+from ..graphs.products import Products, coreachable, reachable
 from ..model.strategy import TestStrategy
 from ..model.test_agent import TestAgent
 from ..routing.model import CutGroups, Exclusion
@@ -209,9 +209,10 @@ def trap_reason(
     :func:`~synthesis.agent.game.trapped_nodes` for ``strategy``, the cut set's test).
 
     ``K`` = the cuts on the edges that leave the region the SUT can still reach from the
-    trap, ``O`` = the groups of a path from the start to the trap. Every cut set that
-    cuts ``K`` and leaves ``O`` open lets the SUT walk the path into that region (the test
-    is not over on the way) and closes every way out of it to ``Tgt``: a trap again.
+    trap, then fewer while they alone still close every way from the trap to ``Tgt``;
+    ``O`` = the groups of a path from the start to the trap. Every cut set that cuts ``K``
+    and leaves ``O`` open lets the SUT walk the path to the trap (the test is not over on
+    the way) and closes every way from it to ``Tgt``: a trap again.
     """
     edges = reason_groups(products, groups)
     g = products.virtual
@@ -225,6 +226,13 @@ def trap_reason(
     cut = np.zeros(n_groups, dtype=bool)
     cut[edges.group[leaving]] = True
     cut &= cut_mask
+    # fewer cuts: drop one while no way from the trap to Tgt avoids the cuts left
+    for k in np.flatnonzero(cut).tolist():
+        trial = cut.copy()
+        trial[k] = False
+        free = ~(trial[edges.group] & edges.can_cut)
+        if not coreachable(g.n_nodes, g.src[free], g.dst[free], products.target)[node]:
+            cut = trial
     # a shortest open path from the start to the trap, through nodes where the test goes on
     walk = np.flatnonzero(keep & ~ended_nodes(products)[g.src])
     graph = sp.csr_matrix((np.ones(walk.size), (g.src[walk], g.dst[walk])), shape=(g.n_nodes, g.n_nodes))
