@@ -245,8 +245,10 @@ def patrolling() -> Problem:
 
     Static cuts are per transition of T (method.md §5, c9), i.e. per fuel level:
     paper-examples.md ties them across fuel levels for refueling and mars-exploration
-    only, and tying them here makes the routing MILP intractable (phase 1 unproven
-    after 60 s).
+    only. Tied here (``tie_places``, which ties the reactive cuts too), the loop's rule that
+    a test never traps the system anywhere reachable leaves no test: CP-SAT proves it after
+    excluding the first cut set, which traps a system back at its start with fuel 4
+    (docs/benchmarks.md, "Patrolling with tied walls").
     """
     rows, cols = 6, 6
     goal, start, refuel = (5, 0), (5, 5), (1, 5)
