@@ -54,7 +54,7 @@ from .model import BACKENDS, CutGroups, MilpOptions, RoutingModel, build_model, 
 from .result import RoutingResult as RoutingResult
 from .result import blocked_by as blocked_by
 from .result import blocked_of_edges, required_entries
-from .solver_control import Clock, run_highs, solver_version, stdout_guard
+from .solver_control import Clock, quiet_highs, run_highs, solver_version
 from .traps import trapped_configurations, trapped_entries
 
 EAGER_FLOW_LIMIT = 200_000  # histories x G_sys edges up to which all feasibility flows go in at once
@@ -678,15 +678,8 @@ def _incumbent(
 
 
 def _highs(options: MilpOptions) -> highspy.Highs:
-    with stdout_guard():  # HiGHS >= 1.16 prints its banner on construction, before any option
-        h = highspy.Highs()
-    h.setOptionValue("output_flag", False)
-    h.setOptionValue("log_to_console", False)
-    if options.threads is not None:
-        highspy.Highs.resetGlobalScheduler(True)
-        h.setOptionValue("threads", int(options.threads))
+    h = quiet_highs(options.threads, options.random_seed)
     h.setOptionValue("mip_rel_gap", float(options.mip_rel_gap))
-    h.setOptionValue("random_seed", int(options.random_seed))
     if options.node_limit is not None:
         h.setOptionValue("mip_max_nodes", int(options.node_limit))
     # both objectives are integral: an absolute gap below 1 proves optimality

@@ -342,3 +342,18 @@ __all__ = [
     "stdout_guard",
 ]
 
+
+
+def quiet_highs(threads: int | None, random_seed: int) -> highspy.Highs:
+    """A HiGHS instance that prints nothing (its banner included), on ``threads`` threads
+    (``None``: HiGHS decides) with a fixed ``random_seed``: what every HiGHS solve of the
+    routing backends starts from."""
+    with stdout_guard():  # HiGHS >= 1.16 prints its banner on construction, before any option
+        h = highspy.Highs()
+    h.setOptionValue("output_flag", False)
+    h.setOptionValue("log_to_console", False)
+    if threads is not None:
+        highspy.Highs.resetGlobalScheduler(True)
+        h.setOptionValue("threads", int(threads))
+    h.setOptionValue("random_seed", int(random_seed))
+    return h

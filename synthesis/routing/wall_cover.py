@@ -59,7 +59,7 @@ from ..model.errors import InconsistentProblem
 from .cover_rows import CoverSeparator, FlowCut, Row
 from .model import MilpOptions, cut_groups, group_reductions, model_edges, static_moves_of
 from .result import RoutingResult, required_entries
-from .solver_control import Clock, SolveStatus, run_highs, stdout_guard
+from .solver_control import Clock, SolveStatus, quiet_highs, run_highs
 
 #: Master rounds per solve (each: one master MILP, then the separation): a deterministic
 #: budget far above what the built-ins need.
@@ -92,14 +92,7 @@ class _Master:
     """The 0-1 master: a HiGHS MILP over the binaries, grown row by row."""
 
     def __init__(self, n_col: int, cost: np.ndarray, options: MilpOptions) -> None:
-        with stdout_guard():  # HiGHS >= 1.16 prints its banner on construction
-            h = highspy.Highs()
-        h.setOptionValue("output_flag", False)
-        h.setOptionValue("log_to_console", False)
-        if options.threads is not None:
-            highspy.Highs.resetGlobalScheduler(True)
-            h.setOptionValue("threads", int(options.threads))
-        h.setOptionValue("random_seed", int(options.random_seed))
+        h = quiet_highs(options.threads, options.random_seed)
         h.setOptionValue("mip_rel_gap", 0.0)
         h.setOptionValue("mip_abs_gap", 1.0 - 1e-6)  # integral objective
         if options.node_limit is not None:
