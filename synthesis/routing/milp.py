@@ -90,7 +90,7 @@ def solve_routing(products: Products, options: MilpOptions | None = None) -> Rou
         maximum flow 0: every routing cut set would trap the system).
     """
     options = options or MilpOptions()
-    options = replace(options, backend=chosen_backend(products, options))
+    check_backend(options)
     if options.backend == "cover":
         result = wall_cover.solve_cover(products, options)
         return replace(result, stats={**result.stats, "solver_version": backend_version("cover")})
@@ -137,9 +137,9 @@ def solve_routing(products: Products, options: MilpOptions | None = None) -> Rou
             options.progress(f"routing MILP: adding feasibility flows for {len(trapped)} trapped histories")
 
 
-def chosen_backend(products: Products, options: MilpOptions) -> str:
-    """The solver asked for: ``options.backend``, checked; ``"auto"`` stays ``"auto"`` until
-    the model is built (:func:`auto_backend` decides on its size).
+def check_backend(options: MilpOptions) -> None:
+    """Refuse a backend that cannot run; ``"auto"`` is resolved once the model is built
+    (:func:`auto_backend` decides on its size).
 
     Raises
     ------
@@ -152,7 +152,6 @@ def chosen_backend(products: Products, options: MilpOptions) -> str:
         raise ValueError(f"unknown routing backend {options.backend!r}; expected one of {', '.join(BACKENDS)}")
     if options.backend == "cpsat":
         cpsat.require()
-    return options.backend
 
 
 AUTO_CPSAT_ROWS = (900, 3_000)
