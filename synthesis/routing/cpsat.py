@@ -14,7 +14,7 @@ reachability from ``Src`` outside I (the fact the coupling rows of
 
 CP-SAT runs in a child process (:mod:`synthesis.routing.cpsat_worker`): OR-Tools bundles
 its own ``libhighs.so.1``, which cannot share a process with highspy. The model goes over
-as arrays; the child keeps it between the two phases. Its search is deterministic: one
+as arrays (plain bytes: the child loads no NumPy); the child keeps it between the two phases. Its search is deterministic: one
 worker, a fixed ``random_seed``, and as a budget CP-SAT's deterministic time
 (``MilpOptions.work_limit``); a wall-clock limit only when the user asks for one
 (``time_limit`` / ``after_first``), and then the answer is reported non-deterministic as
@@ -71,6 +71,16 @@ def ortools_version() -> str | None:
         return version("ortools")
     except PackageNotFoundError:
         return None
+
+
+def _ints(a: Any) -> tuple[str, bytes]:
+    """An integer array as the child receives it: ``("q", int64 bytes)`` (no NumPy there)."""
+    return "q", np.ascontiguousarray(a, dtype=np.int64).tobytes()
+
+
+def _floats(a: Any) -> tuple[str, bytes]:
+    """A float array as the child receives it: ``("d", float64 bytes)``."""
+    return "d", np.ascontiguousarray(a, dtype=np.float64).tobytes()
 
 
 @dataclass(frozen=True)
@@ -238,8 +248,9 @@ class CpSatSession:
         self._cpu_before = self._worker.cpu
         a = arrays.a
         self._worker.cpu = self._call(
-            ("build", {"indptr": a.indptr, "indices": a.indices, "data": a.data, "shape": np.array(a.shape),
-                       "row_lo": arrays.row_lo, "row_hi": arrays.row_hi, "col_lo": arrays.col_lo, "col_hi": arrays.col_hi}),
+            ("build", {"indptr": _ints(a.indptr), "indices": _ints(a.indices), "data": _floats(a.data),
+                       "row_lo": _floats(arrays.row_lo), "row_hi": _floats(arrays.row_hi),
+                       "col_lo": _floats(arrays.col_lo), "col_hi": _floats(arrays.col_hi)}),
         )
         self.spawn_seconds = time.perf_counter() - self.started
         self.spawn_cpu_seconds = self._worker.cpu - self._cpu_before
@@ -262,7 +273,7 @@ class CpSatSession:
 
     def add_row(self, idx: np.ndarray, val: np.ndarray, lo: float, hi: float) -> None:
         """Add one row (phase 2's ``F >= F*``), here and in the child."""
-        self._worker.cpu = self._call(("row", np.asarray(idx, dtype=np.int64), np.asarray(val, dtype=float), float(lo), float(hi)))
+        self._worker.cpu = self._call(("row", _ints(idx), _floats(val), float(lo), float(hi)))
         self.arrays = self.arrays.with_row(idx, val, lo, hi)
 
     def solve(
@@ -292,7 +303,8 @@ class CpSatSession:
         if self.control is not None:
             self.control.report(SolveStatus(phase, sense, None, None, t0, flow))
         try:
-            raw = self._call(("solve", np.asarray(cost, dtype=float), bool(maximize), hint, params), progress=(phase, sense, t0, flow))
+            packed_hint = None if hint is None else _floats(hint)
+            raw = self._call(("solve", _floats(cost), bool(maximize), packed_hint, params), progress=(phase, sense, t0, flow))
         finally:
             if self.control is not None:
                 self.control.report(None)

@@ -3,15 +3,20 @@
 Why a child process: OR-Tools bundles its own ``libhighs.so.1``, and that build and the one
 of highspy cannot be loaded into one process (with OR-Tools 9.15 and highspy 1.15.1,
 whichever is imported second fails with an undefined symbol). So this module imports
-NumPy, SciPy and OR-Tools only, never ``synthesis`` (whose package imports highspy), and
-:mod:`synthesis.routing.cpsat` starts it by its file path (``python -P PATH``), not as
+OR-Tools' compiled CP-SAT helper and the standard library only, never ``synthesis`` (whose
+package imports highspy), nor NumPy, SciPy or OR-Tools' ``cp_model`` (which imports
+pandas): with them a fresh child took about 0.4 CPU s to start, with the helper alone
+about 0.06 (docs/benchmarks.md, "The whole command"). The parent starts it by its file
+path (``python -P PATH``), not as
 ``-m synthesis...``, so the package's ``__init__`` never runs here. Importing this module into a process that
 holds highspy fails for the same reason: nothing in FlowTest imports it.
 
 The protocol is a pipe each way (the child's standard input and output), each message a
 tuple sent with :class:`multiprocessing.connection.Connection` (pickled, behind its length), so
 the parent needs nothing of this module, which it must never import. Requests: ``("build", arrays)``,
-``("row", idx, val, lo, hi)``, ``("solve", cost, maximize, hint, params)``. Answers:
+``("row", idx, val, lo, hi)``, ``("solve", cost, maximize, hint, params)``, every array
+as ``(typecode, bytes)`` of :mod:`array` (``"q"`` int64, ``"d"`` float64), so nothing
+here needs NumPy to receive it. Answers:
 ``("ok", value)`` or ``("error", text)``; during a solve ``("progress", best, bound)``
 lines come first. The protocol keeps its own copy of file descriptor 1, and descriptor 1
 itself is pointed at standard error, so nothing a library prints can reach the parent's
@@ -24,52 +29,128 @@ why that keeps the optimum is said in :mod:`synthesis.routing.cpsat`.
 
 from __future__ import annotations
 
+import math
 import os
 import signal
 import sys
 import threading
 import time
+from array import array
 from multiprocessing.connection import Connection
 from typing import Any
 
-import numpy as np
-import scipy.sparse as sp
-from ortools.sat.python import cp_model
+from ortools.sat.python import cp_model_helper as cmh
 
 #: Seconds between two looks of the child at whether its parent is still alive.
 PARENT_POLL = 0.2
 
+INF = float("inf")
+
+_STATUS = {cmh.CpSolverStatus.OPTIMAL: "optimal", cmh.CpSolverStatus.FEASIBLE: "feasible", cmh.CpSolverStatus.INFEASIBLE: "infeasible"}
+
+
+def _ceil(v: float) -> int:
+    """``ceil(v - 1e-9)``: a bound a rounding error above an integer is that integer."""
+    return math.ceil(v - 1e-9)
+
+
+def _floor(v: float) -> int:
+    """``floor(v + 1e-9)``."""
+    return math.floor(v + 1e-9)
+
+
+def unpack(packed: tuple[str, bytes]) -> array[Any]:
+    """An array sent by the parent as ``(typecode, bytes)`` (``"q"``: int64, ``"d"``: float64):
+    plain bytes, so that receiving it needs no NumPy here."""
+    code, raw = packed
+    out: array[Any] = array(code)
+    out.frombytes(raw)
+    return out
+
+
+def _integral(values: array[Any] | list[float], what: str) -> list[int]:
+    """``values`` rounded to integers; raises ``ValueError`` if one is not integral (the
+    tolerance of ``numpy.allclose``)."""
+    out = [round(v) for v in values]
+    for c, v in zip(out, values, strict=True):
+        if abs(v - c) > 1e-8 + 1e-5 * abs(c):
+            raise ValueError(f"the routing model has a non-integral {what}")
+    return out
+
+
+def _merged(idx: array[Any] | list[int], coef: list[int]) -> tuple[list[int], list[int]]:
+    """A linear expression as CP-SAT stores it: terms by variable index, duplicates summed,
+    zero coefficients dropped."""
+    terms: dict[int, int] = {}
+    for j, c in zip(idx, coef, strict=True):
+        terms[int(j)] = terms.get(int(j), 0) + c
+    keys = sorted(j for j, c in terms.items() if c != 0)
+    return keys, [terms[j] for j in keys]
+
 
 class CpSatModel:
-    """(In the child.) The routing model as a CP-SAT model: one integer variable per column,
-    one linear constraint per row; the objective and extra rows come per phase."""
+    """(In the child.) The routing model as a CP-SAT model (its ``CpModelProto``, written
+    directly): one integer variable per column, one linear constraint per row; the
+    objective and extra rows come per phase. Only OR-Tools' compiled helper is loaded:
+    its Python layer (``cp_model``) imports pandas and NumPy, most of a fresh child's
+    start-up."""
 
-    def __init__(self, arrays: dict[str, np.ndarray]) -> None:
-        self._cp = cp_model
-        self.model = cp_model.CpModel()
-        lo = np.ceil(arrays["col_lo"] - 1e-9).astype(np.int64)
-        hi = np.floor(arrays["col_hi"] + 1e-9).astype(np.int64)
-        self.vars = [self.model.new_int_var(int(a), int(b), f"x{j}") for j, (a, b) in enumerate(zip(lo, hi, strict=True))]
-        a = sp.csr_matrix((arrays["data"], arrays["indices"], arrays["indptr"]), shape=tuple(arrays["shape"]))
-        for r in range(a.shape[0]):
-            s, e = a.indptr[r], a.indptr[r + 1]
+    def __init__(self, arrays: dict[str, tuple[str, bytes]]) -> None:
+        self.proto = cmh.CpModelProto()
+        col_lo, col_hi = unpack(arrays["col_lo"]), unpack(arrays["col_hi"])
+        variables = self.proto.variables
+        for j, (lo, hi) in enumerate(zip(col_lo, col_hi, strict=True)):
+            var = variables.add()
+            var.name = f"x{j}"
+            var.domain.extend([_ceil(lo), _floor(hi)])
+        self.n_cols = len(col_lo)
+        indptr, indices, data = unpack(arrays["indptr"]), unpack(arrays["indices"]), unpack(arrays["data"])
+        row_lo, row_hi = unpack(arrays["row_lo"]), unpack(arrays["row_hi"])
+        for r in range(len(indptr) - 1):
+            s, e = indptr[r], indptr[r + 1]
             if e > s:
-                self.add_row(a.indices[s:e], a.data[s:e], float(arrays["row_lo"][r]), float(arrays["row_hi"][r]))
+                self.add_row(indices[s:e], data[s:e], row_lo[r], row_hi[r])
 
-    def add_row(self, idx: np.ndarray, val: np.ndarray, lo: float, hi: float) -> None:
+    def add_row(self, idx: array[Any] | list[int], val: array[Any] | list[float], lo: float, hi: float) -> None:
         """Add ``lo <= val . x[idx] <= hi``; integral coefficients, so the bounds are rounded
         inwards (``ceil(lo)``, ``floor(hi)``); an infinite bound becomes a finite one past
         every value the row can take."""
-        coef = np.round(np.asarray(val, dtype=float)).astype(np.int64)
-        if not np.allclose(coef, val):
-            raise ValueError("the routing model has a non-integral coefficient")
-        expr = self._cp.LinearExpr.weighted_sum([self.vars[int(j)] for j in idx], [int(c) for c in coef])
-        span = int(np.abs(coef).sum()) * 10**6 + 1
-        ilo = -span if not np.isfinite(lo) else int(np.ceil(lo - 1e-9))
-        ihi = span if not np.isfinite(hi) else int(np.floor(hi + 1e-9))
-        self.model.add_linear_constraint(expr, ilo, ihi)
+        coef = _integral(val, "coefficient")
+        span = sum(abs(c) for c in coef) * 10**6 + 1
+        ilo = -span if lo == -INF else _ceil(lo)
+        ihi = span if hi == INF else _floor(hi)
+        linear = self.proto.constraints.add().linear
+        keys, coeffs = _merged(idx, coef)
+        linear.vars.extend(keys)
+        linear.coeffs.extend(coeffs)
+        if ilo <= ihi:  # an empty domain (an infeasible row) is stored as no interval
+            linear.domain.extend([ilo, ihi])
 
-    def solve(self, cost: np.ndarray, maximize: bool, hint: np.ndarray | None, params: dict[str, Any], out: Connection) -> dict[str, Any]:
+    def _set_objective(self, cost: array[Any], maximize: bool) -> None:
+        """``cost . x`` as the objective (CP-SAT minimises: a maximum is stored negated,
+        with scaling factor -1)."""
+        nz = [j for j, c in enumerate(cost) if c != 0]
+        keys, coeffs = _merged(nz, _integral([cost[j] for j in nz], "objective coefficient"))
+        self.proto.clear_objective()
+        self.proto.clear_floating_point_objective()
+        objective = self.proto.objective
+        objective.vars.extend(keys)
+        if maximize:
+            objective.scaling_factor = -1.0
+            objective.offset = 0
+            objective.coeffs.extend([-c for c in coeffs])
+        else:
+            objective.scaling_factor = 1.0
+            objective.offset = 0
+            objective.coeffs.extend(coeffs)
+
+    def _set_hint(self, hint: array[Any] | None) -> None:
+        self.proto.clear_solution_hint()
+        if hint is not None:
+            self.proto.solution_hint.vars.extend(range(self.n_cols))
+            self.proto.solution_hint.values.extend([round(v) for v in hint])
+
+    def solve(self, cost: array[Any], maximize: bool, hint: array[Any] | None, params: dict[str, Any], out: Connection) -> dict[str, Any]:
         """Optimise ``cost . x`` (integral costs) from ``hint`` under ``params``; progress
         lines go to ``out`` as solutions and bounds come.
 
@@ -79,22 +160,9 @@ class CpSatModel:
         >= ``first_at`` and the search stops ``after_first`` seconds after it;
         ``rel_gap``.
         """
-        cp = self._cp
-        nz = np.flatnonzero(cost)
-        coef = np.round(cost[nz]).astype(np.int64)
-        if not np.allclose(coef, cost[nz]):
-            raise ValueError("the routing objective has a non-integral coefficient")
-        expr = cp.LinearExpr.weighted_sum([self.vars[int(j)] for j in nz], [int(c) for c in coef])
-        if maximize:
-            self.model.maximize(expr)
-        else:
-            self.model.minimize(expr)
-        self.model.clear_hints()
-        if hint is not None:
-            for var, v in zip(self.vars, np.round(hint).astype(np.int64), strict=True):
-                self.model.add_hint(var, int(v))
-        solver = cp.CpSolver()
-        p = solver.parameters
+        self._set_objective(cost, maximize)
+        self._set_hint(hint)
+        p = cmh.SatParameters()
         p.num_workers = 1  # one worker: the same search, and answer, on every run and machine
         p.random_seed = int(params["random_seed"])
         p.log_search_progress = False
@@ -107,31 +175,37 @@ class CpSatModel:
         if params.get("rel_gap"):
             p.relative_gap_limit = float(params["rel_gap"])
         first_at = float(params.get("first_at", 1.0))
-        watch = _Watch(solver, out, maximize, after_first, first_at, cp.CpSolverSolutionCallback)
-        solver.best_bound_callback = watch.on_bound
+        solver = cmh.SolveWrapper()
+        solver.set_parameters(p)
+        watch = _Watch(solver, out, maximize, after_first, first_at)
+        solver.add_solution_callback(watch.callback)
+        solver.add_best_bound_callback(watch.on_bound)
         timers = watch.start(seconds)
         cpu0 = time.process_time()
         try:
-            status = solver.solve(self.model, watch.callback)
+            response = solver.solve(self.proto)
         finally:
             for t in timers + watch.timers:
                 t.cancel()
+            solver.clear_solution_callback(watch.callback)
+        status = response.status
+        found = status in (cmh.CpSolverStatus.OPTIMAL, cmh.CpSolverStatus.FEASIBLE)
         answer: dict[str, Any] = {
-            "status": {cp.OPTIMAL: "optimal", cp.FEASIBLE: "feasible", cp.INFEASIBLE: "infeasible"}.get(status, "unknown"),
+            "status": _STATUS.get(status, "unknown"),
             "x": None,
             "objective": None,
-            "bound": float(solver.best_objective_bound) if status in (cp.OPTIMAL, cp.FEASIBLE) else None,
+            "bound": float(response.best_objective_bound) if found else None,
             "first_age": None if watch.first is None else time.perf_counter() - watch.first,
-            "wall_seconds": float(solver.wall_time),
+            "wall_seconds": float(response.wall_time),
             "cpu_seconds": time.process_time() - cpu0,  # this solve's CPU time (CP-SAT's user_time is a wall time)
             "process_cpu_seconds": time.process_time(),  # this child's CPU seconds so far
-            "deterministic_time": float(solver.deterministic_time),
-            "conflicts": int(solver.num_conflicts),
-            "branches": int(solver.num_branches),
+            "deterministic_time": float(response.deterministic_time),
+            "conflicts": int(response.num_conflicts),
+            "branches": int(response.num_branches),
         }
-        if status in (cp.OPTIMAL, cp.FEASIBLE):
-            answer["x"] = np.array([solver.value(v) for v in self.vars], dtype=float)
-            answer["objective"] = float(solver.objective_value)
+        if found:
+            answer["x"] = [int(v) for v in response.solution]
+            answer["objective"] = float(response.objective_value)
         return answer
 
 
@@ -140,7 +214,7 @@ class _Watch:
     ``after_first`` seconds after its first solution of objective >= ``first_at``, or at
     ``seconds`` without one."""
 
-    def __init__(self, solver: Any, out: Connection, maximize: bool, after_first: float | None, first_at: float, base: type) -> None:
+    def __init__(self, solver: Any, out: Connection, maximize: bool, after_first: float | None, first_at: float) -> None:
         self.solver = solver
         self.out = out
         self.maximize = maximize
@@ -153,9 +227,9 @@ class _Watch:
         self._lock = threading.Lock()
         watch = self
 
-        class _Callback(base):  # type: ignore[misc]
-            def on_solution_callback(self) -> None:
-                watch.on_solution(float(self.objective_value), float(self.best_objective_bound))
+        class _Callback(cmh.SolutionCallback):
+            def OnSolutionCallback(self) -> None:  # noqa: N802 - the name CP-SAT calls
+                watch.on_solution(float(self.ObjectiveValue()), float(self.BestObjectiveBound()))
 
         self.callback = _Callback()
 
@@ -214,11 +288,12 @@ def serve(inp: Connection, out: Connection) -> None:
                 model = CpSatModel(message[1])
                 out.send(("ok", time.process_time()))  # this child's CPU seconds so far
             elif kind == "row" and model is not None:
-                model.add_row(*message[1:])
+                idx, val, lo, hi = message[1:]
+                model.add_row(unpack(idx), unpack(val), lo, hi)
                 out.send(("ok", time.process_time()))
             elif kind == "solve" and model is not None:
                 cost, maximize, hint, params = message[1:]
-                out.send(("ok", model.solve(cost, maximize, hint, params, out)))
+                out.send(("ok", model.solve(unpack(cost), maximize, None if hint is None else unpack(hint), params, out)))
             else:
                 out.send(("error", f"unexpected request {kind!r}"))
         except Exception as exc:  # noqa: BLE001 - reported to the parent, which raises
