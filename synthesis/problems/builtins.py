@@ -130,7 +130,7 @@ def refueling() -> Problem:
     tokens = {goal: "T", refuel: "R", (4, 0): "S"} | {c: "L" for c in low_cells}
     ts = fuel_grid_world(_grid_cells(5, 5), 5, 5, (4, 0), 10, [refuel], [goal], label, tokens)
     return make_problem(
-        "refueling", ts, "F goal & G !unsafe", "F low", "static", tie_places=True,
+        "refueling", ts, "F goal & G !unsafe", "F low", "static", tie_places="static",
         description="Reach the goal without running dry; walls force a low-fuel detour far from the goal.",
     )
 
@@ -164,7 +164,7 @@ def mars_exploration() -> Problem:
     ts = fuel_grid_world(_grid_cells(6, 6), 6, 6, (5, 0), 10, refuel, [goal], label, tokens)
     return make_problem(
         "mars-exploration", ts, "F goal & G !unsafe & G((ice | rock) -> F dropoff)",
-        "F lowfuel & F ice & F rock", "static", tie_places=True,
+        "F lowfuel & F ice & F rock", "static", tie_places="static",
         description="A rover samples ice and rock, drops them off, and is pushed to run low on fuel.",
     )
 

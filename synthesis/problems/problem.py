@@ -22,6 +22,13 @@ from ..model.test_agent import TestAgent
 
 KINDS = ("static", "reactive", "mixed", "agent")
 
+TIE_PLACES = ("none", "all", "static")
+"""What ``MilpOptions.tie_places`` (and ``Problem.tie_places``) ties across the states of one
+place (the fuel levels of a cell): ``"none"`` (every cut is per transition of T), ``"all"``
+(every cut group, static and reactive alike, is per pair of places) or ``"static"`` (the
+static cuts are per pair of places: walls that do not come and go with the fuel gauge; the
+reactive cuts stay per transition of T and history, as a test agent realizes them)."""
+
 
 @dataclass
 class Problem:
@@ -40,7 +47,10 @@ class Problem:
     bidirectional_cuts
         c14 (default: true for static problems, false otherwise).
     tie_places
-        Tie static cuts across states of the same place (fuel levels).
+        Which cuts are tied across the states of one place (fuel levels), one of
+        :data:`TIE_PLACES`: ``"none"``, ``"all"`` (static and
+        reactive cuts) or ``"static"`` (the static area's cuts only: physical walls, one
+        per pair of cells, while a test agent's cuts stay per transition and history).
     static_moves
         ``bool`` mask over moves: the static area of a mixed or agent problem. An agent
         problem without one gets its agent's default (:meth:`TestAgent.static_moves`:
@@ -59,7 +69,7 @@ class Problem:
     test_objective: Objective
     kind: str
     bidirectional_cuts: bool
-    tie_places: bool = False
+    tie_places: str = "none"
     static_moves: np.ndarray | None = None
     time_limit: float | None = None
     agent: TestAgent | None = None
@@ -82,14 +92,19 @@ def make_problem(
 ) -> Problem:
     """Validate and assemble a problem.
 
+    ``tie_places`` (in ``kw``) is one of :data:`TIE_PLACES`;
+    ``True`` and ``False`` stand for ``"all"`` and ``"none"``.
+
     Raises
     ------
     ProblemError
-        On an unknown kind, a formula outside the fragment, an unknown proposition,
-        or a system objective whose goal is not at terminal states.
+        On an unknown kind or ``tie_places``, a formula outside the fragment, an unknown
+        proposition, or a system objective whose goal is not at terminal states.
     """
     if kind not in KINDS:
         raise ProblemError(f"unknown environment kind {kind!r}; expected one of {', '.join(KINDS)}")
+    if "tie_places" in kw:
+        kw["tie_places"] = _tie_mode(kw["tie_places"])
     sys_obj = parse_objective(system_objective, "system")
     test_obj = parse_objective(test_objective, "test")
     known = system.propositions() | set(kw.pop("declared_propositions", ()))
@@ -106,6 +121,16 @@ def make_problem(
     if kind == "mixed" and kw.get("static_moves") is None:
         raise ProblemError("a mixed problem needs [environment] static = [...] (its static area)")
     return Problem(name, system, sys_obj, test_obj, kind, bool(bidirectional_cuts), **kw)
+
+
+def _tie_mode(value: object) -> str:
+    """``tie_places`` as a mode of :data:`TIE_PLACES` (booleans:
+    ``True`` ties every cut, ``False`` none, as the option meant before its modes)."""
+    if isinstance(value, bool):
+        return "all" if value else "none"
+    if isinstance(value, str) and value in TIE_PLACES:
+        return value
+    raise ProblemError(f"unknown tie_places {value!r}; expected one of {', '.join(TIE_PLACES)} (or true/false)")
 
 
 def _check_goal_terminal(ts: TransitionSystem, objective: Objective) -> None:

@@ -21,6 +21,7 @@ from scipy.sparse.csgraph import breadth_first_order
 from ..graphs.consistency import check_consistency
 from ..graphs.products import Products, reachable
 from ..model.errors import InconsistentProblem
+from ..problems.problem import TIE_PLACES
 from .heuristic import RouteSeed, RoutingGuess, guess_routing
 from .reductions import Reductions, reduce_groups
 from .solver_control import SolveControl
@@ -64,8 +65,10 @@ class MilpOptions:
     bidirectional
         c14: a cut on ``s -> s'`` also cuts ``s' -> s`` (under the same history).
     tie_places
-        Static cuts are tied between places (cells), not states: one wall per pair
-        of cells across fuel levels.
+        Which cuts are tied between places (cells) rather than states, one per pair of
+        cells across fuel levels (:data:`TIE_PLACES`): ``"none"``, ``"all"`` or
+        ``"static"`` (the static area only: physical walls beside a test agent's
+        per-transition cuts).
     block_states
         MILP-agent: add ``d_state`` per place entered by a cut and minimise them
         before the cuts (method.md §7).
@@ -127,7 +130,7 @@ class MilpOptions:
     mode: str = "reactive"
     static_moves: np.ndarray | None = None
     bidirectional: bool = False
-    tie_places: bool = False
+    tie_places: str = "none"
     block_states: bool = False
     exclusions: list[Exclusion] = field(default_factory=list)
     time_limit: float | None = None
@@ -253,19 +256,37 @@ class CutGroups:
 
 
 def cut_groups(products: Products, options: MilpOptions) -> CutGroups:
-    """Group the edges of G by the cut value they must share (c9, c14, fuel ties)."""
+    """Group the edges of G by the cut value they must share (c9, c14, fuel ties).
+
+    A static edge's key is its move's tie key ``a * n_s + b``: ``a``, ``b`` its ends as
+    places when ``tie_places`` ties static cuts (``n_s`` places), else as states (sorted
+    under c14). A reactive edge's key is ``n_s^2 + history * n_r^2 + a * n_r + b``, its ends
+    as places only when ``tie_places`` is ``"all"``. So static keys are below ``n_s^2``, and
+    the keys of ``"none"`` and ``"all"`` are what they were before ``"static"`` existed, as
+    are those of ``"static"`` and ``"all"`` on a problem without reactive moves.
+    """
     ts, g = products.ts, products.virtual
     static_moves = static_moves_of(products, options)
-    place = ts.place if options.tie_places else np.arange(ts.n_states, dtype=np.int32)
-    n_place = int(place.max()) + 1
-    a = place[ts.src].astype(np.int64)
-    b = place[ts.dst].astype(np.int64)
-    if options.bidirectional:
-        a, b = np.minimum(a, b), np.maximum(a, b)
-    move_key = a * n_place + b  # static tie key of each move
-    span = np.int64(n_place) * n_place
+    if options.tie_places not in TIE_PLACES:
+        raise ValueError(f"unknown tie_places {options.tie_places!r}; expected one of {TIE_PLACES}")
+    states = np.arange(ts.n_states, dtype=np.int32)
+    static_place = ts.place if options.tie_places != "none" else states
+    reactive_place = ts.place if options.tie_places == "all" else states
+
+    def pair_key(place: np.ndarray) -> tuple[np.ndarray, np.int64]:
+        """Each move's key over ``place`` and the size of that key space."""
+        n = np.int64(int(place.max()) + 1)
+        a = place[ts.src].astype(np.int64)
+        b = place[ts.dst].astype(np.int64)
+        if options.bidirectional:
+            a, b = np.minimum(a, b), np.maximum(a, b)
+        return a * n + b, n * n
+
+    move_key, span = pair_key(static_place)  # static tie key of each move
+    reactive_key, reactive_span = pair_key(reactive_place)
     is_static = static_moves[g.move]
-    key = np.where(is_static, move_key[g.move], span + g.hist[g.src].astype(np.int64) * span + move_key[g.move])
+    history = g.hist[g.src].astype(np.int64)
+    key = np.where(is_static, move_key[g.move], span + history * reactive_span + reactive_key[g.move])
     keys, of_edge = np.unique(key, return_inverse=True)
     of_edge = of_edge.ravel()
     n = keys.size
