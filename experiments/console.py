@@ -5,6 +5,10 @@ then would otherwise end in a ``KeyboardInterrupt`` traceback from inside an imp
 handler installed here before those imports exits 130 with the same one line as
 :func:`experiments.cli.main`; once they are done, Python's own handler is back and
 ``main`` maps ``KeyboardInterrupt`` itself.
+
+Before those imports, too, ``flowtest synthesize`` starts its CP-SAT child
+(:mod:`experiments.prestart`), so that both load at once; the child is ended with the
+command (and killed by the early Ctrl-C handler).
 """
 
 from __future__ import annotations
@@ -17,6 +21,9 @@ from types import FrameType
 
 def _interrupted_while_starting(signum: int, frame: FrameType | None) -> None:
     try:
+        pool = sys.modules.get("synthesis.routing.cpsat_pool")
+        if pool is not None:  # a prestarted CP-SAT child goes with us
+            pool.kill_idle_now()
         sys.stderr.write("flowtest: interrupted\n")
         sys.stderr.flush()
     finally:
@@ -25,11 +32,19 @@ def _interrupted_while_starting(signum: int, frame: FrameType | None) -> None:
 
 def main() -> None:
     """Run ``flowtest`` (the entry point in pyproject.toml)."""
-    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:  # not if the caller ignores Ctrl-C
+    early = signal.getsignal(signal.SIGINT) is signal.default_int_handler  # not if the caller ignores Ctrl-C
+    if early:
         signal.signal(signal.SIGINT, _interrupted_while_starting)
-        from experiments.cli import main as cli_main
+    from experiments.prestart import prestart_for
+    from synthesis.routing.cpsat_pool import close_idle_workers
 
+    prestart_for(sys.argv[1:])
+    from experiments.cli import main as cli_main
+
+    if early:
         signal.signal(signal.SIGINT, signal.default_int_handler)
-    else:
-        from experiments.cli import main as cli_main
-    sys.exit(cli_main())
+    try:
+        code = cli_main()
+    finally:
+        close_idle_workers()  # a prestarted child the command did not use, reaped
+    sys.exit(code)

@@ -14,10 +14,11 @@ import os
 import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from synthesis import pipeline
 from synthesis.model.errors import ProblemError
+from synthesis.routing.cpsat_pool import close_idle_workers
 from synthesis.routing.solver_control import SolveControl, status_line, stdout_guard
 
 from .arguments import positive_int, positive_seconds, relative_gap
@@ -26,6 +27,9 @@ from .exits import EXIT_OK
 from .human_summary import human_summary
 from .outputs import check_output_path, json_safe, print_json, write_atomically
 from .progress import PROGRESS_EVERY, StageProgress
+
+if TYPE_CHECKING:
+    from synthesis.problems.problem import Problem
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -71,8 +75,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """``flowtest synthesize``: load, synthesize, check, then print and write outputs."""
-    from synthesis.artifacts.artifact import artifact_of
-    from synthesis.artifacts.summary import summary_of
     from synthesis.problems.load import load_problem
 
     outputs: list[tuple[Path, str]] = []
@@ -99,7 +101,20 @@ def run(args: argparse.Namespace) -> int:
     from synthesis.problems.files import MAX_GRID_CELLS
 
     max_cells = None if args.no_size_limit else MAX_GRID_CELLS
-    problem = _load(lambda name: load_problem(name, max_cells), args.problem)
+    try:
+        problem = _load(lambda name: load_problem(name, max_cells), args.problem)
+        if not pipeline.may_use_cpsat(problem, args.backend):
+            close_idle_workers()  # started by the console script in case; not needed here
+        return _synthesize(args, problem)
+    finally:
+        close_idle_workers()  # the CP-SAT child, prestarted or kept after the solve, ends with the command
+
+
+def _synthesize(args: argparse.Namespace, problem: Problem) -> int:
+    """Synthesize ``problem`` as ``args`` ask, then print and write the outputs."""
+    from synthesis.artifacts.artifact import artifact_of
+    from synthesis.artifacts.summary import summary_of
+
     control = SolveControl()
     every = getattr(args, "progress", None)
     # stdout is ours: whatever a library prints meanwhile (HiGHS's banner, a C printf)

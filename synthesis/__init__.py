@@ -12,22 +12,71 @@ The package is split by stage; each sub-package imports only from those before i
 * :mod:`synthesis.pipeline` — :func:`synthesize`, the one entry point;
 * :mod:`synthesis.artifacts` — the JSON summary, the versioned test artifact, cache keys.
 
-What is exported here is the public API; everything else may move between versions.
+What is exported here is the public API; everything else may move between versions. The
+names are imported on first use, not with the package.
 """
 
-from .artifacts.artifact import TestArtifact, artifact_of, verify_artifact
-from .artifacts.summary import summary_of
-from .checks.verify import CheckReport
-from .model.errors import CheckFailed, FlowTestError, InconsistentProblem, ProblemError, ProblemTooLarge
-from .model.strategy import TestStrategy
-from .model.systems import TransitionSystem
-from .pipeline import SynthesisOptions, SynthesizedTest, synthesize
-from .problems.builtins import BUILTINS
-from .problems.files import load_problem_file
-from .problems.load import load_problem
-from .problems.problem import Problem, make_problem
-from .routing.milp import RoutingResult
-from .routing.solver_control import SolveControl
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from .artifacts.artifact import TestArtifact, artifact_of, verify_artifact
+    from .artifacts.summary import summary_of
+    from .checks.verify import CheckReport
+    from .model.errors import CheckFailed, FlowTestError, InconsistentProblem, ProblemError, ProblemTooLarge
+    from .model.strategy import TestStrategy
+    from .model.systems import TransitionSystem
+    from .pipeline import SynthesisOptions, SynthesizedTest, synthesize
+    from .problems.builtins import BUILTINS
+    from .problems.files import load_problem_file
+    from .problems.load import load_problem
+    from .problems.problem import Problem, make_problem
+    from .routing.milp import RoutingResult
+    from .routing.solver_control import SolveControl
+
+_PUBLIC: dict[str, str] = {
+    "BUILTINS": ".problems.builtins",
+    "CheckFailed": ".model.errors",
+    "CheckReport": ".checks.verify",
+    "FlowTestError": ".model.errors",
+    "InconsistentProblem": ".model.errors",
+    "Problem": ".problems.problem",
+    "ProblemError": ".model.errors",
+    "ProblemTooLarge": ".model.errors",
+    "RoutingResult": ".routing.milp",
+    "SolveControl": ".routing.solver_control",
+    "SynthesisOptions": ".pipeline",
+    "SynthesizedTest": ".pipeline",
+    "TestArtifact": ".artifacts.artifact",
+    "TestStrategy": ".model.strategy",
+    "TransitionSystem": ".model.systems",
+    "artifact_of": ".artifacts.artifact",
+    "load_problem": ".problems.load",
+    "load_problem_file": ".problems.files",
+    "make_problem": ".problems.problem",
+    "summary_of": ".artifacts.summary",
+    "synthesize": ".pipeline",
+    "verify_artifact": ".artifacts.artifact",
+}
+"""Where each public name lives: imported on first use (PEP 562), so importing one module of
+the package (say ``synthesis.routing.cpsat_pool`` at the start of ``flowtest synthesize``)
+does not load all of them with NumPy, SciPy and HiGHS."""
+
+
+def __getattr__(name: str) -> Any:
+    """A public name of :data:`__all__`, imported from its module on first use."""
+    module = _PUBLIC.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    from importlib import import_module
+
+    value = getattr(import_module(module, __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))
+
 
 __all__ = [
     "BUILTINS",

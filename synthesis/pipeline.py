@@ -25,7 +25,7 @@ from .model.test_agent import TestAgent
 from .problems.limits import MAX_GRAPH_EDGES, check_size
 from .problems.problem import Problem, build_graphs
 from .routing import cpsat
-from .routing.milp import RoutingResult, solve_routing
+from .routing.milp import AUTO_CPSAT_MODES, RoutingResult, solve_routing
 from .routing.model import BACKENDS, MilpOptions
 from .routing.restrictions import strategy_from_routing
 from .routing.solver_control import SolveControl
@@ -122,9 +122,22 @@ class SynthesizedTest:
         return out
 
 
+def routing_mode(problem: Problem) -> str:
+    """The routing model's mode for ``problem`` (``MilpOptions.mode``)."""
+    return "mixed" if problem.kind in ("mixed", "agent") else problem.kind
+
+
+def may_use_cpsat(problem: Problem, backend: str) -> bool:
+    """Whether synthesizing ``problem`` on ``backend`` may solve on CP-SAT: ``"cpsat"``, or
+    ``"auto"`` on a static or reactive problem (:data:`~synthesis.routing.milp.AUTO_CPSAT_MODES`;
+    the model's size decides later) with OR-Tools installed. Known before any graph is built,
+    so a CP-SAT child started early can be ended at once when it will not be used."""
+    return backend == "cpsat" or (backend == "auto" and routing_mode(problem) in AUTO_CPSAT_MODES and cpsat.available())
+
+
 def milp_options(problem: Problem, options: SynthesisOptions) -> MilpOptions:
     """The routing MILP options a problem asks for."""
-    mode = "mixed" if problem.kind in ("mixed", "agent") else problem.kind
+    mode = routing_mode(problem)
     return MilpOptions(
         mode=mode,
         static_moves=problem.static_moves,

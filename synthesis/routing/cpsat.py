@@ -25,27 +25,18 @@ against the model here (bounds, rows, integrality, objective) before it is used.
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
-import tempfile
-import threading
 import time
 from dataclasses import dataclass
 from importlib.metadata import PackageNotFoundError, version
 from importlib.util import find_spec
-from multiprocessing.connection import Connection
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
 
 from ..model.errors import ProblemError
+from .cpsat_pool import WORKER, close_idle_workers, give_back, prestart, take_worker
 from .solver_control import POLL, SolveControl, SolveStatus
-
-WORKER = Path(__file__).resolve().with_name("cpsat_worker.py")
-"""The child's program, started by its path so the ``synthesis`` package (and highspy) never loads there."""
 
 MISSING = "the cpsat backend needs OR-Tools, which is not installed: pip install 'ortools>=9.15,<9.16' (see docs/install.md)"
 """The one-line error when ``--backend cpsat`` is asked for without the extra."""
@@ -129,105 +120,6 @@ class CpSatAnswer:
     stats: dict[str, Any]
 
 
-class _Worker:
-    """One child process running :mod:`synthesis.routing.cpsat_worker`, and the two ends
-    of the pipes to it (:class:`multiprocessing.connection.Connection`)."""
-
-    def __init__(self) -> None:
-        self.stderr = tempfile.TemporaryFile()
-        self.proc = subprocess.Popen(
-            [sys.executable, "-P", str(WORKER), str(os.getpid())],
-            stdin=subprocess.PIPE,
-            stdout=subprocess.PIPE,
-            stderr=self.stderr,
-        )
-        if self.proc.stdin is None or self.proc.stdout is None:
-            raise RuntimeError("the CP-SAT worker has no pipes")
-        self.to_child = Connection(os.dup(self.proc.stdin.fileno()), readable=False)
-        self.from_child = Connection(os.dup(self.proc.stdout.fileno()), writable=False)
-        self.proc.stdin.close()
-        self.proc.stdout.close()
-        self.cpu = 0.0  # the child's CPU seconds at its last answer
-
-    @property
-    def alive(self) -> bool:
-        return self.proc.poll() is None
-
-    def stderr_tail(self) -> str:
-        """The last line the child wrote to its standard error (``""``: none)."""
-        try:
-            self.stderr.seek(0)
-            lines = self.stderr.read().decode(errors="replace").strip().splitlines()
-        except (OSError, ValueError):
-            return ""
-        return f": {lines[-1]}" if lines else ""
-
-    def close(self) -> None:
-        """End the child (killed if it still runs) and free its pipes."""
-        if self.proc.poll() is None:
-            self.proc.kill()
-        self.proc.wait()
-        for conn in (self.to_child, self.from_child):
-            conn.close()
-        self.stderr.close()
-
-
-_idle: list[_Worker] = []
-_idle_lock = threading.Lock()
-
-
-def _forget_idle_in_fork_child() -> None:
-    """A forked process must not talk to its parent's idle child (the pipes are shared): it
-    forgets it, without ending it, and starts its own when it needs one."""
-    global _idle_lock
-    _idle.clear()
-    _idle_lock = threading.Lock()
-
-
-os.register_at_fork(after_in_child=_forget_idle_in_fork_child)
-
-
-def prestart() -> None:
-    """Start an idle child now, if none waits, so importing OR-Tools there overlaps with
-    the caller's work (building the product graphs and the model) instead of following it."""
-    with _idle_lock:
-        if any(w.alive for w in _idle):
-            return
-    worker = _Worker()
-    _give_back(worker)
-
-
-def _take_worker() -> tuple[_Worker, bool]:
-    """An idle child from an earlier solve of this process, else a new one (and whether
-    it is new): importing OR-Tools in a fresh child takes most of a second, which the
-    counterexample loop of an agent problem, with its many solves, would pay each time.
-    A child holds no state between models (each solve builds its own CP-SAT model)."""
-    with _idle_lock:
-        while _idle:
-            worker = _idle.pop()
-            if worker.alive:
-                return worker, False
-            worker.close()
-    return _Worker(), True
-
-
-def _give_back(worker: _Worker) -> None:
-    with _idle_lock:
-        if worker.alive and not _idle:
-            _idle.append(worker)
-            return
-    worker.close()
-
-
-def close_idle_workers() -> None:
-    """End the idle child kept for later solves (tests; a child also ends with its parent)."""
-    with _idle_lock:
-        workers = list(_idle)
-        _idle.clear()
-    for worker in workers:
-        worker.close()
-
-
 class CpSatSession:
     """The routing model on CP-SAT in a child process, kept between the two phases.
 
@@ -242,7 +134,7 @@ class CpSatSession:
         self.arrays = arrays
         self.control = control
         self.started = time.perf_counter()
-        self._worker, self.fresh = _take_worker()
+        self._worker, self.fresh = take_worker()
         self._broken = False
         self._closed = False
         self._cpu_before = self._worker.cpu
@@ -379,7 +271,7 @@ class CpSatSession:
         if self._broken:
             self._worker.close()
         else:
-            _give_back(self._worker)
+            give_back(self._worker)
 
 
-__all__ = ["MISSING", "CpSatAnswer", "CpSatSession", "ModelArrays", "available", "close_idle_workers", "ortools_version", "prestart", "require"]
+__all__ = ["MISSING", "WORKER", "CpSatAnswer", "CpSatSession", "ModelArrays", "available", "close_idle_workers", "ortools_version", "prestart", "require"]

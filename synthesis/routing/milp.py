@@ -154,6 +154,9 @@ def check_backend(options: MilpOptions) -> None:
         cpsat.require()
 
 
+AUTO_CPSAT_MODES = ("static", "reactive")
+"""The routing modes in which ``"auto"`` may run CP-SAT (agent problems, mode ``"mixed"``, stay on HiGHS)."""
+
 AUTO_CPSAT_ROWS = (900, 3_000)
 """The model sizes (rows, inclusive) at which ``"auto"`` runs CP-SAT on a static or reactive
 problem; HiGHS elsewhere. Measured (docs/benchmarks.md, "CP-SAT against HiGHS"): in this
@@ -171,7 +174,7 @@ def auto_backend(rm: RoutingModel, options: MilpOptions) -> str:
     the wall-cover master proved nothing HiGHS did not and was slower wherever a solve took
     more than a tenth of a second (docs/benchmarks.md, "The ``cover`` backend")."""
     lo, hi = AUTO_CPSAT_ROWS
-    if options.mode in ("static", "reactive") and lo <= rm.model.n_row <= hi and cpsat.available():
+    if options.mode in AUTO_CPSAT_MODES and lo <= rm.model.n_row <= hi and cpsat.available():
         return "cpsat"
     return "highs"
 
