@@ -7,8 +7,14 @@ Usage::
 Runs the console script ``--runs`` times per problem (default 10), one after another, each in
 a fresh process with a fresh, empty cache (``XDG_CACHE_HOME`` and ``FLOWTEST_CACHE_DIR`` in a
 new temporary folder, so no cached answer is used), and prints a Markdown table: the median,
-fastest and slowest wall seconds from the start of the process to its end, and the median CPU
-seconds of the process and the children it reaped (the CP-SAT child among them). Every run's
+fastest and slowest wall seconds from the start of the process to its end; the medians, from
+each run's JSON stats, of the routing solve (``solve_seconds``), of its wait for the CP-SAT
+child (``cpsat.spawn_seconds``: from handing the model over until the child has built it,
+the child's start-up included when it was not ready yet), of CP-SAT's search
+(``cpsat.wall_seconds``) and of the rest of the command (wall minus routing: start-up,
+imports, graphs, model, checks, output); the median CPU seconds of the process and the
+children it reaped, and the CP-SAT child's own (``cpsat.child_cpu_seconds``; before the
+command reaped its child, only this figure held its CPU time). Every run's
 stdout must be the JSON document, and every run's answer (the document without its timings)
 the same: the script fails otherwise.
 
@@ -63,13 +69,20 @@ def one_run(name: str, source: Path | None) -> tuple[float, float, dict[str, Any
 
 
 def bench(name: str, runs: int, source: Path | None) -> dict[str, Any]:
-    """``runs`` cold runs of ``name``: wall and CPU figures, and the one answer they all gave."""
+    """``runs`` cold runs of ``name``: wall and CPU figures, where the wall time went (from
+    each run's JSON stats), and the one answer they all gave."""
     walls, cpus, answers = [], [], []
+    parts: dict[str, list[float]] = {"routing_s": [], "child_wait_s": [], "search_s": [], "child_cpu_s": []}
     for _ in range(runs):
         wall, cpu, document = one_run(name, source)
         walls.append(wall)
         cpus.append(cpu)
         answers.append(json.dumps(without_timings(document), sort_keys=True))
+        stats, child = document["stats"], document["stats"].get("cpsat", {})
+        parts["routing_s"].append(float(stats.get("solve_seconds", 0.0)))
+        parts["child_wait_s"].append(float(child.get("spawn_seconds", 0.0)))  # model handed over until the child has built it
+        parts["search_s"].append(float(child.get("wall_seconds", 0.0)))
+        parts["child_cpu_s"].append(float(child.get("child_cpu_seconds", 0.0)))
     if len(set(answers)) != 1:
         raise SystemExit(f"{name}: the runs gave {len(set(answers))} different answers")
     answer = json.loads(answers[0])
@@ -85,6 +98,8 @@ def bench(name: str, runs: int, source: Path | None) -> dict[str, Any]:
         "min_wall_s": min(walls),
         "max_wall_s": max(walls),
         "median_cpu_s": statistics.median(cpus),
+        **{f"median_{k}": statistics.median(v) for k, v in parts.items()},
+        "median_outside_routing_s": statistics.median(w - r for w, r in zip(walls, parts["routing_s"], strict=True)),
         "walls": walls,
         "cpus": cpus,
     }
@@ -98,11 +113,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--json", type=Path, help="also write the rows (with every run's figures) here")
     args = parser.parse_args(argv)
     rows = [bench(name, args.runs, args.source) for name in args.names]
-    print("| problem | answer | backend | runs | median wall s | min | max | median CPU s (process + children) |")
-    print("|---|---|---|---|---|---|---|---|")
+    print("| problem | answer | backend | runs | median wall s | min | max | routing | of which: waiting for the child | CP-SAT search | "
+          "outside routing | CPU s reaped (process + children) | child CPU s |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         print(f"| {r['problem']} | {r['status']}, flow {r['flow']}, {r['n_cuts']} cuts | {r['backend']} | {r['runs']} | "
-              f"{r['median_wall_s']:.2f} | {r['min_wall_s']:.2f} | {r['max_wall_s']:.2f} | {r['median_cpu_s']:.2f} |")
+              f"{r['median_wall_s']:.2f} | {r['min_wall_s']:.2f} | {r['max_wall_s']:.2f} | {r['median_routing_s']:.2f} | "
+              f"{r['median_child_wait_s']:.2f} | {r['median_search_s']:.2f} | {r['median_outside_routing_s']:.2f} | "
+              f"{r['median_cpu_s']:.2f} | {r['median_child_cpu_s']:.2f} |")
     print(f"load average at the end: {', '.join(f'{x:.1f}' for x in os.getloadavg())}")
     if args.json is not None:
         args.json.write_text(json.dumps(rows, indent=1) + "\n")

@@ -13,6 +13,7 @@ no more than the ``fork``/``exec`` (the ``synthesis`` package loads its modules 
 
 from __future__ import annotations
 
+import atexit
 import os
 import signal
 import subprocess
@@ -128,12 +129,15 @@ def give_back(worker: Worker) -> None:
 
 
 def close_idle_workers() -> None:
-    """End and reap the idle child (a command's end, tests; a child also ends with its parent)."""
+    """End and reap the idle child (a command's end, tests, this process's exit)."""
     with _idle_lock:
         workers = list(_idle)
         _idle.clear()
     for worker in workers:
         worker.close()
+
+
+atexit.register(close_idle_workers)  # no child outlives this process unreaped
 
 
 def kill_idle_now() -> None:

@@ -161,8 +161,9 @@ AUTO_CPSAT_ROWS = (900, 3_000)
 """The model sizes (rows, inclusive) at which ``"auto"`` runs CP-SAT on a static or reactive
 problem; HiGHS elsewhere. Measured (docs/benchmarks.md, "CP-SAT against HiGHS"): in this
 band CP-SAT proved refueling and every random 5x5 instance in 0.6-1.2 CPU s against HiGHS's
-0.7-26.6; below it a CP-SAT child's start-up (about 0.4 CPU s) is more than HiGHS's whole
-solve; above it neither proves the 10x10 grids in 60 s and only HiGHS reaches flow 2 on
+0.7-26.6; below it a CP-SAT child's start-up (about 0.4 CPU s when this was measured; about
+0.06 since the child loads no NumPy or pandas, the rule kept so that answers stay the same)
+was more than HiGHS's whole solve; above it neither proves the 10x10 grids in 60 s and only HiGHS reaches flow 2 on
 mars-exploration. Agent problems (mixed, many small MILPs) stay on HiGHS. The
 ``cover`` backend is never chosen: it proved nothing faster than HiGHS."""
 
