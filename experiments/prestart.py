@@ -47,7 +47,10 @@ def prestart_for(argv: Sequence[str]) -> bool:
     """Start an idle CP-SAT child if :func:`may_use_cpsat` (returns whether it did)."""
     if not may_use_cpsat(argv):
         return False
-    prestart()
+    try:
+        prestart()
+    except OSError:  # no process to spare now: the solve starts its own child, and says why if it cannot
+        return False
     return True
 
 

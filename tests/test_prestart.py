@@ -64,6 +64,18 @@ def test_the_command_line_decides(argv: list[str], expected: bool) -> None:
 
 
 @needs_ortools
+def test_a_failed_early_start_is_no_error(monkeypatch: pytest.MonkeyPatch) -> None:
+    """No process to spare at start-up: the command goes on, and the solve starts its own child."""
+
+    def refused() -> None:
+        raise OSError("Resource temporarily unavailable")
+
+    monkeypatch.setattr(prestart, "prestart", refused)
+    assert prestart.prestart_for(["synthesize", "refueling"]) is False
+    assert cpsat_pool.idle_pids() == []
+
+
+@needs_ortools
 def test_the_prestarted_child_solves_and_is_reaped(capsys: pytest.CaptureFixture[str]) -> None:
     """refueling on ``auto`` (CP-SAT): the solve runs on the child started before, which is
     reaped when the command ends; the answer is the in-process one."""
