@@ -1,9 +1,10 @@
-"""Benchmark: the routing solver backends (HiGHS, OR-Tools CP-SAT) on the same problems.
+"""Benchmark: the routing solver backends (HiGHS, OR-Tools CP-SAT, SCIP one-tree cover) on the same problems.
 
 Usage::
 
     nice -n 10 .venv/bin/python -m experiments.bench_backends [--time-limit S] [--seeds N]
         [--builtins NAME ...] [--sizes 5 10] [--families reachability reaction] [--json FILE]
+        [--backends highs cpsat scip cover]
 
 For each problem (built-ins, then seeded random grids of every size, family and kind static /
 reactive, the first consistent attempt of seeds 0..N-1) and each backend, one synthesis in this
@@ -33,10 +34,12 @@ from synthesis.pipeline import SynthesisOptions, synthesize
 from synthesis.problems.load import load_problem
 from synthesis.problems.problem import Problem
 from synthesis.problems.random_grid import first_consistent
-from synthesis.routing import cpsat
+from synthesis.routing import cpsat, scip
 
 BUILTINS = ("small-reactive", "example1", "beaver-rescue", "motion-primitives", "maze1", "maze2", "patrolling", "refueling", "mars-exploration")
 BACKENDS = ("highs", "cpsat")
+"""The backends run by default; ``--backends`` may add ``scip`` (the optional extra) and ``cover``."""
+CHOICES = ("highs", "cpsat", "scip", "cover")
 
 
 def run(problem: Problem, backend: str, time_limit: float | None) -> dict[str, Any]:
@@ -69,6 +72,7 @@ def run(problem: Problem, backend: str, time_limit: float | None) -> dict[str, A
         "rounds": len(test.agent.iterations) if test.agent is not None else 1,
         "binaries": r.stats["binary_vars"],
         "rows": r.stats["constraints"],
+        "nodes": r.stats.get("master_nodes"),
     }
 
 
@@ -106,14 +110,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--builtins", nargs="*", default=list(BUILTINS))
     ap.add_argument("--sizes", nargs="*", type=int, default=[5, 10])
     ap.add_argument("--families", nargs="*", default=["reachability", "reaction"])
-    ap.add_argument("--backends", nargs="*", default=list(BACKENDS), choices=BACKENDS)
+    ap.add_argument("--backends", nargs="*", default=list(BACKENDS), choices=CHOICES)
     ap.add_argument("--json", type=Path, default=None, help="write the rows here as JSON")
     args = ap.parse_args(argv)
     if "cpsat" in args.backends:
         cpsat.require()
+    if "scip" in args.backends:
+        scip.require()
     rows: list[dict[str, Any]] = []
-    print(f"ortools {cpsat.ortools_version()}, time limit {args.time_limit:g} s per synthesis\n", flush=True)
-    head = "| group | problem | backend | status | flow | cuts | solve s | CPU s | child start s |"
+    print(f"ortools {cpsat.ortools_version()}, pyscipopt {scip.scip_version()}, time limit {args.time_limit:g} s per synthesis\n", flush=True)
+    head = "| group | problem | backend | status | flow | cuts | solve s | CPU s | child start s | nodes (scip, cover) |"
     print(head)
     print("|---" * (head.count("|") - 1) + "|", flush=True)
     for group, label, problem in cases(args.builtins, args.sizes, args.families, args.seeds):
@@ -122,7 +128,7 @@ def main(argv: list[str] | None = None) -> int:
             rows.append(row)
             print(
                 f"| {group} | {label} | {backend} | {row['status']} | {_fmt(row['flow'])} | {_fmt(row['n_cuts'])} | "
-                f"{_fmt(row.get('solve_s'))} | {_fmt(row['cpu_s'])} | {_fmt(row.get('spawn_s'))} |",
+                f"{_fmt(row.get('solve_s'))} | {_fmt(row['cpu_s'])} | {_fmt(row.get('spawn_s'))} | {_fmt(row.get('nodes'))} |",
                 flush=True,
             )
     print("\n| group | backend | runs | proven | same answer as the other backend (both proven) | total solve s | total CPU s |")

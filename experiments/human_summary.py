@@ -85,7 +85,12 @@ def human_summary(test: Any, summary: dict[str, Any]) -> str:
         f"{stats['continuous_vars']} continuous, {stats['constraints']} constraints"
     )
     if "backend" in stats:
-        packages = {"highs": "HiGHS, highspy", "cover": "wall-cover master on HiGHS, highspy", "cpsat": "OR-Tools CP-SAT, ortools"}
+        packages = {
+            "highs": "HiGHS, highspy",
+            "cover": "wall-cover master on HiGHS, highspy",
+            "cpsat": "OR-Tools CP-SAT, ortools",
+            "scip": "wall-cover master in one SCIP tree, pyscipopt",
+        }
         package = packages.get(stats["backend"], stats["backend"])
         lines.append(f"  solver       {stats['backend']} ({package} {stats.get('solver_version', '?')})")
     gap_text = "" if summary["status"] == "optimal" or gap is None else f", gap {gap:.2%}"

@@ -24,7 +24,7 @@ from .model.strategy import SETTINGS, TestStrategy
 from .model.test_agent import TestAgent
 from .problems.limits import MAX_GRAPH_EDGES, check_size
 from .problems.problem import Problem, build_graphs
-from .routing import cpsat
+from .routing import cpsat, scip
 from .routing.milp import AUTO_CPSAT_MODES, RoutingResult, solve_routing
 from .routing.model import BACKENDS, MilpOptions
 from .routing.restrictions import strategy_from_routing
@@ -90,6 +90,8 @@ def check_options(options: SynthesisOptions) -> None:
         raise ProblemError(f"unknown solver backend {options.backend!r}; expected one of {', '.join(BACKENDS)}")
     if options.backend == "cpsat":
         cpsat.require()
+    if options.backend == "scip":
+        scip.require()
     w = options.work_limit
     if w is not None and (isinstance(w, bool) or not isinstance(w, (int, float)) or not math.isfinite(w) or w <= 0):
         raise ProblemError(f"option work_limit must be a positive finite number, not {w!r}")

@@ -47,12 +47,14 @@ def source_digest() -> str:
 def versions() -> dict[str, str]:
     """The versions an answer depends on: FlowTest (package and synthesis sources), highspy,
     OR-Tools (``"unknown"`` when not installed: the ``"auto"`` backend may pick CP-SAT where
-    it is, and an explicit ``backend`` is part of the options), NumPy and SciPy."""
+    it is, and an explicit ``backend`` is part of the options), PySCIPOpt (the ``scip`` extra's
+    solver, ``"unknown"`` when not installed), NumPy and SciPy."""
     return {
         "flowtest": _dist_version("flowtest"),
         "flowtest_source": source_digest(),
         "highspy": _dist_version("highspy"),
         "ortools": _dist_version("ortools"),
+        "pyscipopt": _dist_version("pyscipopt"),
         "numpy": _dist_version("numpy"),
         "scipy": _dist_version("scipy"),
     }

@@ -48,7 +48,7 @@ import scipy.sparse as sp
 from ..graphs.consistency import check_consistency
 from ..graphs.products import Products
 from ..model.errors import InconsistentProblem
-from . import cpsat, wall_cover
+from . import cpsat, scip, wall_cover
 from .heuristic import RoutingGuess
 from .model import BACKENDS, CutGroups, MilpOptions, RoutingModel, build_model, static_moves_of
 from .result import RoutingResult as RoutingResult
@@ -94,6 +94,9 @@ def solve_routing(products: Products, options: MilpOptions | None = None) -> Rou
     if options.backend == "cover":
         result = wall_cover.solve_cover(products, options)
         return replace(result, stats={**result.stats, "solver_version": backend_version("cover")})
+    if options.backend == "scip":
+        result = wall_cover.solve_cover(products, options, solve_level=scip.solve_level_scip, backend="scip")
+        return replace(result, stats={**result.stats, "solver_version": backend_version("scip")})
     # small reactive models start with every history's flows (adding them lazily costs
     # more rounds than it saves there); reactive ones whose flows would swamp the model
     # start without
@@ -152,6 +155,8 @@ def check_backend(options: MilpOptions) -> None:
         raise ValueError(f"unknown routing backend {options.backend!r}; expected one of {', '.join(BACKENDS)}")
     if options.backend == "cpsat":
         cpsat.require()
+    if options.backend == "scip":
+        scip.require()
 
 
 AUTO_CPSAT_MODES = ("static", "reactive")
@@ -173,7 +178,10 @@ def auto_backend(rm: RoutingModel, options: MilpOptions) -> str:
     OR-Tools is missing. A function of the model and options only, so the choice, and with
     it the answer, is the same on every machine with the locked install. Never ``"cover"``:
     the wall-cover master proved nothing HiGHS did not and was slower wherever a solve took
-    more than a tenth of a second (docs/benchmarks.md, "The ``cover`` backend")."""
+    more than a tenth of a second (docs/benchmarks.md, "The ``cover`` backend"). Never
+    ``"scip"`` either: an optional extra (the choice must be the same on every install), and
+    measured slower than this choice on refueling and the random grids (docs/benchmarks.md,
+    "SCIP one-tree branch and cut")."""
     lo, hi = AUTO_CPSAT_ROWS
     if options.mode in AUTO_CPSAT_MODES and lo <= rm.model.n_row <= hi and cpsat.available():
         return "cpsat"
@@ -184,6 +192,8 @@ def backend_version(backend: str) -> str:
     """The version of the package a backend's answers depend on (highspy, OR-Tools)."""
     if backend == "cpsat":
         return cpsat.ortools_version() or "unknown"
+    if backend == "scip":
+        return scip.scip_version() or "unknown"
     return solver_version()
 
 

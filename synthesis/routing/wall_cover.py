@@ -47,6 +47,7 @@ is honoured between rounds.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -234,8 +235,22 @@ class _Search:
                 return stopped
 
 
-def solve_cover(products: Products, options: MilpOptions, max_rounds: int = MAX_ROUNDS) -> RoutingResult:
-    """Solve the routing problem with the wall-cover master (see the module docstring).
+LevelSolver = Callable[["_Search", _Level], "str | None"]
+"""Solves the master at one flow level to its proven optimum (or a budget), updating the
+level; returns what stopped it (``None``: done). The default is :meth:`_Search.solve_level`
+(a HiGHS master re-solved per round); :mod:`synthesis.routing.scip` passes one SCIP tree."""
+
+
+def solve_cover(
+    products: Products,
+    options: MilpOptions,
+    max_rounds: int = MAX_ROUNDS,
+    solve_level: LevelSolver | None = None,
+    backend: str = "cover",
+) -> RoutingResult:
+    """Solve the routing problem with the wall-cover master (see the module docstring);
+    ``solve_level`` solves each flow level's master (default: the HiGHS master re-solved
+    per round), ``backend`` names it in the stats.
 
     Returns the same :class:`RoutingResult` as the flow MILP: ``"optimal"`` only when the
     maximum flow and the fewest cuts at it are both proven.
@@ -288,7 +303,7 @@ def solve_cover(products: Products, options: MilpOptions, max_rounds: int = MAX_
         while flow >= max(best, 1):
             note(f"wall cover: flow {flow} (upper bound {upper}, heuristic {guess.flow})")
             level = levels.setdefault(flow, _Level(flow))
-            stopped_by = search.solve_level(level)
+            stopped_by = (solve_level or _Search.solve_level)(search, level)
             if stopped_by is not None or level.cut is not None:
                 break
             flow -= 1
@@ -312,7 +327,7 @@ def solve_cover(products: Products, options: MilpOptions, max_rounds: int = MAX_
     optimal = level.proven and flow_proven and stopped_by is None
     gap = 0.0 if optimal else _gap(level)
     return _result(
-        products, options, sep, level.cut, best, optimal, gap, stopped_by, search.stats, graph_seconds, time.perf_counter() - t_solve
+        products, options, sep, level.cut, best, optimal, gap, stopped_by, search.stats, graph_seconds, time.perf_counter() - t_solve, backend
     )
 
 
@@ -337,11 +352,12 @@ def _result(
     stats: _Stats,
     graph_seconds: float,
     solve_seconds: float,
+    backend: str,
 ) -> RoutingResult:
     groups = sep.groups
     static_moves_cut = np.isin(groups.move_key, groups.keys[cut & groups.static]) & static_moves_of(products, options)
     out: dict[str, Any] = {
-        "backend": "cover",
+        "backend": backend,
         "binary_vars": int(sep.n_col),
         "continuous_vars": 0,
         "constraints": int(sum(stats.rows.values())),
