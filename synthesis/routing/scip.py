@@ -38,20 +38,19 @@ process is needed.
 
 from __future__ import annotations
 
+import importlib
 import threading
 import time
 from importlib.metadata import PackageNotFoundError, version
 from importlib.util import find_spec
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from ..model.errors import ProblemError
 from .cover_rows import Row
 from .solver_control import POLL, STOP_GRACE, SolveStatus, stdout_guard
-
-if TYPE_CHECKING:
-    from .wall_cover import _Level, _Search
+from .wall_cover import _Level, _Search
 
 MISSING = "the scip backend needs PySCIPOpt, which is not installed: pip install 'flowtest[scip]' (see docs/install.md)"
 """The one-line error when ``--backend scip`` is asked for without the extra."""
@@ -80,13 +79,19 @@ def scip_version() -> str | None:
         return None
 
 
+def _pyscipopt() -> Any:
+    """The PySCIPOpt module, imported when the backend first runs (importing it costs about
+    0.1 s, which no other command should pay)."""
+    return importlib.import_module("pyscipopt")
+
+
 def _handler_class() -> Any:
-    """The constraint handler class (PySCIPOpt is imported only when the backend runs)."""
-    import pyscipopt
-
+    """The constraint handler class."""
+    pyscipopt = _pyscipopt()
     result = pyscipopt.SCIP_RESULT
+    base: Any = pyscipopt.Conshdlr
 
-    class WallCoverHandler(pyscipopt.Conshdlr):  # type: ignore[misc]
+    class WallCoverHandler(base):  # type: ignore[misc]
         """Enforces the wall-cover checks at SCIP's integral points (see the module docstring)."""
 
         def __init__(self, tree: _LevelTree) -> None:
@@ -125,8 +130,7 @@ class _LevelTree:
     """One SCIP model: the master at one flow level, the rows known so far, the handler."""
 
     def __init__(self, search: _Search, flow: int) -> None:
-        import pyscipopt
-
+        pyscipopt = _pyscipopt()
         self.search, self.sep, self.flow = search, search.sep, flow
         with stdout_guard():
             m = pyscipopt.Model()
@@ -163,9 +167,7 @@ class _LevelTree:
         m.addPyCons(cons)
 
     def _add(self, row: Row) -> None:
-        import pyscipopt
-
-        expr = pyscipopt.quicksum(float(v) * self.vars[int(c)] for c, v in zip(row.cols.tolist(), row.vals.tolist(), strict=True))
+        expr = _pyscipopt().quicksum(float(v) * self.vars[int(c)] for c, v in zip(row.cols.tolist(), row.vals.tolist(), strict=True))
         if np.isfinite(row.lo):
             self.m.addCons(expr >= float(row.lo), name=f"r{self.n_rows}")
         if np.isfinite(row.hi):
