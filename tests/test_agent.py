@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import random
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -12,7 +13,7 @@ import pytest
 from synthesis.agent import gr1
 from synthesis.agent.closed_loop import verify_closed_loop
 from synthesis.agent.controller import AgentController
-from synthesis.agent.game import blocking_places, build_agent_game
+from synthesis.agent.game import blocking_places, build_agent_game, trapped_nodes, walled_off_nodes
 from synthesis.agent.loop import AgentSynthesis
 from synthesis.artifacts.artifact import TestArtifact, artifact_of
 from synthesis.artifacts.summary import summary_of
@@ -175,6 +176,28 @@ def test_g8_is_computed_from_the_graphs(tests: dict[str, SynthesizedTest]) -> No
     assert not blocking[src, col[(5, 2)]]
     somewhere = blocking.any(axis=0)
     assert somewhere[col[(0, 2)]] and somewhere[col[(2, 2)]] and somewhere[col[(4, 2)]]
+
+
+def test_walls_alone_dooming_a_node_set_no_trap(tests: dict[str, SynthesizedTest]) -> None:
+    """The loop's trap rule: a node the static walls alone doom is the system's own fault
+    (the walls are on the map it sees), while the same moves restricted reactively (by the
+    agent, unseen in advance) trap the system there."""
+    test = tests["maze1"]
+    products, strategy = test.products, test.strategy
+    ts, g = products.ts, products.virtual
+    assert trapped_nodes(products, strategy).size == 0
+    h0 = int(g.hist[g.initial])
+    first = [int(m) for m in np.flatnonzero(ts.src == ts.initial) if not strategy.blocked[h0, m] and not ts.terminal[ts.dst[m]]]
+    s = int(ts.dst[first[0]])
+    out_of_s = ts.src == s
+    at_s = g.state == s
+    walls = replace(strategy, static_obstacles=strategy.static_obstacles | out_of_s)
+    assert walled_off_nodes(products, walls.static_obstacles)[at_s].any()
+    assert trapped_nodes(products, walls).size == 0
+    doors = replace(strategy, restrictions=strategy.restrictions | out_of_s[None, :])
+    assert not walled_off_nodes(products, doors.static_obstacles)[at_s].any()
+    trapped = trapped_nodes(products, doors)
+    assert trapped.size and at_s[trapped].any()
 
 
 def test_game_is_solved_and_strategy_verified(tests: dict[str, SynthesizedTest]) -> None:

@@ -125,6 +125,14 @@ def test_every_excluded_cut_set_is_rejected_builtins(name: str) -> None:
     assert _check_reasons_sound(load_problem(name), n_sets=12, n_supersets=8, seed=1) >= 1
 
 
+def test_every_excluded_cut_set_is_rejected_physical_walls() -> None:
+    """patrolling with walls tied across fuel levels (``tie_places="static"``): random walls
+    often doom what a system reaches, so trap reasons must keep the trap's way on the map
+    open too."""
+    problem = replace(load_problem("patrolling"), tie_places="static", bidirectional_cuts=True)
+    assert _check_reasons_sound(problem, n_sets=12, n_supersets=8, seed=3) >= 1
+
+
 def test_every_excluded_cut_set_is_rejected_all_free_cells() -> None:
     assert _check_reasons_sound(_maze_all(), n_sets=12, n_supersets=8, seed=2) >= 1
 

@@ -15,10 +15,11 @@ import pytest
 
 from synthesis.graphs.consistency import check_consistency
 from synthesis.model.errors import ProblemError
-from synthesis.pipeline import SynthesisOptions, milp_options
+from synthesis.pipeline import SynthesisOptions, milp_options, synthesize
 from synthesis.problems.builtins import patrolling, refueling
 from synthesis.problems.load import load_problem
 from synthesis.problems.problem import TIE_PLACES, Problem, build_graphs, make_problem
+from synthesis.routing import cpsat
 from synthesis.routing.model import CutGroups, MilpOptions, build_model, cut_groups
 
 
@@ -112,3 +113,22 @@ def test_tie_places_values() -> None:
     _, products = build_graphs(problem)
     with pytest.raises(ValueError, match="unknown tie_places"):
         cut_groups(products, MilpOptions(mode="static", tie_places="walls"))
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not cpsat.available(), reason="OR-Tools is not installed")
+def test_patrolling_with_physical_walls_is_realized() -> None:
+    """paper-examples.md's patrolling (static walls tied across fuel levels and directions):
+    proven optimal at flow 1, the paper's figure, its test agent realized and checked
+    (docs/benchmarks.md, "Patrolling with physical walls"; a few minutes)."""
+    problem = replace(patrolling(), tie_places="static", bidirectional_cuts=True)
+    test = synthesize(problem, SynthesisOptions(backend="cpsat"))
+    assert test.routing.status == "optimal" and test.routing.flow == 1
+    assert int(test.routing.cut_edges.size) == 27
+    assert test.checks.ok and test.checks.bypass_flow == 0
+    assert test.agent is not None and test.agent.counterexamples >= 1
+    # the walls hold at every fuel level: a static obstacle's cell pair is walled at all of them
+    ts, walls = problem.system, test.strategy.static_obstacles
+    pair = np.minimum(ts.place[ts.src], ts.place[ts.dst]) * len(ts.places) + np.maximum(ts.place[ts.src], ts.place[ts.dst])
+    walled = np.unique(pair[walls])
+    assert walled.size and np.all(walls[np.isin(pair, walled) & problem.static_moves])

@@ -12,7 +12,7 @@ from ..model.errors import CheckFailed
 from ..model.strategy import TestStrategy
 from ..model.test_agent import TestAgent
 from .controller import AgentController
-from .game import blocking_places, ended_nodes, reactive_restrictions
+from .game import blocking_places, ended_nodes, reactive_restrictions, walled_off_nodes
 
 
 @dataclass(frozen=True)
@@ -45,7 +45,10 @@ def verify_closed_loop(
       ``R(q) ∩ out(s)`` plus the static obstacles (no more, no less);
     * g8: the agent never stays at its turn in a place that blocks every path;
     * the agent never traps the system: from every reachable configuration where the
-      test goes on, a configuration with the system at its goal is reachable;
+      test goes on and the static walls alone leave the system a way to its goal
+      (:func:`~synthesis.agent.game.walled_off_nodes`: a correct system never walks into
+      a node the walls it sees doom), a configuration with the system at its goal is
+      reachable;
     * every run that reaches the goal passed through the test objective (the last node
       before ``Tgt`` is in ``I``).
 
@@ -61,6 +64,7 @@ def verify_closed_loop(
     obs = strategy.static_obstacles
     reactive = reactive_restrictions(strategy)
     ended = ended_nodes(products)
+    walled = walled_off_nodes(products, obs)
     blocking = np.zeros((n, n_agent), dtype=bool)
     cells = np.flatnonzero(places >= 0)
     blocking[:, cells] = blocking_places(products, obs, places[cells])
@@ -162,7 +166,7 @@ def verify_closed_loop(
     s_node = states // (n_mem * n_agent)
     goal = products.target[s_node]
     alive = coreachable(states.size, src, dst, goal)
-    trapped = np.flatnonzero(~ended[s_node] & ~alive)
+    trapped = np.flatnonzero(~ended[s_node] & ~walled[s_node] & ~alive)
     if trapped.size:
         k = int(states[trapped[0]])
         raise CheckFailed(

@@ -53,7 +53,10 @@ guarantees and the agent has none, so the game carries no liveness sets (the GR(
 solver's ``G F true``). The SUT's progress is the SUT's business: since the agent blocks
 exactly ``R(q)``, the SUT's options at ``(s, q)`` are those of the routing strategy,
 and the counterexample loop rejects a cut set under which some reachable configuration
-has lost every way to the goal (:func:`trapped_nodes`).
+has lost every way to the goal although the static walls leave it one
+(:func:`trapped_nodes`). A configuration the walls alone doom is one no correct SUT
+enters (the walls are on the map it sees from its first step), as the routing checks
+and the environments hold for entry nodes (:func:`walled_off_nodes`).
 
 g8 (the livelock guard) is computed, not hand-listed: a place ``p`` *blocks every path*
 of the SUT at node ``v`` when ``Tgt`` is reachable from ``v`` in G without the static
@@ -82,6 +85,7 @@ __all__ = [
     "build_game",
     "rules_of_strategy",
     "ended_nodes",
+    "walled_off_nodes",
     "blocking_places",
     "trapped_nodes",
     "reactive_restrictions",
@@ -123,6 +127,22 @@ def ended_nodes(products: Products) -> np.ndarray:
     return out
 
 
+def walled_off_nodes(products: Products, static_obstacles: np.ndarray) -> np.ndarray:
+    """``bool[n_nodes]``: nodes where the test goes on (not ended) but the static walls
+    ``static_obstacles`` (``bool`` per move of T) alone leave no way to ``Tgt``.
+
+    The walls are on the map the SUT sees from its first step, so a correct SUT never
+    enters such a node: walking in is its own fault (the environments call the run
+    violated there), not a trap the test set. Every node reachable from one over moves
+    that are not walls is one too.
+    """
+    g = products.virtual
+    free = ~static_obstacles[g.move]
+    on_map = coreachable(g.n_nodes, g.src[free], g.dst[free], products.target)
+    out: np.ndarray = ~on_map & ~ended_nodes(products)
+    return out
+
+
 def blocking_places(products: Products, static_obstacles: np.ndarray, places: np.ndarray) -> np.ndarray:
     """``bool[n_nodes, len(places)]``: place ``places[k]`` blocks every path of the SUT at node ``v``.
 
@@ -154,9 +174,11 @@ def trapped_nodes(products: Products, strategy: TestStrategy) -> np.ndarray:
 
     The SUT moves over G without the restricted edges (static obstacles and ``C(q)`` of
     the tail's history, exactly what a legal agent blocks) and stops at ended nodes. A
-    reachable node that is not ended (so the goal is reachable without restrictions) but
-    from which no restricted path reaches ``Tgt`` is a trap: the test took the SUT's
-    last way to its goal. Returns the indices of such nodes (empty: no trap).
+    reachable node that is not ended (so the goal is reachable without restrictions) and
+    not walled off (:func:`walled_off_nodes`: the static walls alone leave it a way to the
+    goal) but from which no restricted path reaches ``Tgt`` is a trap: the test's
+    restrictions took the SUT's last way to its goal. Returns the indices of such nodes
+    (empty: no trap).
     """
     g = products.virtual
     blocked = strategy.blocked[g.hist[g.src], g.move]
@@ -167,7 +189,8 @@ def trapped_nodes(products: Products, strategy: TestStrategy) -> np.ndarray:
     start = np.zeros(g.n_nodes, dtype=bool)
     start[g.initial] = True
     seen = reachable(g.n_nodes, g.src[walk], g.dst[walk], start)
-    return np.flatnonzero(seen & ~ended & ~alive)
+    walled = walled_off_nodes(products, strategy.static_obstacles)
+    return np.flatnonzero(seen & ~ended & ~alive & ~walled)
 
 
 @dataclass(frozen=True)

@@ -210,9 +210,11 @@ def trap_reason(
 
     ``K`` = the cuts on the edges that leave the region the SUT can still reach from the
     trap, then fewer while they alone still close every way from the trap to ``Tgt``;
-    ``O`` = the groups of a path from the start to the trap. Every cut set that cuts ``K``
+    ``O`` = the groups of a path from the start to the trap, and the walls of a way from
+    the trap to ``Tgt`` that no wall of the cut set closes. Every cut set that cuts ``K``
     and leaves ``O`` open lets the SUT walk the path to the trap (the test is not over on
-    the way) and closes every way from it to ``Tgt``: a trap again.
+    the way), leaves the trap a way to ``Tgt`` on the map (not walled off) and closes
+    every way from it to ``Tgt`` under its restrictions: a trap again.
     """
     edges = reason_groups(products, groups)
     g = products.virtual
@@ -249,4 +251,29 @@ def trap_reason(
     on_path = np.asarray(path_edges, dtype=np.int64)
     open_ = np.zeros(n_groups, dtype=bool)
     open_[edges.group[on_path[edges.can_cut[on_path]]]] = True
+    way = _way_on_map(products, strategy, node)
+    if way is None:  # walled off: the loop's trap check says it is not, so keep the whole cut set
+        return Reason(Exclusion(cut=tuple(int(k) for k in groups.keys[cut_mask])), int(cut_mask.sum()), 0)
+    walls = way[edges.static[way] & edges.can_cut[way]]
+    open_[edges.group[walls]] = True
     return Reason(_exclusion(groups, cut, open_), int(cut_mask.sum()), 0)
+
+
+def _way_on_map(products: Products, strategy: TestStrategy, node: int) -> np.ndarray | None:
+    """The edges of G of a shortest way from ``node`` to ``Tgt`` over moves that are not
+    static walls of ``strategy`` (``None``: there is none, the node is walled off)."""
+    g = products.virtual
+    free = np.flatnonzero(~strategy.static_obstacles[g.move])
+    graph = sp.csr_matrix((np.ones(free.size), (g.src[free], g.dst[free])), shape=(g.n_nodes, g.n_nodes))
+    order, pred = breadth_first_order(graph, int(node), directed=True, return_predecessors=True)
+    hits = order[products.target[order]]
+    if hits.size == 0:
+        return None
+    edge_of = {(int(a), int(b)): int(e) for e, a, b in zip(free.tolist(), g.src[free].tolist(), g.dst[free].tolist(), strict=True)}
+    way: list[int] = []
+    v = int(hits[0])
+    while v != int(node):
+        u = int(pred[v])
+        way.append(edge_of[(u, v)])
+        v = u
+    return np.asarray(way, dtype=np.int64)

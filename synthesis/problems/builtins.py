@@ -243,12 +243,14 @@ def patrolling() -> Problem:
     one row up or down in column 2 or stays, starts at (5, 2), and parks off the grid
     from row 0 or row 5. Static area: everything off column 2.
 
-    Static cuts are per transition of T (method.md §5, c9), i.e. per fuel level:
-    paper-examples.md ties them across fuel levels for refueling and mars-exploration
-    only. Tied here (``tie_places``, which ties the reactive cuts too), the loop's rule that
-    a test never traps the system anywhere reachable leaves no test: CP-SAT proves it after
-    excluding the first cut set, which traps a system back at its start with fuel 4
-    (docs/benchmarks.md, "Patrolling with tied walls").
+    Static cuts are per transition of T (method.md §5, c9), i.e. per fuel level
+    (``tie_places="none"``). paper-examples.md asks for physical walls here as in refueling:
+    ``tie_places="static"`` with c14 ties the static area's cuts across fuel levels and
+    directions while the agent's cuts stay per move and history. That variant
+    (``experiments.bench_patrolling_walls``) is proven optimal at flow 1, the paper's figure,
+    with its test agent realized, but its MILP is much harder (minutes against half a second
+    here), so the built-in keeps per-fuel-level walls (docs/benchmarks.md, "Patrolling with
+    physical walls").
     """
     rows, cols = 6, 6
     goal, start, refuel = (5, 0), (5, 5), (1, 5)
