@@ -2,7 +2,7 @@
 
 Usage::
 
-    nice -n 10 .venv/bin/python -m experiments.bench_backends [--time-limit S] [--seeds N]
+    nice -n 10 .venv/bin/python -m experiments.bench_backends [--time-limit S] [--work-limit W] [--seeds N]
         [--builtins NAME ...] [--sizes 5 10] [--families reachability reaction] [--json FILE]
         [--backends highs cpsat scip cover]
 
@@ -13,8 +13,9 @@ solve it stops says ``feasible``). Per run: status, flow, cuts, the solve's wall
 CPU seconds it used (this process's, plus the CP-SAT child's, which it reports), and for CP-SAT
 the child's start-up and model transfer (``spawn``: a fresh child each run here, as the first
 solve of a process pays; later solves of a process, such as an agent problem's rounds, reuse it;
-the figure is the last round's). CPU seconds are the load-independent figure: wall times on a
-shared machine are upper bounds. Prints a Markdown table and, per
+the figure is the last round's). CPU seconds and CP-SAT's deterministic seconds ("CP-SAT work",
+all phases; ``--work-limit`` bounds each phase by them) are the load-independent figures: wall
+times on a shared machine are upper bounds. Prints a Markdown table and, per
 group, how many runs each backend proved and its total solve time; ``--json`` keeps the rows.
 Needs OR-Tools (a core dependency).
 """
@@ -42,13 +43,14 @@ BACKENDS = ("highs", "cpsat")
 CHOICES = ("highs", "cpsat", "scip", "cover")
 
 
-def run(problem: Problem, backend: str, time_limit: float | None) -> dict[str, Any]:
-    """One synthesis of ``problem`` on ``backend``: its answer and costs."""
+def run(problem: Problem, backend: str, time_limit: float | None, work_limit: float | None = None) -> dict[str, Any]:
+    """One synthesis of ``problem`` on ``backend``: its answer and costs (``work_limit``:
+    CP-SAT's deterministic seconds per phase, a load-independent budget)."""
     cpsat.close_idle_workers()  # every CP-SAT run starts a fresh child: the first solve's cost
     cpu0 = time.process_time() + _children_cpu()
     t0 = time.perf_counter()
     try:
-        test = synthesize(problem, SynthesisOptions(backend=backend, time_limit=time_limit))
+        test = synthesize(problem, SynthesisOptions(backend=backend, time_limit=time_limit, work_limit=work_limit))
     except (TimeoutError, InconsistentProblem) as exc:
         cpsat.close_idle_workers()
         status = exc.reason if isinstance(exc, InconsistentProblem) else "no test"
@@ -69,6 +71,7 @@ def run(problem: Problem, backend: str, time_limit: float | None) -> dict[str, A
         "spawn_cpu_s": child.get("spawn_cpu_seconds"),
         "spawn_s": child.get("spawn_seconds"),
         "cpsat_wall_s": child.get("wall_seconds"),
+        "cpsat_work": child.get("deterministic_time"),
         "rounds": len(test.agent.iterations) if test.agent is not None else 1,
         "binaries": r.stats["binary_vars"],
         "rows": r.stats["constraints"],
@@ -111,6 +114,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--sizes", nargs="*", type=int, default=[5, 10])
     ap.add_argument("--families", nargs="*", default=["reachability", "reaction"])
     ap.add_argument("--backends", nargs="*", default=list(BACKENDS), choices=CHOICES)
+    ap.add_argument("--work-limit", type=float, default=None,
+                    help="CP-SAT's deterministic seconds per phase (SynthesisOptions.work_limit; default none)")
     ap.add_argument("--json", type=Path, default=None, help="write the rows here as JSON")
     args = ap.parse_args(argv)
     if "cpsat" in args.backends:
@@ -118,17 +123,19 @@ def main(argv: list[str] | None = None) -> int:
     if "scip" in args.backends:
         scip.require()
     rows: list[dict[str, Any]] = []
-    print(f"ortools {cpsat.ortools_version()}, pyscipopt {scip.scip_version()}, time limit {args.time_limit:g} s per synthesis\n", flush=True)
-    head = "| group | problem | backend | status | flow | cuts | solve s | CPU s | child start s | nodes (scip, cover) |"
+    work = "" if args.work_limit is None else f", CP-SAT work limit {args.work_limit:g} deterministic s per phase"
+    print(f"ortools {cpsat.ortools_version()}, pyscipopt {scip.scip_version()}, time limit {args.time_limit:g} s per synthesis{work}\n", flush=True)
+    head = "| group | problem | backend | status | flow | cuts | solve s | CPU s | child start s | nodes (scip, cover) | CP-SAT work |"
     print(head)
     print("|---" * (head.count("|") - 1) + "|", flush=True)
     for group, label, problem in cases(args.builtins, args.sizes, args.families, args.seeds):
         for backend in args.backends:
-            row = {"group": group, "problem": label, "backend": backend, **run(problem, backend, args.time_limit)}
+            row = {"group": group, "problem": label, "backend": backend, **run(problem, backend, args.time_limit, args.work_limit)}
             rows.append(row)
             print(
                 f"| {group} | {label} | {backend} | {row['status']} | {_fmt(row['flow'])} | {_fmt(row['n_cuts'])} | "
-                f"{_fmt(row.get('solve_s'))} | {_fmt(row['cpu_s'])} | {_fmt(row.get('spawn_s'))} | {_fmt(row.get('nodes'))} |",
+                f"{_fmt(row.get('solve_s'))} | {_fmt(row['cpu_s'])} | {_fmt(row.get('spawn_s'))} | {_fmt(row.get('nodes'))} | "
+                f"{_fmt(row.get('cpsat_work'))} |",
                 flush=True,
             )
     print("\n| group | backend | runs | proven | same answer as the other backend (both proven) | total solve s | total CPU s |")

@@ -18,7 +18,8 @@ as arrays (plain bytes: the child loads no NumPy); the child keeps it between th
 worker, a fixed ``random_seed``, and as a budget CP-SAT's deterministic time
 (``MilpOptions.work_limit``); a wall-clock limit only when the user asks for one
 (``time_limit`` / ``after_first``), and then the answer is reported non-deterministic as
-with HiGHS. Ctrl-C (or a stop request through :class:`SolveControl`) kills the child at
+with HiGHS. Phase 1 may add feasibility solves with another search (:data:`MAX_FLOW_SEARCH`,
+see :func:`synthesis.routing.milp._phase1_cpsat`). Ctrl-C (or a stop request through :class:`SolveControl`) kills the child at
 once and is raised as ``KeyboardInterrupt``. Every solution the child returns is checked
 against the model here (bounds, rows, integrality, objective) before it is used.
 """
@@ -43,6 +44,23 @@ MISSING = "the cpsat backend needs OR-Tools, which is not installed: pip install
 
 FEASIBILITY_TOLERANCE = 1e-6
 """Largest violation of a bound or row accepted in a CP-SAT solution (they are integral: 0)."""
+
+
+PROOF_WORK = 1.0
+"""Deterministic seconds of CP-SAT's default search (with its LP relaxation) for the maximum
+flow before phase 1 turns to :data:`MAX_FLOW_SEARCH` (see
+:func:`synthesis.routing.milp._phase1_cpsat`): enough for refueling and the random 5x5 grids,
+which it proves in 0.01-0.1."""
+
+MAX_FLOW_SEARCH: dict[str, Any] = {"linearization_level": 0, "search_branching": "PORTFOLIO_WITH_QUICK_RESTART_SEARCH"}
+"""CP-SAT's search for phase 1 (maximum flow): no LP relaxation, and quick restarts that
+alternate CP-SAT's branching heuristics. Finding a wall set that lets the flow through is a
+search for a solution, which the weak LP bound (docs/benchmarks.md) does not guide: measured
+on mars-exploration (docs/benchmarks.md, "CP-SAT as a routing backend"), a flow-2 wall set in
+5-35 deterministic seconds (random seeds 0-3; 7.8 from the heuristic's hint with seed 0),
+against none in 100 with CP-SAT's default search. It is bad at proving that no wall set
+reaches a flow (a random 5x5 grid: 1.5 deterministic seconds where the LP bound takes 0.01), so
+it only follows the default search."""
 
 
 def available() -> bool:
@@ -109,8 +127,9 @@ class CpSatAnswer:
     ``unknown``: stopped without a solution), the solution ``x`` (``None`` without one), its
     relative ``gap`` to CP-SAT's bound, what stopped it short of a proof (``stopped_by``:
     ``"time_limit"``, ``"work_limit"`` or ``None``), how many seconds before its end the first
-    solution of objective >= 1 came (``first_age``), and the child's own figures
-    (``stats``: wall, CPU and deterministic seconds, conflicts, branches)."""
+    solution of objective >= 1 came (``first_age``), the child's own figures
+    (``stats``: wall, CPU and deterministic seconds, conflicts, branches), and CP-SAT's bound
+    on the objective (``bound``; ``None`` without a solution or for a feasibility solve)."""
 
     status: str
     x: np.ndarray | None
@@ -118,6 +137,7 @@ class CpSatAnswer:
     stopped_by: str | None
     first_age: float | None
     stats: dict[str, Any]
+    bound: float | None = None
 
 
 class CpSatSession:
@@ -181,15 +201,24 @@ class CpSatSession:
         random_seed: int,
         phase: str,
         flow: int | None = None,
+        search: dict[str, Any] | None = None,
+        reach: float | None = None,
     ) -> CpSatAnswer:
         """Optimise ``cost . x`` (integral) from ``hint`` (used only if it satisfies the
         model), under the budgets (see the module docstring), and check the answer.
+
+        ``search``: CP-SAT parameters by name for this solve (an enum's value by its name),
+        such as :data:`MAX_FLOW_SEARCH`. With ``reach``, a feasibility solve instead: some
+        solution of objective at least ``reach`` (at most, minimising), its status
+        ``"feasible"`` (found), ``"infeasible"`` (proven none) or ``"unknown"``; the row
+        is not kept.
 
         Raises ``KeyboardInterrupt`` on Ctrl-C or a stop request (the child is killed)."""
         if hint is not None and self.arrays.violation(hint) > FEASIBILITY_TOLERANCE:
             hint = None
         params = {"random_seed": int(random_seed), "deterministic_time": work_limit, "seconds": seconds,
-                  "after_first": after_first, "rel_gap": float(rel_gap), "first_at": 1.0}
+                  "after_first": after_first, "rel_gap": float(rel_gap), "first_at": 1.0,
+                  "search": dict(search or {}), "reach": None if reach is None else float(reach)}
         sense = "max" if maximize else "min"
         t0 = time.perf_counter()
         if self.control is not None:
@@ -201,9 +230,12 @@ class CpSatSession:
             if self.control is not None:
                 self.control.report(None)
         self._worker.cpu = float(raw["process_cpu_seconds"])
-        return self._checked(raw, cost, seconds, work_limit)
+        return self._checked(raw, cost, seconds, work_limit, reach, maximize)
 
-    def _checked(self, raw: dict[str, Any], cost: np.ndarray, seconds: float | None, work_limit: float | None) -> CpSatAnswer:
+    def _checked(
+        self, raw: dict[str, Any], cost: np.ndarray, seconds: float | None, work_limit: float | None,
+        reach: float | None = None, maximize: bool = True,
+    ) -> CpSatAnswer:
         """The child's answer as a :class:`CpSatAnswer`, its solution checked against the model."""
         stats = {k: raw[k] for k in ("wall_seconds", "cpu_seconds", "deterministic_time", "conflicts", "branches")}
         status = str(raw["status"])
@@ -220,13 +252,18 @@ class CpSatSession:
         objective = float(np.asarray(cost, dtype=float) @ x)
         if abs(objective - float(raw["objective"])) > 1e-6 * max(1.0, abs(objective)):
             raise RuntimeError("CP-SAT reported another objective than its solution has")
+        if reach is not None:
+            if (objective < reach - 1e-6) if maximize else (objective > reach + 1e-6):
+                raise RuntimeError("CP-SAT's feasibility solve returned a solution short of its target")
+            return CpSatAnswer("feasible", x, float("inf"), None, raw["first_age"], stats)
         bound = raw["bound"]
         # integral objective: within less than 1 of the bound is a proof
         proven = bound is not None and np.isfinite(bound) and abs(objective - float(bound)) < 1.0 - 1e-6
         if status == "optimal" and proven:
-            return CpSatAnswer("optimal", x, 0.0, None, raw["first_age"], stats)
-        gap = abs(objective - float(bound)) / max(abs(objective), 1.0) if bound is not None and np.isfinite(bound) else float("inf")
-        return CpSatAnswer("feasible", x, float(gap), stopped_by, raw["first_age"], stats)
+            return CpSatAnswer("optimal", x, 0.0, None, raw["first_age"], stats, objective)
+        finite = bound is not None and np.isfinite(bound)
+        gap = abs(objective - float(bound)) / max(abs(objective), 1.0) if finite else float("inf")
+        return CpSatAnswer("feasible", x, float(gap), stopped_by, raw["first_age"], stats, float(bound) if finite else None)
 
     def _call(self, message: tuple[Any, ...], progress: tuple[str, str, float, int | None] | None = None) -> Any:
         """Send a request and wait for its answer, in short steps so Ctrl-C and stop

@@ -158,14 +158,21 @@ class CpSatModel:
         seconds, ``None``: none); ``seconds`` (wall clock, ``None``: none); with
         ``after_first``, ``seconds`` bounds the time to the first solution of objective
         >= ``first_at`` and the search stops ``after_first`` seconds after it;
-        ``rel_gap``.
+        ``rel_gap``; ``search`` (CP-SAT parameters by name, an enum's value by its name);
+        ``reach`` (not ``None``: a feasibility solve on a copy of the model, for a solution
+        of objective at least ``reach``, at most when minimising; the copy's extra row and
+        missing objective do not touch the kept model).
         """
         self._set_objective(cost, maximize)
         self._set_hint(hint)
+        reach = params.get("reach")
+        proto = self.proto if reach is None else self._reaching(cost, maximize, float(reach))
         p = cmh.SatParameters()
         p.num_workers = 1  # one worker: the same search, and answer, on every run and machine
         p.random_seed = int(params["random_seed"])
         p.log_search_progress = False
+        for name, value in (params.get("search") or {}).items():
+            _set_parameter(p, name, value)
         if params.get("deterministic_time") is not None:
             p.max_deterministic_time = float(params["deterministic_time"])
         seconds = params.get("seconds")
@@ -177,13 +184,13 @@ class CpSatModel:
         first_at = float(params.get("first_at", 1.0))
         solver = cmh.SolveWrapper()
         solver.set_parameters(p)
-        watch = _Watch(solver, out, maximize, after_first, first_at)
+        watch = _Watch(solver, out, maximize, after_first, first_at, None if reach is None else float(reach))
         solver.add_solution_callback(watch.callback)
         solver.add_best_bound_callback(watch.on_bound)
         timers = watch.start(seconds)
         cpu0 = time.process_time()
         try:
-            response = solver.solve(self.proto)
+            response = solver.solve(proto)
         finally:
             for t in timers + watch.timers:
                 t.cancel()
@@ -206,7 +213,35 @@ class CpSatModel:
         if found:
             answer["x"] = [int(v) for v in response.solution]
             answer["objective"] = float(response.objective_value)
+            if reach is not None:  # no objective in a feasibility solve, and no bound on one
+                answer["objective"] = float(sum(c * answer["x"][j] for j, c in enumerate(cost) if c != 0))
+                answer["bound"] = None
         return answer
+
+    def _reaching(self, cost: array[Any], maximize: bool, reach: float) -> Any:
+        """A copy of the model without objective and with the row ``cost . x >= reach``
+        (``<=`` when minimising): a feasibility question that leaves the kept model as it is."""
+        proto = cmh.CpModelProto()
+        proto.copy_from(self.proto)
+        proto.clear_objective()
+        proto.clear_floating_point_objective()
+        nz = [j for j, c in enumerate(cost) if c != 0]
+        coef = _integral([cost[j] for j in nz], "objective coefficient")
+        span = sum(abs(c) for c in coef) * 10**6 + 1
+        keys, coeffs = _merged(nz, coef)
+        linear = proto.constraints.add().linear
+        linear.vars.extend(keys)
+        linear.coeffs.extend(coeffs)
+        linear.domain.extend([_ceil(reach), span] if maximize else [-span, _floor(reach)])
+        return proto
+
+
+def _set_parameter(p: Any, name: str, value: Any) -> None:
+    """Set one CP-SAT parameter by name; an enum parameter's value is given by its name."""
+    current = getattr(p, name)
+    if isinstance(value, str):
+        value = getattr(type(current), value)
+    setattr(p, name, value)
 
 
 class _Watch:
@@ -214,7 +249,9 @@ class _Watch:
     ``after_first`` seconds after its first solution of objective >= ``first_at``, or at
     ``seconds`` without one."""
 
-    def __init__(self, solver: Any, out: Connection, maximize: bool, after_first: float | None, first_at: float) -> None:
+    def __init__(
+        self, solver: Any, out: Connection, maximize: bool, after_first: float | None, first_at: float, reach: float | None = None
+    ) -> None:
         self.solver = solver
         self.out = out
         self.maximize = maximize
@@ -229,7 +266,10 @@ class _Watch:
 
         class _Callback(cmh.SolutionCallback):
             def OnSolutionCallback(self) -> None:  # noqa: N802 - the name CP-SAT calls
-                watch.on_solution(float(self.ObjectiveValue()), float(self.BestObjectiveBound()))
+                if reach is not None:  # a feasibility solve: its solutions reach the objective asked for
+                    watch.on_solution(reach, reach)
+                else:
+                    watch.on_solution(float(self.ObjectiveValue()), float(self.BestObjectiveBound()))
 
         self.callback = _Callback()
 

@@ -352,30 +352,78 @@ def _phase1_cpsat(
     session: cpsat.CpSatSession, rm: RoutingModel, products: Products, options: MilpOptions, entries: dict[int, np.ndarray], clock: Clock
 ) -> tuple[_Phase, list[dict[str, Any]]]:
     """:func:`_phase1` on CP-SAT: the heuristic's answer proves the maximum flow when it
-    attains the upper bound, else CP-SAT maximises the flow from it (as a hint)."""
+    attains the upper bound; else CP-SAT maximises the flow from it (as a hint) with its
+    default search, whose LP bound proves small cases at once, for at most
+    :data:`~synthesis.routing.cpsat.PROOF_WORK` deterministic seconds; if that does not
+    prove it, a feasibility search (:data:`~synthesis.routing.cpsat.MAX_FLOW_SEARCH`) for
+    a test at the proven bound follows: found, it is optimal; proven impossible, the bound
+    drops by one (a valid row, kept) and the round repeats. ``work_limit`` bounds the
+    whole phase."""
     guess = rm.guess(products, traps=_trap_test(products, rm.groups, entries))
     x_guess = _guess_solution(products, rm, guess, options)
     if x_guess is not None:
         clock.first_test()
     if x_guess is not None and guess.flow == guess.upper_bound:
         return _Phase(x_guess, "optimal", 0.0, None), []
+    out = rm.cols.flow[rm.out_src]
     cost = np.zeros(rm.n_col)
-    cost[rm.cols.flow[rm.out_src]] = 1.0
-    seconds, after_first = _cpsat_budget(clock)
-    ans = session.solve(
-        cost, True, x_guess if options.offer_starts else None, seconds=seconds, after_first=after_first,
-        work_limit=options.work_limit, rel_gap=options.mip_rel_gap, random_seed=options.random_seed, phase="phase 1 (maximum flow)",
-    )
-    if ans.first_age is not None:
-        clock.first_test(at=time.perf_counter() - ans.first_age)
-    if ans.status == "infeasible":
-        raise _no_cut_set()
-    x = ans.x if ans.x is not None else x_guess
+    cost[out] = 1.0
+    best = x_guess if options.offer_starts else None
+    runs: list[dict[str, Any]] = []
+    left = options.work_limit
+    proven = False
+    stopped_by: str | None = None
+    gap = float("inf")
+    cap = guess.upper_bound  # no test has a larger flow (the flow upper bound, then each bound proven out)
+    while True:
+        seconds, after_first = _cpsat_budget(clock)
+        ans = session.solve(
+            cost, True, best, seconds=seconds, after_first=after_first,
+            work_limit=cpsat.PROOF_WORK if left is None else min(cpsat.PROOF_WORK, left), rel_gap=options.mip_rel_gap,
+            random_seed=options.random_seed, phase="phase 1 (maximum flow)",
+        )
+        runs.append(ans.stats)
+        left = None if left is None else left - ans.stats["deterministic_time"]
+        if ans.first_age is not None:
+            clock.first_test(at=time.perf_counter() - ans.first_age)
+        if ans.status == "infeasible":
+            raise _no_cut_set()
+        if ans.x is not None:
+            best = ans.x
+        stopped_by, gap = ans.stopped_by, ans.gap
+        proven = ans.status == "optimal"
+        if proven or (left is not None and left <= 0.0) or ans.stopped_by == "time_limit":
+            break
+        bound = cap if ans.bound is None else min(cap, int(np.floor(ans.bound + 1e-6)))
+        if best is not None and rm.flow_of(best) > bound - 0.5:
+            proven = True  # the best test attains the bound
+            break
+        seconds, after_first = _cpsat_budget(clock)
+        top = session.solve(
+            cost, True, best, seconds=seconds, after_first=after_first, work_limit=left, rel_gap=0.0,
+            random_seed=options.random_seed, phase="phase 1 (maximum flow)", search=cpsat.MAX_FLOW_SEARCH, reach=bound,
+        )
+        runs.append(top.stats)
+        left = None if left is None else left - top.stats["deterministic_time"]
+        if top.x is not None:
+            clock.first_test(at=time.perf_counter() - (top.first_age or 0.0))
+            return _Phase(top.x, "optimal", 0.0, None), runs  # the bound is attained
+        if top.status != "infeasible":  # stopped by a budget
+            stopped_by = top.stopped_by
+            break
+        # proven: no test has flow ``bound``; the row stays valid for phase 2
+        if bound < 1:
+            raise _no_cut_set()
+        cap = bound - 1
+        session.add_row(out, np.ones(out.size), -np.inf, cap + 0.5)
+    x = best if best is not None else x_guess
     if x is None:
-        raise TimeoutError(f"the routing MILP found no solution within the {_LIMIT_TEXT.get(ans.stopped_by or '', 'time limit')}")
+        raise TimeoutError(f"the routing MILP found no solution within the {_LIMIT_TEXT.get(stopped_by or '', 'time limit')}")
     if x_guess is not None and guess.flow > rm.flow_of(x) + 0.5:
-        return _Phase(x_guess, "feasible", ans.gap, ans.stopped_by), [ans.stats]
-    return _Phase(x, ans.status if ans.x is not None else "feasible", ans.gap, ans.stopped_by), [ans.stats]
+        return _Phase(x_guess, "feasible", gap, stopped_by), runs  # CP-SAT stopped below the heuristic's flow
+    if proven:
+        return _Phase(x, "optimal", 0.0, None), runs
+    return _Phase(x, "feasible", gap, stopped_by), runs
 
 
 def _phase2_cpsat(
