@@ -168,8 +168,11 @@ problem; HiGHS elsewhere. Measured (docs/benchmarks.md, "CP-SAT against HiGHS"):
 band CP-SAT proved refueling and every random 5x5 instance in 0.6-1.2 CPU s against HiGHS's
 0.7-26.6; below it a CP-SAT child's start-up (about 0.4 CPU s when this was measured; about
 0.06 since the child loads no NumPy or pandas, the rule kept so that answers stay the same)
-was more than HiGHS's whole solve; above it neither proves the 10x10 grids in 60 s and only HiGHS reaches flow 2 on
-mars-exploration. Agent problems (mixed, many small MILPs) stay on HiGHS. The
+was more than HiGHS's whole solve; above it neither proves the 10x10 grids in 60 s nor
+mars-exploration's fewest cuts. CP-SAT's phase 1 now reaches mars's flow 2 first (about 9
+deterministic seconds against HiGHS's 150 s: docs/benchmarks.md, "CP-SAT's phase 1"), but
+the band stays: it proves nothing more above it, and the shipped and cached artifacts'
+options bound HiGHS alone (a node limit). Agent problems (mixed, many small MILPs) stay on HiGHS. The
 ``cover`` backend is never chosen: it proved nothing faster than HiGHS."""
 
 
