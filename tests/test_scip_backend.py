@@ -21,7 +21,7 @@ from synthesis.problems.problem import build_graphs
 from synthesis.routing import scip
 from synthesis.routing.milp import solve_routing
 from synthesis.routing.model import Exclusion
-from synthesis.routing.solver_control import SolveControl
+from synthesis.routing.solver_control import SolveControl, solves_running
 
 needs_scip = pytest.mark.skipif(not scip.available(), reason="PySCIPOpt (the scip extra) is not installed")
 
@@ -95,9 +95,9 @@ def test_a_stop_request_ends_a_scip_solve_within_a_second() -> None:
         solve_routing(products, options)
     assert time.perf_counter() - t0 < 1.0 + 1.0
     deadline = time.perf_counter() + 2.0
-    while any(t.name == scip.SOLVER_THREAD and t.is_alive() for t in threading.enumerate()) and time.perf_counter() < deadline:
+    while solves_running() and time.perf_counter() < deadline:
         time.sleep(0.01)
-    assert not any(t.name == scip.SOLVER_THREAD and t.is_alive() for t in threading.enumerate())
+    assert not solves_running()
 
 
 def test_missing_extra_is_one_clear_error(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -39,7 +39,6 @@ process is needed.
 from __future__ import annotations
 
 import importlib
-import threading
 import time
 from importlib.metadata import PackageNotFoundError, version
 from importlib.util import find_spec
@@ -49,14 +48,11 @@ import numpy as np
 
 from ..model.errors import ProblemError
 from .cover_rows import Row
-from .solver_control import POLL, STOP_GRACE, SolveStatus, stdout_guard
+from .solver_control import SolveStatus, run_in_solver_thread, stdout_guard
 from .wall_cover import _Level, _Search
 
 MISSING = "the scip backend needs PySCIPOpt, which is not installed: pip install 'flowtest[scip]' (see docs/install.md)"
 """The one-line error when ``--backend scip`` is asked for without the extra."""
-
-SOLVER_THREAD = "flowtest-scip"
-"""The name of the thread that runs SCIP."""
 
 
 def available() -> bool:
@@ -257,37 +253,7 @@ def solve_level_scip(search: _Search, level: _Level) -> str | None:
 
 
 def _run(m: Any, search: _Search, level: _Level) -> None:
-    """``m.optimizeNogil()`` in a daemon thread while this thread waits in short steps; a
-    ``KeyboardInterrupt`` or stop request interrupts SCIP and is raised within
-    :data:`~.solver_control.STOP_GRACE` seconds."""
-    control = search.options.control
-    done = threading.Event()
-    failure: list[BaseException] = []
-
-    def work() -> None:
-        try:
-            m.optimizeNogil()
-        except BaseException as exc:  # noqa: BLE001 - handed to the caller below
-            failure.append(exc)
-        finally:
-            done.set()
-
-    if control is not None:
-        control.report(SolveStatus("wall cover (SCIP)", "min", None, None, time.perf_counter(), level.flow))
-    thread = threading.Thread(target=work, name=SOLVER_THREAD, daemon=True)
-    try:
-        thread.start()
-        while not done.wait(POLL):
-            if control is not None and control.stop_requested:
-                raise KeyboardInterrupt
-    except KeyboardInterrupt:
-        m.interruptSolve()
-        if control is not None:
-            control.request_stop()
-        done.wait(STOP_GRACE)
-        raise
-    finally:
-        if control is not None:
-            control.report(None)
-    if failure:
-        raise failure[0]
+    """``m.optimizeNogil()`` in a solver thread; a ``KeyboardInterrupt`` or stop request
+    interrupts SCIP and is raised within :data:`~.solver_control.STOP_GRACE` seconds."""
+    status = SolveStatus("wall cover (SCIP)", "min", None, None, time.perf_counter(), level.flow)
+    run_in_solver_thread(m.optimizeNogil, m.interruptSolve, search.options.control, status)

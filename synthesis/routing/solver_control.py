@@ -24,7 +24,7 @@ import os
 import sys
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from importlib.metadata import PackageNotFoundError, version
@@ -40,8 +40,8 @@ STOP_GRACE = 0.25
 #: Seconds between two looks of the main thread at a running solve.
 POLL = 0.05
 
-#: The name of the threads that run HiGHS (see :func:`solves_running`).
-SOLVER_THREAD = "flowtest-highs"
+#: The name of the threads that run an in-process solver, HiGHS or SCIP (see :func:`solves_running`).
+SOLVER_THREAD = "flowtest-solver"
 
 
 @dataclass(frozen=True)
@@ -218,37 +218,63 @@ def run_highs(
     kinds = [getattr(highspy.cb.HighsCallbackType, k) for k in _CALLBACKS]
     for k in kinds:
         h.startCallback(k)
+
+    def stop_callbacks() -> None:
+        for k in kinds:
+            h.stopCallback(k)
+
+    status = SolveStatus(phase, "max" if sense_max else "min", None, None, t0, flow)
+    run_in_solver_thread(h.run, stop.set, control, status, finished=stop_callbacks)
+
+
+def run_in_solver_thread(
+    run: Callable[[], object],
+    interrupt: Callable[[], None],
+    control: SolveControl | None,
+    status: SolveStatus,
+    *,
+    finished: Callable[[], None] | None = None,
+) -> None:
+    """Call the blocking solver entry ``run`` in a daemon thread while the calling thread
+    waits in short steps, so Ctrl-C reaches the caller at once.
+
+    A ``KeyboardInterrupt``, or a stop requested through ``control`` by another thread,
+    calls ``interrupt`` (which must make the solver return), sets the stop request, waits
+    up to :data:`STOP_GRACE` seconds for the solver, and is raised. ``status`` is published
+    to ``control`` for the run; ``finished`` runs once the solver has returned (not if it
+    is still inside after the grace); an exception of ``run`` is raised here. Shared by
+    HiGHS (:func:`run_highs`) and the other in-process solvers, so each stops alike.
+    """
     failure: list[BaseException] = []
     done = threading.Event()
 
     def work() -> None:
         try:
-            h.run()
+            run()
         except BaseException as exc:  # noqa: BLE001 - handed to the caller below
             failure.append(exc)
         finally:
             done.set()
 
     if control is not None:
-        control.report(SolveStatus(phase, "max" if sense_max else "min", None, None, t0, flow))
+        control.report(status)
     thread = threading.Thread(target=work, name=SOLVER_THREAD, daemon=True)
     try:
         thread.start()
         while not done.wait(POLL):
             if control is not None and control.stop_requested:
                 raise KeyboardInterrupt
-        if control is not None and control.stop_requested:  # HiGHS saw the stop first
+        if control is not None and control.stop_requested:  # the solver saw the stop first
             raise KeyboardInterrupt
     except KeyboardInterrupt:
-        stop.set()
+        interrupt()
         if control is not None:
             control.request_stop()
         done.wait(STOP_GRACE)
         raise
     finally:
-        if done.is_set():
-            for k in kinds:
-                h.stopCallback(k)
+        if done.is_set() and finished is not None:
+            finished()
         if control is not None:
             control.report(None)
     if failure:
@@ -266,8 +292,8 @@ def solver_version() -> str:
 
 
 def solves_running() -> bool:
-    """Whether a solver thread started by :func:`run_highs` is still running (one that was
-    asked to stop but has not reached a point where HiGHS notices yet)."""
+    """Whether a solver thread started by :func:`run_in_solver_thread` is still running (one
+    that was asked to stop but has not reached a point where its solver notices yet)."""
     return any(t.name == SOLVER_THREAD and t.is_alive() for t in threading.enumerate())
 
 
