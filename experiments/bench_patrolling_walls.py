@@ -1,7 +1,8 @@
 """Patrolling with physical walls (issue 18 point 5): the whole agent synthesis of
 ``patrolling`` with its static area's cuts tied across fuel levels and directions
-(``tie_places="static"``, ``bidirectional_cuts=True``: paper-examples.md's spec), per
-routing backend.
+(``tie_places="static"``, ``bidirectional_cuts=True``: paper-examples.md's spec, and the
+built-in's own setting now), per routing backend; ``--tie none`` is the per-fuel-level
+variant the built-in used before.
 
 For each backend it reports the outcome (a checked test with its flow and cuts, or the
 loop's proof that none exists), every round of the counterexample loop (flow, cuts,

@@ -25,7 +25,13 @@ import sys
 import time
 from pathlib import Path
 
-from flowtest_env.artifacts import ARTIFACT_DIR, ARTIFACT_NODE_LIMIT, synthesize_artifact, write_manifest
+from flowtest_env.artifacts import (
+    ARTIFACT_DIR,
+    ARTIFACT_NODE_LIMIT,
+    ARTIFACT_NODE_LIMITS,
+    synthesize_artifact,
+    write_manifest,
+)
 from synthesis.problems.builtins import BUILTINS
 
 
@@ -68,7 +74,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, default=ARTIFACT_DIR, help=f"output folder (default {ARTIFACT_DIR})")
     ap.add_argument(
         "--node-limit", type=int, default=None, metavar="N",
-        help=f"branch-and-bound nodes per HiGHS run (default {ARTIFACT_NODE_LIMIT}; a deterministic budget: "
+        help=f"branch-and-bound nodes per HiGHS run (default {ARTIFACT_NODE_LIMIT}, or the built-in's entry of "
+        f"ARTIFACT_NODE_LIMITS: {ARTIFACT_NODE_LIMITS}; a deterministic budget: "
         "the answer may then be feasible, not proven optimal)",
     )
     args = ap.parse_args(argv)

@@ -162,10 +162,11 @@ def _permanent_walls(artifact: TestArtifact) -> np.ndarray:
     state the system can reach.
 
     A move's *place move* is its pair ``(place[src], place[dst])``; on fuel grids one
-    place move stands for a move at every fuel level. Tied walls (refueling) are static at
-    every reachable fuel level and so permanent; per-level cuts (patrolling) are not,
-    and showing them at every level would draw walls that are not there. Reachability
-    is over the moves that are not static obstacles, from the initial state.
+    place move stands for a move at every fuel level. Tied walls (refueling, patrolling)
+    are static at every reachable fuel level and so permanent; per-level cuts
+    (``tie_places="none"``) are not, and showing them at every level would draw walls
+    that are not there. Reachability is over the moves that are not static obstacles,
+    from the initial state.
     """
     ts = artifact.system
     static = artifact.strategy.static_obstacles

@@ -25,6 +25,10 @@ from synthesis.problems.load import load_problem
 from synthesis.problems.problem import Problem
 
 AGENT_BUILTINS = ("maze1", "maze2", "patrolling")
+#: physical walls make patrolling's MILP take minutes (docs/benchmarks.md, "Patrolling with
+#: physical walls"): its synthesis runs with the slow tests only
+SLOW_AGENT_BUILTINS = frozenset({"patrolling"})
+AGENT_PARAMS = [pytest.param(n, marks=pytest.mark.slow) if n in SLOW_AGENT_BUILTINS else n for n in AGENT_BUILTINS]
 
 MAZE2_TOML = """
 name = "maze2-toml"
@@ -60,13 +64,22 @@ parks = [
 """
 
 
+class _Synthesized(dict[str, SynthesizedTest]):
+    """Agent built-ins synthesized when a test first asks for one, then kept."""
+
+    def __missing__(self, name: str) -> SynthesizedTest:
+        self[name] = synthesize(load_problem(name))
+        return self[name]
+
+
 @pytest.fixture(scope="module")
 def tests() -> dict[str, SynthesizedTest]:
-    """Each agent built-in synthesized once for the whole module."""
-    return {name: synthesize(load_problem(name)) for name in AGENT_BUILTINS}
+    """Each agent built-in synthesized once for the whole module (the slow ones only when
+    a slow test asks for them)."""
+    return _Synthesized()
 
 
-@pytest.mark.parametrize("name", AGENT_BUILTINS)
+@pytest.mark.parametrize("name", AGENT_PARAMS)
 def test_builtin_synthesizes_and_verifies(tests: dict[str, SynthesizedTest], name: str) -> None:
     test = tests[name]
     summary = summary_of(test)
@@ -103,7 +116,7 @@ def test_prefilter_only_saves_solves() -> None:
     assert plain.routing.flow == synthesize(load_problem("maze1")).routing.flow
 
 
-@pytest.mark.parametrize("name", AGENT_BUILTINS)
+@pytest.mark.parametrize("name", AGENT_PARAMS)
 def test_controller_round_trip(tests: dict[str, SynthesizedTest], name: str) -> None:
     test = tests[name]
     ctrl = test.agent.controller
@@ -130,7 +143,7 @@ def test_controller_round_trip(tests: dict[str, SynthesizedTest], name: str) -> 
     verify_closed_loop(test.products, test.strategy, test.problem.agent, again)
 
 
-@pytest.mark.parametrize("name", AGENT_BUILTINS)
+@pytest.mark.parametrize("name", AGENT_PARAMS)
 def test_random_runs_through_the_public_protocol(tests: dict[str, SynthesizedTest], name: str) -> None:
     """Drive the controller as an environment does: reset, (first move), respond per step."""
     test = tests[name]

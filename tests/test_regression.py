@@ -28,11 +28,11 @@ EXAMPLES: dict[str, tuple[int, int]] = {
     "beaver-rescue": (2, 2),
     "motion-primitives": (3, 15),
     "maze1": (1, 3),
-    "patrolling": (2, 10),
+    "patrolling": (1, 27),
     "maze2": (2, 8),
     "refueling": (2, 101),
 }
-SLOW_EXAMPLES = {"maze2", "refueling"}
+SLOW_EXAMPLES = {"maze2", "refueling", "patrolling"}
 
 #: (size, family, n, seed, MILP) -> (flow, cut edges of G), from the random grid study, proven optimal
 RANDOM: dict[tuple[int, str, int, int, str], tuple[int, int]] = {

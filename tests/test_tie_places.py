@@ -65,10 +65,12 @@ def _place_pair(problem: Problem, moves: np.ndarray) -> np.ndarray:
 
 
 def test_patrolling_walls_are_tied_and_the_agents_cuts_are_not() -> None:
-    """Under "static", patrolling's static area has one cut group per pair of cells (every
-    fuel level, both directions), while each reactive group (moves into column 2) stays one
-    move of T under one history: the test agent blocks per fuel level and history."""
-    problem = replace(patrolling(), tie_places="static", bidirectional_cuts=True)
+    """Under "static" (the built-in's physical walls), patrolling's static area has one cut
+    group per pair of cells (every fuel level, both directions), while each reactive group
+    (moves into column 2) stays one move of T under one history: the test agent blocks per
+    fuel level and history."""
+    problem = patrolling()
+    assert problem.tie_places == "static" and problem.bidirectional_cuts
     _, products = build_graphs(problem)
     groups, _ = _groups(problem, "static")
     g, ts = products.virtual, problem.system
@@ -118,10 +120,10 @@ def test_tie_places_values() -> None:
 @pytest.mark.slow
 @pytest.mark.skipif(not cpsat.available(), reason="OR-Tools is not installed")
 def test_patrolling_with_physical_walls_is_realized() -> None:
-    """paper-examples.md's patrolling (static walls tied across fuel levels and directions):
-    proven optimal at flow 1, the paper's figure, its test agent realized and checked
-    (docs/benchmarks.md, "Patrolling with physical walls"; a few minutes)."""
-    problem = replace(patrolling(), tie_places="static", bidirectional_cuts=True)
+    """paper-examples.md's patrolling (static walls tied across fuel levels and directions,
+    the built-in): proven optimal at flow 1, the paper's figure, its test agent realized and
+    checked (docs/benchmarks.md, "Patrolling with physical walls"; a few minutes)."""
+    problem = patrolling()
     test = synthesize(problem, SynthesisOptions(backend="cpsat"))
     assert test.routing.status == "optimal" and test.routing.flow == 1
     assert int(test.routing.cut_edges.size) == 27

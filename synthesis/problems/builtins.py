@@ -243,14 +243,14 @@ def patrolling() -> Problem:
     one row up or down in column 2 or stays, starts at (5, 2), and parks off the grid
     from row 0 or row 5. Static area: everything off column 2.
 
-    Static cuts are per transition of T (method.md §5, c9), i.e. per fuel level
-    (``tie_places="none"``). paper-examples.md asks for physical walls here as in refueling:
-    ``tie_places="static"`` with c14 ties the static area's cuts across fuel levels and
-    directions while the agent's cuts stay per move and history. That variant
-    (``experiments.bench_patrolling_walls``) is proven optimal at flow 1, the paper's figure,
-    with its test agent realized, but its MILP is much harder (minutes against half a second
-    here), so the built-in keeps per-fuel-level walls (docs/benchmarks.md, "Patrolling with
-    physical walls").
+    Physical walls, as paper-examples.md asks: the static area's cuts are tied across fuel
+    levels and directions (``tie_places="static"``, ``bidirectional_cuts=True``, method.md
+    §5 c14), one wall per pair of cells, while the test agent's cuts (moves into column 2)
+    stay per move and history. Proven optimal at flow 1, the paper's figure, with 27 cuts
+    and its test agent realized after 2 loop rounds (the first cut set traps the system at
+    ``((5, 2), 5)``); this MILP is much harder than the per-fuel-level one this built-in
+    used before (flow 2, 10 cuts, half a second): minutes of solver time, so the tests load
+    the shipped artifact (docs/benchmarks.md, "Patrolling with physical walls").
     """
     rows, cols = 6, 6
     goal, start, refuel = (5, 0), (5, 5), (1, 5)
@@ -277,6 +277,7 @@ def patrolling() -> Problem:
     return make_problem(
         "patrolling", ts, "F goal & G !empty", "F lowfuel", "agent", agent=agent,
         description="A test agent patrolling column 2 pushes a fuel-limited robot to run low far from the goal.",
+        tie_places="static", bidirectional_cuts=True,
     )
 
 
