@@ -63,10 +63,13 @@ choice of the same round:
   its new cell is refused: a stay), and when the system moves first (maze1, patrolling)
   the tester answers the round-start position, not the system's move of the round.
 
-The synthesized tester keeps the test's guarantees in the parallel game as well (every
-met run realizes the test objective, no state traps the system: ``tests/test_multiagent.py``
-explores every system behaviour). For exact turn-by-turn play, and for a learned
-tester, use the AEC version.
+With the synthesized tester no state of the parallel game traps the system, and every
+met run realizes the test objective except where the test agent must step in front of
+the system right after the system's move: patrolling (physical walls), whose agent must
+block the way into (3, 2) and, one round late in the parallel game, lets the system slip
+past (``tests/test_multiagent.py`` explores every system behaviour and checks both). For
+exact turn-by-turn play, for patrolling's guarantee, and for a learned tester, use the
+AEC version.
 """
 
 from __future__ import annotations

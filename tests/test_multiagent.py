@@ -213,14 +213,23 @@ def test_synthesized_tester_guarantee_against_random_systems(problem: str) -> No
     assert met > 0
 
 
+#: agent problems whose test agent must step in front of the system right after the
+#: system's move (the system moves first): in the parallel game the tester answers the
+#: round-start position, one round late, so the system can slip past (patrolling since it
+#: took paper-examples.md's physical walls: the agent must block the way into (3, 2))
+PARALLEL_LATE = frozenset({"patrolling"})
+
+
 @pytest.mark.parametrize("problem", PROBLEMS)
 def test_synthesized_tester_keeps_the_guarantees_in_the_parallel_game(problem: str) -> None:
     """Every system behaviour against the synthesized tester in the parallel version,
     where the players of a round choose simultaneously (agent problems: the system does
     not see the agent's move of the round, the tester answers the round-start position
     when the system moves first). Exhaustive over reachable game states, by copying the
-    run state: every met run realized the test objective, every live state can still meet
-    the system objective."""
+    run state: every met run realized the test objective (except in
+    :data:`PARALLEL_LATE`, where some met run provably misses it: the documented
+    limitation of the parallel version), every live state can still meet the system
+    objective."""
     env = multiagent.parallel_env(problem=problem, max_cycles=10**6)
     tester = synthesized_tester(env)
 
@@ -237,6 +246,7 @@ def test_synthesized_tester_keeps_the_guarantees_in_the_parallel_game(problem: s
     src: list[int] = []
     dst: list[int] = []
     met, ended = set(), set()
+    missed = 0  # met runs that did not realize the test objective
     while stack:
         state = stack.pop()
         i = index[state.key() + (False,)]
@@ -254,12 +264,16 @@ def test_synthesized_tester_keeps_the_guarantees_in_the_parallel_game(problem: s
                     ended.add(index[key])
                     if run.outcome == "met":
                         met.add(index[key])
-                        assert infos[SYSTEM]["verdict"]["test_objective_realized"], run
+                        missed += not infos[SYSTEM]["verdict"]["test_objective_realized"]
                 else:
                     stack.append(run.copy())
             src.append(i)
             dst.append(index[key])
     assert met, f"{problem}: no system behaviour meets the objective"
+    if problem in PARALLEL_LATE:
+        assert missed > 0, f"{problem}: the parallel game keeps the guarantee after all; drop it from PARALLEL_LATE"
+    else:
+        assert missed == 0, f"{problem}: {missed} met runs did not realize the test objective"
     can = np.zeros(len(index), dtype=bool)
     can[list(met)] = True
     s, d = np.array(src), np.array(dst)
