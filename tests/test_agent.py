@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from flowtest_env.game import TestGame
 from synthesis.agent import gr1
 from synthesis.agent.closed_loop import verify_closed_loop
 from synthesis.agent.controller import AgentController
@@ -145,10 +146,13 @@ def test_controller_round_trip(tests: dict[str, SynthesizedTest], name: str) -> 
 
 @pytest.mark.parametrize("name", AGENT_PARAMS)
 def test_random_runs_through_the_public_protocol(tests: dict[str, SynthesizedTest], name: str) -> None:
-    """Drive the controller as an environment does: reset, (first move), respond per step."""
+    """Drive the controller as an environment does: reset, (first move), respond per step,
+    until the run ends (met, or violated: the SUT can no longer meet its objective, where the
+    environment stops asking the agent)."""
     test = tests[name]
     ts = test.problem.system
     art = TestArtifact.from_dict(json.loads(json.dumps(artifact_of(test, summary_of(test)).to_dict())))
+    doomed = TestGame(art).doomed
     ctrl = AgentController.from_dict(art.agent["controller"])
     static = test.strategy.static_obstacles
     out_moves = [np.flatnonzero(ts.src == s) for s in range(ts.n_states)]
@@ -159,7 +163,7 @@ def test_random_runs_through_the_public_protocol(tests: dict[str, SynthesizedTes
         if ctrl.first == "agent":
             a, m = ctrl.respond(a, m, s, h)
         for _step in range(60):
-            if ts.terminal[s]:
+            if ts.terminal[s] or doomed[h][s]:
                 break
             here = ctrl.agent_places[a]
             assert here != int(ts.place[s]), "collision"
