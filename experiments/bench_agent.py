@@ -34,14 +34,17 @@ def bench(name: str, repeat: int) -> dict[str, float | int | str]:
     """Median timings of ``repeat`` full syntheses of built-in ``name``."""
     runs: list[dict[str, float]] = []
     wall: list[float] = []
-    test = None
+    test = agent = None
     for _ in range(repeat):
         problem = load_problem(name)
         t0 = time.perf_counter()
         test = synthesize(problem)
         wall.append(time.perf_counter() - t0)
-        runs.append(dict(test.agent.timings))
-    assert test is not None
+        agent = test.agent
+        if agent is None or test.problem.agent is None:
+            raise SystemExit(f"error: {name} is not a test-agent problem")
+        runs.append(dict(agent.timings))
+    assert test is not None and agent is not None and test.problem.agent is not None
     med = {k: statistics.median(r[k] for r in runs) for k in runs[0]}
     game = build_agent_game(test.products, test.strategy, test.problem.agent)
     solo: list[float] = []
@@ -58,8 +61,8 @@ def bench(name: str, repeat: int) -> dict[str, float | int | str]:
         "gr1_loop": med["gr1"],
         "verify": med["verify"],
         "gr1_final": statistics.median(solo),
-        "iterations": len(test.agent.iterations),
-        "counterexamples": test.agent.counterexamples,
+        "iterations": len(agent.iterations),
+        "counterexamples": agent.counterexamples,
         "positions": game.n_positions,
         "moves": game.game.n_edges,
         "g_nodes": test.products.virtual.n_nodes,
@@ -90,8 +93,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     rows = [bench(name, args.repeat) for name in args.problems]
     print(markdown(rows))
-    slow = [r["problem"] for r in rows if float(r["end_to_end"]) >= END_TO_END_TARGET]
-    slow_gr1 = [r["problem"] for r in rows if float(r["gr1_final"]) >= GR1_TARGET]
+    slow = [str(r["problem"]) for r in rows if float(r["end_to_end"]) >= END_TO_END_TARGET]
+    slow_gr1 = [str(r["problem"]) for r in rows if float(r["gr1_final"]) >= GR1_TARGET]
     print()
     print(f"targets: end to end < {END_TO_END_TARGET} s: {'met' if not slow else 'missed by ' + ', '.join(slow)}; "
           f"GR(1) < {GR1_TARGET} s: {'met' if not slow_gr1 else 'missed by ' + ', '.join(slow_gr1)}")

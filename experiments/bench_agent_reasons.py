@@ -68,7 +68,7 @@ def bench(name: str) -> dict[str, Any]:
     plain, ours = _run(name, False), _run(name, True)
     if plain["answer"] != ours["answer"] or plain["status"] != ours["status"]:
         raise AssertionError(f"{name}: the answers differ: {plain['answer']} vs {ours['answer']}")
-    row = {"problem": Path(name).stem, "plain": plain, "reasons": ours, "cli": None}
+    row: dict[str, Any] = {"problem": Path(name).stem, "plain": plain, "reasons": ours, "cli": None}
     if name.endswith(".toml"):
         seconds, summary = _cli_seconds(name)
         row["cli"] = (seconds, summary["agent_strategy"]["iterations"], summary["flow"])

@@ -26,7 +26,7 @@ import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import gymnasium as gym
 import numpy as np
@@ -64,7 +64,7 @@ def success_rate(model: Any, env_id: str, wrappers: str, episodes: int, seed: in
         obs, info = env.reset(seed=seed + i)
         done = False
         while not done:
-            action, _ = model.predict(obs, deterministic=True, action_masks=env.unwrapped.action_masks())
+            action, _ = model.predict(obs, deterministic=True, action_masks=cast(Any, env.unwrapped).action_masks())
             obs, _, term, trunc, info = env.step(int(action))
             done = term or trunc
         met += info["verdict"]["system_objective"] == "met"

@@ -32,8 +32,9 @@ from synthesis.pipeline import SynthesisOptions, milp_options
 from synthesis.problems.builtins import BUILTINS
 from synthesis.problems.problem import Problem, build_graphs
 from synthesis.problems.random_grid import PAPER_SPECS, first_consistent, paper_ap
-from synthesis.routing.milp import EAGER_FLOW_LIMIT, required_entries, solve_routing
+from synthesis.routing.milp import EAGER_FLOW_LIMIT, solve_routing
 from synthesis.routing.model import MilpOptions, build_model
+from synthesis.routing.result import required_entries
 
 RULES = ("never_needed", "never_closed", "dominated")
 
@@ -110,8 +111,8 @@ def main(argv: list[str] | None = None) -> int:
         print(HEAD.format(what="built-in", rng=""))
         print("|---" * 9 + "|")
         for name in args.builtins:
-            mode, *rest = counts(BUILTINS[name]())
-            print(_row([name, mode], 1, [(mode, *rest)]), flush=True)
+            row = counts(BUILTINS[name]())
+            print(_row([name, row[0]], 1, [row]), flush=True)
         print()
     if args.sizes and args.instances > 0:
         print(HEAD.format(what="spec, \\|AP\\|, grid", rng=", range"))

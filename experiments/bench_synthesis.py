@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from typing import Any
 
 from synthesis.artifacts.summary import summary_of
 from synthesis.pipeline import SynthesisOptions, synthesize
@@ -26,9 +27,9 @@ from synthesis.routing.model import BACKENDS
 DEFAULT = ("example1", "small-reactive", "beaver-rescue", "motion-primitives", "refueling", "mars-exploration")
 
 
-def bench(name: str, repeat: int, time_limit: float | None, backend: str = "auto") -> dict:
+def bench(name: str, repeat: int, time_limit: float | None, backend: str = "auto") -> dict[str, Any]:
     """Synthesize ``name`` ``repeat`` times; the fastest run's figures."""
-    best: dict | None = None
+    best: dict[str, Any] | None = None
     for _ in range(repeat):
         t0 = time.perf_counter()
         try:

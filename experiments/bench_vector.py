@@ -40,7 +40,8 @@ import numpy as np
 
 def masked_random(rng: np.random.Generator, mask: np.ndarray) -> np.ndarray:
     """One random legal action per row of ``mask`` (``int8[n_envs, n_actions]``)."""
-    return np.argmax(rng.random(mask.shape) * (mask > 0), axis=1)
+    out: np.ndarray = np.argmax(rng.random(mask.shape) * (mask > 0), axis=1)
+    return out
 
 
 def rate(envs: Any, steps: int, masked: bool, seed: int) -> float:
@@ -53,7 +54,7 @@ def rate(envs: Any, steps: int, masked: bool, seed: int) -> float:
     for _ in range(steps):
         a = masked_random(rng, infos["action_mask"]) if masked else rng.integers(n_actions, size=n)
         _, _, _, _, infos = envs.step(a)
-    return steps * n / (time.perf_counter() - t)
+    return float(steps * n / (time.perf_counter() - t))
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -17,6 +17,7 @@ import re
 import sys
 import time
 from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 
 from synthesis.artifacts.artifact import artifact_of
@@ -114,7 +115,7 @@ def run(args: argparse.Namespace) -> int:
             seconds = time.perf_counter() - t0
             summary = json_safe(summary_of(test))
             write_atomically(out / f"{name}.json", artifact_of(test, summary).save)
-            write_atomically(out / f"{name}.png", lambda tmp, test=test: plot_test(test, tmp))
+            write_atomically(out / f"{name}.png", partial(plot_test, test))
             rows.append((name, problem.kind, summary, seconds))
         report = None
         if not args.no_evaluation:

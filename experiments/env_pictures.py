@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import Any, cast
 
 import gymnasium as gym
 import numpy as np
@@ -42,11 +43,11 @@ class ScriptError(RuntimeError):
 
 def picture(env_id: str, actions: list[str], tile: int, **kwargs: object) -> tuple[np.ndarray, str]:
     """The engineer-view frame after ``actions``, and the ANSI text of the same state."""
-    opts = {"tile_size": tile, **kwargs}
+    opts: dict[str, Any] = {"tile_size": tile, **kwargs}
     env = gym.make(env_id, render_mode="rgb_array", view="engineer", **opts)
     _, info = env.reset(seed=0)
     for name in actions:
-        meanings = env.unwrapped.action_meanings()
+        meanings = cast(Any, env.unwrapped).action_meanings()
         if name not in meanings:
             raise ScriptError(f"{env_id}: no action {name!r} at {info['system_state']} (actions: {meanings})")
         a = meanings.index(name)
@@ -57,8 +58,10 @@ def picture(env_id: str, actions: list[str], tile: int, **kwargs: object) -> tup
             raise ScriptError(f"{env_id}: the run ended at {info['system_state']} before the script did")
     from flowtest_env.render import ansi
 
-    u = env.unwrapped
-    return env.render(), ansi(u.game, u.run, "engineer")
+    u = cast(Any, env.unwrapped)
+    frame = env.render()
+    assert isinstance(frame, np.ndarray)
+    return frame, ansi(u.game, u.run, "engineer")
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -46,6 +46,7 @@ import sys
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -259,7 +260,7 @@ def test_infos(env_ids: Sequence[str], out: Path) -> list[TestInfo]:
         game = u.game
         env.close()
         name = f"tests/{_slug(env_id)}.png"
-        write_atomically(out / name, lambda tmp, game=game: start_picture(game, tmp))
+        write_atomically(out / name, partial(start_picture, game))
         art = game.artifact
         infos.append(TestInfo(
             env_id=env_id, problem=str(art.name), kind=str(art.kind),
@@ -299,11 +300,11 @@ def write_report(cells: Sequence[Cell], out: Path, tests: Sequence[TestInfo] | N
             if tr is None:
                 continue
             name = f"traces/{_slug(cell.sut)}--{_slug(cell_name)}--{label}.png"
-            write_atomically(out / name, lambda tmp, tr=tr: trace_picture(tr, tmp))
+            write_atomically(out / name, partial(trace_picture, tr))
             cell.pictures[label] = name
         if failing is not None:
             name = f"traces/{_slug(cell.sut)}--{_slug(cell_name)}--filmstrip.png"
-            write_atomically(out / name, lambda tmp, tr=failing: _filmstrip(tr, tmp))
+            write_atomically(out / name, partial(_filmstrip, failing))
             cell.pictures["filmstrip"] = name
     if tests is None:
         tests = test_infos(list(dict.fromkeys(c.env_id for c in cells)), out)
@@ -384,15 +385,15 @@ def _markdown(records: Sequence[dict[str, Any]]) -> str:
     for group in fold_rows(records, envs):
         cells = []
         for env in envs:
-            r = by.get((group[0], env))
-            if r is None:
+            found = by.get((group[0], env))
+            if found is None:
                 cells.append("–")
                 continue
-            if r["error"]:
+            if found["error"]:
                 cells.append("not run (see below)")
                 continue
-            met = round((r["system_objective_met_rate"] or 0) * r["episodes"])
-            cells.append(f"{met}/{r['episodes']} met ({outcome_class(r)})")
+            met = round((found["system_objective_met_rate"] or 0) * found["episodes"])
+            cells.append(f"{met}/{found['episodes']} met ({outcome_class(found)})")
         lines.append(f"| {', '.join(group)} | " + " | ".join(cells) + " |")
     lines.append("")
     lines += [f"- **{word}**: {html.unescape(text).replace('<b>', '').replace('</b>', '')}" for word, text in GLOSSARY]

@@ -97,11 +97,11 @@ def capture_models() -> Iterator[Capture]:
         cap.recorders.append(rec)
         return rec
 
-    milp._highs = recording  # type: ignore[assignment]
+    milp._highs = recording
     try:
         yield cap
     finally:
-        milp._highs = original  # type: ignore[assignment]
+        milp._highs = original
 
 
 def combined_model(model: CapturedModel, n_edges: int) -> highspy.HighsLp:

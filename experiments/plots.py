@@ -37,6 +37,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from matplotlib.artist import Artist
 from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
@@ -410,7 +411,7 @@ def _grid_figure(test: Any, panels: Sequence[Panel], overlay: _Overlay | None) -
     for ax in list(axes.flat)[len(panels):]:
         ax.set_visible(False)
     fig.suptitle(_header(test), fontsize=10)
-    handles = [
+    handles: list[Artist] = [
         Patch(facecolor=START, edgecolor=GRID_LINE, label="start"),
         Patch(facecolor=GOAL, edgecolor=GRID_LINE, label="goal (terminal)"),
     ]
@@ -582,7 +583,7 @@ def _graph_figure(test: Any, panels: Sequence[Panel], overlay: _Overlay | None) 
     for ax in list(axes.flat)[len(panels):]:
         ax.set_visible(False)
     fig.suptitle(_header(test), fontsize=10)
-    handles = [
+    handles: list[Artist] = [
         Line2D([], [], linestyle="", marker="o", markersize=10, markerfacecolor=START, markeredgecolor="#505050", label="start"),
         Line2D([], [], linestyle="", marker="o", markersize=10, markerfacecolor=GOAL, markeredgecolor="#505050", label="terminal"),
         Line2D([], [], color=EDGE, linewidth=1.0, label="transition"),

@@ -107,7 +107,7 @@ class Task:
     backend: str | None = None  # SynthesisOptions.backend; None: the default
 
     @property
-    def key(self) -> tuple:
+    def key(self) -> tuple[Any, ...]:
         """Identifies the task's record (for ``--resume`` and for ordering)."""
         return (
             self.family, self.n, self.size, self.instance, self.milp, self.time_limit, self.gurobi, self.after_first,
@@ -115,7 +115,7 @@ class Task:
         )
 
 
-def record_key(rec: dict) -> tuple:
+def record_key(rec: dict[str, Any]) -> tuple[Any, ...]:
     """The :attr:`Task.key` of a record."""
     return (
         rec["family"], rec["n"], rec["size"], rec["instance"], rec["milp"], rec["time_limit"], rec["gurobi"],
@@ -131,7 +131,7 @@ def _digest(test: Any) -> str:
     return h.hexdigest()[:12]
 
 
-def run_task(task: Task) -> dict:
+def run_task(task: Task) -> dict[str, Any]:
     """Draw, synthesize and check one instance; a flat record of what happened and how long it took.
 
     Never raises for a solver or check outcome: each becomes the record's ``outcome``.
@@ -257,7 +257,7 @@ def run_task(task: Task) -> dict:
     return rec
 
 
-def _gurobi_fields(cap: Any, test: Any, task: Task) -> dict:
+def _gurobi_fields(cap: Any, test: Any, task: Task) -> dict[str, Any]:
     """Solve the final routing model with the paper's combined objective on Gurobi and on HiGHS."""
     from .gurobi_compare import compare_on
 
@@ -283,14 +283,14 @@ def _gurobi_fields(cap: Any, test: Any, task: Task) -> dict:
 # ------------------------------------------------------------------------------ dispatch
 
 
-def run_in_process(tasks: list[Task], on_done: Callable[[dict], None]) -> None:
+def run_in_process(tasks: list[Task], on_done: Callable[[dict[str, Any]], None]) -> None:
     """Run the tasks one after the other in this process."""
     for t in tasks:
         on_done(run_task(t))
 
 
 def run_on_ray(
-    tasks: list[Task], on_done: Callable[[dict], None], address: str | None = None, workers: int | None = None
+    tasks: list[Task], on_done: Callable[[dict[str, Any]], None], address: str | None = None, workers: int | None = None
 ) -> None:
     """Run every task as a Ray task (one CPU each) and hand each record over as it finishes.
 
@@ -324,7 +324,7 @@ def run_on_ray(
             ray.shutdown()
 
 
-def run_task_failed(task: Task, message: str) -> dict:
+def run_task_failed(task: Task, message: str) -> dict[str, Any]:
     """The record of a task whose worker died."""
     return {
         "family": task.family, "n": task.n, "ap": paper_ap(task.family, task.n), "size": task.size,
@@ -359,7 +359,7 @@ def _pct(k: int, n: int) -> str:
     return f"{100 * k / n:.0f}%" if n else "—"
 
 
-def graph_table(records: list[dict]) -> str:
+def graph_table(records: list[dict[str, Any]]) -> str:
     """Graph construction per spec (rows) and grid size (columns): mean G nodes and seconds (mean ± std)."""
     recs = [r for r in records if r.get("graph_s") is not None and not r.get("gurobi")]
     specs = sorted({(r["family"], r["n"]) for r in recs}, key=lambda c: (FAMILIES.index(c[0]), c[1]))
@@ -375,7 +375,7 @@ def graph_table(records: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def study_table(records: list[dict]) -> str:
+def study_table(records: list[dict[str, Any]]) -> str:
     """The paper's layout: one row per spec (family, |AP|) and grid size, both MILPs side by side.
 
     Graph construction time over every run of the cell; solve time over the solved
@@ -383,8 +383,8 @@ def study_table(records: list[dict]) -> str:
     """
     recs = [r for r in records if not r.get("gurobi")]
     solved_cells = {(r["family"], r["n"], r["size"]) for r in recs if r["milp"] in MILPS}
-    cells = solved_cells or {(r["family"], r["n"], r["size"]) for r in recs}  # graphs-only: every cell
-    cells = sorted(cells, key=lambda c: (FAMILIES.index(c[0]), c[1], c[2]))
+    cell_set = solved_cells or {(r["family"], r["n"], r["size"]) for r in recs}  # graphs-only: every cell
+    cells = sorted(cell_set, key=lambda c: (FAMILIES.index(c[0]), c[1], c[2]))
     milps = [m for m in MILPS if any(r["milp"] == m for r in recs)]  # graphs-only runs fill the graph columns only
     head = ["spec", r"\|AP\|", "grid", "G nodes (mean)", "graphs s"]
     for m in milps:
@@ -413,7 +413,7 @@ def study_table(records: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def gurobi_table(records: list[dict]) -> str:
+def gurobi_table(records: list[dict[str, Any]]) -> str:
     """FlowTest (HiGHS, two phases) next to the paper's combined MILP on Gurobi and on HiGHS.
 
     Times: FlowTest's over its solved instances, Gurobi's and one-phase HiGHS's over the
@@ -457,11 +457,11 @@ def gurobi_table(records: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def compare_table(records: list[dict], baseline: list[dict]) -> str:
+def compare_table(records: list[dict[str, Any]], baseline: list[dict[str, Any]]) -> str:
     """Per cell of ``records``: the share solved and proven optimal, per MILP, next to the
     same cell of ``baseline`` (earlier records, e.g. a ``results.csv`` under another budget or
     backend); cells of ``records`` only, and a cell counts only its finished instances."""
-    def shares(recs: list[dict], cell: tuple, milp: str) -> str:
+    def shares(recs: list[dict[str, Any]], cell: tuple[Any, ...], milp: str) -> str:
         rs = [r for r in recs if (r["family"], int(r["n"]), int(r["size"])) == cell and r["milp"] == milp]
         if not rs:
             return "—"
@@ -484,7 +484,7 @@ def compare_table(records: list[dict], baseline: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def read_csv_records(path: Path) -> list[dict]:
+def read_csv_records(path: Path) -> list[dict[str, Any]]:
     """The records of a ``results.csv`` (values as text, enough for :func:`compare_table`)."""
     with open(path, newline="") as f:
         return list(csv.DictReader(f))
@@ -502,7 +502,7 @@ CSV_FIELDS = [
 ]
 
 
-def write_outputs(out: Path, records: list[dict], config: dict) -> None:
+def write_outputs(out: Path, records: list[dict[str, Any]], config: dict[str, Any]) -> None:
     """``results.json``, ``results.csv`` and ``tables.md`` from every record so far."""
     records = sorted(records, key=_order)
     (out / "results.json").write_text(json.dumps({"config": config, "records": records}, indent=1, default=str))
@@ -521,11 +521,11 @@ def write_outputs(out: Path, records: list[dict], config: dict) -> None:
     (out / "tables.md").write_text("\n".join(parts) + "\n")
 
 
-def _order(r: dict) -> tuple:
+def _order(r: dict[str, Any]) -> tuple[Any, ...]:
     return (FAMILIES.index(r["family"]), r["n"], r["size"], r["instance"], _MILP_ORDER[r["milp"]], bool(r.get("gurobi")))
 
 
-def read_records(path: Path) -> list[dict]:
+def read_records(path: Path) -> list[dict[str, Any]]:
     """The records of ``records.jsonl`` (a torn last line from a killed run is skipped)."""
     out = []
     if path.exists():
@@ -581,7 +581,7 @@ class Progress:
         self.counts: dict[str, int] = {}
         self.t0 = time.perf_counter()
 
-    def __call__(self, rec: dict) -> None:
+    def __call__(self, rec: dict[str, Any]) -> None:
         self.done += 1
         self.counts[rec["outcome"]] = self.counts.get(rec["outcome"], 0) + 1
         if self.quiet:
@@ -682,7 +682,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.backend is not None and "backend" not in {f.name for f in fields(SynthesisOptions)}:
         ap.error("--backend: this FlowTest has no solver backend option (SynthesisOptions.backend)")
     if args.time_limit is None and args.after_first is None:
-        time_limit, after_first = PAPER_FIRST_LIMIT, PAPER_AFTER_FIRST
+        time_limit: float | None = PAPER_FIRST_LIMIT
+        after_first: float | None = PAPER_AFTER_FIRST
     else:
         time_limit = args.time_limit if args.time_limit and args.time_limit > 0 else None
         after_first = args.after_first if args.after_first is not None and args.after_first >= 0 else None
@@ -691,7 +692,7 @@ def main(argv: list[str] | None = None) -> int:
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
     log = out / "records.jsonl"
-    records: list[dict] = []
+    records: list[dict[str, Any]] = []
     if args.resume:
         wanted = {t.key for t in tasks}
         records = [r for r in read_records(log) if record_key(r) in wanted]
@@ -711,7 +712,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{len(tasks)} solves to run ({len(records)} already done), dispatch: {config['dispatch']}", file=sys.stderr)
     last_write = [time.perf_counter()]
 
-    def on_done(rec: dict) -> None:
+    def on_done(rec: dict[str, Any]) -> None:
         records.append(rec)
         with open(log, "a") as f:
             f.write(json.dumps(rec, default=str) + "\n")

@@ -202,8 +202,8 @@ def render_html(
             label += f"<br><span class='small'>{len(group)} systems, identical results</span>"
         parts.append(f"<tr><td>{label}</td>")
         for col in columns:
-            r = by.get((group[0], col))
-            parts.append(_cell(r, f"fail-{slug(group[0])}--{slug(col)}") if r else "<td>–</td>")
+            found = by.get((group[0], col))
+            parts.append(_cell(found, f"fail-{slug(group[0])}--{slug(col)}") if found else "<td>–</td>")
         parts.append("</tr>")
     parts.append("</table><p class='legend'>")
     parts += [f"<span class='{c}'>{e(text)}</span>" for c, text in OUTCOME_CLASSES]
@@ -211,9 +211,9 @@ def render_html(
     parts += [f"<dt>{word}</dt><dd>{text}</dd>" for word, text in GLOSSARY]
     parts.append("</dl>")
     if comparison is not None and comparison[1]:
-        head, rows = comparison
+        head, table = comparison
         parts.append("<h2 id='testers'>Testers side by side</h2><table><tr>" + "".join(f"<th>{e(c)}</th>" for c in head) + "</tr>")
-        parts += ["<tr>" + "".join(f"<td>{e(c)}</td>" for c in row) + "</tr>" for row in rows]
+        parts += ["<tr>" + "".join(f"<td>{e(c)}</td>" for c in row) + "</tr>" for row in table]
         parts.append("</table>")
     # ---- the tests
     parts.append("<h2 id='tests'>The tests</h2><div class='tests'>")

@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 
 from synthesis import pipeline
 from synthesis.model.errors import ProblemError
+from synthesis.problems.limits import MAX_GRAPH_EDGES
 from synthesis.routing.cpsat_pool import close_idle_workers
 from synthesis.routing.solver_control import SolveControl, status_line, stdout_guard
 
@@ -64,7 +65,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--force", action="store_true", help="overwrite existing --out/--plot files")
     p.add_argument("--no-size-limit", action="store_true",
                    help="synthesize even a problem whose product graph may exceed "
-                        f"{pipeline.MAX_GRAPH_EDGES:,} edges (refused by default, with an estimate)")
+                        f"{MAX_GRAPH_EDGES:,} edges (refused by default, with an estimate)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines on stderr")
     p.add_argument(
         "--progress", metavar="S", nargs="?", type=positive_seconds, const=PROGRESS_EVERY,
@@ -135,7 +136,7 @@ def _synthesize(args: argparse.Namespace, problem: Problem) -> int:
             setting=args.setting,
             progress=progress,
             control=control,
-            max_graph_edges=None if args.no_size_limit else pipeline.MAX_GRAPH_EDGES,
+            max_graph_edges=None if args.no_size_limit else MAX_GRAPH_EDGES,
         )
         test = pipeline.synthesize(problem, options)
         summary = json_safe(summary_of(test))

@@ -18,21 +18,20 @@ def _trace_legend(ax: Any, game: Any) -> list[Any]:
 
     from flowtest_env import render
 
-    def rgb(c: tuple[int, int, int]) -> tuple[float, ...]:
-        return tuple(x / 255 for x in c)
+    def rgb(c: tuple[int, int, int]) -> tuple[float, float, float]:
+        return (c[0] / 255, c[1] / 255, c[2] / 255)
 
-    handles, _ = ax.get_legend_handles_labels()
-    marker = {"linestyle": "", "markersize": 10}
+    handles: list[Any] = list(ax.get_legend_handles_labels()[0])
     handles += [
-        Line2D([], [], marker="o", color=rgb(render.SYSTEM), label="system under test", **marker),
+        Line2D([], [], marker="o", color=rgb(render.SYSTEM), label="system under test", linestyle="", markersize=10),
         Patch(facecolor=rgb(render.GOAL), label="goal"),
         Line2D([], [], marker="o", markerfacecolor="none", markeredgewidth=2, color=rgb(render.TEST_CELL),
-               label="hidden test cell", **marker),
+               label="hidden test cell", linestyle="", markersize=10),
         Patch(facecolor=rgb(render.BLOCKED), label="blocked cell"),
         Line2D([], [], color=rgb(render.WALL), lw=4, label="wall"),
     ]
     if game.artifact.kind == "agent":
-        handles.append(Line2D([], [], marker="D", color=rgb(render.AGENT), label="test agent", **marker))
+        handles.append(Line2D([], [], marker="D", color=rgb(render.AGENT), label="test agent", linestyle="", markersize=10))
     return handles
 
 

@@ -29,6 +29,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -41,7 +42,7 @@ from .command import Command
 from .episodes import make_env, run_episode
 from .exits import EXIT_OK
 from .outputs import check_output_path, write_atomically
-from .training import EpisodeCurve, EpisodeEnd, learn, make_ppo, moving_average, require_rl
+from .training import EpisodeCurve, EpisodeEnd, action_masks_of, learn, make_ppo, moving_average, require_rl
 
 ALGOS = ("maskable-ppo", "recurrent-ppo")
 """``--algo`` choices: sb3-contrib's MaskablePPO (MLP policy, action masks) and
@@ -96,7 +97,8 @@ def make_training_env(env_id: str, seed: int, settings: dict[str, Any], env_kwar
         return env
     from sb3_contrib.common.wrappers import ActionMasker
 
-    return ActionMasker(env, lambda e: e.unwrapped.action_masks())
+    return ActionMasker(env, action_masks_of)
+
 
 
 def make_training_vec_env(env_id: str, seed: int, settings: dict[str, Any], env_kwargs: dict[str, Any] | None = None) -> Any:
@@ -109,7 +111,7 @@ def make_training_vec_env(env_id: str, seed: int, settings: dict[str, Any], env_
     n = int(settings["n_envs"])
     if n < 1:
         raise ProblemError("n_envs must be at least 1")
-    return DummyVecEnv([(lambda i=i: make_training_env(env_id, seed + i, settings, env_kwargs)) for i in range(n)])
+    return DummyVecEnv([partial(make_training_env, env_id, seed + i, settings, env_kwargs) for i in range(n)])
 
 
 def check_settings(settings: dict[str, Any]) -> None:

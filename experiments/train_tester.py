@@ -21,6 +21,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -32,7 +33,7 @@ from .arguments import nonnegative_int, positive_int
 from .command import Command
 from .exits import EXIT_OK
 from .outputs import check_output_path, write_atomically
-from .training import EpisodeCurve, EpisodeEnd, learn, make_ppo, moving_average, require_rl
+from .training import EpisodeCurve, EpisodeEnd, action_masks_of, learn, make_ppo, moving_average, require_rl
 
 DEFAULTS: dict[str, Any] = {
     "n_envs": 4,
@@ -82,12 +83,12 @@ def make_tester_vec_env(problem: str, system: str, seed: int, settings: dict[str
         env = TesterView(problem, system, trap_penalty=settings["trap_penalty"])
         env.reset(seed=seed + i)
         env.action_space.seed(seed + i)
-        return ActionMasker(env, lambda e: e.unwrapped.action_masks())
+        return ActionMasker(env, action_masks_of)
 
     n = int(settings["n_envs"])
     if n < 1:
         raise ProblemError("n_envs must be at least 1")
-    return DummyVecEnv([(lambda i=i: make(i)) for i in range(n)])
+    return DummyVecEnv([partial(make, i) for i in range(n)])
 
 
 def plot_tester_curve(points: list[EpisodeEnd], path: Path, title: str) -> None:

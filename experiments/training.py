@@ -153,3 +153,8 @@ def learn(model: Any, steps: int, curve: Recorder, progress_bar: bool) -> float:
     callbacks = [curve.callback] + ([_progress_callback(steps)] if progress_bar else [])
     model.learn(total_timesteps=steps, callback=callbacks)
     return time.perf_counter() - t0
+
+
+def action_masks_of(env: Any) -> Any:
+    """The legal-action mask of a FlowTest env under its wrappers (``ActionMasker``'s function)."""
+    return env.unwrapped.action_masks()
