@@ -3,8 +3,8 @@
 Usage::
 
     nice -n 10 .venv/bin/python -m experiments.bench_backends [--time-limit S] [--work-limit W] [--seeds N]
-        [--builtins NAME ...] [--sizes 5 10] [--families reachability reaction] [--json FILE]
-        [--backends highs cpsat scip cover]
+        [--builtins NAME ...] [--sizes 5 10] [--families reachability reaction:3 ...] [--kinds static reactive]
+        [--json FILE] [--backends highs cpsat scip cover]
 
 For each problem (built-ins, then seeded random grids of every size, family and kind static /
 reactive, the first consistent attempt of seeds 0..N-1) and each backend, one synthesis in this
@@ -34,13 +34,14 @@ from synthesis.model.errors import InconsistentProblem
 from synthesis.pipeline import SynthesisOptions, synthesize
 from synthesis.problems.load import load_problem
 from synthesis.problems.problem import Problem
-from synthesis.problems.random_grid import first_consistent
+from synthesis.problems.random_grid import FAMILIES, first_consistent, random_problem
 from synthesis.routing import cpsat, scip
 
 BUILTINS = ("small-reactive", "example1", "beaver-rescue", "motion-primitives", "maze1", "maze2", "patrolling", "refueling", "mars-exploration")
 BACKENDS = ("highs", "cpsat")
 """The backends run by default; ``--backends`` may add ``scip`` (the optional extra) and ``cover``."""
 CHOICES = ("highs", "cpsat", "scip", "cover")
+KINDS = ("static", "reactive")
 
 
 def run(problem: Problem, backend: str, time_limit: float | None, work_limit: float | None = None) -> dict[str, Any]:
@@ -85,16 +86,28 @@ def _children_cpu() -> float:
     return float(ru.ru_utime + ru.ru_stime)
 
 
-def cases(builtins: list[str], sizes: list[int], families: list[str], seeds: int) -> list[tuple[str, str, Problem]]:
-    """``(group, label, problem)`` of every problem benchmarked."""
+def parse_family(token: str) -> tuple[str, int]:
+    """``FAMILY[:N]`` of ``--families`` as ``(family, n)``; ``n`` defaults to 2 (the study's
+    ``--families`` spelling, so both scripts name the same instances)."""
+    family, _, n = token.partition(":")
+    if family not in FAMILIES or (n and not n.isdigit()):
+        raise SystemExit(f"error: bad --families entry {token!r}; expected FAMILY[:N] with FAMILY one of {', '.join(FAMILIES)}")
+    return family, int(n) if n else 2
+
+
+def cases(
+    builtins: list[str], sizes: list[int], families: list[str], seeds: int, kinds: tuple[str, ...] = KINDS
+) -> list[tuple[str, str, Problem]]:
+    """``(group, label, problem)`` of every problem benchmarked. The random grids are the
+    random grid study's instances (:mod:`experiments.random_grid_study`: seed = instance)."""
     out = [("built-in", name, load_problem(name)) for name in builtins]
-    n_of = {"reachability": 2, "reaction": 2, "safety": 2}
     for size in sizes:
-        for kind in ("static", "reactive"):
-            for family in families:
+        for kind in kinds:
+            for family, n in map(parse_family, families):
                 for seed in range(seeds):
-                    attempt, problem, _ = first_consistent(size, family, n_of[family], seed, kind)
-                    out.append((f"{size}x{size} {kind}", f"{family}{n_of[family]} s{seed}", problem))
+                    attempt, _, _ = first_consistent(size, family, n, seed)  # the study's draw: the graphs do not depend on the kind
+                    problem = random_problem(size, family, n, seed, attempt, kind)
+                    out.append((f"{size}x{size} {kind}", f"{family}{n} s{seed}", problem))
     return out
 
 
@@ -112,7 +125,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", type=int, default=3, help="random instances per (size, kind, family) (default 3)")
     ap.add_argument("--builtins", nargs="*", default=list(BUILTINS))
     ap.add_argument("--sizes", nargs="*", type=int, default=[5, 10])
-    ap.add_argument("--families", nargs="*", default=["reachability", "reaction"])
+    ap.add_argument("--families", nargs="*", default=["reachability", "reaction"], metavar="FAMILY[:N]",
+                    help="random grid spec families, N as in the study (default 2): reachability:3 is |AP| = 4")
+    ap.add_argument("--kinds", nargs="*", default=list(KINDS), choices=KINDS, help="random grids' kinds (default both)")
     ap.add_argument("--backends", nargs="*", default=list(BACKENDS), choices=CHOICES)
     ap.add_argument("--work-limit", type=float, default=None,
                     help="CP-SAT's deterministic seconds per phase (SynthesisOptions.work_limit; default none)")
@@ -128,7 +143,7 @@ def main(argv: list[str] | None = None) -> int:
     head = "| group | problem | backend | status | flow | cuts | solve s | CPU s | child start s | nodes (scip, cover) | CP-SAT work |"
     print(head)
     print("|---" * (head.count("|") - 1) + "|", flush=True)
-    for group, label, problem in cases(args.builtins, args.sizes, args.families, args.seeds):
+    for group, label, problem in cases(args.builtins, args.sizes, args.families, args.seeds, tuple(args.kinds)):
         for backend in args.backends:
             row = {"group": group, "problem": label, "backend": backend, **run(problem, backend, args.time_limit, args.work_limit)}
             rows.append(row)

@@ -277,11 +277,35 @@ def test_a_forked_process_starts_its_own_child() -> None:
 @needs_ortools
 @pytest.mark.parametrize(
     ("name", "backend"),
-    [("refueling", "cpsat"), ("motion-primitives", "highs"), ("small-reactive", "highs"), ("maze1", "highs")],
+    [("refueling", "cpsat"), ("motion-primitives", "cpsat"), ("small-reactive", "highs"), ("maze1", "highs")],
 )
 def test_auto_runs_the_measured_rule(name: str, backend: str) -> None:
-    """``auto`` runs CP-SAT on static and reactive models of 900-3,000 rows (refueling: 1,096)
-    and HiGHS on smaller ones and on agent problems, and says which in the stats."""
+    """``auto`` runs CP-SAT on static models of 200-15,000 rows (refueling: 1,096) and reactive
+    ones of 200-2,500 (motion-primitives: 687), HiGHS on smaller ones (small-reactive: 153) and
+    on agent problems, and says which in the stats."""
     test = synthesize(load_problem(name), SynthesisOptions())
     assert test.routing.stats["backend"] == backend
     assert test.routing.status == "optimal" and test.checks.bypass_flow == 0
+
+
+@needs_ortools
+@pytest.mark.parametrize(
+    ("mode", "rows", "backend"),
+    [
+        ("static", 199, "highs"), ("static", 200, "cpsat"), ("static", 15_000, "cpsat"), ("static", 15_001, "highs"),
+        ("static", 21_515, "highs"),  # mars-exploration
+        ("reactive", 199, "highs"), ("reactive", 200, "cpsat"), ("reactive", 2_500, "cpsat"), ("reactive", 2_501, "highs"),
+        ("mixed", 1_000, "highs"),
+    ],
+)
+def test_auto_backend_edges(mode: str, rows: int, backend: str) -> None:
+    """The rule's edges per mode (:data:`synthesis.routing.milp.AUTO_CPSAT_ROWS`, inclusive):
+    a reactive model of 2,706 rows (the 5x5 reachability |AP| = 4 cell) goes to HiGHS, a
+    static one of 13,000 (reaction |AP| = 7) to CP-SAT, an agent problem's never."""
+    from types import SimpleNamespace
+
+    from synthesis.routing.milp import auto_backend
+    from synthesis.routing.model import MilpOptions
+
+    rm: Any = SimpleNamespace(model=SimpleNamespace(n_row=rows))
+    assert auto_backend(rm, MilpOptions(mode=mode)) == backend

@@ -159,34 +159,43 @@ def check_backend(options: MilpOptions) -> None:
         scip.require()
 
 
-AUTO_CPSAT_MODES = ("static", "reactive")
-"""The routing modes in which ``"auto"`` may run CP-SAT (agent problems, mode ``"mixed"``, stay on HiGHS)."""
+AUTO_CPSAT_ROWS: dict[str, tuple[int, int]] = {"static": (200, 15_000), "reactive": (200, 2_500)}
+"""Per routing mode, the model sizes (rows, inclusive) at which ``"auto"`` runs CP-SAT; HiGHS
+elsewhere and in the other modes. Measured per model kind on the 5x5 random grid study's
+instances (docs/benchmarks.md, "auto's backend rule per model kind"; seeds 0-2 of all nine
+cells, one worker each, 30 s each, measured under load, so CPU seconds and proofs compared):
 
-AUTO_CPSAT_ROWS = (900, 3_000)
-"""The model sizes (rows, inclusive) at which ``"auto"`` runs CP-SAT on a static or reactive
-problem; HiGHS elsewhere. Measured (docs/benchmarks.md, "CP-SAT against HiGHS"): in this
-band CP-SAT proved refueling and every random 5x5 instance in 0.6-1.2 CPU s against HiGHS's
-0.7-26.6; below it a CP-SAT child's start-up (about 0.4 CPU s when this was measured; about
-0.06 since the child loads no NumPy or pandas, the rule kept so that answers stay the same)
-was more than HiGHS's whole solve; above it neither proves the 10x10 grids in 60 s nor
-mars-exploration's fewest cuts. CP-SAT's phase 1 now reaches mars's flow 2 first (about 9
-deterministic seconds against HiGHS's 150 s: docs/benchmarks.md, "CP-SAT's phase 1"), but
-the band stays: it proves nothing more above it, and the shipped and cached artifacts'
-options bound HiGHS alone (a node limit). Agent problems (mixed, many small MILPs) stay on HiGHS. The
-``cover`` backend is never chosen: it proved nothing faster than HiGHS."""
+* static, 259-13,310 rows (safety to reaction |AP| = 7): CP-SAT proved 24 of 27, HiGHS 19,
+  CP-SAT in 0.13-3.9 CPU s wherever it proved (HiGHS 0.03-17.8 s on the same ones);
+  mars-exploration (21,515 rows) stays on HiGHS: neither proves its fewest cuts, and its
+  shipped artifact is HiGHS's under a node limit.
+* reactive, 300-2,026 rows (safety, reachability |AP| = 2, 3, reaction |AP| = 3): CP-SAT
+  proved 18 of 18 in 0.13-1.1 CPU s, HiGHS 17 in 0.02-7.0; from 2,706 rows (reachability
+  |AP| = 4, 2,706-2,830; reaction |AP| = 5 and 7, 8,887-43,166) HiGHS proved 3 of 9 and CP-SAT
+  none (also session 8: CP-SAT 2 of 14 on reachability |AP| = 4). The edge lies in the
+  measured gap 2,046-2,706.
+* below 200 rows (the built-ins small-reactive, example1, beaver-rescue: 84-153 rows) HiGHS
+  answers in 0.03 CPU s, a CP-SAT child (start, model transfer, solve) in 0.11-0.14.
+
+The rule reads the built model only, so the choice, and with it the answer, is the same on
+every machine with the locked install. Agent problems (mode ``"mixed"``, many small MILPs)
+stay on HiGHS. The ``cover`` backend is never chosen: it proved nothing faster than HiGHS."""
+
+AUTO_CPSAT_MODES: tuple[str, ...] = tuple(AUTO_CPSAT_ROWS)
+"""The routing modes in which ``"auto"`` may run CP-SAT (agent problems, mode ``"mixed"``, stay on HiGHS)."""
 
 
 def auto_backend(rm: RoutingModel, options: MilpOptions) -> str:
-    """The backend ``"auto"`` runs on a built model (see :data:`AUTO_CPSAT_ROWS`); HiGHS when
-    OR-Tools is missing. A function of the model and options only, so the choice, and with
+    """The backend ``"auto"`` runs on a built model (see :data:`AUTO_CPSAT_ROWS`: by mode and
+    rows); HiGHS when OR-Tools is missing. A function of the model and options only, so the choice, and with
     it the answer, is the same on every machine with the locked install. Never ``"cover"``:
     the wall-cover master proved nothing HiGHS did not and was slower wherever a solve took
     more than a tenth of a second (docs/benchmarks.md, "The ``cover`` backend"). Never
     ``"scip"`` either: an optional extra (the choice must be the same on every install), and
     measured slower than this choice on refueling and the random grids (docs/benchmarks.md,
     "SCIP one-tree branch and cut")."""
-    lo, hi = AUTO_CPSAT_ROWS
-    if options.mode in AUTO_CPSAT_MODES and lo <= rm.model.n_row <= hi and cpsat.available():
+    lo, hi = AUTO_CPSAT_ROWS.get(options.mode, (1, 0))
+    if lo <= rm.model.n_row <= hi and cpsat.available():
         return "cpsat"
     return "highs"
 
