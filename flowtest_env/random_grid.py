@@ -62,6 +62,7 @@ __all__ = [
     "MAX_ATTEMPTS",
     "POOL_KINDS",
     "POOL_NODE_LIMIT",
+    "POOL_WORK_LIMIT",
     "SPLITS",
     "SPLIT_SPAN",
     "WORLDS",
@@ -85,6 +86,14 @@ POOL_NODE_LIMIT = 1000
 8x8 reachability instance whose maximum flow HiGHS cannot prove in minutes stops at it
 with a checked, feasible test)."""
 
+POOL_WORK_LIMIT = 10.0
+"""CP-SAT's deterministic seconds per phase for pool tests (``SynthesisOptions.work_limit``):
+``auto`` runs CP-SAT on static models of 200-15,000 rows and reactive ones of 200-2,500
+(:data:`synthesis.routing.milp.AUTO_CPSAT_ROWS`), where the node limit does not apply, so this
+bounds their work the same way. Every 5x5 study instance CP-SAT proved when the rule was
+measured took at most 1.8 deterministic seconds (docs/benchmarks.md, "auto's backend rule per
+model kind"); 10 is a few CPU seconds per phase."""
+
 SPLITS: tuple[str, ...] = ("train", "validation", "test")
 SPLIT_SPAN = 1_000_000
 """Seeds per split: split ``k`` of :data:`SPLITS` holds seeds ``k * SPLIT_SPAN`` onwards."""
@@ -92,7 +101,7 @@ SPLIT_SPAN = 1_000_000
 
 def pool_options() -> SynthesisOptions:
     """The synthesis options of every pool test: deterministic budgets only."""
-    return SynthesisOptions(threads=1, node_limit=POOL_NODE_LIMIT)
+    return SynthesisOptions(threads=1, node_limit=POOL_NODE_LIMIT, work_limit=POOL_WORK_LIMIT)
 
 
 def _options_record(options: SynthesisOptions) -> dict[str, Any]:
