@@ -11,7 +11,7 @@ columns and rows, the exclusions. Solving it is :mod:`synthesis.routing.milp`.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import highspy
 import numpy as np
@@ -22,7 +22,8 @@ from ..graphs.consistency import check_consistency
 from ..graphs.products import Products, reachable
 from ..model.errors import InconsistentProblem
 from ..problems.problem import TIE_PLACES
-from .heuristic import RouteSeed, RoutingGuess, guess_routing
+from .flow_bound import static_flow_bound
+from .heuristic import RouteSeed, RoutingGuess, flow_upper_bound, guess_routing
 from .reductions import Reductions, reduce_groups
 from .solver_control import SolveControl
 
@@ -106,6 +107,10 @@ class MilpOptions:
     reductions
         Fix open, before any solve, the cut groups that :mod:`synthesis.routing.reductions`
         proves some optimum leaves open (column upper bound 0); off only to measure them.
+    flow_bound
+        MILP-static: lower the flow upper bound phase 1 starts from to the walls' bound of
+        :mod:`synthesis.routing.flow_bound` (a proof, so the optimum is kept); off only to
+        measure it.
     offer_starts
         Offer HiGHS the heuristic's answer (phase 1) and the phase-1 answer (phase 2) as
         starts (each checked against the model first). Without, they are still kept as
@@ -148,6 +153,7 @@ class MilpOptions:
     control: SolveControl | None = None
     offer_starts: bool = True
     reductions: bool = True
+    flow_bound: bool = True
     backend: str = "auto"
     work_limit: float | None = None
 
@@ -452,10 +458,17 @@ class RoutingModel:
     rows: Rows
     out_src: np.ndarray  # model edges leaving Src: their flow is F
     reductions: Reductions  # the cut groups fixed open (d = 0) before the solve
+    flow_bound: int | None = None  # MILP-static: the walls' flow bound (synthesis.routing.flow_bound)
 
     def guess(self, products: Products, traps: Callable[[np.ndarray], bool] | None = None) -> RoutingGuess:
-        """The routing heuristic on this model: its edges, no group fixed open cut."""
-        return self.edges.guess(products, traps=traps, fixed_open=self.reductions.fixed_open)
+        """The routing heuristic on this model: its edges, no group fixed open cut; its flow
+        upper bound lowered to :attr:`flow_bound` where that is smaller (it is proven too)."""
+        guess = self.edges.guess(products, traps=traps, fixed_open=self.reductions.fixed_open)
+        if self.flow_bound is not None and self.flow_bound < guess.upper_bound:
+            if self.flow_bound < guess.flow:
+                raise RuntimeError(f"flow bound {self.flow_bound} below the heuristic's valid flow {guess.flow}: a FlowTest bug")
+            guess = replace(guess, upper_bound=self.flow_bound)
+        return guess
 
     @property
     def n_col(self) -> int:
@@ -514,7 +527,19 @@ def build_model(
         rows=Rows(conservation, cut_stops_flow, path_cut, coupling, place_of_cut, exclusions),
         out_src=np.flatnonzero(me.eu == g.initial),
         reductions=reductions,
+        flow_bound=model_flow_bound(products, options, me),
     )
+
+
+def model_flow_bound(products: Products, options: MilpOptions, me: ModelEdges) -> int | None:
+    """MILP-static: :func:`~synthesis.routing.flow_bound.static_flow_bound` below the maximum
+    flow with every group open (the heuristic's bound); ``None`` in the other modes, where
+    cuts depend on the history and the bound's proof does not hold (and with ``options.flow_bound`` off)."""
+    if options.mode != "static" or not options.flow_bound:
+        return None
+    g = products.virtual
+    known = flow_upper_bound(g.n_nodes, g.initial, me.eu, me.ev, ~(me.c5 & products.target[me.ev]), products.target)
+    return static_flow_bound(products, me.eu, me.ev, known)
 
 
 def group_reductions(

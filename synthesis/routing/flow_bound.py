@@ -1,0 +1,191 @@
+"""A combinatorial upper bound on the maximum flow of MILP-static (issue 18, 10x10 grids).
+
+The routing heuristic's bound (:func:`synthesis.routing.heuristic.flow_upper_bound`, the
+maximum flow with every group open) ignores that the walls which route every bypass through I
+are walls in I too. On random grids it is 3-4 where no wall set gives more than 2, and proving
+that the flow level above the optimum is empty was the part of a 10x10 MILP-static solve that
+no backend finished (docs/benchmarks.md, "10x10 (issue 18, session 9)"). :func:`static_flow_bound`
+is a bound that sees the walls, computed from the product graph alone in a few graph searches.
+
+Terms. In MILP-static every edge of G over the same move of T shares one cut value (c9), so a
+cut set ``S`` opens or closes *moves*. Let ``S`` be valid (every bypass walk holds a cut edge),
+and let
+
+* ``R`` be the nodes of the whole G reachable from ``Src`` over open edges with both ends
+  outside I (the potentials' region), ``A`` the states of T of the nodes of ``R``;
+* ``Y`` be the states of the heads of G's *entry edges* (tail outside I, head in I), a set fixed
+  by G alone, and ``Z = A | Y``.
+
+Facts, for a valid ``S`` with ``Src`` outside I:
+
+* (L0) ``R`` holds no ``Tgt`` node: a shortest open walk from ``Src`` to ``Tgt`` outside I
+  would be a bypass walk of the model (its nodes reach ``Tgt``, so the model keeps them).
+  So ``A`` holds only states with a node outside I and ``Tgt`` (*eligible* states), and
+  the state of ``Src``.
+* (L1) An open move ``s -> s'`` with ``s`` in ``A`` leads into ``Z``. Take ``(s, q)`` in ``R``:
+  G has the edge ``(s, q) -> (s', q')`` (the automaton is total, and G holds every node
+  reachable from ``Src``), open because the move is. If ``(s', q')`` is outside I it is in
+  ``R`` (so ``s'`` is in ``A``), else the edge is an entry edge (so ``s'`` is in ``Y``).
+* (L2) By flow decomposition (reductions.py, F1) a flow of value ``F`` is ``F`` edge-disjoint
+  routes over open model edges. Each has a first entry edge, whose tail is in ``R`` (what
+  comes before is an open walk outside I from ``Src``): so ``F <= E``, the number of model
+  entry edges with a tail in ``R``.
+* (L3) After its first entry edge a route is at a state of ``Y``, inside ``Z``, and ends at
+  a ``Tgt`` node. Either that node's state is in ``Z`` (then the route's last edge is an
+  edge into ``Tgt`` whose head's state is in ``Z``), or the route leaves ``Z`` by some move
+  ``y -> x``, ``x`` outside ``Z``, whose tail ``y`` is not in ``A`` (L1), so in ``Y - A``.
+  Both edges come after an I node. So ``F <= X``, the number of model edges with a tail
+  reachable from I that are of either kind.
+
+``E`` and ``X`` depend on ``S`` only through ``A``. The bound is the largest
+``min(E, X)`` over every set ``A`` of eligible states holding the start's, over-estimated
+so that it takes few graph searches: for each choice of ``A & Y`` (at most
+:data:`MAX_ENTRY_STATES` states of ``Y``, ``2^|Y|`` choices), ``R`` is at most the nodes
+reachable from ``Src`` outside I and ``Tgt`` over states not in ``Y - A`` (monotone in
+``A``), and each other state ``x`` adds to ``E`` the entry edges with a tail at ``x`` in that
+set if ``x`` is in ``A``, and to ``X`` the exits into ``x`` if not (the edges into ``Tgt``
+nodes at ``x`` if so). Choosing the other states' membership to maximise ``min(E, X)`` is a
+two-value knapsack over a few states, solved exactly by dynamic programming over ``E``
+(capped at the bound already known). Every step over-estimates ``min(E, X)`` of the true
+``A``, so every valid cut set has flow at most the bound, and the optimum of method.md §5 is
+kept: the bound only proves a flow level empty, or tells phase 1 that the heuristic's flow
+is the maximum (``tests/test_flow_bound.py`` checks it against brute force).
+
+Only MILP-static (every cut history-independent); with ``Src`` in I there is no entry edge
+to count and no bound.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..graphs.products import Products, reachable
+
+#: States of ``Y`` (heads of entry edges) up to which the bound is computed: it takes
+#: ``2^|Y|`` graph searches. A count, so whether it runs is the same on every machine.
+MAX_ENTRY_STATES = 10
+
+
+def static_flow_bound(products: Products, eu: np.ndarray, ev: np.ndarray, known: int) -> int:
+    """An upper bound on the flow of every valid cut set of MILP-static (see the module
+    docstring), at most ``known`` (a bound already proven; returned when this one is no
+    better or does not apply).
+
+    Parameters
+    ----------
+    products
+        The product graphs (the whole G, ``Src``, I, ``Tgt``).
+    eu, ev
+        The routing model's edges (:class:`~synthesis.routing.model.ModelEdges`).
+    known
+        A proven upper bound on the flow (the heuristic's maximum flow with every group open).
+    """
+    g = products.virtual
+    inter, target = products.intermediate, products.target
+    src = int(g.initial)
+    if inter[src] or known <= 0:
+        return known
+    state = g.state.astype(np.int64)
+    n_states = products.ts.n_states
+    entry_full = ~inter[g.src] & inter[g.dst]
+    ys = np.unique(state[g.dst[entry_full]])
+    eligible = np.zeros(n_states, dtype=bool)
+    eligible[state[~inter & ~target]] = True
+    start = int(state[src])
+    free_y = ys[eligible[ys]]
+    if free_y.size > MAX_ENTRY_STATES:
+        return known
+    in_y = np.zeros(n_states, dtype=bool)
+    in_y[ys] = True
+
+    n = g.n_nodes
+    outside = ~inter & ~target
+    g_out = outside[g.src] & outside[g.dst]
+    m_entry = ~inter[eu] & inter[ev]
+    after_i = reachable(n, eu, ev, inter)
+    m_tgt = after_i[eu] & target[ev]  # last edges of routes into Tgt
+    m_from_y = after_i[eu] & in_y[state[eu]]  # candidate exits, by the state of their tail
+
+    best = 0
+    for bits in range(1 << free_y.size):
+        chosen = free_y[[(bits >> i) & 1 == 1 for i in range(free_y.size)]]
+        in_a_y = np.zeros(n_states, dtype=bool)
+        in_a_y[chosen] = True
+        out_y = in_y & ~in_a_y  # states of Y not in A
+        if out_y[start]:
+            continue  # the start's state is in A
+        allowed = eligible & ~out_y
+        e = np.flatnonzero(g_out & allowed[state[g.src]] & allowed[state[g.dst]])
+        region = reachable(n, g.src[e], g.dst[e], np.arange(n) == src)
+        value = _best_split(
+            n_states,
+            state,
+            eu,
+            ev,
+            m_entry & region[eu],
+            m_from_y & out_y[state[eu]],
+            m_tgt,
+            allowed,
+            in_y,
+            start,
+            known,
+        )
+        best = max(best, value)
+        if best >= known:
+            return known
+    return best
+
+
+def _best_split(
+    n_states: int,
+    state: np.ndarray,
+    eu: np.ndarray,
+    ev: np.ndarray,
+    entries: np.ndarray,
+    exits: np.ndarray,
+    into_tgt: np.ndarray,
+    allowed: np.ndarray,
+    in_y: np.ndarray,
+    start: int,
+    cap: int,
+) -> int:
+    """The largest ``min(E, X)`` (capped at ``cap``) over the membership in ``A`` of the states
+    outside ``Y`` (``allowed`` ones may be in ``A``, the start's is; ``A & Y`` is fixed by the
+    caller through ``allowed``).
+
+    ``entries``: model entry edges with a tail in the search region (``E`` counts those with
+    a tail state in ``A``); ``exits``: model edges from a state of ``Y - A`` after I (``X``
+    counts those with a head state outside ``Z``); ``into_tgt``: edges into ``Tgt`` after I
+    (``X`` counts those with a head state in ``Z``)."""
+    e_of = np.bincount(state[eu[entries]], minlength=n_states)
+    tg_of = np.bincount(state[ev[into_tgt]], minlength=n_states)
+    # an edge both an exit and into Tgt counts once: as an exit when its head is outside Z,
+    # as an edge into Tgt when inside
+    out_of = np.bincount(state[ev[exits]], minlength=n_states)
+    in_z_fixed = in_y  # Y is in Z whatever A is
+    base_e = 0
+    base_x = int(tg_of[in_z_fixed].sum())
+    # states of Y in A: their entry tails count (Y - A states have none in the region)
+    base_e += int(e_of[in_y & allowed].sum())
+    items: list[tuple[int, int, int]] = []  # (E if in A, X if in A, X if not in A) per free state
+    for x in np.flatnonzero((e_of > 0) | (tg_of > 0) | (out_of > 0)):
+        if in_y[x]:
+            continue
+        if x == start:
+            base_e += int(e_of[x])
+            base_x += int(tg_of[x])
+        elif allowed[x]:
+            items.append((int(e_of[x]), int(tg_of[x]), int(out_of[x])))
+        else:
+            base_x += int(out_of[x])
+    # dp[k] = the largest X with E = k (E capped at cap), -1: unreachable
+    dp = np.full(cap + 1, -1, dtype=np.int64)
+    dp[min(base_e, cap)] = base_x
+    for e_in, x_in, x_out in items:
+        nxt = np.full(cap + 1, -1, dtype=np.int64)
+        ok = np.flatnonzero(dp >= 0)
+        np.maximum.at(nxt, ok, dp[ok] + x_out)  # not in A
+        np.maximum.at(nxt, np.minimum(ok + e_in, cap), dp[ok] + x_in)  # in A
+        dp = nxt
+    ok = np.flatnonzero(dp >= 0)
+    return int(min(cap, max((min(int(k), int(dp[k])) for k in ok), default=0)))

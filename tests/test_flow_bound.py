@@ -1,0 +1,91 @@
+"""The walls' flow bound of MILP-static (synthesis/routing/flow_bound.py) never cuts off a
+valid wall set, fires where the heuristic's bound is loose, and settles phase 1 on a 10x10 grid.
+
+* on small static grids of the exhaustive-optimality generators (walls both ways, one-way
+  walls, safety, sequenced and one-cell tests), the bound is at least the largest flow of
+  any valid wall set, found by enumerating every wall set (``tests/test_optimality.py``);
+  the instances where it lies below the heuristic's bound are counted, so the check cannot
+  pass vacuously (they are most of the routable ones);
+* it is ``None`` outside MILP-static;
+* on a random 10x10 reachability grid it is 2 where the heuristic's bound is 4, and the
+  heuristic's flow 2 is then proven the maximum without a search.
+"""
+
+from __future__ import annotations
+
+import pytest
+from test_optimality import grid_instance, static_optimum, view_of
+
+from synthesis.graphs.consistency import check_consistency
+from synthesis.model.errors import InconsistentProblem
+from synthesis.pipeline import SynthesisOptions, milp_options, synthesize
+from synthesis.problems.problem import Problem, build_graphs
+from synthesis.problems.random_grid import first_consistent
+from synthesis.routing.model import build_model
+
+
+def _bound_and_truth(problem: Problem) -> tuple[int, int, int] | None:
+    """``(walls' bound, heuristic's bound, largest flow of a valid wall set)``, ``None`` when
+    the model is not built (the problem is inconsistent on its graphs)."""
+    _, products = build_graphs(problem)
+    try:
+        rm = build_model(products, milp_options(problem, SynthesisOptions()), {}, check_consistency(products))
+    except InconsistentProblem:
+        return None  # inconsistent, or an unrestrictable move from the start to the goal
+    assert rm.flow_bound is not None
+    guess = rm.edges.guess(products, fixed_open=rm.reductions.fixed_open)
+    best, _ = static_optimum(view_of(products), problem.system, problem.bidirectional_cuts)
+    return rm.flow_bound, guess.upper_bound, 0 if best is None else best.flow
+
+
+def _check(make: list[Problem]) -> tuple[int, int]:
+    """Assert the bound on every instance; return (instances compared, instances where it fires)."""
+    compared = fired = 0
+    for problem in make:
+        got = _bound_and_truth(problem)
+        if got is None:
+            continue
+        bound, heuristic, truth = got
+        assert truth <= bound <= heuristic, f"{problem.name}: bound {bound}, heuristic {heuristic}, largest flow {truth}"
+        compared += 1
+        fired += bound < heuristic
+    return compared, fired
+
+
+@pytest.mark.parametrize(
+    ("rows", "cols", "base", "both_ways"),
+    [(3, 3, 100, True), (2, 3, 300, False), (3, 3, 5000, True)],
+)
+def test_bound_never_below_a_valid_wall_set(rows: int, cols: int, base: int, both_ways: bool) -> None:
+    compared, fired = _check([grid_instance(base + s, rows, cols, "static", both_ways) for s in range(30)])
+    assert compared >= 20 and fired >= 8, (compared, fired)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("rows", "cols", "base", "both_ways"),
+    [(3, 3, 6000, True), (2, 3, 7000, False), (2, 4, 8000, True)],
+)
+def test_bound_never_below_a_valid_wall_set_sweep(rows: int, cols: int, base: int, both_ways: bool) -> None:
+    compared, fired = _check([grid_instance(base + s, rows, cols, "static", both_ways) for s in range(200)])
+    assert compared >= 100 and fired >= 30, (compared, fired)
+
+
+def test_no_bound_outside_milp_static() -> None:
+    problem = grid_instance(1100, 3, 3, "reactive", None)
+    _, products = build_graphs(problem)
+    rm = build_model(products, milp_options(problem, SynthesisOptions()), {}, check_consistency(products))
+    assert rm.flow_bound is None
+
+
+def test_settles_the_flow_level_of_a_10x10_grid() -> None:
+    _, problem, _ = first_consistent(10, "reachability", 1, 0, "static")
+    _, products = build_graphs(problem)
+    rm = build_model(products, milp_options(problem, SynthesisOptions()), {}, check_consistency(products))
+    heuristic = rm.edges.guess(products, fixed_open=rm.reductions.fixed_open)
+    assert (heuristic.flow, heuristic.upper_bound, rm.flow_bound) == (2, 4, 2)
+    assert rm.guess(products).upper_bound == 2
+    # phase 1 is proven by the bound; phase 2 on HiGHS under a deterministic budget
+    test = synthesize(problem, SynthesisOptions(backend="highs", node_limit=2000))
+    assert test.routing.flow == 2 and test.checks.bypass_flow == 0
+    assert test.routing.status == "optimal"
