@@ -32,10 +32,11 @@ def _bound_and_truth(problem: Problem) -> tuple[int, int, int] | None:
         rm = build_model(products, milp_options(problem, SynthesisOptions()), {}, check_consistency(products))
     except InconsistentProblem:
         return None  # inconsistent, or an unrestrictable move from the start to the goal
-    assert rm.flow_bound is not None
     guess = rm.edges.guess(products, fixed_open=rm.reductions.fixed_open)
     best, _ = static_optimum(view_of(products), problem.system, problem.bidirectional_cuts)
-    return rm.flow_bound, guess.upper_bound, 0 if best is None else best.flow
+    bound = guess.upper_bound if rm.flow_bound is None else rm.flow_bound  # None: not below the heuristic's
+    assert bound < guess.upper_bound or rm.flow_bound is None
+    return bound, guess.upper_bound, 0 if best is None else best.flow
 
 
 def _check(make: list[Problem]) -> tuple[int, int]:

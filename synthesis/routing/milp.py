@@ -285,6 +285,11 @@ def _phase1(
     cost = np.zeros(rm.n_col)
     cost[rm.cols.flow[rm.out_src]] = 1.0
     h.changeColsCost(rm.n_col, np.arange(rm.n_col, dtype=np.int32), cost)
+    if rm.flow_bound is not None:
+        # MILP-static's walls' bound (synthesis.routing.flow_bound), below the LP's: as the
+        # row F <= bound, HiGHS stops as soon as a test attains it (valid for phase 2 too)
+        out = rm.cols.flow[rm.out_src].astype(np.int32)
+        h.addRow(-highspy.kHighsInf, rm.flow_bound + 0.5, out.size, out, np.ones(out.size))
     # a route-seeded start is kept as the fallback but not handed to HiGHS: from
     # it, HiGHS's neighbourhood heuristics stay near the lone route (mars-exploration:
     # no flow 2 in 300 s, against 170 s from scratch)

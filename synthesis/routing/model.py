@@ -458,7 +458,7 @@ class RoutingModel:
     rows: Rows
     out_src: np.ndarray  # model edges leaving Src: their flow is F
     reductions: Reductions  # the cut groups fixed open (d = 0) before the solve
-    flow_bound: int | None = None  # MILP-static: the walls' flow bound (synthesis.routing.flow_bound)
+    flow_bound: int | None = None  # MILP-static: the walls' flow bound where below the heuristic's (synthesis.routing.flow_bound)
 
     def guess(self, products: Products, traps: Callable[[np.ndarray], bool] | None = None) -> RoutingGuess:
         """The routing heuristic on this model: its edges, no group fixed open cut; its flow
@@ -532,14 +532,17 @@ def build_model(
 
 
 def model_flow_bound(products: Products, options: MilpOptions, me: ModelEdges) -> int | None:
-    """MILP-static: :func:`~synthesis.routing.flow_bound.static_flow_bound` below the maximum
-    flow with every group open (the heuristic's bound); ``None`` in the other modes, where
-    cuts depend on the history and the bound's proof does not hold (and with ``options.flow_bound`` off)."""
+    """MILP-static: :func:`~synthesis.routing.flow_bound.static_flow_bound` where it is below
+    the maximum flow with every group open (the heuristic's bound), else ``None``; ``None``
+    in the other modes too, where cuts depend on the history and the bound's proof does not
+    hold (and with ``options.flow_bound`` off). So a model whose bound does not improve is
+    the model it was without this bound."""
     if options.mode != "static" or not options.flow_bound:
         return None
     g = products.virtual
     known = flow_upper_bound(g.n_nodes, g.initial, me.eu, me.ev, ~(me.c5 & products.target[me.ev]), products.target)
-    return static_flow_bound(products, me.eu, me.ev, known)
+    bound = static_flow_bound(products, me.eu, me.ev, known)
+    return bound if bound < known else None
 
 
 def group_reductions(
