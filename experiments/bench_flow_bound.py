@@ -80,6 +80,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--sizes", type=int, nargs="+", default=[10])
     ap.add_argument("--families", nargs="+", default=list(DEFAULT_FAMILIES), metavar="FAMILY:N")
     ap.add_argument("--instances", type=int, default=5, help="seeds 0..N-1")
+    ap.add_argument("--seeds", type=int, nargs="+", default=None, help="these seeds instead of 0..N-1")
     ap.add_argument("--solve", action="store_true", help="also solve with and without the bound")
     ap.add_argument("--backend", default="auto", choices=BACKENDS)
     ap.add_argument("--work-limit", type=float, default=None, help="CP-SAT deterministic seconds per phase")
@@ -96,7 +97,7 @@ def main(argv: list[str] | None = None) -> None:
     for size in args.sizes:
         for spec in args.families:
             family, n = spec.split(":")
-            for seed in range(args.instances):
+            for seed in args.seeds if args.seeds is not None else range(args.instances):
                 _, problem, _ = first_consistent(size, family, int(n), seed, "static")
                 b = bounds(problem)
                 total += 1
