@@ -167,7 +167,7 @@ def test_reasons_keep_the_answer_builtins(name: str) -> None:
     _same_answer(load_problem(name))
 
 
-@pytest.mark.skipif(not cpsat.available(), reason="OR-Tools is not installed (the extra flowtest[cpsat])")
+@pytest.mark.skipif(not cpsat.available(), reason="OR-Tools is not installed (a core dependency: a broken install)")
 def test_reasons_keep_the_answer_on_cpsat() -> None:
     """The exclusion rows with open groups reach CP-SAT through the same model."""
     _same_answer(load_problem("maze2"), backend="cpsat")

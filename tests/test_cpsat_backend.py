@@ -1,4 +1,4 @@
-"""The CP-SAT solver backend (``backend="cpsat"``, the extra ``flowtest[cpsat]``; issue 18 pt 2).
+"""The CP-SAT solver backend (``backend="cpsat"``, OR-Tools CP-SAT, a core dependency; issue 18 pt 2).
 
 Its exhaustive optimality is ``tests/test_optimality.py`` (parametrized over the installed
 backends). Here: the same answers as HiGHS on built-ins both prove, determinism under a

@@ -1,8 +1,8 @@
 """What decides a synthesized test besides its problem: versions and options, as a cache key.
 
 A problem, its options and the versions of FlowTest and of the libraries that compute the
-answer (HiGHS through highspy, OR-Tools CP-SAT when the ``cpsat`` extra is installed, NumPy,
-SciPy) determine a test when every budget is
+answer (HiGHS through highspy, OR-Tools CP-SAT, PySCIPOpt when the ``scip`` extra is installed,
+NumPy, SciPy) determine a test when every budget is
 deterministic (design.md, "Determinism"). Anything cached or shipped is filed under
 :func:`cache_key` of those inputs, so an answer computed under another version is never
 served as this version's: it is recomputed.
@@ -46,8 +46,8 @@ def source_digest() -> str:
 @lru_cache(maxsize=1)
 def versions() -> dict[str, str]:
     """The versions an answer depends on: FlowTest (package and synthesis sources), highspy,
-    OR-Tools (``"unknown"`` when not installed: the ``"auto"`` backend may pick CP-SAT where
-    it is, and an explicit ``backend`` is part of the options), PySCIPOpt (the ``scip`` extra's
+    OR-Tools (a core dependency; ``"unknown"`` only in a broken install, where ``"auto"``
+    falls back to HiGHS; an explicit ``backend`` is part of the options), PySCIPOpt (the ``scip`` extra's
     solver, ``"unknown"`` when not installed), NumPy and SciPy."""
     return {
         "flowtest": _dist_version("flowtest"),
