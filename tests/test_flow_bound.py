@@ -6,6 +6,8 @@ valid wall set, fires where the heuristic's bound is loose, and settles phase 1 
   any valid wall set, found by enumerating every wall set (``tests/test_optimality.py``);
   the instances where it lies below the heuristic's bound are counted, so the check cannot
   pass vacuously (they are most of the routable ones);
+* the same on small random graphs that are not grids (one-way and two-way walls, safety
+  objectives, unrestrictable moves: ``test_optimality.graph_instance`` solved as MILP-static);
 * it is ``None`` outside MILP-static;
 * on a random 10x10 reachability grid it is 2 where the heuristic's bound is 4, and the
   heuristic's flow 2 is then proven the maximum without a search.
@@ -13,8 +15,10 @@ valid wall set, fires where the heuristic's bound is loose, and settles phase 1 
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import pytest
-from test_optimality import grid_instance, static_optimum, view_of
+from test_optimality import graph_instance, grid_instance, static_optimum, view_of
 
 from synthesis.graphs.consistency import check_consistency
 from synthesis.model.errors import InconsistentProblem
@@ -70,6 +74,13 @@ def test_bound_never_below_a_valid_wall_set(rows: int, cols: int, base: int, bot
 def test_bound_never_below_a_valid_wall_set_sweep(rows: int, cols: int, base: int, both_ways: bool) -> None:
     compared, fired = _check([grid_instance(base + s, rows, cols, "static", both_ways) for s in range(200)])
     assert compared >= 100 and fired >= 30, (compared, fired)
+
+
+@pytest.mark.parametrize(("base", "both_ways"), [(9000, False), (9500, True)])
+def test_bound_never_below_a_valid_wall_set_on_graphs(base: int, both_ways: bool) -> None:
+    problems = [replace(graph_instance(base + s), kind="static", bidirectional_cuts=both_ways) for s in range(60)]
+    compared, fired = _check(problems)
+    assert compared >= 30 and fired >= 4, (compared, fired)
 
 
 def test_no_bound_outside_milp_static() -> None:

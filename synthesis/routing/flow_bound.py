@@ -16,7 +16,12 @@ and let
 * ``Y`` be the states of the heads of G's *entry edges* (tail outside I, head in I), a set fixed
   by G alone, and ``Z = A | Y``.
 
-Facts, for a valid ``S`` with ``Src`` outside I:
+``R``, ``A``, ``Y`` and the eligible states below are taken over the whole G, not the model's
+edges: L1 reasons about open edges of G that the model may have pruned (a head in I that
+reaches no ``Tgt``). The counted entries and exits are model edges, which routes use.
+
+Facts, for a valid ``S`` with ``Src`` outside I and outside ``Tgt`` (with ``Src`` in ``Tgt``
+no model edge leaves ``Src``, the known bound is 0 and it is returned as it is):
 
 * (L0) ``R`` holds no ``Tgt`` node: a shortest open walk from ``Src`` to ``Tgt`` outside I
   would be a bypass walk of the model (its nodes reach ``Tgt``, so the model keeps them).
@@ -37,11 +42,12 @@ Facts, for a valid ``S`` with ``Src`` outside I:
   Both edges come after an I node. So ``F <= X``, the number of model edges with a tail
   reachable from I that are of either kind.
 
-``E`` and ``X`` depend on ``S`` only through ``A``. The bound is the largest
+``E`` depends on ``S`` through ``R``, ``X`` through ``A``; once ``R`` is over-estimated by a
+region that depends on ``A`` alone (below), both do. The bound is the largest
 ``min(E, X)`` over every set ``A`` of eligible states holding the start's, over-estimated
 so that it takes few graph searches: for each choice of ``A & Y`` (at most
 :data:`MAX_ENTRY_STATES` states of ``Y``, ``2^|Y|`` choices), ``R`` is at most the nodes
-reachable from ``Src`` outside I and ``Tgt`` over states not in ``Y - A`` (monotone in
+reachable from ``Src`` outside I and ``Tgt`` over eligible states not in ``Y - A`` (monotone in
 ``A``), and each other state ``x`` adds to ``E`` the entry edges with a tail at ``x`` in that
 set if ``x`` is in ``A``, and to ``X`` the exits into ``x`` if not (the edges into ``Tgt``
 nodes at ``x`` if so). Choosing the other states' membership to maximise ``min(E, X)`` is a
