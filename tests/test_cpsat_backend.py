@@ -28,7 +28,7 @@ from synthesis.artifacts.summary import summary_of, without_timings
 from synthesis.model.errors import ProblemError
 from synthesis.pipeline import SynthesisOptions, synthesize
 from synthesis.problems.load import load_problem
-from synthesis.routing import cpsat, model
+from synthesis.routing import cpsat, model, solver_control
 from synthesis.routing.solver_control import SolveControl
 
 FLOWTEST = Path(sys.executable).parent / "flowtest"
@@ -194,7 +194,7 @@ def test_json_stdout_only_with_cpsat() -> None:
 def test_missing_ortools_is_one_clear_error(capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
     """``--backend cpsat`` without OR-Tools: exit 2, one ``error:`` line naming the package,
     before any work; the library raises :class:`ProblemError` with the same words."""
-    monkeypatch.setattr(cpsat, "find_spec", lambda name: None)
+    monkeypatch.setattr(solver_control, "find_spec", lambda name: None)
     code = main(["synthesize", "small-reactive", "--backend", "cpsat", "--json"])
     out, err = capsys.readouterr()
     assert code == 2 and out == ""

@@ -18,7 +18,7 @@ from synthesis.artifacts.summary import summary_of, without_timings
 from synthesis.model.errors import ProblemError
 from synthesis.pipeline import SynthesisOptions, milp_options, synthesize
 from synthesis.problems.problem import build_graphs
-from synthesis.routing import scip
+from synthesis.routing import scip, solver_control
 from synthesis.routing.milp import solve_routing
 from synthesis.routing.model import Exclusion
 from synthesis.routing.solver_control import SolveControl, solves_running
@@ -102,6 +102,7 @@ def test_a_stop_request_ends_a_scip_solve_within_a_second() -> None:
 
 def test_missing_extra_is_one_clear_error(monkeypatch: pytest.MonkeyPatch) -> None:
     """Without PySCIPOpt, asking for the backend is a :class:`ProblemError` naming the extra."""
-    monkeypatch.setattr(scip, "available", lambda: False)
+    real = solver_control.find_spec
+    monkeypatch.setattr(solver_control, "find_spec", lambda name: None if name == "pyscipopt" else real(name))
     with pytest.raises(ProblemError, match=r"flowtest\[scip\]"):
         synthesize(load_problem("example1"), SynthesisOptions(backend="scip"))

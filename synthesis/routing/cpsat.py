@@ -28,16 +28,13 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from importlib.metadata import PackageNotFoundError, version
-from importlib.util import find_spec
 from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
 
-from ..model.errors import ProblemError
 from .cpsat_pool import WORKER, close_idle_workers, give_back, prestart, take_worker
-from .solver_control import POLL, SolveControl, SolveStatus
+from .solver_control import POLL, OptionalSolver, SolveControl, SolveStatus
 
 MISSING = "the cpsat backend needs OR-Tools, which is not installed: pip install 'ortools>=9.15,<9.16' (see docs/install.md)"
 """The one-line error when ``--backend cpsat`` is asked for without the extra."""
@@ -63,23 +60,10 @@ reaches a flow (a random 5x5 grid: 1.5 deterministic seconds where the LP bound 
 it only follows the default search."""
 
 
-def available() -> bool:
-    """Whether OR-Tools is installed (without importing it: it cannot share a process with highspy)."""
-    return find_spec("ortools") is not None
-
-
-def require() -> None:
-    """Raise :class:`ProblemError` (:data:`MISSING`) when OR-Tools is not installed."""
-    if not available():
-        raise ProblemError(MISSING)
-
-
-def ortools_version() -> str | None:
-    """The installed OR-Tools version (``None``: not installed); part of the cache key."""
-    try:
-        return version("ortools")
-    except PackageNotFoundError:
-        return None
+_ORTOOLS = OptionalSolver("ortools", MISSING)
+available = _ORTOOLS.available
+require = _ORTOOLS.require
+ortools_version = _ORTOOLS.version
 
 
 def _ints(a: Any) -> tuple[str, bytes]:

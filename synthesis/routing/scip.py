@@ -40,39 +40,22 @@ from __future__ import annotations
 
 import importlib
 import time
-from importlib.metadata import PackageNotFoundError, version
-from importlib.util import find_spec
 from typing import Any
 
 import numpy as np
 
-from ..model.errors import ProblemError
 from .cover_rows import Row
-from .solver_control import SolveStatus, run_in_solver_thread, stdout_guard
+from .solver_control import OptionalSolver, SolveStatus, run_in_solver_thread, stdout_guard
 from .wall_cover import _Level, _Search
 
 MISSING = "the scip backend needs PySCIPOpt, which is not installed: pip install 'flowtest[scip]' (see docs/install.md)"
 """The one-line error when ``--backend scip`` is asked for without the extra."""
 
 
-def available() -> bool:
-    """Whether PySCIPOpt is installed (without importing it)."""
-    return find_spec("pyscipopt") is not None
-
-
-def require() -> None:
-    """Raise :class:`ProblemError` (:data:`MISSING`) when PySCIPOpt is not installed."""
-    if not available():
-        raise ProblemError(MISSING)
-
-
-def scip_version() -> str | None:
-    """The installed PySCIPOpt version (``None``: not installed); part of the cache key
-    (each PySCIPOpt wheel bundles one SCIP release)."""
-    try:
-        return version("pyscipopt")
-    except PackageNotFoundError:
-        return None
+_PYSCIPOPT = OptionalSolver("pyscipopt", MISSING)
+available = _PYSCIPOPT.available
+require = _PYSCIPOPT.require
+scip_version = _PYSCIPOPT.version  # each PySCIPOpt wheel bundles one SCIP release
 
 
 def _pyscipopt() -> Any:

@@ -28,10 +28,13 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from importlib.metadata import PackageNotFoundError, version
+from importlib.util import find_spec
 from typing import Any
 
 import highspy
 import numpy as np
+
+from ..model.errors import ProblemError
 
 #: Seconds the main thread waits for HiGHS to honour a stop request before it gives up
 #: on it and raises ``KeyboardInterrupt`` anyway (the solve thread is a daemon).
@@ -281,6 +284,34 @@ def run_in_solver_thread(
         raise failure[0]
 
 
+@dataclass(frozen=True)
+class OptionalSolver:
+    """A solver package a backend needs (OR-Tools for ``cpsat``, PySCIPOpt for ``scip``):
+    whether it is installed, a one-line error when it is asked for and missing, its version.
+    Checked without importing the package (OR-Tools cannot share a process with highspy;
+    PySCIPOpt costs 0.1 s to import)."""
+
+    package: str
+    missing: str  # the error message when the backend is asked for without the package
+
+    def available(self) -> bool:
+        """Whether the package is installed."""
+        return find_spec(self.package) is not None
+
+    def require(self) -> None:
+        """Raise :class:`~synthesis.model.errors.ProblemError` (:attr:`missing`) when the
+        package is not installed."""
+        if not self.available():
+            raise ProblemError(self.missing)
+
+    def version(self) -> str | None:
+        """The installed version (``None``: not installed); part of the cache key."""
+        try:
+            return version(self.package)
+        except PackageNotFoundError:
+            return None
+
+
 def solver_version() -> str:
     """The version of the solver package answers depend on (``highspy``, e.g. ``"1.15.1"``):
     recorded with shipped artifacts, and part of every cache key."""
@@ -359,6 +390,7 @@ def status_line(control: SolveControl | None) -> str | None:
 
 __all__ = [
     "Clock",
+    "OptionalSolver",
     "SolveControl",
     "SolveStatus",
     "run_highs",
