@@ -168,11 +168,9 @@ def _best_split(
     # an edge both an exit and into Tgt counts once: as an exit when its head is outside Z,
     # as an edge into Tgt when inside
     out_of = np.bincount(state[ev[exits]], minlength=n_states)
-    in_z_fixed = in_y  # Y is in Z whatever A is
-    base_e = 0
-    base_x = int(tg_of[in_z_fixed].sum())
+    base_x = int(tg_of[in_y].sum())  # Y is in Z whatever A is
     # states of Y in A: their entry tails count (Y - A states have none in the region)
-    base_e += int(e_of[in_y & allowed].sum())
+    base_e = int(e_of[in_y & allowed].sum())
     items: list[tuple[int, int, int]] = []  # (E if in A, X if in A, X if not in A) per free state
     for x in np.flatnonzero((e_of > 0) | (tg_of > 0) | (out_of > 0)):
         if in_y[x]:

@@ -60,6 +60,18 @@ def flow_upper_bound(n: int, src: int, eu: np.ndarray, ev: np.ndarray, usable: n
     return int(maximum_flow(cap, src, n).flow_value)
 
 
+def usable_edges(c5: np.ndarray, ev: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """``bool`` per model edge: the heuristic's flows and its upper bound may use it (every
+    edge but the c5 edges into ``Tgt``)."""
+    out: np.ndarray = ~(c5 & target[ev])
+    return out
+
+
+def open_flow_bound(n: int, src: int, eu: np.ndarray, ev: np.ndarray, c5: np.ndarray, target: np.ndarray) -> int:
+    """The heuristic's flow upper bound: the maximum flow with every group open."""
+    return flow_upper_bound(n, src, eu, ev, usable_edges(c5, ev, target), target)
+
+
 def _csr(keys: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
     order = np.argsort(keys, kind="stable")
     ptr = np.zeros(n + 1, dtype=np.int64)
@@ -104,7 +116,7 @@ def guess_routing(
         route and pairs of routes, and the largest flow is kept.
     """
     m = eu.size
-    usable = ~(c5 & target[ev])
+    usable = usable_edges(c5, ev, target)
     upper = flow_upper_bound(n, src, eu, ev, usable, target)
     out_ptr, out_order = _csr(eu, n)
     in_ptr, in_order = _csr(ev, n)

@@ -23,7 +23,7 @@ from ..graphs.products import Products, reachable
 from ..model.errors import InconsistentProblem
 from ..problems.problem import TIE_PLACES
 from .flow_bound import static_flow_bound
-from .heuristic import RouteSeed, RoutingGuess, flow_upper_bound, guess_routing
+from .heuristic import RouteSeed, RoutingGuess, guess_routing, open_flow_bound
 from .reductions import Reductions, reduce_groups
 from .solver_control import SolveControl
 
@@ -540,7 +540,7 @@ def model_flow_bound(products: Products, options: MilpOptions, me: ModelEdges) -
     if options.mode != "static" or not options.flow_bound:
         return None
     g = products.virtual
-    known = flow_upper_bound(g.n_nodes, g.initial, me.eu, me.ev, ~(me.c5 & products.target[me.ev]), products.target)
+    known = open_flow_bound(g.n_nodes, g.initial, me.eu, me.ev, me.c5, products.target)
     bound = static_flow_bound(products, me.eu, me.ev, known)
     return bound if bound < known else None
 
