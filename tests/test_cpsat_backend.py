@@ -25,10 +25,11 @@ from test_optimality import compare_reactive, compare_static, graph_instance, gr
 
 from experiments.cli import main
 from synthesis.artifacts.summary import summary_of, without_timings
-from synthesis.model.errors import ProblemError
+from synthesis.model.errors import InconsistentProblem, ProblemError
 from synthesis.pipeline import SynthesisOptions, synthesize
 from synthesis.problems.load import load_problem
-from synthesis.routing import cpsat, model, solver_control
+from synthesis.problems.random_grid import first_consistent
+from synthesis.routing import cpsat, milp, model, solver_control
 from synthesis.routing.solver_control import SolveControl
 
 FLOWTEST = Path(sys.executable).parent / "flowtest"
@@ -79,16 +80,20 @@ def test_deterministic_budget_gives_the_same_test() -> None:
 
 
 @needs_ortools
-def test_the_search_at_the_flow_bound_keeps_the_optimum(monkeypatch: pytest.MonkeyPatch) -> None:
-    """Phase 1's feasibility search for a test at the proven flow bound
-    (``cpsat.MAX_FLOW_SEARCH``, which follows the default search where that does not prove
-    the maximum flow within ``cpsat.PROOF_WORK``) forced on every solve of exhaustive
-    comparisons: the same optima as the brute force, through bounds found and bounds
-    proven out. The walls' flow bound of MILP-static is switched off here: it makes the
-    bound tight on most of these instances, so no bound would be proven out (the
-    exhaustive comparisons of tests/test_optimality.py run with it)."""
+def test_the_level_search_keeps_the_optimum(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Phase 1's feasibility solves level by level (``milp._reach_level``: the default
+    search below the top level, ``cpsat.MAX_FLOW_SEARCH`` and the default search in turn at
+    it), which follow the default search where that does not prove the maximum flow within
+    ``cpsat.PROOF_WORK``, forced on every solve of exhaustive comparisons: the same optima as
+    the brute force, through levels found and levels proven empty. The heuristic's test is
+    withheld (the levels start at 1, so every level up to the maximum is found by a search;
+    from the heuristic's flow, which is the maximum on most of these instances, only the
+    level above would be searched) and the walls' flow bound of MILP-static is switched off
+    (it makes the bound tight on most of these instances, so no level would be proven
+    empty; the exhaustive comparisons of tests/test_optimality.py run with both)."""
     monkeypatch.setattr(cpsat, "PROOF_WORK", 1e-9)
     monkeypatch.setattr(model, "model_flow_bound", lambda *args: None)
+    monkeypatch.setattr(milp, "_guess_solution", lambda *args: None)
     outcomes: list[str] = []
     real = cpsat.CpSatSession.solve
 
@@ -104,6 +109,25 @@ def test_the_search_at_the_flow_bound_keeps_the_optimum(monkeypatch: pytest.Monk
         compare_static(grid_instance(300 + seed, 2, 3, "static", False), max_sets=1 << 14, backend="cpsat")
         assert compare_reactive(graph_instance(500 + seed), backend="cpsat")
     assert "found" in outcomes and "infeasible" in outcomes, outcomes
+
+
+@needs_ortools
+@pytest.mark.slow
+def test_phase1_proves_a_level_below_the_bound_empty() -> None:
+    """Two random 5x5 reaction grids (|AP| = 5, MILP-static) on which phase 1's search at
+    the flow bound (3) found nothing within the paper's 600 s in session 9: seed 1, whose
+    heuristic test has flow 1, is now proven optimal (the level search proves flow 2
+    impossible and phase 2 proves the fewest cuts), and seed 3, where the heuristic finds no
+    test, has none (level 1 proven impossible: unroutable). Deterministic budgets; about
+    15 s."""
+    _, problem, _ = first_consistent(5, "reaction", 3, 1, "static")
+    test = synthesize(problem, SynthesisOptions(backend="cpsat", work_limit=20))
+    assert test.routing.status == "optimal" and test.routing.flow == 1
+    assert test.checks.ok and test.checks.bypass_flow == 0
+    _, problem, _ = first_consistent(5, "reaction", 3, 3, "static")
+    with pytest.raises(InconsistentProblem) as err:
+        synthesize(problem, SynthesisOptions(backend="cpsat", work_limit=20))
+    assert err.value.reason == "unroutable"
 
 
 @needs_ortools

@@ -18,8 +18,9 @@ as arrays (plain bytes: the child loads no NumPy); the child keeps it between th
 worker, a fixed ``random_seed``, and as a budget CP-SAT's deterministic time
 (``MilpOptions.work_limit``); a wall-clock limit only when the user asks for one
 (``time_limit`` / ``after_first``), and then the answer is reported non-deterministic as
-with HiGHS. Phase 1 may add feasibility solves with another search (:data:`MAX_FLOW_SEARCH`,
-see :func:`synthesis.routing.milp._phase1_cpsat`). Ctrl-C (or a stop request through :class:`SolveControl`) kills the child at
+with HiGHS. Phase 1 may add feasibility solves level by level, with the default search and at
+the top level with another one (:data:`MAX_FLOW_SEARCH`, see
+:func:`synthesis.routing.milp._phase1_cpsat`). Ctrl-C (or a stop request through :class:`SolveControl`) kills the child at
 once and is raised as ``KeyboardInterrupt``. Every solution the child returns is checked
 against the model here (bounds, rows, integrality, objective) before it is used.
 """
@@ -49,6 +50,11 @@ flow before phase 1 turns to :data:`MAX_FLOW_SEARCH` (see
 :func:`synthesis.routing.milp._phase1_cpsat`): enough for refueling and the random 5x5 grids,
 which it proves in 0.01-0.1."""
 
+LEVEL_WORK = 1.0
+"""Deterministic seconds of each of phase 1's first two feasibility solves at the top flow
+level (:data:`MAX_FLOW_SEARCH`, then the default search; see
+:func:`synthesis.routing.milp._reach_level`), doubled after both ran out without an answer."""
+
 MAX_FLOW_SEARCH: dict[str, Any] = {"linearization_level": 0, "search_branching": "PORTFOLIO_WITH_QUICK_RESTART_SEARCH"}
 """CP-SAT's search for phase 1 (maximum flow): no LP relaxation, and quick restarts that
 alternate CP-SAT's branching heuristics. Finding a wall set that lets the flow through is a
@@ -56,8 +62,10 @@ search for a solution, which the weak LP bound (docs/benchmarks.md) does not gui
 on mars-exploration (docs/benchmarks.md, "CP-SAT as a routing backend"), a flow-2 wall set in
 5-35 deterministic seconds (random seeds 0-3; 7.8 from the heuristic's hint with seed 0),
 against none in 100 with CP-SAT's default search. It is bad at proving that no wall set
-reaches a flow (a random 5x5 grid: 1.5 deterministic seconds where the LP bound takes 0.01), so
-it only follows the default search."""
+reaches a flow (a random 5x5 grid: 1.5 deterministic seconds where the LP bound takes 0.01;
+random 5x5 reaction grids' flow 2: not within 600 s, where the default search takes 1-30), so
+it only follows the default search, and only at the top flow level, taking turns with the
+default search there."""
 
 
 _ORTOOLS = OptionalSolver("ortools", MISSING)
