@@ -195,6 +195,7 @@ class CpSatSession:
         flow: int | None = None,
         search: dict[str, Any] | None = None,
         reach: float | None = None,
+        stop_at: float | None = None,
     ) -> CpSatAnswer:
         """Optimise ``cost . x`` (integral) from ``hint`` (used only if it satisfies the
         model), under the budgets (see the module docstring), and check the answer.
@@ -203,14 +204,16 @@ class CpSatSession:
         such as :data:`MAX_FLOW_SEARCH`. With ``reach``, a feasibility solve instead: some
         solution of objective at least ``reach`` (at most, minimising), its status
         ``"feasible"`` (found), ``"infeasible"`` (proven none) or ``"unknown"``; the row
-        is not kept.
+        is not kept. With ``stop_at`` (minimising), the search stops at its first solution of
+        objective at most ``stop_at`` (a proven lower bound: that solution is optimal).
 
         Raises ``KeyboardInterrupt`` on Ctrl-C or a stop request (the child is killed)."""
         if hint is not None and self.arrays.violation(hint) > FEASIBILITY_TOLERANCE:
             hint = None
         params = {"random_seed": int(random_seed), "deterministic_time": work_limit, "seconds": seconds,
                   "after_first": after_first, "rel_gap": float(rel_gap), "first_at": 1.0,
-                  "search": dict(search or {}), "reach": None if reach is None else float(reach)}
+                  "search": dict(search or {}), "reach": None if reach is None else float(reach),
+                  "stop_at": None if stop_at is None else float(stop_at)}
         sense = "max" if maximize else "min"
         t0 = time.perf_counter()
         if self.control is not None:

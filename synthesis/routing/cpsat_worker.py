@@ -161,7 +161,8 @@ class CpSatModel:
         ``rel_gap``; ``search`` (CP-SAT parameters by name, an enum's value by its name);
         ``reach`` (not ``None``: a feasibility solve on a copy of the model, for a solution
         of objective at least ``reach``, at most when minimising; the copy's extra row and
-        missing objective do not touch the kept model).
+        missing objective do not touch the kept model); ``stop_at`` (minimising: stop at the
+        first solution of objective at most this, a proven lower bound).
         """
         self._set_objective(cost, maximize)
         self._set_hint(hint)
@@ -185,6 +186,9 @@ class CpSatModel:
         solver = cmh.SolveWrapper()
         solver.set_parameters(p)
         watch = _Watch(solver, out, maximize, after_first, first_at, None if reach is None else float(reach))
+        stop_at = params.get("stop_at")
+        if stop_at is not None and not maximize:
+            watch.stop_at = float(stop_at)
         solver.add_solution_callback(watch.callback)
         solver.add_best_bound_callback(watch.on_bound)
         timers = watch.start(seconds)
@@ -261,6 +265,7 @@ class _Watch:
         self.best: float | None = None
         self.bound: float | None = None
         self.timers: list[threading.Timer] = []
+        self.stop_at: float | None = None  # minimising: stop at a solution this good (a proven bound)
         self._lock = threading.Lock()
         watch = self
 
@@ -291,6 +296,8 @@ class _Watch:
                 t.daemon = True
                 t.start()
                 self.timers.append(t)
+            if self.stop_at is not None and objective <= self.stop_at + 1e-9:
+                self.solver.stop_search()
             self._report()
 
     def on_bound(self, bound: float) -> None:

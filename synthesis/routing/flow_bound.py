@@ -63,6 +63,9 @@ to count and no bound.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from dataclasses import dataclass
+
 import numpy as np
 
 from ..graphs.products import Products, reachable
@@ -70,6 +73,27 @@ from ..graphs.products import Products, reachable
 #: States of ``Y`` (heads of entry edges) up to which the bound is computed: it takes
 #: ``2^|Y|`` graph searches. A count, so whether it runs is the same on every machine.
 MAX_ENTRY_STATES = 10
+
+
+@dataclass(frozen=True)
+class EntryChoice:
+    """One choice of ``A & Y`` in the bound's maximisation, with what the bound derives from it.
+
+    ``in_a_y`` (``bool`` per state of T): the states of ``Y`` in ``A``; ``out_y``: those of
+    ``Y - A``; ``allowed``: the states that may be in ``A`` (eligible, not in ``Y - A``);
+    ``region`` (``bool`` per node of G): the over-estimate of ``R`` (the nodes ``Src`` reaches
+    outside I and ``Tgt`` over ``allowed`` states); ``flow``: the largest ``min(E, X)`` over
+    every ``A`` with this ``A & Y``, capped at the known bound; ``split``: ``E`` and ``X`` by
+    the other states' membership (:class:`Split`). Every valid cut set's ``A``
+    has ``R`` inside ``region`` and flow at most ``flow`` for its own ``A & Y``.
+    (:mod:`synthesis.routing.cut_bound` reuses the choices for the cost of the walls.)"""
+
+    in_a_y: np.ndarray
+    out_y: np.ndarray
+    allowed: np.ndarray
+    region: np.ndarray
+    flow: int
+    split: Split
 
 
 def static_flow_bound(products: Products, eu: np.ndarray, ev: np.ndarray, known: int) -> int:
@@ -86,11 +110,27 @@ def static_flow_bound(products: Products, eu: np.ndarray, ev: np.ndarray, known:
     known
         A proven upper bound on the flow (the heuristic's maximum flow with every group open).
     """
+    choices = entry_choices(products, eu, ev, known)
+    if choices is None:
+        return known
+    best = 0
+    for choice in choices:
+        best = max(best, choice.flow)
+        if best >= known:
+            return known
+    return best
+
+
+def entry_choices(products: Products, eu: np.ndarray, ev: np.ndarray, known: int) -> Iterator[EntryChoice] | None:
+    """The choices of ``A & Y`` the bound ranges over, each with its capped ``min(E, X)``
+    (see :class:`EntryChoice`), or ``None`` where the bound does not apply (``Src`` in I, no
+    known flow, or more than :data:`MAX_ENTRY_STATES` free states of ``Y``). Every set ``A``
+    of a valid cut set matches one of the choices (its ``A & Y``; the start's state is in it)."""
     g = products.virtual
     inter, target = products.intermediate, products.target
     src = int(g.initial)
     if inter[src] or known <= 0:
-        return known
+        return None
     state = g.state.astype(np.int64)
     n_states = products.ts.n_states
     entry_full = ~inter[g.src] & inter[g.dst]
@@ -100,7 +140,7 @@ def static_flow_bound(products: Products, eu: np.ndarray, ev: np.ndarray, known:
     start = int(state[src])
     free_y = ys[eligible[ys]]
     if free_y.size > MAX_ENTRY_STATES:
-        return known
+        return None
     in_y = np.zeros(n_states, dtype=bool)
     in_y[ys] = True
 
@@ -112,37 +152,47 @@ def static_flow_bound(products: Products, eu: np.ndarray, ev: np.ndarray, known:
     m_tgt = after_i[eu] & target[ev]  # last edges of routes into Tgt
     m_from_y = after_i[eu] & in_y[state[eu]]  # candidate exits, by the state of their tail
 
-    best = 0
-    for bits in range(1 << free_y.size):
-        chosen = free_y[[(bits >> i) & 1 == 1 for i in range(free_y.size)]]
-        in_a_y = np.zeros(n_states, dtype=bool)
-        in_a_y[chosen] = True
-        out_y = in_y & ~in_a_y  # states of Y not in A
-        if out_y[start]:
-            continue  # the start's state is in A
-        allowed = eligible & ~out_y
-        e = np.flatnonzero(g_out & allowed[state[g.src]] & allowed[state[g.dst]])
-        region = reachable(n, g.src[e], g.dst[e], np.arange(n) == src)
-        value = _best_split(
-            n_states,
-            state,
-            eu,
-            ev,
-            m_entry & region[eu],
-            m_from_y & out_y[state[eu]],
-            m_tgt,
-            allowed,
-            in_y,
-            start,
-            known,
-        )
-        best = max(best, value)
-        if best >= known:
-            return known
-    return best
+    def choices() -> Iterator[EntryChoice]:
+        for bits in range(1 << free_y.size):
+            chosen = free_y[[(bits >> i) & 1 == 1 for i in range(free_y.size)]]
+            in_a_y = np.zeros(n_states, dtype=bool)
+            in_a_y[chosen] = True
+            out_y = in_y & ~in_a_y  # states of Y not in A
+            if out_y[start]:
+                continue  # the start's state is in A
+            allowed = eligible & ~out_y
+            e = np.flatnonzero(g_out & allowed[state[g.src]] & allowed[state[g.dst]])
+            region = reachable(n, g.src[e], g.dst[e], np.arange(n) == src)
+            split = _split(
+                n_states,
+                state,
+                eu,
+                ev,
+                m_entry & region[eu],
+                m_from_y & out_y[state[eu]],
+                m_tgt,
+                allowed,
+                in_y,
+                start,
+            )
+            yield EntryChoice(in_a_y, out_y, allowed, region, _best_split(split, known), split)
+
+    return choices()
 
 
-def _best_split(
+@dataclass(frozen=True)
+class Split:
+    """``E`` and ``X`` of one choice of ``A & Y`` as functions of the other states' membership
+    in ``A``: ``E = base_e + sum e_in``, ``X = base_x + sum (x_in if in A else x_out)`` over the
+    ``items`` (rows ``(state, e_in, x_in, x_out)``: the allowed states outside ``Y`` other
+    than the start's with an edge counted; every other state's share is in the bases)."""
+
+    base_e: int
+    base_x: int
+    items: np.ndarray
+
+
+def _split(
     n_states: int,
     state: np.ndarray,
     eu: np.ndarray,
@@ -153,11 +203,8 @@ def _best_split(
     allowed: np.ndarray,
     in_y: np.ndarray,
     start: int,
-    cap: int,
-) -> int:
-    """The largest ``min(E, X)`` (capped at ``cap``) over the membership in ``A`` of the states
-    outside ``Y`` (``allowed`` ones may be in ``A``, the start's is; ``A & Y`` is fixed by the
-    caller through ``allowed``).
+) -> Split:
+    """:class:`Split` of one choice (``A & Y`` fixed by the caller through ``allowed``).
 
     ``entries``: model entry edges with a tail in the search region (``E`` counts those with
     a tail state in ``A``); ``exits``: model edges from a state of ``Y - A`` after I (``X``
@@ -171,7 +218,7 @@ def _best_split(
     base_x = int(tg_of[in_y].sum())  # Y is in Z whatever A is
     # states of Y in A: their entry tails count (Y - A states have none in the region)
     base_e = int(e_of[in_y & allowed].sum())
-    items: list[tuple[int, int, int]] = []  # (E if in A, X if in A, X if not in A) per free state
+    items: list[tuple[int, int, int, int]] = []
     for x in np.flatnonzero((e_of > 0) | (tg_of > 0) | (out_of > 0)):
         if in_y[x]:
             continue
@@ -179,13 +226,19 @@ def _best_split(
             base_e += int(e_of[x])
             base_x += int(tg_of[x])
         elif allowed[x]:
-            items.append((int(e_of[x]), int(tg_of[x]), int(out_of[x])))
+            items.append((int(x), int(e_of[x]), int(tg_of[x]), int(out_of[x])))
         else:
             base_x += int(out_of[x])
+    return Split(base_e, base_x, np.array(items, dtype=np.int64).reshape(-1, 4))
+
+
+def _best_split(split: Split, cap: int) -> int:
+    """The largest ``min(E, X)`` (capped at ``cap``) over the membership in ``A`` of the
+    split's items: a two-value knapsack, by dynamic programming over ``E``."""
     # dp[k] = the largest X with E = k (E capped at cap), -1: unreachable
     dp = np.full(cap + 1, -1, dtype=np.int64)
-    dp[min(base_e, cap)] = base_x
-    for e_in, x_in, x_out in items:
+    dp[min(split.base_e, cap)] = split.base_x
+    for _, e_in, x_in, x_out in split.items.tolist():
         nxt = np.full(cap + 1, -1, dtype=np.int64)
         ok = np.flatnonzero(dp >= 0)
         np.maximum.at(nxt, ok, dp[ok] + x_out)  # not in A

@@ -49,6 +49,7 @@ from ..graphs.consistency import check_consistency
 from ..graphs.products import Products
 from ..model.errors import InconsistentProblem
 from . import cpsat, scip, wall_cover
+from .cut_bound import static_cut_bound
 from .heuristic import RoutingGuess
 from .model import BACKENDS, CutGroups, MilpOptions, RoutingModel, build_model, static_moves_of
 from .result import RoutingResult as RoutingResult
@@ -237,6 +238,7 @@ class _Phase:
     status: str
     gap: float
     stopped_by: str | None
+    cut_bound: dict[str, Any] | None = None  # phase 2: the walls' cut bound, what it proved (see _CutProof)
 
 
 def _solve_once(
@@ -267,7 +269,7 @@ def _solve_once(
     flow = _flow_of_phase1(rm, first)
     _raise_if_flows_bind(rm, products, options, first.x, {q: v for q, v in required.items() if q not in entries})
     note(f"routing MILP, phase 2 of 2: fewest cuts at flow {flow}")
-    second = _phase2(h, rm, first.x, flow, options, clock)
+    second = _phase2(h, rm, first.x, flow, options, clock, _cut_proof(products, rm, options, entries, flow))
     return _result(rm, products, options, first, second, flow, graph_seconds, time.perf_counter() - t_solve)
 
 
@@ -343,7 +345,7 @@ def _solve_once_cpsat(
         flow = _flow_of_phase1(rm, first)
         _raise_if_flows_bind(rm, products, options, first.x, {q: v for q, v in required.items() if q not in entries})
         note(f"routing MILP (CP-SAT), phase 2 of 2: fewest cuts at flow {flow}")
-        second, more = _phase2_cpsat(session, rm, first.x, flow, options, clock)
+        second, more = _phase2_cpsat(session, rm, first.x, flow, options, clock, _cut_proof(products, rm, options, entries, flow))
         spawn, spawn_cpu, child_cpu = session.spawn_seconds, session.spawn_cpu_seconds, session.child_cpu_seconds
     result = _result(rm, products, options, first, second, flow, graph_seconds, time.perf_counter() - t_solve)
     runs = runs + more
@@ -486,23 +488,114 @@ def _reach_level(
 
 
 def _phase2_cpsat(
-    session: cpsat.CpSatSession, rm: RoutingModel, x: np.ndarray, flow: int, options: MilpOptions, clock: Clock
+    session: cpsat.CpSatSession, rm: RoutingModel, x: np.ndarray, flow: int, options: MilpOptions, clock: Clock,
+    proof: _CutProof | None = None,
 ) -> tuple[_Phase, list[dict[str, Any]]]:
     """:func:`_phase2` on CP-SAT: fewest cuts (fewest blocked places first) at flow
-    ``flow``, from phase 1's answer as a hint (kept if CP-SAT finds nothing better)."""
+    ``flow``, from phase 1's answer as a hint (kept if CP-SAT finds nothing better). With the
+    walls' cut bound (``proof``), its cheaper checked candidate is the hint, an answer that
+    meets the bound is proven without a search, and the search stops at the first solution
+    that meets it."""
     out = rm.cols.flow[rm.out_src]
     session.add_row(out, np.ones(out.size), flow - 0.5, np.inf)
     clock.first_test()
+    cost = _phase2_cost(rm, options)
+    if proof is not None:
+        x = proof.start(x, cost)
+        if proof.meets(x, cost):
+            return _Phase(x, "optimal", 0.0, None, proof.stats(cost, x, True)), []
     seconds, _ = _cpsat_budget(clock)
     ans = session.solve(
-        _phase2_cost(rm, options), False, x, seconds=seconds, after_first=None, work_limit=options.work_limit,
+        cost, False, x, seconds=seconds, after_first=None, work_limit=options.work_limit,
         rel_gap=options.mip_rel_gap, random_seed=options.random_seed, phase="phase 2 (fewest cuts)", flow=flow,
+        stop_at=None if proof is None else proof.bound,
     )
     if ans.status == "infeasible":  # cannot happen: phase 1's solution is feasible
         raise RuntimeError("phase 2 of the routing MILP lost the phase-1 solution")
-    if ans.x is None:
-        return _Phase(x, "feasible", float("inf"), ans.stopped_by), [ans.stats]
-    return _Phase(ans.x, ans.status, ans.gap, ans.stopped_by), [ans.stats]
+    phase = _Phase(x, "feasible", float("inf"), ans.stopped_by) if ans.x is None else _Phase(ans.x, ans.status, ans.gap, ans.stopped_by)
+    return _with_cut_proof(phase, proof, cost), [ans.stats]
+
+
+@dataclass(frozen=True)
+class _CutProof:
+    """MILP-static's walls' cut bound at phase 2's flow level (:mod:`synthesis.routing.cut_bound`:
+    every valid cut set with that flow costs at least :attr:`bound`) and its cheapest
+    candidate, completed into a model solution and checked (``None``: none passed)."""
+
+    bound: float
+    level: int
+    x: np.ndarray | None
+    candidates: int
+    checked: int
+
+    def start(self, x: np.ndarray, cost: np.ndarray) -> np.ndarray:
+        """The cheaper of ``x`` and the checked candidate (``x`` on a tie)."""
+        if self.x is not None and float(cost @ self.x) < float(cost @ x) - 0.5:
+            return self.x
+        return x
+
+    def meets(self, x: np.ndarray, cost: np.ndarray) -> bool:
+        """Whether ``x`` (a solution of the phase-2 model) costs no more than the bound: then
+        it is optimal at this level."""
+        value = float(cost @ x)
+        if value < self.bound - 0.5:
+            raise RuntimeError(f"a test costs {value:.0f}, below the walls' cut bound {self.bound:.0f}: a FlowTest bug")
+        return value <= self.bound + 0.5
+
+    def stats(self, cost: np.ndarray, x: np.ndarray, proven: bool) -> dict[str, Any]:
+        """What the bound did, for the result's stats."""
+        return {
+            "level": self.level,
+            "bound": self.bound,
+            "candidates": self.candidates,
+            "checked": self.checked,
+            "candidate_cost": None if self.x is None else float(cost @ self.x),
+            "proven": proven,
+        }
+
+
+def _cut_proof(products: Products, rm: RoutingModel, options: MilpOptions, entries: dict[int, np.ndarray], flow: int) -> _CutProof | None:
+    """The walls' cut bound at phase 2's level with its cheapest checked candidate, for
+    MILP-static (``None`` elsewhere, with ``options.cut_bound`` off, for MILP-agent's places
+    objective, or where the bound does not apply). A candidate counts only as a whole model
+    solution that satisfies every row of the model (feasibility flows included) with flow
+    ``flow`` exactly: the routing heuristic grows it from the candidate's walls (opening any
+    of them that separation does not need) and :func:`_guess_solution` completes it."""
+    if options.mode != "static" or not options.cut_bound or options.block_states:
+        return None
+    groups, me = rm.groups, rm.edges
+    cb = static_cut_bound(products, groups.of_edge, groups.weight, groups.restrictable, me.eu, me.ev, flow)
+    if cb is None:
+        return None
+    if not np.isfinite(cb.value):
+        raise RuntimeError(f"the walls' cut bound says no cut set has flow {flow}, which phase 1 found: a FlowTest bug")
+    cost = _phase2_cost(rm, options)
+    col_lo, col_hi, row_lo, row_hi = rm.model.bounds()
+    arrays = cpsat.ModelArrays(rm.model.matrix().tocsr(), row_lo, row_hi, col_lo, col_hi)
+    traps = _trap_test(products, groups, entries)
+    best: np.ndarray | None = None
+    checked = 0
+    for walls in cb.candidates:
+        guess = replace(me, has_var=me.has_var & walls).guess(products, traps=traps, route_seed=False, fixed_open=rm.reductions.fixed_open)
+        if guess.flow != flow:
+            continue
+        x = _guess_solution(products, rm, guess, options)
+        if x is None or arrays.violation(x) > FEASIBILITY_TOLERANCE or abs(rm.flow_of(x) - flow) > 0.5:
+            continue
+        checked += 1
+        if best is None or float(cost @ x) < float(cost @ best) - 0.5:
+            best = x
+    return _CutProof(cb.value, flow, best, len(cb.candidates), checked)
+
+
+def _with_cut_proof(phase: _Phase, proof: _CutProof | None, cost: np.ndarray) -> _Phase:
+    """A phase-2 answer with what the cut bound says of it: optimal when it meets the bound."""
+    if proof is None:
+        return phase
+    proven = proof.meets(phase.x, cost)
+    if proven and phase.status != "optimal":
+        return _Phase(phase.x, "optimal", 0.0, None, proof.stats(cost, phase.x, True))
+    return replace(phase, cut_bound=proof.stats(cost, phase.x, proven))
 
 
 def _phase2_cost(rm: RoutingModel, options: MilpOptions) -> np.ndarray:
@@ -554,15 +647,23 @@ def _raise_if_flows_bind(
         raise _FlowsBind(trapped1)
 
 
-def _phase2(h: highspy.Highs, rm: RoutingModel, x: np.ndarray, flow: int, options: MilpOptions, clock: Clock) -> _Phase:
+def _phase2(
+    h: highspy.Highs, rm: RoutingModel, x: np.ndarray, flow: int, options: MilpOptions, clock: Clock, proof: _CutProof | None = None
+) -> _Phase:
     """Phase 2, fewest cuts (for the agent: fewest blocked places first) at flow ``flow``,
-    seeded by the fewest-cuts answer with phase 1's flow held fixed."""
+    seeded by the fewest-cuts answer with phase 1's flow held fixed. With the walls' cut
+    bound (``proof``), its cheaper checked candidate is the start, and an answer that meets
+    the bound is proven (before the search: without one)."""
     f_col = rm.cols.flow
     h.addRow(flow - 0.5, highspy.kHighsInf, rm.out_src.size, f_col[rm.out_src].astype(np.int32), np.ones(rm.out_src.size))
     cost = _phase2_cost(rm, options)
     h.changeObjectiveSense(highspy.ObjSense.kMinimize)
     h.changeColsCost(rm.n_col, np.arange(rm.n_col, dtype=np.int32), cost)
     clock.first_test()
+    if proof is not None:
+        x = proof.start(x, cost)
+        if proof.meets(x, cost):
+            return _Phase(x, "optimal", 0.0, None, proof.stats(cost, x, True))
     if clock.deadline is None:  # no wall clock: a deterministic budget for the helper solve
         x = _incumbent(h, x, f_col, None, options, flow, _min_limit(INCUMBENT_NODES, options.node_limit))
     else:
@@ -577,7 +678,7 @@ def _phase2(h: highspy.Highs, rm: RoutingModel, x: np.ndarray, flow: int, option
         status, gap, x2 = "feasible", float("inf"), x
     if status == "infeasible" or x2 is None:  # cannot happen: phase 1's solution is feasible
         raise RuntimeError("phase 2 of the routing MILP lost the phase-1 solution")
-    return _Phase(x2, status, gap, _stopped_by(h))
+    return _with_cut_proof(_Phase(x2, status, gap, _stopped_by(h)), proof, cost)
 
 
 def _result(
@@ -614,6 +715,8 @@ def _result(
         "backend": options.backend,
         "solver_version": backend_version(options.backend),
     }
+    if second.cut_bound is not None:
+        stats["cut_bound"] = second.cut_bound
     return RoutingResult(
         status=status,
         flow=flow,

@@ -111,6 +111,11 @@ class MilpOptions:
         MILP-static: lower the flow upper bound phase 1 starts from to the walls' bound of
         :mod:`synthesis.routing.flow_bound` (a proof, so the optimum is kept); off only to
         measure it.
+    cut_bound
+        MILP-static: at phase 2's flow level, the walls' cut bound of
+        :mod:`synthesis.routing.cut_bound` (a proof) and its minimum cuts' wall sets, completed
+        and checked, as a start: an answer that costs the bound is proven optimal at that
+        level, with or without a search; off only to measure it.
     offer_starts
         Offer HiGHS the heuristic's answer (phase 1) and the phase-1 answer (phase 2) as
         starts (each checked against the model first). Without, they are still kept as
@@ -154,6 +159,7 @@ class MilpOptions:
     offer_starts: bool = True
     reductions: bool = True
     flow_bound: bool = True
+    cut_bound: bool = True
     backend: str = "auto"
     work_limit: float | None = None
 

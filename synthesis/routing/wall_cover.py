@@ -58,7 +58,8 @@ from ..graphs.consistency import check_consistency
 from ..graphs.products import Products
 from ..model.errors import InconsistentProblem
 from .cover_rows import CoverSeparator, FlowCut, Row
-from .model import MilpOptions, cut_groups, group_reductions, model_edges, static_moves_of
+from .cut_bound import static_cut_bound
+from .model import MilpOptions, cut_groups, group_reductions, model_edges, model_flow_bound, static_moves_of
 from .result import RoutingResult, required_entries
 from .solver_control import Clock, SolveStatus, quiet_highs, run_highs
 
@@ -286,7 +287,8 @@ def solve_cover(
     graph_seconds = time.perf_counter() - t0
     t_solve = time.perf_counter()
     search = _Search(sep, options, clock, max_rounds)
-    upper = guess.upper_bound
+    walls_bound = model_flow_bound(products, options, me)  # MILP-static: the walls' flow bound, a proof
+    upper = guess.upper_bound if walls_bound is None else min(guess.upper_bound, walls_bound)
     levels: dict[int, _Level] = {}
     best = 0
     if guess.flow >= 1:
@@ -303,7 +305,9 @@ def solve_cover(
         while flow >= max(best, 1):
             note(f"wall cover: flow {flow} (upper bound {upper}, heuristic {guess.flow})")
             level = levels.setdefault(flow, _Level(flow))
-            stopped_by = (solve_level or _Search.solve_level)(search, level)
+            _apply_cut_bound(products, options, sep, level)
+            if not level.proven:
+                stopped_by = (solve_level or _Search.solve_level)(search, level)
             if stopped_by is not None or level.cut is not None:
                 break
             flow -= 1
@@ -332,6 +336,27 @@ def solve_cover(
 
 
 _LIMIT_TEXT = {"time_limit": "time limit", "node_limit": "node limit"}
+
+
+def _apply_cut_bound(products: Products, options: MilpOptions, sep: CoverSeparator, level: _Level) -> None:
+    """MILP-static: the walls' cut bound at the level (:mod:`synthesis.routing.cut_bound`, a
+    proof) raises the level's bound, and its minimum cuts' wall sets, grown by the routing
+    heuristic and passing every check, become the level's answer where cheaper; an answer that
+    meets the bound is proven without a master."""
+    if options.mode != "static" or not options.cut_bound or options.block_states:
+        return
+    groups, me = sep.groups, sep.me
+    cb = static_cut_bound(products, groups.of_edge, groups.weight, groups.restrictable, me.eu, me.ev, level.flow)
+    if cb is None:
+        return
+    level.bound = max(level.bound, cb.value)
+    for walls in cb.candidates:
+        guess = replace(me, has_var=me.has_var & walls).guess(products, route_seed=False)
+        cut = sep.guess_cut(guess) if guess.flow >= level.flow else None
+        if cut is not None and sep.checks_pass(cut, level.flow) and sep.cost_of(cut) < level.cost:
+            level.cut, level.cost = cut, sep.cost_of(cut)
+    if level.cut is not None and level.cost <= level.bound + 0.5:
+        level.proven = True
 
 
 def _gap(level: _Level) -> float:
