@@ -57,10 +57,11 @@ def _cpu() -> float:
     return time.process_time() + child.ru_utime + child.ru_stime
 
 
-def solve(problem: Problem, with_bound: bool, options: SynthesisOptions) -> dict[str, Any]:
-    """One checked routing solve of ``problem`` with or without the walls' bound."""
+def solve(problem: Problem, with_bound: bool, options: SynthesisOptions, **flags: Any) -> dict[str, Any]:
+    """One checked routing solve of ``problem`` with or without the walls' bound (``flags``:
+    more :class:`~synthesis.routing.model.MilpOptions` fields, such as ``cut_bound``)."""
     _, products = build_graphs(problem)
-    opts = replace(milp_options(problem, options), flow_bound=with_bound)
+    opts = replace(milp_options(problem, options), flow_bound=with_bound, **flags)
     cpsat.close_idle_workers()
     cpu0 = _cpu()
     t0 = time.perf_counter()
@@ -72,7 +73,7 @@ def solve(problem: Problem, with_bound: bool, options: SynthesisOptions) -> dict
     assert checks.bypass_flow == 0 and checks.ok, checks
     cpsat.close_idle_workers()  # reaped: its CPU seconds count in RUSAGE_CHILDREN
     return {"status": routing.status, "flow": flow, "cuts": int(routing.cut_edges.size), "wall_s": wall,
-            "cpu_s": _cpu() - cpu0, "backend": routing.stats["backend"]}
+            "cpu_s": _cpu() - cpu0, "backend": routing.stats["backend"], "cut_bound": routing.stats.get("cut_bound")}
 
 
 def main(argv: list[str] | None = None) -> None:
