@@ -60,6 +60,13 @@ Lemmas, for a valid ``S`` whose flow is at least ``F``:
   forced out (C2). Where the search's budget (a count of minimum cuts) runs out, the
   smallest lower bound of a node left open enters the minimum too.
 
+* (C6) Dominating states. ``F >= 1`` needs ``E >= 1``: ``R`` holds the tail of a model entry
+  edge, and the walk in ``R`` that reaches it is a walk in the choice's ``region`` from ``Src``
+  to the tail of a model entry edge in ``region`` (``R`` lies in ``region``, C2). So a state
+  whose nodes every such walk passes is in ``A`` and is forced in as well (a test objective in
+  sequence passes its first cell before it can enter I). Such a state lies on every walk, so
+  only those of one shortest walk are tried, each by one graph search without its nodes.
+
 So ``cost(S) >= min`` over the kept choices and memberships of their minimum cuts, and since costs are
 integers, its ceiling is a lower bound on the fewest cuts at flow ``F`` (method.md §5's phase 2
 optimum). Nothing about the model's pruned edges or reductions enters: the groups fixed open
@@ -230,6 +237,7 @@ def static_cut_bound(
     n_states = products.ts.n_states
     start = int(state[g.initial])
     arcs = _state_arcs(state, g.src, g.dst, of_edge, weight, restrictable)
+    entry = ~products.intermediate[eu] & products.intermediate[ev]  # the model's entry edges
     search = _Search(arcs, n_states, level, max_cuts)
     kept = 0
     for choice in choices:
@@ -242,6 +250,7 @@ def static_cut_bound(
         kept += 1
         forced_in = choice.in_a_y.copy()
         forced_in[start] = True
+        forced_in |= _dominators(products, state, choice.region, eu[entry & choice.region[eu]])
         forced_out = ~in_region & ~choice.out_y
         search.run(choice.split, forced_in, forced_out, choice.out_y)
     best = search.bound()
@@ -257,6 +266,39 @@ def static_cut_bound(
         if len(candidates) >= max_candidates:
             break
     return CutBound(level, float(math.ceil(best - 1e-9)), candidates, kept)
+
+
+def _dominators(products: Products, state: np.ndarray, region: np.ndarray, tails: np.ndarray) -> np.ndarray:
+    """C6: the states (``bool`` per state of T) whose nodes every walk in ``region`` from ``Src``
+    to a node of ``tails`` passes (the start's excluded). Only the states of one shortest such
+    walk can be, so only those are tried, one graph search each."""
+    g = products.virtual
+    out = np.zeros(products.ts.n_states, dtype=bool)
+    src = int(g.initial)
+    inside = region[g.src] & region[g.dst]
+    eu, ev = g.src[inside], g.dst[inside]
+    is_tail = np.zeros(g.n_nodes, dtype=bool)
+    is_tail[tails] = True
+    if not is_tail.any():
+        return out
+    adj = sp.csr_matrix((np.ones(eu.size, dtype=np.int8), (eu, ev)), shape=(g.n_nodes, g.n_nodes))
+    order, pred = breadth_first_order(adj, src, directed=True, return_predecessors=True)
+    hit = order[is_tail[order]]
+    if hit.size == 0:
+        return out
+    walk: list[int] = []
+    v = int(hit[0])
+    while v >= 0:
+        walk.append(v)
+        v = int(pred[v])
+    start = int(state[src])
+    for s in sorted({int(state[v]) for v in walk} - {start}):
+        keep = (state[eu] != s) & (state[ev] != s)
+        cut_adj = sp.csr_matrix((np.ones(int(keep.sum()), dtype=np.int8), (eu[keep], ev[keep])), shape=(g.n_nodes, g.n_nodes))
+        seen = breadth_first_order(cut_adj, src, directed=True, return_predecessors=False)
+        if not is_tail[seen].any():
+            out[s] = True
+    return out
 
 
 def _state_arcs(
