@@ -240,3 +240,20 @@ def test_cover_backends_use_both_walls_bounds(backend: str) -> None:
     assert test.routing.status == "optimal" and test.routing.flow == 2 and test.routing.cut_edges.size == 24
     assert test.checks.bypass_flow == 0
     assert test.routing.stats["rounds"] == 0 and test.routing.stats["master_solves"] == 0
+
+
+def test_candidate_proves_the_maximum_flow_of_a_10x10_grid() -> None:
+    """Seed 6: the heuristic's flow is 1, the walls' flow bound 2; a candidate of the cut bound
+    at flow 2 passes the checks, so phase 1 is proven by it, and it costs the cut bound (22), so
+    phase 2 too: CP-SAT is never run."""
+    _, problem, _ = first_consistent(10, "reachability", 1, 6, "static")
+    _, products = build_graphs(problem)
+    options = milp_options(problem, SynthesisOptions())
+    rm = build_model(products, options, {}, check_consistency(products))
+    assert rm.guess(products).flow == 1 and rm.flow_bound == 2
+    if not cpsat.available():
+        pytest.skip("OR-Tools is not installed")
+    test = synthesize(problem, SynthesisOptions(backend="cpsat", work_limit=20))
+    assert (test.routing.status, test.routing.flow, int(test.routing.cut_edges.size)) == ("optimal", 2, 22)
+    assert test.checks.ok and test.checks.bypass_flow == 0
+    assert test.routing.stats["cpsat"]["runs"] == 0 and test.routing.stats["cut_bound"]["proven"]

@@ -276,14 +276,20 @@ def _solve_once(
 def _phase1(
     h: highspy.Highs, rm: RoutingModel, products: Products, options: MilpOptions, entries: dict[int, np.ndarray], clock: Clock
 ) -> _Phase:
-    """Phase 1, maximum flow: proven by the heuristic when it attains the flow upper bound,
-    else solved by HiGHS (seeded by the heuristic's answer, kept as the fallback)."""
+    """Phase 1, maximum flow: proven by the heuristic when it attains the flow upper bound, or
+    (MILP-static) by a checked candidate of the walls' cut bound at that bound
+    (:func:`_test_at_bound`), else solved by HiGHS (seeded by the heuristic's answer, kept as
+    the fallback)."""
     guess = rm.guess(products, traps=_trap_test(products, rm.groups, entries))
     x_guess = _guess_solution(products, rm, guess, options)
     if x_guess is not None:
         clock.first_test()
     if x_guess is not None and guess.flow == guess.upper_bound:
         return _Phase(x_guess, "optimal", 0.0, None)  # the flow upper bound is attained: proven
+    x_top = _test_at_bound(products, rm, options, entries, guess.upper_bound)
+    if x_top is not None:
+        clock.first_test()
+        return _Phase(x_top, "optimal", 0.0, None)  # a cut bound candidate attains the flow upper bound
     cost = np.zeros(rm.n_col)
     cost[rm.cols.flow[rm.out_src]] = 1.0
     h.changeColsCost(rm.n_col, np.arange(rm.n_col, dtype=np.int32), cost)
@@ -370,8 +376,8 @@ def _cpsat_budget(clock: Clock) -> tuple[float | None, float | None]:
 def _phase1_cpsat(
     session: cpsat.CpSatSession, rm: RoutingModel, products: Products, options: MilpOptions, entries: dict[int, np.ndarray], clock: Clock
 ) -> tuple[_Phase, list[dict[str, Any]]]:
-    """:func:`_phase1` on CP-SAT: the heuristic's answer proves the maximum flow when it
-    attains the upper bound; else CP-SAT maximises the flow from it (as a hint) with its
+    """:func:`_phase1` on CP-SAT: the heuristic's answer (or a checked candidate of the walls'
+    cut bound) proves the maximum flow when it attains the upper bound; else CP-SAT maximises the flow from it (as a hint) with its
     default search, whose LP bound proves small cases at once, for at most
     :data:`~synthesis.routing.cpsat.PROOF_WORK` deterministic seconds. If that does not
     prove it, phase 1 asks level by level, from the flow above the best test known, whether
@@ -385,6 +391,10 @@ def _phase1_cpsat(
         clock.first_test()
     if x_guess is not None and guess.flow == guess.upper_bound:
         return _Phase(x_guess, "optimal", 0.0, None), []
+    x_top = _test_at_bound(products, rm, options, entries, guess.upper_bound)
+    if x_top is not None:
+        clock.first_test()
+        return _Phase(x_top, "optimal", 0.0, None), []  # a cut bound candidate attains the flow upper bound
     out = rm.cols.flow[rm.out_src]
     cost = np.zeros(rm.n_col)
     cost[out] = 1.0
@@ -568,7 +578,7 @@ def _cut_proof(products: Products, rm: RoutingModel, options: MilpOptions, entri
     if cb is None:
         return None
     if not np.isfinite(cb.value):
-        raise RuntimeError(f"the walls' cut bound says no cut set has flow {flow}, which phase 1 found: a FlowTest bug")
+        return _CutProof(cb.value, flow, None, 0, 0)  # no cut set has this flow (phase 2: meets() reports the bug)
     cost = _phase2_cost(rm, options)
     col_lo, col_hi, row_lo, row_hi = rm.model.bounds()
     arrays = cpsat.ModelArrays(rm.model.matrix().tocsr(), row_lo, row_hi, col_lo, col_hi)
@@ -586,6 +596,18 @@ def _cut_proof(products: Products, rm: RoutingModel, options: MilpOptions, entri
         if best is None or float(cost @ x) < float(cost @ best) - 0.5:
             best = x
     return _CutProof(cb.value, flow, best, len(cb.candidates), checked)
+
+
+def _test_at_bound(
+    products: Products, rm: RoutingModel, options: MilpOptions, entries: dict[int, np.ndarray], upper: int
+) -> np.ndarray | None:
+    """MILP-static, phase 1: a checked candidate of the walls' cut bound at the flow upper bound
+    ``upper`` (see :func:`_cut_proof`), which proves the maximum flow without a search; ``None``
+    where there is none (or the bound does not apply)."""
+    if upper < 1:
+        return None
+    proof = _cut_proof(products, rm, options, entries, upper)
+    return None if proof is None else proof.x
 
 
 def _with_cut_proof(phase: _Phase, proof: _CutProof | None, cost: np.ndarray) -> _Phase:
