@@ -111,3 +111,21 @@ def test_an_infeasible_start_is_not_offered() -> None:
     bad = START.copy()
     bad[0] += 0.5  # a flow value off by a half breaks conservation
     assert not _set_solution(h, bad)
+
+
+def test_start_on_a_model_without_rows() -> None:
+    """A static model of column bounds alone: HiGHS hands its matrix back row-wise once phase 2
+    adds a row, and the start's check must read it so (regression: a ``ValueError`` from SciPy).
+
+    From s0 both moves reach the goal through I (s0 itself): nothing to cut, flow 2.
+    """
+    from synthesis.model.systems import graph_system
+    from synthesis.pipeline import SynthesisOptions, synthesize
+    from synthesis.problems.problem import make_problem
+
+    ts = graph_system(
+        ["s0", "s1", "s2"], [("s0", "s1"), ("s0", "s2")], "s0", ["s1", "s2"],
+        {"s0": {"I1"}, "s1": {"goal"}, "s2": {"goal"}},
+    )
+    res = synthesize(make_problem("no-rows", ts, "F goal", "F I1", "static"), SynthesisOptions(backend="highs"))
+    assert (res.routing.status, res.routing.flow, res.routing.cut_edges.size) == ("optimal", 2, 0)

@@ -834,10 +834,11 @@ class _ModelView:
     def of(cls, h: highspy.Highs) -> _ModelView:
         lp = h.getLp()
         n, m = int(lp.num_col_), int(lp.num_row_)
-        a = sp.csc_matrix(
-            (np.asarray(lp.a_matrix_.value_), np.asarray(lp.a_matrix_.index_), np.asarray(lp.a_matrix_.start_)),
-            shape=(m, n),
-        ).tocsr()
+        parts = (np.asarray(lp.a_matrix_.value_), np.asarray(lp.a_matrix_.index_), np.asarray(lp.a_matrix_.start_))
+        # HiGHS keeps a matrix column-wise, but one that had no rows before a row was added
+        # (a model of column bounds alone) comes back row-wise.
+        rowwise = lp.a_matrix_.format_ != highspy.MatrixFormat.kColwise
+        a = sp.csr_matrix(parts, shape=(m, n)) if rowwise else sp.csc_matrix(parts, shape=(m, n)).tocsr()
         integrality = list(lp.integrality_)
         integer = np.array([t == highspy.HighsVarType.kInteger for t in integrality], dtype=bool) if integrality else np.zeros(n, dtype=bool)
         return cls(
