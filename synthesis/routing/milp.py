@@ -51,7 +51,7 @@ from ..model.errors import InconsistentProblem
 from . import cpsat, scip, wall_cover
 from .cut_bound import static_cut_bound
 from .heuristic import RoutingGuess
-from .model import BACKENDS, CutGroups, MilpOptions, RoutingModel, build_model, static_moves_of
+from .model import BACKENDS, CutGroups, MilpOptions, RoutingModel, build_model, reach_may_be_binary, static_moves_of
 from .result import RoutingResult as RoutingResult
 from .result import blocked_by as blocked_by
 from .result import blocked_of_edges, required_entries
@@ -681,6 +681,7 @@ def _phase2(
     cost = _phase2_cost(rm, options)
     h.changeObjectiveSense(highspy.ObjSense.kMinimize)
     h.changeColsCost(rm.n_col, np.arange(rm.n_col, dtype=np.int32), cost)
+    x = _binary_reach(h, rm, options, x)
     clock.first_test()
     if proof is not None:
         x = proof.start(x, cost)
@@ -701,6 +702,21 @@ def _phase2(
     if status == "infeasible" or x2 is None:  # cannot happen: phase 1's solution is feasible
         raise RuntimeError("phase 2 of the routing MILP lost the phase-1 solution")
     return _with_cut_proof(_Phase(x2, status, gap, _stopped_by(h)), proof, cost)
+
+
+def _binary_reach(h: highspy.Highs, rm: RoutingModel, options: MilpOptions, x: np.ndarray) -> np.ndarray:
+    """Declare the ``mu`` columns of :func:`~synthesis.routing.model.reach_may_be_binary`
+    integral in the model HiGHS holds (phase 2 of MILP-reactive: the optimum is kept, see
+    there), and return ``x`` with those columns on the same level set (1 where positive
+    beyond :data:`FEASIBILITY_TOLERANCE`), so phase 1's answer stays a valid start."""
+    cols = reach_may_be_binary(rm, options)
+    if cols.size == 0:
+        return x
+    idx = cols.astype(np.int32)
+    h.changeColsIntegrality(idx.size, idx, np.full(idx.size, highspy.HighsVarType.kInteger))
+    x = x.copy()
+    x[cols] = (x[cols] > FEASIBILITY_TOLERANCE).astype(float)
+    return x
 
 
 def _result(

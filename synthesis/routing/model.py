@@ -116,6 +116,12 @@ class MilpOptions:
         :mod:`synthesis.routing.cut_bound` (a proof) and its minimum cuts' wall sets, completed
         and checked, as a start: an answer that costs the bound is proven optimal at that
         level, with or without a search; off only to measure it.
+    binary_reach
+        MILP-reactive, HiGHS's phase 2 (fewest cuts): the reachability columns ``mu``
+        are integral there (:func:`reach_may_be_binary` proves the optimum is kept), so
+        HiGHS branches on which nodes ``Src`` reaches, not on the cuts alone
+        (docs/benchmarks.md, "MILP-reactive's fewest cuts (issue 18, session 10)"); off
+        only to measure it. The other modes and phase 1 keep ``mu`` continuous.
     offer_starts
         Offer HiGHS the heuristic's answer (phase 1) and the phase-1 answer (phase 2) as
         starts (each checked against the model first). Without, they are still kept as
@@ -160,6 +166,7 @@ class MilpOptions:
     reductions: bool = True
     flow_bound: bool = True
     cut_bound: bool = True
+    binary_reach: bool = True
     backend: str = "auto"
     work_limit: float | None = None
 
@@ -652,6 +659,45 @@ def _add_coupling(m: _Model, me: ModelEdges, flow: np.ndarray, reach: np.ndarray
         m.add_terms(r, reach[ends[sel]], -1.0)
         rows.append(r)
     return rows[0], rows[1]
+
+
+BINARY_REACH_MIN_ROWS = 200
+"""Models with fewer rows keep continuous ``mu`` in phase 2 (:func:`reach_may_be_binary`): HiGHS
+answers them in hundredths of a second either way, and the small built-ins (small-reactive,
+84-153 rows) keep their shipped answers. ``auto`` sends reactive models of 200-2,500 rows to
+CP-SAT, whose columns are all integral anyway."""
+
+
+def reach_may_be_binary(rm: RoutingModel, options: MilpOptions) -> np.ndarray:
+    """The ``mu`` columns HiGHS's phase 2 declares integral (:attr:`MilpOptions.binary_reach`):
+    all of them in MILP-reactive with the option on and at least
+    :data:`BINARY_REACH_MIN_ROWS` rows, else none.
+
+    Why the optimum is kept. Only the c4-c5 rows (``d_uv - mu_u + mu_v >= [u = Src]``, with
+    ``mu`` of ``Tgt`` taken as 0) and the coupling rows (``f_uv <= mu_u``, ``f_uv <= mu_v``)
+    hold ``mu``; no objective (neither phase's) and no other row does. Take any solution
+    ``(f, d, mu)`` of the model with ``d`` binary and let ``mu'_v = 1`` where ``mu_v > 0``,
+    else 0 (a level set of the potentials). Then ``(f, d, mu')`` is a solution with the same
+    objective:
+
+    * c4-c5 on an edge with ``d_uv = 1``: ``1 - mu'_u + mu'_v >= 0`` always, and ``>= 1``
+      when ``u = Src`` (``mu'_v >= 0``);
+    * c4-c5 with ``d_uv = 0``: the row gives ``mu_v >= mu_u`` (``mu_v >= 1`` when ``u = Src``),
+      so ``mu_u > 0`` implies ``mu_v > 0``: ``mu'_v >= mu'_u`` (``mu'_v = 1`` when ``u = Src``);
+      when ``v`` is in ``Tgt`` the row gives ``mu_u <= 0``, so ``mu'_u = 0`` too;
+    * coupling: ``0 < f_uv <= mu_u`` implies ``mu'_u = 1 >= f_uv`` (``f <= 1``), the same for
+      ``v``; where ``f_uv = 0`` the row holds for any ``mu' >= 0``.
+
+    So every cut set the model admits, with its flows, is admitted with binary ``mu``, and
+    the optimum of each phase is unchanged. (:mod:`synthesis.routing.cpsat` rests on the
+    same fact, with every column integral.) Exhaustive check: ``tests/test_optimality.py``
+    and ``tests/test_binary_reach.py``.
+    """
+    if not options.binary_reach or options.mode != "reactive" or rm.model.n_row < BINARY_REACH_MIN_ROWS:
+        return np.zeros(0, dtype=np.int64)
+    reach = rm.cols.reach
+    out: np.ndarray = reach[reach >= 0]
+    return out
 
 
 def _add_blocked_places(
