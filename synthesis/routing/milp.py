@@ -20,6 +20,13 @@ Reductions, none of which changes the optimum of method.md §5:
 * **Lexicographic objective in two phases.** ``F - (1/|E|) sum d`` with integral F
   is maximised by first maximising F and then minimising the cuts with ``F`` fixed;
   both objectives are integral, so an absolute gap below 1 proves optimality.
+* **Integral reachability and flows in MILP-reactive's phase 2.** The potentials ``mu``
+  may be taken 0/1 and the flows integral once the cuts are binary
+  (:func:`synthesis.routing.model.phase2_integral_columns` proves it), so phase 2 of
+  MILP-reactive declares them integral on HiGHS (models of 200 rows or more): HiGHS then
+  branches on which nodes ``Src`` reaches and its heuristics look for integral routes, which
+  proves the fewest cuts of mid-size reactive models that branching on the cuts alone does
+  not.
 * **Aggregated feasibility flows.** For a history ``q`` with ``K`` kept entry nodes,
   the ``K`` unit flows of c6-c8 are replaced by one flow in which every entry node
   supplies one unit, on edges of capacity ``K (1 - d)``. By flow decomposition each
@@ -51,7 +58,7 @@ from ..model.errors import InconsistentProblem
 from . import cpsat, scip, wall_cover
 from .cut_bound import static_cut_bound
 from .heuristic import RoutingGuess
-from .model import BACKENDS, CutGroups, MilpOptions, RoutingModel, build_model, reach_may_be_binary, static_moves_of
+from .model import BACKENDS, CutGroups, MilpOptions, RoutingModel, build_model, phase2_integral_columns, static_moves_of
 from .result import RoutingResult as RoutingResult
 from .result import blocked_by as blocked_by
 from .result import blocked_of_edges, required_entries
@@ -681,7 +688,7 @@ def _phase2(
     cost = _phase2_cost(rm, options)
     h.changeObjectiveSense(highspy.ObjSense.kMinimize)
     h.changeColsCost(rm.n_col, np.arange(rm.n_col, dtype=np.int32), cost)
-    x = _binary_reach(h, rm, options, x)
+    x = _integral_phase2(h, rm, options, x)
     clock.first_test()
     if proof is not None:
         x = proof.start(x, cost)
@@ -704,18 +711,22 @@ def _phase2(
     return _with_cut_proof(_Phase(x2, status, gap, _stopped_by(h)), proof, cost)
 
 
-def _binary_reach(h: highspy.Highs, rm: RoutingModel, options: MilpOptions, x: np.ndarray) -> np.ndarray:
-    """Declare the ``mu`` columns of :func:`~synthesis.routing.model.reach_may_be_binary`
-    integral in the model HiGHS holds (phase 2 of MILP-reactive: the optimum is kept, see
-    there), and return ``x`` with those columns on the same level set (1 where positive
-    beyond :data:`FEASIBILITY_TOLERANCE`), so phase 1's answer stays a valid start."""
-    cols = reach_may_be_binary(rm, options)
+def _integral_phase2(h: highspy.Highs, rm: RoutingModel, options: MilpOptions, x: np.ndarray) -> np.ndarray:
+    """Declare the columns of :func:`~synthesis.routing.model.phase2_integral_columns`
+    (``mu`` and ``f`` of MILP-reactive) integral in the model HiGHS holds (phase 2: the
+    optimum is kept, see there), and return ``x`` with ``mu`` on its level set (1 where
+    positive beyond :data:`FEASIBILITY_TOLERANCE`) and ``f`` rounded, so phase 1's answer
+    (integral flows, from the heuristic or a vertex) stays a start; one that is not is
+    refused by :func:`_set_solution` and the helper solve of :func:`_incumbent` gives one."""
+    cols = phase2_integral_columns(rm, options)
     if cols.size == 0:
         return x
     idx = cols.astype(np.int32)
     h.changeColsIntegrality(idx.size, idx, np.full(idx.size, highspy.HighsVarType.kInteger))
     x = x.copy()
-    x[cols] = (x[cols] > FEASIBILITY_TOLERANCE).astype(float)
+    mu = rm.cols.reach[rm.cols.reach >= 0]
+    x[mu] = (x[mu] > FEASIBILITY_TOLERANCE).astype(float)
+    x[rm.cols.flow] = np.round(x[rm.cols.flow])
     return x
 
 

@@ -116,12 +116,13 @@ class MilpOptions:
         :mod:`synthesis.routing.cut_bound` (a proof) and its minimum cuts' wall sets, completed
         and checked, as a start: an answer that costs the bound is proven optimal at that
         level, with or without a search; off only to measure it.
-    binary_reach
-        MILP-reactive, HiGHS's phase 2 (fewest cuts): the reachability columns ``mu``
-        are integral there (:func:`reach_may_be_binary` proves the optimum is kept), so
-        HiGHS branches on which nodes ``Src`` reaches, not on the cuts alone
-        (docs/benchmarks.md, "MILP-reactive's fewest cuts (issue 18, session 10)"); off
-        only to measure it. The other modes and phase 1 keep ``mu`` continuous.
+    integral_phase2
+        MILP-reactive, HiGHS's phase 2 (fewest cuts): the reachability columns ``mu`` and
+        the flows ``f`` are integral there (:func:`phase2_integral_columns` proves the
+        optimum is kept), so HiGHS branches on which nodes ``Src`` reaches and its
+        heuristics look for integral routes, not on the cuts alone (docs/benchmarks.md,
+        "MILP-reactive's fewest cuts (issue 18, session 10)"); off only to measure it. The
+        other modes and phase 1 keep those columns continuous.
     offer_starts
         Offer HiGHS the heuristic's answer (phase 1) and the phase-1 answer (phase 2) as
         starts (each checked against the model first). Without, they are still kept as
@@ -166,7 +167,7 @@ class MilpOptions:
     reductions: bool = True
     flow_bound: bool = True
     cut_bound: bool = True
-    binary_reach: bool = True
+    integral_phase2: bool = True
     backend: str = "auto"
     work_limit: float | None = None
 
@@ -661,42 +662,50 @@ def _add_coupling(m: _Model, me: ModelEdges, flow: np.ndarray, reach: np.ndarray
     return rows[0], rows[1]
 
 
-BINARY_REACH_MIN_ROWS = 200
-"""Models with fewer rows keep continuous ``mu`` in phase 2 (:func:`reach_may_be_binary`): HiGHS
-answers them in hundredths of a second either way, and the small built-ins (small-reactive,
-84-153 rows) keep their shipped answers. ``auto`` sends reactive models of 200-2,500 rows to
-CP-SAT, whose columns are all integral anyway."""
+INTEGRAL_PHASE2_MIN_ROWS = 200
+"""Models with fewer rows keep continuous ``mu`` and ``f`` in phase 2 (:func:`phase2_integral_columns`):
+HiGHS answers them in hundredths of a second either way, and the small built-ins
+(small-reactive, beaver-rescue: 84-153 rows) keep their shipped answers. ``auto`` sends
+reactive models of 200-2,500 rows to CP-SAT, whose columns are all integral anyway."""
 
 
-def reach_may_be_binary(rm: RoutingModel, options: MilpOptions) -> np.ndarray:
-    """The ``mu`` columns HiGHS's phase 2 declares integral (:attr:`MilpOptions.binary_reach`):
-    all of them in MILP-reactive with the option on and at least
-    :data:`BINARY_REACH_MIN_ROWS` rows, else none.
+def phase2_integral_columns(rm: RoutingModel, options: MilpOptions) -> np.ndarray:
+    """The columns HiGHS's phase 2 declares integral (:attr:`MilpOptions.integral_phase2`):
+    the reachability ``mu`` and the flows ``f`` of MILP-reactive with the option on and at
+    least :data:`INTEGRAL_PHASE2_MIN_ROWS` rows, else none.
 
-    Why the optimum is kept. Only the c4-c5 rows (``d_uv - mu_u + mu_v >= [u = Src]``, with
-    ``mu`` of ``Tgt`` taken as 0) and the coupling rows (``f_uv <= mu_u``, ``f_uv <= mu_v``)
-    hold ``mu``; no objective (neither phase's) and no other row does. Take any solution
-    ``(f, d, mu)`` of the model with ``d`` binary and let ``mu'_v = 1`` where ``mu_v > 0``,
-    else 0 (a level set of the potentials). Then ``(f, d, mu')`` is a solution with the same
-    objective:
+    Why the optimum is kept. Take any solution ``(f, d, mu, x)`` of phase 2's model (the
+    model, and the row ``sum_{Src} f >= F - 1/2`` fixing the flow level) with ``d`` binary
+    (``x``: the feasibility flows, untouched). It gives one with ``mu`` and ``f`` integral
+    and the same objective (phase 2's cost holds ``d`` and MILP-agent's place binaries only):
 
-    * c4-c5 on an edge with ``d_uv = 1``: ``1 - mu'_u + mu'_v >= 0`` always, and ``>= 1``
-      when ``u = Src`` (``mu'_v >= 0``);
-    * c4-c5 with ``d_uv = 0``: the row gives ``mu_v >= mu_u`` (``mu_v >= 1`` when ``u = Src``),
-      so ``mu_u > 0`` implies ``mu_v > 0``: ``mu'_v >= mu'_u`` (``mu'_v = 1`` when ``u = Src``);
-      when ``v`` is in ``Tgt`` the row gives ``mu_u <= 0``, so ``mu'_u = 0`` too;
-    * coupling: ``0 < f_uv <= mu_u`` implies ``mu'_u = 1 >= f_uv`` (``f <= 1``), the same for
-      ``v``; where ``f_uv = 0`` the row holds for any ``mu' >= 0``.
+    1. ``mu`` binary. Only the c4-c5 rows (``d_uv - mu_u + mu_v >= [u = Src]``, ``mu`` of
+       ``Tgt`` taken as 0) and the coupling rows (``f_uv <= mu_u``, ``f_uv <= mu_v``) hold
+       ``mu``. Let ``mu'_v = 1`` where ``mu_v > 0``, else 0 (a level set of the potentials).
+       c4-c5 with ``d_uv = 1``: ``1 - mu'_u + mu'_v >= 0`` always, ``>= 1`` when ``u = Src``.
+       With ``d_uv = 0`` the row gives ``mu_v >= mu_u`` (``mu_v >= 1`` when ``u = Src``), so
+       ``mu_u > 0`` implies ``mu_v > 0``: ``mu'_v >= mu'_u`` (``mu'_v = 1`` when ``u = Src``);
+       when ``v`` is in ``Tgt`` the row gives ``mu_u <= 0``, so ``mu'_u = 0``. Coupling:
+       ``0 < f_uv <= mu_u`` implies ``mu'_u = 1 >= f_uv``, the same for ``v``. So
+       ``(f, d, mu', x)`` is a solution.
+    2. ``f`` integral. With ``d`` and ``mu'`` fixed, the rows on ``f`` are conservation
+       outside ``Src`` and ``Tgt`` and the upper bounds ``f_e <= 1``, ``f_e <= 1 - d_e`` (c3),
+       ``f_e <= mu'`` of its ends (coupling): a flow network with integral capacities. ``f``
+       is a flow in it of value at least ``F - 1/2``, so its maximum flow, an integer, is at
+       least ``F``, and some maximum flow ``f'`` is integral (max-flow integrality). No other
+       row holds ``f`` in MILP-reactive (the walls' flow bound row is MILP-static's), so
+       ``(f', d, mu', x)`` is a solution.
 
-    So every cut set the model admits, with its flows, is admitted with binary ``mu``, and
-    the optimum of each phase is unchanged. (:mod:`synthesis.routing.cpsat` rests on the
-    same fact, with every column integral.) Exhaustive check: ``tests/test_optimality.py``
-    and ``tests/test_binary_reach.py``.
+    So every cut set phase 2 admits is admitted with ``mu`` and ``f`` integral, at the same
+    cost. (:mod:`synthesis.routing.cpsat` rests on the same facts, with every column
+    integral.) Checked on the generators' models (``tests/test_integral_phase2.py``: each
+    step on solutions with fractional ``mu`` and ``f``) and by the exhaustive comparisons of
+    ``tests/test_optimality.py`` run with these columns integral.
     """
-    if not options.binary_reach or options.mode != "reactive" or rm.model.n_row < BINARY_REACH_MIN_ROWS:
+    if not options.integral_phase2 or options.mode != "reactive" or rm.model.n_row < INTEGRAL_PHASE2_MIN_ROWS:
         return np.zeros(0, dtype=np.int64)
     reach = rm.cols.reach
-    out: np.ndarray = reach[reach >= 0]
+    out: np.ndarray = np.concatenate([reach[reach >= 0], rm.cols.flow])
     return out
 
 
