@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from synthesis.graphs.consistency import check_consistency
+from synthesis.model.errors import InconsistentProblem
 from synthesis.pipeline import SynthesisOptions, milp_options
 from synthesis.problems.problem import Problem, build_graphs
 from synthesis.problems.random_grid import first_consistent, paper_ap
@@ -93,8 +94,12 @@ def main(argv: list[str] | None = None) -> None:
                 name = f"{size}x{size} {family} |AP| {paper_ap(family, int(n))} s{seed}"
                 row = f"| {name} | {b['rows']} | {b['flow']} | {b['walls']} | {_levels_text(b['levels'])} | {b['cpu_s']:.2f} |"
                 if args.solve:
-                    with_cb = solve(problem, True, options, cut_bound=True)
-                    without = solve(problem, True, options, cut_bound=False)
+                    try:
+                        with_cb = solve(problem, True, options, cut_bound=True)
+                        without = solve(problem, True, options, cut_bound=False)
+                    except InconsistentProblem as exc:
+                        print(f"{row} {exc.reason} | | | |", flush=True)
+                        continue
                     cb = with_cb["cut_bound"] or {}
                     mark = "cut bound" if cb.get("proven") else (f"bound {cb['bound']:g}" if cb else "no bound")
                     row += f" {with_cb['status']}, {with_cb['flow']}, {with_cb['cuts']} ({mark}) | {with_cb['cpu_s']:.1f} |"
