@@ -342,12 +342,18 @@ def _apply_cut_bound(products: Products, options: MilpOptions, sep: CoverSeparat
     """MILP-static: the walls' cut bound at the level (:mod:`synthesis.routing.cut_bound`, a
     proof) raises the level's bound, and its minimum cuts' wall sets, grown by the routing
     heuristic and passing every check, become the level's answer where cheaper; an answer that
-    meets the bound is proven without a master."""
+    meets the bound is proven without a master, and a level the bound proves empty (infinite)
+    needs no master either."""
     if options.mode != "static" or not options.cut_bound or options.block_states:
         return
     groups, me = sep.groups, sep.me
     cb = static_cut_bound(products, groups.of_edge, groups.weight, groups.restrictable, me.eu, me.ev, level.flow)
     if cb is None:
+        return
+    if not np.isfinite(cb.value):  # no cut set has this flow: the level is empty, no master needed
+        if level.cut is not None:
+            raise RuntimeError(f"the walls' cut bound says no cut set has flow {level.flow}, which a checked test has: a FlowTest bug")
+        level.infeasible = level.proven = True
         return
     level.bound = max(level.bound, cb.value)
     for walls in cb.candidates:
