@@ -7,7 +7,8 @@ phase 2 of a 10x10 grid without a search.
   random graphs, and on small fuel grids whose walls are tied across fuel levels, every cut
   group set is enumerated; at every flow level ``F`` the bound is at most the fewest cuts of
   a valid set with flow at least ``F``; the instances where it is positive and where it is
-  tight are counted, so the check cannot pass vacuously;
+  tight are counted (only levels some cut set reaches: at the others any bound holds), so the
+  check cannot pass vacuously: a bound of 0 everywhere fails every test;
 * the candidate phase 2 accepts (completed into a model solution and checked) is a valid
   wall set with flow ``F``, and where it costs the bound it costs the true fewest cuts;
 * on random 10x10 reachability grids the bound is 24 and 32 at flow 2 (the optimum), and
@@ -80,7 +81,8 @@ def _at_least(best: dict[int, int], level: int) -> float:
 
 def _check(problems: list[Problem]) -> tuple[int, int, int, int]:
     """Assert the bound and the accepted candidates on every instance and level; return
-    (levels compared, levels with a positive bound, levels where it is tight, candidates accepted)."""
+    (levels compared, levels some cut set reaches with a positive bound, those where it is tight,
+    candidates accepted)."""
     compared = positive = tight = accepted = 0
     for problem in problems:
         _, products = build_graphs(problem)
@@ -100,10 +102,10 @@ def _check(problems: list[Problem]) -> tuple[int, int, int, int]:
             truth = _at_least(best, level)
             assert cb.value <= truth, f"{problem.name} flow {level}: bound {cb.value}, fewest cuts {truth}"
             compared += 1
-            positive += cb.value > 0
-            if not np.isfinite(truth):
+            if not np.isfinite(truth):  # no cut set has this flow: any bound holds, so it counts for nothing
                 continue
-            tight += cb.value == truth
+            positive += cb.value > 0
+            tight += 0 < cb.value == truth
             proof = _cut_proof(products, rm, options, {}, level)
             if proof is None or proof.x is None:
                 continue
@@ -166,18 +168,18 @@ def fuel_instance(seed: int) -> Problem:
 )
 def test_bound_never_above_the_fewest_cuts(rows: int, cols: int, base: int, both_ways: bool) -> None:
     compared, positive, tight, _ = _check([grid_instance(base + s, rows, cols, "static", both_ways) for s in range(25)])
-    assert compared >= 20 and positive >= 10 and tight >= 5, (compared, positive, tight)
+    assert compared >= 20 and positive >= 8 and tight >= 5, (compared, positive, tight)
 
 
 def test_bound_never_above_the_fewest_cuts_on_graphs() -> None:
     problems = [replace(graph_instance(9000 + s), kind="static", bidirectional_cuts=s % 2 == 0) for s in range(50)]
     compared, positive, tight, _ = _check(problems)
-    assert compared >= 20 and positive >= 5 and tight >= 3, (compared, positive, tight)
+    assert compared >= 20 and positive >= 10 and tight >= 8, (compared, positive, tight)
 
 
 def test_bound_never_above_the_fewest_cuts_with_tied_walls() -> None:
     compared, positive, tight, _ = _check(fuel_instances(range(40)))
-    assert compared >= 15 and positive >= 5, (compared, positive, tight)
+    assert compared >= 15 and positive >= 10 and tight >= 10, (compared, positive, tight)
 
 
 def test_candidates_accepted_are_valid_and_optimal() -> None:

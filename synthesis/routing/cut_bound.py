@@ -124,7 +124,8 @@ class _Search:
     out) is a lower bound for every completion (more forcing only raises a minimum cut), and
     the completions' ``min(E, X)`` is at most ``min(E_max, X_max)`` (each free item counted at
     its largest ``E`` and ``X`` share). A node is dropped when that is below the level or its
-    cut is no smaller than the best full assignment's; a full assignment is kept when its
+    cut is larger than the best full assignment's (a tie is searched on: its leaves are more
+    candidates at the same cut); a full assignment is kept when its
     ``min(E, X)`` reaches the level."""
 
     def __init__(self, arcs: _Arcs, n_states: int, level: int, max_cuts: int) -> None:
@@ -220,8 +221,8 @@ def static_cut_bound(
     level
         The flow level ``F`` (at least 1).
     max_candidates
-        How many minimum cuts' wall sets to return (two per choice: the smallest and the
-        largest source side), cheapest cut first.
+        How many minimum cuts' wall sets to return (two per kept full assignment: the
+        smallest and the largest source side), cheapest cut first.
     max_cuts
         The minimum cuts the search over the states next to ``Y`` (C5) may compute: a count,
         so the bound is the same on every machine; where it runs out, the bound is the

@@ -39,8 +39,10 @@ no model edge leaves ``Src``, the known bound is 0 and it is returned as it is):
   a ``Tgt`` node. Either that node's state is in ``Z`` (then the route's last edge is an
   edge into ``Tgt`` whose head's state is in ``Z``), or the route leaves ``Z`` by some move
   ``y -> x``, ``x`` outside ``Z``, whose tail ``y`` is not in ``A`` (L1), so in ``Y - A``.
-  Both edges come after an I node. So ``F <= X``, the number of model edges with a tail
-  reachable from I that are of either kind.
+  Both edges come after an I node (``I`` and ``Tgt`` are disjoint: ``intermediate`` is
+  ``acc_test & ~acc_sys``: a route reaches ``Tgt`` strictly after its first I node).
+  So ``F <= X``, the number of model edges with a tail reachable from I that are of either
+  kind.
 
 ``E`` depends on ``S`` through ``R``, ``X`` through ``A``; once ``R`` is over-estimated by a
 region that depends on ``A`` alone (below), both do. The bound is the largest
