@@ -464,23 +464,23 @@ def _reach_level(
     relaxation and clause learning prove a level empty where the search at the bound does
     not (random 5x5 reaction grids' flow 2 in 1-30 deterministic seconds, and level 1 of
     the grids without a test, docs/benchmarks.md), and it finds tests there too. At the top
-    (``level == cap``: a test there is the maximum), it takes turns with
-    :data:`~synthesis.routing.cpsat.MAX_FLOW_SEARCH` (no LP, quick restarts: finds
-    mars-exploration's flow 2, where the default search does not), that one first, both
-    with the same deterministic budget (:data:`~synthesis.routing.cpsat.LEVEL_WORK`),
-    doubled after both ran out. A test found raises ``best`` and the level; a level proven
-    empty makes ``best`` the maximum (``cap = level - 1``, kept as a row). Every answer is
-    an exact solve of the same model, so no optimum is lost; the budgets are deterministic
-    (``work_limit``) or the user's wall clock. Returns ``(best, cap, stopped_by)``:
+    (``level == cap``: a test there is the maximum),
+    :data:`~synthesis.routing.cpsat.MAX_FLOW_SEARCH` (no LP, quick restarts, from ``best`` as a
+    hint: finds mars-exploration's flow 2, where the default search does not) gets one turn
+    of :data:`~synthesis.routing.cpsat.LEVEL_WORK` first, then the default search what is
+    left (one run: CP-SAT cannot resume a search, and restarting it with doubling budgets
+    cost the 5x5 reaction grids 2-6 times the single run's proof). A test found raises
+    ``best`` and the level; a level proven empty makes ``best`` the maximum (``cap = level -
+    1``, kept as a row). Every answer is an exact solve of the same model, so no optimum is
+    lost; the budgets are deterministic (``work_limit``) or the user's wall clock. Returns ``(best, cap, stopped_by)``:
     ``best`` is the maximum when its flow reaches ``cap``."""
     out = rm.cols.flow[rm.out_src]
-    chunk = cpsat.LEVEL_WORK
-    turn = 0  # solves at the top level so far
+    tried = False  # MAX_FLOW_SEARCH had its turn at the top level
     level = known + 1
     while level <= cap:
-        top = level == cap
-        search = cpsat.MAX_FLOW_SEARCH if top and turn % 2 == 0 else None
-        work = (chunk * 2 ** (turn // 2)) if top else None
+        search = cpsat.MAX_FLOW_SEARCH if level == cap and not tried else None
+        tried = tried or search is not None
+        work = None if search is None else cpsat.LEVEL_WORK
         if left is not None:
             work = left if work is None else min(work, left)
         seconds, after_first = _cpsat_budget(clock)
@@ -489,7 +489,6 @@ def _reach_level(
             rel_gap=0.0, random_seed=options.random_seed, phase="phase 1 (maximum flow)", search=search, reach=level,
         )
         runs.append(ans.stats)
-        turn += top
         left = None if left is None else left - ans.stats["deterministic_time"]
         if ans.x is not None:
             clock.first_test(at=time.perf_counter() - (ans.first_age or 0.0))
@@ -499,7 +498,7 @@ def _reach_level(
             cap = level - 1
             if cap >= 1:
                 session.add_row(out, np.ones(out.size), -np.inf, cap + 0.5)
-        elif ans.stopped_by == "time_limit" or not top or (left is not None and left <= 0.0):
+        elif ans.stopped_by == "time_limit" or search is None or (left is not None and left <= 0.0):
             return best, cap, ans.stopped_by or "work_limit"
     return best, cap, None
 
