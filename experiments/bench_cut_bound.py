@@ -21,7 +21,6 @@ where the bound equals the optimum (tight).
 
 from __future__ import annotations
 
-import argparse
 import time
 from typing import Any
 
@@ -31,11 +30,10 @@ from synthesis.graphs.consistency import check_consistency
 from synthesis.model.errors import InconsistentProblem
 from synthesis.pipeline import SynthesisOptions, milp_options
 from synthesis.problems.problem import Problem, build_graphs
-from synthesis.problems.random_grid import first_consistent, paper_ap
 from synthesis.routing.milp import _cut_proof, _phase2_cost
-from synthesis.routing.model import BACKENDS, build_model
+from synthesis.routing.model import build_model
 
-from .bench_flow_bound import solve
+from .bench_flow_bound import instance_arguments, options_of, solve, static_instances
 
 
 def cut_bounds(problem: Problem) -> dict[str, Any]:
@@ -66,53 +64,39 @@ def _levels_text(levels: dict[int, tuple[float, float | None]]) -> str:
 
 
 def main(argv: list[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--sizes", type=int, nargs="+", default=[10])
-    ap.add_argument("--families", nargs="+", default=["reachability:1", "reachability:2", "reachability:3"], metavar="FAMILY:N")
-    ap.add_argument("--instances", type=int, default=5, help="seeds 0..N-1")
-    ap.add_argument("--seeds", type=int, nargs="+", default=None, help="these seeds instead of 0..N-1")
-    ap.add_argument("--solve", action="store_true", help="also solve with and without the cut bound")
-    ap.add_argument("--backend", default="auto", choices=BACKENDS)
-    ap.add_argument("--work-limit", type=float, default=None, help="CP-SAT deterministic seconds per phase")
-    ap.add_argument("--node-limit", type=int, default=None, help="HiGHS nodes per run")
-    ap.add_argument("--time-limit", type=float, default=None, help="wall seconds per solve")
-    args = ap.parse_args(argv)
-    options = SynthesisOptions(backend=args.backend, work_limit=args.work_limit, node_limit=args.node_limit, time_limit=args.time_limit)
+    families = ["reachability:1", "reachability:2", "reachability:3"]
+    args = instance_arguments(__doc__, families, "also solve with and without the cut bound").parse_args(argv)
+    options = options_of(args)
     head = "| instance | rows | heuristic flow | walls' flow bound | per level: cut bound / candidate | s |"
     if args.solve:
         head += " with: status, flow, cuts (proof) | CPU s | without: status, flow, cuts | CPU s |"
     print(head)
     print("|" + "---|" * (head.count("|") - 1))
     proven = tight = proven_with = proven_without = total = 0
-    for size in args.sizes:
-        for spec in args.families:
-            family, n = spec.split(":")
-            for seed in args.seeds if args.seeds is not None else range(args.instances):
-                _, problem, _ = first_consistent(size, family, int(n), seed, "static")
-                b = cut_bounds(problem)
-                total += 1
-                name = f"{size}x{size} {family} |AP| {paper_ap(family, int(n))} s{seed}"
-                row = f"| {name} | {b['rows']} | {b['flow']} | {b['walls']} | {_levels_text(b['levels'])} | {b['cpu_s']:.2f} |"
-                if args.solve:
-                    try:
-                        with_cb = solve(problem, True, options, cut_bound=True)
-                        without = solve(problem, True, options, cut_bound=False)
-                    except InconsistentProblem as exc:
-                        print(f"{row} {exc.reason} | | | |", flush=True)
-                        continue
-                    cb = with_cb["cut_bound"] or {}
-                    mark = "cut bound" if cb.get("proven") else (f"bound {cb['bound']:g}" if cb else "no bound")
-                    row += f" {with_cb['status']}, {with_cb['flow']}, {with_cb['cuts']} ({mark}) | {with_cb['cpu_s']:.1f} |"
-                    row += f" {without['status']}, {without['flow']}, {without['cuts']} | {without['cpu_s']:.1f} |"
-                    proven_with += with_cb["status"] == "optimal"
-                    proven_without += without["status"] == "optimal"
-                    for r in (with_cb, without):
-                        if r["status"] == "optimal":
-                            proven += 1
-                            level = b["levels"].get(r["flow"])
-                            tight += level is not None and level[0] == r["cuts"]
-                            break
-                print(row, flush=True)
+    for name, problem in static_instances(args):
+        b = cut_bounds(problem)
+        total += 1
+        row = f"| {name} | {b['rows']} | {b['flow']} | {b['walls']} | {_levels_text(b['levels'])} | {b['cpu_s']:.2f} |"
+        if args.solve:
+            try:
+                with_cb = solve(problem, True, options, cut_bound=True)
+                without = solve(problem, True, options, cut_bound=False)
+            except InconsistentProblem as exc:
+                print(f"{row} {exc.reason} | | | |", flush=True)
+                continue
+            cb = with_cb["cut_bound"] or {}
+            mark = "cut bound" if cb.get("proven") else (f"bound {cb['bound']:g}" if cb else "no bound")
+            row += f" {with_cb['status']}, {with_cb['flow']}, {with_cb['cuts']} ({mark}) | {with_cb['cpu_s']:.1f} |"
+            row += f" {without['status']}, {without['flow']}, {without['cuts']} | {without['cpu_s']:.1f} |"
+            proven_with += with_cb["status"] == "optimal"
+            proven_without += without["status"] == "optimal"
+            for r in (with_cb, without):
+                if r["status"] == "optimal":
+                    proven += 1
+                    level = b["levels"].get(r["flow"])
+                    tight += level is not None and level[0] == r["cuts"]
+                    break
+        print(row, flush=True)
     if args.solve:
         print(
             f"\n{total} instances: proven with the cut bound {proven_with}, without {proven_without}; "

@@ -24,6 +24,7 @@ from __future__ import annotations
 import argparse
 import resource
 import time
+from collections.abc import Iterator
 from dataclasses import replace
 from typing import Any
 
@@ -76,41 +77,56 @@ def solve(problem: Problem, with_bound: bool, options: SynthesisOptions, **flags
             "cpu_s": _cpu() - cpu0, "backend": routing.stats["backend"], "cut_bound": routing.stats.get("cut_bound")}
 
 
-def main(argv: list[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+def instance_arguments(doc: str, families: list[str], solve_help: str) -> argparse.ArgumentParser:
+    """The command line of the bound benchmarks: which static random grids, and how to solve them."""
+    ap = argparse.ArgumentParser(description=doc.split("\n\n")[0])
     ap.add_argument("--sizes", type=int, nargs="+", default=[10])
-    ap.add_argument("--families", nargs="+", default=list(DEFAULT_FAMILIES), metavar="FAMILY:N")
+    ap.add_argument("--families", nargs="+", default=families, metavar="FAMILY:N")
     ap.add_argument("--instances", type=int, default=5, help="seeds 0..N-1")
     ap.add_argument("--seeds", type=int, nargs="+", default=None, help="these seeds instead of 0..N-1")
-    ap.add_argument("--solve", action="store_true", help="also solve with and without the bound")
+    ap.add_argument("--solve", action="store_true", help=solve_help)
     ap.add_argument("--backend", default="auto", choices=BACKENDS)
     ap.add_argument("--work-limit", type=float, default=None, help="CP-SAT deterministic seconds per phase")
     ap.add_argument("--node-limit", type=int, default=None, help="HiGHS nodes per run")
     ap.add_argument("--time-limit", type=float, default=None, help="wall seconds per solve")
-    args = ap.parse_args(argv)
-    options = SynthesisOptions(backend=args.backend, work_limit=args.work_limit, node_limit=args.node_limit, time_limit=args.time_limit)
+    return ap
+
+
+def options_of(args: argparse.Namespace) -> SynthesisOptions:
+    """The solve options the command line asks for."""
+    return SynthesisOptions(backend=args.backend, work_limit=args.work_limit, node_limit=args.node_limit, time_limit=args.time_limit)
+
+
+def static_instances(args: argparse.Namespace) -> Iterator[tuple[str, Problem]]:
+    """(name, MILP-static problem) of every size, family and seed the command line asks for."""
+    for size in args.sizes:
+        for spec in args.families:
+            family, n = spec.split(":")
+            for seed in args.seeds if args.seeds is not None else range(args.instances):
+                _, problem, _ = first_consistent(size, family, int(n), seed, "static")
+                yield f"{size}x{size} {family} |AP| {paper_ap(family, int(n))} s{seed}", problem
+
+
+def main(argv: list[str] | None = None) -> None:
+    args = instance_arguments(__doc__, list(DEFAULT_FAMILIES), "also solve with and without the bound").parse_args(argv)
+    options = options_of(args)
     head = "| instance | rows | heuristic flow | heuristic bound | walls' bound |"
     if args.solve:
         head += " with bound: status, flow, cuts | CPU s | without: status, flow, cuts | CPU s |"
     print(head)
     print("|" + "---|" * (head.count("|") - 1))
     lower = settled = total = 0
-    for size in args.sizes:
-        for spec in args.families:
-            family, n = spec.split(":")
-            for seed in args.seeds if args.seeds is not None else range(args.instances):
-                _, problem, _ = first_consistent(size, family, int(n), seed, "static")
-                b = bounds(problem)
-                total += 1
-                lower += b["walls"] < b["heuristic"]
-                settled += b["walls"] == b["flow"] < b["heuristic"]
-                name = f"{size}x{size} {family} |AP| {paper_ap(family, int(n))} s{seed}"
-                row = f"| {name} | {b['rows']} | {b['flow']} | {b['heuristic']} | {b['walls']} |"
-                if args.solve:
-                    for flag in (True, False):
-                        r = solve(problem, flag, options)
-                        row += f" {r['status']}, {r['flow']}, {r['cuts']} ({r['backend']}) | {r['cpu_s']:.1f} |"
-                print(row, flush=True)
+    for name, problem in static_instances(args):
+        b = bounds(problem)
+        total += 1
+        lower += b["walls"] < b["heuristic"]
+        settled += b["walls"] == b["flow"] < b["heuristic"]
+        row = f"| {name} | {b['rows']} | {b['flow']} | {b['heuristic']} | {b['walls']} |"
+        if args.solve:
+            for flag in (True, False):
+                r = solve(problem, flag, options)
+                row += f" {r['status']}, {r['flow']}, {r['cuts']} ({r['backend']}) | {r['cpu_s']:.1f} |"
+        print(row, flush=True)
     print(f"\n{total} instances: walls' bound below the heuristic's on {lower}, equal to the heuristic's flow (phase 1 settled) on {settled}")
 
 
