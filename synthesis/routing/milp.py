@@ -56,9 +56,8 @@ from ..graphs.consistency import check_consistency
 from ..graphs.products import Products
 from ..model.errors import InconsistentProblem
 from . import cpsat, scip, wall_cover
-from .cut_bound import static_cut_bound
 from .heuristic import RoutingGuess
-from .model import BACKENDS, CutGroups, MilpOptions, RoutingModel, build_model, phase2_integral_columns, static_moves_of
+from .model import BACKENDS, CutGroups, MilpOptions, RoutingModel, build_model, model_cut_bound, phase2_integral_columns, static_moves_of
 from .result import RoutingResult as RoutingResult
 from .result import blocked_by as blocked_by
 from .result import blocked_of_edges, required_entries
@@ -577,10 +576,8 @@ def _cut_proof(products: Products, rm: RoutingModel, options: MilpOptions, entri
     solution that satisfies every row of the model (feasibility flows included) with flow
     ``flow`` exactly: the routing heuristic grows it from the candidate's walls (opening any
     of them that separation does not need) and :func:`_guess_solution` completes it."""
-    if options.mode != "static" or not options.cut_bound or options.block_states:
-        return None
     groups, me = rm.groups, rm.edges
-    cb = static_cut_bound(products, groups.of_edge, groups.weight, groups.restrictable, me.eu, me.ev, flow)
+    cb = model_cut_bound(products, options, groups, me, flow)
     if cb is None:
         return None
     if not np.isfinite(cb.value):

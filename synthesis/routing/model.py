@@ -22,6 +22,7 @@ from ..graphs.consistency import check_consistency
 from ..graphs.products import Products, reachable
 from ..model.errors import InconsistentProblem
 from ..problems.problem import TIE_PLACES
+from .cut_bound import CutBound, static_cut_bound
 from .flow_bound import static_flow_bound
 from .heuristic import RouteSeed, RoutingGuess, guess_routing, open_flow_bound
 from .reductions import Reductions, reduce_groups
@@ -557,6 +558,16 @@ def model_flow_bound(products: Products, options: MilpOptions, me: ModelEdges) -
     known = open_flow_bound(g.n_nodes, g.initial, me.eu, me.ev, me.c5, products.target)
     bound = static_flow_bound(products, me.eu, me.ev, known)
     return bound if bound < known else None
+
+
+def model_cut_bound(products: Products, options: MilpOptions, groups: CutGroups, me: ModelEdges, level: int) -> CutBound | None:
+    """MILP-static: :func:`~synthesis.routing.cut_bound.static_cut_bound` of this model's cut
+    groups at flow ``level``; ``None`` in the other modes (cuts depend on the history), for
+    MILP-agent's places objective (the bound counts cuts only), with ``options.cut_bound`` off,
+    or where the bound does not apply."""
+    if options.mode != "static" or not options.cut_bound or options.block_states:
+        return None
+    return static_cut_bound(products, groups.of_edge, groups.weight, groups.restrictable, me.eu, me.ev, level)
 
 
 def group_reductions(

@@ -58,8 +58,7 @@ from ..graphs.consistency import check_consistency
 from ..graphs.products import Products
 from ..model.errors import InconsistentProblem
 from .cover_rows import CoverSeparator, FlowCut, Row
-from .cut_bound import static_cut_bound
-from .model import MilpOptions, cut_groups, group_reductions, model_edges, model_flow_bound, static_moves_of
+from .model import MilpOptions, cut_groups, group_reductions, model_cut_bound, model_edges, model_flow_bound, static_moves_of
 from .result import RoutingResult, required_entries
 from .solver_control import Clock, SolveStatus, quiet_highs, run_highs
 
@@ -344,10 +343,7 @@ def _apply_cut_bound(products: Products, options: MilpOptions, sep: CoverSeparat
     heuristic and passing every check, become the level's answer where cheaper; an answer that
     meets the bound is proven without a master, and a level the bound proves empty (infinite)
     needs no master either."""
-    if options.mode != "static" or not options.cut_bound or options.block_states:
-        return
-    groups, me = sep.groups, sep.me
-    cb = static_cut_bound(products, groups.of_edge, groups.weight, groups.restrictable, me.eu, me.ev, level.flow)
+    cb = model_cut_bound(products, options, sep.groups, sep.me, level.flow)
     if cb is None:
         return
     if not np.isfinite(cb.value):  # no cut set has this flow: the level is empty, no master needed
@@ -357,7 +353,7 @@ def _apply_cut_bound(products: Products, options: MilpOptions, sep: CoverSeparat
         return
     level.bound = max(level.bound, cb.value)
     for walls in cb.candidates:
-        guess = replace(me, has_var=me.has_var & walls).guess(products, route_seed=False)
+        guess = replace(sep.me, has_var=sep.me.has_var & walls).guess(products, route_seed=False)
         cut = sep.guess_cut(guess) if guess.flow >= level.flow else None
         if cut is not None and sep.checks_pass(cut, level.flow) and sep.cost_of(cut) < level.cost:
             level.cut, level.cost = cut, sep.cost_of(cut)
