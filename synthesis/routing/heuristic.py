@@ -196,6 +196,31 @@ def guess_routing(
             pool.append(route)
             if flow >= upper or len(pool) >= route_seed.pool or work.exhausted:
                 break
+    if route_seed is not None and flow < upper and upper >= 2:
+        # F routes that share no place but where the history changes (and the start and
+        # the goal): with only their moves open, a walk from Src must follow one of them
+        # between two such places, so every walk to Tgt passes them all, as each route
+        # does (random 10x10 grids with two test cells: flow 2 where the pairs above give 1)
+        work = Work(route_seed.work)
+        for route in simple_routes(n, src, eu, ev, usable, target, route_seed, work):
+            if work.exhausted:
+                break
+            group = disjoint_routes(n, src, eu, ev, usable, target, route_seed, route, upper, work)
+            if len(group) < 2:
+                continue
+            seeded = ~has_var
+            for r in group:
+                seeded[grp[r]] = True
+            ok, reach = separated(seeded)
+            if not ok or (traps is not None and traps(border(reach))):
+                continue
+            f0 = np.zeros(m, dtype=bool)
+            f0[route] = True
+            flow2, open2, f2 = grow(seeded, f0, 1, work)
+            if flow2 > flow:
+                flow, is_open, f, from_route = flow2, open2, f2, True
+            if flow >= upper:
+                break
     _, reach = separated(is_open)
     return RoutingGuess(flow, upper, f.astype(float), border(reach), reach, from_route)
 
@@ -299,6 +324,52 @@ def simple_routes(
             if tuple(route) not in seen:
                 seen.add(tuple(route))
                 yield np.asarray(route, dtype=np.int64)
+
+
+def disjoint_routes(
+    n: int,
+    src: int,
+    eu: np.ndarray,
+    ev: np.ndarray,
+    usable: np.ndarray,
+    target: np.ndarray,
+    seed: RouteSeed,
+    route: np.ndarray,
+    count: int,
+    work: Work,
+) -> list[np.ndarray]:
+    """``route`` and up to ``count - 1`` more place-simple routes through its order of
+    history changes, each sharing no place with the others but the places where a route's
+    history changes, the start's and the goal's (edge indices; fewer where none is found
+    within ``work``).
+
+    Why: the moves of such routes alone open no walk past I that a single route's moves do
+    not (a walk can leave a route only at a shared place, where every route has passed the
+    same histories), and they carry ``count`` units of flow where the place-simple routes
+    of :func:`simple_routes`, combined in pairs, cross each other and open a shortcut. The
+    caller checks separation rather than rely on the argument."""
+    h, place = seed.hist, seed.place
+    change = h[eu[route]] != h[ev[route]]
+    changes = (int(h[src]),) + tuple(int(x) for x in h[ev[route[change]]])
+    shared = {int(p) for p in place[ev[route[change]]]} | {int(place[ev[route[-1]]])}
+    taken = {int(place[src])} | {int(p) for p in place[ev[route]]}
+    ok = np.flatnonzero(usable)
+    out_ptr, out_order = _csr(eu[ok], n)
+    search = _RouteSearch(eu, ev, out_ptr, ok[out_order], target, seed, work)
+    group = [route]
+    while len(group) < count and not work.exhausted:
+        used = frozenset((taken - shared) | {int(place[src])})
+        found = None
+        for again in range(seed.per_order):
+            search.left = _RouteSearch.BUDGET
+            found = search.through(changes, 0, src, used, randomized=again > 0)
+            if found is not None:
+                break
+        if found is None:
+            break
+        group.append(np.asarray(found, dtype=np.int64))
+        taken |= {int(p) for p in place[ev[group[-1]]]}
+    return group
 
 
 def _history_sequences(
