@@ -8,6 +8,10 @@ valid wall set, fires where the heuristic's bound is loose, and settles phase 1 
   pass vacuously (they are most of the routable ones);
 * the same on small random graphs that are not grids (one-way and two-way walls, safety
   objectives, unrestrictable moves: ``test_optimality.graph_instance`` solved as MILP-static);
+* the same on small grids shaped like the study's safety and multi-cell reachability specs
+  (one or two hazard cells under ``G !haz``, or two test cells under ``F I1 & F I2``), where the
+  bound leaves out the dead histories (L5) and takes the smallest over the test cells' stages
+  (L4); the instances where L4/L5 alone make it fire are counted;
 * it is ``None`` outside MILP-static;
 * on a random 10x10 reachability grid it is 2 where the heuristic's bound is 4, and the
   heuristic's flow 2 is then proven the maximum without a search.
@@ -15,6 +19,7 @@ valid wall set, fires where the heuristic's bound is loose, and settles phase 1 
 
 from __future__ import annotations
 
+import random
 from dataclasses import replace
 
 import pytest
@@ -22,9 +27,11 @@ from test_optimality import graph_instance, grid_instance, static_optimum, view_
 
 from synthesis.graphs.consistency import check_consistency
 from synthesis.model.errors import InconsistentProblem
+from synthesis.model.systems import grid_world
 from synthesis.pipeline import SynthesisOptions, milp_options, synthesize
-from synthesis.problems.problem import Problem, build_graphs
+from synthesis.problems.problem import Problem, build_graphs, make_problem
 from synthesis.problems.random_grid import first_consistent
+from synthesis.routing import flow_bound
 from synthesis.routing.model import build_model
 
 
@@ -81,6 +88,58 @@ def test_bound_never_below_a_valid_wall_set_on_graphs(base: int, both_ways: bool
     problems = [replace(graph_instance(base + s), kind="static", bidirectional_cuts=both_ways) for s in range(60)]
     compared, fired = _check(problems)
     assert compared >= 30 and fired >= 4, (compared, fired)
+
+
+def study_like_instance(seed: int, rows: int, cols: int, both_ways: bool) -> Problem:
+    """A small grid shaped like the random grid study's specs: start, terminal goal, and
+    either a test cell with one or two hazard cells (``F goal & G !haz``, the safety family)
+    or two test cells (``F I1 & F I2``, the reachability family with |AP| = 3)."""
+    rng = random.Random(seed)
+    cells = [(r, c) for r in range(rows) for c in range(cols)]
+    picks = rng.sample(cells, len(cells))
+    start, goal, rest = picks[0], picks[1], picks[2:]
+    labels: dict[tuple[int, int], set[str]] = {goal: {"goal"}}
+    if rng.random() < 0.5:
+        labels[rest[0]] = {"I"}
+        for cell in rest[1 : 2 + (rng.random() < 0.4)]:
+            labels[cell] = {"haz"}
+        system, test = "F goal & G !haz", "F I"
+    else:
+        labels[rest[0]], labels[rest[1]] = {"I1"}, {"I2"}
+        system, test = "F goal", "F I1 & F I2"
+    ts = grid_world(cells, rows, cols, start, [goal], labels)
+    return make_problem(f"study-like-{seed}", ts, system, test, "static", both_ways)
+
+
+def _plain_bound(problem: Problem) -> int | None:
+    """The bound of L0-L3 alone (I only, dead nodes kept), ``None`` where no model is built."""
+    _, products = build_graphs(problem)
+    try:
+        rm = build_model(products, milp_options(problem, SynthesisOptions()), {}, check_consistency(products))
+    except InconsistentProblem:
+        return None
+    known = rm.edges.guess(products, fixed_open=rm.reductions.fixed_open).upper_bound
+    choices = flow_bound.entry_choices(products, rm.edges.eu, rm.edges.ev, known)
+    return known if choices is None else min(known, max((c.flow for c in choices), default=0))
+
+
+@pytest.mark.parametrize(("rows", "cols", "base", "both_ways"), [(3, 3, 12000, True), (2, 3, 12500, False)])
+def test_stages_and_dead_histories_never_below_a_valid_wall_set(rows: int, cols: int, base: int, both_ways: bool) -> None:
+    problems = [study_like_instance(base + s, rows, cols, both_ways) for s in range(40)]
+    compared, fired = _check(problems)
+    sharper = 0
+    for problem in problems:
+        got, plain = _bound_and_truth(problem), _plain_bound(problem)
+        if got is not None and plain is not None:
+            sharper += got[0] < plain
+    assert compared >= 25 and fired >= 8 and sharper >= 3, (compared, fired, sharper)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("rows", "cols", "base", "both_ways"), [(3, 3, 13000, True), (2, 3, 14000, False), (2, 4, 15000, True)])
+def test_stages_and_dead_histories_never_below_a_valid_wall_set_sweep(rows: int, cols: int, base: int, both_ways: bool) -> None:
+    compared, fired = _check([study_like_instance(base + s, rows, cols, both_ways) for s in range(150)])
+    assert compared >= 90 and fired >= 30, (compared, fired)
 
 
 def test_no_bound_outside_milp_static() -> None:

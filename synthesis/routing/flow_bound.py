@@ -59,6 +59,32 @@ two-value knapsack over a few states, solved exactly by dynamic programming over
 kept: the bound only proves a flow level empty, or tells phase 1 that the heuristic's flow
 is the maximum (``tests/test_flow_bound.py`` checks it against brute force).
 
+(L4) Every fact above holds with I replaced by any set ``I'`` of nodes of G that holds I and
+no ``Tgt`` node. A valid ``S`` is valid for ``I'``: a walk from ``Src`` to ``Tgt`` outside
+``I'`` is outside I, so it is a bypass walk (and L0 holds for the region outside ``I'``). A
+route passes an I node before its ``Tgt`` node, and that node is in ``I'``: so every route is a
+route through ``I'`` (L2 counts its first entry edge into ``I'``, L3 its edges after its first
+``I'`` node), and the flow through I is at most the bound computed for ``I'``. The bound is
+therefore the smallest over I and a few such sets (:func:`stage_sets`): for each place where a
+history changes, I together with every node reachable in G from the nodes entered there by a
+change of history, less ``Tgt``. Why: a test of several cells (``F p1 & F p2``) passes each of
+them, so each test cell is a bottleneck of its own, and the enclosure around one that lies on the
+grid's border (3 moves) allows 1 where the enclosure around I (the last cell visited) allows 2
+(random 10x10 reachability grids with two test cells: docs/benchmarks.md, session 11).
+
+(L5) L0-L3 hold too with every node that reaches no ``Tgt`` node in G (a *dead* node: a
+safety objective already violated) left out of ``R`` and of the eligible states, and with
+``Y`` grown by ``D``, the states of the dead heads of edges of G from live nodes outside I and
+``Tgt``. L0: an open walk from ``Src`` to ``Tgt`` has only live nodes. L1 becomes: an open move
+``s -> s'`` with ``s`` in ``A`` leads into ``Z`` (the edge from ``(s, q)`` in ``R`` reaches a live
+node outside I, in ``R``, or an I node, an entry edge, or a dead node, whose state is in
+``D``). L2 is unchanged (a route has only live nodes: it reaches ``Tgt``), and L3 holds with the
+larger ``Y``: its argument uses only L1 and ``Y`` inside ``Z``. Why: on the safety objectives
+(``G !p2``) every state is in ``A`` through the histories where ``p2`` was visited, and the
+bound said nothing; without them the enclosure sees the test cell again (random 10x10 safety
+grids: docs/benchmarks.md, session 11). This variant is the flow bound's only
+(``live=True`` of :func:`entry_choices`); :mod:`synthesis.routing.cut_bound` keeps L0-L3.
+
 Only MILP-static (every cut history-independent); with ``Src`` in I there is no entry edge
 to count and no bound.
 """
@@ -70,7 +96,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..graphs.products import Products, reachable
+from ..graphs.products import Products, coreachable, reachable
 
 #: States of ``Y`` (heads of entry edges) up to which the bound is computed: it takes
 #: ``2^|Y|`` graph searches. A count, so whether it runs is the same on every machine.
@@ -112,7 +138,18 @@ def static_flow_bound(products: Products, eu: np.ndarray, ev: np.ndarray, known:
     known
         A proven upper bound on the flow (the heuristic's maximum flow with every group open).
     """
-    choices = entry_choices(products, eu, ev, known)
+    bound = _bound_through(products, products.intermediate, eu, ev, known)
+    for inter in stage_sets(products):
+        if bound <= 0:
+            break
+        bound = _bound_through(products, inter, eu, ev, bound)  # L4
+    return bound
+
+
+def _bound_through(products: Products, inter: np.ndarray, eu: np.ndarray, ev: np.ndarray, known: int) -> int:
+    """The bound of L0-L3 with ``inter`` (I, or a set ``I'`` of L4) in the place of I, at most
+    ``known``."""
+    choices = entry_choices(products, eu, ev, known, inter, live=True)
     if choices is None:
         return known
     best = 0
@@ -123,22 +160,53 @@ def static_flow_bound(products: Products, eu: np.ndarray, ev: np.ndarray, known:
     return best
 
 
-def entry_choices(products: Products, eu: np.ndarray, ev: np.ndarray, known: int) -> Iterator[EntryChoice] | None:
+def stage_sets(products: Products) -> list[np.ndarray]:
+    """The sets ``I'`` of L4 (``bool`` per node of G), one per place where an edge of G changes
+    the history (in place order): I, and every node reachable in G from the heads of those
+    edges at that place, less ``Tgt``; those equal to I are left out. Each holds I and no
+    ``Tgt`` node, which is all L4 needs; which ones are tried only decides how tight the
+    bound is."""
+    g = products.virtual
+    inter, target = products.intermediate, products.target
+    place = products.ts.place[g.state]
+    change = g.hist[g.src] != g.hist[g.dst]
+    heads = g.dst[change]
+    out: list[np.ndarray] = []
+    for p in np.unique(place[heads]).tolist():
+        seeds = np.zeros(g.n_nodes, dtype=bool)
+        seeds[heads[place[heads] == p]] = True
+        stage = (inter | reachable(g.n_nodes, g.src, g.dst, seeds)) & ~target
+        if not np.array_equal(stage, inter):
+            out.append(stage)
+    return out
+
+
+def entry_choices(
+    products: Products, eu: np.ndarray, ev: np.ndarray, known: int, inter: np.ndarray | None = None, live: bool = False
+) -> Iterator[EntryChoice] | None:
     """The choices of ``A & Y`` the bound ranges over, each with its capped ``min(E, X)``
     (see :class:`EntryChoice`), or ``None`` where the bound does not apply (``Src`` in I, no
     known flow, or more than :data:`MAX_ENTRY_STATES` free states of ``Y``). Every set ``A``
-    of a valid cut set matches one of the choices (its ``A & Y``; the start's state is in it)."""
+    of a valid cut set matches one of the choices (its ``A & Y``; the start's state is in it).
+    ``inter``: I (the default), or a set ``I'`` of L4 in its place; ``live``: the choices of
+    L5 (dead nodes left out, ``Y`` grown by ``D``)."""
     g = products.virtual
-    inter, target = products.intermediate, products.target
+    target = products.target
+    if inter is None:
+        inter = products.intermediate
     src = int(g.initial)
     if inter[src] or known <= 0:
         return None
     state = g.state.astype(np.int64)
     n_states = products.ts.n_states
+    alive = coreachable(g.n_nodes, g.src, g.dst, target) if live else np.ones(g.n_nodes, dtype=bool)
     entry_full = ~inter[g.src] & inter[g.dst]
     ys = np.unique(state[g.dst[entry_full]])
+    if live:  # L5: D, the states of dead heads of edges from live nodes outside I and Tgt
+        from_live = (alive & ~inter & ~target)[g.src] & ~alive[g.dst]
+        ys = np.union1d(ys, state[g.dst[from_live]])
     eligible = np.zeros(n_states, dtype=bool)
-    eligible[state[~inter & ~target]] = True
+    eligible[state[~inter & ~target & alive]] = True
     start = int(state[src])
     free_y = ys[eligible[ys]]
     if free_y.size > MAX_ENTRY_STATES:
@@ -147,7 +215,7 @@ def entry_choices(products: Products, eu: np.ndarray, ev: np.ndarray, known: int
     in_y[ys] = True
 
     n = g.n_nodes
-    outside = ~inter & ~target
+    outside = ~inter & ~target & alive
     g_out = outside[g.src] & outside[g.dst]
     m_entry = ~inter[eu] & inter[ev]
     after_i = reachable(n, eu, ev, inter)
