@@ -160,6 +160,8 @@ def check_backend(options: MilpOptions) -> None:
     """
     if options.backend not in BACKENDS:
         raise ValueError(f"unknown routing backend {options.backend!r}; expected one of {', '.join(BACKENDS)}")
+    if options.flow_rows not in FLOW_ROWS:
+        raise ValueError(f"unknown flow_rows option {options.flow_rows!r}; expected one of {', '.join(FLOW_ROWS)}")
     if options.backend == "cpsat":
         cpsat.require()
     if options.backend == "scip":
@@ -205,6 +207,32 @@ def auto_backend(rm: RoutingModel, options: MilpOptions) -> str:
     if lo <= rm.model.n_row <= hi and cpsat.available():
         return "cpsat"
     return "highs"
+
+
+FLOW_ROWS = ("auto", "edge", "cut")
+"""The ways of writing the feasibility flows' closing rows (``MilpOptions.flow_rows``)."""
+
+PER_CUT_MIN_ROWS = 20_000
+"""MILP-reactive models on HiGHS with at least this many rows (written per flow edge) get the
+feasibility flows' closing rows per cut column (:func:`per_cut_flow_rows`). Measured on the
+5x5 random grids' reaction |AP| = 7 reactive models (36,647-43,676 rows, 23,000-25,000 per
+cut column; docs/benchmarks.md, "Session 11 (issue 18)"); below, nothing was measured
+(reaction |AP| = 5: about 9,000 rows; reachability |AP| = 4: about 2,800), so those models
+keep method.md's rows and their answers."""
+
+
+def per_cut_flow_rows(rm: RoutingModel, options: MilpOptions) -> bool:
+    """Whether ``"auto"`` writes the feasibility flows' closing rows per cut column
+    (:func:`synthesis.routing.model._add_feasibility` proves the answers the same): on
+    HiGHS, for MILP-reactive models of at least :data:`PER_CUT_MIN_ROWS` rows built per flow
+    edge. A function of the built model and the options only, so the choice is the same on
+    every machine."""
+    return (
+        options.backend == "highs"
+        and options.mode == "reactive"
+        and bool(rm.cols.feasibility)
+        and rm.model.n_row >= PER_CUT_MIN_ROWS
+    )
 
 
 def backend_version(backend: str) -> str:
@@ -265,6 +293,9 @@ def _solve_once(
     graph_seconds = time.perf_counter() - t0
     if options.backend == "auto":
         options = replace(options, backend=auto_backend(rm, options))
+    if options.flow_rows == "auto" and per_cut_flow_rows(rm, options):
+        options = replace(options, flow_rows="cut")
+        rm = build_model(products, options, entries, check_consistency(products))
     if options.backend == "cpsat":
         return _solve_once_cpsat(rm, products, options, entries, required, clock, graph_seconds)
     h = _highs(options)

@@ -124,6 +124,13 @@ class MilpOptions:
         heuristics look for integral routes, not on the cuts alone (docs/benchmarks.md,
         "MILP-reactive's fewest cuts (issue 18, session 10)"); off only to measure it. The
         other modes and phase 1 keep those columns continuous.
+    flow_rows
+        How the feasibility flows' closing rows (c7) are written: ``"edge"`` (method.md's, one
+        row ``x + K d <= K`` per flow edge), ``"cut"`` (one row per history and closing cut
+        column over all the flow edges it closes, :func:`_add_feasibility` proves the same
+        answers) or ``"auto"`` (the default: ``"cut"`` where
+        :func:`synthesis.routing.milp.per_cut_flow_rows` says it was measured to pay, else
+        ``"edge"``).
     offer_starts
         Offer HiGHS the heuristic's answer (phase 1) and the phase-1 answer (phase 2) as
         starts (each checked against the model first). Without, they are still kept as
@@ -169,6 +176,7 @@ class MilpOptions:
     flow_bound: bool = True
     cut_bound: bool = True
     integral_phase2: bool = True
+    flow_rows: str = "auto"
     backend: str = "auto"
     work_limit: float | None = None
 
@@ -530,7 +538,7 @@ def build_model(
     cut_stops_flow = _add_cut_stops_flow(m, me, flow, cut)
     path_cut = _add_path_cuts(m, g.initial, me, cut, reach)
     coupling = _add_coupling(m, me, flow, reach)
-    feasibility = _add_feasibility(m, products, groups, cut, entries) if entries else []
+    feasibility = _add_feasibility(m, products, groups, cut, entries, options.flow_rows == "cut") if entries else []
     blocked_place, places, place_of_cut = _add_blocked_places(m, products, groups, cut) if options.block_states else (
         np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64))
     exclusions = _add_exclusions(m, groups, cut, options.exclusions)
@@ -775,11 +783,29 @@ def _add_feasibility(
     groups: CutGroups,
     cut: np.ndarray,
     entries: dict[int, np.ndarray],
+    per_cut: bool = False,
 ) -> list[FeasibilityFlow]:
     """Add c6-c8 as one aggregated flow per history; returns where each flow lives.
 
     A flow edge over move ``t`` under history ``q`` is closed by the cut of the G edge
     of ``Gr(q)`` over ``t`` (method.md c7); where G has no such edge nothing closes it.
+    One cut column ``d`` closes every flow edge over its move, one per copy of the move in
+    ``G_sys`` (the system automaton's states).
+
+    ``per_cut`` writes c7 as one row per closing column ``d`` of the flow,
+    ``sum_{e closed by d} x_e + K n_d d <= K n_d`` (``n_d`` flow edges, capacity ``K``),
+    instead of one row ``x_e + K d <= K`` per flow edge. Why the answers are the same: the
+    rows differ only at fractional ``d``. With ``d = 1`` both force every ``x_e`` closed by
+    ``d`` to 0 (the per-cut row reads ``sum x_e <= 0`` with ``x_e >= 0``); with ``d = 0``
+    both are implied by the column bounds ``x_e <= K`` (the per-cut row by their sum).
+    Every solution with binary cuts satisfies one set of rows iff it satisfies the other,
+    and no other row differs, so the two models admit the same solutions with binary cuts
+    (the only ones the MILP returns) and have the same optimum. The LP relaxation is weaker
+    (a fractional ``d`` leaves room for ``K n_d (1 - d)`` over all its edges together), but
+    phase 2's LP bound on the large reactive models is the same with the feasibility flows
+    or without any (docs/benchmarks.md, "Session 11"), and a model with ``n_d`` times fewer
+    closing rows (5x5 reaction |AP| = 7 #1: 23,831 rows instead of 41,035) runs more
+    branch-and-bound nodes per second. Checked by ``tests/test_flow_rows.py``.
     """
     g, gs = products.virtual, products.system
     ts = products.ts
@@ -814,9 +840,16 @@ def _add_feasibility(
         dcol = np.full(e.size, -1, dtype=np.int64)
         dcol[found] = cut[groups.of_edge[gorder[pos[found]]]]
         sel = np.flatnonzero(dcol >= 0)
-        r = m.add_rows(-np.inf, cap, sel.size)
-        m.add_terms(r, cols[sel], 1.0)
-        m.add_terms(r, dcol[sel], cap)
+        if per_cut:
+            closing, of_edge, copies = np.unique(dcol[sel], return_inverse=True, return_counts=True)
+            big = cap * copies.astype(float)
+            r = m.add_rows(-np.inf, big, closing.size)
+            m.add_terms(r[of_edge.ravel()], cols[sel], 1.0)
+            m.add_terms(r, closing, big)
+        else:
+            r = m.add_rows(-np.inf, cap, sel.size)
+            m.add_terms(r, cols[sel], 1.0)
+            m.add_terms(r, dcol[sel], cap)
         flows.append(FeasibilityFlow(cols=cols, src=s, dst=d, dcol=dcol, supply_nodes=supply_nodes))
     return flows
 
