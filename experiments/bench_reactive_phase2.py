@@ -3,7 +3,8 @@
 Usage::
 
     nice -n 10 .venv/bin/python -m experiments.bench_reactive_phase2 --family reachability:3 --instances 1 3 5 \
-        [--size 5] [--variants continuous binary binary-flows no-feasibility] [--time-limit 120 | --node-limit N]
+        [--size 5] [--variants continuous binary binary-flows no-feasibility] [--time-limit 120 | --node-limit N] \
+        [--flow-rows edge|cut]
 
 Builds each study instance's MILP-reactive model as :func:`synthesis.pipeline.synthesize`
 does (the feasibility flows of every history at once, the model's reductions), settles the
@@ -17,6 +18,9 @@ search alone) for each variant:
   phase 2 does now);
 * ``no-feasibility``: ``binary-flows`` without the feasibility flows (c6-c8), a relaxation:
   its optimum is a lower bound, and where its cut set traps no entry node it is the optimum.
+
+``--flow-rows cut`` writes the feasibility flows' closing rows per cut column
+(``MilpOptions.flow_rows``; the default here is method.md's, per flow edge).
 
 Printed per run: the root LP bound, the objective and bound reached, HiGHS's nodes, CPU
 seconds, status. One thread, HiGHS's fixed random seed.
@@ -87,11 +91,14 @@ def root_bound(h: highspy.Highs) -> float:
     return float(r.getInfo().objective_function_value)
 
 
-def run(size: int, family: str, n: int, instance: int, variants: list[str], time_limit: float | None, node_limit: int | None) -> None:
+def run(
+    size: int, family: str, n: int, instance: int, variants: list[str], time_limit: float | None, node_limit: int | None,
+    flow_rows: str = "edge",
+) -> None:
     attempt, _, _ = first_consistent(size, family, n, instance)
     problem = random_problem(size, family, n, instance, attempt, "reactive")
     _, products = build_graphs(problem)
-    options = milp_options(problem, SynthesisOptions())
+    options = replace(milp_options(problem, SynthesisOptions()), flow_rows=flow_rows)
     required = required_entries(products, options)
     rm = build_model(products, options, dict(required), check_consistency(products))
     guess = rm.guess(products)
@@ -128,12 +135,14 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--variants", nargs="+", choices=VARIANTS, default=["continuous", "binary-flows"])
     ap.add_argument("--time-limit", type=float, default=None, help="wall seconds per run")
     ap.add_argument("--node-limit", type=int, default=None, help="HiGHS nodes per run (deterministic)")
+    ap.add_argument("--flow-rows", choices=("edge", "cut"), default="edge",
+                    help="the feasibility flows' closing rows per flow edge or per cut column (MilpOptions.flow_rows)")
     args = ap.parse_args(argv)
     family, _, n = args.family.partition(":")
     print("| instance | rows | F (settled by) | variant | root LP | best | bound | nodes | CPU s | wall s | status |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     for instance in args.instances:
-        run(args.size, family, int(n or 1), instance, args.variants, args.time_limit, args.node_limit)
+        run(args.size, family, int(n or 1), instance, args.variants, args.time_limit, args.node_limit, args.flow_rows)
 
 
 if __name__ == "__main__":
