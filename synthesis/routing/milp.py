@@ -27,6 +27,10 @@ Reductions, none of which changes the optimum of method.md §5:
   branches on which nodes ``Src`` reaches and its heuristics look for integral routes, which
   proves the fewest cuts of mid-size reactive models that branching on the cuts alone does
   not.
+* **Closing rows per cut column** (large MILP-reactive models on HiGHS,
+  :func:`per_cut_flow_rows`): the feasibility flows' c7 rows written once per history and cut
+  over all the flow edges it closes; the same solutions with binary cuts
+  (:func:`synthesis.routing.model._add_feasibility` proves it), a smaller model.
 * **Aggregated feasibility flows.** For a history ``q`` with ``K`` kept entry nodes,
   the ``K`` unit flows of c6-c8 are replaced by one flow in which every entry node
   supplies one unit, on edges of capacity ``K (1 - d)``. By flow decomposition each
