@@ -5,6 +5,10 @@
   ``Tgt`` and never returns to a cell, and its moves alone leave no ``Src -> Tgt`` path
   outside I; with it, the heuristic finds a first test where the greedy growth alone
   finds none.
+* :func:`synthesis.routing.heuristic.disjoint_routes`: on 10x10 grids with two test cells,
+  the routes it returns share no cell but where the history changes, each is a route of G,
+  and grown from them the heuristic reaches flow 2 (the walls' flow bound) where pairs of
+  place-simple routes gave 1; its answer passes the solution checks below.
 * ``after_first`` (the paper's budget: a limit to the first test, then a little more):
   a solve stops that long after its first test, whether the test came from the
   heuristic or from HiGHS.
@@ -17,12 +21,13 @@ import time
 import numpy as np
 import pytest
 
+from synthesis.graphs.consistency import check_consistency
 from synthesis.graphs.products import Products, reachable
 from synthesis.pipeline import SynthesisOptions, milp_options, synthesize
 from synthesis.problems.problem import Problem, build_graphs
 from synthesis.problems.random_grid import first_consistent
-from synthesis.routing.heuristic import RouteSeed, RoutingGuess, guess_routing, simple_route
-from synthesis.routing.model import ModelEdges, cut_groups, model_edges
+from synthesis.routing.heuristic import RouteSeed, RoutingGuess, Work, disjoint_routes, guess_routing, simple_route, simple_routes
+from synthesis.routing.model import ModelEdges, build_model, cut_groups, model_edges
 from synthesis.routing.solver_control import Clock
 
 
@@ -134,7 +139,34 @@ def test_after_first_stops_soon_after_highs_finds_a_first_test(monkeypatch: pyte
     assert t_end - t0 < 120.0
 
 
-@pytest.mark.parametrize("size,family,n,seed", CASES[::2] + [(5, "safety", 3, 0), (10, "reachability", 1, 2)])
+@pytest.mark.parametrize("seed", [0, 3, 4])
+def test_disjoint_routes_reach_flow_two_with_two_test_cells(seed: int) -> None:
+    """10x10 reachability |AP| = 3 (two test cells), seeds 0, 3, 4: the heuristic gave flow 1
+    before disjoint routes (measured when this was written), 2 with them, which is the walls'
+    flow bound: phase 1 is proven without a search."""
+    products, me, problem = _instance(10, "reachability", 2, seed)
+    g, tgt = products.virtual, products.target
+    seed_ = _route_seed(products)
+    usable = ~(me.c5 & tgt[me.ev])
+    work = Work(seed_.work)
+    route = next(simple_routes(g.n_nodes, g.initial, me.eu, me.ev, usable, tgt, seed_, work))
+    group = disjoint_routes(g.n_nodes, g.initial, me.eu, me.ev, usable, tgt, seed_, route, 2, work)
+    if len(group) == 2:
+        a, b = group
+        changes = g.hist[me.eu] != g.hist[me.ev]
+        shared = set(products.ts.place[g.state[me.ev[a[changes[a]]]]].tolist())
+        shared |= {int(products.ts.place[g.state[g.initial]]), int(products.ts.place[g.state[me.ev[a[-1]]]])}
+        for r in group:
+            assert me.eu[r[0]] == g.initial and tgt[me.ev[r[-1]]] and np.array_equal(me.eu[r[1:]], me.ev[r[:-1]])
+        cells_a = set(products.ts.place[g.state[me.ev[a]]].tolist())
+        cells_b = set(products.ts.place[g.state[me.ev[b]]].tolist())
+        assert cells_a & cells_b <= shared
+    rm = build_model(products, milp_options(problem, SynthesisOptions()), {}, check_consistency(products))
+    guess = rm.guess(products)
+    assert guess.flow == guess.upper_bound == 2
+
+
+@pytest.mark.parametrize("size,family,n,seed", CASES[::2] + [(5, "safety", 3, 0), (10, "reachability", 1, 2), (10, "reachability", 2, 0)])
 def test_guess_is_a_valid_cut_set_and_flow(size: int, family: str, n: int, seed: int) -> None:
     """Whatever the heuristic returns is a solution of the model: its cuts leave no
     ``Src -> Tgt`` path outside I, and its edge flow is a unit flow of the value it
