@@ -8,9 +8,10 @@ a cut may enter. The checks, all graph searches in bulk (SciPy's ``csgraph``):
 * bypass (c4-c5): cheapest open ``Src -> Tgt`` paths over the c5 edges, each group with a
   binary costing 1, the groups of a found path closed before the next search (so the
   rows of one round have disjoint supports);
-* flow: a maximum flow over the open model edges and, below the level, the minimum cut on
+* flow: a maximum flow over the open model edges and, below the level, a minimal part ``K``
+  of the cut groups that keeps the flow below it, and the minimum cuts under ``K`` alone on
   the source side (a :class:`FlowCut`, kept to be re-instantiated at other levels) and on
-  the sink side;
+  the sink side (see :meth:`CoverSeparator._flow_cuts`);
 * traps (c6-c8): :func:`synthesis.routing.traps.trapped_entries` on the restrictions of
   the cut set (plus :func:`~synthesis.routing.traps.trapped_configurations` with
   ``closed_loop``), and per trapped node the set it still reaches.
@@ -304,22 +305,74 @@ class CoverSeparator:
         res = maximum_flow(cap, self.src, n)
         return int(res.flow_value), cap, res.flow
 
+    def _reaches(self, cut: np.ndarray, flow: int) -> bool:
+        """Whether the maximum flow over the open model edges under ``cut`` is at least
+        ``flow`` (for ``flow == 1`` a reachability search, else a maximum flow)."""
+        if flow > 1:
+            return self._max_flow(cut)[0] >= flow
+        is_cut = np.zeros(self.n_col + 1, dtype=bool)
+        is_cut[: self.var.size] = cut[self.var]
+        col = self.mcol
+        ok = np.flatnonzero((col < 0) | ~is_cut[np.maximum(col, 0)])
+        graph = sp.csr_matrix((np.ones(ok.size, dtype=np.int8), (self.me.eu[ok], self.me.ev[ok])), shape=(self.n, self.n))
+        seen = breadth_first_order(graph, self.src, directed=True, return_predecessors=False)
+        return bool(np.any(self.target[seen]))
+
     def _flow_cuts(self, cut: np.ndarray, flow: int) -> list[FlowCut]:
-        """The minimum cuts next to ``Src`` and next to ``Tgt`` when the maximum flow over
-        the open model edges is below ``flow`` (one when they coincide), else none."""
+        """When the maximum flow over the open model edges under ``cut`` is below ``flow``:
+        the minimum cuts next to ``Src`` and next to ``Tgt`` under a *minimal* part ``K`` of
+        the cut groups that still keeps the flow below ``flow`` (one cut when they coincide);
+        else none.
+
+        ``K`` starts as the cut groups with an edge leaving the source side ``S`` of a
+        minimum cut under ``cut`` (closing only these keeps every edge out of ``S`` that
+        ``cut`` closes closed, so the flow stays below ``flow``), and drops each group,
+        in column order, whose reopening leaves the flow below ``flow``. The rows of
+        the minimum cuts under ``K`` alone are violated by ``cut`` (``cut`` contains
+        ``K``, so it closes at least what ``K`` closes) and, as every (b) row, valid for
+        every cut set of flow at least ``flow``; for ``flow == 1`` such a row is the
+        no-good "open one of ``K``" (every group of a minimal ``K`` has an edge out of
+        ``S``), which implies the row of the whole boundary of ``S``."""
         value, cap, f = self._max_flow(cut)
         if value >= flow:
             return []
+        near_src = self._source_side(cap, f)
+        k = np.flatnonzero(near_src[self.me.eu] & ~near_src[self.me.ev])
+        col = self.mcol[k]
+        boundary = np.unique(col[col >= 0])
+        keep = np.zeros(self.groups.keys.size, dtype=bool)
+        keep[self.var[boundary[cut[self.var[boundary]]]]] = True
+        for g in np.flatnonzero(keep).tolist():
+            keep[g] = False
+            if self._reaches(keep, flow):
+                keep[g] = True
+        return self._side_cuts(keep, flow)
+
+    def _source_side(self, cap: sp.csr_matrix, f: sp.csr_matrix) -> np.ndarray:
+        """``bool`` per node of G: the residual graph's nodes reachable from ``Src``."""
         residual = (cap - f).tocsr()
         residual.data = (residual.data > 0).astype(np.int8)
         residual.eliminate_zeros()
-        near_src = np.zeros(self.n + 1, dtype=bool)
-        near_src[breadth_first_order(residual, self.src, directed=True, return_predecessors=False)] = True
+        side = np.zeros(self.n + 1, dtype=bool)
+        side[breadth_first_order(residual, self.src, directed=True, return_predecessors=False)] = True
+        out: np.ndarray = side[: self.n]
+        return out
+
+    def _side_cuts(self, cut: np.ndarray, flow: int) -> list[FlowCut]:
+        """The minimum cuts next to ``Src`` and next to ``Tgt`` under ``cut`` (whose flow is
+        below ``flow``)."""
+        value, cap, f = self._max_flow(cut)
+        if value >= flow:
+            raise RuntimeError("a minimal flow-cutting group set lets the flow through: a FlowTest bug")
+        residual = (cap - f).tocsr()
+        residual.data = (residual.data > 0).astype(np.int8)
+        residual.eliminate_zeros()
+        near_src = self._source_side(cap, f)
         to_sink = np.zeros(self.n + 1, dtype=bool)
         to_sink[breadth_first_order(residual.T.tocsr(), self.n, directed=True, return_predecessors=False)] = True
-        out = [self._cut_of_side(near_src[: self.n])]
+        out = [self._cut_of_side(near_src)]
         far = ~to_sink[: self.n]
-        if not np.array_equal(far, near_src[: self.n]):
+        if not np.array_equal(far, near_src):
             out.append(self._cut_of_side(far))
         return out
 

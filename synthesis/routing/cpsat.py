@@ -121,7 +121,8 @@ class CpSatAnswer:
     ``"time_limit"``, ``"work_limit"`` or ``None``), how many seconds before its end the first
     solution of objective >= 1 came (``first_age``), the child's own figures
     (``stats``: wall, CPU and deterministic seconds, conflicts, branches), and CP-SAT's bound
-    on the objective (``bound``; ``None`` without a solution or for a feasibility solve)."""
+    on the objective (``bound``; ``None`` without a solution or for a feasibility solve), and
+    with ``keep`` the first solutions the search found, in order, each checked (``solutions``)."""
 
     status: str
     x: np.ndarray | None
@@ -130,6 +131,7 @@ class CpSatAnswer:
     first_age: float | None
     stats: dict[str, Any]
     bound: float | None = None
+    solutions: tuple[np.ndarray, ...] = ()
 
 
 class CpSatSession:
@@ -196,6 +198,7 @@ class CpSatSession:
         search: dict[str, Any] | None = None,
         reach: float | None = None,
         stop_at: float | None = None,
+        keep: int = 0,
     ) -> CpSatAnswer:
         """Optimise ``cost . x`` (integral) from ``hint`` (used only if it satisfies the
         model), under the budgets (see the module docstring), and check the answer.
@@ -205,7 +208,8 @@ class CpSatSession:
         solution of objective at least ``reach`` (at most, minimising), its status
         ``"feasible"`` (found), ``"infeasible"`` (proven none) or ``"unknown"``; the row
         is not kept. With ``stop_at`` (minimising), the search stops at its first solution of
-        objective at most ``stop_at`` (a proven lower bound: that solution is optimal).
+        objective at most ``stop_at`` (a proven lower bound: that solution is optimal). With
+        ``keep``, the first ``keep`` solutions of the search come back too (``solutions``).
 
         Raises ``KeyboardInterrupt`` on Ctrl-C or a stop request (the child is killed)."""
         if hint is not None and self.arrays.violation(hint) > FEASIBILITY_TOLERANCE:
@@ -213,7 +217,7 @@ class CpSatSession:
         params = {"random_seed": int(random_seed), "deterministic_time": work_limit, "seconds": seconds,
                   "after_first": after_first, "rel_gap": float(rel_gap), "first_at": 1.0,
                   "search": dict(search or {}), "reach": None if reach is None else float(reach),
-                  "stop_at": None if stop_at is None else float(stop_at)}
+                  "stop_at": None if stop_at is None else float(stop_at), "keep": int(keep)}
         sense = "max" if maximize else "min"
         t0 = time.perf_counter()
         if self.control is not None:
@@ -244,6 +248,9 @@ class CpSatSession:
         x = np.asarray(x, dtype=float)
         if x.size != self.arrays.col_lo.size or self.arrays.violation(x) > FEASIBILITY_TOLERANCE:
             raise RuntimeError("CP-SAT returned a solution that violates the routing model")
+        kept = tuple(np.asarray(y, dtype=float) for y in raw.get("solutions") or ())
+        if any(y.size != x.size or self.arrays.violation(y) > FEASIBILITY_TOLERANCE for y in kept):
+            raise RuntimeError("CP-SAT returned a solution that violates the routing model")
         objective = float(np.asarray(cost, dtype=float) @ x)
         if abs(objective - float(raw["objective"])) > 1e-6 * max(1.0, abs(objective)):
             raise RuntimeError("CP-SAT reported another objective than its solution has")
@@ -255,10 +262,10 @@ class CpSatSession:
         # integral objective: within less than 1 of the bound is a proof
         proven = bound is not None and np.isfinite(bound) and abs(objective - float(bound)) < 1.0 - 1e-6
         if status == "optimal" and proven:
-            return CpSatAnswer("optimal", x, 0.0, None, raw["first_age"], stats, objective)
+            return CpSatAnswer("optimal", x, 0.0, None, raw["first_age"], stats, objective, kept)
         finite = bound is not None and np.isfinite(bound)
         gap = abs(objective - float(bound)) / max(abs(objective), 1.0) if finite else float("inf")
-        return CpSatAnswer("feasible", x, float(gap), stopped_by, raw["first_age"], stats, float(bound) if finite else None)
+        return CpSatAnswer("feasible", x, float(gap), stopped_by, raw["first_age"], stats, float(bound) if finite else None, kept)
 
     def _call(self, message: tuple[Any, ...], progress: tuple[str, str, float, int | None] | None = None) -> Any:
         """Send a request and wait for its answer, in short steps so Ctrl-C and stop

@@ -189,6 +189,7 @@ class CpSatModel:
         stop_at = params.get("stop_at")
         if stop_at is not None and not maximize:
             watch.stop_at = float(stop_at)
+        watch.keep, watch.n_cols = int(params.get("keep") or 0), self.n_cols
         solver.add_solution_callback(watch.callback)
         solver.add_best_bound_callback(watch.on_bound)
         timers = watch.start(seconds)
@@ -213,6 +214,7 @@ class CpSatModel:
             "deterministic_time": float(response.deterministic_time),
             "conflicts": int(response.num_conflicts),
             "branches": int(response.num_branches),
+            "solutions": watch.solutions,
         }
         if found:
             answer["x"] = [int(v) for v in response.solution]
@@ -266,6 +268,9 @@ class _Watch:
         self.bound: float | None = None
         self.timers: list[threading.Timer] = []
         self.stop_at: float | None = None  # minimising: stop at a solution this good (a proven bound)
+        self.keep = 0  # how many of the search's solutions to keep (``solutions``), in order found
+        self.n_cols = 0
+        self.solutions: list[list[int]] = []
         self._lock = threading.Lock()
         watch = self
 
@@ -275,6 +280,8 @@ class _Watch:
                     watch.on_solution(reach, reach)
                 else:
                     watch.on_solution(float(self.ObjectiveValue()), float(self.BestObjectiveBound()))
+                if len(watch.solutions) < watch.keep:
+                    watch.solutions.append([int(self.SolutionIntegerValue(j)) for j in range(watch.n_cols)])
 
         self.callback = _Callback()
 

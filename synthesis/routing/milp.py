@@ -55,11 +55,13 @@ from typing import Any
 import highspy
 import numpy as np
 import scipy.sparse as sp
+from scipy.sparse.csgraph import breadth_first_order, maximum_flow
 
 from ..graphs.consistency import check_consistency
 from ..graphs.products import Products
 from ..model.errors import InconsistentProblem
-from . import cpsat, scip, wall_cover
+from . import cpsat, hitting_set, scip, wall_cover
+from .cover_rows import CoverSeparator
 from .heuristic import RoutingGuess
 from .model import BACKENDS, CutGroups, MilpOptions, RoutingModel, build_model, model_cut_bound, phase2_integral_columns, static_moves_of
 from .result import RoutingResult as RoutingResult
@@ -277,6 +279,7 @@ class _Phase:
     gap: float
     stopped_by: str | None
     cut_bound: dict[str, Any] | None = None  # phase 2: the walls' cut bound, what it proved (see _CutProof)
+    hitting_set: dict[str, Any] | None = None  # phase 2: what the hitting set did (see _hitting_set)
 
 
 def _solve_once(
@@ -295,13 +298,14 @@ def _solve_once(
     t0 = time.perf_counter()
     rm = build_model(products, options, entries, check_consistency(products))
     graph_seconds = time.perf_counter() - t0
-    if options.backend == "auto":
+    by_auto = options.backend == "auto"
+    if by_auto:
         options = replace(options, backend=auto_backend(rm, options))
     if options.flow_rows == "auto" and per_cut_flow_rows(rm, options):
         options = replace(options, flow_rows="cut")
         rm = build_model(products, options, entries, check_consistency(products))
     if options.backend == "cpsat":
-        return _solve_once_cpsat(rm, products, options, entries, required, clock, graph_seconds)
+        return _solve_once_cpsat(rm, products, options, entries, required, clock, graph_seconds, by_auto)
     h = _highs(options)
     h.passModel(rm.model.to_highs(np.zeros(rm.n_col), maximize=True))
     t_solve = time.perf_counter()
@@ -379,9 +383,11 @@ def _solve_once_cpsat(
     required: dict[int, np.ndarray],
     clock: Clock,
     graph_seconds: float,
+    by_auto: bool = False,
 ) -> RoutingResult:
     """:func:`_solve_once` on CP-SAT (:mod:`synthesis.routing.cpsat`): the same model and
-    phases, in a child process that holds the model between them."""
+    phases, in a child process that holds the model between them; chosen ``by_auto``, phase 2
+    of MILP-static with few free groups tries the hitting set first (:func:`_hitting_set`)."""
     note = options.progress or (lambda msg: None)
     a = rm.model.matrix().tocsr()
     col_lo, col_hi, row_lo, row_hi = rm.model.bounds()
@@ -392,7 +398,9 @@ def _solve_once_cpsat(
         flow = _flow_of_phase1(rm, first)
         _raise_if_flows_bind(rm, products, options, first.x, {q: v for q, v in required.items() if q not in entries})
         note(f"routing MILP (CP-SAT), phase 2 of 2: fewest cuts at flow {flow}")
-        second, more = _phase2_cpsat(session, rm, first.x, flow, options, clock, _cut_proof(products, rm, options, entries, flow))
+        proof = _cut_proof(products, rm, options, entries, flow)
+        ihs = _hitting_set(products, rm, first.x, flow, options, clock, proof) if by_auto else None
+        second, more = _phase2_cpsat(session, rm, first.x, flow, options, clock, proof, ihs)
         spawn, spawn_cpu, child_cpu = session.spawn_seconds, session.spawn_cpu_seconds, session.child_cpu_seconds
     result = _result(rm, products, options, first, second, flow, graph_seconds, time.perf_counter() - t_solve)
     runs = runs + more
@@ -539,13 +547,15 @@ def _reach_level(
 
 def _phase2_cpsat(
     session: cpsat.CpSatSession, rm: RoutingModel, x: np.ndarray, flow: int, options: MilpOptions, clock: Clock,
-    proof: _CutProof | None = None,
+    proof: _CutProof | None = None, ihs: _HittingSet | None = None,
 ) -> tuple[_Phase, list[dict[str, Any]]]:
     """:func:`_phase2` on CP-SAT: fewest cuts (fewest blocked places first) at flow
     ``flow``, from phase 1's answer as a hint (kept if CP-SAT finds nothing better). With the
     walls' cut bound (``proof``), its cheaper checked candidate is the hint, an answer that
     meets the bound is proven without a search, and the search stops at the first solution
-    that meets it."""
+    that meets it. With the hitting set's outcome (``ihs``, :func:`_hitting_set`): its proven
+    answer is the answer; else its answer, where cheaper, is the hint, and its lower bound
+    (proven) stops the search as the cut bound does."""
     out = rm.cols.flow[rm.out_src]
     session.add_row(out, np.ones(out.size), flow - 0.5, np.inf)
     clock.first_test()
@@ -554,16 +564,118 @@ def _phase2_cpsat(
         x = proof.start(x, cost)
         if proof.meets(x, cost):
             return _Phase(x, "optimal", 0.0, None, proof.stats(cost, x, True)), []
+    stop_at = None if proof is None else proof.bound
+    if ihs is not None:
+        if ihs.result.proven:
+            return _Phase(ihs.x, "optimal", 0.0, None, None if proof is None else proof.stats(cost, ihs.x, False), ihs.result.stats()), []
+        if float(cost @ ihs.x) < float(cost @ x) - 0.5:
+            x = ihs.x
+        stop_at = max(stop_at or 0.0, ihs.result.bound)
     seconds, _ = _cpsat_budget(clock)
     ans = session.solve(
         cost, False, x, seconds=seconds, after_first=None, work_limit=options.work_limit,
         rel_gap=options.mip_rel_gap, random_seed=options.random_seed, phase="phase 2 (fewest cuts)", flow=flow,
-        stop_at=None if proof is None else proof.bound,
+        stop_at=stop_at,
     )
     if ans.status == "infeasible":  # cannot happen: phase 1's solution is feasible
         raise RuntimeError("phase 2 of the routing MILP lost the phase-1 solution")
     phase = _Phase(x, "feasible", float("inf"), ans.stopped_by) if ans.x is None else _Phase(ans.x, ans.status, ans.gap, ans.stopped_by)
+    if ihs is not None:
+        phase = replace(phase, hitting_set=ihs.result.stats())
+        if ans.x is not None and float(cost @ ans.x) <= ihs.result.bound + 0.5:
+            phase = replace(phase, status="optimal", gap=0.0, stopped_by=None)  # meets the hitting set's proven bound
     return _with_cut_proof(phase, proof, cost), [ans.stats]
+
+
+@dataclass(frozen=True)
+class _HittingSet:
+    """The hitting set's outcome in phase 2 (:func:`_hitting_set`): its best answer as a model
+    solution, checked, and the search's figures."""
+
+    x: np.ndarray
+    result: hitting_set.HittingSetResult
+
+
+def _hitting_set(
+    products: Products, rm: RoutingModel, x: np.ndarray, flow: int, options: MilpOptions, clock: Clock, proof: _CutProof | None
+) -> _HittingSet | None:
+    """Phase 2 of MILP-static by the implicit hitting set (:mod:`synthesis.routing.hitting_set`)
+    where it applies: MILP-static without exclusions, places objective or closed-loop traps, at
+    most :data:`~synthesis.routing.hitting_set.IHS_MAX_GROUPS` free groups, and no cut bound
+    proof already in hand. It starts from the cheaper of phase 1's answer and the cut bound's
+    candidate, with the cut bound as its lower bound, and has a deterministic budget
+    (:class:`~synthesis.routing.hitting_set.HittingSetBudget`: rounds and the master's
+    deterministic seconds, at most ``options.work_limit``) and the user's wall clock. Its answer
+    becomes a whole model solution (:func:`_model_solution`), checked against the model.
+    ``None`` where it does not apply."""
+    if options.mode != "static" or options.exclusions or options.block_states or options.closed_loop:
+        return None
+    groups = rm.groups
+    me = replace(rm.edges, has_var=rm.edges.has_var & ~rm.reductions.fixed_open)
+    sep = CoverSeparator(products, options, groups, me, {})
+    if sep.n_col > hitting_set.IHS_MAX_GROUPS:
+        return None
+    cost = _phase2_cost(rm, options)
+    if proof is not None:
+        x = proof.start(x, cost)
+        if proof.meets(x, cost):
+            return None  # proven already: _phase2_cpsat says so
+    work = hitting_set.IHS_WORK if options.work_limit is None else min(hitting_set.IHS_WORK, options.work_limit)
+    budget = hitting_set.HittingSetBudget(work=work, deadline=clock.deadline)
+    lower = 0.0 if proof is None else float(proof.bound)
+    result = hitting_set.fewest_cuts(
+        sep, flow, rm.cut_of(x), budget, bound=lower, random_seed=options.random_seed, control=options.control,
+    )
+    y = x if result.cut is None or np.array_equal(result.cut, rm.cut_of(x)) else _model_solution(products, rm, result.cut, flow)
+    return _HittingSet(y, result)
+
+
+def _model_solution(products: Products, rm: RoutingModel, cut: np.ndarray, flow: int) -> np.ndarray:
+    """A whole MILP-static model solution for a cut set (``bool`` per group) that passes the
+    wall-cover checks at flow ``flow``: the cuts, ``flow`` units of flow over the open model
+    edges (a maximum flow from ``Src`` capped at ``flow``), and ``mu`` the reachability from
+    ``Src`` over the open c5 edges. Checked against the model's every row and bound."""
+    cols, me = rm.cols, rm.edges
+    g = products.virtual
+    n = g.n_nodes
+    x = np.zeros(rm.n_col)
+    with_d = np.flatnonzero(cols.cut >= 0)
+    x[cols.cut[with_d]] = cut[with_d].astype(float)
+    open_edge = ~cut[me.grp]
+    e = np.flatnonzero(open_edge)
+    # flow: super source n+1 -> Src with capacity ``flow``, targets -> super sink n
+    t = np.flatnonzero(products.target)
+    big = max(int(e.size), 1)
+    rows_ = np.concatenate([me.eu[e], t, [n + 1]])
+    cols_ = np.concatenate([me.ev[e], np.full(t.size, n), [int(g.initial)]])
+    caps = np.concatenate([np.ones(e.size, dtype=np.int32), np.full(t.size, big, dtype=np.int32), [flow]]).astype(np.int32)
+    cap = sp.csr_matrix((caps, (rows_, cols_)), shape=(n + 2, n + 2))
+    cap.sum_duplicates()
+    res = maximum_flow(cap, n + 1, n)
+    if int(res.flow_value) != flow:
+        raise RuntimeError(f"the hitting set's answer has flow {int(res.flow_value)}, not {flow}: a FlowTest bug")
+    pair_flow = res.flow.tocsr()
+    # spread each pair's flow over its parallel open edges
+    key = me.eu[e].astype(np.int64) * (n + 2) + me.ev[e]
+    order = np.lexsort((e, key))
+    ks = key[order]
+    first = np.searchsorted(ks, ks)
+    rank = np.arange(ks.size) - first
+    amount = np.asarray(pair_flow[me.eu[e[order]], me.ev[e[order]]]).ravel()
+    on = rank < np.maximum(amount, 0)
+    x[cols.flow[e[order[on]]]] = 1.0
+    # mu: reachable from Src over the open c5 edges
+    c5 = np.flatnonzero(open_edge & me.c5)
+    graph = sp.csr_matrix((np.ones(c5.size, dtype=np.int8), (me.eu[c5], me.ev[c5])), shape=(n, n))
+    reach = np.zeros(n, dtype=bool)
+    reach[breadth_first_order(graph, int(g.initial), directed=True, return_predecessors=False)] = True
+    has_mu = cols.reach >= 0
+    x[cols.reach[has_mu]] = reach[has_mu].astype(float)
+    col_lo, col_hi, row_lo, row_hi = rm.model.bounds()
+    arrays = cpsat.ModelArrays(rm.model.matrix().tocsr(), row_lo, row_hi, col_lo, col_hi)
+    if arrays.violation(x) > FEASIBILITY_TOLERANCE or abs(rm.flow_of(x) - flow) > 0.5:
+        raise RuntimeError("the hitting set's answer is no solution of the routing model: a FlowTest bug")
+    return x
 
 
 @dataclass(frozen=True)
@@ -797,6 +909,8 @@ def _result(
     }
     if second.cut_bound is not None:
         stats["cut_bound"] = second.cut_bound
+    if second.hitting_set is not None:
+        stats["hitting_set"] = second.hitting_set
     return RoutingResult(
         status=status,
         flow=flow,

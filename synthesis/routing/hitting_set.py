@@ -1,0 +1,211 @@
+"""Phase 2 of MILP-static (fewest cuts at a fixed flow ``F``) by an implicit hitting set over the
+cut groups, with CP-SAT as the master: what ``auto`` runs first on static models with few free
+groups (:func:`synthesis.routing.milp._phase2_cpsat`).
+
+The master is the 0-1 problem ``min sum_g weight_g d_g`` over the binaries of the groups that
+may be cut (:class:`~synthesis.routing.cover_rows.CoverSeparator`'s columns), with only the rows
+found so far. Each round solves it to its proven optimum ``C`` and asks
+:meth:`~synthesis.routing.cover_rows.CoverSeparator.separate` what ``C`` fails at level ``F``:
+
+(a) an open bypass path (``Src -> Tgt`` over the c5 edges, avoiding I) gives "cut one of its
+    distinct groups" (several group-disjoint paths per round). Every cut set of MILP-static
+    closes every bypass path (c4-c5), so it cuts a group of each: the row is valid;
+(b) a flow below ``F`` gives the minimum-cut rows of a *minimal* group set ``K`` that keeps the
+    flow below ``F`` (``sum_g min(n_g, F) (1 - d_g) + fixed >= F`` over the model edges of the
+    minimum cut under ``K``; at ``F = 1`` the no-good "open one of ``K``"). Max-flow min-cut:
+    every cut set with flow at least ``F`` leaves at least ``F`` of those edges open, and a
+    group stands for at most ``min(n_g, F)`` of the ``F`` edge-disjoint paths' crossings, so the
+    row is valid (proof in :mod:`synthesis.routing.cover_rows`).
+
+MILP-static's cut sets of flow ``F`` are exactly those that pass (a) and (b) (no open bypass is
+c4-c5 over binary cuts; c2-c3 with the flow row is a flow of value ``F`` over the open edges), so
+the master with any set of valid rows is a relaxation: its optimum is a lower bound, a master
+optimum that passes every check is optimal, and so is the incumbent once the lower bound reaches
+its cost. Each round adds rows the master's answer violates, so no answer comes twice and the
+search ends (at most ``2^groups`` rounds; in practice hundreds).
+
+The master lives in one CP-SAT child (:class:`~synthesis.routing.cpsat.CpSatSession`) for the
+whole search: rows are added to the model it holds, each round is a fresh CP-SAT search on it
+(CP-SAT cannot resume one). Measured on the 5x5 reaction |AP|=7 static grid seed 13 (40 groups,
+flow 1): HiGHS as the master (the ``cover`` backend's) took 0.37 s per master solve (163 in 60 s),
+CP-SAT 0.07 (docs/benchmarks.md, "Session 11"). No hint is passed: measured, it slowed the
+search. Budgets are deterministic: :attr:`HittingSetBudget.rounds` and the master's deterministic
+seconds (``work``); a wall-clock deadline only when the user set one. A stop request (Ctrl-C)
+kills the child within :data:`~synthesis.routing.solver_control.POLL` seconds.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+
+from . import cpsat
+from .cover_rows import CoverSeparator, Row
+from .solver_control import SolveControl
+
+KEEP = 64
+"""Solutions of each master search (in the order found, the optimum last) whose failures become
+rows: each satisfies every row so far, so its failures are new rows, got without another master
+solve. Measured on the 5x5 reaction |AP|=7 static seed 13: 190 rounds instead of 952
+(docs/benchmarks.md, "Session 11")."""
+
+
+def _key(row: Row) -> tuple[object, ...]:
+    return (tuple(row.cols.tolist()), tuple(row.vals.tolist()), row.lo, row.hi)
+
+
+IHS_MAX_GROUPS = 64
+"""Free groups (master columns) up to which ``auto`` runs the hitting set first in phase 2 of
+MILP-static (see :func:`synthesis.routing.milp._phase2_cpsat`)."""
+
+IHS_WORK = 40.0
+"""Deterministic seconds of master search that ``auto`` grants the hitting set before it falls
+back to CP-SAT on the whole flow model (docs/benchmarks.md, "Session 11")."""
+
+IHS_ROUNDS = 5_000
+"""Rounds that ``auto`` grants the hitting set (a deterministic budget far above what the 5x5
+grids need)."""
+
+
+@dataclass(frozen=True)
+class HittingSetBudget:
+    """What the hitting set may spend: ``rounds`` (master solves), ``work`` (the master's
+    deterministic seconds, summed; ``None``: no limit), ``deadline`` (``time.perf_counter()``
+    value, only when the user asked for a wall clock)."""
+
+    rounds: int = IHS_ROUNDS
+    work: float | None = IHS_WORK
+    deadline: float | None = None
+
+
+@dataclass
+class HittingSetResult:
+    """The best checked cut set (``bool`` per group) with its ``cost``, the proven lower bound,
+    whether ``cut`` is proven optimal at the level (with ``cut`` ``None``: no cut set has the
+    flow, ``empty``), what stopped the search short of a proof
+    (``"work_limit"``, ``"time_limit"`` or ``None``), and the counters."""
+
+    cut: np.ndarray | None
+    cost: float
+    bound: float
+    proven: bool
+    stopped_by: str | None
+    rounds: int = 0
+    rows: dict[str, int] = field(default_factory=lambda: {"cover": 0, "flow": 0})
+    work: float = 0.0
+    master_seconds: float = 0.0
+    separation_seconds: float = 0.0
+
+    @property
+    def empty(self) -> bool:
+        """Proven: no cut set has this flow."""
+        return self.proven and self.cut is None
+
+    def stats(self) -> dict[str, object]:
+        """The figures for a routing result's stats."""
+        return {
+            "flow_level_empty": self.empty,
+            "proven": self.proven,
+            "bound": self.bound,
+            "cost": self.cost,
+            "rounds": self.rounds,
+            "rows": dict(self.rows),
+            "deterministic_time": self.work,
+            "master_seconds": self.master_seconds,
+            "separation_seconds": self.separation_seconds,
+            "stopped_by": self.stopped_by,
+        }
+
+
+def fewest_cuts(
+    sep: CoverSeparator,
+    flow: int,
+    incumbent: np.ndarray | None,
+    budget: HittingSetBudget,
+    *,
+    bound: float = 0.0,
+    random_seed: int = 0,
+    control: SolveControl | None = None,
+) -> HittingSetResult:
+    """The fewest cuts at flow ``flow`` by the implicit hitting set (module docstring), from
+    ``incumbent`` (``bool`` per group: a cut set that passes every check at ``flow``; its cost
+    is the upper bound; ``None``: none known) and a proven lower ``bound`` (such as the walls'
+    cut bound). Without an incumbent, a master without solution proves that no cut set has flow
+    ``flow`` (``empty``): the rows are valid for every such cut set.
+
+    Raises ``RuntimeError`` if the incumbent fails a check (a caller's bug) or the master
+    becomes infeasible (the incumbent satisfies every row: a FlowTest bug);
+    ``KeyboardInterrupt`` on Ctrl-C or a stop request."""
+    if incumbent is not None and not sep.checks_pass(incumbent, flow):
+        raise RuntimeError("the hitting set's incumbent fails a check: a FlowTest bug")
+    best = None if incumbent is None else incumbent.copy()
+    out = HittingSetResult(best, float("inf") if best is None else sep.cost_of(best), float(bound), False, None)
+    if best is not None and out.bound >= out.cost - 0.5:
+        out.proven = True
+        return out
+    n = sep.n_col
+    arrays = cpsat.ModelArrays(sp.csr_matrix((0, n)), np.zeros(0), np.zeros(0), np.zeros(n), np.ones(n))
+    with cpsat.CpSatSession(arrays, control) as session:
+        while True:
+            if control is not None and control.stop_requested:
+                raise KeyboardInterrupt
+            if out.rounds >= budget.rounds:
+                out.stopped_by = "work_limit"
+                return out
+            left = None if budget.work is None else budget.work - out.work
+            if left is not None and left <= 0.0:
+                out.stopped_by = "work_limit"
+                return out
+            seconds = None
+            if budget.deadline is not None:
+                seconds = budget.deadline - time.perf_counter()
+                if seconds <= 0.0:
+                    out.stopped_by = "time_limit"
+                    return out
+            out.rounds += 1
+            t = time.perf_counter()
+            ans = session.solve(
+                sep.cost, False, None, seconds=seconds, after_first=None, work_limit=left, rel_gap=0.0,
+                random_seed=random_seed, phase="phase 2 (fewest cuts, hitting set)", flow=flow, keep=KEEP,
+            )
+            out.master_seconds += time.perf_counter() - t
+            out.work += float(ans.stats["deterministic_time"])
+            if ans.status == "infeasible":
+                if out.cut is not None:
+                    raise RuntimeError("the hitting set's master lost the incumbent: a FlowTest bug")
+                out.proven, out.bound = True, float("inf")  # no cut set has this flow
+                return out
+            if ans.status != "optimal" or ans.x is None:
+                out.stopped_by = ans.stopped_by or "work_limit"
+                return out
+            value = float(sep.cost @ np.round(ans.x))
+            out.bound = max(out.bound, value)
+            if out.cut is not None and out.bound >= out.cost - 0.5:  # the relaxation's optimum reaches the incumbent
+                out.proven = True
+                return out
+            cut = sep.cut_of_point(ans.x)
+            t = time.perf_counter()
+            found, flow_cuts = sep.separate(cut, flow)
+            rows: list[tuple[str, Row]] = found + [("flow", fc.row(flow)) for fc in flow_cuts]
+            if not rows:  # the master's optimum passes every check: optimal
+                out.cut, out.cost, out.proven = cut, value, True
+                return out
+            # the search's earlier solutions satisfy every row so far too: their failures are
+            # rows as well, found without another master solve
+            seen = {_key(r) for _, r in rows}
+            for y in ans.solutions[:-1]:
+                other = sep.cut_of_point(y)
+                more, more_cuts = sep.separate(other, flow)
+                if not more and not more_cuts and sep.cost_of(other) < out.cost:  # a test: a better incumbent
+                    out.cut, out.cost = other, sep.cost_of(other)
+                for kind, row in more + [("flow", fc.row(flow)) for fc in more_cuts]:
+                    if _key(row) not in seen:
+                        seen.add(_key(row))
+                        rows.append((kind, row))
+            out.separation_seconds += time.perf_counter() - t
+            for kind, row in rows:
+                out.rows[kind] = out.rows.get(kind, 0) + 1
+                session.add_row(row.cols, row.vals, row.lo, row.hi)
