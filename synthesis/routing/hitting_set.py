@@ -61,6 +61,13 @@ IHS_MAX_GROUPS = 64
 """Free groups (master columns) up to which ``auto`` runs the hitting set first in phase 2 of
 MILP-static (see :func:`synthesis.routing.milp._phase2_cpsat`)."""
 
+IHS_MAX_FLOW = 1
+"""The flow levels at which ``auto`` runs the hitting set: at flow 1 its flow rows are no-goods
+over minimal group sets and it proved the 5x5 reaction |AP|=7 static seed 13 (720 cuts) in 128
+rounds; at flow 2 the rows ``sum min(n_g, 2) (1 - d_g) >= 2`` are weak: refueling (40 groups,
+flow 2) stopped at 40 deterministic seconds, bound 98 against the optimum 101, where CP-SAT on
+the flow model proves it in 0.4 CPU s (docs/benchmarks.md, "Session 11")."""
+
 IHS_WORK = 40.0
 """Deterministic seconds of master search that ``auto`` grants the hitting set before it falls
 back to CP-SAT on the whole flow model (docs/benchmarks.md, "Session 11")."""

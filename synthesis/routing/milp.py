@@ -601,14 +601,14 @@ def _hitting_set(
 ) -> _HittingSet | None:
     """Phase 2 of MILP-static by the implicit hitting set (:mod:`synthesis.routing.hitting_set`)
     where it applies: MILP-static without exclusions, places objective or closed-loop traps, at
-    most :data:`~synthesis.routing.hitting_set.IHS_MAX_GROUPS` free groups, and no cut bound
-    proof already in hand. It starts from the cheaper of phase 1's answer and the cut bound's
-    candidate, with the cut bound as its lower bound, and has a deterministic budget
+    most :data:`~synthesis.routing.hitting_set.IHS_MAX_GROUPS` free groups, flow at most
+    :data:`~synthesis.routing.hitting_set.IHS_MAX_FLOW`, and no cut bound proof already in hand.
+    It starts from the cheaper of phase 1's answer and the cut bound's candidate, with the cut bound as its lower bound, and has a deterministic budget
     (:class:`~synthesis.routing.hitting_set.HittingSetBudget`: rounds and the master's
     deterministic seconds, at most ``options.work_limit``) and the user's wall clock. Its answer
     becomes a whole model solution (:func:`_model_solution`), checked against the model.
     ``None`` where it does not apply."""
-    if options.mode != "static" or options.exclusions or options.block_states or options.closed_loop:
+    if options.mode != "static" or options.exclusions or options.block_states or options.closed_loop or flow > hitting_set.IHS_MAX_FLOW:
         return None
     groups = rm.groups
     me = replace(rm.edges, has_var=rm.edges.has_var & ~rm.reductions.fixed_open)
