@@ -206,11 +206,11 @@ class CoverSeparator:
         """Whether a bypass path stays open with every group with a binary cut."""
         return self._bypass_paths(np.ones(self.groups.keys.size, dtype=bool), 1) != []
 
-    def separate(self, cut: np.ndarray, flow: int) -> tuple[list[tuple[str, Row]], list[FlowCut]]:
+    def separate(self, cut: np.ndarray, flow: int, paths: int = PATHS_PER_ROUND) -> tuple[list[tuple[str, Row]], list[FlowCut]]:
         """What a cut set violates at flow level ``flow``: the ``(kind, row)`` pairs of
-        bypass cover and traps, and the minimum cuts of a too small flow (source side and
-        sink side; none when the flow is at least ``flow``)."""
-        rows: list[tuple[str, Row]] = [("cover", _at_least_one_cut(c)) for c in self._bypass_paths(cut, PATHS_PER_ROUND)]
+        bypass cover (at most ``paths``) and traps, and the minimum cuts of a too small flow
+        (source side and sink side; none when the flow is at least ``flow``)."""
+        rows: list[tuple[str, Row]] = [("cover", _at_least_one_cut(c)) for c in self._bypass_paths(cut, paths)]
         rows += [("trap", r) for r in self._trap_rows(cut)]
         return rows, self._flow_cuts(cut, flow)
 

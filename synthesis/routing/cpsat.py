@@ -182,6 +182,25 @@ class CpSatSession:
         self._worker.cpu = self._call(("row", _ints(idx), _floats(val), float(lo), float(hi)))
         self.arrays = self.arrays.with_row(idx, val, lo, hi)
 
+    def add_rows(self, rows: list[tuple[np.ndarray, np.ndarray, float, float]]) -> None:
+        """Add rows ``(idx, val, lo, hi)``, here and in the child, in one message."""
+        if not rows:
+            return
+        self._worker.cpu = self._call(("rows", [(_ints(i), _floats(v), float(lo), float(hi)) for i, v, lo, hi in rows]))
+        n = self.arrays.a.shape[1]
+        block = sp.csr_matrix(
+            (np.concatenate([np.asarray(v, dtype=float) for _, v, _, _ in rows]),
+             (np.repeat(np.arange(len(rows)), [len(i) for i, _, _, _ in rows]), np.concatenate([np.asarray(i, dtype=np.int64) for i, _, _, _ in rows]))),
+            shape=(len(rows), n),
+        )
+        self.arrays = ModelArrays(
+            sp.vstack([self.arrays.a, block], format="csr"),
+            np.append(self.arrays.row_lo, [lo for _, _, lo, _ in rows]),
+            np.append(self.arrays.row_hi, [hi for _, _, _, hi in rows]),
+            self.arrays.col_lo,
+            self.arrays.col_hi,
+        )
+
     def solve(
         self,
         cost: np.ndarray,

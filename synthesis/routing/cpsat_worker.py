@@ -14,7 +14,8 @@ holds highspy fails for the same reason: nothing in FlowTest imports it.
 The protocol is a pipe each way (the child's standard input and output), each message a
 tuple sent with :class:`multiprocessing.connection.Connection` (pickled, behind its length), so
 the parent needs nothing of this module, which it must never import. Requests: ``("build", arrays)``,
-``("row", idx, val, lo, hi)``, ``("solve", cost, maximize, hint, params)``, every array
+``("row", idx, val, lo, hi)``, ``("rows", [(idx, val, lo, hi), ...])``,
+``("solve", cost, maximize, hint, params)``, every array
 as ``(typecode, bytes)`` of :mod:`array` (``"q"`` int64, ``"d"`` float64), so nothing
 here needs NumPy to receive it. Answers:
 ``("ok", value)`` or ``("error", text)``; during a solve ``("progress", best, bound)``
@@ -344,6 +345,10 @@ def serve(inp: Connection, out: Connection) -> None:
             elif kind == "row" and model is not None:
                 idx, val, lo, hi = message[1:]
                 model.add_row(unpack(idx), unpack(val), lo, hi)
+                out.send(("ok", time.process_time()))
+            elif kind == "rows" and model is not None:
+                for idx, val, lo, hi in message[1]:
+                    model.add_row(unpack(idx), unpack(val), lo, hi)
                 out.send(("ok", time.process_time()))
             elif kind == "solve" and model is not None:
                 cost, maximize, hint, params = message[1:]
