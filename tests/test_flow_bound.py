@@ -27,7 +27,7 @@ from test_optimality import graph_instance, grid_instance, static_optimum, view_
 
 from synthesis.graphs.consistency import check_consistency
 from synthesis.model.errors import InconsistentProblem
-from synthesis.model.systems import grid_world
+from synthesis.model.systems import graph_system, grid_world
 from synthesis.pipeline import SynthesisOptions, milp_options, synthesize
 from synthesis.problems.problem import Problem, build_graphs, make_problem
 from synthesis.problems.random_grid import first_consistent
@@ -140,6 +140,51 @@ def test_stages_and_dead_histories_never_below_a_valid_wall_set(rows: int, cols:
 def test_stages_and_dead_histories_never_below_a_valid_wall_set_sweep(rows: int, cols: int, base: int, both_ways: bool) -> None:
     compared, fired = _check([study_like_instance(base + s, rows, cols, both_ways) for s in range(150)])
     assert compared >= 90 and fired >= 30, (compared, fired)
+
+
+def dead_and_live_instance(seed: int) -> Problem:
+    """A random graph whose system objective is sequenced (``F(b & F goal)``) or has a
+    reaction (``G(a -> F c)``), so that a state can hold both dead and live nodes of G: the
+    only case where L5's entry states ``D`` change the bound (the review of session 11)."""
+    rng = random.Random(seed)
+    n = rng.randint(4, 7)
+    names = [f"s{i}" for i in range(n)]
+    start, goal, inner = names[0], names[-1], names[1:-1]
+    density = rng.uniform(0.25, 0.6)
+    edges = [(a, b) for a in names for b in names if a != b and a != goal and rng.random() < density]
+    labels: dict[str, set[str]] = {goal: {"goal"}}
+    labels.setdefault(rng.choice(inner), set()).add("I1")
+    system = "F goal"
+    if rng.random() < 0.5:
+        labels.setdefault(rng.choice(inner), set()).add("b")
+        system = "F(b & F goal)"
+    else:
+        labels.setdefault(rng.choice([start, *inner]), set()).add("a")
+        labels.setdefault(rng.choice(inner), set()).add("c")
+        system = "F goal & G(a -> F c)"
+    ts = graph_system(names, edges, start, [goal], labels)
+    return make_problem(f"dead-and-live-{seed}", ts, system, "F I1", "static", rng.random() < 0.5)
+
+
+def test_dead_entry_states_are_kept() -> None:
+    """L5 must add the states where dead nodes are entered to Y: without them the bound of
+    this graph is 0, while a wall set of flow 1 (6 cuts) exists and no heuristic finds it."""
+    names = [f"s{i}" for i in range(7)]
+    edges = [("s0", "s4"), ("s0", "s5"), ("s1", "s0"), ("s2", "s4"), ("s2", "s5"), ("s3", "s2"), ("s4", "s1"), ("s4", "s5"), ("s5", "s3"), ("s5", "s6")]
+    ts = graph_system(names, edges, "s0", ["s6"], {"s1": {"I1"}, "s3": {"b"}, "s6": {"goal"}})
+    problem = make_problem("dead-entry", ts, "F(b & F goal)", "F I1", "static", False)
+    got = _bound_and_truth(problem)
+    assert got is not None
+    bound, _, truth = got
+    assert truth == 1 and bound >= 1, got
+    r = synthesize(problem, SynthesisOptions(backend="highs")).routing
+    assert (r.status, r.flow, r.cut_edges.size) == ("optimal", 1, 6)
+
+
+@pytest.mark.slow
+def test_bound_never_below_a_valid_wall_set_with_dead_and_live_histories() -> None:
+    compared, fired = _check([dead_and_live_instance(16000 + s) for s in range(80)])
+    assert compared >= 25 and fired >= 1, (compared, fired)
 
 
 def test_no_bound_outside_milp_static() -> None:
