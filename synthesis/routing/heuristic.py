@@ -170,6 +170,19 @@ def guess_routing(
     if traps is not None and flow > 0 and traps(border(separated(is_open)[1])):
         # grown from a trapping start and never left it: no use as a solution
         flow, is_open, f = 0, ~has_var, np.zeros(m, dtype=bool)
+    def grow_from(routes: list[np.ndarray], work: Work) -> tuple[int, np.ndarray, np.ndarray] | None:
+        """Grow from the first of ``routes`` with every route's groups open, ``None`` where
+        those groups alone open a bypass or trap."""
+        seeded = ~has_var
+        for r in routes:
+            seeded[grp[r]] = True
+        ok, reach = separated(seeded)
+        if not ok or (traps is not None and traps(border(reach))):
+            return None
+        f0 = np.zeros(m, dtype=bool)
+        f0[routes[0]] = True
+        return grow(seeded, f0, 1, work)
+
     if route_seed is not None and flow < upper:
         # grow from one route, then from the union of two (two routes through the same
         # labelled cell in different orders can cross there without a shortcut)
@@ -179,16 +192,10 @@ def guess_routing(
             for other in [None] + pool:
                 if work.exhausted:
                     break
-                seeded = ~has_var
-                seeded[grp[route]] = True
-                if other is not None:
-                    seeded[grp[other]] = True
-                ok, reach = separated(seeded)
-                if not ok or (traps is not None and traps(border(reach))):
+                grown = grow_from([route] if other is None else [route, other], work)
+                if grown is None:
                     continue
-                f0 = np.zeros(m, dtype=bool)
-                f0[route] = True
-                flow2, open2, f2 = grow(seeded, f0, 1, work)
+                flow2, open2, f2 = grown
                 if flow2 > flow:
                     flow, is_open, f, from_route = flow2, open2, f2, True
                 if flow >= upper:
@@ -208,15 +215,10 @@ def guess_routing(
             group = disjoint_routes(n, src, eu, ev, usable, target, route_seed, route, upper, work)
             if len(group) < 2:
                 continue
-            seeded = ~has_var
-            for r in group:
-                seeded[grp[r]] = True
-            ok, reach = separated(seeded)
-            if not ok or (traps is not None and traps(border(reach))):
+            grown = grow_from(group, work)  # group[0] is route
+            if grown is None:
                 continue
-            f0 = np.zeros(m, dtype=bool)
-            f0[route] = True
-            flow2, open2, f2 = grow(seeded, f0, 1, work)
+            flow2, open2, f2 = grown
             if flow2 > flow:
                 flow, is_open, f, from_route = flow2, open2, f2, True
             if flow >= upper:
