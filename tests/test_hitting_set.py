@@ -56,30 +56,32 @@ def test_fewest_cuts_matches_enumeration(seed: int) -> None:
     assert above.empty
 
 
-def test_incumbent_and_bound_stop_the_search() -> None:
-    """An incumbent the lower bound already meets is proven without a master solve; an
-    incumbent that fails a check is refused."""
-    problem = grid_instance(101, 3, 3, "static", True)
+def _solved_from_nothing(seed: int) -> tuple[CoverSeparator, int, hitting_set.HittingSetResult]:
+    """A 3x3 static grid's separator, its exhaustive maximum flow, and the hitting set's
+    answer there from no incumbent."""
+    problem = grid_instance(seed, 3, 3, "static", True)
     products, sep = _separator(problem)
     best, _ = static_optimum(view_of(products), problem.system, problem.bidirectional_cuts)
     assert best is not None
     at = hitting_set.fewest_cuts(sep, best.flow, None, UNLIMITED)
     assert at.cut is not None
-    again = hitting_set.fewest_cuts(sep, best.flow, at.cut, UNLIMITED, bound=at.cost)
+    return sep, best.flow, at
+
+
+def test_incumbent_and_bound_stop_the_search() -> None:
+    """An incumbent the lower bound already meets is proven without a master solve; an
+    incumbent that fails a check is refused."""
+    sep, flow, at = _solved_from_nothing(101)
+    again = hitting_set.fewest_cuts(sep, flow, at.cut, UNLIMITED, bound=at.cost)
     assert again.proven and again.rounds == 0
     with pytest.raises(RuntimeError, match="incumbent"):
-        hitting_set.fewest_cuts(sep, best.flow, np.zeros_like(at.cut), UNLIMITED)
+        hitting_set.fewest_cuts(sep, flow, np.zeros_like(at.cut), UNLIMITED)
 
 
 def test_a_spent_budget_keeps_the_incumbent() -> None:
     """With no rounds left, the search returns its incumbent unproven, stopped by the work limit."""
-    problem = grid_instance(103, 3, 3, "static", True)
-    products, sep = _separator(problem)
-    best, _ = static_optimum(view_of(products), problem.system, problem.bidirectional_cuts)
-    assert best is not None
-    at = hitting_set.fewest_cuts(sep, best.flow, None, UNLIMITED)
-    assert at.cut is not None
-    out = hitting_set.fewest_cuts(sep, best.flow, at.cut, hitting_set.HittingSetBudget(rounds=0))
+    sep, flow, at = _solved_from_nothing(103)
+    out = hitting_set.fewest_cuts(sep, flow, at.cut, hitting_set.HittingSetBudget(rounds=0))
     assert (out.proven, out.stopped_by, out.cost) == (at.cost <= 0.5, None if at.cost <= 0.5 else "work_limit", at.cost)
 
 
