@@ -205,9 +205,11 @@ def guess_routing(
                 break
     if route_seed is not None and flow < upper and upper >= 2:
         # F routes that share no place but where the history changes (and the start and
-        # the goal): with only their moves open, a walk from Src must follow one of them
-        # between two such places, so every walk to Tgt passes them all, as each route
-        # does (random 10x10 grids with two test cells: flow 2 where the pairs above give 1)
+        # the goal): the idea is that with only their moves open a walk from Src follows
+        # one of them between two such places, and so passes I as each route does. Not a
+        # proof (two-way walls, ties and states sharing a place open more), so grow_from
+        # checks the seed (random 10x10 grids with two test cells: flow 2 where the pairs
+        # above give 1)
         work = Work(route_seed.work)
         for route in simple_routes(n, src, eu, ev, usable, target, route_seed, work):
             if work.exhausted:
