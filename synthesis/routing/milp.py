@@ -671,11 +671,20 @@ def _model_solution(products: Products, rm: RoutingModel, cut: np.ndarray, flow:
     reach[breadth_first_order(graph, int(g.initial), directed=True, return_predecessors=False)] = True
     has_mu = cols.reach >= 0
     x[cols.reach[has_mu]] = reach[has_mu].astype(float)
-    col_lo, col_hi, row_lo, row_hi = rm.model.bounds()
-    arrays = cpsat.ModelArrays(rm.model.matrix().tocsr(), row_lo, row_hi, col_lo, col_hi)
-    if arrays.violation(x) > FEASIBILITY_TOLERANCE or abs(rm.flow_of(x) - flow) > 0.5:
+    if not _solves_at(_model_arrays(rm), rm, x, flow):
         raise RuntimeError("the hitting set's answer is no solution of the routing model: a FlowTest bug")
     return x
+
+
+def _model_arrays(rm: RoutingModel) -> cpsat.ModelArrays:
+    """The routing model's matrix and bounds, to check a whole solution against every row."""
+    col_lo, col_hi, row_lo, row_hi = rm.model.bounds()
+    return cpsat.ModelArrays(rm.model.matrix().tocsr(), row_lo, row_hi, col_lo, col_hi)
+
+
+def _solves_at(arrays: cpsat.ModelArrays, rm: RoutingModel, x: np.ndarray, flow: int) -> bool:
+    """Whether ``x`` satisfies every row and bound of the model with flow exactly ``flow``."""
+    return arrays.violation(x) <= FEASIBILITY_TOLERANCE and abs(rm.flow_of(x) - flow) <= 0.5
 
 
 @dataclass(frozen=True)
@@ -730,8 +739,7 @@ def _cut_proof(products: Products, rm: RoutingModel, options: MilpOptions, entri
     if not np.isfinite(cb.value):
         return _CutProof(cb.value, flow, None, 0, 0)  # no cut set has this flow (phase 2: meets() reports the bug)
     cost = _phase2_cost(rm, options)
-    col_lo, col_hi, row_lo, row_hi = rm.model.bounds()
-    arrays = cpsat.ModelArrays(rm.model.matrix().tocsr(), row_lo, row_hi, col_lo, col_hi)
+    arrays = _model_arrays(rm)
     traps = _trap_test(products, groups, entries)
     best: np.ndarray | None = None
     checked = 0
@@ -740,7 +748,7 @@ def _cut_proof(products: Products, rm: RoutingModel, options: MilpOptions, entri
         if guess.flow != flow:
             continue
         x = _guess_solution(products, rm, guess, options)
-        if x is None or arrays.violation(x) > FEASIBILITY_TOLERANCE or abs(rm.flow_of(x) - flow) > 0.5:
+        if x is None or not _solves_at(arrays, rm, x, flow):
             continue
         checked += 1
         if best is None or float(cost @ x) < float(cost @ best) - 0.5:
