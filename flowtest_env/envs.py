@@ -22,6 +22,7 @@ from synthesis.artifacts.artifact import TestArtifact
 from synthesis.problems.random_grid import FAMILIES
 from synthesis.problems.random_worlds import POOL_KINDS, WORLDS
 
+from .draws import draw_test
 from .encoding import Encoder, make_encoder
 from .game import GRID_ACTIONS, MET, VIOLATED, GameError, RunState, TestGame
 from .pools import random_grid_arguments
@@ -223,6 +224,8 @@ class FlowTestEnv(gym.Env[np.ndarray, np.int64]):
         self.encoder = self.encoders[0]
         self._renderers: dict[int, Renderer] = {}
         self.run: RunState | None = None
+        self._draw_key: int | None = None  # the seed of the test draws (flowtest_env.draws)
+        self._episode = -1  # episodes since that seed
 
     # ------------------------------------------------------------------ API
 
@@ -236,10 +239,14 @@ class FlowTestEnv(gym.Env[np.ndarray, np.int64]):
         return 0
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
-        """Start a test run (``seed`` seeds ``self.np_random``, which only the random-grid
-        env uses, to draw its problem). ``info`` carries ``system_state`` and
-        ``action_mask``."""
+        """Start a test run. ``seed`` seeds ``self.np_random`` and keys the pool's test
+        draws (:mod:`flowtest_env.draws`: a reset without a seed plays the key's next
+        episode). ``info`` carries ``system_state`` and ``action_mask``."""
         super().reset(seed=seed)
+        if seed is not None:
+            self._draw_key, self._episode = int(seed), 0
+        else:
+            self._episode += 1
         self._index = self._choose_game()
         self.game = self.games[self._index]
         self.encoder = self.encoders[self._index]
@@ -746,7 +753,12 @@ class RandomGridEnv(FlowTestEnv):
         self.problem = f"random-{size}x{size}-{family}{n}" + ("" if world == "empty" else f"-{world}")
 
     def _choose_game(self) -> int:
-        return int(self.np_random.integers(len(self.games)))
+        """The test of this episode, by :func:`flowtest_env.draws.draw_test` of the seed
+        given at the last seeded ``reset`` and the episodes since (never seeded: a key
+        drawn once from ``self.np_random``)."""
+        if self._draw_key is None:
+            self._draw_key, self._episode = int(self.np_random.integers(2**63)), 0
+        return draw_test(self._draw_key, self._episode, len(self.games))
 
 
 BUILTIN_ENVS: dict[str, tuple[str, type[FlowTestEnv]]] = {

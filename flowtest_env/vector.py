@@ -20,8 +20,8 @@ resets that env (its action is ignored; reward 0, not terminated, not truncated,
 reset's infos).
 
 A batch may hold different tests of one pool: :class:`RandomGridVectorEnv` draws each
-episode's test as :class:`~flowtest_env.envs.RandomGridEnv` does (one generator per env,
-seeded ``seed + i`` like ``SyncVectorEnv``, the same draws), and :class:`PoolVectorEnv`
+episode's test as :class:`~flowtest_env.envs.RandomGridEnv` does (the counter-based
+draws of :mod:`flowtest_env.draws`, env ``i`` keyed ``seed + i`` like ``SyncVectorEnv``), and :class:`PoolVectorEnv`
 takes any list of tests, drawn the same way or fixed per env (``assignment="fixed"``:
 env ``i`` always plays test ``i % n_tests``). Tests with fewer actions or smaller
 observations than the pool's largest are padded: extra actions are invalid (refused,
@@ -42,11 +42,11 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
-from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from .compiled import OUTCOMES, CompiledPool, compile_pool
+from .draws import draw_tests, key_of_seed
 from .encoding import make_encoder
 from .envs import default_max_steps
 from .game import RunState, TestGame
@@ -54,10 +54,6 @@ from .pools import random_grid_arguments
 from .random_grid import POOL_KINDS, WORLDS, random_pool
 from .render import Renderer, make_renderer
 from .sources import game_for
-
-DRAWS_PER_REFILL = 64
-"""Test draws taken from each env's generator at a time (a batch of draws gives the same
-numbers as as many single draws, so episodes get the single env's tests)."""
 
 
 class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
@@ -130,33 +126,20 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         self._restrictions = np.zeros(self.num_envs, dtype=np.int64)
         self._blocked = np.zeros(self.num_envs, dtype=np.int64)
         self._prev_done = np.zeros(self.num_envs, dtype=bool)
-        self._generators: list[np.random.Generator] = []
-        self._draws = np.zeros((self.num_envs, DRAWS_PER_REFILL), dtype=np.int64)
-        self._next_draw = np.zeros(self.num_envs, dtype=np.int64)
+        self._keys = np.zeros(self.num_envs, dtype=np.uint64)  # the test draws' keys (flowtest_env.draws)
+        self._episode = np.zeros(self.num_envs, dtype=np.int64)  # each env's episodes since its key
+        self._keyed = False
         self._started = False
         self._renderers: dict[int, Renderer] = {}
 
     # ------------------------------------------------------------------ tests per episode
 
-    def _refill(self, envs: np.ndarray) -> None:
-        n = len(self.games)
-        for i in envs.tolist():  # once per DRAWS_PER_REFILL episodes of env i
-            self._draws[i] = self._generators[i].integers(n, size=DRAWS_PER_REFILL)
-        self._next_draw[envs] = 0
-
     def _choose_tests(self, envs: np.ndarray) -> np.ndarray:
-        """The tests of the next episodes of ``envs`` (advances their draws)."""
+        """The tests of the current episodes of ``envs`` (their keys and episode counters:
+        :func:`flowtest_env.draws.draw_tests`)."""
         if self.assignment == "fixed":
             return envs % len(self.games)
-        if len(self.games) == 1:
-            return np.zeros(envs.size, dtype=np.int64)
-        empty = envs[self._next_draw[envs] >= DRAWS_PER_REFILL]
-        if empty.size:
-            self._refill(empty)
-        k = self._next_draw[envs]
-        self._next_draw[envs] = k + 1
-        drawn: np.ndarray = self._draws[envs, k]
-        return drawn
+        return draw_tests(self._keys[envs], self._episode[envs], len(self.games))
 
     def _start(self, envs: np.ndarray) -> None:
         tests = self._choose_tests(envs)
@@ -180,9 +163,16 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
             seeds = list(seed)
             if len(seeds) != self.num_envs:
                 raise ValueError(f"{len(seeds)} seeds for {self.num_envs} envs")
-        self._generators = [seeding.np_random(s)[0] for s in seeds]
+        if not self._keyed:  # never seeded: keys drawn once, as each single env would
+            self._keys[:] = self.np_random.integers(2**63, size=self.num_envs).astype(np.uint64)
+            self._episode[:] = -1
+            self._keyed = True
+        given = np.array([s is not None for s in seeds], dtype=bool)
+        self._episode += 1
+        if given.any():
+            self._keys[given] = [key_of_seed(s) for s in seeds if s is not None]
+            self._episode[given] = 0
         envs = np.arange(self.num_envs)
-        self._next_draw[:] = DRAWS_PER_REFILL
         self._start(envs)
         self._prev_done[:] = False
         self._started = True
@@ -214,6 +204,7 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         truncated = ~terminated & (self._steps >= self.max_steps)
         if self._prev_done.any():
             envs = np.flatnonzero(self._prev_done)
+            self._episode[envs] += 1
             self._start(envs)
             z2[envs] = self._z[envs]
             reward[envs] = 0.0
@@ -412,4 +403,4 @@ class VectorActionMaskObservation(gym.vector.VectorWrapper):
         return {"observation": obs, "action_mask": infos["action_mask"]}, reward, terminated, truncated, infos
 
 
-__all__ = ["PoolVectorEnv", "FlowTestVectorEnv", "RandomGridVectorEnv", "VectorActionMaskObservation", "DRAWS_PER_REFILL"]
+__all__ = ["PoolVectorEnv", "FlowTestVectorEnv", "RandomGridVectorEnv", "VectorActionMaskObservation"]
