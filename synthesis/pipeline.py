@@ -16,15 +16,17 @@ from typing import Any
 import numpy as np
 
 from .agent.loop import AgentSynthesis, counterexample_loop
+from .checks.physical import cap_count, physical_counts
 from .checks.verify import CheckReport, check_test, restricted_edges, routed_flow
 from .graphs.automata import SpecificationProduct
 from .graphs.products import Products
-from .model.errors import ProblemError
+from .model.errors import CheckFailed, InconsistentProblem, ProblemError
 from .model.strategy import SETTINGS, TestStrategy
 from .model.test_agent import TestAgent
 from .problems.limits import MAX_GRAPH_EDGES, check_size
-from .problems.problem import Problem, build_graphs
+from .problems.problem import CAP_KEYS, Problem, build_graphs, check_caps
 from .routing import cpsat, scip
+from .routing.caps import CAP_NOUNS, Fewest, caps_text, fewest_within
 from .routing.milp import AUTO_CPSAT_MODES, RoutingResult, solve_routing
 from .routing.model import BACKENDS, MilpOptions
 from .routing.restrictions import strategy_from_routing
@@ -60,6 +62,9 @@ class SynthesisOptions:
     backend: str = "auto"
     # CP-SAT's deterministic budget per phase (its max_deterministic_time; see MilpOptions)
     work_limit: float | None = None
+    # caps on the physical restrictions a test may use (max_walls, max_doors,
+    # max_restrictions); each key given here replaces the problem's
+    caps: dict[str, int] | None = None
 
 
 MAX_THREADS = 256
@@ -98,6 +103,17 @@ def check_options(options: SynthesisOptions) -> None:
     e = options.max_graph_edges
     if e is not None and (isinstance(e, bool) or not isinstance(e, int) or e < 1):
         raise ProblemError(f"option max_graph_edges must be a positive integer or None, not {e!r}")
+    if options.caps is not None:
+        if not isinstance(options.caps, dict):
+            raise ProblemError(f"option caps must be a dict of {', '.join(CAP_KEYS)}, not {options.caps!r}")
+        check_caps(options.caps, " (option caps)")
+
+
+def caps_of(problem: Problem, options: SynthesisOptions) -> dict[str, int]:
+    """The caps a synthesis honours: the problem's, each replaced by the option's."""
+    caps = dict(problem.caps)
+    caps.update(check_caps(options.caps or {}, " (option caps)"))
+    return caps
 
 
 @dataclass(frozen=True)
@@ -156,6 +172,7 @@ def milp_options(problem: Problem, options: SynthesisOptions) -> MilpOptions:
         control=options.control,
         backend=options.backend,
         work_limit=options.work_limit,
+        caps=caps_of(problem, options),
     )
 
 
@@ -198,7 +215,11 @@ def synthesize(problem: Problem, options: SynthesisOptions | None = None) -> Syn
     note("building automata and product graphs")
     spec, products = build_graphs(problem)
     graph_seconds = time.perf_counter() - t0
-    routing = solve_routing(products, milp_options(problem, remaining_time(problem, options, graph_seconds)))
+    milp = milp_options(problem, remaining_time(problem, options, graph_seconds))
+    try:
+        routing = solve_routing(products, milp)
+    except InconsistentProblem as exc:
+        raise over_caps(products, milp, exc, note) from None
     setting = options.setting or problem.extras.get("setting", "instantaneous")
     strategy = strategy_from_routing(products, routing, setting)
     if routing.status != "optimal":
@@ -207,7 +228,55 @@ def synthesize(problem: Problem, options: SynthesisOptions | None = None) -> Syn
         routing = replace(routing, flow=routed_flow(products, restricted_edges(products, strategy)))
     note("checking the test (bypass flow, feasibility)")
     checks = check_test(products, strategy, routing.flow, closed_loop=options.closed_loop)
+    check_caps_held(problem, strategy, milp.caps)
     return SynthesizedTest(problem, spec, products, routing, strategy, checks, graph_seconds)
+
+
+def check_caps_held(problem: Problem, strategy: TestStrategy, caps: dict[str, int]) -> None:
+    """The independent check of the caps: the test's physical restrictions, counted from its
+    strategy (:func:`~synthesis.checks.physical.physical_counts`, not from the solver's cut
+    groups), within every cap.
+
+    Raises
+    ------
+    CheckFailed
+        If a cap is exceeded (a FlowTest bug: the solver honours the caps).
+    """
+    if not caps:
+        return
+    counts = physical_counts(problem.system, strategy)
+    for cap, limit in caps.items():
+        used = cap_count(counts, cap)
+        if used > limit:
+            raise CheckFailed(f"the test uses {used} {CAP_NOUNS[cap]}, above its cap {cap} = {limit}")
+
+
+def over_caps(products: Products, milp: MilpOptions, exc: InconsistentProblem, note: Callable[[str], None]) -> InconsistentProblem:
+    """The error to raise when the routing solve found no test: ``exc`` itself without caps
+    (or when the problem has no test whatever the caps); with caps, a message that names
+    them and how many items a test needs (:func:`synthesis.routing.caps.fewest_within`):
+    ``no test with at most 3 doors routes ... : the fewest that does is 5 doors``."""
+    if not milp.caps or exc.reason != "unroutable":
+        return exc
+    note("no test within the caps: finding how few restrictions a test needs")
+    left = None if milp.time_limit is None else time.perf_counter() + max(milp.time_limit, 1.0)
+    uncapped = replace(milp, caps={})
+    parts = []
+    for cap, limit in milp.caps.items():
+        fewest = fewest_within(products, replace(uncapped, caps=milp.caps), cap, deadline=left)
+        if fewest.value is None:
+            if len(milp.caps) == 1:
+                return exc  # no test at all: the caps are not the reason
+            parts.append(f"{CAP_NOUNS[cap]}: no test routes it within the other caps")
+            continue
+        if fewest.value <= limit and not fewest.exact:
+            fewest = Fewest(limit + 1, False) if len(milp.caps) == 1 else fewest
+        parts.append(fewest.text(CAP_NOUNS[cap]))
+    return InconsistentProblem(
+        "unroutable",
+        f"no test with {caps_text(milp.caps)} routes every successful execution through the test objective "
+        f"without trapping the system: {'; '.join(parts)}; raise the cap or drop it",
+    )
 
 
 def synthesize_agent_test(
@@ -268,19 +337,24 @@ def synthesize_agent_test(
     note("building automata and product graphs")
     spec, products = build_graphs(problem)
     graph_seconds = time.perf_counter() - t0
-    outcome = counterexample_loop(
-        products,
-        agent,
-        milp_options(problem, options),
+    milp = milp_options(problem, remaining_time(problem, options, graph_seconds))
+    try:
+        outcome = counterexample_loop(
+            products,
+            agent,
+            milp,
         problem.static_moves,
-        setting=options.setting or problem.extras.get("setting", "instantaneous"),
-        bound=bound,
-        prefilter=prefilter,
-        reasons=reasons,
-        closed_loop=options.closed_loop,
-        note=note,
-        graph_seconds=graph_seconds,
-    )
+            setting=options.setting or problem.extras.get("setting", "instantaneous"),
+            bound=bound,
+            prefilter=prefilter,
+            reasons=reasons,
+            closed_loop=options.closed_loop,
+            note=note,
+            graph_seconds=graph_seconds,
+        )
+    except InconsistentProblem as exc:
+        raise over_caps(products, milp, exc, note) from None
+    check_caps_held(problem, outcome.strategy, milp.caps)
     timings = outcome.solution.timings
     return SynthesizedTest(
         problem, spec, products, outcome.routing, outcome.strategy, outcome.checks, graph_seconds,

@@ -23,13 +23,13 @@ from ..model.specs import check_proposition_name
 from ..model.strategy import SETTINGS
 from ..model.systems import Cell, TransitionSystem, graph_system, grid_world
 from .agent_section import agent_from_toml
-from .problem import KINDS, Problem, make_problem
+from .problem import CAP_KEYS, KINDS, Problem, check_caps, make_problem, shown
 
 _TOP_KEYS = {"name", "description", "system", "labels", "objectives", "environment"}
 _GRID_KEYS = {"grid", "start", "terminal", "restrictable"}
 _GRAPH_KEYS = {"states", "edges", "start", "terminal", "stay", "restrictable"}
 _OBJ_KEYS = {"system", "test"}
-_ENV_KEYS = {"kind", "static", "bidirectional_cuts", "time_limit", "setting", "agent"}
+_ENV_KEYS = {"kind", "static", "bidirectional_cuts", "time_limit", "setting", "agent", *CAP_KEYS}
 
 
 def _unknown(section: str, got: dict[str, Any], allowed: set[str]) -> None:
@@ -43,6 +43,14 @@ def _unknown(section: str, got: dict[str, Any], allowed: set[str]) -> None:
 def _is_int(x: Any) -> bool:
     """An integer that is not a boolean (TOML's ``true`` is not the number 1)."""
     return isinstance(x, int) and not isinstance(x, bool)
+
+
+def _finite(x: int | float) -> bool:
+    """Whether a number is finite as a float (an integer too large for one is not)."""
+    try:
+        return math.isfinite(x)
+    except OverflowError:
+        return False
 
 
 def _is_cell(x: Any) -> bool:
@@ -163,9 +171,9 @@ def problem_from_dict(data: dict[str, Any], source: str = "<problem>", max_cells
     time_limit = env.get("time_limit")
     if time_limit is not None and (
         not isinstance(time_limit, (int, float)) or isinstance(time_limit, bool)
-        or not math.isfinite(time_limit) or time_limit <= 0
+        or not _finite(time_limit) or time_limit <= 0
     ):
-        raise ProblemError(f"`time_limit` in [environment]{where} must be a positive finite number of seconds, not {time_limit!r}")
+        raise ProblemError(f"`time_limit` in [environment]{where} must be a positive finite number of seconds, not {shown(time_limit)}")
     bidir = env.get("bidirectional_cuts")
     if bidir is not None and not isinstance(bidir, bool):
         raise ProblemError(f"`bidirectional_cuts` in [environment]{where} must be true or false")
@@ -189,7 +197,8 @@ def problem_from_dict(data: dict[str, Any], source: str = "<problem>", max_cells
     extras: dict[str, Any] = {}
     if "setting" in env:
         extras["setting"] = env["setting"]
-    kw: dict[str, Any] = {"static_moves": static_moves, "time_limit": time_limit, "extras": extras}
+    caps = check_caps({k: env[k] for k in CAP_KEYS if k in env}, f" in [environment]{where}")
+    kw: dict[str, Any] = {"static_moves": static_moves, "time_limit": time_limit, "extras": extras, "caps": caps}
     if "agent" in env:
         kw["agent"] = agent_from_toml(env["agent"], ts, cell_of, f"[environment.agent]{where}")
     elif kind == "agent":
@@ -344,6 +353,12 @@ def read_limited(path: str | Path, what: str, limit: int = MAX_FILE_BYTES) -> by
     return raw
 
 
+def _first_line(exc: BaseException) -> str:
+    """The first line of an exception's message, at most 200 characters."""
+    text = (str(exc).splitlines() or [type(exc).__name__])[0]
+    return text if len(text) <= 200 else text[:197] + "..."
+
+
 def load_problem_file(path: str | Path, max_cells: int | None = MAX_GRID_CELLS) -> Problem:
     """Read a TOML problem file.
 
@@ -362,4 +377,8 @@ def load_problem_file(path: str | Path, max_cells: int | None = MAX_GRID_CELLS) 
         raise ProblemError(f"{p}: invalid TOML: {exc}") from None
     except RecursionError:
         raise ProblemError(f"{p}: invalid TOML: nested too deeply") from None
+    except ValueError as exc:  # an integer of thousands of digits (int's digit limit), a bad date
+        if "digits" in str(exc):
+            raise ProblemError(f"{p}: invalid TOML: an integer has more digits than Python reads (at most 4300)") from None
+        raise ProblemError(f"{p}: invalid TOML: {_first_line(exc)}") from None
     return problem_from_dict(data, str(p), max_cells)

@@ -22,6 +22,42 @@ from ..model.test_agent import TestAgent
 
 KINDS = ("static", "reactive", "mixed", "agent")
 
+CAP_KEYS = ("max_walls", "max_doors", "max_restrictions")
+"""The caps on what a test may use: physical walls (static restrictions), doors (reactive
+ones, and a test agent's blocks) and both together, each a move of the system between two
+places, counted once whichever way and under however many histories it is restricted."""
+
+MAX_CAP = 10**9
+"""Largest cap accepted (far above any move count FlowTest can solve)."""
+
+
+def shown(value: object, limit: int = 60) -> str:
+    """``repr(value)`` cut to ``limit`` characters (a number of thousands of digits stays one
+    short line in a message)."""
+    text = repr(value)
+    return text if len(text) <= limit else f"{text[: limit - 3]}... ({len(text)} characters)"
+
+
+def check_caps(caps: dict[str, Any], where: str) -> dict[str, int]:
+    """``caps`` checked: keys of :data:`CAP_KEYS`, values non-negative integers.
+
+    Raises
+    ------
+    ProblemError
+        Naming the key and ``where``.
+    """
+    out: dict[str, int] = {}
+    for key, value in caps.items():
+        if key not in CAP_KEYS:
+            raise ProblemError(f"unknown cap {key!r}{where}; expected one of {', '.join(CAP_KEYS)}")
+        if value is None:
+            continue
+        if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= MAX_CAP:
+            raise ProblemError(f"`{key}`{where} must be a whole number from 0 to {MAX_CAP}, not {shown(value)}")
+        out[key] = int(value)
+    return out
+
+
 TIE_PLACES = ("none", "all", "static")
 """What ``MilpOptions.tie_places`` (and ``Problem.tie_places``) ties across the states of one
 place (the fuel levels of a cell): ``"none"`` (every cut is per transition of T), ``"all"``
@@ -61,6 +97,10 @@ class Problem:
         The test agent of an agent problem (:mod:`synthesis.model.test_agent`).
     description
         One paragraph for people.
+    caps
+        Caps on what a test may use (:data:`CAP_KEYS`: ``max_walls``, ``max_doors``,
+        ``max_restrictions``), counted as physical restrictions (moves of the system between
+        two places, a two-way wall once); absent keys: no cap.
     """
 
     name: str
@@ -75,6 +115,7 @@ class Problem:
     agent: TestAgent | None = None
     description: str = ""
     extras: dict[str, Any] = field(default_factory=dict)
+    caps: dict[str, int] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if self.kind == "agent" and self.static_moves is None and self.agent is not None:
@@ -105,6 +146,8 @@ def make_problem(
         raise ProblemError(f"unknown environment kind {kind!r}; expected one of {', '.join(KINDS)}")
     if "tie_places" in kw:
         kw["tie_places"] = _tie_mode(kw["tie_places"])
+    if "caps" in kw:
+        kw["caps"] = check_caps(dict(kw["caps"]), "")
     sys_obj = parse_objective(system_objective, "system")
     test_obj = parse_objective(test_objective, "test")
     known = system.propositions() | set(kw.pop("declared_propositions", ()))

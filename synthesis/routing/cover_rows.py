@@ -14,7 +14,9 @@ a cut may enter. The checks, all graph searches in bulk (SciPy's ``csgraph``):
   the sink side (see :meth:`CoverSeparator._flow_cuts`);
 * traps (c6-c8): :func:`synthesis.routing.traps.trapped_entries` on the restrictions of
   the cut set (plus :func:`~synthesis.routing.traps.trapped_configurations` with
-  ``closed_loop``), and per trapped node the set it still reaches.
+  ``closed_loop``), and per trapped node the set it still reaches;
+* caps: the physical restrictions a cut set uses against ``options.caps``
+  (:meth:`CoverSeparator._cap_rows`).
 """
 
 from __future__ import annotations
@@ -28,7 +30,7 @@ from scipy.sparse.csgraph import breadth_first_order, dijkstra, maximum_flow
 
 from ..graphs.products import Products
 from .heuristic import RoutingGuess
-from .model import CutGroups, MilpOptions, ModelEdges, static_moves_of
+from .model import CutGroups, MilpOptions, ModelEdges, PhysicalItems, physical_items, static_moves_of
 from .result import blocked_of_edges
 from .traps import trapped_configurations, trapped_entries
 
@@ -120,6 +122,7 @@ class CoverSeparator:
         # c5 edges into Tgt cannot carry flow in a valid answer; nothing else needs them here
         self.static_moves = static_moves_of(products, options)
         self._closing = _ClosingGroups(products, groups, self.static_moves)
+        self._items: PhysicalItems | None = None  # the caps' physical items, once needed
 
     # ------------------------------------------------------------------ cut sets
 
@@ -212,7 +215,28 @@ class CoverSeparator:
         (source side and sink side; none when the flow is at least ``flow``)."""
         rows: list[tuple[str, Row]] = [("cover", _at_least_one_cut(c)) for c in self._bypass_paths(cut, paths)]
         rows += [("trap", r) for r in self._trap_rows(cut)]
+        rows += [("cap", r) for r in self._cap_rows(cut)]
         return rows, self._flow_cuts(cut, flow)
+
+    def _cap_rows(self, cut: np.ndarray) -> list[Row]:
+        """(e) caps (:attr:`MilpOptions.caps`): a cut set that uses ``k`` items a cap of ``N``
+        counts (``k > N``) gives ``sum d_g <= N`` over one cut group with a column per item.
+        Valid: the groups stand for ``k`` distinct items, so a cut set within the cap cuts at
+        most ``N`` of them; and the cut set violates it."""
+        if not self.options.caps:
+            return []
+        if self._items is None:
+            self._items = physical_items(self.products, self.groups)
+        items = self._items
+        rows = []
+        for cap, used in items.over_cap(cut, self.options.caps):
+            groups = np.flatnonzero(cut & (self.col_of >= 0))
+            of = items.of_group[groups]
+            keep = np.isin(of, used)
+            _, first = np.unique(of[keep], return_index=True)
+            cols = self.col_of[groups[keep][first]]
+            rows.append(Row(cols, np.ones(cols.size), -np.inf, float(self.options.caps[cap])))
+        return rows
 
     def checks_pass(self, cut: np.ndarray, flow: int) -> bool:
         """Whether a cut set passes every check at flow level ``flow``."""

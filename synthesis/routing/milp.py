@@ -671,6 +671,7 @@ def _model_solution(products: Products, rm: RoutingModel, cut: np.ndarray, flow:
     reach[breadth_first_order(graph, int(g.initial), directed=True, return_predecessors=False)] = True
     has_mu = cols.reach >= 0
     x[cols.reach[has_mu]] = reach[has_mu].astype(float)
+    x = rm.with_items(x)
     if not _solves_at(_model_arrays(rm), rm, x, flow):
         raise RuntimeError("the hitting set's answer is no solution of the routing model: a FlowTest bug")
     return x
@@ -934,7 +935,8 @@ def _result(
 def _guess_solution(products: Products, rm: RoutingModel, guess: RoutingGuess, options: MilpOptions) -> np.ndarray | None:
     """The heuristic's cut set as a full model solution, or ``None`` if it is unusable.
 
-    Unusable: no flow, a rejected cut set (an exclusion row), or, with feasibility
+    Unusable: no flow, a rejected cut set (an exclusion row), a cut set over a cap
+    (:attr:`MilpOptions.caps`), or, with feasibility
     constraints, an entry node trapped by the cuts. The feasibility flows are
     completed along shortest open paths, so the start is a whole solution and a solve
     stopped by its time limit still returns a checked test.
@@ -945,6 +947,8 @@ def _guess_solution(products: Products, rm: RoutingModel, guess: RoutingGuess, o
     cut_mask = guess.cut_groups & (cols.cut >= 0)
     cut_keys = set(groups.keys[cut_mask].tolist())
     if any(excluded.excludes(cut_keys) for excluded in options.exclusions):
+        return None
+    if rm.caps is not None and rm.caps.items.over_cap(cut_mask, options.caps):
         return None
     g, ts = products.virtual, products.ts
     x = np.zeros(rm.n_col)
@@ -964,7 +968,7 @@ def _guess_solution(products: Products, rm: RoutingModel, guess: RoutingGuess, o
         if value is None:  # the cuts trap an entry node of this history
             return None
         x[fl.cols] = value
-    return x
+    return rm.with_items(x)
 
 
 def _trap_test(products: Products, groups: CutGroups, entries: dict[int, np.ndarray]) -> Callable[[np.ndarray], bool] | None:

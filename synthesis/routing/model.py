@@ -153,6 +153,13 @@ class MilpOptions:
         CP-SAT's budget per phase in its deterministic seconds (``max_deterministic_time``;
         ``None``: no limit): a deterministic budget, as ``node_limit`` is for HiGHS. A run
         stopped by it returns its best test (``"feasible"``).
+    caps
+        Caps on the physical restrictions a test may use (``max_walls``, ``max_doors``,
+        ``max_restrictions``; :func:`physical_items` says what one is): rows of the model
+        (:func:`_add_caps`), lazy rows of the wall-cover master
+        (:meth:`~synthesis.routing.cover_rows.CoverSeparator.separate`). With a cap the
+        dominance reduction is off (its proof swaps one cut group for another, which may
+        add a physical restriction).
     """
 
     mode: str = "reactive"
@@ -179,6 +186,7 @@ class MilpOptions:
     flow_rows: str = "auto"
     backend: str = "auto"
     work_limit: float | None = None
+    caps: dict[str, int] = field(default_factory=dict)
 
     @property
     def deterministic(self) -> bool:
@@ -348,6 +356,67 @@ def static_moves_of(products: Products, options: MilpOptions) -> np.ndarray:
 
 
 @dataclass(frozen=True)
+class PhysicalItems:
+    """The physical restrictions the cut groups stand for: a wall (a static group) or a door
+    (a reactive one) on the move between two places, whichever way and under whichever
+    history: ``of_group[g]`` is group ``g``'s item, ``is_wall[i]`` whether item ``i`` is a
+    wall, ``places[i]`` its two places (the lower index first)."""
+
+    of_group: np.ndarray
+    is_wall: np.ndarray
+    places: np.ndarray
+
+    def counts(self, cut: np.ndarray) -> dict[str, int]:
+        """``{"walls": .., "doors": ..}`` used by a cut set (``bool`` per group)."""
+        used = np.zeros(self.is_wall.size, dtype=bool)
+        used[self.of_group[cut]] = True
+        walls = int((used & self.is_wall).sum())
+        return {"walls": walls, "doors": int(used.sum()) - walls}
+
+    def kinds(self, cap: str) -> np.ndarray:
+        """``bool`` per item: counted by the cap ``cap`` (a key of :data:`CAP_KEYS`)."""
+        if cap == "max_walls":
+            return self.is_wall
+        if cap == "max_doors":
+            out: np.ndarray = ~self.is_wall
+            return out
+        return np.ones(self.is_wall.size, dtype=bool)
+
+    def over_cap(self, cut: np.ndarray, caps: dict[str, int]) -> list[tuple[str, np.ndarray]]:
+        """The caps a cut set exceeds, each with the items it uses that the cap counts."""
+        used = np.zeros(self.is_wall.size, dtype=bool)
+        used[self.of_group[cut]] = True
+        out = []
+        for cap, limit in caps.items():
+            items = np.flatnonzero(used & self.kinds(cap))
+            if items.size > limit:
+                out.append((cap, items))
+        return out
+
+
+def physical_items(products: Products, groups: CutGroups) -> PhysicalItems:
+    """The physical restriction of each cut group (:class:`PhysicalItems`). Every edge of a
+    group lies over moves between the same two places (its key is a pair of places or of
+    states, the states of one place pair), so one edge of each group names its item."""
+    ts, g = products.ts, products.virtual
+    n = groups.keys.size
+    rep = np.zeros(n, dtype=np.int64)
+    rep[groups.of_edge] = np.arange(groups.of_edge.size)
+    move = g.move[rep]
+    a = ts.place[ts.src[move]].astype(np.int64)
+    b = ts.place[ts.dst[move]].astype(np.int64)
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    span = np.int64(int(ts.place.max()) + 1) if ts.place.size else np.int64(1)
+    key = (~groups.static).astype(np.int64) * span * span + lo * span + hi
+    uniq, of_group = np.unique(key, return_inverse=True)
+    return PhysicalItems(
+        of_group=of_group.ravel(),
+        is_wall=uniq < span * span,
+        places=np.stack([(uniq % (span * span)) // span, uniq % span], axis=1),
+    )
+
+
+@dataclass(frozen=True)
 class ModelEdges:
     """The edges of G the routing model keeps, and what the model knows of each.
 
@@ -482,6 +551,7 @@ class RoutingModel:
     out_src: np.ndarray  # model edges leaving Src: their flow is F
     reductions: Reductions  # the cut groups fixed open (d = 0) before the solve
     flow_bound: int | None = None  # MILP-static: the walls' flow bound where below the heuristic's (synthesis.routing.flow_bound)
+    caps: CapRows | None = None  # the caps' items and rows (options.caps), None without caps
 
     def guess(self, products: Products, traps: Callable[[np.ndarray], bool] | None = None) -> RoutingGuess:
         """The routing heuristic on this model: its edges, no group fixed open cut; its flow
@@ -518,6 +588,19 @@ class RoutingModel:
         cut[var] = x[self.cols.cut[var]] > 0.5
         return cut
 
+    def with_items(self, x: np.ndarray) -> np.ndarray:
+        """``x`` with the caps' item columns at their least values (1 where a cut group of
+        the item is cut), so a solution built from cut values alone meets the item rows."""
+        caps = self.caps
+        if caps is None:
+            return x
+        x = x.copy()
+        used = np.zeros(caps.items.is_wall.size, dtype=bool)
+        used[caps.items.of_group[self.cut_of(x)]] = True
+        has = caps.item_col >= 0
+        x[caps.item_col[has]] = used[has].astype(float)
+        return x
+
 
 def build_model(
     products: Products, options: MilpOptions, entries: dict[int, np.ndarray], keep_node: np.ndarray
@@ -542,6 +625,7 @@ def build_model(
     blocked_place, places, place_of_cut = _add_blocked_places(m, products, groups, cut) if options.block_states else (
         np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64))
     exclusions = _add_exclusions(m, groups, cut, options.exclusions)
+    caps = _add_caps(m, products, groups, cut, options.caps) if options.caps else None
     return RoutingModel(
         model=m,
         edges=me,
@@ -551,7 +635,42 @@ def build_model(
         out_src=np.flatnonzero(me.eu == g.initial),
         reductions=reductions,
         flow_bound=model_flow_bound(products, options, me),
+        caps=caps,
     )
+
+
+@dataclass(frozen=True)
+class CapRows:
+    """The caps in the model: ``y_i`` per physical item (:class:`PhysicalItems`) with a cut
+    binary, at least each of its groups' ``d`` (``y_i - d_g >= 0``), and per cap
+    ``sum y_i <= cap`` over the items it counts. Over binary ``d`` the rows admit exactly the
+    cut sets within the caps (``y_i = max d_g`` meets them when the cut set does, and every
+    solution has ``y_i >= max d_g``). ``y`` is continuous on HiGHS (its least value is
+    integral) and integral on CP-SAT (every column is)."""
+
+    items: PhysicalItems
+    item_col: np.ndarray  # per item, its y column (-1: no group of it has a binary)
+    cap_rows: dict[str, np.ndarray]
+
+
+def _add_caps(m: _Model, products: Products, groups: CutGroups, cut: np.ndarray, caps: dict[str, int]) -> CapRows:
+    """The rows of :class:`CapRows`."""
+    items = physical_items(products, groups)
+    var = np.flatnonzero(cut >= 0)
+    of = items.of_group[var]
+    used = np.unique(of)
+    item_col = np.full(items.is_wall.size, -1, dtype=np.int64)
+    item_col[used] = m.add_cols(used.size, 0.0, 1.0)
+    r = m.add_rows(0.0, np.inf, var.size)
+    m.add_terms(r, item_col[of], 1.0)
+    m.add_terms(r, cut[var], -1.0)
+    cap_rows: dict[str, np.ndarray] = {}
+    for key, limit in caps.items():
+        counted = used[items.kinds(key)[used]]
+        row = m.add_rows(-np.inf, float(limit), 1)
+        m.add_terms(np.repeat(row, counted.size), item_col[counted], 1.0)
+        cap_rows[key] = row
+    return CapRows(items, item_col, cap_rows)
 
 
 def model_flow_bound(products: Products, options: MilpOptions, me: ModelEdges) -> int | None:
@@ -588,6 +707,7 @@ def group_reductions(
         return Reductions.none(groups.keys.size)
     dominance = (
         options.mode == "static"
+        and not options.caps
         and not with_feasibility
         and not options.closed_loop
         and not options.block_states

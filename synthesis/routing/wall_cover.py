@@ -84,7 +84,7 @@ class _Stats:
     rounds: int = 0
     master_solves: int = 0
     master_nodes: int = 0
-    rows: dict[str, int] = field(default_factory=lambda: {"cover": 0, "flow": 0, "trap": 0, "exclusion": 0, "place": 0})
+    rows: dict[str, int] = field(default_factory=lambda: {"cover": 0, "flow": 0, "trap": 0, "exclusion": 0, "place": 0, "cap": 0})
     separation_seconds: float = 0.0
     master_seconds: float = 0.0
 

@@ -1,0 +1,99 @@
+"""When no test fits the caps: how few physical restrictions a test needs.
+
+The caps (``max_walls``, ``max_doors``, ``max_restrictions``; :attr:`MilpOptions.caps`)
+are rows of the routing model (:class:`~synthesis.routing.model.CapRows`). When the capped
+solve finds no test, :func:`fewest_within` answers the user's next question, *how many
+would do?*: the fewest walls (doors, restrictions) of any cut set that routes flow >= 1,
+the other caps kept, as the routing model's own optimum (every row of method.md §5, all
+feasibility flows up front), so the figure is the one a cap must allow. The solve is
+bounded by a deadline; stopped early it gives HiGHS's proven lower bound.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, replace
+
+import highspy
+import numpy as np
+
+from ..graphs.consistency import check_consistency
+from ..graphs.products import Products
+from .model import MilpOptions, build_model
+from .result import required_entries
+from .solver_control import quiet_highs, run_highs
+
+CAP_NOUNS = {"max_walls": "walls", "max_doors": "doors", "max_restrictions": "restrictions (walls and doors)"}
+"""What each cap counts, for messages."""
+
+FEWEST_SECONDS = 30.0
+"""The most seconds :func:`fewest_within` spends when the caller gives no deadline."""
+
+
+@dataclass(frozen=True)
+class Fewest:
+    """The fewest items a cap counts that a test needs: ``value`` exactly when ``exact``,
+    else at least ``value`` (``None``: no test at all, whatever the cap)."""
+
+    value: int | None
+    exact: bool
+
+    def text(self, noun: str) -> str:
+        """``"the fewest is 5 doors"``, ``"at least 5 doors are needed"``."""
+        if self.value is None:
+            return f"no test routes it with any number of {noun}"
+        if not self.exact and self.value == 0:
+            return f"how many {noun} would do was not settled within the time left"
+        if self.exact:
+            return f"the fewest that does is {self.value} {noun}"
+        return f"at least {self.value} {noun} are needed (not proven exactly within the time left)"
+
+
+def fewest_within(products: Products, options: MilpOptions, cap: str, deadline: float | None = None) -> Fewest:
+    """The fewest items ``cap`` counts over the cut sets with flow >= 1 that meet every other
+    cap of ``options.caps`` and every row of the routing model (feasibility flows of every
+    history with entry nodes, up front: no lazy rounds). ``deadline`` (``perf_counter``
+    time; default :data:`FEWEST_SECONDS` from now) bounds the solve; stopped by it, the
+    answer is HiGHS's proven lower bound (``exact`` false). With ``closed_loop`` or the test
+    agent's places the model is a relaxation of the test's conditions, so the answer is
+    a lower bound too."""
+    if deadline is None:
+        deadline = time.perf_counter() + FEWEST_SECONDS
+    caps = {k: v for k, v in options.caps.items() if k != cap}
+    caps[cap] = 10**9  # present, so its items have columns; never binding
+    opts = replace(options, caps=caps, exclusions=list(options.exclusions))
+    entries = required_entries(products, opts)
+    rm = build_model(products, opts, entries, check_consistency(products))
+    rows = rm.caps
+    if rows is None:  # cannot happen: caps is not empty
+        raise RuntimeError("the routing model has no cap rows")
+    counted = rows.items.kinds(cap) & (rows.item_col >= 0)
+    cost = np.zeros(rm.n_col)
+    cost[rows.item_col[counted]] = 1.0
+    lp = rm.model.to_highs(cost, maximize=False)
+    h = quiet_highs(options.threads if options.threads else 1, options.random_seed)
+    h.passModel(lp)
+    out = rm.cols.flow[rm.out_src].astype(np.int32)
+    h.addRow(1.0, highspy.kHighsInf, out.size, out, np.ones(out.size))
+    # the item columns are integral at their least value; declared so, HiGHS's bound is integral
+    item_cols = rows.item_col[rows.item_col >= 0].astype(np.int32)
+    h.changeColsIntegrality(item_cols.size, item_cols, np.full(item_cols.size, highspy.HighsVarType.kInteger))
+    try:
+        run_highs(h, deadline, control=options.control, phase="the fewest restrictions a test needs")
+    except TimeoutError:
+        return Fewest(0, False)
+    status = h.getModelStatus()
+    if status == highspy.HighsModelStatus.kInfeasible:
+        return Fewest(None, True)
+    info = h.getInfo()
+    relaxed = options.closed_loop or options.block_states
+    if status == highspy.HighsModelStatus.kOptimal:
+        return Fewest(int(round(info.objective_function_value)), not relaxed)
+    bound = float(info.mip_dual_bound)
+    return Fewest(max(int(np.ceil(bound - 1e-6)), 0) if np.isfinite(bound) else 0, False)
+
+
+def caps_text(caps: dict[str, int]) -> str:
+    """``"at most 3 doors and at most 2 walls"``."""
+    parts = [f"at most {n} {CAP_NOUNS[k].split(' (')[0]}" for k, n in caps.items()]
+    return " and ".join(parts)
