@@ -14,15 +14,22 @@ never a wall-clock limit, so they are the same on every machine.
 Loaded artifacts and their :class:`~flowtest_env.game.TestGame` tables are kept in
 memory per process: they are read-only, so every env of a problem shares them.
 
-Nothing loaded here is trusted. A cache entry is checked in full on load
-(:meth:`synthesis.artifacts.artifact.TestArtifact.load`: schema, source hash, automata,
-restrictions against its own product graphs). A shipped artifact must have exactly the
-bytes FlowTest shipped (:data:`MANIFEST`, the SHA-256 of each file, checked in full by
-the test suite and written by ``experiments/build_artifacts.py``), then its schema,
+Nothing loaded here is trusted. A cache entry must carry the digest of its whole content
+(:data:`synthesis.artifacts.artifact.DIGEST_KEY`, written when it was made) and is checked
+in full on load (:meth:`synthesis.artifacts.artifact.TestArtifact.load`: schema, sizes,
+source hash, automata, restrictions against its own product graphs, a test agent's
+controller in closed loop). A shipped artifact must have exactly the bytes FlowTest
+shipped (:data:`MANIFEST`, the SHA-256 of each file, checked in full by the test suite
+and written by ``experiments/build_artifacts.py``) and its own digest, then its schema,
 source hash and automata are checked; its restrictions are not searched again, so
-``gym.make`` stays fast and needs no graph library. Both must carry the source hash of
-the built-in problem they stand for. An edited file, or one made for another problem,
-is refused with a message naming what is wrong.
+``gym.make`` stays fast. Both must carry the source hash of the built-in problem they
+stand for. An edited file, or one made for another problem, is refused with a message
+naming what is wrong (a cache entry is then synthesized again, with a warning).
+
+The cache is a convenience, never a requirement: a cache folder that is missing, a file,
+read-only or full, an entry that is a folder, a name the file system refuses, all end in
+a warning and the test kept in memory (:func:`write_cache_entry`), never in an error, and
+no temporary file is left behind.
 """
 
 from __future__ import annotations
@@ -41,6 +48,7 @@ from synthesis.artifacts.summary import summary_of
 from synthesis.model.errors import ProblemError
 from synthesis.pipeline import SynthesisOptions, synthesize
 from synthesis.problems.builtins import BUILTINS
+from synthesis.problems.files import read_limited
 from synthesis.routing.milp import backend_version
 
 from .game import TestGame
@@ -131,8 +139,9 @@ def builtin_cache_path(name: str) -> Path:
 
 
 def file_sha256(path: Path) -> str:
-    """The SHA-256 hex digest of a file's bytes."""
-    return hashlib.sha256(path.read_bytes()).hexdigest()
+    """The SHA-256 hex digest of a file's bytes (a regular file of at most 16 MiB, its size
+    checked before it is read; ProblemError otherwise)."""
+    return hashlib.sha256(read_limited(path, "artifact")).hexdigest()
 
 
 def shipped_digests(folder: Path = ARTIFACT_DIR) -> dict[str, str]:
@@ -173,7 +182,7 @@ def load_shipped(path: Path, expected_source: str) -> TestArtifact:
     if file_sha256(path) != want:
         raise ProblemError(f"artifact {path} is not the file FlowTest shipped (its SHA-256 differs: edited?); {fix}")
     try:
-        art = TestArtifact.load(path, verify=False)
+        art = TestArtifact.load(path, verify=False, require_digest=True)
         verify_artifact(art, str(path), expected_source, restrictions=False)
     except ProblemError as exc:
         raise ProblemError(f"{exc}; {fix}") from None
@@ -195,11 +204,32 @@ def load_checked(path: Path, expected_source: str, what: str) -> TestArtifact:
         names the file and says how to get a good one (``what``).
     """
     try:
-        art = TestArtifact.load(path, verify=False)
+        art = TestArtifact.load(path, verify=False, require_digest=True)
         verify_artifact(art, str(path), expected_source)
     except ProblemError as exc:
         raise ProblemError(f"{exc}; {what}") from None
     return art
+
+
+def write_cache_entry(path: Path, art: TestArtifact) -> bool:
+    """Write ``art`` to the cache file ``path`` through a temporary file, best effort: any
+    fault of the file system (the folder missing and not creatable, a file, read-only or
+    full; an entry that is a folder; a name too long) is one warning, the temporary file
+    is removed, and False is returned (the caller keeps the test in memory)."""
+    tmp = path.with_name(f".{path.name[:64]}.{os.getpid()}.tmp")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        art.save(tmp)
+        os.replace(tmp, path)
+        return True
+    except OSError as exc:
+        logger.warn(f"could not write the cache entry {str(path)!r} ({exc.strerror or exc}); the test is kept in memory only")
+        return False
+    finally:
+        try:
+            tmp.unlink(missing_ok=True)
+        except OSError:
+            pass
 
 
 @cache
@@ -218,7 +248,7 @@ def load_builtin(name: str) -> TestArtifact:
     if shipped.exists():
         return load_shipped(shipped, expected)
     cached = builtin_cache_path(name)
-    if cached.exists():
+    if cached.exists() or cached.is_symlink():
         try:
             return load_checked(cached, expected, "synthesizing it again")
         except ProblemError as exc:  # FlowTest's own file: refused, said why, rebuilt
@@ -228,10 +258,7 @@ def load_builtin(name: str) -> TestArtifact:
         f"`python -m experiments.build_artifacts {name}` ships it, the result is cached in {cached}"
     )
     art = synthesize_artifact(name)
-    cached.parent.mkdir(parents=True, exist_ok=True)
-    tmp = cached.with_suffix(f".{os.getpid()}.tmp")
-    art.save(tmp)
-    tmp.replace(cached)
+    write_cache_entry(cached, art)
     return art
 
 

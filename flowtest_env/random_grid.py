@@ -30,6 +30,11 @@ under the current FlowTest, highspy, NumPy and SciPy versions (``key.json`` says
 a pool built under another version is never reused, it is rebuilt. Within a process
 pools are also kept in memory.
 
+**The cache is a convenience.** A cache folder that is missing, a file, read-only or
+full, a split file that is a folder or larger than :data:`MAX_POOL_FILE_BYTES`: every fault
+is one warning, the tests are synthesized and kept in memory, and no temporary file is
+left behind.
+
 **Built in parallel when asked.** :func:`build_pool` synthesizes the missing seeds in
 process, or as Ray tasks (``parallel="ray"``, each returns a record); the answers do not
 depend on the dispatch. A progress bar (tqdm, on standard error) counts the seeds.
@@ -45,12 +50,15 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
+from gymnasium import logger
+
 from synthesis.artifacts.artifact import TestArtifact
 from synthesis.artifacts.pool_records import rebuild_artifact, record_of
 from synthesis.artifacts.provenance import cache_key, versions
 from synthesis.artifacts.summary import summary_of
 from synthesis.model.errors import InconsistentProblem, ProblemError
 from synthesis.pipeline import SynthesisOptions, SynthesizedTest, synthesize
+from synthesis.problems.files import read_limited
 from synthesis.problems.problem import Problem
 from synthesis.problems.random_grid import FAMILIES, MAX_ATTEMPTS, family_objectives, random_problem
 from synthesis.problems.random_worlds import AGENT_ITERATIONS, POOL_KINDS, WORLDS, first_accepted, world_problem
@@ -80,7 +88,7 @@ __all__ = [
     "world_problem",
 ]
 
-POOL_FORMAT = 3
+POOL_FORMAT = 4
 POOL_NODE_LIMIT = 1000
 """Branch-and-bound nodes per HiGHS run for pool tests: bounds the work per test (an
 8x8 reachability instance whose maximum flow HiGHS cannot prove in minutes stops at it
@@ -93,6 +101,9 @@ POOL_WORK_LIMIT = 10.0
 bounds their work the same way. Every 5x5 study instance CP-SAT proved when the rule was
 measured took at most 1.8 deterministic seconds (docs/benchmarks.md, "auto's backend rule per
 model kind"); 10 is a few CPU seconds per phase."""
+
+MAX_POOL_FILE_BYTES = 256 * 1024 * 1024
+"""Largest split file read (its size checked before it is read): about 800,000 records."""
 
 SPLITS: tuple[str, ...] = ("train", "validation", "test")
 SPLIT_SPAN = 1_000_000
@@ -202,22 +213,44 @@ def _line(record: dict[str, Any]) -> str:
     return json.dumps(record, sort_keys=True, separators=(",", ":")) + "\n"
 
 
+def _cache_fault(path: Path, exc: OSError) -> None:
+    """Say that the pool cache could not be written (the tests stay in memory)."""
+    logger.warn(f"could not write the pool cache {str(path)!r} ({exc.strerror or exc}); the tests are kept in memory only")
+
+
 def _append(path: Path, record: dict[str, Any]) -> None:
-    """Append one record to a split file (one write: parallel builders of a pool are safe)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "a+b") as f:  # appends go to the end whatever the read position
-        end = f.seek(0, os.SEEK_END)
-        torn = end > 0 and f.seek(end - 1) >= 0 and f.read(1) != b"\n"  # a damaged last line stays apart
-        f.write((b"\n" if torn else b"") + _line(record).encode("utf-8"))
+    """Append one record to a split file (one write: parallel builders of a pool are safe);
+    a file system fault is a warning (:func:`_cache_fault`)."""
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with open(path, "a+b") as f:  # appends go to the end whatever the read position
+            end = f.seek(0, os.SEEK_END)
+            torn = end > 0 and f.seek(end - 1) >= 0 and f.read(1) != b"\n"  # a damaged last line stays apart
+            f.write((b"\n" if torn else b"") + _line(record).encode("utf-8"))
+    except OSError as exc:
+        _cache_fault(path, exc)
+
+
+def _read_text(path: Path, warn: bool) -> str | None:
+    """A split file's text (None if missing or refused: not a regular file, too large, unreadable)."""
+    if not (path.exists() or path.is_symlink()):
+        return None
+    try:
+        return read_limited(path, "pool file", MAX_POOL_FILE_BYTES).decode("utf-8", errors="replace")
+    except ProblemError as exc:
+        if warn:
+            warn_refused_entry(ProblemError(f"{exc}; its seeds will be synthesized again"))
+        return None
 
 
 def _read(path: Path, warn: bool = True) -> dict[int, dict[str, Any]]:
     """The records of a split file by seed (a later line wins); a line that is not a
     record of this file's seeds is refused (with a warning if ``warn``)."""
     out: dict[int, dict[str, Any]] = {}
-    if not path.exists():
+    text_all = _read_text(path, warn)
+    if text_all is None:
         return out
-    for k, text in enumerate(path.read_text(encoding="utf-8", errors="replace").splitlines(), 1):
+    for k, text in enumerate(text_all.splitlines(), 1):
         if not text.strip():
             continue
         try:
@@ -233,26 +266,38 @@ def _read(path: Path, warn: bool = True) -> dict[int, dict[str, Any]]:
     return out
 
 
+def _write_atomic(path: Path, text: str) -> None:
+    """Replace ``path`` by ``text`` through a temporary file, best effort (a fault is a
+    warning and the temporary file is removed)."""
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp.write_text(text, encoding="utf-8")
+        os.replace(tmp, path)
+    except OSError as exc:
+        _cache_fault(path, exc)
+    finally:
+        try:
+            tmp.unlink(missing_ok=True)
+        except OSError:
+            pass
+
+
 def _compact(path: Path) -> None:
     """Rewrite a split file sorted by seed, one line per seed (atomically): the bytes of
     a pool depend on its seeds only, not on the order they were built in."""
-    if not path.exists():
+    if _read_text(path, warn=False) is None:  # missing or refused: nothing of ours to rewrite
         return
     records = _read(path, warn=False)
-    tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
-    tmp.write_text("".join(_line(records[s]) for s in sorted(records)), encoding="utf-8")
-    tmp.replace(path)
+    _write_atomic(path, "".join(_line(records[s]) for s in sorted(records)))
 
 
 def _write_key(folder: Path, params: dict[str, Any]) -> None:
-    """The pool's parameters and versions next to its records (atomically)."""
+    """The pool's parameters and versions next to its records (atomically, best effort)."""
     path = folder / "key.json"
     if path.exists():
         return
-    folder.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
-    tmp.write_text(json.dumps({"params": params, "versions": versions()}, sort_keys=True, separators=(",", ":")))
-    tmp.replace(path)
+    _write_atomic(path, json.dumps({"params": params, "versions": versions()}, sort_keys=True, separators=(",", ":")))
 
 
 def _progress_bar(total: int, initial: int, desc: str, enabled: bool | None) -> Any:

@@ -8,11 +8,18 @@ command that takes an environment gets its test from :func:`load_test`, which ac
 * a **problem file** (``mine.toml``): synthesized once, then cached on disk under a key
   of its content, FlowTest's and HiGHS's versions (:func:`synthesis.artifacts.provenance.content_key`);
   only a proven-optimal answer is cached (a time-limited one depends on the machine's
-  speed, so it is synthesized again next time, with a warning);
+  speed, so it is synthesized again next time, with a warning). A cache entry records the
+  SHA-256 of the problem file it was made from (``extras["origin"]``) and must carry its
+  digest and the source hash of that file's problem: another problem's entry, or an
+  edited one, is refused and synthesized again with a warning. A cache that cannot be
+  written (see :func:`flowtest_env.artifacts.write_cache_entry`) is a warning only;
 * an **artifact file** (``mine.json``, written by ``flowtest synthesize --out``), checked on
   load like every artifact (:func:`synthesis.artifacts.artifact.verify_artifact`);
 * a :class:`~synthesis.problems.problem.Problem`, a :class:`~synthesis.pipeline.SynthesizedTest`
   or a :class:`~synthesis.artifacts.artifact.TestArtifact` object.
+
+Every file is read through :func:`synthesis.problems.files.read_limited`: a regular file of
+at most 16 MiB, refused before it is read whole.
 
 Loaded tests are kept in memory per process (by content key), so the envs of one test
 share one artifact and one :class:`~flowtest_env.game.TestGame`.
@@ -20,23 +27,24 @@ share one artifact and one :class:`~flowtest_env.game.TestGame`.
 
 from __future__ import annotations
 
-import json
+import hashlib
 import os
+import re
 from pathlib import Path
 from typing import Union
 
 from gymnasium import logger
 
-from synthesis.artifacts.artifact import FORMAT, TestArtifact, artifact_of
+from synthesis.artifacts.artifact import FORMAT, TestArtifact, artifact_of, parse_artifact_json, problem_source_hash, verify_artifact
 from synthesis.artifacts.provenance import content_key
 from synthesis.artifacts.summary import summary_of
 from synthesis.model.errors import ProblemError
 from synthesis.pipeline import SynthesizedTest, synthesize
 from synthesis.problems.builtins import BUILTINS
-from synthesis.problems.files import load_problem_file
+from synthesis.problems.files import load_problem_file, read_limited
 from synthesis.problems.problem import Problem
 
-from .artifacts import builtin_game, cache_dir, load_builtin, warn_refused_entry
+from .artifacts import builtin_game, cache_dir, load_builtin, warn_refused_entry, write_cache_entry
 from .game import TestGame
 
 TestLike = Union[str, "os.PathLike[str]", Problem, SynthesizedTest, TestArtifact]
@@ -51,43 +59,48 @@ def builtin_names() -> list[str]:
     return sorted(BUILTINS)
 
 
-def _is_artifact_file(path: Path, raw: bytes) -> bool:
-    """A JSON document whose ``format`` is FlowTest's test artifact."""
-    if path.suffix.lower() != ".json":
-        return False
-    try:
-        head = json.loads(raw)
-    except (json.JSONDecodeError, UnicodeDecodeError):
-        return False
-    return isinstance(head, dict) and head.get("format") == FORMAT
-
-
 def problem_cache_path(path: Path, raw: bytes) -> Path:
-    """Where the synthesized test of a problem file with content ``raw`` is cached."""
-    return cache_dir() / "problems" / f"{path.stem}-{content_key('problem', raw)[:24]}.json"
+    """Where the synthesized test of a problem file with content ``raw`` is cached: a name of
+    at most about 100 characters whatever the file's (its stem cut to 48 safe characters,
+    then the content key)."""
+    stem = re.sub(r"[^A-Za-z0-9._-]", "_", path.stem)[:48].lstrip(".") or "problem"
+    return cache_dir() / "problems" / f"{stem}-{content_key('problem', raw)[:24]}.json"
 
 
-def _synthesized_artifact(problem: Problem) -> TestArtifact:
+def _synthesized_artifact(problem: Problem, origin: dict[str, str] | None = None) -> TestArtifact:
     test = synthesize(problem)
-    return artifact_of(test, summary_of(test))
+    return artifact_of(test, summary_of(test), None if origin is None else {"origin": origin})
+
+
+def _cached_entry(cached: Path, problem: Problem, origin: dict[str, str]) -> TestArtifact | None:
+    """The cache entry of a problem file, if it is FlowTest's own (its digest), made from
+    that very file (its origin) and a checked test of its problem (its source hash and
+    every check); None (with a warning saying why) otherwise."""
+    if not (cached.exists() or cached.is_symlink()):
+        return None
+    try:
+        art = TestArtifact.load(cached, verify=False, require_digest=True)
+        if art.extras.get("origin") != origin:
+            raise ProblemError(f"cache entry {str(cached)!r} was made from another problem file than the one asked for")
+        verify_artifact(art, str(cached), problem_source_hash(problem))
+    except ProblemError as exc:
+        warn_refused_entry(ProblemError(f"{exc}; synthesizing it again"))  # a damaged, edited or foreign entry
+        return None
+    return art
 
 
 def _problem_file_artifact(path: Path, raw: bytes) -> TestArtifact:
     """The test of a problem file: from the cache, else synthesized (and cached when
     the answer is proven optimal, i.e. independent of the machine's speed)."""
-    cached = problem_cache_path(path, raw)
-    if cached.exists():
-        try:
-            return TestArtifact.load(cached)  # checked on load (schema, source hash, restrictions)
-        except ProblemError as exc:
-            warn_refused_entry(exc)  # a damaged or edited entry is synthesized again
     problem = load_problem_file(path)
-    art = _synthesized_artifact(problem)
+    origin = {"problem_sha256": hashlib.sha256(raw).hexdigest()}
+    cached = problem_cache_path(path, raw)
+    art = _cached_entry(cached, problem, origin)
+    if art is not None:
+        return art
+    art = _synthesized_artifact(problem, origin)
     if art.summary.get("status") == "optimal":
-        cached.parent.mkdir(parents=True, exist_ok=True)
-        tmp = cached.with_suffix(f".{os.getpid()}.tmp")
-        art.save(tmp)
-        tmp.replace(cached)
+        write_cache_entry(cached, art)
     else:
         logger.warn(
             f"{path}: the synthesized test is not proven optimal (status {art.summary.get('status')!r}, "
@@ -122,22 +135,20 @@ def load_test(test: TestLike) -> TestArtifact:
     if isinstance(test, str) and text in builtin_names():
         return load_builtin(text)
     path = Path(text).expanduser()
-    if not path.is_file():
+    if not path.exists():
         raise ProblemError(
             f"test {text!r} is neither a built-in ({', '.join(builtin_names())}) nor an existing file"
         )
-    try:
-        raw = path.read_bytes()
-    except OSError as exc:
-        raise ProblemError(f"cannot read {text!r}: {exc.strerror or exc}") from None
+    raw = read_limited(path, "test file")  # its size checked before it is read
     key = content_key("file", raw)
     hit = _LOADED.get(key)
     if hit is not None:
         return hit
-    if _is_artifact_file(path, raw):
-        art = TestArtifact.load(path)
-    elif path.suffix.lower() == ".json":
-        raise ProblemError(f"{text}: a JSON file that is not a FlowTest test artifact (format {FORMAT!r})")
+    if path.suffix.lower() == ".json":
+        data = parse_artifact_json(raw, text)
+        if not (isinstance(data, dict) and data.get("format") == FORMAT):
+            raise ProblemError(f"{text}: a JSON file that is not a FlowTest test artifact (format {FORMAT!r})")
+        art = TestArtifact.from_dict(data, text)  # every check; an edited file is said so
     else:
         art = _problem_file_artifact(path, raw)
     _LOADED[key] = art

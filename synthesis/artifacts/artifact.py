@@ -10,14 +10,29 @@ An artifact cannot lie: loading checks every field against the schema
 ``source`` hash of what it was synthesized from (system, objectives, kind) matches its
 content, its automata are those of its objectives, and its restrictions pass the
 independent checks of :mod:`synthesis.checks.verify` on its own product graphs (bypass flow 0,
-the flow of its summary, feasibility). Any failure is a :class:`ProblemError` that names
-what is wrong; an edited test never runs.
+the flow of its summary, feasibility) and, for a test agent, its controller passes the
+closed-loop check of :mod:`synthesis.agent.closed_loop` (its moves legal, the restrictions
+realized exactly, the system never trapped). Any failure is a :class:`ProblemError` that
+names what is wrong.
+
+Before any of that, what can be checked on the plain data is (:func:`check_plain_data`):
+every integer fits in 53 bits, every name is printable (no control characters), and the
+sizes the file declares (histories times moves and states, the test agent's table, the
+layout against the states) stay below :data:`MAX_TABLE_CELLS` and :data:`MAX_LAYOUT_CELLS`,
+so a small file can never make FlowTest build huge tables.
+
+**Identity.** Every artifact FlowTest writes carries a digest of its whole content
+(:data:`DIGEST_KEY`, :func:`content_digest`). A file whose digest is missing or wrong was
+not written as it is by FlowTest: where FlowTest made the file itself (a cache entry, a
+shipped artifact) it is refused (``require_digest=True``); a user's own file is checked in
+full and reported as edited (:class:`EditedArtifactWarning`, :attr:`TestArtifact.edited`).
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -25,13 +40,16 @@ from typing import Any
 
 import numpy as np
 
+from ..agent.closed_loop import verify_closed_loop
+from ..agent.controller import AgentController
 from ..checks.verify import check_test
 from ..graphs.automata import DBA, specification_product
 from ..graphs.products import build_products
-from ..model.errors import ProblemError
+from ..model.errors import CheckFailed, ProblemError, ProblemTooLarge
 from ..model.specs import parse_objective
 from ..model.strategy import TestStrategy
 from ..model.systems import TransitionSystem
+from ..model.test_agent import Park, TestAgent, places_of_cells
 from ..pipeline import SynthesizedTest
 from ..problems.files import read_limited
 from ..problems.problem import Problem
@@ -39,6 +57,147 @@ from .schema import validate_artifact
 
 FORMAT = "flowtest-test"
 VERSION = 1
+
+DIGEST_KEY = "digest"
+"""The top-level field holding :func:`content_digest` of the rest of the document, as
+``{"sha256": "<64 lowercase hex digits>"}``."""
+
+MAX_TABLE_CELLS = 5_000_000
+"""Largest look-up table an artifact may declare (histories x moves, histories x states x
+action slots, the test agent's memory x rows x states, the closed loop's configurations):
+ten times the product-graph edges synthesis allows by default
+(:data:`synthesis.problems.limits.MAX_GRAPH_EDGES`), a few hundred MB of tables at most."""
+
+MAX_LAYOUT_CELLS = 1_000_000
+"""Largest grid layout (rows x cols) an artifact may declare."""
+
+MAX_INT = 2**53
+"""Integers in an artifact are below this in magnitude (what every JSON reader holds exactly)."""
+
+
+class EditedArtifactWarning(UserWarning):
+    """A user's artifact file was changed after FlowTest wrote it (its digest is missing or
+    wrong); it was checked in full and is used as it is."""
+
+
+def content_digest(doc: Mapping[str, Any]) -> str:
+    """SHA-256 (hex) of an artifact document without its :data:`DIGEST_KEY` field, as
+    canonical JSON (sorted keys, no spaces, ASCII).
+
+    >>> content_digest({"name": "x"}) == content_digest({"name": "x", "digest": {"sha256": "0" * 64}})
+    True
+    """
+    body = {k: v for k, v in doc.items() if k != DIGEST_KEY}
+    text = json.dumps(body, sort_keys=True, separators=(",", ":"), ensure_ascii=True, allow_nan=False)
+    return hashlib.sha256(text.encode("ascii")).hexdigest()
+
+
+def with_digest(doc: dict[str, Any]) -> dict[str, Any]:
+    """``doc`` with its :data:`DIGEST_KEY` field (re)computed, last."""
+    body = {k: v for k, v in doc.items() if k != DIGEST_KEY}
+    return {**body, DIGEST_KEY: {"sha256": content_digest(body)}}
+
+
+def digest_matches(doc: Mapping[str, Any]) -> bool:
+    """Whether ``doc`` carries the digest of its own content (False if it has none)."""
+    stated = doc.get(DIGEST_KEY)
+    if not isinstance(stated, dict) or set(stated) != {"sha256"} or not isinstance(stated["sha256"], str):
+        return False
+    try:
+        return bool(stated["sha256"] == content_digest(doc))
+    except (TypeError, ValueError):
+        return False
+
+
+def _walk_plain(x: Any, path: str, source: str, names: bool = True) -> None:
+    """Refuse integers beyond :data:`MAX_INT` and (``names``) strings with non-printable characters."""
+    stack: list[tuple[Any, str]] = [(x, path)]
+    while stack:
+        v, at = stack.pop()
+        if isinstance(v, str):
+            if names and not v.isprintable():
+                raise ProblemError(f"artifact {source}: field {at}: {v!r} holds a control or other non-printable character")
+        elif isinstance(v, bool) or v is None:
+            continue
+        elif isinstance(v, int):
+            if not -MAX_INT < v < MAX_INT:
+                raise ProblemError(f"artifact {source}: field {at}: an integer of {len(str(abs(v)))} digits is out of range")
+        elif isinstance(v, float):
+            continue
+        elif isinstance(v, dict):
+            for k, item in v.items():
+                if names and not str(k).isprintable():
+                    raise ProblemError(f"artifact {source}: field {at}: key {k!r} holds a non-printable character")
+                stack.append((item, f"{at}.{k}" if at else str(k)))
+        elif isinstance(v, list):
+            stack.extend((item, f"{at}[{i}]") for i, item in enumerate(v))
+
+
+def check_plain_data(d: Any, source: str) -> None:
+    """What the plain data of an artifact must satisfy before any object is built from it
+    (after the schema): integers within :data:`MAX_INT`, printable names (every string
+    outside ``summary``), declared sizes within :data:`MAX_TABLE_CELLS` and
+    :data:`MAX_LAYOUT_CELLS`, a grid layout that is its places and blocked cells.
+
+    Raises
+    ------
+    ProblemError
+        Naming the field; :class:`~synthesis.model.errors.ProblemTooLarge` for sizes.
+    """
+    if not isinstance(d, dict):
+        return
+    for key, value in d.items():
+        _walk_plain(value, key, source, names=key != "summary")  # the summary's texts are not names
+    _check_declared_sizes(d, source)
+
+
+def _check_declared_sizes(d: dict[str, Any], source: str) -> None:
+    where = f"artifact {source}"
+    s = d["system"]
+    n, m, n_places = len(s["states"]), len(s["moves"]), len(s["places"])
+    nh = len(d["automata"]["histories"]["delta"])
+    if s["kind"] == "graph":
+        out = np.bincount(np.asarray([mv[0] for mv in s["moves"]], dtype=np.int64), minlength=n) if m else np.zeros(1)
+        slots = max(1, int(out.max()))
+    else:
+        slots = 4
+    big = MAX_TABLE_CELLS
+
+    def refuse(what: str, value: int) -> None:
+        raise ProblemTooLarge(f"{where} declares {what} = {value} table cells, above the limit of {big}; "
+                              "FlowTest builds no tables this large")
+
+    if nh * m > big:
+        refuse(f"{nh} histories x {m} moves", nh * m)
+    if nh * n * (slots + 1) > big:
+        refuse(f"{nh} histories x {n} states x {slots + 1} actions", nh * n * (slots + 1))
+    lay = s.get("layout")
+    if lay is not None:
+        rows, cols = lay["rows"], lay["cols"]
+        if rows * cols > MAX_LAYOUT_CELLS:
+            raise ProblemTooLarge(f"{where}: field system.layout: {rows}x{cols} cells, above the limit of {MAX_LAYOUT_CELLS}")
+        cells = [tuple(p) for p in s["places"] if isinstance(p, list)]
+        if len(cells) != n_places:
+            raise ProblemError(f"{where}: field system.places: a grid's places are cells [row, col]")
+        outside = [list(c) for c in cells if not (c[0] < rows and c[1] < cols)]
+        if outside:
+            raise ProblemError(f"{where}: field system.places: {outside[0]} is outside the {rows}x{cols} layout")
+        blocked = {tuple(c) for c in lay["blocked"]}
+        if s["kind"] == "grid" and (len(set(cells)) + len(blocked - set(cells)) != rows * cols or blocked & set(cells)):
+            raise ProblemError(
+                f"{where}: field system.layout: a {rows}x{cols} layout for a system of {n_places} places and "
+                f"{len(blocked)} blocked cells (a grid's layout is exactly its places and blocked cells)"
+            )
+    agent = d.get("agent")
+    if isinstance(agent, dict) and isinstance(agent.get("controller"), dict):
+        c = agent["controller"]
+        na, n_mem, n_rows = len(c["agent_names"]), c["n_memory"], len(c["rows"])
+        if n_mem * n_rows * na > big:
+            refuse(f"the test agent's {n_mem} memories x {n_rows} rows x {na} states", n_mem * n_rows * na)
+        if na * na > big:
+            refuse(f"the test agent's {na} x {na} moves", na * na)
+        if nh * n * na * n_mem > 4 * big:
+            refuse(f"{nh} histories x {n} states x {na} agent states x {n_mem} memories", nh * n * na * n_mem)
 
 
 def source_hash(system: dict[str, Any], objectives: dict[str, Any], kind: str) -> str:
@@ -117,6 +276,8 @@ class TestArtifact:
     agent: dict[str, Any] | None = None
     extras: dict[str, Any] = field(default_factory=dict)
     source: str = ""  # source_hash of what it was synthesized from
+    edited: bool = field(default=False, compare=False)
+    """Loaded from a file whose digest was missing or wrong (checked in full, see the module docstring)."""
     _letter: np.ndarray = field(init=False, repr=False, compare=False)  # letter index of each state
 
     def initial_history(self) -> int:
@@ -133,7 +294,8 @@ class TestArtifact:
         object.__setattr__(self, "_letter", self.system.letter_of_state(self.letters))
 
     def to_dict(self) -> dict[str, Any]:
-        return {
+        """The artifact's plain data, with its :data:`DIGEST_KEY` last."""
+        return with_digest({
             "format": FORMAT,
             "version": VERSION,
             "name": self.name,
@@ -151,19 +313,34 @@ class TestArtifact:
             "summary": self.summary,
             "extras": self.extras,
             "source": {"sha256": self.source or source_hash(self.system.to_dict(), self.objectives, self.kind)},
-        }
+        })
 
     @classmethod
-    def from_dict(cls, d: dict[str, Any], source: str = "<artifact>", verify: bool = True) -> TestArtifact:
+    def from_dict(
+        cls, d: dict[str, Any], source: str = "<artifact>", verify: bool = True, require_digest: bool = False
+    ) -> TestArtifact:
         """Build an artifact from its plain data, checked first (see the module docstring).
+
+        A document whose digest is missing or wrong is checked in full whatever ``verify``
+        says (a failed check is what the error names); then ``require_digest=True`` (files
+        FlowTest wrote itself) refuses it all the same, otherwise an
+        :class:`EditedArtifactWarning` is issued and the artifact's :attr:`edited` is set.
 
         Raises
         ------
         ProblemError
             Naming the field or the check that fails. ``verify=False`` skips the
-            checks of meaning (:func:`verify_artifact`), never the schema.
+            checks of meaning (:func:`verify_artifact`) of a document whose digest
+            matches, never the schema, the plain-data checks or the digest.
         """
         validate_artifact(d, source, FORMAT, VERSION)
+        check_plain_data(d, source)
+        edited = not digest_matches(d)
+        how = "missing" if DIGEST_KEY not in d else "not that of its content"
+        if edited and not require_digest:
+            warnings.warn(EditedArtifactWarning(
+                f"artifact {source} was changed after FlowTest wrote it (its digest is {how}): every check was run "
+                "again and it is used as it is"), stacklevel=2)
         try:
             letters = tuple(frozenset(a) for a in d["letters"])
             a = d["automata"]
@@ -181,31 +358,43 @@ class TestArtifact:
                 agent=d.get("agent"),
                 extras=d.get("extras", {}),
                 source=d["source"]["sha256"],
+                edited=edited,
             )
-        except (KeyError, IndexError, TypeError, ValueError, AttributeError) as exc:
+        except (KeyError, IndexError, TypeError, ValueError, AttributeError, OverflowError) as exc:
             # the schema should have said it; never let a raw error reach a user
             raise ProblemError(f"artifact {source} is malformed ({type(exc).__name__}: {exc})") from None
-        if verify:
-            verify_artifact(art, source)
+        if verify or edited:
+            verify_artifact(art, source)  # an edited file is checked in full, whatever ``verify`` says
+        if edited and require_digest:  # it passes every check, but it is not the file FlowTest wrote
+            raise ProblemError(f"artifact {source} was changed after FlowTest wrote it (its digest is {how})")
         return art
 
     def save(self, path: str | Path) -> None:
-        Path(path).write_text(json.dumps(self.to_dict(), separators=(",", ":")))
+        """Write the artifact as compact JSON (with its digest)."""
+        Path(path).write_text(json.dumps(self.to_dict(), separators=(",", ":"), allow_nan=False))
 
     @classmethod
-    def load(cls, path: str | Path, verify: bool = True) -> TestArtifact:
-        """Read and check an artifact file (see :meth:`from_dict`)."""
+    def load(cls, path: str | Path, verify: bool = True, require_digest: bool = False) -> TestArtifact:
+        """Read and check an artifact file of at most 16 MiB, its size checked before it is
+        read (see :meth:`from_dict`)."""
         p = Path(path)
         raw = read_limited(p, "artifact")
-        try:
-            data = json.loads(raw.decode("utf-8"))
-        except UnicodeDecodeError:
-            raise ProblemError(f"artifact {str(p)!r} is not UTF-8 text") from None
-        except json.JSONDecodeError as exc:
-            raise ProblemError(f"{p}: invalid JSON: {exc}") from None
-        except RecursionError:
-            raise ProblemError(f"{p}: invalid JSON: nested too deeply") from None
-        return cls.from_dict(data, str(p), verify)
+        return cls.from_dict(parse_artifact_json(raw, str(p)), str(p), verify, require_digest)
+
+
+def parse_artifact_json(raw: bytes, source: str) -> Any:
+    """The parsed JSON of an artifact file's bytes (raises ProblemError, never a raw error:
+    not UTF-8, invalid JSON, nested too deeply, an integer too long to convert)."""
+    try:
+        return json.loads(raw.decode("utf-8"))
+    except UnicodeDecodeError:
+        raise ProblemError(f"artifact {source!r} is not UTF-8 text") from None
+    except json.JSONDecodeError as exc:
+        raise ProblemError(f"{source}: invalid JSON: {exc}") from None
+    except RecursionError:
+        raise ProblemError(f"{source}: invalid JSON: nested too deeply") from None
+    except ValueError as exc:  # e.g. an integer of more than 4300 digits
+        raise ProblemError(f"{source}: invalid JSON: {exc}") from None
 
 
 def _same_dba(a: DBA, b: DBA) -> bool:
@@ -248,10 +437,16 @@ def verify_artifact(
         raise ProblemError(f"{where} was synthesized from another problem than the one asked for (source hash mismatch)")
     if art.letters != art.system.letters():
         raise ProblemError(f"{where}: field letters is not the alphabet of its system's labels")
+    # the automata derived again are compared with those the file declares: no larger product is explored
+    bound = 64 * max(art.histories.n_states, art.system_automaton.n_states, art.test_automaton.n_states)
     try:
         spec = specification_product(
-            parse_objective(art.objectives["system"], "system"), parse_objective(art.objectives["test"], "test"), art.letters
+            parse_objective(art.objectives["system"], "system"), parse_objective(art.objectives["test"], "test"), art.letters,
+            max_states=bound,
         )
+    except ProblemTooLarge:
+        raise ProblemError(f"{where}: field automata is not the automaton of its objectives (these need more than "
+                           f"{bound} states)") from None
     except ProblemError as exc:
         raise ProblemError(f"{where}: field objectives: {exc}") from None
     for field_name, mine, derived in (("system", art.system_automaton, spec.sys), ("test", art.test_automaton, spec.test),
@@ -261,9 +456,57 @@ def verify_artifact(
                                "(edited, or another problem's automata)")
     if not restrictions:
         return
-    report = check_test(build_products(art.system, spec), art.strategy, int(art.summary["flow"]), raise_on_failure=False)
+    products = build_products(art.system, spec)
+    report = check_test(products, art.strategy, int(art.summary["flow"]), raise_on_failure=False)
     if not report.ok:
         raise ProblemError(f"{where}: its restrictions fail the independent check: " + "; ".join(report.problems()))
+    if art.kind == "agent":
+        agent, controller = artifact_agent(art, where)
+        try:
+            verify_closed_loop(products, art.strategy, agent, controller)
+        except CheckFailed as exc:
+            raise ProblemError(f"{where}: its test agent does not realize its restrictions: {exc}") from None
+
+
+def artifact_agent(art: TestArtifact, where: str | None = None) -> tuple[TestAgent, AgentController]:
+    """The test agent ``T_TA`` and its controller stored in an agent artifact, checked to
+    agree with each other (names, places, start, who moves first).
+
+    Raises
+    ------
+    ProblemError
+        If the artifact has no test agent or its two descriptions disagree.
+    """
+    where = where or f"artifact {art.name!r}"
+    d = art.agent
+    if not isinstance(d, dict) or not isinstance(d.get("controller"), dict):
+        raise ProblemError(f"{where}: field agent: an agent test needs its test agent and controller")
+    ts = art.system
+    try:
+        controller = AgentController.from_dict(d["controller"])
+        cells = places_of_cells(ts, d["cells"], f"{where}: field agent.cells")
+        names = [str(x) for x in d["names"]]
+        state_of = {p: i for i, p in enumerate(cells)}
+        parks = [
+            Park(str(p["name"]), tuple(state_of[q] for q in places_of_cells(ts, p["from"], f"{where}: field agent.parks")))
+            for p in d["parks"]
+        ]
+        moves = np.asarray(d["moves"], dtype=np.int64).reshape(-1, 2)
+        agent = TestAgent(cells=np.asarray(cells, dtype=np.int32), parks=parks, start=names.index(d["start"]), moves=moves,
+                          first=str(d["first"]), names=names)
+    except (KeyError, TypeError, ValueError, IndexError) as exc:
+        raise ProblemError(f"{where}: field agent is malformed ({type(exc).__name__}: {exc})") from None
+    n_states = agent.n_states
+    if len(names) != n_states or len(cells) != len(d["cells"]):
+        raise ProblemError(f"{where}: field agent.names: {len(names)} names for {n_states} agent states")
+    if moves.size and (int(moves.min()) < 0 or int(moves.max()) >= n_states):
+        raise ProblemError(f"{where}: field agent.moves: a move between agent states outside 0..{n_states - 1}")
+    places = [None if p < 0 else int(p) for p in agent.place_of_state]
+    if (controller.agent_names != names or controller.agent_places != places or controller.first != agent.first
+            or controller.initial_agent != agent.start):
+        raise ProblemError(f"{where}: field agent.controller does not belong to the test agent described beside it "
+                           "(names, places, start or first mover differ)")
+    return agent, controller
 
 
 def artifact_of(test: SynthesizedTest, summary: dict[str, Any], extras: Mapping[str, Any] | None = None) -> TestArtifact:

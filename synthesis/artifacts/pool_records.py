@@ -17,12 +17,19 @@ is solved again and its strategy checked and tabulated
 record states. Everything is deterministic: one record gives one artifact on every
 machine. A record that fails raises :class:`ProblemError` naming the check.
 
+A record carries the digest of its whole content (``digest``, :func:`record_digest`,
+written by :func:`record_of`); :func:`rebuild_artifact` refuses a record whose digest is
+missing or wrong (after the checks, so that a broken answer is named as such), so an edited record (one more cut, a summary
+rewritten by hand) is never served, even where it would still pass the checks.
+
 A record is trusted for which attempt it names (a rebuilt test is a checked test of that
 attempt's problem; whether earlier attempts had none is what its builder found).
 """
 
 from __future__ import annotations
 
+import hashlib
+import json
 from collections.abc import Mapping
 from typing import Any
 
@@ -39,10 +46,19 @@ from ..routing.restrictions import strategy_from_routing
 from .artifact import TestArtifact, artifact_of
 from .summary import DERIVED_KEYS, DERIVED_STATS, derived_summary, without_timings
 
-__all__ = ["RECORD_KEYS", "rebuild_artifact", "record_of"]
+__all__ = ["RECORD_KEYS", "rebuild_artifact", "record_digest", "record_of"]
 
-RECORD_KEYS: tuple[str, ...] = ("seed", "attempt", "cuts", "static", "summary")
+RECORD_KEYS: tuple[str, ...] = ("seed", "attempt", "cuts", "static", "summary", "digest")
 """The fields of a record, in the order they are written."""
+
+
+def record_digest(record: Mapping[str, Any]) -> str:
+    """SHA-256 (hex) of a record without its ``digest`` field, as canonical JSON (sorted
+    keys, no spaces, ASCII): the same definition as an artifact's
+    (:func:`synthesis.artifacts.artifact.content_digest`)."""
+    body = {k: v for k, v in record.items() if k != "digest"}
+    text = json.dumps(body, sort_keys=True, separators=(",", ":"), ensure_ascii=True, allow_nan=False)
+    return hashlib.sha256(text.encode("ascii")).hexdigest()
 
 
 def record_of(seed: int, attempt: int, test: SynthesizedTest, summary: dict[str, Any]) -> dict[str, Any]:
@@ -50,13 +66,15 @@ def record_of(seed: int, attempt: int, test: SynthesizedTest, summary: dict[str,
     from the problem and without timings)."""
     rest = without_timings({k: v for k, v in summary.items() if k not in DERIVED_KEYS})
     rest["stats"] = {k: v for k, v in rest["stats"].items() if k not in DERIVED_STATS}
-    return {
+    record: dict[str, Any] = {
         "seed": int(seed),
         "attempt": int(attempt),
         "cuts": [int(e) for e in test.routing.cut_edges],
         "static": [int(m) for m in np.flatnonzero(test.strategy.static_obstacles)],
         "summary": rest,
     }
+    record["digest"] = {"sha256": record_digest(record)}
+    return record
 
 
 def _indices(values: Any, bound: int, what: str) -> np.ndarray:
@@ -84,7 +102,10 @@ def rebuild_artifact(
         return _rebuild(record, size, family, n, world, kind, extras)
     except (CheckFailed, InconsistentProblem) as exc:
         raise ProblemError(f"pool record of seed {record.get('seed')!r} fails its check: {exc}") from None
-    except (KeyError, TypeError, ValueError, AttributeError, IndexError) as exc:
+    except ProblemError as exc:
+        seed = record.get("seed") if isinstance(record, dict) else None
+        raise ProblemError(f"pool record of seed {seed!r}: {exc}") from None
+    except (KeyError, TypeError, ValueError, AttributeError, IndexError, OverflowError) as exc:
         raise ProblemError(f"pool record of seed {record.get('seed')!r} is malformed ({type(exc).__name__}: {exc})") from None
 
 
@@ -127,6 +148,10 @@ def _rebuild(
         )
     derived = derived_summary(problem, spec, products, cuts, strategy, checks.bypass_flow)
     summary = {**derived, **{k: v for k, v in rest.items() if k != "stats"}, "stats": {**derived["stats"], **rest["stats"]}}
+    # last, so that a record whose answer fails a check is told so: one that passes them all
+    # but is not the record FlowTest wrote (one more cut, a summary edited) is refused here
+    if record["digest"] != {"sha256": record_digest(record)}:
+        raise ProblemError("the record was changed after FlowTest wrote it (its digest is not that of its content)")
     # graph_seconds: not measured here; a rebuilt test's summary holds no timings
     test = SynthesizedTest(problem, spec, products, routing, strategy, checks, graph_seconds=0.0, agent=agent)
     return artifact_of(test, summary, extras)
