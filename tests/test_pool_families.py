@@ -110,7 +110,7 @@ def test_each_family_gives_checked_tests_that_come_back_from_their_records(name:
     path = rg.pool_path(pool.size, pool.family, pool.n, 0, pool.kind, pool.world)
     (line,) = path.read_text().splitlines()
     record = json.loads(line)
-    assert sorted(record) == ["attempt", "cuts", "seed", "static", "summary"]
+    assert sorted(record) == ["attempt", "cuts", "digest", "seed", "static", "summary"]
     assert len(line) < len(json.dumps(art.to_dict())) / 4, "the record is compact"
     again = rebuild_artifact(record, pool.size, pool.family, pool.n, pool.world, pool.kind)
     assert again.strategy.to_dict() == art.strategy.to_dict() and again.agent == art.agent
