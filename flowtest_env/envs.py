@@ -22,6 +22,7 @@ from synthesis.artifacts.artifact import TestArtifact
 from synthesis.problems.random_grid import FAMILIES
 from synthesis.problems.random_worlds import POOL_KINDS, WORLDS
 
+from .config import EnvConfig
 from .draws import draw_test
 from .encoding import Encoder, make_encoder
 from .game import GRID_ACTIONS, MET, VIOLATED, GameError, RunState, TestGame
@@ -29,8 +30,8 @@ from .pools import random_grid_arguments
 from .random_grid import random_pool
 from .render import Renderer, ansi, make_renderer
 from .sources import TestLike, game_for
-from .validation import action_index, finite_float, one_of, positive_int
-from .wrappers import MEMORY_KINDS, DistancePotential, VisitedMemory, position_slice
+from .validation import action_index, one_of, positive_int
+from .wrappers import DistancePotential, VisitedMemory, shared_position_slice
 
 DEFAULT_MAX_STEPS: dict[str, int] = {
     "example1": 50,
@@ -153,72 +154,50 @@ class FlowTestEnv(gym.Env[np.ndarray, np.int64]):
     ) -> None:
         if problem is not None:  # the older name of `test`
             test = problem
-        one_of("setting", setting, (None, "instantaneous", "accumulative"))
-        game = game_for(test, setting)
-        self._configure(
-            [game], max_steps if max_steps is not None else default_max_steps(game), obs_kind,
-            render_mode, view, tile_size, step_cost, restricted_penalty, goal_reward, violation_penalty,
-            memory, shaping, shaping_gamma, pad_to,
+        config = EnvConfig(
+            setting=setting, max_steps=max_steps, obs_kind=obs_kind, pad_to=pad_to, render_mode=render_mode, view=view,
+            tile_size=tile_size, step_cost=step_cost, restricted_penalty=restricted_penalty, goal_reward=goal_reward,
+            violation_penalty=violation_penalty, memory=memory, shaping=shaping, shaping_gamma=shaping_gamma,
         )
+        game = game_for(test, config.setting)
+        self._configure([game], config.with_max_steps(default_max_steps(game)))
         self.problem = game.artifact.name
 
     # ------------------------------------------------------------------ set-up
 
-    def _configure(
-        self,
-        games: list[TestGame],
-        max_steps: int,
-        obs_kind: str,
-        render_mode: str | None,
-        view: str,
-        tile_size: int,
-        step_cost: float,
-        restricted_penalty: float,
-        goal_reward: float,
-        violation_penalty: float,
-        memory: str = "none",
-        shaping: float = 0.0,
-        shaping_gamma: float = 0.99,
-        pad_to: int = 8,
-    ) -> None:
-        one_of("render_mode", render_mode, (None, *self.metadata["render_modes"]))
-        one_of("view", view, ("system", "engineer"))
-        max_steps = positive_int("max_steps", max_steps)
-        tile_size = positive_int("tile_size", tile_size)
-        step_cost = finite_float("step_cost", step_cost)
-        restricted_penalty = finite_float("restricted_penalty", restricted_penalty)
-        goal_reward = finite_float("goal_reward", goal_reward)
-        violation_penalty = finite_float("violation_penalty", violation_penalty)
+    def _configure(self, games: list[TestGame], config: EnvConfig) -> None:
+        """Set the env up for ``games`` (a pool of one or more) under ``config`` (its
+        ``max_steps`` given)."""
+        one_of("render_mode", config.render_mode, (None, *self.metadata["render_modes"]))
+        assert config.max_steps is not None
+        self.config = config
+        obs_kind, pad_to, memory = config.obs_kind, config.pad_to, config.memory
         self.games = games
         self.encoders: list[Encoder] = [make_encoder(g, obs_kind, pad_to) for g in games]
         first = self.encoders[0].space
         for g, e in zip(games, self.encoders, strict=True):
             if e.space != first or g.n_actions != games[0].n_actions:
                 raise GameError(f"problem {g.artifact.name!r} does not share the pool's observation or action space")
-        if memory not in MEMORY_KINDS:
-            raise ValueError(f"unknown memory {memory!r}; expected one of {', '.join(MEMORY_KINDS)}")
-        if shaping < 0:
-            raise ValueError(f"shaping must be 0 (off) or a positive scale, not {shaping}")
         self.memory_kind = memory
         self.memory: VisitedMemory | None = None
         if memory == "visited":
-            self.memory = VisitedMemory(position_slice(self.encoders[0]))
+            self.memory = VisitedMemory(shared_position_slice(self.encoders))
             first = spaces.Box(0.0, 1.0, shape=(int(first.shape[0]) + self.memory.size,), dtype=np.float32)
-        self.shaping = float(shaping)
-        self.shaping_gamma = float(shaping_gamma)
+        self.shaping = config.shaping
+        self.shaping_gamma = config.shaping_gamma
         self._potential = DistancePotential(self.shaping) if self.shaping > 0 else None
         self._phi = 0.0
         self.observation_space = first
         self.action_space = spaces.Discrete(games[0].n_actions)
-        self.max_steps = int(max_steps)
+        self.max_steps = config.max_steps
         self.obs_kind = obs_kind
-        self.render_mode = render_mode
-        self.view = view
-        self.tile_size = int(tile_size)
-        self.step_cost = float(step_cost)
-        self.restricted_penalty = float(restricted_penalty)
-        self.goal_reward = float(goal_reward)
-        self.violation_penalty = float(violation_penalty)
+        self.render_mode = config.render_mode
+        self.view = config.view
+        self.tile_size = config.tile_size
+        self.step_cost = config.step_cost
+        self.restricted_penalty = config.restricted_penalty
+        self.goal_reward = config.goal_reward
+        self.violation_penalty = config.violation_penalty
         self._index = 0
         self.game = games[0]
         self.encoder = self.encoders[0]
@@ -651,6 +630,39 @@ class PatrollingEnv(FlowTestEnv):
         super().__init__(test, **kwargs)
 
 
+def random_grid_pool(
+    size: Any, family: Any, n: Any, seeds: Any, kind: Any, pool: str | None, split: str, count: int, world: Any,
+) -> tuple[int, str, int, tuple[int, ...], str, str]:
+    """The checked ``(size, family, n, seeds, kind, world)`` of a random-grid pool: the
+    explicit arguments, or the named ``pool``'s ``split`` (shared by the single and the
+    vector env, so both refuse the same arguments with the same message).
+
+    Raises
+    ------
+    ValueError
+        On a size, ``n`` or seed that is not an integer (``2.5``, ``True``, ``"01"``), an
+        unknown family, kind or world, or an empty seed pool.
+    """
+    if isinstance(seeds, (str, bytes)) or not hasattr(seeds, "__iter__"):
+        raise ValueError(f"seeds must be a list of non-negative integers, not {seeds!r}")
+    seeds = tuple(seeds)
+    for s in seeds:
+        if isinstance(s, (bool, np.bool_)) or not isinstance(s, (int, np.integer)) or s < 0:
+            raise ValueError(f"seeds must be non-negative integers, not {s!r}")
+    if pool is None:
+        size = positive_int("size", size)
+        n = None if n is None else positive_int("n", n)
+    else:
+        count = positive_int("count", count)
+    size, family, n, seeds, kind, world = random_grid_arguments(pool, split, count, size, family, n, seeds, kind, world)
+    one_of("family", family, tuple(FAMILIES))
+    one_of("kind", kind, POOL_KINDS)
+    one_of("world", world, WORLDS)
+    if not seeds:
+        raise ValueError("the seed pool is empty")
+    return positive_int("size", size), family, positive_int("n", n), seeds, kind, world
+
+
 class RandomGridEnv(FlowTestEnv):
     """## Description
 
@@ -725,31 +737,15 @@ class RandomGridEnv(FlowTestEnv):
         shaping: float = 0.0,
         shaping_gamma: float = 0.99,
     ) -> None:
-        if isinstance(seeds, (str, bytes)) or not hasattr(seeds, "__iter__"):
-            raise ValueError(f"seeds must be a list of non-negative integers, not {seeds!r}")
-        for s in seeds:
-            if isinstance(s, (bool, np.bool_)) or not isinstance(s, (int, np.integer)) or s < 0:
-                raise ValueError(f"seeds must be non-negative integers, not {s!r}")
-        if pool is None:
-            size = positive_int("size", size)
-            n = None if n is None else positive_int("n", n)
-        size, family, n, seeds, kind, world = random_grid_arguments(pool, split, count, size, family, n, tuple(seeds), kind, world)
-        one_of("family", family, tuple(FAMILIES))
-        one_of("kind", kind, POOL_KINDS)
-        one_of("world", world, WORLDS)
-        one_of("setting", setting, (None, "instantaneous", "accumulative"))
-        size = positive_int("size", size)
-        n = positive_int("n", n)
-        if not seeds:
-            raise ValueError("the seed pool is empty")
-        if max_steps is not None:
-            max_steps = positive_int("max_steps", max_steps)
-        tests = random_pool(size, family, n, seeds, kind, world=world)
-        games = [TestGame(a, setting) for a in tests]
-        self._configure(
-            games, max_steps if max_steps is not None else 4 * size * size, obs_kind, render_mode, view, tile_size,
-            step_cost, restricted_penalty, goal_reward, violation_penalty, memory, shaping, shaping_gamma, pad_to,
+        config = EnvConfig(
+            setting=setting, max_steps=max_steps, obs_kind=obs_kind, pad_to=pad_to, render_mode=render_mode, view=view,
+            tile_size=tile_size, step_cost=step_cost, restricted_penalty=restricted_penalty, goal_reward=goal_reward,
+            violation_penalty=violation_penalty, memory=memory, shaping=shaping, shaping_gamma=shaping_gamma,
         )
+        size, family, n, seeds, kind, world = random_grid_pool(size, family, n, seeds, kind, pool, split, count, world)
+        tests = random_pool(size, family, n, seeds, kind, world=world)
+        games = [TestGame(a, config.setting) for a in tests]
+        self._configure(games, config.with_max_steps(4 * size * size))
         self.problem = f"random-{size}x{size}-{family}{n}" + ("" if world == "empty" else f"-{world}")
 
     def _choose_game(self) -> int:

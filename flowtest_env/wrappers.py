@@ -8,6 +8,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from .config import MEMORY_KINDS as MEMORY_KINDS  # re-exported: the memory kinds live with the options
 from .encoding import Encoder
 from .game import RunState, TestGame
 from .system_product import INF, SystemProduct
@@ -80,9 +81,6 @@ class ActionMaskObservation(
 # ---------------------------------------------------------------- the SUT's memory
 
 
-MEMORY_KINDS = ("none", "visited")
-"""What a system under test may remember of its own run: nothing, or the places it has
-occupied (:class:`VisitedPlaces`)."""
 
 
 def encoder_of(env: object) -> Encoder:
@@ -118,6 +116,26 @@ def position_slice(encoder: Encoder) -> slice:
     if encoder.obs_kind == "grid":
         raise ValueError("the visited-places memory needs a flat observation, not obs_kind='grid'")
     return encoder.position_slice()
+
+
+def shared_position_slice(encoders: list[Encoder]) -> slice:
+    """The position slice (:func:`position_slice`) of every encoder of a pool, which must
+    be the same for one memory to read them all.
+
+    Raises
+    ------
+    ValueError
+        For image-like observations, or tests whose observations put the SUT's place at
+        different entries (mix ``obs_kind="padded"`` for such a pool).
+    """
+    where = {(sl.start, sl.stop) for sl in (position_slice(e) for e in encoders)}
+    if len(where) != 1:
+        raise ValueError(
+            "memory='visited' needs the pool's tests to show the SUT's place at the same entries; "
+            "these differ (use obs_kind='padded')"
+        )
+    start, stop = where.pop()
+    return slice(start, stop)
 
 
 class VisitedMemory:

@@ -1,0 +1,160 @@
+"""One frozen configuration for every FlowTest environment, checked by one validator.
+
+:class:`EnvConfig` holds the options a FlowTest env takes besides its test: which
+restrictions are shown, the step budget, the observation, rendering, the reward weights,
+the SUT's memory and reward shaping. The single env (:class:`~flowtest_env.envs.FlowTestEnv`,
+:class:`~flowtest_env.envs.RandomGridEnv`), the NumPy vector envs
+(:mod:`flowtest_env.vector`) and the PettingZoo env build one from their keyword
+arguments, so an option means the same, and is refused with the same message, whichever
+env takes it::
+
+    >>> from flowtest_env.config import EnvConfig
+    >>> EnvConfig(memory="visited", shaping=10.0).memory
+    'visited'
+    >>> EnvConfig(max_steps=2.7)
+    Traceback (most recent call last):
+    ...
+    ValueError: max_steps must be a positive integer, not 2.7
+
+An env that supports only part of an option's values (the vector env: no accumulative
+setting, ``rgb_array`` rendering only) refuses the rest after this check, naming the
+option.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any
+
+from .encoding import OBS_KINDS
+from .validation import finite_float, one_of, positive_int
+
+SETTINGS: tuple[None, str, str] = (None, "instantaneous", "accumulative")
+"""``setting``: the test's own (``None``), or which restrictions are shown."""
+VIEWS = ("system", "engineer")
+"""``view``: what a picture shows (``"engineer"`` adds the hidden test cells)."""
+RENDER_MODES: tuple[None, str, str, str] = (None, "rgb_array", "ansi", "human")
+"""``render_mode`` values some FlowTest env takes (each env's ``metadata`` lists its own)."""
+MEMORY_KINDS = ("none", "visited")
+"""What a system under test may remember of its own run: nothing, or the places it has
+occupied (:class:`~flowtest_env.wrappers.VisitedPlaces`)."""
+
+
+@dataclass(frozen=True)
+class EnvConfig:
+    """The options of a FlowTest env (every field checked when the object is made).
+
+    Attributes
+    ----------
+    setting
+        ``None`` (the test's own), ``"instantaneous"`` (restrictions on the current
+        state shown) or ``"accumulative"`` (every restriction met under the history).
+    max_steps
+        The step budget (a positive integer), ``None``: the test's default.
+    obs_kind
+        ``"flat"``, ``"grid"`` or ``"padded"`` (:mod:`flowtest_env.encoding`).
+    pad_to
+        The grid side of ``"padded"`` observations.
+    render_mode
+        ``None``, ``"rgb_array"``, ``"ansi"`` or ``"human"`` (a window; needs pygame).
+    view
+        ``"system"`` or ``"engineer"``.
+    tile_size
+        Pixels per grid cell in pictures.
+    step_cost, restricted_penalty, goal_reward, violation_penalty
+        The reward weights (finite numbers).
+    memory
+        ``"none"`` or ``"visited"`` (the SUT's visited places appended to a flat
+        observation).
+    shaping
+        ``0`` (off) or the scale of potential-based shaping towards the SUT's objective.
+    shaping_gamma
+        The shaping's discount, in ``[0, 1]``.
+
+    Raises
+    ------
+    ValueError
+        On any value outside the above (booleans, strings or ``2.7`` for an integer,
+        NaN or infinities for a number).
+    """
+
+    setting: str | None = None
+    max_steps: int | None = None
+    obs_kind: str = "flat"
+    pad_to: int = 8
+    render_mode: str | None = None
+    view: str = "system"
+    tile_size: int = 32
+    step_cost: float = 0.01
+    restricted_penalty: float = 0.05
+    goal_reward: float = 1.0
+    violation_penalty: float = 1.0
+    memory: str = "none"
+    shaping: float = 0.0
+    shaping_gamma: float = 0.99
+
+    def __post_init__(self) -> None:
+        checked = validate(self)
+        for f in dataclasses.fields(self):
+            object.__setattr__(self, f.name, checked[f.name])
+
+    def replace(self, **changes: Any) -> EnvConfig:
+        """A copy with ``changes`` (checked again)."""
+        return dataclasses.replace(self, **changes)
+
+    def kwargs(self) -> dict[str, Any]:
+        """The fields as keyword arguments."""
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+
+    def with_max_steps(self, default: int) -> EnvConfig:
+        """This configuration with ``default`` as the step budget if none was given."""
+        return self if self.max_steps is not None else self.replace(max_steps=default)
+
+
+FIELDS: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(EnvConfig))
+"""The option names of :class:`EnvConfig`, in order."""
+
+
+def validate(config: EnvConfig) -> dict[str, Any]:
+    """The checked, normalised values of ``config``'s fields (the one validator).
+
+    Raises
+    ------
+    ValueError
+        Naming the first option with a value it does not take.
+    """
+    c = config
+    one_of("setting", c.setting, SETTINGS)
+    max_steps = None if c.max_steps is None else positive_int("max_steps", c.max_steps)
+    one_of("obs_kind", c.obs_kind, OBS_KINDS)
+    pad_to = positive_int("pad_to", c.pad_to)
+    one_of("render_mode", c.render_mode, RENDER_MODES)
+    one_of("view", c.view, VIEWS)
+    tile_size = positive_int("tile_size", c.tile_size)
+    weights = {k: finite_float(k, getattr(c, k)) for k in ("step_cost", "restricted_penalty", "goal_reward", "violation_penalty")}
+    one_of("memory", c.memory, MEMORY_KINDS)
+    if c.memory == "visited" and c.obs_kind == "grid":
+        raise ValueError("memory='visited' needs a flat observation (obs_kind='flat' or 'padded'), not obs_kind='grid'")
+    shaping = finite_float("shaping", c.shaping)
+    if shaping < 0:
+        raise ValueError(f"shaping must be 0 (off) or a positive scale, not {c.shaping!r}")
+    gamma = finite_float("shaping_gamma", c.shaping_gamma)
+    if not 0.0 <= gamma <= 1.0:
+        raise ValueError(f"shaping_gamma must be a discount in [0, 1], not {c.shaping_gamma!r}")
+    return {
+        "setting": c.setting, "max_steps": max_steps, "obs_kind": c.obs_kind, "pad_to": pad_to,
+        "render_mode": c.render_mode, "view": c.view, "tile_size": tile_size, **weights, "memory": c.memory,
+        "shaping": shaping, "shaping_gamma": gamma,
+    }
+
+
+def split_options(options: dict[str, Any]) -> tuple[EnvConfig, dict[str, Any]]:
+    """``(EnvConfig of the options it names, the other options)``: how an env with extra
+    arguments of its own (a pool, ``num_envs``) takes the shared ones."""
+    mine = {k: v for k, v in options.items() if k in FIELDS}
+    rest = {k: v for k, v in options.items() if k not in FIELDS}
+    return EnvConfig(**mine), rest
+
+
+__all__ = ["EnvConfig", "FIELDS", "MEMORY_KINDS", "RENDER_MODES", "SETTINGS", "VIEWS", "split_options", "validate"]
