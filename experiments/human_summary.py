@@ -52,6 +52,26 @@ def _walls_text(ts: Any, mask: np.ndarray) -> list[str]:
     return out
 
 
+def _uses(summary: dict[str, Any]) -> str:
+    """``"2 walls, 1 door (caps: at most 3 doors)"``: the physical restrictions first."""
+    walls, doors = summary.get("n_walls", 0), summary.get("n_doors", 0)
+    text = f"{walls} wall{'s' if walls != 1 else ''}, {doors} door{'s' if doors != 1 else ''}"
+    caps = summary.get("caps")
+    if caps:
+        nouns = {"max_walls": "walls", "max_doors": "doors", "max_restrictions": "restrictions"}
+        text += " (caps: " + ", ".join(f"at most {n} {nouns.get(k, k)}" for k, n in caps.items()) + ")"
+    return text
+
+
+def _pair_text(ts: Any, a: Any, b: Any) -> str:
+    """Two places of the JSON summary as people write them: ``(r,c) | (r,c)``."""
+
+    def one(p: Any) -> str:
+        return f"({p[0]},{p[1]})" if isinstance(p, list) and len(p) == 2 else str(p)
+
+    return f"{one(a)} | {one(b)}"
+
+
 def human_summary(test: Any, summary: dict[str, Any]) -> str:
     """A few lines a person reads after ``flowtest synthesize`` (without ``--json``)."""
     p, ts, strategy = test.problem, test.problem.system, test.strategy
@@ -65,8 +85,16 @@ def human_summary(test: Any, summary: dict[str, Any]) -> str:
         f"{p.name}: {p.kind} test, {status}{stop_note(summary)}",
         f"  objectives   system: {p.system_objective.text}   test: {p.test_objective.text}",
         f"  flow         {summary['flow']} (edge-disjoint ways through the test)",
-        f"  cuts         {summary['n_cuts']} edges of the product graph",
+        f"  uses         {_uses(summary)}",
+        f"  cuts         {summary['n_cuts']} edges of the product graph (the walls and doors above, per history"
+        f"{' and fuel level' if ts.kind == 'fuel' else ''})",
     ]
+    one_way = summary.get("physical", {}).get("one_way_walls", [])
+    if one_way:
+        lines.append(
+            f"  one-way      {len(one_way)} wall(s) block one way only (a move back stays open): "
+            f"{_limited([_pair_text(ts, a, b) for a, b in one_way])}"
+        )
     reactive = strategy.restrictions & ~strategy.static_obstacles[None, :]
     histories = [q for q in range(strategy.n_hist) if reactive[q].any()]
     if histories:

@@ -66,6 +66,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-size-limit", action="store_true",
                    help="synthesize even a problem whose product graph may exceed "
                         f"{MAX_GRAPH_EDGES:,} edges (refused by default, with an estimate)")
+    for cap, what in (("walls", "walls (static restrictions)"), ("doors", "doors (reactive restrictions)"),
+                      ("restrictions", "walls and doors together")):
+        p.add_argument(
+            f"--max-{cap}", metavar="N", type=cap_count, dest=f"max_{cap}",
+            help=f"at most N {what}, each a move between two places counted once (replaces the problem's "
+            f"max_{cap}); no test within it: exit 3 with the fewest that would do",
+        )
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines on stderr")
     p.add_argument(
         "--progress", metavar="S", nargs="?", type=positive_seconds, const=PROGRESS_EVERY,
@@ -73,6 +80,29 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         f"test, bound, gap) on stderr every S seconds (default {PROGRESS_EVERY:g}); on a terminal "
         "the live line always shows it",
     )
+
+
+def cap_count(text: str) -> int:
+    """A cap from the command line: a whole number from 0 (argparse's type)."""
+    from synthesis.problems.problem import MAX_CAP
+
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number from 0, not {text[:40]!r}") from None
+    if not 0 <= value <= MAX_CAP:
+        raise argparse.ArgumentTypeError(f"expected a whole number from 0 to {MAX_CAP}, not {text[:40]!r}")
+    return value
+
+
+def caps_of_args(args: argparse.Namespace) -> dict[str, int]:
+    """The caps given on the command line (``--max-walls`` etc.)."""
+    caps = {}
+    for key in ("max_walls", "max_doors", "max_restrictions"):
+        value = getattr(args, key, None)
+        if value is not None:
+            caps[key] = int(value)
+    return caps
 
 
 def run(args: argparse.Namespace) -> int:
@@ -137,6 +167,7 @@ def _synthesize(args: argparse.Namespace, problem: Problem) -> int:
             progress=progress,
             control=control,
             max_graph_edges=None if args.no_size_limit else MAX_GRAPH_EDGES,
+            caps=caps_of_args(args),
         )
         test = pipeline.synthesize(problem, options)
         summary = json_safe(summary_of(test))

@@ -23,6 +23,7 @@ from .graphs.products import Products
 from .model.errors import CheckFailed, InconsistentProblem, ProblemError
 from .model.strategy import SETTINGS, TestStrategy
 from .model.test_agent import TestAgent
+from .problems.diagnose import check_problem_consistency
 from .problems.limits import MAX_GRAPH_EDGES, check_size
 from .problems.problem import CAP_KEYS, Problem, build_graphs, check_caps
 from .routing import cpsat, scip
@@ -131,6 +132,7 @@ class SynthesizedTest:
     graph_seconds: float
     agent: AgentSynthesis | None = None  # the test agent's synthesized strategy (agent problems)
     extra_stats: dict[str, Any] = field(default_factory=dict)
+    caps: dict[str, int] = field(default_factory=dict)  # the caps it was synthesized under
 
     @property
     def cut_edges_outside_intermediate(self) -> np.ndarray:
@@ -199,7 +201,9 @@ def synthesize(problem: Problem, options: SynthesisOptions | None = None) -> Syn
     Raises
     ------
     InconsistentProblem
-        If the goal is unreachable or the test objective cannot be routed.
+        If the goal is unreachable (``"unreachable"``), the test objective cannot be routed
+        (``"unroutable"``; within the caps too), or the system objective already implies it
+        (``"implied"``); the message names the conjunct or visit to blame.
     CheckFailed
         If the answer fails an independent check (a FlowTest bug).
     """
@@ -214,6 +218,7 @@ def synthesize(problem: Problem, options: SynthesisOptions | None = None) -> Syn
     t0 = time.perf_counter()
     note("building automata and product graphs")
     spec, products = build_graphs(problem)
+    check_problem_consistency(problem, products)
     graph_seconds = time.perf_counter() - t0
     milp = milp_options(problem, remaining_time(problem, options, graph_seconds))
     try:
@@ -229,7 +234,7 @@ def synthesize(problem: Problem, options: SynthesisOptions | None = None) -> Syn
     note("checking the test (bypass flow, feasibility)")
     checks = check_test(products, strategy, routing.flow, closed_loop=options.closed_loop)
     check_caps_held(problem, strategy, milp.caps)
-    return SynthesizedTest(problem, spec, products, routing, strategy, checks, graph_seconds)
+    return SynthesizedTest(problem, spec, products, routing, strategy, checks, graph_seconds, caps=milp.caps)
 
 
 def check_caps_held(problem: Problem, strategy: TestStrategy, caps: dict[str, int]) -> None:
@@ -336,6 +341,7 @@ def synthesize_agent_test(
     t0 = time.perf_counter()
     note("building automata and product graphs")
     spec, products = build_graphs(problem)
+    check_problem_consistency(problem, products)
     graph_seconds = time.perf_counter() - t0
     milp = milp_options(problem, remaining_time(problem, options, graph_seconds))
     try:
@@ -358,5 +364,5 @@ def synthesize_agent_test(
     timings = outcome.solution.timings
     return SynthesizedTest(
         problem, spec, products, outcome.routing, outcome.strategy, outcome.checks, graph_seconds,
-        agent=outcome.solution, extra_stats={"agent_seconds": dict(timings)},
+        agent=outcome.solution, extra_stats={"agent_seconds": dict(timings)}, caps=milp.caps,
     )

@@ -6,13 +6,17 @@ from typing import Any
 
 import numpy as np
 
+from ..checks.physical import physical_counts
 from ..graphs.automata import SpecificationProduct
 from ..graphs.products import Products
 from ..model.strategy import TestStrategy
 from ..pipeline import SynthesizedTest
 from ..problems.problem import Problem
 
-DERIVED_KEYS: tuple[str, ...] = ("problem", "environment", "cuts", "restrictions", "static_obstacles", "bypass_flow", "histories")
+DERIVED_KEYS: tuple[str, ...] = (
+    "problem", "environment", "n_walls", "n_doors", "n_one_way_walls", "physical", "cuts", "restrictions",
+    "static_obstacles", "bypass_flow", "histories",
+)
 """Summary fields that come back from the problem, its product graphs and the test's cuts
 (:func:`derived_summary`); the rest says how the solver got there."""
 DERIVED_STATS: tuple[str, ...] = ("transition_system", "automaton", "graph", "system_graph")
@@ -37,9 +41,22 @@ def derived_summary(
         if strategy.restrictions[q].any()
     }
     static = [[w(int(ts.src[m])), w(int(ts.dst[m]))] for m in np.flatnonzero(strategy.static_obstacles)]
+    counts = physical_counts(ts, strategy)
+
+    def place(p: int) -> object:
+        x = ts.places[p]
+        return list(x) if isinstance(x, tuple) else x
+
     return {
         "problem": problem.name,
         "environment": problem.kind,
+        "n_walls": len(counts.walls),
+        "n_doors": len(counts.doors),
+        "n_one_way_walls": len(counts.one_way_walls),
+        "physical": {
+            key: [[place(a), place(b)] for a, b in pairs]
+            for key, pairs in (("walls", counts.walls), ("doors", counts.doors), ("one_way_walls", counts.one_way_walls))
+        },
         "cuts": cuts,
         "restrictions": restrictions,
         "static_obstacles": static,
@@ -66,7 +83,11 @@ def summary_of(test: SynthesizedTest) -> dict[str, Any]:
         "stopped_by": stats.pop("stopped_by", None),
         "deterministic": stats.pop("deterministic", False),
         "flow": r.flow,
+        "n_walls": d["n_walls"],
+        "n_doors": d["n_doors"],
+        "n_one_way_walls": d["n_one_way_walls"],
         "n_cuts": int(r.cut_edges.size),
+        "physical": d["physical"],
         "cuts": d["cuts"],
         "restrictions": d["restrictions"],
         "static_obstacles": d["static_obstacles"],
@@ -85,6 +106,9 @@ def summary_of(test: SynthesizedTest) -> dict[str, Any]:
         },
         "histories": d["histories"],
     }
+    caps = test.caps or dict(p.caps)
+    if caps:
+        out["caps"] = caps
     if test.agent is not None:
         out.update(test.agent.summary())
     return out

@@ -95,5 +95,9 @@ def fewest_within(products: Products, options: MilpOptions, cap: str, deadline: 
 
 def caps_text(caps: dict[str, int]) -> str:
     """``"at most 3 doors and at most 2 walls"``."""
-    parts = [f"at most {n} {CAP_NOUNS[k].split(' (')[0]}" for k, n in caps.items()]
+    def noun(k: str, n: int) -> str:
+        word = CAP_NOUNS[k].split(" (")[0]
+        return word[:-1] if n == 1 else word
+
+    parts = [f"at most {n} {noun(k, n)}" for k, n in caps.items()]
     return " and ".join(parts)
