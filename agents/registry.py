@@ -10,10 +10,17 @@ Policies are named by plain strings on the command line (:func:`make_policy`):
 ``scripted:greedy``         faulty: one-step greedy, can walk into dead ends
 ``gr1``                     GR(1)-synthesized controller (:mod:`agents.gr1_sut`)
 ``ppo:PATH``                a saved stable-baselines3 (Maskable)PPO model
+``python:MODULE:NAME``      your planner in Python: a function ``act(observation, mask)``
+                            or a factory of planners (:mod:`agents.external`)
+``cmd:COMMAND``             your planner as a process in any language, over JSON lines on
+                            its standard input and output (:mod:`agents.external`)
 ==========================  ============================================================
 
 Each policy module exposes a factory ``(env, argument) -> Policy`` and knows nothing of
 this list; :data:`FACTORIES` names them all, so adding a policy is one entry here.
+:func:`make_policy` also takes a Python object instead of a name: a
+:class:`~agents.base.Policy` is used as it is, any other callable or planner object as a
+``python:`` planner (:func:`agents.external.planner_policy`).
 """
 
 from __future__ import annotations
@@ -22,7 +29,7 @@ import re
 from collections.abc import Callable
 from typing import Any
 
-from . import gr1_sut, ppo, scripted
+from . import external, gr1_sut, ppo, scripted
 from .base import Policy, PolicyError, RandomPolicy
 
 PolicyFactory = Callable[[Any, str], Policy]
@@ -39,10 +46,15 @@ FACTORIES: dict[str, PolicyFactory] = {
     "scripted": scripted.make_scripted,
     "gr1": gr1_sut.make_gr1,
     "ppo": ppo.make_ppo,
+    "python": external.make_python,
+    "cmd": external.make_command,
 }
 """Every policy by the prefix of its name (``prefix`` or ``prefix:ARG``)."""
 
-_NAME = re.compile(r"^([a-z0-9_-]+)(?::(.*))?$")
+_NAME = re.compile(r"^([a-z0-9_-]+)(?::(.*))?$", re.DOTALL)
+
+KNOWN = "random, scripted:<name>, gr1, ppo:PATH, python:MODULE:NAME, cmd:COMMAND"
+"""The names, for error messages."""
 
 
 def policy_names() -> list[str]:
@@ -50,17 +62,36 @@ def policy_names() -> list[str]:
     return sorted(FACTORIES)
 
 
-def make_policy(name: str, env: Any) -> Policy:
+def make_policy(name: str | Any, env: Any, step_timeout: float | None = None) -> Policy:
     """Build the policy called ``name`` for ``env`` (see the module docstring).
+
+    ``name`` may also be a Python object: a :class:`~agents.base.Policy` (returned as it
+    is) or a planner (a function ``act(observation, mask)``, a factory or a planner
+    object, :func:`agents.external.planner_policy`). ``step_timeout`` bounds each answer
+    of a ``cmd:`` planner (seconds; default :data:`agents.external.DEFAULT_STEP_TIMEOUT`).
+
+    Example::
+
+        policy = make_policy("cmd:python3 planner.py", env, step_timeout=2.0)
 
     Raises
     ------
     PolicyError
-        On an unknown name or an env the policy cannot play.
+        On an unknown name, a missing module, attribute or program, or an env the policy
+        cannot play.
     """
+    if not isinstance(name, str):
+        if isinstance(name, Policy):
+            return name
+        if callable(name) or callable(getattr(name, "act", None)):
+            return external.planner_policy(name, env)
+        raise PolicyError(f"a system under test is a name, a Policy or a planner, not a {type(name).__name__}")
     m = _NAME.match(name.strip())
     if not m or m.group(1) not in FACTORIES:
-        raise PolicyError(f"unknown policy {name!r}; known: random, scripted:<name>, gr1, ppo:PATH")
-    policy = FACTORIES[m.group(1)](env, m.group(2) or "")
+        raise PolicyError(f"unknown policy {name!r}; known: {KNOWN}")
+    if m.group(1) == "cmd":
+        policy: Policy = external.make_command(env, m.group(2) or "", step_timeout)
+    else:
+        policy = FACTORIES[m.group(1)](env, m.group(2) or "")
     policy.name = name
     return policy

@@ -21,6 +21,10 @@ Two kinds of failure are told apart:
 With a tester other than the synthesized one (:mod:`agents.testers`) a run that ends
 where the system can no longer meet its objective is ``trap``: an unfair test, not a
 FlowTest bug.
+
+A planner from outside FlowTest (``python:``, ``cmd:``, :mod:`agents.external`) that
+crashes, hangs or answers an action the test does not allow fails its run: a SUT failure
+whose reason says what happened (``Trace.planner_error``), the run stopped where it was.
 """
 
 from __future__ import annotations
@@ -47,6 +51,7 @@ class Trace:
     kind: str = "pass"
     reason: str = ""
     tester: str = "synthesized"
+    planner_error: str = ""  # what a planner from outside FlowTest did wrong (it failed the run)
 
     @property
     def failed(self) -> bool:
@@ -193,29 +198,45 @@ def _reachable_past_walls(game: Any, history: int, state: int) -> bool:
 
 def run_episode(env: Any, policy: Any, env_id: str, sut: str, seed: int, record: bool = True,
                 tester: str = "synthesized") -> Trace:
-    """Play one seeded episode; the trace keeps copies of the run states when ``record``."""
+    """Play one seeded episode; the trace keeps copies of the run states when ``record``.
+
+    A planner that fails (:class:`agents.external.PlannerError`: it crashed, hung or
+    answered an action the test does not allow) ends the run there: the trace is a SUT
+    failure whose ``reason`` and ``planner_error`` say what happened."""
+    from agents.external import PlannerError
+
     obs, info = env.reset(seed=seed)
-    policy.reset(seed)
     u = env.unwrapped
     trace = Trace(env_id, sut, seed, tester=tester)
     if record:
         trace.states.append(u.run.copy())
-    while True:
-        action = int(policy.act(obs, info))
-        obs, _, terminated, truncated, info = env.step(action)
-        trace.actions.append(action)
-        if record:
-            trace.states.append(u.run.copy())
-        if terminated or truncated:
-            break
+    try:
+        policy.reset(seed)
+        while True:
+            action = int(policy.act(obs, info))
+            obs, _, terminated, truncated, info = env.step(action)
+            trace.actions.append(action)
+            if record:
+                trace.states.append(u.run.copy())
+            if terminated or truncated:
+                break
+    except PlannerError as exc:
+        trace.verdict = dict(u.game.verdict(u.run))
+        trace.kind, trace.planner_error = "sut", str(exc)
+        trace.reason = f"the planner failed: {exc}"
+        return trace
     trace.verdict = dict(info["verdict"])
     trace.kind, trace.reason = classify(env, trace.verdict)
+    end = getattr(policy, "episode_end", None)
+    if callable(end):
+        end(trace.verdict)
     return trace
 
 
-def sut_policy(sut: str, env: Any) -> Any:
-    """The SUT called ``sut`` for ``env`` (:func:`agents.registry.make_policy`), its errors
-    (unknown name, a model that does not fit the env) reported as invalid input.
+def sut_policy(sut: Any, env: Any, step_timeout: float | None = None) -> Any:
+    """The SUT called ``sut`` for ``env`` (:func:`agents.registry.make_policy`: a name, or a
+    Policy or planner object), its errors (unknown name, a missing module or program, a
+    model that does not fit the env) reported as invalid input.
 
     Raises
     ------
@@ -226,6 +247,6 @@ def sut_policy(sut: str, env: Any) -> Any:
     from agents.registry import make_policy
 
     try:
-        return make_policy(sut, env)
+        return make_policy(sut, env, step_timeout=step_timeout)
     except PolicyError as exc:
         raise ProblemError(f"--sut {sut}: {exc}") from None

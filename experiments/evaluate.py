@@ -1,9 +1,17 @@
 """``flowtest evaluate``: run systems under test against synthesized tests and report.
 
-Every SUT (a policy name, :func:`agents.registry.make_policy`) plays every env for
+Every SUT (a policy name, :func:`agents.registry.make_policy`; your own planner as
+``python:MODULE:NAME`` or ``cmd:COMMAND``, :mod:`agents.external`) plays every env for
 ``--episodes`` episodes; episode ``i`` uses seed ``S + i`` for both the env and the
 policy, so each run can be replayed exactly with
-``flowtest evaluate --env ID --sut POLICY --episodes 1 --seed S+i --replay``.
+``flowtest evaluate --env ID --sut POLICY --episodes 1 --seed S+i --replay`` (for a
+``python:`` or ``cmd:`` planner run from the directory the evaluation ran in: the replay
+command starts with ``cd DIR &&``, and carries ``--step-timeout``).
+
+A planner from outside FlowTest that crashes, hangs past ``--step-timeout`` or answers an
+action the test does not allow fails that run (a SUT failure whose reason says what
+happened and where); the pair stops there (its record's ``stopped`` says so) and every
+other pair still runs.
 
 Outputs in ``--out``:
 
@@ -13,7 +21,8 @@ Outputs in ``--out``:
   runs that met the system objective; ``null`` if none did), ``violated``, ``open``,
   ``mean_restrictions``, ``mean_steps``, ``test_failures`` and ``failures`` (at most
   :data:`MAX_LISTED` listed, ``n_failures`` counts all; each with ``seed``, ``kind``,
-  ``reason``, the ``verdict`` and its ``replay`` command).
+  ``reason``, the ``verdict`` and its ``replay`` command), ``stopped`` (``null``, or why the
+  pair ran fewer episodes: its planner failed).
 * ``report.html`` — opens with an outcome matrix (systems x tests), then each test's
   picture and objectives, the failing runs as filmstrips with their replay commands, and
   every number (:mod:`experiments.report`); ``report.md`` — the matrix and one table per
@@ -41,6 +50,7 @@ from __future__ import annotations
 import argparse
 import html
 import json
+import os
 import shlex
 import sys
 import time
@@ -54,13 +64,17 @@ import numpy as np
 
 from synthesis.model.errors import ProblemError
 
-from .arguments import nonnegative_int, positive_int
+from .arguments import nonnegative_int, positive_int, positive_seconds
 from .command import Command
 from .episodes import Trace, make_env, make_tester_env, run_episode, sut_policy
 from .exits import EXIT_CHECK_FAILED, EXIT_OK
 from .outputs import json_safe, prepare_output_folder, write_atomically
 from .report import GLOSSARY, TestInfo, fold_rows, outcome_class, render_html, test_name
 from .trace_picture import trace_picture
+
+DEFAULT_STEP_TIMEOUT = 10.0
+"""``--step-timeout``'s default (:data:`agents.external.DEFAULT_STEP_TIMEOUT`, which the
+command line does not import before it runs)."""
 
 REPORT_MARKER = ".flowtest-evaluation"
 """The file that marks a report folder as FlowTest's: ``--out`` refuses any other
@@ -76,11 +90,42 @@ EXIT_TEST_FAILED = EXIT_CHECK_FAILED
 # --------------------------------------------------------------------------- runs
 
 
-def replay_command(env_id: str, sut: str, seed: int, tester: str = "synthesized") -> str:
-    """The command that replays one run exactly (shell-quoted: a model path may hold spaces)."""
+EXTERNAL_PREFIXES = ("python:", "cmd:")
+"""Systems named from outside FlowTest: their names depend on the working directory."""
+
+
+def replay_command(env_id: str, sut: str, seed: int, tester: str = "synthesized", step_timeout: float | None = None,
+                   cwd: str | None = None) -> str:
+    """The command that replays one run exactly (shell-quoted: a model path may hold spaces).
+
+    A ``python:`` or ``cmd:`` planner is found from the directory the evaluation ran in
+    (``cwd``, default the current one): its command starts with ``cd DIR &&``, and a
+    ``cmd:`` planner's carries ``--step-timeout`` when one was given."""
     against = "" if tester == "synthesized" else f" --tester {shlex.quote(tester)}"
-    return (f"flowtest evaluate --env {shlex.quote(env_id)} --sut {shlex.quote(sut)}{against} "
-            f"--episodes 1 --seed {seed} --replay")
+    timeout = f" --step-timeout {step_timeout:g}" if step_timeout is not None and sut.startswith("cmd:") else ""
+    command = (f"flowtest evaluate --env {shlex.quote(env_id)} --sut {shlex.quote(sut)}{against}{timeout} "
+               f"--episodes 1 --seed {seed} --replay")
+    if sut.startswith(EXTERNAL_PREFIXES):
+        return f"cd {shlex.quote(cwd or os.getcwd())} && {command}"
+    return command
+
+
+NOT_REPLAYABLE = ("# no replay command: this system was given to evaluate() as a Python object; "
+                  "name it python:MODULE:NAME to get one")
+
+
+def sut_label(sut: Any) -> str:
+    """The name a system under test goes by in records and reports: its name, or for a
+    Python object the ``python:MODULE:NAME`` that names it (:func:`agents.external.spec_of`),
+    its ``name`` attribute, or its type."""
+    if isinstance(sut, str):
+        return sut
+    from agents.external import spec_of
+
+    name = getattr(sut, "name", None)
+    if isinstance(name, str) and name:
+        return name
+    return spec_of(sut) or f"python object {getattr(sut, '__qualname__', type(sut).__name__)}"
 
 
 def tester_fairness(env_id: str, tester: str) -> dict[str, Any] | None:
@@ -111,6 +156,16 @@ class Cell:
     tester: str = "synthesized"
     fairness: dict[str, Any] | None = None
     error: str | None = None  # why this SUT cannot play this env (no runs then)
+    stopped: str | None = None  # why fewer runs than asked (the planner failed)
+    replayable: bool = True  # False for a system given as a Python object without a name
+    step_timeout: float | None = None
+    cwd: str = field(default_factory=os.getcwd)
+
+    def replay(self, trace: Trace) -> str:
+        """The replay command of one of this cell's runs."""
+        if not self.replayable:
+            return NOT_REPLAYABLE
+        return replay_command(trace.env_id, self.sut, trace.seed, self.tester, self.step_timeout, self.cwd)
 
     def record(self) -> dict[str, Any]:
         """The ``results.json`` record (``error`` says why a pair has no runs)."""
@@ -142,59 +197,83 @@ class Cell:
                     "kind": t.kind,
                     "reason": t.reason,
                     "verdict": t.verdict,
-                    "replay": replay_command(t.env_id, self.sut, t.seed, self.tester),
+                    "replay": self.replay(t),
                 }
                 for t in fails[:MAX_LISTED]
             ],
             "pictures": self.pictures,
             "seconds": round(self.seconds, 3),
             "error": self.error,
+            "stopped": self.stopped,
         }
 
 
-def check_sut_names(suts: Sequence[str]) -> None:
-    """Reject a SUT name no factory knows (a typo), before anything runs.
+def check_sut_names(suts: Sequence[Any]) -> None:
+    """Reject a SUT name no factory knows (a typo), a ``python:`` module or name that is
+    missing, or a ``cmd:`` program that is not found, before anything runs (Python
+    objects are checked when they are built).
 
     Raises
     ------
     ProblemError
-        On an unknown name.
+        On an unknown or unusable name.
     """
-    from agents.registry import policy_names
+    from agents.base import PolicyError
+    from agents.external import check_spec
+    from agents.registry import KNOWN, policy_names
     from agents.scripted import SCRIPTED
 
     known = set(policy_names())
     for sut in suts:
+        if not isinstance(sut, str):
+            continue
         prefix, _, arg = sut.strip().partition(":")
         if prefix not in known:
-            raise ProblemError(f"--sut {sut}: unknown policy; known: random, scripted:<name>, gr1, ppo:PATH")
+            raise ProblemError(f"--sut {sut}: unknown policy; known: {KNOWN}")
         if prefix == "scripted" and (arg or "replanner") not in SCRIPTED:
             raise ProblemError(f"--sut {sut}: unknown scripted SUT {arg!r}; known: {', '.join(SCRIPTED)}")
+        try:
+            check_spec(prefix, arg)
+        except PolicyError as exc:
+            raise ProblemError(f"--sut {sut}: {exc}") from None
 
 
 def evaluate(
     env_ids: Sequence[str],
-    suts: Sequence[str],
+    suts: Sequence[Any],
     episodes: int,
     seed: int = 0,
     progress: Callable[[str], None] | None = None,
     testers: Sequence[str] = ("synthesized",),
+    step_timeout: float | None = None,
 ) -> list[Cell]:
     """Run every SUT against every env (``episodes`` seeded runs each), once per tester
     (``synthesized``: the synthesized test; ``ppo:PATH``: a learned tester,
     :mod:`agents.testers`). With more than one tester, every cell also carries the
     tester's exhaustive fairness check on the env's game. Each (SUT, test) pair runs on its
     own: a SUT that cannot play an env (a model trained on another observation shape, a
-    graph for a grid policy) gives a :class:`Cell` with the reason in ``error`` and the
-    run goes on.
+    graph for a grid policy) gives a :class:`Cell` with the reason in ``error``, and a
+    planner that fails a run (crashes, hangs past ``step_timeout``, answers an action the
+    test does not allow) stops its pair with that run as a failure; the others go on.
+
+    A SUT is a name (``"scripted:replanner"``, ``"python:my_planner:Bfs"``,
+    ``"cmd:python3 planner.py"``) or a Python object: a :class:`agents.base.Policy`, or
+    a planner (a function ``act(observation, mask)``, a class or factory of planners;
+    :mod:`agents.external`). Example::
+
+        def greedy(observation, mask):
+            return observation["allowed"][0]
+
+        cells = evaluate(["small-reactive"], [greedy, "scripted:replanner"], episodes=3)
 
     Raises
     ------
     ProblemError
         Before anything runs, if an env or a SUT name is invalid input (not a test, an
-        unknown policy), or ``episodes < 1``.
+        unknown policy, a missing module or program), or ``episodes < 1``.
     """
     from agents.base import PolicyError
+    from agents.external import spec_of
     from agents.registry import make_policy
 
     if episodes < 1:
@@ -213,21 +292,38 @@ def evaluate(
             against = "" if tester == "synthesized" else f" against {tester}"
             for sut in suts:
                 k += 1
+                label = sut_label(sut)
+                replayable = isinstance(sut, str) or (label.startswith("python:") and label == spec_of(sut))
+                cell = Cell(env_id, label, [], seed, 0.0, tester=tester, fairness=fairness, replayable=replayable,
+                            step_timeout=step_timeout)
                 t0 = time.perf_counter()
                 try:
-                    policy = make_policy(sut, env)
+                    policy = make_policy(sut, env, step_timeout=step_timeout)
                 except PolicyError as exc:
-                    cells.append(Cell(env_id, sut, [], seed, time.perf_counter() - t0, tester=tester, fairness=fairness,
-                                      error=str(exc)))
+                    cell.error, cell.seconds = str(exc), time.perf_counter() - t0
+                    cells.append(cell)
                     if progress is not None:
-                        progress(f"[{k}/{total}] {sut} on {env_id}{against}: cannot play it: {exc}")
+                        progress(f"[{k}/{total}] {label} on {env_id}{against}: cannot play it: {exc}")
                     continue
-                traces = []
-                for i in range(episodes):
-                    traces.append(run_episode(env, policy, env_id, sut, seed + i, tester=tester))
-                    if progress is not None and (i + 1 == episodes or (i + 1) % max(1, episodes // 10) == 0):
-                        progress(f"[{k}/{total}] {sut} on {env_id}{against}: {i + 1}/{episodes} episodes")
-                cells.append(Cell(env_id, sut, traces, seed, time.perf_counter() - t0, tester=tester, fairness=fairness))
+                try:
+                    for i in range(episodes):
+                        trace = run_episode(env, policy, env_id, label, seed + i, tester=tester)
+                        cell.traces.append(trace)
+                        if trace.planner_error:
+                            cell.stopped = (f"the planner failed in run {i + 1} of {episodes} (seed {seed + i}); "
+                                            f"the other runs were not played: {trace.planner_error}")
+                            if progress is not None:
+                                progress(f"[{k}/{total}] {label} on {env_id}{against}: the planner failed: "
+                                         f"{trace.planner_error}")
+                            break
+                        if progress is not None and (i + 1 == episodes or (i + 1) % max(1, episodes // 10) == 0):
+                            progress(f"[{k}/{total}] {label} on {env_id}{against}: {i + 1}/{episodes} episodes")
+                finally:
+                    close = getattr(policy, "close", None)
+                    if callable(close) and policy is not sut:
+                        close()
+                cell.seconds = time.perf_counter() - t0
+                cells.append(cell)
             env.close()
     return cells
 
@@ -235,8 +331,15 @@ def evaluate(
 # --------------------------------------------------------------------------- pictures
 
 
-def _slug(text: str) -> str:
-    return "".join(ch if ch.isalnum() else "-" for ch in text).strip("-").lower()
+def _slug(text: str, limit: int = 60) -> str:
+    """A file-name fragment of ``text``; a long one (a planner's command) is cut and
+    told apart by a digest of the whole."""
+    out = "".join(ch if ch.isalnum() else "-" for ch in text).strip("-").lower()
+    if len(out) <= limit:
+        return out
+    import hashlib
+
+    return out[:limit].rstrip("-") + "-" + hashlib.sha256(text.encode("utf-8", "replace")).hexdigest()[:8]
 
 
 
@@ -443,7 +546,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "(mine.toml, synthesized once and cached) or artifact files (flowtest synthesize --out)")
     p.add_argument("--sut", nargs="+", required=True, metavar="POLICY",
                    help="systems under test: scripted:replanner, scripted:committed, scripted:fuel-blind, "
-                        "scripted:greedy, random, gr1, ppo:PATH")
+                        "scripted:greedy, random, gr1, ppo:PATH; your own planner: python:MODULE:NAME (a function "
+                        "act(observation, mask) or a factory, found from the current directory) or "
+                        "cmd:\"COMMAND\" (a process speaking JSON lines; docs/runtime.md)")
+    p.add_argument("--step-timeout", type=positive_seconds, default=None, metavar="SECONDS",
+                   help="how long a cmd: planner may take to answer one step (default "
+                        f"{DEFAULT_STEP_TIMEOUT:g}; the first answer includes its start)")
     p.add_argument("--tester", nargs="+", default=["synthesized"], metavar="TESTER",
                    help="who plays the test: synthesized (default), ppo:PATH (a learned tester, flowtest "
                         "train-tester); several give a side-by-side comparison")
@@ -456,13 +564,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
 
 
-def replay(env_id: str, sut: str, seed: int, stream: Any = None, tester: str = "synthesized") -> Trace:
+def replay(env_id: str, sut: str, seed: int, stream: Any = None, tester: str = "synthesized",
+           step_timeout: float | None = None) -> Trace:
     """Replay one run and print it step by step (state, legal actions, action, verdict)
     to ``stream`` (standard output by default)."""
     stream = sys.stdout if stream is None else stream
     env = make_tester_env(env_id, tester)
-    policy = sut_policy(sut, env)
-    trace = run_episode(env, policy, env_id, sut, seed, tester=tester)
+    policy = sut_policy(sut, env, step_timeout)
+    try:
+        trace = run_episode(env, policy, env_id, sut, seed, tester=tester)
+    finally:
+        close = getattr(policy, "close", None)
+        if callable(close):
+            close()
     game = env.unwrapped.game
     against = "" if tester == "synthesized" else f" against tester {tester}"
     stream.write(f"{sut} on {env_id}{against}, seed {seed}\n")
@@ -485,7 +599,8 @@ def run(args: argparse.Namespace) -> int:
             for tester in args.tester:
                 for sut in args.sut:
                     for i in range(args.episodes):
-                        bug |= replay(env_id, sut, args.seed + i, tester=tester).kind == "test"
+                        trace = replay(env_id, sut, args.seed + i, tester=tester, step_timeout=args.step_timeout)
+                        bug |= trace.kind == "test"
         return EXIT_TEST_FAILED if bug else EXIT_OK
     if args.out is None:
         raise ProblemError("--out is required (or use --replay)")
@@ -497,7 +612,9 @@ def run(args: argparse.Namespace) -> int:
         first: ProblemError | None = None
         for env in envs:
             try:
-                sut_policy(sut, env)
+                close = getattr(sut_policy(sut, env, args.step_timeout), "close", None)
+                if callable(close):
+                    close()
                 break
             except ProblemError as exc:
                 first = first or exc
@@ -513,7 +630,8 @@ def run(args: argparse.Namespace) -> int:
             sys.stderr.write(msg + "\n")
             sys.stderr.flush()
 
-    cells = evaluate(args.env, args.sut, args.episodes, args.seed, progress, testers=args.tester)
+    cells = evaluate(args.env, args.sut, args.episodes, args.seed, progress, testers=args.tester,
+                     step_timeout=args.step_timeout)
     progress("drawing trace pictures")
     records = write_report(cells, args.out)
     for r in records:
@@ -525,6 +643,8 @@ def run(args: argparse.Namespace) -> int:
             f"{r['sut']:24s} {test_name(r):30s} met {_pct(r['system_objective_met_rate']):>6s}  "
             f"realized {_pct(r['test_objective_realized_rate']):>6s}  failures {r['n_failures']}{trapped}\n"
         )
+        if r["stopped"]:
+            sys.stdout.write(f"{'':24s} stopped: {r['stopped']}\n")
     bugs = test_failure_records(records)
     if bugs:
         sys.stderr.write("flowtest: FLOWTEST BUG: a test failed its guarantee; see the report\n")
