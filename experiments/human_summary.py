@@ -80,7 +80,7 @@ def human_summary(test: Any, summary: dict[str, Any]) -> str:
     if summary["status"] == "optimal":
         status = "optimal (proven, gap 0)"
     else:
-        status = f"{summary['status']} (gap {'unknown' if gap is None else f'{gap:.2%}'})"
+        status = f"{summary['status']} ({'no bound yet' if gap is None else f'gap {gap:.2%}'})"
     lines = [
         f"{p.name}: {p.kind} test, {status}{stop_note(summary)}",
         f"  objectives   system: {p.system_objective.text}   test: {p.test_objective.text}",

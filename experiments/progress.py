@@ -25,7 +25,8 @@ class StageProgress:
     """Stage messages on standard error, with a live elapsed-time indicator on a TTY.
 
     Called with a message, it starts a new stage. On a terminal the stage is one line
-    that a small background thread rewrites (``\\r``) with the stage's elapsed time once
+    that a small background thread rewrites (``\\r``) with the seconds since the command
+    began (one clock for every line, which solver status lines share) once
     the stage has run longer than ``delay`` seconds, so a long MILP solve visibly
     progresses; elsewhere (a file, a pipe, a CI log) each stage is printed once as a
     plain line, because carriage returns make logs unreadable. Nothing is ever written
@@ -68,6 +69,7 @@ class StageProgress:
         self._width = 0  # characters on the open line
         self._started = 0.0
         self._t0 = time.perf_counter()
+        self.clock_start = self._t0  # perf_counter time of the one clock (a solve's status lines share it)
         self.status = status
         self.every = every if enabled and not self.live else None
         self._last_status = time.perf_counter()
@@ -120,7 +122,7 @@ class StageProgress:
     # -- internals (call with the lock held)
     def _end_line(self) -> None:
         if self._message is not None:
-            self._rewrite(f"{self.PREFIX}{self._message} ({time.perf_counter() - self._started:.1f} s)")
+            self._rewrite(f"{self.PREFIX}{self._message} (to {self.elapsed():.1f} s)")
             self._write("\n")
             self._message = None
             self._width = 0
@@ -168,8 +170,8 @@ class StageProgress:
                     continue
                 if self._message is None:
                     continue
-                elapsed = time.perf_counter() - self._started
-                if elapsed >= self.delay:
+                if time.perf_counter() - self._started >= self.delay:
                     status = self._status()
                     tail = f" | {status}" if status else ""
-                    self._rewrite(f"{self.PREFIX}{self._message} ... {elapsed:.1f} s{tail}")
+                    # one clock: the seconds since the command began, on every line
+                    self._rewrite(f"{self.PREFIX}{self._message} ... {self.elapsed():.1f} s{tail}")

@@ -156,6 +156,7 @@ def _synthesize(args: argparse.Namespace, problem: Problem) -> int:
     # stdout is ours: whatever a library prints meanwhile (HiGHS's banner, a C printf)
     # goes to /dev/null, and only our summary reaches the real stdout, after
     with stdout_guard(), StageProgress(enabled=not args.quiet, status=lambda: status_line(control), every=every) as progress:
+        control.started = progress.clock_start  # solver status lines count on the command's one clock
         progress(f"synthesizing {problem.name} ({problem.kind} test)")
         options = pipeline.SynthesisOptions(
             time_limit=args.time_limit,

@@ -71,7 +71,23 @@ def test_status_line_shows_best_bound_gap_and_time() -> None:
     assert phase1.text() == "phase 1 (maximum flow): best flow 2, bound 3, gap 50.0%, 12 s"
     phase2 = SolveStatus("phase 2 (fewest cuts)", "min", 14.0, 11.0, t0, flow=2)
     assert phase2.text().startswith("phase 2 (fewest cuts): flow 2, best cuts 14, bound 11, gap 21.4%")
-    assert SolveStatus("phase 1", "max", None, None, t0).text().startswith("phase 1: best flow -, bound -, gap -")
+    # no bound: said in words, never a "gap -" or a gap from a placeholder bound
+    assert SolveStatus("phase 1", "max", None, None, t0).text().startswith("phase 1: best flow -, no bound yet, ")
+    assert SolveStatus("phase 1", "max", -0.0, None, t0).text().startswith("phase 1: best flow 0, no bound yet, ")
+    # a minimised count is never below 0: HiGHS's early bound -1040 means 0 (gap 100%, not 200%)
+    assert SolveStatus("p2", "min", 1040.0, -1040.0, t0, flow=1).text().startswith("p2: flow 1, best cuts 1040, bound 0, gap 100.0%")
+    # a bound on the wrong side of the best answer proves nothing
+    assert SolveStatus("p1", "max", 3.0, 1.0, t0).text().startswith("p1: best flow 3, no bound yet, ")
+
+
+def test_status_line_has_one_clock() -> None:
+    """The seconds a status line shows run from the command's one clock (the control's
+    start), not from the start of the solver run that published it."""
+    control = SolveControl()
+    control.started -= 100.0
+    control.report(SolveStatus("phase 2", "min", 5.0, 3.0, time.perf_counter(), flow=1))
+    line = status_line(control)
+    assert line is not None and line.endswith(", 100 s")
 
 
 def test_clock_moves_the_deadline_after_the_first_test() -> None:

@@ -354,7 +354,8 @@ def _phase1(
     except TimeoutError:
         if x_guess is None:
             raise
-        status, gap, x1 = "feasible", float("inf"), None
+        # the heuristic's flow against its proven upper bound
+        status, gap, x1 = "feasible", (guess.upper_bound - guess.flow) / max(guess.flow, 1), None
     stopped_by = _stopped_by(h)
     if status == "infeasible":
         raise _no_cut_set()
@@ -899,7 +900,12 @@ def _result(
     place_cols = rm.cols.blocked_place
     blocked = rm.cols.places[x[place_cols] > 0.5] if place_cols.size else np.zeros(0, dtype=np.int64)
     status = "optimal" if first.status == second.status == "optimal" else "feasible"
-    mip_gap = float(max(first.gap, second.gap)) if status != "optimal" else 0.0
+    second_gap = second.gap
+    if not np.isfinite(second_gap):  # no solver bound: the cut bound's, else 0 (cuts are never fewer)
+        value = float(_phase2_cost(rm, options) @ x)
+        lower = float(second.cut_bound["bound"]) if second.cut_bound is not None else 0.0
+        second_gap = max(value - lower, 0.0) / max(value, 1.0)
+    mip_gap = float(max(first.gap, second_gap)) if status != "optimal" else 0.0
     m = rm.model
     stats: dict[str, Any] = {
         "binary_vars": m.n_integer,
@@ -1174,6 +1180,8 @@ def _read_solution(h: highspy.Highs) -> tuple[str, float, np.ndarray | None, boo
     feasible = _violation(model, x) <= FEASIBILITY_TOLERANCE
     agrees = feasible and abs(objective - reported) <= 1e-6 * max(1.0, abs(objective))
     bound = float(info.mip_dual_bound)
+    if h.getLp().sense_ == highspy.ObjSense.kMinimize and np.isfinite(bound):
+        bound = max(bound, 0.0)  # minimised counts (cuts, places) are never below 0
     if not feasible:
         return "feasible", float("inf"), None, False
     # integral objectives: an absolute gap below 1 between the solution we hold and

@@ -70,25 +70,54 @@ class SolveStatus:
         return time.perf_counter() - self.started
 
     @property
-    def gap(self) -> float | None:
-        """Relative gap ``|best - bound| / max(|best|, 1)`` (``None`` without both)."""
-        if self.best is None or self.bound is None:
+    def valid_bound(self) -> float | None:
+        """The bound where it says something: ``None`` when there is none or it lies on the
+        wrong side of the best answer (a solver's placeholder, not a proof); a minimised
+        objective (cuts, walls, doors: never below 0) is bounded by 0 at worst."""
+        b = self.bound
+        if b is None or not np.isfinite(b):
             return None
-        return abs(self.best - self.bound) / max(abs(self.best), 1.0)
+        if self.sense == "min":
+            b = max(b, 0.0)
+            if self.best is not None and b > self.best + 1e-6:
+                return None
+        elif self.best is not None and b < self.best - 1e-6:
+            return None
+        return b
 
-    def text(self) -> str:
-        """One short line: the best test so far (flow, cuts), the bound and the gap."""
+    @property
+    def gap(self) -> float | None:
+        """Relative gap ``|best - bound| / max(|best|, 1)`` (``None`` without both, or with a
+        bound that proves nothing: see :attr:`valid_bound`)."""
+        bound = self.valid_bound
+        if self.best is None or bound is None:
+            return None
+        return abs(self.best - bound) / max(abs(self.best), 1.0)
+
+    def text(self, since: float | None = None) -> str:
+        """One short line: the best test so far (flow, cuts), the bound and the gap (a
+        number, or ``no bound yet``), and the seconds since ``since`` (a ``perf_counter``
+        time: the command's one clock; default: since this run began)."""
 
         def num(v: float | None) -> str:
-            return "-" if v is None else f"{v:.0f}" if abs(v - round(v)) < 1e-6 else f"{v:.2f}"
+            if v is None:
+                return "-"
+            if abs(v - round(v)) < 1e-6:
+                return f"{round(v) + 0:d}"  # never "-0"
+            return f"{v:.2f}"
 
         if self.flow is None:  # maximum flow
             best = f"best flow {num(self.best)}"
         else:
             best = f"flow {self.flow}, best cuts {num(self.best)}"
+        bound = self.valid_bound
         gap = self.gap
-        gap_text = "-" if gap is None else f"{100 * gap:.1f}%"
-        return f"{self.phase}: {best}, bound {num(self.bound)}, gap {gap_text}, {self.elapsed:.0f} s"
+        if bound is None:
+            tail = "no bound yet"
+        else:
+            tail = f"bound {num(bound)}, gap {'-' if gap is None else f'{100 * gap:.1f}%'}"
+        elapsed = self.elapsed if since is None else time.perf_counter() - since
+        return f"{self.phase}: {best}, {tail}, {elapsed:.0f} s"
 
 
 class SolveControl:
@@ -102,6 +131,7 @@ class SolveControl:
         self._stop = threading.Event()
         self._lock = threading.Lock()
         self._status: SolveStatus | None = None
+        self.started = time.perf_counter()  # the one clock progress lines show
 
     def request_stop(self) -> None:
         """Ask every running and later solve to stop as soon as it can."""
@@ -385,7 +415,7 @@ def stdout_guard() -> Iterator[None]:
 def status_line(control: SolveControl | None) -> str | None:
     """The running solve's status as one line, or ``None`` when no solve runs."""
     status = None if control is None else control.status
-    return None if status is None else status.text()
+    return None if status is None or control is None else status.text(since=control.started)
 
 
 __all__ = [
