@@ -56,6 +56,19 @@ class GameError(ValueError):
     """An artifact or a call the test game cannot honour (bad action index, bad agent move)."""
 
 
+def printable(text: str) -> str:
+    """``text`` with every non-printable character escaped (``"\\x1b"``), so a name never
+    reaches a terminal or a log raw. Artifacts refuse such names; a Problem built in
+    Python may still hold one.
+
+    >>> printable("a\x1b[2Jb")
+    'a\\x1b[2Jb'
+    """
+    if text.isprintable():
+        return text
+    return "".join(c if c.isprintable() else c.encode("unicode_escape").decode("ascii") for c in text)
+
+
 def grid_cell(place: Hashable) -> tuple[int, int]:
     """The ``(row, col)`` of a place of a grid system (its places are cells)."""
     if not (isinstance(place, tuple) and len(place) == 2):
@@ -181,9 +194,8 @@ def _permanent_walls(artifact: TestArtifact) -> np.ndarray:
         reach |= frontier
     n_places = len(ts.places)
     key = ts.place[ts.src].astype(np.int64) * n_places + ts.place[ts.dst]
-    open_somewhere = np.zeros(n_places * n_places, dtype=bool)
-    np.logical_or.at(open_somewhere, key, reach[ts.src] & ~static)
-    permanent: np.ndarray = static & ~open_somewhere[key]
+    open_keys = np.unique(key[reach[ts.src] & ~static])  # sparse: no n_places^2 table
+    permanent: np.ndarray = static & ~np.isin(key, open_keys)
     return permanent
 
 
@@ -340,7 +352,7 @@ class TestGame:
         if self.is_grid:
             return GRID_ACTIONS[action]
         m = self.slot_list[state][action]
-        return "(none)" if m < 0 else f"-> {self.ts.states[int(self.ts.dst[m])]}"
+        return "(none)" if m < 0 else f"-> {printable(str(self.ts.states[int(self.ts.dst[m])]))}"
 
     def agent_bits(self, run: RunState) -> int:
         """Slots of the SUT's state blocked by the test agent's position."""
@@ -512,5 +524,7 @@ class TestGame:
         return out
 
     def state_json(self, state: int) -> object:
-        """A system state written as in problem-format.md."""
-        return self.ts.to_json_state(state)
+        """A system state written as in problem-format.md (a name with a non-printable
+        character escaped, see :func:`printable`)."""
+        out = self.ts.to_json_state(state)
+        return printable(out) if isinstance(out, str) else out

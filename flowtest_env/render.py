@@ -25,7 +25,7 @@ import numpy as np
 from synthesis.model.specs import parse_formula, propositions
 
 from .encoding import system_propositions
-from .game import GRID_ACTIONS, RunState, TestGame
+from .game import GRID_ACTIONS, RunState, TestGame, printable
 
 RGB = tuple[int, int, int]
 
@@ -340,7 +340,7 @@ class GraphRenderer:
             edge = _unit_rgb(TEST_CELL) if ts.labels[s] & test_props else "0.3"
             ax.scatter([xy[s, 0]], [xy[s, 1]], s=520, c=[face] if not isinstance(face, str) else face,
                        edgecolors=[edge] if not isinstance(edge, str) else edge, linewidths=2.5, zorder=3)
-            ax.text(xy[s, 0], xy[s, 1] - 0.13, str(ts.states[s]), ha="center", va="top", fontsize=8, zorder=4)
+            ax.text(xy[s, 0], xy[s, 1] - 0.13, printable(str(ts.states[s])), ha="center", va="top", fontsize=8, zorder=4)
         # matplotlib ships no type hints for backend_agg (FigureCanvasAgg's methods are untyped)
         canvas.draw()  # type: ignore[no-untyped-call]
         self.background = np.asarray(canvas.buffer_rgba())[:, :, :3].copy()  # type: ignore[no-untyped-call]
@@ -435,7 +435,7 @@ def ansi(game: TestGame, run: RunState, view: str = "system") -> str:
         for name in props:
             for p in marked_places(game, name):
                 r, c = cells[p]
-                grid[r][c] = name[0]
+                grid[r][c] = name[0] if name[:1].isprintable() else "?"
         if ts.kind == "fuel":
             fuel_of = np.array(game.fuel, dtype=np.int64)
             for refuel in np.unique(ts.place[ts.dst[fuel_of[ts.dst] == ts.max_fuel]]):
@@ -451,17 +451,17 @@ def ansi(game: TestGame, run: RunState, view: str = "system") -> str:
         for s in range(ts.n_states):
             mark = "@" if s == run.system else ("A" if s == ap else " ")
             tag = "T" if ts.terminal[s] else ("?" if ts.labels[s] & test_props else " ")
-            lines.append(f"{mark}{tag} {ts.states[s]}")
+            lines.append(f"{mark}{tag} {printable(str(ts.states[s]))}")
     shown = game.shown_moves(run)
     static = game.artifact.strategy.static_obstacles
-    w = ts.to_json_state
+    w = game.state_json
     for label, moves in (("walls", [m for m in shown if static[m]]), ("restricted now", [m for m in shown if not static[m]])):
         if moves:
             lines.append(f"{label}: " + ", ".join(f"{w(int(ts.src[m]))}->{w(int(ts.dst[m]))}" for m in moves))
-    status = f"step {run.steps}  state {ts.to_json_state(run.system)}  system objective {run.outcome}"
+    status = f"step {run.steps}  state {game.state_json(run.system)}  system objective {run.outcome}"
     if view == "engineer":
         desc = game.artifact.extras.get("history_descriptions")
-        hist = desc[run.history] if desc else str(run.history)
+        hist = printable(str(desc[run.history])) if desc else str(run.history)
         status += f"  history [{hist}]  test objective {'realized' if game.test_accepting[run.history] else 'open'}"
     lines.append(status)
     return "\n".join(lines) + "\n"
