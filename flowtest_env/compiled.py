@@ -23,6 +23,7 @@ tests with the same array indexing.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -321,6 +322,28 @@ class CompiledPool:
         """``(test index, local configuration)`` of global configuration ``z``."""
         t = int(self.test_of[z])
         return t, int(z - self.offset[t])
+
+
+def potentials(pool: CompiledPool, games: list[TestGame], potential: Callable[[TestGame, RunState], float]) -> np.ndarray:
+    """``float64[n_z]``: ``potential(game, run)`` of every configuration of ``pool``.
+
+    Reward shaping's potential (:class:`~flowtest_env.wrappers.DistancePotential`) reads
+    the SUT's state and the history only, so it is a function of the configuration: it is
+    evaluated once per distinct ``(state, history)`` of each test, by the single env's
+    own function, and the vector env gathers it.
+    """
+    out = np.empty(pool.n_z, dtype=np.float64)
+    for t, (ct, game) in enumerate(zip(pool.tests, games, strict=True)):
+        nh = int(ct.history.max()) + 1
+        key = ct.system * nh + ct.history
+        uniq, inverse = np.unique(key, return_inverse=True)
+        values = np.array(
+            [potential(game, RunState(system=int(k // nh), history=int(k % nh), visited={int(k // nh)})) for k in uniq.tolist()],
+            dtype=np.float64,
+        )
+        o = int(pool.offset[t])
+        out[o : o + ct.n_z] = values[inverse.reshape(-1)]
+    return out
 
 
 def compile_pool(games: list[TestGame], encoders: list[Encoder]) -> CompiledPool:

@@ -13,30 +13,51 @@ The ``vector_entry_point`` of every FlowTest ID::
 Each test is compiled once into flat tables (:mod:`flowtest_env.compiled`); a step is
 then a handful of array gathers over the whole batch, the same for every env whatever
 test it plays. The trajectories are exactly those of a ``SyncVectorEnv`` of the single
-env (observations, rewards, terminated, truncated and infos: ``system_state``,
-``action_mask``, and ``verdict`` with its fields at the end of an episode), with
-Gymnasium 1.x's default ``AutoresetMode.NEXT_STEP``: the step after an episode ended
-resets that env (its action is ignored; reward 0, not terminated, not truncated, the
-reset's infos).
+env built with the same options and the same autoreset mode (observations, rewards,
+terminated, truncated and infos: ``system_state``, ``action_mask``, and ``verdict`` with
+its fields at the end of an episode).
+
+**Options.** Every option of the single env (:class:`~flowtest_env.config.EnvConfig`,
+checked by the same validator): ``max_steps``, ``obs_kind``, ``pad_to``, the reward
+weights, ``memory="visited"`` (the places each env's SUT has occupied, one bulk array
+update a step), ``shaping``/``shaping_gamma`` (the potential compiled into a
+per-configuration table), ``render_mode="rgb_array"``, ``view``, ``tile_size``;
+``setting="instantaneous"`` only (the accumulative observation depends on the states
+visited under the history, not on the configuration).
+
+**Autoreset modes** (``autoreset_mode=``, a :class:`gymnasium.vector.AutoresetMode` or its
+name, also through ``gym.make_vec(..., autoreset_mode=...)``), as Gymnasium's
+``SyncVectorEnv`` has them:
+
+* ``NEXT_STEP`` (default): the step after an episode ended resets that env (its action
+  is ignored; reward 0, not terminated, not truncated, the reset's infos);
+* ``SAME_STEP``: an env whose episode ends is reset in the same step; the observation is
+  the new episode's, the ended one's is in ``infos["final_obs"]`` (an object array,
+  ``None`` for the envs that did not end) and its infos (``verdict`` included) in
+  ``infos["final_info"]``;
+* ``DISABLED``: nothing is reset by ``step``; reset the envs that ended with
+  ``reset(options={"reset_mask": mask})`` (stepping one first raises ``ResetNeeded``).
+
+A ``reset(options={"reset_mask": mask})`` resets only the envs of ``mask`` in every mode
+(their infos only; the others keep their runs and observations).
 
 A batch may hold different tests of one pool: :class:`RandomGridVectorEnv` draws each
 episode's test as :class:`~flowtest_env.envs.RandomGridEnv` does (the counter-based
-draws of :mod:`flowtest_env.draws`, env ``i`` keyed ``seed + i`` like ``SyncVectorEnv``), and :class:`PoolVectorEnv`
-takes any list of tests, drawn the same way or fixed per env (``assignment="fixed"``:
-env ``i`` always plays test ``i % n_tests``). Tests with fewer actions or smaller
-observations than the pool's largest are padded: extra actions are invalid (refused,
-never in the mask), extra observation entries are zero.
+draws of :mod:`flowtest_env.draws`, env ``i`` keyed ``seed + i`` like ``SyncVectorEnv``), and
+:class:`PoolVectorEnv` takes any list of tests, drawn the same way or fixed per env
+(``assignment="fixed"``: env ``i`` always plays test ``i % n_tests``, so each test is
+played by the same envs, e.g. to score every test once). Tests with fewer actions or
+smaller observations than the pool's largest are padded: extra actions are invalid
+(refused, never in the mask), extra observation entries are zero.
 
 :class:`VectorActionMaskObservation` puts the batched mask into the observation, as
 :class:`~flowtest_env.wrappers.ActionMaskObservation` does for one env.
-
-Limits: the ``"instantaneous"`` setting only (the accumulative observation depends on
-the states visited, not on the configuration); ``AutoresetMode.NEXT_STEP`` only.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import os
+from collections.abc import Iterable, Sequence
 from typing import Any
 
 import gymnasium as gym
@@ -45,15 +66,17 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from .compiled import OUTCOMES, CompiledPool, compile_pool
+from .compiled import OUTCOMES, CompiledPool, compile_pool, potentials
+from .config import EnvConfig, split_options
 from .draws import draw_tests, key_of_seed
 from .encoding import make_encoder
-from .envs import default_max_steps
+from .envs import default_max_steps, random_grid_pool
 from .game import RunState, TestGame
-from .pools import random_grid_arguments
-from .random_grid import POOL_KINDS, WORLDS, random_pool
+from .random_grid import random_pool
 from .render import Renderer, make_renderer
 from .sources import game_for
+from .validation import one_of, positive_int
+from .wrappers import DistancePotential, shared_position_slice
 
 
 class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
@@ -62,16 +85,27 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
     Parameters
     ----------
     num_envs
-        Number of runs in the batch.
+        Number of runs in the batch (bounded by the memory the batch would need).
     games
-        The pool's tests.
+        The pool's tests: :class:`~flowtest_env.game.TestGame` objects or anything
+        :func:`~flowtest_env.sources.load_test` takes (a built-in name, a problem or
+        artifact file, a ``Problem``, ``SynthesizedTest`` or ``TestArtifact``, e.g. the
+        list :func:`~flowtest_env.pools.load_pool` returns).
     assignment
-        ``"random"``: each episode draws its test from the env's generator (as
+        ``"random"``: each episode draws its test (:mod:`flowtest_env.draws`, as
         :class:`~flowtest_env.envs.RandomGridEnv`); ``"fixed"``: env ``i`` plays test
-        ``i % len(games)``.
-    max_steps, obs_kind, render_mode, view, tile_size, step_cost, restricted_penalty,
-    goal_reward, violation_penalty
-        As for :class:`~flowtest_env.envs.FlowTestEnv`.
+        ``i % len(games)`` in every episode.
+    autoreset_mode
+        ``NEXT_STEP`` (default), ``SAME_STEP`` or ``DISABLED`` (module docstring).
+    config, options
+        The env options: an :class:`~flowtest_env.config.EnvConfig`, or its fields as
+        keyword arguments (``max_steps``, ``obs_kind``, ``memory``, ``shaping``, ...;
+        ``max_steps`` defaults to the largest default budget of the pool's tests).
+
+    Example::
+
+        >>> from flowtest_env.pools import load_pool
+        >>> envs = PoolVectorEnv(64, load_pool("reachability1/5x5", count=4), memory="visited")  # doctest: +SKIP
     """
 
     metadata: dict[str, Any] = {"render_modes": ["rgb_array"], "autoreset_mode": AutoresetMode.NEXT_STEP}
@@ -79,45 +113,59 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
     def __init__(
         self,
         num_envs: int,
-        games: Sequence[TestGame],
+        games: Any,
         assignment: str = "random",
-        max_steps: int = 100,
-        obs_kind: str = "flat",
-        render_mode: str | None = None,
-        view: str = "system",
-        tile_size: int = 32,
-        step_cost: float = 0.01,
-        restricted_penalty: float = 0.05,
-        goal_reward: float = 1.0,
-        violation_penalty: float = 1.0,
+        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
+        config: EnvConfig | None = None,
+        **options: Any,
     ) -> None:
-        if int(num_envs) < 1:
-            raise ValueError(f"num_envs must be at least 1, not {num_envs}")
-        if assignment not in ("random", "fixed"):
-            raise ValueError(f"unknown assignment {assignment!r}; expected 'random' or 'fixed'")
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"unknown render_mode {render_mode!r}; expected one of {self.metadata['render_modes']}")
-        if view not in ("system", "engineer"):
-            raise ValueError(f"unknown view {view!r}; expected 'system' or 'engineer'")
-        if int(max_steps) < 1:
-            raise ValueError(f"max_steps must be at least 1, not {max_steps}")
-        self.games = list(games)
-        self.pool: CompiledPool = compile_pool(self.games, [make_encoder(g, obs_kind) for g in self.games])
+        num_envs = positive_int("num_envs", num_envs)
+        one_of("assignment", assignment, ("random", "fixed"))
+        self.autoreset_mode = autoreset_mode_of(autoreset_mode)
+        if config is None:
+            config, rest = split_options(options)
+            if rest:
+                raise TypeError(f"{type(self).__name__} got unexpected keyword arguments: {', '.join(sorted(rest))}")
+        elif options:
+            raise TypeError("pass the env options either as config= or as keyword arguments, not both")
+        one_of("render_mode", config.render_mode, (None, *self.metadata["render_modes"]))
+        if config.setting == "accumulative":
+            raise ValueError(
+                "the vectorized env supports setting='instantaneous' only, not 'accumulative' "
+                "(the accumulative observation depends on the states visited under the history)"
+            )
+        self.games: list[TestGame] = pool_games(games, config.setting)
+        config = config.with_max_steps(max(default_max_steps(g) for g in self.games))
+        assert config.max_steps is not None
+        self.config = config
+        encoders = [make_encoder(g, config.obs_kind, config.pad_to) for g in self.games]
+        self._mem: slice | None = shared_position_slice(encoders) if config.memory == "visited" else None
+        self.pool: CompiledPool = compile_pool(self.games, encoders)
         p = self.pool
-        self.num_envs = int(num_envs)
+        self.metadata = {**type(self).metadata, "autoreset_mode": self.autoreset_mode}
+        self.num_envs = num_envs
         self.assignment = assignment
-        self.max_steps = int(max_steps)
-        self.obs_kind = obs_kind
-        self.render_mode = render_mode
-        self.view = view
-        self.tile_size = int(tile_size)
-        dtype = p.obs.dtype
-        high = 1.0 if dtype == np.float32 else 255
-        self.single_observation_space = spaces.Box(0, high, shape=p.obs_shape, dtype=dtype)
+        self.max_steps = config.max_steps
+        self.obs_kind = config.obs_kind
+        self.render_mode = config.render_mode
+        self.view = config.view
+        self.tile_size = config.tile_size
+        mem_size = 0 if self._mem is None else self._mem.stop - self._mem.start
+        check_batch_memory(num_envs, p, mem_size)
+        if self._mem is not None:
+            shape = (int(np.prod(p.obs_shape)) + mem_size,)
+            self.single_observation_space = spaces.Box(0.0, 1.0, shape=shape, dtype=np.float32)
+        else:
+            high = 1.0 if p.obs.dtype == np.float32 else 255
+            self.single_observation_space = spaces.Box(0, high, shape=p.obs_shape, dtype=p.obs.dtype)
         self.single_action_space = spaces.Discrete(p.n_actions)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
-        self._reward = p.rewards(step_cost, restricted_penalty, goal_reward, violation_penalty)
+        self._reward = p.rewards(config.step_cost, config.restricted_penalty, config.goal_reward, config.violation_penalty)
+        self._phi_table: np.ndarray | None = None
+        if config.shaping > 0:
+            self._phi_table = potentials(p, self.games, DistancePotential(config.shaping))
+        self._gamma = config.shaping_gamma
         self._outcome_names = np.array(OUTCOMES, dtype=object)
         self._all = np.ones(self.num_envs, dtype=bool)
         self._z = np.zeros(self.num_envs, dtype=np.int64)
@@ -125,14 +173,16 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         self._steps = np.zeros(self.num_envs, dtype=np.int64)
         self._restrictions = np.zeros(self.num_envs, dtype=np.int64)
         self._blocked = np.zeros(self.num_envs, dtype=np.int64)
-        self._prev_done = np.zeros(self.num_envs, dtype=bool)
+        self._phi = np.zeros(self.num_envs, dtype=np.float64)
+        self._seen = np.zeros((self.num_envs, mem_size), dtype=np.float32) if self._mem is not None else None
+        self._done = np.zeros(self.num_envs, dtype=bool)  # episodes ended and not reset yet
         self._keys = np.zeros(self.num_envs, dtype=np.uint64)  # the test draws' keys (flowtest_env.draws)
         self._episode = np.zeros(self.num_envs, dtype=np.int64)  # each env's episodes since its key
         self._keyed = False
         self._started = False
         self._renderers: dict[int, Renderer] = {}
 
-    # ------------------------------------------------------------------ tests per episode
+    # ------------------------------------------------------------------ episodes
 
     def _choose_tests(self, envs: np.ndarray) -> np.ndarray:
         """The tests of the current episodes of ``envs`` (their keys and episode counters:
@@ -142,109 +192,192 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         return draw_tests(self._keys[envs], self._episode[envs], len(self.games))
 
     def _start(self, envs: np.ndarray) -> None:
+        """Start the current episodes of ``envs`` (their counters already advanced)."""
         tests = self._choose_tests(envs)
         self._test[envs] = tests
-        self._z[envs] = self.pool.initial[tests]
+        z = self.pool.initial[tests]
+        self._z[envs] = z
         self._steps[envs] = 0
         self._restrictions[envs] = 0
         self._blocked[envs] = 0
+        if self._phi_table is not None:
+            self._phi[envs] = self._phi_table[z]
+        self._done[envs] = False
+
+    def _observe(self, fresh: np.ndarray | None = None) -> np.ndarray:
+        """The batch observation now (``fresh``: envs whose episode just started, their
+        memory restarts)."""
+        base: np.ndarray = np.take(self.pool.obs, self.pool.obs_row[self._z], axis=0)  # faster than fancy indexing
+        if self._seen is None:
+            return base
+        if fresh is not None:
+            self._seen[fresh] = 0.0
+        np.maximum(self._seen, base[:, self._mem], out=self._seen)
+        return np.concatenate([base, self._seen], axis=1)
+
+    def _observe_envs(self, envs: np.ndarray) -> np.ndarray:
+        """The observations of ``envs`` alone, their episodes just started."""
+        base: np.ndarray = np.take(self.pool.obs, self.pool.obs_row[self._z[envs]], axis=0)
+        if self._seen is None:
+            return base
+        self._seen[envs] = base[:, self._mem]
+        return np.concatenate([base, self._seen[envs]], axis=1)
 
     # ------------------------------------------------------------------ API
 
     def reset(
         self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
-        """Start a run in every env. ``seed``: an int seeds env ``i`` with ``seed + i``
-        (as ``SyncVectorEnv``), a list one seed per env, ``None`` fresh entropy."""
+        """Start a run in every env, or in the envs of ``options["reset_mask"]`` (a
+        ``bool[num_envs]`` array with at least one ``True``) only. ``seed``: an int seeds
+        env ``i`` with ``seed + i`` (as ``SyncVectorEnv``), a list one seed per env
+        (``None``: that env's next episode), ``None`` every env's next episode.
+
+        Raises
+        ------
+        ValueError, TypeError
+            On a seed that is not a non-negative integer, a list of the wrong length, or a
+            reset mask that is not a ``bool[num_envs]`` array with a ``True``.
+        """
+        seeds = self._seeds(seed)
         super().reset(seed=seed if isinstance(seed, int) else None)
-        if seed is None or isinstance(seed, int):
-            seeds: list[int | None] = [None if seed is None else seed + i for i in range(self.num_envs)]
-        else:
-            seeds = list(seed)
-            if len(seeds) != self.num_envs:
-                raise ValueError(f"{len(seeds)} seeds for {self.num_envs} envs")
+        mask = reset_mask_of((options or {}).get("reset_mask"), self.num_envs)
+        envs = np.arange(self.num_envs) if mask is None else np.flatnonzero(mask)
         if not self._keyed:  # never seeded: keys drawn once, as each single env would
             self._keys[:] = self.np_random.integers(2**63, size=self.num_envs).astype(np.uint64)
             self._episode[:] = -1
             self._keyed = True
-        given = np.array([s is not None for s in seeds], dtype=bool)
-        self._episode += 1
+        given = np.array([seeds[i] is not None for i in envs.tolist()], dtype=bool)
+        self._episode[envs[~given]] += 1
         if given.any():
-            self._keys[given] = [key_of_seed(s) for s in seeds if s is not None]
-            self._episode[given] = 0
-        envs = np.arange(self.num_envs)
+            self._keys[envs[given]] = [key_of_seed(s) for s in (seeds[i] for i in envs[given].tolist()) if s is not None]
+            self._episode[envs[given]] = 0
         self._start(envs)
-        self._prev_done[:] = False
         self._started = True
-        return self._observe(self._z), self._infos(self._z)
+        obs = self._observe(envs)
+        infos = self._infos(self._z, mask)
+        return obs, infos
+
+    def _seeds(self, seed: Any) -> list[int | None]:
+        if seed is None:
+            return [None] * self.num_envs
+        if isinstance(seed, (int, np.integer)) and not isinstance(seed, (bool, np.bool_)):
+            if seed < 0:
+                raise ValueError(f"seed must be a non-negative integer, not {seed!r}")
+            return [int(seed) + i for i in range(self.num_envs)]
+        if isinstance(seed, (list, tuple)):
+            if len(seed) != self.num_envs:
+                raise ValueError(f"{len(seed)} seeds for {self.num_envs} envs")
+            out: list[int | None] = []
+            for s in seed:
+                if s is not None and (isinstance(s, (bool, np.bool_)) or not isinstance(s, (int, np.integer)) or s < 0):
+                    raise ValueError(f"a seed must be a non-negative integer or None, not {s!r}")
+                out.append(None if s is None else int(s))
+            return out
+        raise ValueError(f"seed must be an integer, a list of one seed per env or None, not {seed!r}")
 
     def step(self, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
-        """Every env takes its action (an env whose episode ended at the last step is
-        reset instead and its action ignored).
+        """Every env takes its action (how an env whose episode ended is reset depends on
+        the autoreset mode: module docstring).
 
         Raises
         ------
         gymnasium.error.ResetNeeded
-            Before ``reset()``.
+            Before ``reset()``, or in ``DISABLED`` mode for an env whose episode ended
+            and that was not reset.
         gymnasium.error.InvalidAction
-            If ``actions`` is not ``num_envs`` action indices (a masked action is *not*
-            an error: it is refused, as in the single env).
+            If ``actions`` is not ``num_envs`` integer action indices (booleans and floats
+            are refused, as the single env refuses them; a masked action is *not* an
+            error: it is refused, as in the single env).
         """
         if not self._started:
             raise gym.error.ResetNeeded("call reset() before step()")
+        mode = self.autoreset_mode
+        if mode == AutoresetMode.DISABLED and self._done.any():
+            ended = np.flatnonzero(self._done)[:8].tolist()
+            raise gym.error.ResetNeeded(
+                f"envs {ended} ended their episodes; with autoreset_mode DISABLED reset them first: "
+                "reset(options={'reset_mask': mask})"
+            )
         a = self._check(actions)
+        p = self.pool
         z = self._z
-        flat = z * self.pool.n_actions + a
-        z2 = self.pool.next_z[flat]
+        flat = z * p.n_actions + a
+        z2 = p.next_z[flat]
         reward = self._reward[flat]
         self._steps += 1
-        self._restrictions += self.pool.restricted[z]
-        self._blocked += self.pool.refused[flat]
-        terminated = self.pool.outcome[z2] != 0
+        self._restrictions += p.restricted[z]
+        self._blocked += p.refused[flat]
+        terminated = p.outcome[z2] != 0
         truncated = ~terminated & (self._steps >= self.max_steps)
-        if self._prev_done.any():
-            envs = np.flatnonzero(self._prev_done)
-            self._episode[envs] += 1
-            self._start(envs)
-            z2[envs] = self._z[envs]
-            reward[envs] = 0.0
-            terminated[envs] = False
-            truncated[envs] = False
+        if self._phi_table is not None:
+            phi = np.where(terminated, 0.0, self._phi_table[z2])
+            reward += self._gamma * phi - self._phi
+            self._phi = phi
         self._z = z2
+        fresh: np.ndarray | None = None
+        if mode == AutoresetMode.NEXT_STEP and self._done.any():
+            fresh = np.flatnonzero(self._done)
+            self._episode[fresh] += 1
+            self._start(fresh)
+            reward[fresh] = 0.0
+            terminated[fresh] = False
+            truncated[fresh] = False
         ended = terminated | truncated
-        self._prev_done = ended
-        infos = self._infos(z2)
+        obs = self._observe(fresh)
+        if mode == AutoresetMode.SAME_STEP:
+            if not ended.any():
+                return obs, reward, terminated, truncated, self._infos(self._z)
+            idx = np.flatnonzero(ended)
+            final_obs = np.full(self.num_envs, None, dtype=object)
+            for i in idx.tolist():  # Gymnasium's layout: an object array of single observations
+                final_obs[i] = obs[i].copy()
+            final_info = self._infos(self._z, ended)
+            final_info["verdict"], final_info["_verdict"] = self._verdict(self._z, ended), ended.copy()
+            self._episode[idx] += 1
+            self._start(idx)
+            obs[idx] = self._observe_envs(idx)
+            infos = self._infos(self._z)
+            infos["final_obs"], infos["_final_obs"] = final_obs, ended.copy()
+            infos["final_info"], infos["_final_info"] = final_info, ended.copy()
+            return obs, reward, terminated, truncated, infos
+        self._done = ended
+        infos = self._infos(self._z)
         if ended.any():
-            infos["verdict"], infos["_verdict"] = self._verdict(z2, ended), ended
-        return self._observe(z2), reward, terminated, truncated, infos
+            infos["verdict"], infos["_verdict"] = self._verdict(self._z, ended), ended.copy()
+        return obs, reward, terminated, truncated, infos
 
     def _check(self, actions: Any) -> np.ndarray:
         a = np.asarray(actions)
         if a.shape != (self.num_envs,):
             raise gym.error.InvalidAction(f"expected {self.num_envs} actions, got an array of shape {a.shape}")
-        if a.dtype.kind in "iub":
-            a = a.astype(np.int64, copy=False)
-        elif a.dtype.kind == "f" and bool(np.all(np.isfinite(a) & (a == np.floor(a)))):
-            a = a.astype(np.int64)
-        else:
-            raise gym.error.InvalidAction(f"actions must be integers, not {a.dtype} values")
+        if a.dtype.kind not in "iu":
+            raise gym.error.InvalidAction(
+                f"actions must be integers of {self.single_action_space}, not {a.dtype} values (booleans and floats are refused)"
+            )
+        a = a.astype(np.int64, copy=False)
         if a.size and (int(a.min()) < 0 or int(a.max()) >= self.pool.n_actions):
             bad = int(np.flatnonzero((a < 0) | (a >= self.pool.n_actions))[0])
             raise gym.error.InvalidAction(f"env {bad}: action {int(a[bad])} is outside {self.single_action_space}")
         return a
 
-    def _observe(self, z: np.ndarray) -> np.ndarray:
-        obs: np.ndarray = np.take(self.pool.obs, self.pool.obs_row[z], axis=0)  # faster than fancy indexing
-        return obs
-
-    def _infos(self, z: np.ndarray) -> dict[str, Any]:
+    def _infos(self, z: np.ndarray, only: np.ndarray | None = None) -> dict[str, Any]:
         """``system_state`` (an object array of the single env's values, gathered from one
-        table: read them, do not change them in place) and ``action_mask``."""
+        table: read them, do not change them in place) and ``action_mask``; with ``only``,
+        those of the envs of ``only`` (``None``/zeros elsewhere, as ``SyncVectorEnv`` lays
+        out the infos of some envs)."""
+        if only is None:
+            return {
+                "system_state": self.pool.system_state[z],
+                "_system_state": self._all.copy(),
+                "action_mask": np.take(self.pool.mask, z, axis=0),
+                "_action_mask": self._all.copy(),
+            }
         return {
-            "system_state": self.pool.system_state[z],
-            "_system_state": self._all.copy(),
-            "action_mask": np.take(self.pool.mask, z, axis=0),
-            "_action_mask": self._all.copy(),
+            "system_state": np.where(only, self.pool.system_state[z], None),
+            "_system_state": only.copy(),
+            "action_mask": np.where(only[:, None], np.take(self.pool.mask, z, axis=0), np.int8(0)),
+            "_action_mask": only.copy(),
         }
 
     def _verdict(self, z: np.ndarray, ended: np.ndarray) -> dict[str, Any]:
@@ -318,31 +451,43 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
 class FlowTestVectorEnv(PoolVectorEnv):
     """The vector entry point of ``FlowTest-v0`` and ``FlowTest-<Name>-v0``: ``num_envs``
     runs of one test (``test``: anything :func:`flowtest_env.sources.load_test` takes;
-    ``problem`` is its older name); the arguments are those of
-    :class:`~flowtest_env.envs.FlowTestEnv`."""
+    ``problem`` is its older name); the options are those of
+    :class:`~flowtest_env.envs.FlowTestEnv` (:class:`~flowtest_env.config.EnvConfig`),
+    plus ``autoreset_mode``.
+
+    Example::
+
+        >>> import gymnasium as gym
+        >>> envs = gym.make_vec("FlowTest-Maze2-v0", num_envs=8, vectorization_mode="vector_entry_point",
+        ...                     autoreset_mode="SAME_STEP", memory="visited", shaping=10.0)
+        >>> envs.autoreset_mode.name
+        'SAME_STEP'
+    """
 
     def __init__(
         self,
         num_envs: int = 1,
         test: Any = "maze2",
-        setting: str | None = None,
-        max_steps: int | None = None,
-        obs_kind: str = "flat",
+        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         problem: Any = None,
-        **kwargs: Any,
+        **options: Any,
     ) -> None:
         if problem is not None:
             test = problem
-        game = game_for(test, setting)
-        steps = max_steps if max_steps is not None else default_max_steps(game)
-        super().__init__(num_envs, [game], max_steps=steps, obs_kind=obs_kind, **kwargs)
+        config, rest = split_options(options)
+        if rest:
+            raise TypeError(f"{type(self).__name__} got unexpected keyword arguments: {', '.join(sorted(rest))}")
+        positive_int("num_envs", num_envs)
+        game = game_for(test, config.setting)
+        super().__init__(num_envs, [game], autoreset_mode=autoreset_mode, config=config.with_max_steps(default_max_steps(game)))
         self.problem = game.artifact.name
 
 
 class RandomGridVectorEnv(PoolVectorEnv):
     """The vector entry point of ``FlowTest-RandomGrid-v0``: the arguments of
-    :class:`~flowtest_env.envs.RandomGridEnv`; each episode draws its test from the
-    pool exactly as the single env does."""
+    :class:`~flowtest_env.envs.RandomGridEnv` (checked by the same functions), plus
+    ``autoreset_mode``; each episode draws its test from the pool exactly as the single
+    env does."""
 
     def __init__(
         self,
@@ -352,27 +497,118 @@ class RandomGridVectorEnv(PoolVectorEnv):
         n: int | None = None,
         seeds: Sequence[int] = tuple(range(8)),
         kind: str = "reactive",
-        setting: str | None = None,
-        max_steps: int | None = None,
-        obs_kind: str = "flat",
         pool: str | None = None,
         split: str = "train",
         count: int = 8,
         world: str = "empty",
-        **kwargs: Any,
+        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
+        **options: Any,
     ) -> None:
-        size, family, n, seeds, kind, world = random_grid_arguments(pool, split, count, size, family, n, tuple(seeds), kind, world)
-        if kind not in POOL_KINDS:
-            raise ValueError(f"unknown kind {kind!r}; expected one of {', '.join(map(repr, POOL_KINDS))}")
-        if world not in WORLDS:
-            raise ValueError(f"unknown world {world!r}; expected one of {', '.join(map(repr, WORLDS))}")
-        if not seeds:
-            raise ValueError("the seed pool is empty")
+        config, rest = split_options(options)
+        if rest:
+            raise TypeError(f"{type(self).__name__} got unexpected keyword arguments: {', '.join(sorted(rest))}")
+        positive_int("num_envs", num_envs)
+        size, family, n, seeds, kind, world = random_grid_pool(size, family, n, seeds, kind, pool, split, count, world)
         tests = random_pool(size, family, n, seeds, kind, world=world)
-        games = [TestGame(a, setting) for a in tests]
-        steps = max_steps if max_steps is not None else 4 * size * size
-        super().__init__(num_envs, games, max_steps=steps, obs_kind=obs_kind, **kwargs)
+        games = [TestGame(a, config.setting) for a in tests]
+        super().__init__(num_envs, games, autoreset_mode=autoreset_mode, config=config.with_max_steps(4 * size * size))
         self.problem = f"random-{size}x{size}-{family}{n}" + ("" if world == "empty" else f"-{world}")
+
+
+def autoreset_mode_of(mode: Any) -> AutoresetMode:
+    """``mode`` as an :class:`~gymnasium.vector.AutoresetMode`: the enum, its value
+    (``"NextStep"``) or its name (``"NEXT_STEP"``, any case).
+
+    Raises
+    ------
+    ValueError
+        On anything else.
+    """
+    if isinstance(mode, AutoresetMode):
+        return mode
+    if isinstance(mode, str):
+        for m in AutoresetMode:
+            if mode in (m.value, m.name) or mode.upper() == m.name:
+                return m
+    names = ", ".join(repr(m.name) for m in AutoresetMode)
+    raise ValueError(f"unknown autoreset_mode {mode!r}; expected a gymnasium.vector.AutoresetMode or one of {names}")
+
+
+def reset_mask_of(mask: Any, num_envs: int) -> np.ndarray | None:
+    """The ``reset_mask`` option checked as ``SyncVectorEnv`` checks it (``None``: none)."""
+    if mask is None:
+        return None
+    if not isinstance(mask, np.ndarray):
+        raise TypeError(f"options['reset_mask'] must be a numpy array, got {type(mask).__name__}")
+    if mask.shape != (num_envs,):
+        raise ValueError(f"options['reset_mask'] must have shape ({num_envs},), got {mask.shape}")
+    if mask.dtype != np.bool_:
+        raise TypeError(f"options['reset_mask'] must have dtype bool, got {mask.dtype}")
+    if not mask.any():
+        raise ValueError("options['reset_mask'] must hold at least one True")
+    return mask.copy()
+
+
+def pool_games(games: Any, setting: str | None) -> list[TestGame]:
+    """The games of a pool given as games or as anything :func:`~flowtest_env.sources.load_test`
+    takes (one test, or a list of them).
+
+    Raises
+    ------
+    ValueError
+        On an empty pool.
+    """
+    if isinstance(games, (str, os.PathLike, TestGame)) or not isinstance(games, Iterable):
+        games = [games]
+    out = [g if isinstance(g, TestGame) else game_for(g, setting) for g in games]
+    if not out:
+        raise ValueError("the pool holds no test")
+    return out
+
+
+def available_memory() -> int | None:
+    """Bytes of memory available to a new allocation (Linux ``MemAvailable``, else the
+    physical memory), ``None`` when the system does not say."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return int(os.sysconf("SC_PHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
+    except (AttributeError, ValueError, OSError):
+        return None
+
+
+def batch_bytes(num_envs: int, pool: CompiledPool, memory_size: int = 0) -> int:
+    """An estimate of the bytes a batch of ``num_envs`` runs of ``pool`` needs: the
+    tables, and per env a step's observation (gathered, with the memory, returned), the
+    memory, the masks and infos and the per-env counters."""
+    obs_bytes = (int(np.prod(pool.obs_shape)) * pool.obs.itemsize) + 4 * memory_size
+    per_env = 3 * obs_bytes + 4 * memory_size + 4 * pool.n_actions + 256
+    names = ("next_z", "refused", "restricted", "outcome", "test_realized", "mask", "obs_row", "obs", "system_state")
+    tables = sum(int(getattr(pool, f).nbytes) for f in names)
+    return tables + 2 * pool.next_z.size * 8 + num_envs * per_env
+
+
+def check_batch_memory(num_envs: int, pool: CompiledPool, memory_size: int = 0) -> None:
+    """Refuse a batch that would need more memory than the machine has available.
+
+    Raises
+    ------
+    ValueError
+        Saying how much memory ``num_envs`` runs would need.
+    """
+    need = batch_bytes(num_envs, pool, memory_size)
+    have = available_memory()
+    if have is not None and need > have:
+        per_env = (need - batch_bytes(0, pool, memory_size)) / num_envs
+        raise ValueError(
+            f"num_envs={num_envs} would need about {need / 2**30:.1f} GiB of memory ({per_env:.0f} bytes per env "
+            f"for its observations and infos, plus the test tables); {have / 2**30:.1f} GiB are available. Use fewer envs."
+        )
 
 
 class VectorActionMaskObservation(gym.vector.VectorWrapper):
@@ -403,4 +639,7 @@ class VectorActionMaskObservation(gym.vector.VectorWrapper):
         return {"observation": obs, "action_mask": infos["action_mask"]}, reward, terminated, truncated, infos
 
 
-__all__ = ["PoolVectorEnv", "FlowTestVectorEnv", "RandomGridVectorEnv", "VectorActionMaskObservation"]
+__all__ = [
+    "PoolVectorEnv", "FlowTestVectorEnv", "RandomGridVectorEnv", "VectorActionMaskObservation", "autoreset_mode_of", "batch_bytes",
+    "check_batch_memory",
+]

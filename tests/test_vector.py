@@ -217,7 +217,13 @@ def test_invalid_actions_are_rejected_like_the_single_env() -> None:
     single.reset(seed=0)
     with pytest.raises(gym.error.InvalidAction):
         single.unwrapped.step(9)
-    vec.step(np.array([4.0, 4.0, 4.0]))  # integral floats are integers, as int() takes them
+    for bad in (np.array([4.0, 4.0, 4.0]), np.array([True, False, True])):  # refused as the single env refuses 1.0 and True
+        with pytest.raises(gym.error.InvalidAction):
+            vec.step(bad)
+    for bad_one in (1.0, True):
+        with pytest.raises(gym.error.InvalidAction):
+            single.unwrapped.step(bad_one)
+    vec.step([4, 4, 4])  # a list of Python integers is integers
 
 
 def test_bad_arguments_raise_clear_errors() -> None:
