@@ -35,7 +35,24 @@ restricts nothing, the agent stays, the system stays) and costs the actor
 ``Dict(observation=..., action_mask=int8[n])`` per agent. The system sees what the
 single-agent env shows (``obs_kind`` ``"flat"`` or ``"grid"``), with the restrictions the
 tester chose this step. The tester sees everything: one-hots of the system's state,
-the history and the test agent's state.
+the history and the test agent's state (and of the synthesized agent's strategy memory,
+where that strategy has more than one memory value), so the synthesized test is a
+function of the tester's observation (:class:`SynthesizedTester`).
+
+## Options for RL libraries
+
+* ``obs_key``, ``mask_key``: the names of the two Dict entries (``"observation"`` and
+  ``"action_mask"`` by default, PettingZoo's classic envs, TorchRL and Tianshou;
+  RLlib's masking modules read ``obs_key="observations"``).
+* ``info_kind="numeric"``: every agent's infos hold the same numeric keys at every
+  reset and step (``system_state``: the state index; the running verdict as numbers:
+  ``system_objective`` 0 open / 1 met / 2 violated, ``test_objective_realized`` 0/1,
+  ``restrictions``, ``blocked_attempts``, ``steps``), which libraries that stack infos
+  into tensors need (TorchRL's ``PettingZooWrapper``). ``"full"`` (default): the
+  single-agent env's infos, ``verdict`` a dict with strings at the end.
+* ``same_spaces=True``: both agents get one observation space (flat ``float32``, padded
+  with zeros to the longer one) and one action space (``Discrete`` of the larger; the
+  padding actions are never in the mask), as Tianshou's ``PettingZooEnv`` requires.
 
 ## Rewards
 
@@ -74,7 +91,7 @@ AEC version.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import gymnasium
@@ -85,12 +102,18 @@ from pettingzoo.utils import wrappers
 
 from .encoding import make_encoder
 from .envs import default_max_steps
-from .game import MET, VIOLATED, RunState, TestGame
+from .game import MET, OPEN, VIOLATED, RunState, TestGame
 from .render import Renderer, ansi, make_renderer
 from .sources import TestLike, game_for
 from .validation import action_index, finite_float, one_of, positive_int
 
 TESTER, SYSTEM = "tester_0", "system_0"
+INFO_KINDS = ("full", "numeric")
+"""``info_kind`` values: the single-agent env's infos, or numbers only (see the module docstring)."""
+OUTCOME_CODES: dict[str, int] = {OPEN: 0, MET: 1, VIOLATED: 2}
+"""``system_objective`` in numeric infos: 0 open, 1 met, 2 violated."""
+NUMERIC_INFO_KEYS = ("system_state", "system_objective", "test_objective_realized", "restrictions", "blocked_attempts", "steps")
+"""The keys of every agent's numeric infos, at every reset and step."""
 
 
 def env(**kwargs: Any) -> AECEnv:
@@ -128,6 +151,24 @@ class raw_env(AECEnv):  # type: ignore[misc]  # noqa: N801 - PettingZoo's module
         ``"rgb_array"`` or ``"ansi"``.
     view
         ``"engineer"`` (default: shows the hidden test cells) or ``"system"``.
+    obs_key, mask_key
+        The names of the observation's two Dict entries (``"observation"``,
+        ``"action_mask"``; RLlib's masking modules read ``"observations"``).
+    info_kind
+        ``"full"`` (the single-agent env's infos) or ``"numeric"`` (the same numeric keys
+        at every step, :data:`NUMERIC_INFO_KEYS`; for TorchRL).
+    same_spaces
+        Give both agents one padded observation space and one action space (Tianshou).
+
+    Example
+    -------
+    >>> from flowtest_env import multiagent
+    >>> e = multiagent.raw_env(test="small-reactive", obs_key="observations", info_kind="numeric")
+    >>> e.reset()
+    >>> sorted(e.observe("system_0"))
+    ['action_mask', 'observations']
+    >>> e.infos["system_0"]["system_objective"]
+    0
     """
 
     metadata: dict[str, Any] = {
@@ -149,11 +190,24 @@ class raw_env(AECEnv):  # type: ignore[misc]  # noqa: N801 - PettingZoo's module
         step_cost: float = 0.01,
         restricted_penalty: float = 0.05,
         problem: TestLike | None = None,
+        obs_key: str = "observation",
+        mask_key: str = "action_mask",
+        info_kind: str = "full",
+        same_spaces: bool = False,
     ) -> None:
         super().__init__()
         one_of("render_mode", render_mode, (None, *self.metadata["render_modes"]))
         one_of("setting", setting, (None, "instantaneous", "accumulative"))
         one_of("view", view, ("system", "engineer"))
+        one_of("info_kind", info_kind, INFO_KINDS)
+        for name, key in (("obs_key", obs_key), ("mask_key", mask_key)):
+            if not isinstance(key, str) or not key:
+                raise ValueError(f"{name} must be a non-empty string, not {key!r}")
+        if obs_key == mask_key:
+            raise ValueError(f"obs_key and mask_key must differ, both are {obs_key!r}")
+        if not isinstance(same_spaces, bool):
+            raise ValueError(f"same_spaces must be True or False, not {same_spaces!r}")
+        self.obs_key, self.mask_key, self.info_kind, self.same_spaces = obs_key, mask_key, info_kind, same_spaces
         if problem is not None:  # the older name of `test`
             test = problem
         game = game_for(test, setting, external_tester=True)
@@ -171,17 +225,25 @@ class raw_env(AECEnv):  # type: ignore[misc]  # noqa: N801 - PettingZoo's module
         n_test = game.n_agent_states if game.has_agent else 1 << game.n_slots
         self._n_hist = int(game.artifact.histories.n_states)
         self._n_states = game.ts.n_states
-        self._n_tester_obs = self._n_states + self._n_hist + game.n_agent_states
+        controller = game.agent_controller
+        # the strategy's memory is shown only where it has more than one value (built-ins: one)
+        self._n_memory = controller.n_memory if controller is not None and controller.n_memory > 1 else 0
+        self._n_tester_obs = self._n_states + self._n_hist + game.n_agent_states + self._n_memory
         tester_obs = spaces.Box(0.0, 1.0, shape=(self._n_tester_obs,), dtype=np.float32)
-        self._action_spaces: dict[str, spaces.Discrete] = {
-            TESTER: spaces.Discrete(n_test),
-            SYSTEM: spaces.Discrete(game.n_actions),
-        }
+        system_obs = self.encoder.space
+        n_by_agent = {TESTER: n_test, SYSTEM: game.n_actions}
+        obs_by_agent: dict[str, spaces.Box] = {TESTER: tester_obs, SYSTEM: system_obs}
+        if same_spaces:
+            size = max(int(np.prod(b.shape)) for b in obs_by_agent.values())
+            high = max(float(np.max(b.high)) for b in obs_by_agent.values())
+            shared = spaces.Box(0.0, high, shape=(size,), dtype=np.float32)
+            self._padded_size = size
+            obs_by_agent = {TESTER: shared, SYSTEM: shared}
+            n_by_agent = {a: max(n_by_agent.values()) for a in n_by_agent}
+        self._action_spaces: dict[str, spaces.Discrete] = {a: spaces.Discrete(n) for a, n in n_by_agent.items()}
         self._observation_spaces: dict[str, spaces.Dict] = {
-            TESTER: spaces.Dict({"observation": tester_obs, "action_mask": spaces.Box(0, 1, (n_test,), dtype=np.int8)}),
-            SYSTEM: spaces.Dict(
-                {"observation": self.encoder.space, "action_mask": spaces.Box(0, 1, (game.n_actions,), dtype=np.int8)}
-            ),
+            a: spaces.Dict({obs_key: obs_by_agent[a], mask_key: spaces.Box(0, 1, (n_by_agent[a],), dtype=np.int8)})
+            for a in (TESTER, SYSTEM)
         }
         if not game.has_agent:
             bits = np.arange(n_test)
@@ -254,17 +316,50 @@ class raw_env(AECEnv):  # type: ignore[misc]  # noqa: N801 - PettingZoo's module
 
     # ------------------------------------------------------------------ AEC API
 
-    def observe(self, agent: str) -> dict[str, np.ndarray]:
-        """``{"observation", "action_mask"}`` of ``agent`` now (see the module docstring)."""
-        if agent == SYSTEM:
-            return {"observation": self.encoder.encode(self.run), "action_mask": self.system_mask()}
+    def tester_view(self) -> np.ndarray:
+        """``float32[n]``: the tester's observation now, unpadded: one-hots of the system's
+        state, the history, the test agent's state (and the strategy memory, where shown)."""
         run = self.run
         obs = np.zeros(self._n_tester_obs, dtype=np.float32)
         obs[run.system] = 1.0
         obs[self._n_states + run.history] = 1.0
         if run.agent >= 0:
             obs[self._n_states + self._n_hist + run.agent] = 1.0
-        return {"observation": obs, "action_mask": self.tester_mask()}
+        if self._n_memory and run.memory >= 0:
+            obs[self._n_states + self._n_hist + self.game.n_agent_states + run.memory] = 1.0
+        return obs
+
+    def observe(self, agent: str) -> dict[str, np.ndarray]:
+        """``{obs_key, mask_key}`` of ``agent`` now (see the module docstring)."""
+        if agent == SYSTEM:
+            obs, mask = self.encoder.encode(self.run), self.system_mask()
+        else:
+            obs, mask = self.tester_view(), self.tester_mask()
+        if self.same_spaces:
+            padded = np.zeros(self._padded_size, dtype=np.float32)
+            flat = obs.reshape(-1)
+            padded[: flat.size] = flat
+            full = np.zeros(int(self._action_spaces[agent].n), dtype=np.int8)
+            full[: mask.size] = mask
+            obs, mask = padded, full
+        return {self.obs_key: obs, self.mask_key: mask}
+
+    def _info(self, agent: str) -> dict[str, Any]:
+        """``agent``'s infos now (``info_kind``: see the module docstring)."""
+        g, run = self.game, self.run
+        if self.info_kind == "numeric":
+            return {
+                "system_state": int(run.system),
+                "system_objective": OUTCOME_CODES[run.outcome],
+                "test_objective_realized": int(bool(g.test_accepting[run.history])),
+                "restrictions": int(run.restrictions),
+                "blocked_attempts": int(run.blocked_attempts),
+                "steps": int(run.steps),
+            }
+        info: dict[str, Any] = {"system_state": g.state_json(run.system)}
+        if run.done or self.truncations.get(agent, False):
+            info["verdict"] = g.verdict(run)
+        return info
 
     def reset(self, seed: int | None = None, options: dict[str, Any] | None = None) -> None:
         """Start a run; the game has no randomness, so ``seed`` changes nothing."""
@@ -274,7 +369,7 @@ class raw_env(AECEnv):  # type: ignore[misc]  # noqa: N801 - PettingZoo's module
         self._cumulative_rewards = {a: 0.0 for a in self.agents}
         self.terminations = {a: False for a in self.agents}
         self.truncations = {a: False for a in self.agents}
-        self.infos = {a: {"system_state": self.game.state_json(self.run.system)} for a in self.agents}
+        self.infos = {a: self._info(a) for a in self.agents}
         self.agent_selection = self.agents[0]
         self._rounds = 0
 
@@ -311,9 +406,7 @@ class raw_env(AECEnv):  # type: ignore[misc]  # noqa: N801 - PettingZoo's module
             if self._rounds >= self.max_cycles and not run.done:
                 self.truncations = {x: True for x in self.agents}
         for x in self.agents:
-            self.infos[x] = {"system_state": g.state_json(run.system)}
-            if run.done or self.truncations[x]:
-                self.infos[x]["verdict"] = g.verdict(run)
+            self.infos[x] = self._info(x)
         self.agent_selection = self.agents[1] if agent == self.agents[0] else self.agents[0]
         self._accumulate_rewards()
 
@@ -400,8 +493,20 @@ class ParallelFlowTestEnv(ParallelEnv):  # type: ignore[misc]  # pettingzoo ship
         self.aec_env.close()
 
     def state(self) -> np.ndarray:
-        """The tester's full view of the run (system state, history, agent), flat."""
-        return self.aec_env.observe(TESTER)["observation"]
+        """The tester's full view of the run (system state, history, agent), flat and unpadded."""
+        return self.aec_env.tester_view()
+
+
+def _raw_of(e: Any) -> raw_env:
+    """The :class:`raw_env` under ``e`` (an ``env()``, ``raw_env`` or ``parallel_env``,
+    possibly wrapped: followed through ``aec_env``/``env``/``unwrapped``)."""
+    raw, seen = e, 0
+    while not isinstance(raw, raw_env):
+        nxt = getattr(raw, "aec_env", None) or getattr(raw, "env", None) or getattr(raw, "_env", None)
+        if nxt is None or seen > 32:
+            raise TypeError(f"{type(e).__name__} is not a flowtest_env.multiagent environment")
+        raw, seen = nxt, seen + 1
+    return raw
 
 
 def synthesized_tester(e: Any) -> Callable[..., int]:
@@ -409,15 +514,11 @@ def synthesized_tester(e: Any) -> Callable[..., int]:
     ``raw_env`` or ``parallel_env`` of this module).
 
     Returns a callable ``policy(observation=None, agent="tester_0") -> action`` that reads
-    the run from the environment (the strategy needs the history, which observations of
-    the system never carry).
+    the run from the environment. For a policy a library holds apart from the env (a
+    fixed policy in a multi-agent setup, many envs in a batch), use
+    :class:`SynthesizedTester`: it answers from the tester's observation alone.
     """
-    raw = e
-    while not isinstance(raw, raw_env):
-        nxt = getattr(raw, "aec_env", None) or getattr(raw, "env", None)
-        if nxt is None:
-            raise TypeError(f"{type(e).__name__} is not a flowtest_env.multiagent environment")
-        raw = nxt
+    raw = _raw_of(e)
 
     def policy(observation: Any = None, agent: str = TESTER) -> int:
         return raw.synthesized_action()
@@ -425,4 +526,74 @@ def synthesized_tester(e: Any) -> Callable[..., int]:
     return policy
 
 
-__all__ = ["env", "raw_env", "parallel_env", "ParallelFlowTestEnv", "synthesized_tester", "TESTER", "SYSTEM"]
+class SynthesizedTester:
+    """The synthesized test strategy as a fixed policy over the tester's observation.
+
+    Built once from any env of this module (it copies the strategy's tables, it keeps
+    no reference to the env), then called with ``tester_0``'s observation: the Dict an
+    env returns, its ``obs_key`` entry, or a batch ``[B, n]`` of them (NumPy or anything
+    ``np.asarray`` takes, a CPU tensor included). The answer equals
+    ``env.synthesized_action()`` whenever it is the tester's turn (tested on every
+    built-in), so a multi-agent library can hold it as the tester's frozen policy while
+    it trains ``system_0``. See docs/recipes.md for TorchRL and RLlib.
+
+    Example
+    -------
+    >>> from flowtest_env import multiagent
+    >>> e = multiagent.env(test="small-reactive")
+    >>> tester = multiagent.SynthesizedTester(e)
+    >>> e.reset(seed=0)
+    >>> obs, *_ = e.last()
+    >>> e.agent_selection, tester(obs) == e.unwrapped.synthesized_action()
+    ('tester_0', True)
+    """
+
+    def __init__(self, env: Any) -> None:
+        raw = _raw_of(env)
+        g = raw.game
+        self.obs_key = raw.obs_key
+        self.n_states, self.n_hist, self.n_agent_states, self.n_memory = raw._n_states, raw._n_hist, g.n_agent_states, raw._n_memory
+        self.n_tester_obs = raw._n_tester_obs
+        self.controller = g.agent_controller if g.has_agent else None
+        self._table: np.ndarray | None = None
+        if self.controller is None:
+            restricted = np.asarray(g.restricted_bits, dtype=np.int64)  # [history, state]
+            choosable = np.asarray(g.choosable_bits, dtype=np.int64)  # [state]
+            self._table = restricted & choosable[None, :]
+
+    def actions(self, observations: Any) -> np.ndarray:
+        """``int64[B]``: the synthesized tester's actions for a batch ``[B, n]`` of tester
+        observations (padded ones too: the entries past the tester's own are ignored)."""
+        obs = np.asarray(observations, dtype=np.float32)
+        if obs.ndim != 2 or obs.shape[1] < self.n_tester_obs:
+            raise ValueError(f"expected tester observations of shape [B, >={self.n_tester_obs}], got {obs.shape}")
+        ns, nh, na = self.n_states, self.n_hist, self.n_agent_states
+        system = np.argmax(obs[:, :ns], axis=1)
+        history = np.argmax(obs[:, ns : ns + nh], axis=1)
+        if self._table is not None:
+            out: np.ndarray = self._table[history, system]
+            return out
+        assert self.controller is not None
+        agent = np.argmax(obs[:, ns + nh : ns + nh + na], axis=1)
+        if self.n_memory:
+            memory = np.argmax(obs[:, ns + nh + na : ns + nh + na + self.n_memory], axis=1)
+        else:
+            memory = np.zeros(obs.shape[0], dtype=np.int64)
+        respond = self.controller.respond
+        return np.array([respond(int(a), int(m), int(s), int(h))[0] for a, m, s, h in zip(agent, memory, system, history, strict=True)], dtype=np.int64)
+
+    def __call__(self, observation: Any, agent: str = TESTER) -> Any:
+        """The action for one observation (an ``int``) or a batch (``int64[B]``);
+        ``agent`` is accepted for the ``policy(obs, agent)`` shape and ignored."""
+        if isinstance(observation, Mapping):
+            observation = observation[self.obs_key]
+        obs = np.asarray(observation)
+        if obs.ndim == 1:
+            return int(self.actions(obs[None, :])[0])
+        return self.actions(obs)
+
+
+__all__ = [
+    "env", "raw_env", "parallel_env", "ParallelFlowTestEnv", "synthesized_tester", "SynthesizedTester", "TESTER", "SYSTEM",
+    "INFO_KINDS", "NUMERIC_INFO_KEYS", "OUTCOME_CODES",
+]

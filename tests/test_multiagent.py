@@ -334,3 +334,175 @@ def test_spaces_are_cached() -> None:
     assert env.observation_space(TESTER) is env.observation_space(TESTER)
     assert env.action_space(SYSTEM) is env.action_space(SYSTEM)
     assert builtin_game("maze2", None, external_tester=True) is env.game
+
+
+# ---------------------------------------------------------------------- options for RL libraries
+
+
+def _random_aec_episodes(problem: str, seed: int, episodes: int, **kwargs: Any) -> list[tuple[str, dict[str, Any], int]]:
+    """Play ``episodes`` runs of the AEC env with uniformly random legal actions for both
+    agents; returns ``(agent, observation, action)`` at every live turn (the tester's
+    observation taken before its move)."""
+    e = multiagent.env(test=problem, **kwargs)
+    rng = np.random.default_rng(seed)
+    mask_key = kwargs.get("mask_key", "action_mask")
+    out: list[tuple[str, dict[str, Any], int]] = []
+    for ep in range(episodes):
+        e.reset(seed=seed + ep)
+        for agent in e.agent_iter():
+            obs, _, term, trunc, _ = e.last()
+            if term or trunc:
+                e.step(None)
+                continue
+            action = int(rng.choice(np.flatnonzero(obs[mask_key])))
+            out.append((agent, obs, action))
+            e.step(action)
+    return out
+
+
+@pytest.mark.parametrize("problem", PROBLEMS)
+def test_synthesized_tester_policy_answers_from_the_observation(problem: str) -> None:
+    """SynthesizedTester (built apart, from the tester's observation alone) answers what
+    the env's synthesized_action() answers at every tester turn of random runs, in the
+    AEC and the parallel game, one by one and as a batch, padded spaces included."""
+    for kwargs in ({}, {"same_spaces": True, "obs_key": "observations"}):
+        e = multiagent.env(test=problem, **kwargs)
+        policy = multiagent.SynthesizedTester(e)
+        rng = np.random.default_rng(1)
+        seen, batch, expected = 0, [], []
+        for ep in range(4):
+            e.reset(seed=ep)
+            for agent in e.agent_iter():
+                obs, _, term, trunc, _ = e.last()
+                if term or trunc:
+                    e.step(None)
+                    continue
+                if agent == TESTER:
+                    want = e.unwrapped.synthesized_action()
+                    assert policy(obs) == want
+                    batch.append(obs[policy.obs_key])
+                    expected.append(want)
+                    seen += 1
+                    action = want if rng.random() < 0.7 else int(rng.choice(np.flatnonzero(obs[e.unwrapped.mask_key])))
+                else:
+                    action = int(rng.choice(np.flatnonzero(obs[e.unwrapped.mask_key])))
+                e.step(action)
+        assert seen > 4
+        assert policy(np.stack(batch)).tolist() == expected
+    par = multiagent.parallel_env(test=problem)
+    policy = multiagent.SynthesizedTester(par)
+    obs, _ = par.reset(seed=0)
+    rng = np.random.default_rng(2)
+    rounds = 0
+    while par.agents and rounds < 50:
+        want = par.aec_env.synthesized_action()
+        assert policy(obs[TESTER]) == want
+        sys_mask = obs[SYSTEM]["action_mask"]
+        obs, *_ = par.step({TESTER: want, SYSTEM: int(rng.choice(np.flatnonzero(sys_mask)))})
+        rounds += 1
+    assert rounds > 0
+
+
+def test_synthesized_tester_policy_refuses_other_shapes() -> None:
+    e = multiagent.raw_env(test="small-reactive")
+    policy = multiagent.SynthesizedTester(e)
+    with pytest.raises(ValueError, match="tester observations"):
+        policy(np.zeros(3, dtype=np.float32))
+    with pytest.raises(TypeError, match="not a flowtest_env.multiagent environment"):
+        multiagent.SynthesizedTester(object())
+
+
+@pytest.mark.parametrize("problem", ["small-reactive", "maze2", "maze1"])
+def test_numeric_infos_hold_the_same_numeric_keys_and_the_verdict(problem: str) -> None:
+    """info_kind="numeric": every info of every agent at every reset and step has exactly
+    NUMERIC_INFO_KEYS, all ints, and at the end they are the full verdict as numbers
+    (played in lockstep with an env of the default infos)."""
+    full = multiagent.env(test=problem)
+    num = multiagent.env(test=problem, info_kind="numeric")
+    rng = np.random.default_rng(0)
+    ends = 0
+    for ep in range(6):
+        full.reset(seed=ep)
+        num.reset(seed=ep)
+        for agent in full.agent_iter():
+            assert num.agent_selection == agent
+            obs, _, term, trunc, info = full.last()
+            _, _, nterm, ntrunc, ninfo = num.last()
+            assert (term, trunc) == (nterm, ntrunc)
+            for a in num.agents:
+                i = num.infos[a]
+                assert tuple(i) == multiagent.NUMERIC_INFO_KEYS
+                assert all(type(v) is int for v in i.values()), i
+            assert ninfo["system_state"] == full.unwrapped.run.system
+            if term or trunc:
+                v = info["verdict"]
+                assert ninfo["system_objective"] == multiagent.OUTCOME_CODES[v["system_objective"]]
+                assert ninfo["test_objective_realized"] == int(v["test_objective_realized"])
+                for k in ("restrictions", "blocked_attempts", "steps"):
+                    assert ninfo[k] == v[k]
+                ends += 1
+                full.step(None)
+                num.step(None)
+                continue
+            assert "verdict" not in info
+            action = int(rng.choice(np.flatnonzero(obs["action_mask"])))
+            full.step(action)
+            num.step(action)
+    assert ends >= 6
+
+
+@pytest.mark.parametrize("problem", ["small-reactive", "maze2"])
+def test_key_names_and_same_spaces(problem: str) -> None:
+    """obs_key/mask_key rename the Dict entries (spaces too); same_spaces gives both
+    agents one observation and one action space, the padding zeros and never legal,
+    and the game plays exactly as without it."""
+    plain = multiagent.raw_env(test=problem)
+    e = multiagent.raw_env(test=problem, obs_key="observations", mask_key="mask", same_spaces=True)
+    assert set(e.observation_space(TESTER).spaces) == {"observations", "mask"}
+    assert e.observation_space(TESTER) == e.observation_space(SYSTEM)
+    assert e.action_space(TESTER) == e.action_space(SYSTEM)
+    n = int(e.action_space(TESTER).n)
+    assert n == max(int(plain.action_space(a).n) for a in (TESTER, SYSTEM))
+    for agent, obs, action in _random_aec_episodes(problem, 3, 3, obs_key="observations", mask_key="mask", same_spaces=True):
+        assert e.observation_space(agent).contains(obs)
+        n_own = int(plain.action_space(agent).n)
+        assert not obs["mask"][n_own:].any()
+        assert action < n_own
+    # same actions, same game: observations are the unpadded ones with zeros after
+    plain.reset()
+    e.reset()
+    rng = np.random.default_rng(4)
+    for _ in range(40):
+        if not plain.agents:
+            break
+        agent = plain.agent_selection
+        a_obs, b_obs = plain.observe(agent), e.observe(agent)
+        flat = a_obs["observation"].reshape(-1)
+        np.testing.assert_array_equal(b_obs["observations"][: flat.size], flat)
+        assert not b_obs["observations"][flat.size :].any()
+        np.testing.assert_array_equal(b_obs["mask"][: a_obs["action_mask"].size], a_obs["action_mask"])
+        done = plain.terminations[agent] or plain.truncations[agent]
+        act = None if done else int(rng.choice(np.flatnonzero(a_obs["action_mask"])))
+        plain.step(act)
+        e.step(act)
+        assert plain.rewards == e.rewards
+
+
+def test_pettingzoo_api_with_library_options() -> None:
+    kwargs: dict[str, Any] = {"obs_key": "observations", "info_kind": "numeric", "same_spaces": True}
+    parallel_api_test(multiagent.parallel_env(test="maze2", **kwargs), num_cycles=100)
+    api_test(multiagent.env(test="small-reactive", **kwargs), num_cycles=100)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"info_kind": "strings"}, "info_kind"),
+        ({"obs_key": ""}, "obs_key must be a non-empty string"),
+        ({"obs_key": "x", "mask_key": "x"}, "must differ"),
+        ({"same_spaces": 1}, "same_spaces must be True or False"),
+    ],
+)
+def test_library_options_refuse_bad_values(kwargs: dict[str, Any], message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        multiagent.raw_env(test="small-reactive", **kwargs)
