@@ -47,10 +47,9 @@ REGISTRATIONS: dict[str, dict[str, Any]] = {
     "FlowTest-RandomGrid-v0": {
         "entry_point": "flowtest_env.envs:RandomGridEnv",
         "vector_entry_point": "flowtest_env.vector:RandomGridVectorEnv",
-        "kwargs": {
-            "size": 5, "family": "reachability", "n": 1, "seeds": list(range(8)), "kind": "reactive",
-            "setting": "instantaneous", "max_steps": 100, "obs_kind": "flat",
-        },
+        # the pool (size 5, reachability, n 1, seeds 0..7, reactive) is RandomGridEnv's default, not
+        # listed here: a spec made with `pool=...` then names that pool alone, not default seeds it ignores
+        "kwargs": {"setting": "instantaneous", "max_steps": 100, "obs_kind": "flat"},
     },
 }
 """Every ID this package registers -> the keyword arguments of Gymnasium's ``register``
