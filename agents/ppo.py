@@ -1,9 +1,21 @@
-"""Saved stable-baselines3 models as systems under test: ``ppo:PATH``.
+"""Saved models as systems under test: ``ppo:PATH``.
 
-The model (``MaskablePPO`` or ``RecurrentPPO`` from sb3-contrib, or plain ``PPO``) is loaded lazily, so
-FlowTest works without the ``rl`` extra until a ``ppo:`` policy is asked for. Maskable
-models are given ``info["action_mask"]``, so they never pick a restricted action; a
-plain PPO model may, and the env then leaves the SUT in place.
+Two kinds of file, told apart by their content:
+
+* a **native checkpoint** (:mod:`agents.checkpoint`, written by ``flowtest train``'s
+  native trainer, :mod:`agents.native_ppo`): tensors and plain settings, read without
+  unpickling; safe to load from anyone;
+* a **stable-baselines3 zip** (``MaskablePPO`` or ``RecurrentPPO`` from sb3-contrib, or
+  plain ``PPO``; ``flowtest train --trainer sb3``): SB3 unpickles it, which can run code
+  stored in the file, so it is loaded only when the user trusts it (``--trust-model``, or
+  :func:`agents.checkpoint.trust_pickled_models` from Python), with a warning line;
+  otherwise :class:`agents.checkpoint.UntrustedModelError` (invalid input) before any
+  of it is unpickled.
+
+Models are loaded lazily, so FlowTest works without the ``rl`` extra until a ``ppo:``
+policy is asked for. Maskable models (and every native one) are given
+``info["action_mask"]``, so they never pick a restricted action; a plain PPO model may,
+and the env then leaves the SUT in place.
 
 **Memory.** A reactive test answers the *history* of the run, which the observation
 does not show (the test objective stays hidden), so the observation alone is not
@@ -33,6 +45,7 @@ from flowtest_env.wrappers import MEMORY_KINDS, VisitedMemory, VisitedPlaces, en
 from flowtest_env.wrappers import position_slice as _position_slice
 
 from .base import Policy, PolicyError, action_mask_of, game_of
+from .checkpoint import is_native_checkpoint, is_own_file, pickled_models_trusted, refuse_pickled, warn_pickled
 
 
 def position_slice(env: Any) -> slice:
@@ -79,14 +92,23 @@ def _saved_policy_module(path: Path) -> str:
         return ""
 
 
-def load_model(path: str | Path) -> Any:
-    """Load a saved MaskablePPO, RecurrentPPO or plain PPO model (the class is read from
-    the file's recorded policy class).
+def load_model(path: str | Path, trust: bool | None = None) -> Any:
+    """Load a saved model: a native checkpoint (never unpickled), else a MaskablePPO,
+    RecurrentPPO or plain PPO zip (the class is read from the file's recorded policy
+    class), which only when trusted: ``trust`` (``None``: the process setting of
+    :func:`agents.checkpoint.trust_pickled_models`), or written by this process
+    (:func:`agents.checkpoint.mark_own_file`).
+
+    Example::
+
+        policy = PPOPolicy(load_model("policy.zip"), "ppo:policy.zip", env)
 
     Raises
     ------
     PolicyError
-        If stable-baselines3 is missing or the file cannot be read.
+        If the file is missing or cannot be read as a model (or SB3 is missing).
+    agents.checkpoint.UntrustedModelError
+        For a stable-baselines3 zip without trust (nothing of it unpickled).
     """
     p = Path(path)
     if not p.exists() and not p.with_suffix(".zip").exists():
@@ -97,10 +119,19 @@ def load_model(path: str | Path) -> Any:
     if found.stat().st_size > MAX_MODEL_BYTES:
         raise PolicyError(f"the model {str(found)!r} is larger than {MAX_MODEL_BYTES >> 20} MiB")
     p = found
+    if is_native_checkpoint(p):
+        return _load_native(p)
+    own = is_own_file(p)
+    if not (own or (pickled_models_trusted() if trust is None else trust)):
+        if not _is_zip(p):
+            raise PolicyError(f"{str(p)!r} is not a saved model (neither a native checkpoint nor a stable-baselines3 zip)")
+        raise refuse_pickled(p)
     try:
         from stable_baselines3 import PPO
     except ImportError as exc:  # pragma: no cover
-        raise PolicyError("ppo:PATH needs the rl extra: pip install 'flowtest[rl]'") from exc
+        raise PolicyError("a stable-baselines3 model needs the rl extra: pip install 'flowtest[rl]'") from exc
+    if trust is None and not own:
+        warn_pickled(p)
     module = _saved_policy_module(p)
     try:
         if "recurrent" in module:
@@ -117,8 +148,29 @@ def load_model(path: str | Path) -> Any:
         raise PolicyError(f"{str(p)!r} is not a saved PPO model ({type(exc).__name__}: {detail})") from None
 
 
+def _is_zip(path: Path) -> bool:
+    import zipfile
+
+    return zipfile.is_zipfile(path)
+
+
+def _load_native(path: Path) -> Any:
+    """A native checkpoint as a model (:class:`agents.native_ppo.NativeModel`)."""
+    from .checkpoint import CheckpointError
+
+    try:
+        from .native_ppo import load_native
+    except ImportError as exc:  # pragma: no cover - torch missing
+        raise PolicyError("a FlowTest policy checkpoint needs the rl extra (torch): pip install 'flowtest[rl]'") from exc
+    try:
+        return load_native(path)
+    except CheckpointError as exc:
+        raise PolicyError(f"{str(path)!r} is not a valid FlowTest policy checkpoint: {exc}") from None
+
+
 class PPOPolicy:
-    """A trained model acting deterministically (its most likely legal action).
+    """A trained model (native or stable-baselines3, :func:`load_model`) acting
+    deterministically (its most likely legal action).
 
     The model records the observation it was trained on (``model.flowtest_obs``:
     ``obs_kind`` and ``pad_to``) and the SUT's memory (``model.flowtest_memory``). When
@@ -139,8 +191,8 @@ class PPOPolicy:
         self.model = model
         self.name = name
         kind = type(model).__name__
-        self.maskable = kind == "MaskablePPO"
-        self.recurrent = kind == "RecurrentPPO"
+        self.maskable = bool(getattr(model, "maskable", kind == "MaskablePPO"))
+        self.recurrent = bool(getattr(model, "recurrent", kind == "RecurrentPPO"))
         self.memory_kind = str(getattr(model, "flowtest_memory", "none"))
         self.obs = dict(getattr(model, "flowtest_obs", None) or {"obs_kind": "flat", "pad_to": 8})
         self.memory: VisitedMemory | None = None
@@ -199,7 +251,13 @@ class PPOPolicy:
             obs = observation["observation"] if isinstance(observation, dict) else observation
         if self.memory is not None:
             obs = self.memory(obs)
-        if self.recurrent:
+        if self.recurrent and self.maskable:  # a native GRU policy: its state and the masks
+            mask = action_mask_of(observation, info).astype(bool)
+            action, self._state = self.model.predict(
+                obs, state=self._state, episode_start=np.array([self._start]), deterministic=True, action_masks=mask
+            )
+            self._start = False
+        elif self.recurrent:
             action, self._state = self.model.predict(
                 obs, state=self._state, episode_start=np.array([self._start]), deterministic=True
             )

@@ -8,14 +8,16 @@ What it does, in order (each step a plain function below):
    (:mod:`flowtest_env.pools`: the splits are seed ranges that never overlap), each
    written to ``OUT/pool/<split>/seed<N>.json`` so every run can be replayed with
    ``flowtest evaluate --env <that file> ... --replay``.
-2. **The baselines** (:func:`train_baseline`), for every algorithm and training seed:
-   sb3-contrib's MaskablePPO with the memory wrapper (the ``memory="visited"`` env option,
+2. **The baselines** (:func:`train_baseline`), for every algorithm and training seed,
+   trained on ``FlowTest-RandomGrid-v0`` drawing from the train split. With the native
+   trainer (default, :mod:`agents.native_ppo`): masked PPO with an MLP and the
+   visited-places memory (``maskable-ppo``) and masked PPO with a GRU (``recurrent-ppo``),
+   :data:`NATIVE_BASELINES`; with ``--trainer sb3``: sb3-contrib's MaskablePPO with the
+   memory wrapper (the ``memory="visited"`` env option,
    :class:`flowtest_env.wrappers.VisitedPlaces`) and RecurrentPPO (an LSTM, its own
-   memory), trained with ``flowtest train``'s machinery on ``FlowTest-RandomGrid-v0``
-   drawing from the train split (:data:`BASELINES` lists the settings). During training
-   the learning curve is measured on the train tests and on the held-out tests by
-   :func:`batch_verdicts`: the deterministic policy plays every test once, all of them
-   in one :class:`~flowtest_env.vector.PoolVectorEnv` batch.
+   memory), :data:`BASELINES`. During training the learning curve is measured on the
+   train tests and on the held-out tests by greedy play of every test once, all of them
+   in one :class:`~flowtest_env.vector.PoolVectorEnv` batch (:func:`batch_verdicts`).
 3. **The scores** (:func:`score_systems`): every system plays every test once through
    the single env, exactly as ``flowtest evaluate`` and its replay commands run it (a
    pool test is deterministic and so are the policies, so one run per test is the whole
@@ -53,6 +55,7 @@ from typing import Any
 
 import numpy as np
 
+from agents.checkpoint import mark_own_file
 from synthesis.artifacts.artifact import TestArtifact
 from synthesis.model.errors import ProblemError
 
@@ -63,7 +66,7 @@ from .evaluate import Cell, check_sut_names, write_report
 from .exits import EXIT_OK
 from .outputs import json_safe, prepare_output_folder, print_json, write_atomically
 from .report import TestInfo
-from .train import ALGOS, DEFAULTS, check_settings, make_model, make_training_vec_env
+from .train import ALGOS, DEFAULTS, TRAINERS, check_settings, make_model, make_training_vec_env, native_args, native_settings, require_native
 from .training import learn, require_rl
 
 BENCHMARK_MARKER = ".flowtest-benchmark"
@@ -77,13 +80,22 @@ BASELINES: dict[str, dict[str, Any]] = {
     "maskable-ppo": {"algo": "maskable-ppo", "memory": "visited"},
     "recurrent-ppo": {"algo": "recurrent-ppo", "memory": "none", "batch_size": 1024, "n_epochs": 4, "lstm_hidden_size": 64},
 }
-"""Settings of each baseline over ``flowtest train``'s :data:`~experiments.train.DEFAULTS`
-(8 envs x 128 steps per rollout, learning rate 1e-3, MLP 64 x 64, shaping 10 towards the
-system's own goal). MaskablePPO remembers the places it visited (the memory wrapper; a
-reactive test answers the run's history, which the observation does not show);
-RecurrentPPO has its LSTM instead, and trains on whole rollouts (one minibatch of
-1,024 steps, 4 epochs, 64 LSTM units) because sb3-contrib steps an LSTM through every
-episode boundary of a minibatch in Python, which is its cost."""
+"""Settings of each baseline with ``--trainer sb3``, over ``flowtest train``'s
+:data:`~experiments.train.DEFAULTS` (8 envs x 128 steps per rollout, learning rate 1e-3,
+MLP 64 x 64, shaping 10 towards the system's own goal). MaskablePPO remembers the places
+it visited (the memory wrapper; a reactive test answers the run's history, which the
+observation does not show); RecurrentPPO has its LSTM instead, and trains on whole
+rollouts (one minibatch of 1,024 steps, 4 epochs, 64 LSTM units) because sb3-contrib
+steps an LSTM through every episode boundary of a minibatch in Python, which is its cost."""
+
+NATIVE_BASELINES: dict[str, dict[str, Any]] = {
+    "maskable-ppo": {"algo": "ppo", "memory": "visited", "device": "cpu"},
+    "recurrent-ppo": {"algo": "recurrent-ppo", "device": "cpu"},
+}
+"""Settings of each baseline with the native trainer (the default), over
+:data:`~experiments.train.NATIVE_DEFAULTS`: masked PPO with an MLP and the visited-places
+memory, and masked PPO with a GRU (its own memory); on the CPU, so a seed gives the same
+table."""
 
 REFERENCES: tuple[str, ...] = ("scripted:replanner", "gr1")
 """Systems correct by construction: they should meet the system objective on every test."""
@@ -113,6 +125,7 @@ class BenchmarkConfig:
     steps: int = 80_000
     seeds: tuple[int, ...] = (0, 1, 2)
     curve_points: int = 10
+    trainer: str = "native"
 
     def baselines(self) -> list[str]:
         """The algorithms to train: ``--sut ppo`` stands for every ``--algo``; an
@@ -150,8 +163,13 @@ def check_config(config: BenchmarkConfig) -> None:
     for algo in config.algos:
         if algo not in ALGOS:
             raise ProblemError(f"unknown --algo {algo!r}; expected one of {', '.join(ALGOS)}")
+    if config.trainer not in TRAINERS:
+        raise ProblemError(f"unknown --trainer {config.trainer!r}; expected one of {', '.join(TRAINERS)}")
     if config.baselines():
-        require_rl()
+        if config.trainer == "sb3":
+            require_rl()
+        else:
+            require_native()
         if not config.seeds:
             raise ProblemError("--seeds needs at least one training seed")
         if config.steps < 1:
@@ -159,12 +177,18 @@ def check_config(config: BenchmarkConfig) -> None:
         if config.curve_points < 1:
             raise ProblemError("--curve-points must be at least 1")
         for algo in config.baselines():
-            check_settings(baseline_settings(algo))
+            if config.trainer == "sb3":
+                check_settings(baseline_settings(algo, "sb3"))
+            else:
+                baseline_settings(algo)
 
 
-def baseline_settings(algo: str) -> dict[str, Any]:
-    """The full training settings of a baseline (:data:`BASELINES` over ``DEFAULTS``)."""
-    return {**DEFAULTS, **BASELINES[algo]}
+def baseline_settings(algo: str, trainer: str = "native") -> dict[str, Any]:
+    """The full training settings of a baseline: :data:`NATIVE_BASELINES` over
+    ``NATIVE_DEFAULTS``, or with ``trainer="sb3"`` :data:`BASELINES` over ``DEFAULTS``."""
+    if trainer == "sb3":
+        return {**DEFAULTS, **BASELINES[algo]}
+    return native_settings(NATIVE_BASELINES[algo])
 
 
 # --------------------------------------------------------------------------- the pool
@@ -205,63 +229,42 @@ def load_splits(config: BenchmarkConfig, out: Path, progress: bool | None = None
 
 
 def batch_verdicts(model: Any, games: Sequence[Any], memory: str, budgets: Sequence[int]) -> dict[str, np.ndarray]:
-    """Let the deterministic policy of ``model`` play every test of ``games`` once, all at
-    once in one :class:`~flowtest_env.vector.PoolVectorEnv` (env ``i`` plays test ``i``),
-    and return the verdict arrays: ``system_objective`` (``"met"``, ``"violated"``,
-    ``"open"``), ``test_objective_realized``, ``restrictions``, ``steps``.
+    """Let the deterministic policy of ``model`` (a saved model as :func:`agents.ppo.load_model`
+    gives it: native or stable-baselines3) play every test of ``games`` once, all at once in
+    one :class:`~flowtest_env.vector.PoolVectorEnv` (env ``i`` plays test ``i``), and return
+    the verdict arrays: ``system_objective`` (``"met"``, ``"violated"``, ``"open"``),
+    ``test_objective_realized``, ``restrictions``, ``steps``
+    (:func:`agents.native_ppo.batch_verdicts`).
 
     Each test ends where the single env would end it: at its outcome, or at its own step
     budget ``budgets[i]`` (``"open"``). ``memory`` is the model's (``"visited"`` appends
-    the places visited, as :class:`~flowtest_env.wrappers.VisitedPlaces`); a
-    RecurrentPPO model carries its LSTM state, a MaskablePPO model gets the masks.
+    the places visited, as :class:`~flowtest_env.wrappers.VisitedPlaces`); a recurrent
+    model carries its state, a maskable one gets the masks.
 
     Raises
     ------
     ValueError
         If the tests do not share where the observation holds the system's place.
     """
-    from flowtest_env.encoding import make_encoder
-    from flowtest_env.vector import PoolVectorEnv
-    from flowtest_env.wrappers import position_slice
+    from agents.native_ppo import batch_verdicts as play_all
+    from agents.native_ppo import shared_position_slice
 
-    n = len(games)
-    limit = np.asarray(budgets, dtype=np.int64)
-    env = PoolVectorEnv(n, games, assignment="fixed", max_steps=int(limit.max()))
-    where: slice | None = None
-    if memory == "visited":
-        slices = {(s.start, s.stop) for s in (position_slice(make_encoder(g, "flat")) for g in games)}
-        if len(slices) != 1:
-            raise ValueError("the tests do not share the place of the system in the observation")
-        where = position_slice(make_encoder(games[0], "flat"))
-    recurrent = type(model).__name__ == "RecurrentPPO"
-    obs, infos = env.reset(seed=RUN_SEED)
-    seen = obs[:, where].astype(np.float32) if where is not None else None
-    state: Any = None
-    starts = np.ones(n, dtype=bool)
-    done = np.zeros(n, dtype=bool)
-    result: dict[str, np.ndarray] = {
-        "system_objective": np.full(n, "open", dtype=object),
-        "test_objective_realized": np.zeros(n, dtype=bool),
-        "restrictions": np.zeros(n, dtype=np.int64),
-        "steps": np.zeros(n, dtype=np.int64),
-    }
-    while not done.all():
-        x = np.concatenate([obs.astype(np.float32), seen], axis=1) if seen is not None else obs
+    where = shared_position_slice(games, "flat") if memory == "visited" else None
+    kind = type(model).__name__
+    recurrent = bool(getattr(model, "recurrent", kind == "RecurrentPPO"))
+    maskable = bool(getattr(model, "maskable", kind == "MaskablePPO"))
+    state: list[Any] = [None]
+
+    def act(x: np.ndarray, masks: np.ndarray, starts: np.ndarray) -> np.ndarray:
+        kw: dict[str, Any] = {"deterministic": True}
+        if maskable:
+            kw["action_masks"] = masks
         if recurrent:
-            actions, state = model.predict(x, state=state, episode_start=starts, deterministic=True)
-            starts = np.zeros(n, dtype=bool)
-        else:
-            actions, _ = model.predict(x, action_masks=infos["action_mask"].astype(bool), deterministic=True)
-        obs, _, terminated, _, infos = env.step(np.asarray(actions))
-        now = env.verdicts()  # the runs as they stand after this step (ended ones reset at the next)
-        ended = ~done & (terminated | (now["steps"] >= limit))
-        for key, values in result.items():
-            values[ended] = now[key][ended]
-        done |= ended
-        if seen is not None:
-            seen = np.maximum(seen, obs[:, where])
-    env.close()
-    return result
+            kw["state"], kw["episode_start"] = state[0], starts
+        actions, state[0] = model.predict(x, **kw)
+        return np.asarray(actions)
+
+    return play_all(act, games, budgets, where, seed=RUN_SEED)
 
 
 class CurveRecorder:
@@ -342,19 +345,40 @@ def train_baseline(
     """Train one baseline on the train split (``config.steps`` time steps, rounded up to
     whole rollouts), recording its learning curve on the train and the held-out tests;
     save it to ``out/models/<algo>-seed<seed>.zip``."""
-    settings = baseline_settings(algo)
-    env = make_training_vec_env(
-        POOL_ENV_ID, seed, settings, {"pool": config.pool, "split": "train", "count": config.train_count}
-    )
-    model = make_model(env, settings, seed)
     every = max(1, math.ceil(config.steps / config.curve_points))
+    path = (out / "models" / f"{algo}-seed{seed}.zip").resolve()
+    pool_options = {"pool": config.pool, "split": "train", "count": config.train_count}
+    if config.trainer == "native":
+        return _train_native_baseline(config, algo, seed, splits, path, every, progress_bar)
+    settings = baseline_settings(algo, "sb3")
+    env = make_training_vec_env(POOL_ENV_ID, seed, settings, pool_options)
+    model = make_model(env, settings, seed)
     recorder = CurveRecorder(every, settings["memory"], {name: _games_and_budgets(s) for name, s in splits.items()})
 
     seconds = learn(model, config.steps, recorder, progress_bar)
-    path = (out / "models" / f"{algo}-seed{seed}.zip").resolve()
     write_atomically(path, lambda tmp: model.save(str(tmp)))
+    mark_own_file(path)  # scored below without --trust-model: this run wrote it
     env.close()
     return TrainedBaseline(algo, seed, path, int(model.num_timesteps), seconds, recorder.seconds, recorder.points)
+
+
+def _train_native_baseline(config: BenchmarkConfig, algo: str, seed: int, splits: dict[str, Split], path: Path,
+                           every: int, progress_bar: bool) -> TrainedBaseline:
+    """One baseline with the native trainer on the train split's tests (the env plays
+    exactly them), its greedy curve measured by the trainer on the train and held-out tests."""
+    from agents.native_ppo import save_policy
+    from agents.native_ppo import train as native_train
+    from flowtest_env.game import TestGame
+
+    settings = baseline_settings(algo)
+    pool_options = {"pool": config.pool, "split": "train", "count": config.train_count}
+    args = native_args(settings, POOL_ENV_ID, pool_options, config.steps, seed, eval_every=every)
+    heldout = [TestGame(a) for a in splits["test"].artifacts]
+    result = native_train(args, heldout=heldout, progress_bar=progress_bar)
+    write_atomically(path, lambda tmp: save_policy(tmp, result.agent, result.settings))
+    names = {"train": "train", "heldout": "test"}
+    curve = [(step, {names[k]: v["met"] for k, v in rates.items()}) for step, rates in result.evaluations]
+    return TrainedBaseline(algo, seed, path, result.steps, result.seconds, result.eval_seconds, curve)
 
 
 # --------------------------------------------------------------------------- scoring
@@ -477,7 +501,7 @@ def benchmark_table(
         entry: dict[str, Any] = {"name": name, "kind": kind, "runs": per_seed, **summary}
         if kind == "baseline":
             mine = [b for b in trained if b.algo == name]
-            entry["settings"] = baseline_settings(name)
+            entry["settings"] = baseline_settings(name, config.trainer)
             entry["training"] = [
                 {"seed": b.seed, "steps": b.steps, "seconds": round(b.seconds, 1), "curve_seconds": round(b.curve_seconds, 1),
                  "model": str(b.path), "curve": [[step, rates.get("train"), rates.get("test")] for step, rates in b.curve]}
@@ -487,7 +511,7 @@ def benchmark_table(
     return {
         "pool": config.pool,
         "splits": {s: {"count": len(sp.seeds), "seeds": [sp.seeds[0], sp.seeds[-1]]} for s, sp in splits.items()},
-        "config": {"steps": config.steps, "seeds": list(config.seeds), "algos": config.baselines(),
+        "config": {"steps": config.steps, "seeds": list(config.seeds), "algos": config.baselines(), "trainer": config.trainer,
                    "curve_points": config.curve_points, "suts": list(config.suts)},
         "headline": {"held_out_gap": {e["name"]: e["gap"] for e in systems if e["kind"] == "baseline"}},
         "systems": systems,
@@ -709,6 +733,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help=f"training seeds; the confidence intervals are over them (default {' '.join(map(str, d.seeds))})")
     p.add_argument("--curve-points", type=positive_int, default=d.curve_points,
                    help=f"learning-curve measurements per training run, besides the start (default {d.curve_points})")
+    p.add_argument("--trainer", choices=TRAINERS, default=d.trainer,
+                   help="who trains the baselines: native (FlowTest's batched PPO, default) or sb3 (stable-baselines3)")
+    p.add_argument("--trust-model", action="store_true",
+                   help="load stable-baselines3 zips given as --sut ppo:PATH, which unpickles them (code from the file "
+                        "runs); native checkpoints never need it")
     p.add_argument("--out", type=Path, required=True,
                    help="output folder (table.md, table.json, learning-curves.png, report.html, models/, pool/); "
                         "an existing non-empty folder is refused unless --force")
@@ -738,8 +767,12 @@ def run(args: argparse.Namespace) -> int:
     config = BenchmarkConfig(
         pool=args.pool, suts=tuple(args.sut or DEFAULT_SUTS), algos=tuple(dict.fromkeys(args.algo)),
         train_count=args.train_count, test_count=args.test_count, steps=args.steps,
-        seeds=tuple(dict.fromkeys(args.seeds)), curve_points=args.curve_points,
+        seeds=tuple(dict.fromkeys(args.seeds)), curve_points=args.curve_points, trainer=args.trainer,
     )
+    if args.trust_model:
+        from agents.checkpoint import trust_pickled_models
+
+        trust_pickled_models(True)
     check_config(config)
     _check_out(args.out, args.force)
 

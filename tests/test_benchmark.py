@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from agents.checkpoint import mark_own_file
 from experiments import benchmark as bench
 from experiments.cli import main
 from experiments.evaluate import Trace
@@ -149,11 +150,12 @@ def test_batch_evaluation_gives_the_single_env_verdicts(tmp_path: Path, algo: st
 
     config = bench.BenchmarkConfig(POOL, suts=("ppo",), algos=(algo,), train_count=5, test_count=5)
     splits = bench.load_splits(config, tmp_path, progress=False)
-    settings = bench.baseline_settings(algo)
+    settings = bench.baseline_settings(algo, "sb3")
     env = make_training_vec_env(bench.POOL_ENV_ID, 0, {**settings, "n_envs": 1}, {"pool": POOL, "split": "train", "count": 5})
     model = make_model(env, settings, 3)  # untrained: a fixed, arbitrary deterministic policy
     path = tmp_path / "m.zip"
     model.save(str(path))
+    mark_own_file(path)  # written by this test: scored without --trust-model
     for split in splits.values():
         games, budgets = bench._games_and_budgets(split)
         batch = bench.batch_verdicts(model, games, settings["memory"], budgets)

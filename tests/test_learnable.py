@@ -5,6 +5,7 @@ and ``flowtest evaluate`` reports a pair that cannot play as a row, never aborti
 from __future__ import annotations
 
 import json
+from collections.abc import Iterator
 from pathlib import Path
 
 import gymnasium as gym
@@ -12,8 +13,16 @@ import numpy as np
 import pytest
 
 import flowtest_env  # noqa: F401
+from agents.checkpoint import trust_pickled_models
 from flowtest_env.encoding import EncodingError
 from flowtest_env.wrappers import DistanceShaping, VisitedPlaces
+
+
+@pytest.fixture(autouse=True)
+def _no_lasting_trust() -> Iterator[None]:
+    """A test that trusts SB3 zips (``--trust-model``) leaves the process as it found it."""
+    yield
+    trust_pickled_models(False)
 
 
 def _rollout(env: gym.Env, actions: list[int]) -> tuple[list[np.ndarray], list[float]]:
@@ -107,8 +116,8 @@ def test_train_flags_are_used_saved_and_play_many_tests(tmp_path: Path, capsys: 
     from experiments.cli import main
 
     model = tmp_path / "m.zip"
-    code = main(["train", "FlowTest-Maze2-v0", "--steps", "256", "--out", str(model), "--eval-episodes", "2", "-q",
-                 "--n-envs", "2", "--n-steps", "64", "--batch-size", "64", "--net-arch", "16,16", "--shaping", "0",
+    code = main(["train", "FlowTest-Maze2-v0", "--trainer", "sb3", "--steps", "256", "--out", str(model),
+                 "--eval-episodes", "2", "-q", "--n-envs", "2", "--n-steps", "64", "--batch-size", "64", "--net-arch", "16,16", "--shaping", "0",
                  "--obs-kind", "padded", "--learning-rate", "0.0005"])
     out, err = capsys.readouterr()
     assert code == 0
@@ -119,6 +128,7 @@ def test_train_flags_are_used_saved_and_play_many_tests(tmp_path: Path, capsys: 
     assert saved["env_options"] == {"memory": "visited", "shaping": 0.0, "shaping_gamma": 0.99, "obs_kind": "padded",
                                     "pad_to": 8}
     out_dir = tmp_path / "report"
+    trust_pickled_models(True)  # an SB3 zip: `flowtest evaluate --trust-model`
     code = main(["evaluate", "--env", "FlowTest-Maze2-v0", "example1", "beaver-rescue", "--sut", f"ppo:{model}",
                  "scripted:replanner", "--episodes", "1", "--out", str(out_dir), "-q"])
     assert code == 0
@@ -138,7 +148,7 @@ def test_flat_model_on_another_test_is_a_row(tmp_path: Path, capsys: pytest.Capt
 
     model = tmp_path / "flat.zip"
     assert main(["train", "small-reactive", "--steps", "128", "--out", str(model), "--eval-episodes", "0", "-q",
-                 "--n-envs", "1", "--n-steps", "128", "--batch-size", "64"]) == 0
+                 "--n-envs", "1", "--n-steps", "128", "--batch-size", "64"]) == 0  # the native trainer
     code = main(["evaluate", "--env", "FlowTest-Maze2-v0", "small-reactive", "--sut", f"ppo:{model}", "--episodes", "1",
                  "--out", str(tmp_path / "r"), "-q"])
     out = capsys.readouterr().out
@@ -158,9 +168,10 @@ def test_recurrent_ppo_trains_and_plays(tmp_path: Path, capsys: pytest.CaptureFi
     from experiments.cli import main
 
     model = tmp_path / "lstm.zip"
-    assert main(["train", "small-reactive", "--algo", "recurrent-ppo", "--steps", "128", "--out", str(model),
-                 "--eval-episodes", "2", "-q", "--n-envs", "1", "--n-steps", "128", "--batch-size", "64",
+    assert main(["train", "small-reactive", "--trainer", "sb3", "--algo", "recurrent-ppo", "--steps", "128", "--out",
+                 str(model), "--eval-episodes", "2", "-q", "--n-envs", "1", "--n-steps", "128", "--batch-size", "64",
                  "--memory", "none", "--net-arch", "16"]) == 0
+    trust_pickled_models(True)  # an SB3 zip: `flowtest evaluate --trust-model`
     assert main(["evaluate", "--env", "small-reactive", "--sut", f"ppo:{model}", "--episodes", "2",
                  "--out", str(tmp_path / "r"), "-q"]) == 0
     from agents.ppo import load_model
