@@ -19,8 +19,11 @@ from __future__ import annotations
 
 import argparse
 import os
+import signal
 import sys
+import threading
 from collections.abc import Sequence
+from types import FrameType
 
 from .arguments import ArgumentParser
 from .command import Command
@@ -52,8 +55,29 @@ def build_parser(commands: Sequence[Command] = COMMANDS) -> argparse.ArgumentPar
     return parser
 
 
+def _terminated(signum: int, frame: FrameType | None) -> None:
+    """SIGTERM takes the Ctrl-C path: the same unwinding (temporary files removed, no
+    partial output), the same line and exit code."""
+    raise KeyboardInterrupt
+
+
+def terminate_as_interrupt() -> None:
+    """Make SIGTERM raise :class:`KeyboardInterrupt` in this (main) thread, unless the
+    caller set its own handler or ignores it."""
+    if threading.current_thread() is threading.main_thread() and signal.getsignal(signal.SIGTERM) in (
+        signal.SIG_DFL, None
+    ):
+        signal.signal(signal.SIGTERM, _terminated)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the command line; return the exit code (see :mod:`experiments.exits`)."""
+    """Run the command line; return the exit code (see :mod:`experiments.exits`).
+
+    When it runs as the process (``argv`` None), SIGTERM is handled as Ctrl-C: exit
+    130 with the one line ``flowtest: interrupted``, outputs written whole or not at all.
+    """
+    if argv is None:
+        terminate_as_interrupt()
     try:
         parser = build_parser()
         args = parser.parse_args(argv)  # usage errors exit 2 via argparse

@@ -4,7 +4,8 @@ Importing the command line (numpy, scipy, HiGHS, ...) takes a second or two; a C
 then would otherwise end in a ``KeyboardInterrupt`` traceback from inside an import. The
 handler installed here before those imports exits 130 with the same one line as
 :func:`experiments.cli.main`; once they are done, Python's own handler is back and
-``main`` maps ``KeyboardInterrupt`` itself.
+``main`` maps ``KeyboardInterrupt`` itself. SIGTERM is handled the same way from the first
+instant (``main`` then turns it into ``KeyboardInterrupt``: the Ctrl-C path).
 
 Before those imports, too, ``flowtest synthesize`` starts its CP-SAT child
 (:mod:`experiments.prestart`), so that both load at once; the child is ended with the
@@ -35,6 +36,9 @@ def main() -> None:
     early = signal.getsignal(signal.SIGINT) is signal.default_int_handler  # not if the caller ignores Ctrl-C
     if early:
         signal.signal(signal.SIGINT, _interrupted_while_starting)
+    term = signal.getsignal(signal.SIGTERM) in (signal.SIG_DFL, None)
+    if term:
+        signal.signal(signal.SIGTERM, _interrupted_while_starting)
     from experiments.prestart import prestart_for
     from synthesis.routing.cpsat_pool import close_idle_workers
 
@@ -43,6 +47,8 @@ def main() -> None:
 
     if early:
         signal.signal(signal.SIGINT, signal.default_int_handler)
+    if term:
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)  # cli_main installs its Ctrl-C path for it
     try:
         code = cli_main()
     finally:

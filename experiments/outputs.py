@@ -3,7 +3,15 @@
 Output files are checked before any expensive work (:func:`check_output_path`,
 :func:`prepare_output_folder`) and written through a temporary file
 (:func:`write_atomically`), so nothing a user made is overwritten without ``--force`` and
-an interrupted run leaves no truncated file. Standard output holds a command's result
+an interrupted run leaves no truncated file.
+
+Outputs never follow a link: an output file that is a symbolic link is never replaced,
+and no folder inside an output folder (``OUT/traces``, ``OUT/models``, ``OUT/pool``...) is
+ever a link FlowTest writes through. :func:`prepare_output_folder` records the folder it
+accepted; :func:`write_atomically` and :func:`output_subfolder` then refuse a path under it
+that passes through a symbolic link (:func:`check_no_link_below`), and create the folders
+they need one at a time, checking each. The output folder itself is the user's choice (a
+link the user named is followed). Standard output holds a command's result
 only; with ``--json`` exactly one JSON document (:func:`json_safe`, :func:`print_json`).
 """
 
@@ -47,6 +55,76 @@ def _probe_folder(folder: Path, what: str, path: Path) -> None:
     os.unlink(name)
 
 
+_OUTPUT_ROOTS: set[str] = set()
+"""The output folders accepted by :func:`prepare_output_folder` in this process (absolute,
+not resolved: a link the user named stays the name they gave)."""
+
+
+def _absolute(path: Path) -> Path:
+    return Path(os.path.abspath(path))
+
+
+def _root_of(path: Path) -> Path | None:
+    """The deepest accepted output folder ``path`` lies under (strictly), if any."""
+    ap = _absolute(path)
+    best: Path | None = None
+    for root in _OUTPUT_ROOTS:
+        r = Path(root)
+        if r in ap.parents and (best is None or len(r.parts) > len(best.parts)):
+            best = r
+    return best
+
+
+def check_no_link_below(path: Path, root: Path | None = None) -> None:
+    """Refuse (ProblemError) a ``path`` whose folders below its output folder ``root``
+    (default: the accepted output folder it lies under, see :func:`prepare_output_folder`)
+    include a symbolic link, or that is itself one: FlowTest never writes through a link
+    inside an output folder. Nothing is created."""
+    root = root if root is not None else _root_of(path)
+    ap = _absolute(path)
+    if root is None:
+        return
+    rp = _absolute(root)
+    for part in [ap, *ap.parents]:
+        if part == rp or rp not in part.parents:
+            break
+        if part.is_symlink():
+            raise ProblemError(
+                f"{str(part)!r} inside the output folder {str(rp)!r} is a symbolic link; FlowTest never writes through one"
+            )
+
+
+def _make_folders(folder: Path) -> None:
+    """Create ``folder`` and its missing parents one at a time, refusing any that is (or
+    becomes) a link below an accepted output folder."""
+    missing: list[Path] = []
+    p = folder
+    while not (p.exists() or p.is_symlink()):
+        missing.append(p)
+        if p.parent == p:
+            break
+        p = p.parent
+    check_no_link_below(folder)
+    for m in reversed(missing):
+        try:
+            m.mkdir(exist_ok=True)
+        except OSError as exc:
+            raise ProblemError(f"cannot create the directory {str(m)!r}: {exc.strerror or exc}") from None
+    check_no_link_below(folder)
+    if not folder.is_dir():
+        raise ProblemError(f"{str(folder)!r} is not a folder")
+
+
+def output_subfolder(root: Path, name: str) -> Path:
+    """``root / name``, created if missing: a folder inside an output folder, never a link
+    (ProblemError). Commands use it for ``OUT/traces``, ``OUT/models``, ``OUT/pool``..."""
+    sub = root / name
+    check_no_link_below(sub, root)
+    _make_folders(sub)
+    check_no_link_below(sub, root)
+    return sub
+
+
 def check_output_path(path: Path, force: bool, what: str) -> None:
     """Check an output file before any expensive work (raises ProblemError).
 
@@ -56,6 +134,7 @@ def check_output_path(path: Path, force: bool, what: str) -> None:
     """
     if path.is_symlink():
         raise ProblemError(f"{what} {str(path)!r} is a symbolic link; FlowTest never replaces one")
+    check_no_link_below(path)
     if path.is_dir():
         raise ProblemError(f"{what} {str(path)!r} is a directory, not a file")
     if path.exists() and not force:
@@ -97,6 +176,11 @@ def prepare_output_folder(folder: Path, marker: str, force: bool, what: str, hin
     except OSError as exc:
         raise ProblemError(f"cannot create the {what} {str(folder)!r}: {exc.strerror or exc}") from None
     _probe_folder(folder, what, folder)
+    _OUTPUT_ROOTS.add(str(_absolute(folder)))
+    for sub in folder.iterdir():  # a link inside is refused now, before any work
+        if sub.is_symlink():
+            raise ProblemError(f"{str(sub)!r} inside the {what} {str(folder)!r} is a symbolic link; FlowTest never writes "
+                               "through one: remove it or choose another folder")
     mark = folder / marker
     if mark.is_symlink():
         raise ProblemError(f"{str(mark)!r} is a symbolic link; FlowTest never replaces one")
@@ -109,16 +193,15 @@ def write_atomically(path: Path, write: Callable[[Path], object]) -> None:
 
     ``write`` writes a given path; the result replaces ``path`` only once complete, so
     an interrupted run never leaves a truncated artifact or picture behind. A symbolic
-    link at ``path`` is never replaced (ProblemError).
+    link at ``path`` is never replaced, nor a folder inside an output folder written
+    through when it is a link (ProblemError).
     """
     if path.is_symlink():
         raise ProblemError(f"{str(path)!r} is a symbolic link; FlowTest never replaces one")
+    check_no_link_below(path)
     if path.is_dir():
         raise ProblemError(f"{str(path)!r} is a directory, not a file")
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise ProblemError(f"cannot create the directory of {str(path)!r}: {exc.strerror or exc}") from None
+    _make_folders(path.parent)
     # same directory (so the rename is atomic), same suffix (it picks the picture's format),
     # created by `write` itself so the file gets the user's usual permissions
     tmp = path.with_name(f".{path.stem}.{os.getpid()}.{threading.get_ident()}.tmp{path.suffix}")

@@ -59,6 +59,7 @@ from synthesis.artifacts.summary import summary_of
 from synthesis.model.errors import InconsistentProblem, ProblemError
 from synthesis.pipeline import SynthesisOptions, SynthesizedTest, synthesize
 from synthesis.problems.files import read_limited
+from synthesis.problems.limits import check_file_size
 from synthesis.problems.problem import Problem
 from synthesis.problems.random_grid import FAMILIES, MAX_ATTEMPTS, family_objectives, random_problem
 from synthesis.problems.random_worlds import AGENT_ITERATIONS, POOL_KINDS, WORLDS, first_accepted, world_problem
@@ -236,6 +237,7 @@ def _read_text(path: Path, warn: bool) -> str | None:
     if not (path.exists() or path.is_symlink()):
         return None
     try:
+        check_file_size(path, "pool file", MAX_POOL_FILE_BYTES)
         return read_limited(path, "pool file", MAX_POOL_FILE_BYTES).decode("utf-8", errors="replace")
     except ProblemError as exc:
         if warn:

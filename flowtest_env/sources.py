@@ -41,7 +41,8 @@ from synthesis.artifacts.summary import summary_of
 from synthesis.model.errors import ProblemError
 from synthesis.pipeline import SynthesizedTest, synthesize
 from synthesis.problems.builtins import BUILTINS
-from synthesis.problems.files import load_problem_file, read_limited
+from synthesis.problems.files import MAX_FILE_BYTES, load_problem_file, read_limited
+from synthesis.problems.limits import check_file_size
 from synthesis.problems.problem import Problem
 
 from .artifacts import builtin_game, cache_dir, load_builtin, warn_refused_entry, write_cache_entry
@@ -139,7 +140,8 @@ def load_test(test: TestLike) -> TestArtifact:
         raise ProblemError(
             f"test {text!r} is neither a built-in ({', '.join(builtin_names())}) nor an existing file"
         )
-    raw = read_limited(path, "test file")  # its size checked before it is read
+    check_file_size(path, "test file", MAX_FILE_BYTES)  # its size checked before it is read
+    raw = read_limited(path, "test file")
     key = content_key("file", raw)
     hit = _LOADED.get(key)
     if hit is not None:

@@ -51,7 +51,8 @@ from ..model.strategy import TestStrategy
 from ..model.systems import TransitionSystem
 from ..model.test_agent import Park, TestAgent, places_of_cells
 from ..pipeline import SynthesizedTest
-from ..problems.files import read_limited
+from ..problems.files import MAX_FILE_BYTES, read_limited
+from ..problems.limits import check_file_size
 from ..problems.problem import Problem
 from .schema import validate_artifact
 
@@ -378,6 +379,7 @@ class TestArtifact:
         """Read and check an artifact file of at most 16 MiB, its size checked before it is
         read (see :meth:`from_dict`)."""
         p = Path(path)
+        check_file_size(p, "artifact", MAX_FILE_BYTES)
         raw = read_limited(p, "artifact")
         return cls.from_dict(parse_artifact_json(raw, str(p)), str(p), verify, require_digest)
 

@@ -11,10 +11,14 @@ command line, ``SynthesisOptions(max_graph_edges=None)`` from Python).
 
 from __future__ import annotations
 
+import os
+import stat
+import time
 from dataclasses import dataclass
+from pathlib import Path
 
 from ..graphs.automata import specification_product
-from ..model.errors import ProblemTooLarge
+from ..model.errors import ProblemError, ProblemTooLarge
 from ..model.specs import Task
 from .problem import Problem
 
@@ -68,17 +72,54 @@ INTERMEDIATE_FACTOR = 64
 """How much larger than the final B_pi an objective's unminimised product may grow while
 the exact history count is computed (minimisation shrinks it)."""
 
+MAX_EXPLORED_STATES = 20_000
+"""At most this many automaton states are explored to count the histories exactly (about
+two seconds); beyond it the problem is refused on the estimate rather than explored for
+minutes. The paper's problems need a few hundred at most."""
 
-def check_size(problem: Problem, max_edges: int | None) -> SizeEstimate | None:
+EXPLORED_STATES_PER_SECOND = 10_000
+"""About how many automaton states the exact count explores per second: with a deadline,
+the exploration is cut to what the time left allows."""
+
+EXPLORE_WORK = 400_000
+"""The most automaton states times letters the exact history count explores (about 2.5 s:
+20,000 states of 22 letters took 2.7 s on a loaded machine); beyond it the problem is
+refused on the cheap bound, so the check never runs for minutes (a 22-state path with 20
+visits explored for 393 s and 1.5 GB before this budget)."""
+
+WORK_PER_SECOND = 150_000
+"""States times letters the exploration gets through per second (measured as above): a
+time limit bounds the exploration to :data:`CHECK_SHARE` of it at this rate."""
+
+CHECK_SHARE = 0.25
+"""The most of a synthesis's time limit the size check may spend."""
+
+
+def explore_budget(n_letters: int, seconds: float | None) -> int:
+    """The most automaton states the exact history count explores: :data:`EXPLORE_WORK`
+    over the letters, and under a time limit of ``seconds`` left, :data:`CHECK_SHARE` of
+    it at :data:`WORK_PER_SECOND` (at least 100 states)."""
+    work = float(EXPLORE_WORK)
+    if seconds is not None:
+        work = min(work, max(seconds, 0.0) * CHECK_SHARE * WORK_PER_SECOND)
+    return max(int(work) // max(n_letters, 1), 100)
+
+
+def check_size(problem: Problem, max_edges: int | None, deadline: float | None = None) -> SizeEstimate | None:
     """Refuse ``problem`` if its product graph may exceed ``max_edges`` (``None``: no limit).
 
     The cheap bound decides when it is small enough; otherwise the histories are counted
-    exactly, with the automaton products explored only up to what the limit allows.
+    exactly, with the automaton products explored only up to what the limit allows, at
+    most :data:`MAX_EXPLORED_STATES` states, and (with ``deadline``, a
+    :func:`time.perf_counter` time) no more than the time left allows: beyond that the
+    problem is refused on the estimate.
 
     Raises
     ------
     ProblemTooLarge
         With the estimate and the way to go on anyway.
+    TimeoutError
+        If ``deadline`` has passed before the count could start.
     """
     if max_edges is None:
         return None
@@ -93,15 +134,22 @@ def check_size(problem: Problem, max_edges: int | None) -> SizeEstimate | None:
             f"while solving); {way}"
         )
     cap = max(max_edges // max(est.moves, 1), 1)
+    budget = min(cap * INTERMEDIATE_FACTOR, MAX_EXPLORED_STATES)
+    if deadline is not None:
+        left = deadline - time.perf_counter()
+        if left <= 0:
+            raise TimeoutError("the time limit passed before the problem's size was checked")
+        budget = min(budget, max(int(left * EXPLORED_STATES_PER_SECOND / 2), 1))
     try:
         spec = specification_product(problem.system_objective, problem.test_objective, problem.system.letters(),
-                                     max_states=cap * INTERMEDIATE_FACTOR)
+                                     max_states=budget)
     except ProblemTooLarge:
         spec = None
     if spec is None or spec.dba.n_states > cap:
         raise ProblemTooLarge(
             f"problem {problem.name!r} is too large to synthesize: T has {est.states} states and {est.moves} moves "
-            f"and its objectives more than {cap} histories, so more than {max_edges} product-graph edges "
+            f"and its objectives up to {est.histories} histories (more than {cap} found, or more than the {budget} "
+            f"automaton states explored to count them), so more than {max_edges} product-graph edges "
             f"(more than about {max_edges * BYTES_PER_EDGE / 1e9:.1f} GB while solving); {way}"
         )
     est = SizeEstimate(est.states, est.moves, spec.dba.n_states, est.moves * spec.dba.n_states)
@@ -109,3 +157,23 @@ def check_size(problem: Problem, max_edges: int | None) -> SizeEstimate | None:
         raise ProblemTooLarge(f"problem {problem.name!r} is too large to synthesize: {est.describe()}, above the limit of "
                               f"{max_edges} edges; {way}")
     return est
+
+
+def check_file_size(path: str | Path, what: str, limit: int) -> None:
+    """Refuse a regular file larger than ``limit`` bytes by its size alone, before a byte
+    of it is read (``stat``): a 3 GB file costs nothing. A missing file, a folder or a
+    special file is left to the reader, which refuses it with its own message.
+
+    Raises
+    ------
+    ProblemError
+        Naming the file, its size and the limit.
+    """
+    try:
+        st = os.stat(path)
+    except OSError:
+        return
+    if stat.S_ISREG(st.st_mode) and st.st_size > limit:
+        raise ProblemError(
+            f"{what} {str(path)!r} is {st.st_size / 2**20:.0f} MiB, larger than {limit // 2**20} MiB: refused before reading it"
+        )
