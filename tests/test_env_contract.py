@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -45,7 +47,7 @@ SINGLE_ENV_BAD_KWARGS = [
 
 
 @pytest.mark.parametrize("kwargs,words", SINGLE_ENV_BAD_KWARGS)
-def test_single_env_arguments_are_named(kwargs: dict, words: str) -> None:
+def test_single_env_arguments_are_named(kwargs: dict[str, Any], words: str) -> None:
     with pytest.raises(ValueError, match=words):
         gym.make("FlowTest-SmallReactive-v0", **kwargs)
 
@@ -59,12 +61,12 @@ RANDOM_GRID_BAD_KWARGS = [
 
 
 @pytest.mark.parametrize("kwargs,words", RANDOM_GRID_BAD_KWARGS)
-def test_random_grid_arguments_are_named(kwargs: dict, words: str) -> None:
+def test_random_grid_arguments_are_named(kwargs: dict[str, Any], words: str) -> None:
     with pytest.raises(ValueError, match=words):
         gym.make("FlowTest-RandomGrid-v0", **kwargs)
 
 
-def _message(env_id: str, mode: str, kwargs: dict) -> str:
+def _message(env_id: str, mode: str, kwargs: dict[str, Any]) -> str:
     try:
         if mode == "single":
             gym.make(env_id, **kwargs)
@@ -76,7 +78,7 @@ def _message(env_id: str, mode: str, kwargs: dict) -> str:
 
 
 @pytest.mark.parametrize("kwargs,words", [kw for kw in SINGLE_ENV_BAD_KWARGS if kw[0] != {"render_mode": "human3d"}])
-def test_vector_env_refuses_the_single_envs_arguments_with_its_message(kwargs: dict, words: str) -> None:
+def test_vector_env_refuses_the_single_envs_arguments_with_its_message(kwargs: dict[str, Any], words: str) -> None:
     """One validator: the vector entry point refuses what the single env refuses, with the
     same message (NaN rewards, ``max_steps=1.5``, ``tile_size=0``, ...)."""
     single = _message("FlowTest-SmallReactive-v0", "single", kwargs)
@@ -85,7 +87,7 @@ def test_vector_env_refuses_the_single_envs_arguments_with_its_message(kwargs: d
 
 
 @pytest.mark.parametrize("kwargs,words", RANDOM_GRID_BAD_KWARGS)
-def test_random_grid_vector_env_refuses_the_same_arguments(kwargs: dict, words: str) -> None:
+def test_random_grid_vector_env_refuses_the_same_arguments(kwargs: dict[str, Any], words: str) -> None:
     single = _message("FlowTest-RandomGrid-v0", "single", kwargs)
     assert _message("FlowTest-RandomGrid-v0", "vector", kwargs) == single
     assert words in single
@@ -132,7 +134,7 @@ def test_vector_env_refuses_bool_and_float_actions_like_the_single_env(action: o
 @pytest.mark.parametrize("kwargs,words", [({"max_cycles": 0}, "max_cycles"), ({"tile_size": -3}, "tile_size"),
                                           ({"step_cost": float("inf")}, "step_cost"), ({"view": "x"}, "view"),
                                           ({"problem": "nope"}, "nope")])
-def test_multiagent_arguments_are_named(kwargs: dict, words: str) -> None:
+def test_multiagent_arguments_are_named(kwargs: dict[str, Any], words: str) -> None:
     with pytest.raises(ValueError, match=words):
         multiagent.raw_env(**{"problem": "small-reactive", **kwargs})
 
