@@ -77,7 +77,8 @@ from typing import IO, Any
 
 import numpy as np
 
-from flowtest_env.game import GRID_ACTIONS, TestGame
+from flowtest_env.game import TestGame
+from flowtest_env.runtime import describe
 
 from .base import PolicyError, action_mask_of, game_of, state_index
 
@@ -109,17 +110,9 @@ def _max_steps(env: Any) -> int | None:
 
 def describe_test(game: TestGame, max_steps: int | None) -> dict[str, Any]:
     """The public description of a test, as a system under test may know it (the
-    ``hello`` message's ``test``): never the hidden test objective or the restrictions."""
-    art = game.artifact
-    return {
-        "name": art.name,
-        "kind": art.kind,
-        "objective": art.objectives.get("system", ""),
-        "system": art.system.to_dict(),
-        "actions": [*GRID_ACTIONS, "stay"] if game.is_grid else None,
-        "max_steps": max_steps,
-        "agent": game.has_agent,
-    }
+    ``hello`` message's ``test``; :func:`flowtest_env.runtime.describe`): never the hidden
+    test objective or the restrictions."""
+    return describe(game, max_steps)
 
 
 def _run_of(env: Any) -> Any:

@@ -6,7 +6,7 @@ adding a command is one import and one entry here.
 
 from __future__ import annotations
 
-from . import benchmark, demo, evaluate, synthesize, train, train_tester
+from . import benchmark, demo, evaluate, serve, synthesize, train, train_tester
 from .command import Command
 
 COMMANDS: tuple[Command, ...] = (
@@ -16,5 +16,6 @@ COMMANDS: tuple[Command, ...] = (
     train.COMMAND,
     train_tester.COMMAND,
     benchmark.COMMAND,
+    serve.COMMAND,
 )
 """Every subcommand of ``flowtest``."""

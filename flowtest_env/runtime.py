@@ -1,0 +1,254 @@
+"""A synthesized test as a runtime: step it from your own harness, no Gymnasium loop.
+
+Your system runs where it runs (a robot, a simulator, a ROS node); after each of its moves
+you tell the test where the system is, and the test answers what it restricts now, where
+its test agent moves and the verdict so far. The rules are
+:class:`~flowtest_env.game.TestGame`'s, which every FlowTest environment plays;
+``flowtest serve`` offers the same over JSON lines (docs/runtime.md)::
+
+    from flowtest_env.runtime import TestRuntime
+
+    rt = TestRuntime.load("small-reactive")   # a built-in name, an artifact or problem file
+    status = rt.reset()
+    status = rt.step(state=[1, 1])             # the system entered (1, 1)
+    status["restricted"]                       # moves out of it refused now, and by what
+    status["verdict"]                          # system_objective, test_objective_realized, ...
+
+A **status** (:meth:`TestRuntime.status`) is a plain ``dict`` of JSON values: ``state``,
+``step``, ``history`` and ``history_name``, ``restricted`` (``[{"action", "to", "by"}]``,
+``by`` one of ``wall``, ``test``, ``agent``), ``allowed``, ``to``, ``mask``, ``agent``
+(``null`` or ``{"state", "name", "place"}``), ``verdict``, ``done`` and ``max_steps``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from synthesis.artifacts.artifact import TestArtifact
+
+from .game import GRID_ACTIONS, GameError, RunState, TestGame
+
+
+class RuntimeRefused(ValueError):
+    """A step the test cannot take: a state the system cannot have entered (not one move
+    away, or through a move the test restricts now), an unknown action, or a step after the
+    run has ended. The run is unchanged."""
+
+
+def describe(game: TestGame, max_steps: int | None) -> dict[str, Any]:
+    """The public description of a test, as the system under test may know it: its name,
+    kind, the system objective (never the hidden test objective), the transition system as
+    the artifact holds it, the grid's action names (``None`` on graphs), the step budget
+    and whether a test agent moves."""
+    art = game.artifact
+    return {
+        "name": art.name,
+        "kind": art.kind,
+        "objective": art.objectives.get("system", ""),
+        "system": art.system.to_dict(),
+        "actions": [*GRID_ACTIONS, "stay"] if game.is_grid else None,
+        "max_steps": max_steps,
+        "agent": game.has_agent,
+    }
+
+
+def state_of(game: TestGame, state: Any) -> int:
+    """The index of a system state written as in problem-format.md (``[row, col]``,
+    ``[[row, col], fuel]`` or a state name).
+
+    Raises
+    ------
+    RuntimeRefused
+        If it is not a state of the test's system.
+    """
+    ts = game.ts
+    try:
+        if ts.kind == "grid":
+            if not (isinstance(state, (list, tuple)) and len(state) == 2):
+                raise TypeError
+            key: Any = (_int(state[0]), _int(state[1]))
+        elif ts.kind == "fuel":
+            if not (isinstance(state, (list, tuple)) and len(state) == 2 and isinstance(state[0], (list, tuple))
+                    and len(state[0]) == 2):
+                raise TypeError
+            key = ((_int(state[0][0]), _int(state[0][1])), _int(state[1]))
+        else:
+            if not isinstance(state, str):
+                raise TypeError
+            key = state
+        return ts.index(key)
+    except (TypeError, KeyError):
+        shape = {"grid": "[row, col]", "fuel": "[[row, col], fuel]"}.get(ts.kind, "a state name")
+        raise RuntimeRefused(f"{_show(state)} is not a state of {game.artifact.name!r} (expected {shape})") from None
+
+
+def _int(x: Any) -> int:
+    if isinstance(x, bool) or not isinstance(x, int):
+        raise TypeError
+    return x
+
+
+def _show(x: Any) -> str:
+    text = repr(x)
+    return text if len(text) <= 80 else text[:80] + "..."
+
+
+class TestRuntime:
+    """One run of a synthesized test at a time, stepped by the system's states or actions.
+
+    Parameters
+    ----------
+    artifact
+        The test (:meth:`load` takes a name or a file).
+    max_steps
+        The step budget; default the environment's (:func:`flowtest_env.envs.default_max_steps`).
+        The run is ``done`` once it is spent, as an environment truncates it.
+    """
+
+    __test__ = False
+
+    def __init__(self, artifact: TestArtifact, max_steps: int | None = None) -> None:
+        from .envs import default_max_steps
+
+        self.game = TestGame(artifact)
+        self.max_steps = default_max_steps(self.game) if max_steps is None else int(max_steps)
+        if self.max_steps < 1:
+            raise ValueError(f"max_steps must be at least 1, not {max_steps}")
+        descr = artifact.extras.get("history_descriptions") if isinstance(artifact.extras, dict) else None
+        names = list(artifact.histories.names)
+        self.history_names: list[str] = [str(x) for x in descr] if isinstance(descr, list) and len(descr) == len(names) else names
+        self.run: RunState = self.game.reset()
+
+    @classmethod
+    def load(cls, test: Any, max_steps: int | None = None) -> TestRuntime:
+        """The runtime of ``test``: a built-in name, an artifact file, a problem file
+        (synthesized once, then cached) or a test object (:func:`flowtest_env.sources.load_test`).
+
+        Raises
+        ------
+        synthesis.model.errors.ProblemError
+            If ``test`` names no test, or the file is not a valid artifact or problem.
+        """
+        from .sources import load_test
+
+        return cls(load_test(test), max_steps)
+
+    def describe(self) -> dict[str, Any]:
+        """The test's public description (:func:`describe`)."""
+        return describe(self.game, self.max_steps)
+
+    # ------------------------------------------------------------------ the run
+
+    def reset(self) -> dict[str, Any]:
+        """Start a new run (the test agent takes its first move if it moves first); its status."""
+        self.run = self.game.reset()
+        return self.status()
+
+    @property
+    def done(self) -> bool:
+        """Whether the run has ended: the system objective met or violated, or the budget spent."""
+        return self.run.done or self.run.steps >= self.max_steps
+
+    def step(self, state: Any = None, action: Any = None) -> dict[str, Any]:
+        """The system's next step, given as the ``state`` it entered (``[row, col]``,
+        ``[[row, col], fuel]`` or a name; its own state is a stay) or as an ``action``
+        (an index or a name: ``"N"``, ``"stay"``, ``"-> d1"``). Returns the new status.
+
+        A state must be one move away, through a move the test allows now (the system
+        cannot have gone through a closed door); an action is played as the environment
+        plays it (a refused one is a blocked attempt: the system stays).
+
+        Raises
+        ------
+        RuntimeRefused
+            If the step cannot be taken (the run is then unchanged).
+        """
+        if (state is None) == (action is None):
+            raise RuntimeRefused("give the system's new state or its action (one of them)")
+        if self.done:
+            raise RuntimeRefused("the run has ended; reset it")
+        a = self._action_to(state) if state is not None else self._action(action)
+        try:
+            self.game.step(self.run, a)
+        except GameError as exc:  # pragma: no cover - _action_to and _action check first
+            raise RuntimeRefused(str(exc)) from None
+        return self.status()
+
+    def _action(self, action: Any) -> int:
+        g, s = self.game, self.run.system
+        if isinstance(action, int) and not isinstance(action, bool):
+            if 0 <= action < g.n_actions:
+                return action
+        elif isinstance(action, str):
+            names = [g.action_name(s, a) for a in range(g.n_actions)]
+            for text in (action, f"-> {action}"):
+                if text in names:
+                    return names.index(text)
+        known = ", ".join(g.action_name(s, a) for a in range(g.n_actions))
+        raise RuntimeRefused(f"{_show(action)} is not an action here (an index 0..{g.n_actions - 1} or one of: {known})")
+
+    def _action_to(self, state: Any) -> int:
+        g, run = self.game, self.run
+        s, t = run.system, state_of(g, state)
+        legal = g.legal_bits(run)
+        if t == s:
+            if legal >> g.stay_action & 1:
+                return g.stay_action
+            raise RuntimeRefused(f"the system cannot stay in {_show(g.state_json(s))} now")
+        slots = [k for k in range(g.n_slots) if g.slot_list[s][k] >= 0 and g.succ_list[s][k] == t]
+        if not slots:
+            raise RuntimeRefused(f"{_show(g.state_json(t))} is not one move from {_show(g.state_json(s))}")
+        for k in slots:
+            if legal >> k & 1:
+                return k
+        by = self._refused_by(slots[0])
+        raise RuntimeRefused(f"the move {_show(g.state_json(s))} -> {_show(g.state_json(t))} is restricted now "
+                             f"(by the {'test agent' if by == 'agent' else by})")
+
+    # ------------------------------------------------------------------ what the test says
+
+    def _refused_by(self, slot: int) -> str:
+        g, run = self.game, self.run
+        bit = 1 << slot
+        if g.static_bits[run.system] & bit:
+            return "wall"
+        if g.agent_bits(run) & bit:
+            return "agent"
+        return "test"
+
+    def restricted(self) -> list[dict[str, Any]]:
+        """The moves out of the system's state the test refuses now: the action, the state
+        it leads to, and ``by``: ``wall`` (a static wall), ``test`` (a restriction of this
+        history) or ``agent`` (the test agent stands there)."""
+        g, run = self.game, self.run
+        s = run.system
+        bits = g.restricted_bits_of(run) & g.exists_bits[s]
+        return [{"action": g.action_name(s, k), "to": g.state_json(g.succ_list[s][k]), "by": self._refused_by(k)}
+                for k in range(g.n_slots) if bits >> k & 1]
+
+    def status(self) -> dict[str, Any]:
+        """The run now (see the module docstring); nothing changes."""
+        g, run = self.game, self.run
+        s = run.system
+        mask = g.action_mask(run) if not self.done else g.action_mask(run) * 0
+        allowed = [int(a) for a in mask.nonzero()[0]]
+        agent = None
+        if g.has_agent and g.agent_controller is not None:
+            place = g.agent_place[run.agent]
+            p = g.ts.places[place] if place >= 0 else None
+            agent = {"state": run.agent, "name": g.agent_controller.agent_names[run.agent],
+                     "place": list(p) if isinstance(p, tuple) else p}
+        return {
+            "state": g.state_json(s),
+            "step": run.steps,
+            "history": run.history,
+            "history_name": self.history_names[run.history],
+            "restricted": self.restricted(),
+            "allowed": [g.action_name(s, a) for a in allowed],
+            "to": [g.state_json(s if a == g.stay_action else g.succ_list[s][a]) for a in allowed],
+            "mask": mask.tolist(),
+            "agent": agent,
+            "verdict": g.verdict(run),
+            "done": self.done,
+            "max_steps": self.max_steps,
+        }
