@@ -71,10 +71,11 @@ import torch
 from gymnasium import spaces
 from gymnasium.vector.utils import batch_space
 
-from .compiled import OUTCOMES, CompiledPool
+from .compiled import OUTCOMES, CompiledPool, potentials
 from .draws import GOLDEN_I64, MAX_TESTS, MIX1_I64, MIX2_I64
+from .encoding import make_encoder
 from .game import TestGame
-from .system_product import INF, SystemProduct
+from .wrappers import DistancePotential, shared_position_slice
 
 AUTORESET_MODES: tuple[str, ...] = ("next_step", "same_step", "disabled")
 """The autoreset modes, as Gymnasium's ``AutoresetMode`` values."""
@@ -229,25 +230,6 @@ class TorchTables:
         return replace(self, **moved)
 
 
-def potentials(pool: CompiledPool, games: Sequence[TestGame], scale: float) -> np.ndarray:
-    """``float64[n_z]``: :class:`~flowtest_env.wrappers.DistancePotential` of every
-    configuration of ``pool`` (``-min(d, 4 scale) / scale``, ``-4`` where the SUT's
-    objective is unreachable), the same floats as the single env computes."""
-    if scale <= 0:
-        raise ValueError(f"the shaping scale must be positive, not {scale}")
-    out = np.empty(pool.n_z, dtype=np.float64)
-    for t, (game, ct) in enumerate(zip(games, pool.tests, strict=True)):
-        prod = SystemProduct(game)
-        dist = prod.distances()
-        q = np.asarray(game.q_sys, dtype=np.int64)[ct.history]
-        d = dist[ct.system * prod.n_q + q]
-        reach = d < INF
-        phi = -np.minimum(d.astype(np.float64), 4 * float(scale)) / float(scale)
-        o = int(pool.offset[t])
-        out[o : o + ct.n_z] = np.where(reach, phi, -4.0)
-    return out
-
-
 def shaped_rewards(pool: CompiledPool, base: np.ndarray, phi: np.ndarray, gamma: float) -> np.ndarray:
     """``base + (gamma * phi(z') - phi(z))`` per ``(z, action)``, ``phi(z') = 0`` when the
     step ends the run: the single env's ``reward += gamma * phi - last`` in float64."""
@@ -314,7 +296,7 @@ def build_tables(
         raise ValueError(f"a pool holds at most {MAX_TESTS} tests")
     reward = pool.rewards(step_cost, restricted_penalty, goal_reward, violation_penalty)
     if shaping > 0:
-        reward = shaped_rewards(pool, reward, potentials(pool, games, shaping), shaping_gamma)
+        reward = shaped_rewards(pool, reward, potentials(pool, list(games), DistancePotential(shaping)), shaping_gamma)
     if memory_slice is not None:
         row_bits, n_places = _visited_words(pool.obs, memory_slice)
         bits = row_bits[pool.obs_row]
@@ -420,10 +402,10 @@ class StepOutput(NamedTuple):
 def start_configurations(tables: TorchTables, key: torch.Tensor, episode: torch.Tensor, home: torch.Tensor) -> torch.Tensor:
     """``int64[N]``: the reset configuration of episode ``episode`` of each env."""
     if tables.n_tests == 1:
-        return tables.initial[torch.zeros_like(home)]
+        return tables.initial.index_select(0, torch.zeros_like(home))
     if tables.assignment == "fixed":
-        return tables.initial[home % tables.n_tests]
-    return tables.initial[draw_tests(key, episode, tables.n_tests)]
+        return tables.initial.index_select(0, home % tables.n_tests)
+    return tables.initial.index_select(0, draw_tests(key, episode, tables.n_tests))
 
 
 def reset_state(
@@ -457,7 +439,7 @@ def reset_state(
     zero = torch.zeros(n, dtype=torch.int64, device=dev)
     return EnvState(
         z=z, steps=zero, restrictions=zero.clone(), blocked=zero.clone(), key=keys, episode=ep, home=home,
-        done=torch.zeros(n, dtype=torch.bool, device=dev), visited=tables.visited_bits[z],
+        done=torch.zeros(n, dtype=torch.bool, device=dev), visited=tables.visited_bits.index_select(0, z),
     )
 
 
@@ -486,7 +468,7 @@ def restart(
         episode=ep,
         home=state.home,
         done=state.done & ~which,
-        visited=torch.where(which[:, None], tables.visited_bits[z], state.visited),
+        visited=torch.where(which[:, None], tables.visited_bits.index_select(0, z), state.visited),
     )
 
 
@@ -507,14 +489,14 @@ def step(tables: TorchTables, state: EnvState, actions: torch.Tensor, autoreset:
     a_n = tables.n_actions
     z = state.z
     flat = z * a_n + actions.to(torch.int64)
-    z2 = tables.next_z[flat]
-    reward = tables.reward[flat]
+    z2 = tables.next_z.index_select(0, flat)
+    reward = tables.reward.index_select(0, flat)
     steps = state.steps + 1
-    restrictions = state.restrictions + tables.restricted[z].to(torch.int64)
-    blocked = state.blocked + tables.refused[flat].to(torch.int64)
-    terminated = tables.terminal[z2]
+    restrictions = state.restrictions + tables.restricted.index_select(0, z).to(torch.int64)
+    blocked = state.blocked + tables.refused.index_select(0, flat).to(torch.int64)
+    terminated = tables.terminal.index_select(0, z2)
     truncated = ~terminated & (steps >= tables.max_steps)
-    visited = state.visited | tables.visited_bits[z2]
+    visited = state.visited | tables.visited_bits.index_select(0, z2)
     new = EnvState(z2, steps, restrictions, blocked, state.key, state.episode, state.home, state.done, visited)
     if autoreset == "next_step":
         pending = state.done
@@ -526,9 +508,10 @@ def step(tables: TorchTables, state: EnvState, actions: torch.Tensor, autoreset:
         raise ValueError(f"unknown autoreset mode {autoreset!r}; expected one of {', '.join(AUTORESET_MODES)}")
     ended = terminated | truncated
     zero = torch.zeros_like(steps)
+    outcome = tables.outcome.index_select(0, new.z)
     verdict = Verdict(
-        system_objective=torch.where(ended, tables.outcome[new.z], torch.full_like(tables.outcome[new.z], -1)),
-        test_objective_realized=tables.test_realized[new.z] & ended,
+        system_objective=torch.where(ended, outcome, torch.full_like(outcome, -1)),
+        test_objective_realized=tables.test_realized.index_select(0, new.z) & ended,
         restrictions=torch.where(ended, new.restrictions, zero),
         blocked_attempts=torch.where(ended, new.blocked, zero),
         steps=torch.where(ended, new.steps, zero),
@@ -543,7 +526,7 @@ def step(tables: TorchTables, state: EnvState, actions: torch.Tensor, autoreset:
 
 def action_mask(tables: TorchTables, state: EnvState) -> torch.Tensor:
     """``bool[N, n_actions]``: the legal actions of every run now (all false once ended)."""
-    return tables.mask[state.z]
+    return tables.mask.index_select(0, state.z)
 
 
 def unpack_visited(tables: TorchTables, words: torch.Tensor, dtype: torch.dtype = torch.float32) -> torch.Tensor:
@@ -555,7 +538,7 @@ def unpack_visited(tables: TorchTables, words: torch.Tensor, dtype: torch.dtype 
 
 def observation_of(tables: TorchTables, z: torch.Tensor, visited: torch.Tensor) -> torch.Tensor:
     """The full observations of configurations ``z`` with memory ``visited``."""
-    rows = tables.obs[tables.obs_row[z]]
+    rows = tables.obs.index_select(0, tables.obs_row.index_select(0, z))
     if not tables.n_places:
         return rows
     return torch.cat([rows, unpack_visited(tables, visited, rows.dtype)], dim=1)
@@ -569,7 +552,7 @@ def observe(tables: TorchTables, state: EnvState) -> torch.Tensor:
 
 def compact_of(tables: TorchTables, z: torch.Tensor, visited: torch.Tensor) -> torch.Tensor:
     """``int64[N, 1 + W]``: observation row, then the packed memory words."""
-    return torch.cat([tables.obs_row[z][:, None], visited], dim=1)
+    return torch.cat([tables.obs_row.index_select(0, z)[:, None], visited], dim=1)
 
 
 def compact(tables: TorchTables, state: EnvState) -> torch.Tensor:
@@ -585,7 +568,7 @@ def expand(tables: TorchTables, compact_obs: torch.Tensor) -> torch.Tensor:
 
         obs = expand(tables, compact(tables, state))   # == observe(tables, state)
     """
-    rows = tables.obs[compact_obs[:, 0]]
+    rows = tables.obs.index_select(0, compact_obs[:, 0])
     if not tables.n_places:
         return rows
     return torch.cat([rows, unpack_visited(tables, compact_obs[:, 1:], rows.dtype)], dim=1)
@@ -751,7 +734,7 @@ class TorchVectorEnv(gym.vector.VectorEnv):
             infos["final_obs"] = self._obs(out.final_z, out.final_visited)
             infos["_final_obs"] = out.ended
             infos["final_info"] = {
-                "action_mask": self.tables.mask[out.final_z],
+                "action_mask": self.tables.mask.index_select(0, out.final_z),
                 "_action_mask": out.ended,
                 "verdict": infos.pop("verdict"),
                 "_verdict": infos.pop("_verdict"),
@@ -792,7 +775,7 @@ class TorchVectorEnv(gym.vector.VectorEnv):
     @property
     def test_index(self) -> torch.Tensor:
         """``int64[N]``: the pool index of the test each env plays now."""
-        return self.tables.test_of[self._started().z]
+        return self.tables.test_of.index_select(0, self._started().z)
 
     def action_masks(self) -> torch.Tensor:
         """``bool[N, n_actions]``: the legal actions now."""
@@ -802,8 +785,8 @@ class TorchVectorEnv(gym.vector.VectorEnv):
         """The running verdict of every env (tensors over the batch)."""
         s = self._started()
         return {
-            "system_objective": self.tables.outcome[s.z],
-            "test_objective_realized": self.tables.test_realized[s.z],
+            "system_objective": self.tables.outcome.index_select(0, s.z),
+            "test_objective_realized": self.tables.test_realized.index_select(0, s.z),
             "restrictions": s.restrictions.clone(),
             "blocked_attempts": s.blocked.clone(),
             "steps": s.steps.clone(),
@@ -830,19 +813,18 @@ def outcome_names(codes: torch.Tensor) -> np.ndarray:
 
 def tables_of(env: Any, device: str | torch.device = "cpu", reward_dtype: torch.dtype = torch.float32) -> TorchTables:
     """:class:`TorchTables` of a NumPy :class:`~flowtest_env.vector.PoolVectorEnv`: its
-    pool, step budget, rewards, memory, shaping and assignment."""
+    pool, step budget, reward weights, memory, shaping and assignment (its
+    :class:`~flowtest_env.config.EnvConfig`)."""
     env = getattr(env, "unwrapped", env)
-    pool: CompiledPool = env.pool
-    reward = getattr(env, "_reward", None)
-    memory_slice = getattr(env, "memory_slice", None)
-    tables = build_tables(
-        pool, env.games, max_steps=env.max_steps, memory_slice=memory_slice, assignment=env.assignment,
-        device=device, reward_dtype=reward_dtype,
+    cfg = env.config
+    where = None
+    if cfg.memory == "visited":
+        where = shared_position_slice([make_encoder(g, cfg.obs_kind, cfg.pad_to) for g in env.games])
+    return build_tables(
+        env.pool, env.games, max_steps=env.max_steps, step_cost=cfg.step_cost, restricted_penalty=cfg.restricted_penalty,
+        goal_reward=cfg.goal_reward, violation_penalty=cfg.violation_penalty, memory_slice=where, shaping=cfg.shaping,
+        shaping_gamma=cfg.shaping_gamma, assignment=env.assignment, device=device, reward_dtype=reward_dtype,
     )
-    if reward is not None:  # the NumPy env's own rewards (shaping included), bit for bit
-        own = torch.as_tensor(np.asarray(reward, dtype=np.float64)).to(tables.device, reward_dtype)
-        tables = replace(tables, reward=own)
-    return tables
 
 
 def make_vec(env_id: str, num_envs: int, device: str | torch.device = "cpu", *, autoreset_mode: Any = "next_step",
@@ -872,6 +854,6 @@ def make_tables(env_id: str, device: str | torch.device = "cpu", reward_dtype: t
 __all__ = [
     "AUTORESET_MODES", "EnvState", "StepOutput", "TorchTables", "TorchVectorEnv", "Verdict", "action_mask",
     "build_tables", "compact", "compact_of", "draw_tests", "expand", "make_tables", "make_vec", "mix64", "observation_of",
-    "observe", "outcome_names", "potentials", "reset_state", "restart", "shaped_rewards", "step", "tables_of",
+    "observe", "outcome_names", "reset_state", "restart", "shaped_rewards", "step", "tables_of",
     "unpack_visited",
 ]
