@@ -307,3 +307,149 @@ def validate_artifact(d: Any, source: str, fmt: str, version: int) -> None:
     digest = _get(w, src, "sha256", "source")
     if not isinstance(digest, str) or not _HEX64.fullmatch(digest):
         raise w.fail("source.sha256", "is not a SHA-256 hex digest")
+
+
+# --------------------------------------------------------------------------- JSON Schema
+
+SCHEMA_VERSION = 1
+"""The artifact version (the ``version`` field) the JSON Schema of :func:`json_schema` describes."""
+
+SCHEMA_ID = f"urn:flowtest:test-artifact:{SCHEMA_VERSION}"
+
+
+def json_schema() -> dict[str, Any]:
+    """The artifact as a JSON Schema document (draft 2020-12), for readers outside Python.
+
+    It states every field's type and shape, what :func:`validate_artifact` checks field by
+    field; what JSON Schema cannot say (an index below the length of another field, the
+    automata of the objectives, the source hash, the digest of the content) is checked by
+    FlowTest on load and explained in docs/artifact-schema.md. ``docs/artifact-schema.json``
+    is this document; ``python -m synthesis.artifacts.schema`` prints it.
+
+    >>> json_schema()["properties"]["version"]
+    {'const': 1}
+    """
+    nat = {"type": "integer", "minimum": 0}
+    bit = {"enum": [0, 1]}
+    cell = {"type": "array", "items": nat, "minItems": 2, "maxItems": 2}
+    hex64 = {"type": "string", "pattern": "^[0-9a-f]{64}$"}
+
+    def array(items: dict[str, Any], **more: Any) -> dict[str, Any]:
+        return {"type": "array", "items": items, **more}
+
+    def obj(required: dict[str, Any], optional: dict[str, Any] | None = None, closed: bool = True) -> dict[str, Any]:
+        out: dict[str, Any] = {"type": "object", "required": list(required), "properties": {**required, **(optional or {})}}
+        if closed:
+            out["additionalProperties"] = False
+        return out
+
+    def when(kind: str, states: dict[str, Any]) -> dict[str, Any]:
+        return {"if": {"properties": {"kind": {"const": kind}}}, "then": {"properties": {"states": array(states)}}}
+
+    fuel_state = {"type": "array", "prefixItems": [{"$ref": "#/$defs/cell"}, nat], "minItems": 2, "maxItems": 2}
+    system = obj({
+        "kind": {"enum": list(SYSTEM_KINDS)},
+        "states": array({"anyOf": [{"type": "string"}, {"type": "array"}]}, minItems=1),
+        "moves": array(array(nat, minItems=2, maxItems=2)),
+        "action": array({"type": ["string", "integer"]}),
+        "stay": array(bit),
+        "initial": nat,
+        "labels": array(array({"type": "string"})),
+        "terminal": array(nat),
+        "restrictable": array(bit),
+        "places": array({"anyOf": [{"type": "string"}, {"$ref": "#/$defs/cell"}]}),
+        "place": array(nat),
+    }, {
+        "layout": {"anyOf": [{"type": "null"}, obj({
+            "rows": {"type": "integer", "minimum": 1},
+            "cols": {"type": "integer", "minimum": 1},
+            "blocked": array({"$ref": "#/$defs/cell"}),
+            "tokens": array({"type": "array", "prefixItems": [nat, nat, {"type": "string"}], "minItems": 3, "maxItems": 3}),
+        })]},
+        "max_fuel": {"anyOf": [{"type": "null"}, nat]},
+    })
+    system["allOf"] = [when("grid", {"$ref": "#/$defs/cell"}), when("fuel", fuel_state), when("graph", {"type": "string"})]
+
+    def automaton(components: dict[str, Any]) -> dict[str, Any]:
+        return obj({
+            "delta": array(array(nat), minItems=1),
+            "initial": nat,
+            "accepting": array(array(bit)),
+            "names": array({"type": "string"}),
+        }, {"components": components})
+
+    controller = obj({
+        "format": {"const": "flowtest.agent-controller"},
+        "version": {"const": 1},
+        "first": {"enum": ["system", "agent"]},
+        "agent_names": array({"type": "string"}, minItems=1),
+        "agent_places": array({"anyOf": [{"type": "null"}, nat]}),
+        "initial_agent": nat,
+        "initial_memory": nat,
+        "n_memory": {"type": "integer", "minimum": 1},
+        "n_hist": {"type": "integer", "minimum": 1},
+        "n_system_states": {"type": "integer", "minimum": 1},
+        "rows": array(array(nat, minItems=2, maxItems=2)),
+        "table": obj({key: array(nat) for key in ("memory", "row", "agent", "next_agent", "next_memory")}),
+        "fallback": array(array(nat)),
+        "sys_place": array(nat),
+    })
+    agent = obj({"controller": controller}, {
+        "moves": array(array(nat, minItems=2, maxItems=2)),
+        "names": array({"type": "string"}),
+        "cells": array({"$ref": "#/$defs/cell"}),
+        "parks": array({"type": "object"}),
+        "start": {"type": "string"},
+        "first": {"enum": ["system", "agent"]},
+        "counterexamples": nat,
+    }, closed=False)
+    return {
+        "$schema": "https://json-schema.org/draft/2020-12/schema",
+        "$id": SCHEMA_ID,
+        "title": "FlowTest test artifact",
+        "description": "A synthesized FlowTest test, as flowtest synthesize --out writes it (docs/artifact-schema.md).",
+        "type": "object",
+        "required": ["format", "version", "name", "kind", "objectives", "system", "letters", "automata", "strategy",
+                     "summary", "source"],
+        "additionalProperties": False,
+        "properties": {
+            "format": {"const": "flowtest-test"},
+            "version": {"const": SCHEMA_VERSION},
+            "name": {"type": "string", "minLength": 1},
+            "kind": {"enum": list(KINDS)},
+            "objectives": obj({"system": {"type": "string"}, "test": {"type": "string"}}, closed=False),
+            "system": {"$ref": "#/$defs/system"},
+            "letters": array(array({"type": "string"}), minItems=1),
+            "automata": obj({
+                "system": automaton({"anyOf": [{"type": "null"}, array(array(nat))]}),
+                "test": automaton({"anyOf": [{"type": "null"}, array(array(nat))]}),
+                "histories": automaton(array(array(nat, minItems=2, maxItems=2))),
+            }),
+            "strategy": obj({
+                "setting": {"enum": list(SETTINGS)},
+                "n_hist": {"type": "integer", "minimum": 1},
+                "n_moves": nat,
+                "static_obstacles": array(nat),
+                "restrictions": {"type": "object", "propertyNames": {"pattern": "^(0|[1-9][0-9]*)$"},
+                                 "additionalProperties": array(nat)},
+            }),
+            "agent": {"anyOf": [{"type": "null"}, {"$ref": "#/$defs/agent"}]},
+            "summary": {"type": "object", "required": ["flow"], "properties": {"flow": {"type": "integer", "minimum": 1}}},
+            "extras": {"type": "object", "properties": {"history_descriptions": array({"type": "string"})}},
+            "source": obj({"sha256": hex64}),
+            "digest": obj({"sha256": hex64}),
+        },
+        "allOf": [
+            {"if": {"properties": {"kind": {"const": "agent"}}},
+             "then": {"required": ["agent"], "properties": {"agent": {"$ref": "#/$defs/agent"}}},
+             "else": {"properties": {"agent": {"type": "null"}}}},
+        ],
+        "$defs": {"cell": cell, "system": system, "agent": agent},
+    }
+
+
+if __name__ == "__main__":  # pragma: no cover - python -m synthesis.artifacts.schema
+    import json
+    import sys
+
+    sys.stdout.write(json.dumps(json_schema(), indent=1) + "\n")
