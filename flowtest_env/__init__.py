@@ -12,6 +12,8 @@ NumPy ``vector_entry_point`` (:mod:`flowtest_env.vector`:
     env = gym.make("FlowTest-v0", test="mine.toml")   # a problem file, an artifact, a built-in
     env = flowtest_env.make_env(problem)              # from Python objects
 
+The options every env takes are one :class:`~flowtest_env.config.EnvConfig`;
+:func:`observation_layout` names the entries of an observation (docs/envs/observations.md).
 The two-player (tester vs. system) PettingZoo environment is
 :mod:`flowtest_env.multiagent`.
 """
@@ -22,10 +24,12 @@ from typing import Any
 
 from gymnasium.envs.registration import register, registry
 
+from .config import EnvConfig
+from .encoding import ObservationLayout, Segment
 from .envs import BUILTIN_ENVS, DEFAULT_MAX_STEPS, FlowTestEnv, RandomGridEnv
 from .game import GameError, RunState, TestGame
 from .sources import TestLike, load_test
-from .wrappers import ActionMaskObservation
+from .wrappers import ActionMaskObservation, observation_layout
 
 ANY_TEST_ID = "FlowTest-v0"
 """The registered ID that plays any test: ``gymnasium.make(ANY_TEST_ID, test=...)``."""
@@ -83,6 +87,7 @@ def make_env(test: TestLike, **options: Any) -> FlowTestEnv:
 
 
 __all__ = [
-    "ANY_TEST_ID", "ENV_IDS", "REGISTRATIONS", "ActionMaskObservation", "FlowTestEnv", "GameError", "RandomGridEnv",
-    "RunState", "TestGame", "TestLike", "load_test", "make_env",
+    "ANY_TEST_ID", "ENV_IDS", "REGISTRATIONS", "ActionMaskObservation", "EnvConfig", "FlowTestEnv", "GameError",
+    "ObservationLayout", "RandomGridEnv", "RunState", "Segment", "TestGame", "TestLike", "load_test", "make_env",
+    "observation_layout",
 ]

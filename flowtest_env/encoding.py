@@ -40,6 +40,8 @@ test-objective part of the history, the agent's strategy memory.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from gymnasium import spaces
 
@@ -68,11 +70,114 @@ def system_propositions(game: TestGame) -> list[str]:
     return out
 
 
+@dataclass(frozen=True)
+class Segment:
+    """One named part of an observation.
+
+    ``obs[start:stop]`` (flat and padded observations) or ``obs[start:stop]`` along the
+    channel axis (``"grid"`` observations) holds it; ``shape`` is how to view that part
+    (``(H, W)`` for a plane of a flat observation, ``(n,)`` for a vector).
+    """
+
+    name: str
+    start: int
+    stop: int
+    shape: tuple[int, ...]
+    what: str
+
+    @property
+    def size(self) -> int:
+        """Number of entries (channels for a ``"grid"`` observation)."""
+        return self.stop - self.start
+
+    def of(self, obs: np.ndarray) -> np.ndarray:
+        """This part of ``obs`` (one observation, or a batch: the last axes), viewed as
+        :attr:`shape`."""
+        obs = np.asarray(obs)
+        if obs.ndim >= 3 and len(self.shape) == 2 and self.size == 1:  # grid: [..., C, H, W]
+            return obs[..., self.start, :, :]
+        part = obs[..., self.start : self.stop]
+        return part.reshape(*part.shape[:-1], *self.shape)
+
+
+@dataclass(frozen=True)
+class ObservationLayout:
+    """Which entries of an observation are which (:func:`flowtest_env.observation_layout`).
+
+    ``kind`` is the ``obs_kind`` (``"flat"``, ``"padded"`` or ``"grid"``); ``shape`` the
+    observation's; ``segments`` in order, covering every entry once (a ``"grid"``
+    observation's segments are its channels). ``position`` is the segment that holds the
+    one-hot of the SUT's own place (the ``system`` plane, or the place block on graphs);
+    ``grid`` the ``(rows, cols)`` its planes are laid on (``None`` on graphs).
+    """
+
+    kind: str
+    shape: tuple[int, ...]
+    segments: tuple[Segment, ...]
+    position: str
+    grid: tuple[int, int] | None
+
+    def __getitem__(self, name: str) -> Segment:
+        for seg in self.segments:
+            if seg.name == name:
+                return seg
+        raise KeyError(f"no segment {name!r}; the segments are {', '.join(s.name for s in self.segments)}")
+
+    def names(self) -> list[str]:
+        """The segment names, in order."""
+        return [s.name for s in self.segments]
+
+    def with_memory(self, size: int) -> ObservationLayout:
+        """The layout with the visited-places memory (``size`` entries, laid out as the
+        position segment) appended."""
+        pos = self[self.position]
+        end = self.segments[-1].stop
+        seg = Segment("visited", end, end + size, pos.shape, "places the SUT has occupied this episode (memory='visited')")
+        return ObservationLayout(self.kind, (end + size,), (*self.segments, seg), self.position, self.grid)
+
+
+Part = tuple[str, int, tuple[int, ...], str]
+"""A segment to lay out: name, size, shape, meaning."""
+
+
+def _segments(parts: list[Part]) -> tuple[Segment, ...]:
+    out, i = [], 0
+    for name, size, shape, what in parts:
+        out.append(Segment(name, i, i + size, shape, what))
+        i += size
+    return tuple(out)
+
+
+CHANNEL_MEANINGS: dict[str, str] = {
+    "free": "the cell is a state of the system (not blocked)",
+    "test_agent": "the test agent's cell",
+    "system": "the SUT's own cell",
+    "goal": "the goal (terminal) cells",
+    "subgoal": "cells of any proposition of the system objective other than the goal",
+    "refuel": "refuel cells",
+    "fuel": "constant plane: fuel / max fuel",
+    **{f"wall_{d}": f"a static obstacle on the move {d} out of the cell" for d in DIRS},
+    **{f"door_{d}": f"a reactive restriction shown now on the move {d} out of the cell" for d in DIRS},
+}
+
+
+def _meaning(channel: str) -> str:
+    if channel in CHANNEL_MEANINGS:
+        return CHANNEL_MEANINGS[channel]
+    if channel.startswith("objective_"):
+        return f"constant plane: the system objective's automaton is in state {channel[len('objective_'):]}"
+    return f"cells where the system objective's proposition {channel!r} holds at the current fuel level"
+
+
 class Encoder:
     """Common interface of the encoders."""
 
     obs_kind: str
     space: spaces.Box
+
+    def layout(self) -> ObservationLayout:  # pragma: no cover - interface
+        """Which entries of this encoder's observations are which."""
+        raise NotImplementedError
 
     def encode(self, run: RunState) -> np.ndarray:  # pragma: no cover - interface
         raise NotImplementedError
@@ -178,6 +283,18 @@ class GridEncoder(Encoder):
         """The ``system`` plane of the flat observation."""
         start = self.ch["system"] * self.hw
         return slice(start, start + self.hw)
+
+    def layout(self) -> ObservationLayout:
+        H, W = self.rows, self.cols
+        if self.obs_kind == "grid":
+            segs = tuple(Segment(c, i, i + 1, (H, W), _meaning(c)) for i, c in enumerate(self.channels))
+            return ObservationLayout("grid", tuple(self.space.shape), segs, "system", (H, W))
+        parts: list[Part] = [(c, self.hw, (H, W), _meaning(c)) for c in self.channels[: self.n_spatial]]
+        parts.append(("restricted_now", self.n_slots, (self.n_slots,), f"per action slot ({', '.join(DIRS)}): restricted now"))
+        if self.is_fuel:
+            parts.append(("fuel", 1, (1,), "fuel / max fuel"))
+        parts.append(("objective", self.n_qsys, (self.n_qsys,), "one-hot: the system objective's automaton state"))
+        return ObservationLayout("flat", tuple(self.space.shape), _segments(parts), "system", (H, W))
 
     def planes(self, run: RunState) -> np.ndarray:
         """The ``uint8[C, H, W]`` encoding of ``run``."""
@@ -285,6 +402,13 @@ class PaddedEncoder(Encoder):
         start = PADDED_CHANNELS.index("system") * self.hw
         return slice(start, start + self.hw)
 
+    def layout(self) -> ObservationLayout:
+        S = self.pad_to
+        parts: list[Part] = [(c, self.hw, (S, S), _meaning(c)) for c in PADDED_CHANNELS]
+        parts.append(("restricted_now", 4, (4,), f"per move ({', '.join(DIRS[:4])}): restricted now"))
+        parts.append(("fuel", 1, (1,), "fuel / max fuel (0 without fuel)"))
+        return ObservationLayout("padded", tuple(self.space.shape), _segments(parts), "system", (S, S))
+
     def encode(self, run: RunState) -> np.ndarray:
         inner, S = self.inner, self.pad_to
         planes = inner.planes(run)
@@ -341,6 +465,16 @@ class GraphEncoder(Encoder):
     def position_slice(self) -> slice:
         """The one-hot of the system's place comes first."""
         return slice(0, self.n_places)
+
+    def layout(self) -> ObservationLayout:
+        P = self.n_places
+        parts: list[Part] = [("system", P, (P,), "one-hot: the SUT's place"), ("test_agent", P, (P,), "one-hot: the test agent's place"),
+                 ("goal", P, (P,), "the goal (terminal) places")]
+        parts += [(f"prop_{p}", P, (P,), _meaning(p)) for p in self.sys_props]
+        parts.append(("shown_restriction", self.n_moves, (self.n_moves,), "per move of the system: a restriction shown now"))
+        parts.append(("restricted_now", self.n_slots, (self.n_slots,), "per action slot: restricted now"))
+        parts.append(("objective", self.n_qsys, (self.n_qsys,), "one-hot: the system objective's automaton state"))
+        return ObservationLayout("flat", tuple(self.space.shape), _segments(parts), "system", None)
 
     def encode(self, run: RunState) -> np.ndarray:
         g = self.game

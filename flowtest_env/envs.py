@@ -24,7 +24,7 @@ from synthesis.problems.random_worlds import POOL_KINDS, WORLDS
 
 from .config import EnvConfig
 from .draws import draw_test
-from .encoding import Encoder, make_encoder
+from .encoding import Encoder, ObservationLayout, make_encoder
 from .game import GRID_ACTIONS, MET, VIOLATED, GameError, RunState, TestGame
 from .pools import random_grid_arguments
 from .random_grid import random_pool
@@ -279,6 +279,12 @@ class FlowTestEnv(gym.Env[np.ndarray, np.int64]):
 
     def _info(self, run: RunState) -> dict[str, Any]:
         return {"system_state": self.game.state_json(run.system), "action_mask": self.game.action_mask(run)}
+
+    def observation_layout(self) -> ObservationLayout:
+        """Which entries of the observation are which (the current test's; see
+        :func:`flowtest_env.observation_layout`)."""
+        lay = self.encoder.layout()
+        return lay if self.memory is None else lay.with_memory(self.memory.size)
 
     def action_masks(self) -> np.ndarray:
         """``bool[n_actions]``: the legal actions now (sb3-contrib's MaskablePPO convention)."""

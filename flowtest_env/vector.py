@@ -69,7 +69,7 @@ from gymnasium.vector.utils import batch_space
 from .compiled import OUTCOMES, CompiledPool, compile_pool, potentials
 from .config import EnvConfig, split_options
 from .draws import draw_tests, key_of_seed
-from .encoding import make_encoder
+from .encoding import Encoder, ObservationLayout, Segment, make_encoder
 from .envs import default_max_steps, random_grid_pool
 from .game import RunState, TestGame
 from .random_grid import random_pool
@@ -138,9 +138,9 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         config = config.with_max_steps(max(default_max_steps(g) for g in self.games))
         assert config.max_steps is not None
         self.config = config
-        encoders = [make_encoder(g, config.obs_kind, config.pad_to) for g in self.games]
-        self._mem: slice | None = shared_position_slice(encoders) if config.memory == "visited" else None
-        self.pool: CompiledPool = compile_pool(self.games, encoders)
+        self.encoders: list[Encoder] = [make_encoder(g, config.obs_kind, config.pad_to) for g in self.games]
+        self._mem: slice | None = shared_position_slice(self.encoders) if config.memory == "visited" else None
+        self.pool: CompiledPool = compile_pool(self.games, self.encoders)
         p = self.pool
         self.metadata = {**type(self).metadata, "autoreset_mode": self.autoreset_mode}
         self.num_envs = num_envs
@@ -399,6 +399,26 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         }
 
     # ------------------------------------------------------------------ inspection
+
+    def observation_layout(self, test: int | None = None) -> ObservationLayout:
+        """Which entries of an env's observation are which (:func:`flowtest_env.observation_layout`):
+        those of test ``test`` of the pool, or of every test when they all agree.
+
+        Raises
+        ------
+        ValueError
+            If ``test`` is ``None`` and the pool's tests lay out their observations
+            differently (``obs_kind="padded"`` gives every grid test one layout).
+        """
+        layouts = [e.layout() for e in self.encoders] if test is None else [self.encoders[int(test)].layout()]
+        if any(lay != layouts[0] for lay in layouts):
+            raise ValueError("the pool's tests lay out their observations differently: pass test=i, or use obs_kind='padded'")
+        lay = layouts[0]
+        size = int(np.prod(self.pool.obs_shape))
+        if lay.kind != "grid" and lay.shape[0] < size:  # a smaller test of the pool: zeros at the end
+            pad = Segment("padding", lay.shape[0], size, (size - lay.shape[0],), "zeros: the pool's larger tests use them")
+            lay = ObservationLayout(lay.kind, (size,), (*lay.segments, pad), lay.position, lay.grid)
+        return lay if self._mem is None else lay.with_memory(self._mem.stop - self._mem.start)
 
     @property
     def test_index(self) -> np.ndarray:

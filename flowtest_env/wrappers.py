@@ -9,7 +9,7 @@ import numpy as np
 from gymnasium import spaces
 
 from .config import MEMORY_KINDS as MEMORY_KINDS  # re-exported: the memory kinds live with the options
-from .encoding import Encoder
+from .encoding import Encoder, ObservationLayout
 from .game import RunState, TestGame
 from .system_product import INF, SystemProduct
 
@@ -102,6 +102,50 @@ def encoder_of(env: object) -> Encoder:
     if not isinstance(enc, Encoder):
         raise TypeError(f"{type(env).__name__} exposes no FlowTest observation encoder")
     return enc
+
+
+def observation_layout(env: object) -> ObservationLayout:
+    """Which entries of a FlowTest observation are which: the named segments (planes, the
+    restricted-now bits, fuel, objective progress, the visited-places memory) of a flat,
+    padded or grid observation, and which segment holds the SUT's own position.
+
+    ``env`` is a FlowTest env (single, vector or PettingZoo; wrapped or not, a
+    :class:`VisitedPlaces` wrapper adds its memory; under :class:`ActionMaskObservation`
+    the layout is that of ``obs["observation"]``) or an encoder. docs/envs/observations.md
+    explains the layouts.
+
+    Example::
+
+        >>> import gymnasium as gym, flowtest_env
+        >>> env = gym.make("FlowTest-Maze2-v0", memory="visited")
+        >>> obs, info = env.reset(seed=0)
+        >>> lay = flowtest_env.observation_layout(env)
+        >>> pos = lay[lay.position].of(obs)          # the SUT's cell as a 5x5 one-hot plane
+        >>> [int(v) for v in divmod(int(pos.argmax()), 5)] == info["system_state"]
+        True
+
+    Raises
+    ------
+    TypeError
+        If ``env`` is not a FlowTest env.
+    """
+    memory = 0
+    obj, seen = env, 0
+    while obj is not None and seen < 32:
+        if isinstance(obj, Encoder):
+            lay = obj.layout()
+            break
+        if isinstance(obj, VisitedPlaces):
+            memory += obj.memory.size
+        method = getattr(type(obj), "observation_layout", None)
+        if callable(method):
+            lay = method(obj)
+            break
+        obj = getattr(obj, "env", None) or getattr(obj, "aec_env", None)
+        seen += 1
+    else:
+        lay = encoder_of(env).layout()
+    return lay.with_memory(memory) if memory else lay
 
 
 def position_slice(encoder: Encoder) -> slice:
