@@ -95,19 +95,29 @@ EXTERNAL_PREFIXES = ("python:", "cmd:")
 
 
 def replay_command(env_id: str, sut: str, seed: int, tester: str = "synthesized", step_timeout: float | None = None,
-                   cwd: str | None = None) -> str:
+                   cwd: str | None = None, trust_model: bool = False) -> str:
     """The command that replays one run exactly (shell-quoted: a model path may hold spaces).
 
     A ``python:`` or ``cmd:`` planner is found from the directory the evaluation ran in
     (``cwd``, default the current one): its command starts with ``cd DIR &&``, and a
-    ``cmd:`` planner's carries ``--step-timeout`` when one was given."""
+    ``cmd:`` planner's carries ``--step-timeout`` when one was given. With
+    ``trust_model`` (the evaluation loaded stable-baselines3 zips, ``--trust-model``) a
+    ``ppo:`` system or tester's command carries ``--trust-model`` too."""
     against = "" if tester == "synthesized" else f" --tester {shlex.quote(tester)}"
     timeout = f" --step-timeout {step_timeout:g}" if step_timeout is not None and sut.startswith("cmd:") else ""
-    command = (f"flowtest evaluate --env {shlex.quote(env_id)} --sut {shlex.quote(sut)}{against}{timeout} "
+    trust = " --trust-model" if trust_model and (sut.startswith("ppo:") or tester.startswith("ppo:")) else ""
+    command = (f"flowtest evaluate --env {shlex.quote(env_id)} --sut {shlex.quote(sut)}{against}{timeout}{trust} "
                f"--episodes 1 --seed {seed} --replay")
     if sut.startswith(EXTERNAL_PREFIXES):
         return f"cd {shlex.quote(cwd or os.getcwd())} && {command}"
     return command
+
+
+def _models_trusted() -> bool:
+    """Whether this process loads stable-baselines3 zips (``--trust-model``)."""
+    from agents.checkpoint import pickled_models_trusted
+
+    return pickled_models_trusted()
 
 
 NOT_REPLAYABLE = ("# no replay command: this system was given to evaluate() as a Python object; "
@@ -160,12 +170,14 @@ class Cell:
     replayable: bool = True  # False for a system given as a Python object without a name
     step_timeout: float | None = None
     cwd: str = field(default_factory=os.getcwd)
+    trust_model: bool = field(default_factory=lambda: _models_trusted())
 
     def replay(self, trace: Trace) -> str:
         """The replay command of one of this cell's runs."""
         if not self.replayable:
             return NOT_REPLAYABLE
-        return replay_command(trace.env_id, self.sut, trace.seed, self.tester, self.step_timeout, self.cwd)
+        return replay_command(trace.env_id, self.sut, trace.seed, self.tester, self.step_timeout, self.cwd,
+                              self.trust_model)
 
     def record(self) -> dict[str, Any]:
         """The ``results.json`` record (``error`` says why a pair has no runs)."""
@@ -561,6 +573,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "FlowTest did not write is refused unless --force")
     p.add_argument("--force", action="store_true", help="write into an --out folder that holds other files")
     p.add_argument("--replay", action="store_true", help="print every step of the runs instead of a report")
+    p.add_argument("--trust-model", action="store_true",
+                   help="load stable-baselines3 model zips (--sut ppo:PATH, --tester ppo:PATH), which unpickles them: "
+                        "code from the file runs; native FlowTest checkpoints never need it")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
 
 
@@ -593,6 +608,10 @@ def replay(env_id: str, sut: str, seed: int, stream: Any = None, tester: str = "
 
 def run(args: argparse.Namespace) -> int:
     """Evaluate (or replay); exit 4 if a test failed its guarantee (a FlowTest bug)."""
+    if args.trust_model:
+        from agents.checkpoint import trust_pickled_models
+
+        trust_pickled_models(True)
     if args.replay:
         bug = False
         for env_id in args.env:
