@@ -178,21 +178,41 @@ def milp_options(problem: Problem, options: SynthesisOptions) -> MilpOptions:
     )
 
 
-def remaining_time(problem: Problem, options: SynthesisOptions, spent: float) -> SynthesisOptions:
-    """``options`` with the time limit that is left after ``spent`` seconds of graph building:
-    the limit bounds the whole synthesis, not the solve alone.
+CHECK_SECONDS_PER_EDGE = 1e-4
+"""Seconds per edge of G kept back from the solver's time limit for what follows its last
+run: the answer read back and checked against the model, the strategy, the independent
+checks, the summary, and the solver's late look at its clock. Measured on a loaded machine
+on a 500-state graph of 19,000 edges (``tests/test_limits.py``'s): 0.6 s after the last
+HiGHS run, which itself stopped up to 0.5 s past its limit."""
+
+RESERVE_SHARE = 0.2
+"""At most this share of the time limit is kept back for what follows the solve."""
+
+
+def time_limit_of(problem: Problem, options: SynthesisOptions) -> float | None:
+    """The time limit a synthesis honours: the option's, else the problem's (``None``: none)."""
+    return options.time_limit if options.time_limit is not None else problem.time_limit
+
+
+def remaining_time(problem: Problem, options: SynthesisOptions, spent: float, edges: int = 0) -> SynthesisOptions:
+    """``options`` with the time limit that is left for the solve after ``spent`` seconds
+    (the size check, graph building, the consistency check), less a reserve for what
+    follows the solve on a product graph of ``edges`` edges (:data:`CHECK_SECONDS_PER_EDGE`,
+    at most :data:`RESERVE_SHARE` of the limit): the limit bounds the whole synthesis, not
+    the solve alone.
 
     Raises
     ------
     TimeoutError
         If the limit is already spent.
     """
-    limit = options.time_limit if options.time_limit is not None else problem.time_limit
+    limit = time_limit_of(problem, options)
     if limit is None:
         return options
-    if spent >= limit:
+    reserve = min(RESERVE_SHARE * limit, CHECK_SECONDS_PER_EDGE * edges)
+    if spent + reserve >= limit:
         raise TimeoutError(f"building the product graphs took {spent:.1f} s, the whole time limit of {limit:g} s")
-    return replace(options, time_limit=limit - spent)
+    return replace(options, time_limit=limit - spent - reserve)
 
 
 def synthesize(problem: Problem, options: SynthesisOptions | None = None) -> SynthesizedTest:
@@ -208,10 +228,12 @@ def synthesize(problem: Problem, options: SynthesisOptions | None = None) -> Syn
         If the answer fails an independent check (a FlowTest bug).
     """
     options = options or SynthesisOptions()
+    started = time.perf_counter()
     check_options(options)
-    check_size(problem, options.max_graph_edges)
+    limit = time_limit_of(problem, options)
+    check_size(problem, options.max_graph_edges, deadline=None if limit is None else started + limit)
     if problem.kind == "agent":
-        return synthesize_agent_test(problem, options)
+        return synthesize_agent_test(problem, options, started=started)
     note = options.progress or (lambda msg: None)
     if options.backend == "cpsat":
         cpsat.prestart()  # OR-Tools loads in the child while the graphs are built
@@ -220,11 +242,13 @@ def synthesize(problem: Problem, options: SynthesisOptions | None = None) -> Syn
     spec, products = build_graphs(problem)
     check_problem_consistency(problem, products)
     graph_seconds = time.perf_counter() - t0
-    milp = milp_options(problem, remaining_time(problem, options, graph_seconds))
+    milp = milp_options(
+        problem, remaining_time(problem, options, time.perf_counter() - started, int(products.virtual.n_edges))
+    )
     try:
         routing = solve_routing(products, milp)
     except InconsistentProblem as exc:
-        raise over_caps(products, milp, exc, note) from None
+        raise over_caps(products, milp, exc, note, None if limit is None else started + limit) from None
     setting = options.setting or problem.extras.get("setting", "instantaneous")
     strategy = strategy_from_routing(products, routing, setting)
     if routing.status != "optimal":
@@ -256,15 +280,19 @@ def check_caps_held(problem: Problem, strategy: TestStrategy, caps: dict[str, in
             raise CheckFailed(f"the test uses {used} {CAP_NOUNS[cap]}, above its cap {cap} = {limit}")
 
 
-def over_caps(products: Products, milp: MilpOptions, exc: InconsistentProblem, note: Callable[[str], None]) -> InconsistentProblem:
+def over_caps(
+    products: Products, milp: MilpOptions, exc: InconsistentProblem, note: Callable[[str], None], deadline: float | None = None
+) -> InconsistentProblem:
     """The error to raise when the routing solve found no test: ``exc`` itself without caps
     (or when the problem has no test whatever the caps); with caps, a message that names
     them and how many items a test needs (:func:`synthesis.routing.caps.fewest_within`):
-    ``no test with at most 3 doors routes ... : the fewest that does is 5 doors``."""
+    ``no test with at most 3 doors routes ... : the fewest that does is 5 doors``. That
+    solve ends by ``deadline`` (the synthesis's, a ``perf_counter`` time; ``None``: at most
+    :data:`~synthesis.routing.caps.FEWEST_SECONDS`)."""
     if not milp.caps or exc.reason != "unroutable":
         return exc
     note("no test within the caps: finding how few restrictions a test needs")
-    left = None if milp.time_limit is None else time.perf_counter() + max(milp.time_limit, 1.0)
+    left = deadline
     uncapped = replace(milp, caps={})
     parts = []
     for cap, limit in milp.caps.items():
@@ -290,6 +318,7 @@ def synthesize_agent_test(
     max_iterations: int | None = None,
     prefilter: bool = True,
     reasons: bool = True,
+    started: float | None = None,
 ) -> SynthesizedTest:
     """Synthesize a test agent strategy for an agent problem (method.md §7).
 
@@ -312,6 +341,8 @@ def synthesize_agent_test(
         Exclude with each rejected cut set every cut set rejected for the same reason
         (see :func:`~synthesis.agent.loop.counterexample_loop`); ``False`` excludes the cut
         set alone (the loop of method.md §7 as written; same answer, more solves).
+    started
+        ``perf_counter`` time the synthesis began (default: now): the time limit runs from it.
 
     Returns
     -------
@@ -329,6 +360,8 @@ def synthesize_agent_test(
         If the result fails an independent check (a FlowTest bug).
     """
     options = options or SynthesisOptions()
+    started = time.perf_counter() if started is None else started
+    limit = time_limit_of(problem, options)
     agent = problem.agent
     if not isinstance(agent, TestAgent):
         raise ProblemError(f"problem {problem.name!r} is an agent problem without a test agent; add [environment.agent]")
@@ -343,7 +376,9 @@ def synthesize_agent_test(
     spec, products = build_graphs(problem)
     check_problem_consistency(problem, products)
     graph_seconds = time.perf_counter() - t0
-    milp = milp_options(problem, remaining_time(problem, options, graph_seconds))
+    milp = milp_options(
+        problem, remaining_time(problem, options, time.perf_counter() - started, int(products.virtual.n_edges))
+    )
     try:
         outcome = counterexample_loop(
             products,
@@ -359,7 +394,7 @@ def synthesize_agent_test(
             graph_seconds=graph_seconds,
         )
     except InconsistentProblem as exc:
-        raise over_caps(products, milp, exc, note) from None
+        raise over_caps(products, milp, exc, note, None if limit is None else started + limit) from None
     check_caps_held(problem, outcome.strategy, milp.caps)
     timings = outcome.solution.timings
     return SynthesizedTest(

@@ -67,7 +67,7 @@ from .model import BACKENDS, CutGroups, MilpOptions, RoutingModel, build_model, 
 from .result import RoutingResult as RoutingResult
 from .result import blocked_by as blocked_by
 from .result import blocked_of_edges, required_entries
-from .solver_control import Clock, quiet_highs, run_highs, solver_version
+from .solver_control import Clock, SolverAbandoned, quiet_highs, run_highs, solver_version
 from .traps import trapped_configurations, trapped_entries
 
 EAGER_FLOW_LIMIT = 200_000  # histories x G_sys edges up to which all feasibility flows go in at once
@@ -280,6 +280,17 @@ class _Phase:
     stopped_by: str | None
     cut_bound: dict[str, Any] | None = None  # phase 2: the walls' cut bound, what it proved (see _CutProof)
     hitting_set: dict[str, Any] | None = None  # phase 2: what the hitting set did (see _hitting_set)
+    abandoned: bool = False  # HiGHS was left running past the deadline: its model must not be touched
+
+
+ABANDON_GRACE = 0.25
+"""Seconds past the solve's deadline after which a HiGHS run still busy is left behind
+(:class:`~synthesis.routing.solver_control.SolverAbandoned`): the time limit holds."""
+
+
+def _hard(clock: Clock) -> float | None:
+    """The moment a HiGHS run is abandoned: the solve's deadline plus :data:`ABANDON_GRACE`."""
+    return None if clock.deadline is None else clock.deadline + ABANDON_GRACE
 
 
 def _solve_once(
@@ -313,6 +324,8 @@ def _solve_once(
     first = _phase1(h, rm, products, options, entries, clock)
     flow = _flow_of_phase1(rm, first)
     _raise_if_flows_bind(rm, products, options, first.x, {q: v for q, v in required.items() if q not in entries})
+    if first.abandoned:  # the time is spent and HiGHS still holds the model: phase 1's answer stands
+        return _result(rm, products, options, first, first, flow, graph_seconds, time.perf_counter() - t_solve)
     note(f"routing MILP, phase 2 of 2: fewest cuts at flow {flow}")
     second = _phase2(h, rm, first.x, flow, options, clock, _cut_proof(products, rm, options, entries, flow))
     return _result(rm, products, options, first, second, flow, graph_seconds, time.perf_counter() - t_solve)
@@ -349,14 +362,20 @@ def _phase1(
     if x_guess is not None and not guess.from_route and options.offer_starts:
         _set_solution(h, x_guess)
     watch = clock.watching_first()
+    abandoned = False
     try:
-        status, gap, x1 = _run(h, clock.latest(), options, phase="phase 1 (maximum flow)", clock=clock, watch_first=watch)
-    except TimeoutError:
+        status, gap, x1 = _run(
+            h, clock.latest(), options, phase="phase 1 (maximum flow)", clock=clock, watch_first=watch, hard=_hard(clock)
+        )
+    except TimeoutError as exc:
         if x_guess is None:
             raise
+        abandoned = isinstance(exc, SolverAbandoned)
         # the heuristic's flow against its proven upper bound
         status, gap, x1 = "feasible", (guess.upper_bound - guess.flow) / max(guess.flow, 1), None
-    stopped_by = _stopped_by(h)
+    stopped_by = "time_limit" if abandoned else _stopped_by(h)
+    if abandoned and x_guess is not None:  # (x_guess is never None here: the TimeoutError was raised then)
+        return _Phase(x_guess, "feasible", gap, stopped_by, abandoned=True)
     if status == "infeasible":
         raise _no_cut_set()
     x = x1 if x1 is not None else x_guess
@@ -847,21 +866,27 @@ def _phase2(
         x = proof.start(x, cost)
         if proof.meets(x, cost):
             return _Phase(x, "optimal", 0.0, None, proof.stats(cost, x, True))
-    if clock.deadline is None:  # no wall clock: a deterministic budget for the helper solve
-        x = _incumbent(h, x, f_col, None, options, flow, _min_limit(INCUMBENT_NODES, options.node_limit))
-    else:
-        x = _incumbent(h, x, f_col, _share(clock.deadline, INCUMBENT_SHARE), options, flow)
+    try:
+        if clock.deadline is None:  # no wall clock: a deterministic budget for the helper solve
+            x = _incumbent(h, x, f_col, None, options, flow, _min_limit(INCUMBENT_NODES, options.node_limit))
+        else:
+            x = _incumbent(h, x, f_col, _share(clock.deadline, INCUMBENT_SHARE), options, flow, hard=_hard(clock))
+    except SolverAbandoned:  # the time is spent and HiGHS still holds the model: the start is the answer
+        return _with_cut_proof(_Phase(x, "feasible", float("inf"), "time_limit", abandoned=True), proof, cost)
     if options.offer_starts:
         _set_solution(h, x)
     else:
         h.clearSolver()
+    abandoned = False
     try:
-        status, gap, x2 = _run(h, clock.deadline, options, phase="phase 2 (fewest cuts)", flow=flow)
-    except TimeoutError:  # HiGHS kept no solution: the start is the answer
+        status, gap, x2 = _run(h, clock.deadline, options, phase="phase 2 (fewest cuts)", flow=flow, hard=_hard(clock))
+    except TimeoutError as exc:  # HiGHS kept no solution: the start is the answer
+        abandoned = isinstance(exc, SolverAbandoned)
         status, gap, x2 = "feasible", float("inf"), x
     if status == "infeasible" or x2 is None:  # cannot happen: phase 1's solution is feasible
         raise RuntimeError("phase 2 of the routing MILP lost the phase-1 solution")
-    return _with_cut_proof(_Phase(x2, status, gap, _stopped_by(h)), proof, cost)
+    stopped_by = "time_limit" if abandoned else _stopped_by(h)
+    return _with_cut_proof(_Phase(x2, status, gap, stopped_by, abandoned=abandoned), proof, cost)
 
 
 def _integral_phase2(h: highspy.Highs, rm: RoutingModel, options: MilpOptions, x: np.ndarray) -> np.ndarray:
@@ -1079,8 +1104,11 @@ def _incumbent(
     options: MilpOptions,
     flow: int,
     nodes: int | None = None,
+    hard: float | None = None,
 ) -> np.ndarray:
     """A good first phase-2 solution: fewest cuts with the phase-1 flow held fixed.
+    Raises :class:`~synthesis.routing.solver_control.SolverAbandoned` when HiGHS ran past
+    ``hard`` (see :func:`_run`): then ``h`` must not be touched again.
 
     Without the flow to choose, the model is a plain (tied) cut problem that HiGHS
     solves quickly; its answer is feasible for phase 2 and seeds the search. The helper
@@ -1102,13 +1130,13 @@ def _incumbent(
     if nodes is not None:
         h.setOptionValue("mip_max_nodes", int(nodes))
     try:
-        _, _, y = _run(h, deadline, options, phase="phase 2 start (fewest cuts, flow fixed)", flow=flow)
+        _, _, y = _run(h, deadline, options, phase="phase 2 start (fewest cuts, flow fixed)", flow=flow, hard=hard)
         if y is not None:
             x = y
-    except TimeoutError:
-        pass
-    finally:
-        h.setOptionValue("mip_max_nodes", node_limit)
+    except TimeoutError as exc:
+        if isinstance(exc, SolverAbandoned):
+            raise  # HiGHS still runs on this model: nothing more may be asked of it
+    h.setOptionValue("mip_max_nodes", node_limit)
     h.changeColsBounds(idx.size, idx, lo, hi)
     return x
 
@@ -1132,8 +1160,14 @@ def _run(
     flow: int | None = None,
     clock: Clock | None = None,
     watch_first: bool = False,
+    hard: float | None = None,
 ) -> tuple[str, float, np.ndarray | None]:
     """Run HiGHS until done, the deadline or a stop; return (status, relative gap, solution).
+
+    ``hard`` is the whole solve's deadline: a HiGHS still busy :data:`ABANDON_GRACE` seconds
+    past it (presolve looks at the clock rarely) is left behind with
+    :class:`~synthesis.routing.solver_control.SolverAbandoned`, after which ``h`` must not
+    be touched again.
 
     The solution HiGHS returns is checked against the model it holds, by us: every bound,
     row and integrality, and its objective, recomputed. ``"optimal"`` needs that objective
@@ -1149,7 +1183,7 @@ def _run(
     on Ctrl-C or a stop request (see :func:`synthesis.routing.solver_control.run_highs`).
     """
     for attempt in (1, 2):
-        run_highs(h, deadline, clock=clock, control=options.control, phase=phase, flow=flow, watch_first=watch_first)
+        run_highs(h, deadline, clock=clock, control=options.control, phase=phase, flow=flow, watch_first=watch_first, abandon_at=hard)
         status, gap, x, agrees = _read_solution(h)
         if agrees:
             return status, gap, x

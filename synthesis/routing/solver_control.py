@@ -19,6 +19,7 @@ the same pieces):
 
 from __future__ import annotations
 
+import atexit
 import ctypes
 import os
 import sys
@@ -45,6 +46,12 @@ POLL = 0.05
 
 #: The name of the threads that run an in-process solver, HiGHS or SCIP (see :func:`solves_running`).
 SOLVER_THREAD = "flowtest-solver"
+
+
+class SolverAbandoned(TimeoutError):
+    """A solver still busy past the hard deadline of its run was left behind in its daemon
+    thread (see :func:`run_in_solver_thread`): the time limit holds, and the solver's model
+    must not be touched again (it is still in use)."""
 
 
 @dataclass(frozen=True)
@@ -201,8 +208,10 @@ def run_highs(
     phase: str = "",
     flow: int | None = None,
     watch_first: bool = False,
+    abandon_at: float | None = None,
 ) -> None:
-    """Run HiGHS on its current model until it is done, the deadline passes, or a stop.
+    """Run HiGHS on its current model until it is done, the deadline passes, or a stop
+    (past ``abandon_at``: :class:`SolverAbandoned`, see :func:`run_in_solver_thread`).
 
     The run happens in a daemon thread while the calling thread waits in short steps, so a
     ``KeyboardInterrupt`` reaches the caller at once: it sets the stop request, which the
@@ -257,7 +266,7 @@ def run_highs(
             h.stopCallback(k)
 
     status = SolveStatus(phase, "max" if sense_max else "min", None, None, t0, flow)
-    run_in_solver_thread(h.run, stop.set, control, status, finished=stop_callbacks)
+    run_in_solver_thread(h.run, stop.set, control, status, finished=stop_callbacks, deadline=deadline, abandon_at=abandon_at)
 
 
 def run_in_solver_thread(
@@ -267,9 +276,18 @@ def run_in_solver_thread(
     status: SolveStatus,
     *,
     finished: Callable[[], None] | None = None,
+    deadline: float | None = None,
+    abandon_at: float | None = None,
 ) -> None:
     """Call the blocking solver entry ``run`` in a daemon thread while the calling thread
     waits in short steps, so Ctrl-C reaches the caller at once.
+
+    Past ``deadline`` (a ``perf_counter`` time), ``interrupt`` is called once: the solver's
+    own time limit is the same deadline, but a solver checks its clock only now and then
+    (HiGHS inside a long simplex run), and the time limit must hold for the whole command.
+    Past ``abandon_at`` the solver is left running in its daemon thread and
+    :class:`SolverAbandoned` is raised (``finished`` is not called): HiGHS's presolve looks
+    at no clock for seconds on a large model.
 
     A ``KeyboardInterrupt``, or a stop requested through ``control`` by another thread,
     calls ``interrupt`` (which must make the solver return), sets the stop request, waits
@@ -294,9 +312,18 @@ def run_in_solver_thread(
     thread = threading.Thread(target=work, name=SOLVER_THREAD, daemon=True)
     try:
         thread.start()
+        late = False
         while not done.wait(POLL):
             if control is not None and control.stop_requested:
                 raise KeyboardInterrupt
+            now = time.perf_counter()
+            if deadline is not None and not late and now > deadline:
+                late = True
+                interrupt()
+            if abandon_at is not None and now > abandon_at:
+                interrupt()
+                _left_behind(thread)
+                raise SolverAbandoned("the solver did not stop at its time limit; left behind")
         if control is not None and control.stop_requested:  # the solver saw the stop first
             raise KeyboardInterrupt
     except KeyboardInterrupt:
@@ -312,6 +339,27 @@ def run_in_solver_thread(
             control.report(None)
     if failure:
         raise failure[0]
+
+
+_ABANDONED: list[threading.Thread] = []
+
+ABANDONED_JOIN_SECONDS = 300.0
+"""At interpreter exit, the longest wait for a solver left behind (it stops at its own time
+limit, seconds later): a C++ solver torn down while it runs aborts the process."""
+
+
+def _left_behind(thread: threading.Thread) -> None:
+    """Keep a solver thread left behind, to be waited for at exit (:func:`_join_left_behind`)."""
+    if not _ABANDONED:
+        atexit.register(_join_left_behind)
+    _ABANDONED.append(thread)
+
+
+def _join_left_behind() -> None:
+    """At exit: wait for the solvers left behind (a process that must not wait ends with
+    ``os._exit`` once :func:`solves_running` is false or it does not care)."""
+    for thread in _ABANDONED:
+        thread.join(ABANDONED_JOIN_SECONDS)
 
 
 @dataclass(frozen=True)
@@ -423,6 +471,7 @@ __all__ = [
     "OptionalSolver",
     "SolveControl",
     "SolveStatus",
+    "SolverAbandoned",
     "run_highs",
     "solver_version",
     "solves_running",
