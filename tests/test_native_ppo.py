@@ -16,6 +16,7 @@ import sys
 import time
 import zipfile
 from pathlib import Path
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -45,11 +46,11 @@ FLOWTEST = Path(sys.executable).parent / "flowtest"
 
 def _runner(kind: str, max_steps: int = 3, n: int = 4, seed: int = 0) -> tuple[Runner, Agent, NativeArgs]:
     """A runner on small-reactive whose episodes end every few steps (``max_steps``)."""
-    env = gym.make_vec("FlowTest-SmallReactive-v0", num_envs=n, vectorization_mode="vector_entry_point",
-                       max_steps=max_steps)
+    env: Any = gym.make_vec("FlowTest-SmallReactive-v0", num_envs=n, vectorization_mode="vector_entry_point",
+                            max_steps=max_steps)
     torch.manual_seed(seed)
     where = shared_position_slice(env.unwrapped.games, "flat")
-    obs_size = env.single_observation_space.shape[0] + (where.stop - where.start)
+    obs_size = int(env.single_observation_space.shape[0]) + (where.stop - where.start)
     agent = Agent(obs_size, int(env.single_action_space.n), (16,), "gru" if kind == "recurrent-ppo" else "mlp", 8)
     args = NativeArgs(algo=kind, num_envs=n, num_steps=12, num_minibatches=2, update_epochs=2, hidden=(16,), gru_hidden=8)
     return Runner(env, agent, where, torch.device("cpu"), seed), agent, args
