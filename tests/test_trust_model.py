@@ -123,7 +123,7 @@ def test_an_agent_whose_controller_belongs_to_another_agent_is_refused(tmp_path:
     d["agent"]["start"] = "(2, 1)"
     path = tmp_path / "a.json"
     path.write_text(json.dumps(d))
-    with pytest.warns(EditedArtifactWarning), pytest.raises(ProblemError, match="does not belong to the test agent"):
+    with pytest.raises(ProblemError, match="does not belong to the test agent"):
         TestArtifact.load(path)
 
 

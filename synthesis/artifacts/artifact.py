@@ -72,6 +72,10 @@ ten times the product-graph edges synthesis allows by default
 MAX_LAYOUT_CELLS = 1_000_000
 """Largest grid layout (rows x cols) an artifact may declare."""
 
+MAX_EXPLORED_STATES = 100_000
+"""At most this many automaton states are explored to derive an artifact's automata again
+(about ten seconds): a file cannot buy a longer search by declaring many histories."""
+
 MAX_INT = 2**53
 """Integers in an artifact are below this in magnitude (what every JSON reader holds exactly)."""
 
@@ -338,10 +342,6 @@ class TestArtifact:
         check_plain_data(d, source)
         edited = not digest_matches(d)
         how = "missing" if DIGEST_KEY not in d else "not that of its content"
-        if edited and not require_digest:
-            warnings.warn(EditedArtifactWarning(
-                f"artifact {source} was changed after FlowTest wrote it (its digest is {how}): every check was run "
-                "again and it is used as it is"), stacklevel=2)
         try:
             letters = tuple(frozenset(a) for a in d["letters"])
             a = d["automata"]
@@ -368,6 +368,10 @@ class TestArtifact:
             verify_artifact(art, source)  # an edited file is checked in full, whatever ``verify`` says
         if edited and require_digest:  # it passes every check, but it is not the file FlowTest wrote
             raise ProblemError(f"artifact {source} was changed after FlowTest wrote it (its digest is {how})")
+        if edited:
+            warnings.warn(EditedArtifactWarning(
+                f"artifact {source} was changed after FlowTest wrote it (its digest is {how}): it passed every check "
+                "again and is used as edited"), stacklevel=2)
         return art
 
     def save(self, path: str | Path) -> None:
@@ -440,7 +444,8 @@ def verify_artifact(
     if art.letters != art.system.letters():
         raise ProblemError(f"{where}: field letters is not the alphabet of its system's labels")
     # the automata derived again are compared with those the file declares: no larger product is explored
-    bound = 64 * max(art.histories.n_states, art.system_automaton.n_states, art.test_automaton.n_states)
+    bound = min(64 * max(art.histories.n_states, art.system_automaton.n_states, art.test_automaton.n_states),
+                MAX_EXPLORED_STATES)
     try:
         spec = specification_product(
             parse_objective(art.objectives["system"], "system"), parse_objective(art.objectives["test"], "test"), art.letters,
