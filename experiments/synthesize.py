@@ -157,6 +157,9 @@ def _synthesize(args: argparse.Namespace, problem: Problem) -> int:
     # goes to /dev/null, and only our summary reaches the real stdout, after
     with stdout_guard(), StageProgress(enabled=not args.quiet, status=lambda: status_line(control), every=every) as progress:
         control.started = progress.clock_start  # solver status lines count on the command's one clock
+        large = large_problem_note(problem, args)
+        if large:
+            progress(large)
         progress(f"synthesizing {problem.name} ({problem.kind} test)")
         options = pipeline.SynthesisOptions(
             time_limit=args.time_limit,
@@ -190,6 +193,34 @@ def _synthesize(args: argparse.Namespace, problem: Problem) -> int:
         sys.stdout.write(human_summary(test, summary) + "\n")
         sys.stdout.flush()
     return EXIT_OK
+
+
+LARGE_EDGES = 5_000
+"""Product-graph edges (the cheap upper bound of :func:`synthesis.problems.limits.estimate_size`)
+from which a solve may run for minutes: mars-exploration's 7,759 edges take HiGHS minutes to
+its flow 2 (docs/benchmarks.md); the problems that solve in seconds have a few hundred."""
+
+
+def large_problem_note(problem: Problem, args: argparse.Namespace) -> str | None:
+    """The line said at the start of a problem large enough that its solve may run for
+    minutes (at least :data:`LARGE_EDGES` product-graph edges by the cheap bound): its size
+    and the options that bound the solve; ``None`` for a smaller one.
+
+    Example: ``warehouse is large (T: 900 states, 3,480 moves; up to 27,840 product-graph
+    edges): the solve may run for minutes; no time limit set: --time-limit S bounds it ...``"""
+    from synthesis.problems.limits import estimate_size
+
+    est = estimate_size(problem)
+    if est.edges < LARGE_EDGES:
+        return None
+    limit = args.time_limit if args.time_limit is not None else problem.time_limit
+    bound = (f"the time limit of {limit:g} s bounds it (the best test by then, with its gap)" if limit is not None
+             else "no time limit set: --time-limit S bounds it (the best test by then, with its gap)")
+    caps = {**problem.caps, **caps_of_args(args)}
+    capped = ("caps " + ", ".join(f"{k} = {v}" for k, v in caps.items()) if caps
+              else "--max-walls/--max-doors/--max-restrictions N bound what the test may use")
+    return (f"{problem.name} is large (T: {est.states:,} states, {est.moves:,} moves; up to {est.edges:,} product-graph "
+            f"edges): the solve may run for minutes; {bound}; {capped}")
 
 
 def _load(load_problem: Callable[[str], Any], name: str) -> Any:
