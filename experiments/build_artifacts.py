@@ -10,7 +10,8 @@ Each artifact goes to ``flowtest_env/artifacts/<name>.json`` (or ``--out DIR``).
 existing file is never overwritten without ``--force``: the shipped artifacts are what
 ``gym.make`` loads, and ``tests/test_envs.py`` proves each equals a fresh synthesis.
 ``SHA256SUMS`` in the same folder lists each file's SHA-256 (rewritten after every file):
-``gym.make`` refuses a shipped artifact whose bytes differ.
+``gym.make`` refuses a shipped artifact whose bytes differ, or whose own ``digest`` (written
+with it) is not that of its content.
 
 Shipped artifacts use deterministic budgets only (one HiGHS thread, a fixed seed, a node
 limit per HiGHS run: :func:`flowtest_env.artifacts.artifact_options`), never a wall-clock
@@ -54,9 +55,12 @@ def build(names: list[str], out: Path, force: bool, node_limit: int | None = Non
         t = time.perf_counter()
         art = synthesize_artifact(name, node_limit)
         path = out / f"{name}.json"
-        tmp = path.with_suffix(".json.tmp")
-        art.save(tmp)
-        tmp.replace(path)
+        tmp = path.with_name(f".{path.name}.tmp")
+        try:
+            art.save(tmp)  # with the digest of its content (synthesis.artifacts.artifact.DIGEST_KEY)
+            tmp.replace(path)
+        finally:
+            tmp.unlink(missing_ok=True)
         s = art.summary
         print(
             f"{name}: {s['status']}{' (stopped by ' + s['stopped_by'] + ')' if s.get('stopped_by') else ''}, "

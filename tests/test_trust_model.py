@@ -118,6 +118,26 @@ def test_a_parked_agent_is_one_error_line_from_flowtest_evaluate(
     assert len(errors) == 1 and "test agent does not realize" in errors[0] and "Traceback" not in err
 
 
+def test_a_parked_agent_in_the_shipped_maze2_is_refused_even_with_its_manifest_and_digest(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    folder = tmp_path / "shipped"
+    shutil.copytree(SHIPPED, folder)
+    monkeypatch.setattr(artifacts, "ARTIFACT_DIR", folder)
+    d = shipped("maze2")
+    _parked_for_good(d)
+    (folder / "maze2.json").write_text(json.dumps(with_digest(d), separators=(",", ":")))
+    artifacts.write_manifest(folder)
+    artifacts.load_builtin.cache_clear()
+    artifacts.builtin_game.cache_clear()
+    try:
+        with pytest.raises(ProblemError, match="test agent does not realize its restrictions"):
+            gym.make("FlowTest-Maze2-v0")
+    finally:
+        artifacts.load_builtin.cache_clear()
+        artifacts.builtin_game.cache_clear()
+
+
 def test_an_agent_whose_controller_belongs_to_another_agent_is_refused(tmp_path: Path) -> None:
     d = copy.deepcopy(shipped("maze2"))
     d["agent"]["start"] = "(2, 1)"

@@ -6,7 +6,8 @@ from pathlib import Path
 
 from ..model.errors import ProblemError
 from .builtins import BUILTINS
-from .files import MAX_GRID_CELLS, load_problem_file
+from .files import MAX_FILE_BYTES, MAX_GRID_CELLS, load_problem_file
+from .limits import check_file_size
 from .problem import Problem
 
 
@@ -18,6 +19,7 @@ def load_problem(name_or_path: str, max_cells: int | None = MAX_GRID_CELLS) -> P
         return BUILTINS[name_or_path]()
     p = Path(name_or_path)
     if p.suffix.lower() == ".toml" or p.exists():
+        check_file_size(p, "problem file", MAX_FILE_BYTES)  # by its size, before a byte is read
         return load_problem_file(p, max_cells)
     raise ProblemError(
         f"unknown problem {name_or_path!r}: not a file, and not a built-in "
