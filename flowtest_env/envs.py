@@ -12,6 +12,7 @@ each episode from a pool of seeded random grid problems.
 
 from __future__ import annotations
 
+import importlib.util
 from typing import Any, SupportsFloat
 
 import gymnasium as gym
@@ -53,6 +54,35 @@ def default_max_steps(game: TestGame) -> int:
     if name in DEFAULT_MAX_STEPS:
         return DEFAULT_MAX_STEPS[name]
     return max(50, 4 * len(game.ts.places))
+
+
+RENDER_EXTRA = 'pip install "flowtest[render]"'
+"""How to install what ``render_mode="human"`` needs (pygame, through the ``render`` extra)."""
+
+
+def render_modes(pygame_found: bool | None = None) -> list[str]:
+    """The single env's render modes: ``rgb_array`` and ``ansi``. ``"human"`` is drawn by
+    Gymnasium's ``HumanRendering`` over ``rgb_array`` when pygame is installed; without
+    pygame the env lists ``"human"`` itself, so ``gymnasium.make`` hands it to the env,
+    which says what to install (instead of Gymnasium's advice to install its own extra)."""
+    found = importlib.util.find_spec("pygame") is not None if pygame_found is None else pygame_found
+    return ["rgb_array", "ansi"] if found else ["rgb_array", "ansi", "human"]
+
+
+def check_human_rendering() -> None:
+    """Raise unless pygame, which ``render_mode="human"`` draws with, can be imported.
+
+    Raises
+    ------
+    gymnasium.error.DependencyNotInstalled
+        Naming the extra to install.
+    """
+    try:
+        import pygame  # noqa: F401
+    except ImportError as e:
+        raise gym.error.DependencyNotInstalled(
+            f"render_mode='human' opens a window with pygame, which is not installed: {RENDER_EXTRA} (or pip install pygame-ce)"
+        ) from e
 
 
 class FlowTestEnv(gym.Env[np.ndarray, np.int64]):
@@ -131,7 +161,7 @@ class FlowTestEnv(gym.Env[np.ndarray, np.int64]):
     ``flowtest_env.ENV_IDS`` lists the ones with a fixed test.
     """
 
-    metadata: dict[str, Any] = {"render_modes": ["rgb_array", "ansi"], "render_fps": 4}
+    metadata: dict[str, Any] = {"render_modes": render_modes(), "render_fps": 4}
 
     def __init__(
         self,
@@ -168,6 +198,12 @@ class FlowTestEnv(gym.Env[np.ndarray, np.int64]):
     def _configure(self, games: list[TestGame], config: EnvConfig) -> None:
         """Set the env up for ``games`` (a pool of one or more) under ``config`` (its
         ``max_steps`` given)."""
+        if config.render_mode == "human":
+            check_human_rendering()
+            raise ValueError(
+                "render_mode='human' is drawn by gymnasium.make(..., render_mode='human') (Gymnasium's HumanRendering); "
+                "building the env class directly, pass render_mode='rgb_array' and wrap it in gymnasium.wrappers.HumanRendering"
+            )
         one_of("render_mode", config.render_mode, (None, *self.metadata["render_modes"]))
         assert config.max_steps is not None
         self.config = config
