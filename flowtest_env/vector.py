@@ -162,10 +162,8 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self._reward = p.rewards(config.step_cost, config.restricted_penalty, config.goal_reward, config.violation_penalty)
-        self._phi_table: np.ndarray | None = None
-        if config.shaping > 0:
-            self._phi_table = potentials(p, self.games, DistancePotential(config.shaping))
-        self._gamma = config.shaping_gamma
+        if config.shaping > 0:  # potential-based shaping folded into the reward table
+            self._reward = shaped_rewards(p, self._reward, potentials(p, self.games, DistancePotential(config.shaping)), config.shaping_gamma)
         self._outcome_names = np.array(OUTCOMES, dtype=object)
         self._all = np.ones(self.num_envs, dtype=bool)
         self._z = np.zeros(self.num_envs, dtype=np.int64)
@@ -173,8 +171,10 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         self._steps = np.zeros(self.num_envs, dtype=np.int64)
         self._restrictions = np.zeros(self.num_envs, dtype=np.int64)
         self._blocked = np.zeros(self.num_envs, dtype=np.int64)
-        self._phi = np.zeros(self.num_envs, dtype=np.float64)
         self._seen = np.zeros((self.num_envs, mem_size), dtype=np.float32) if self._mem is not None else None
+        # the observation rows, with room for the memory (filled per step) when there is one
+        self._mem_at = int(np.prod(p.obs_shape))
+        self._obs_table = p.obs if self._mem is None else np.concatenate([p.obs, np.zeros((p.obs.shape[0], mem_size), np.float32)], axis=1)
         self._done = np.zeros(self.num_envs, dtype=bool)  # episodes ended and not reset yet
         self._keys = np.zeros(self.num_envs, dtype=np.uint64)  # the test draws' keys (flowtest_env.draws)
         self._episode = np.zeros(self.num_envs, dtype=np.int64)  # each env's episodes since its key
@@ -200,28 +200,28 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         self._steps[envs] = 0
         self._restrictions[envs] = 0
         self._blocked[envs] = 0
-        if self._phi_table is not None:
-            self._phi[envs] = self._phi_table[z]
         self._done[envs] = False
 
     def _observe(self, fresh: np.ndarray | None = None) -> np.ndarray:
         """The batch observation now (``fresh``: envs whose episode just started, their
         memory restarts)."""
-        base: np.ndarray = np.take(self.pool.obs, self.pool.obs_row[self._z], axis=0)  # faster than fancy indexing
+        obs: np.ndarray = np.take(self._obs_table, self.pool.obs_row[self._z], axis=0)  # faster than fancy indexing
         if self._seen is None:
-            return base
+            return obs
         if fresh is not None:
             self._seen[fresh] = 0.0
-        np.maximum(self._seen, base[:, self._mem], out=self._seen)
-        return np.concatenate([base, self._seen], axis=1)
+        np.maximum(self._seen, obs[:, self._mem], out=self._seen)
+        obs[:, self._mem_at :] = self._seen
+        return obs
 
     def _observe_envs(self, envs: np.ndarray) -> np.ndarray:
         """The observations of ``envs`` alone, their episodes just started."""
-        base: np.ndarray = np.take(self.pool.obs, self.pool.obs_row[self._z[envs]], axis=0)
+        obs: np.ndarray = np.take(self._obs_table, self.pool.obs_row[self._z[envs]], axis=0)
         if self._seen is None:
-            return base
-        self._seen[envs] = base[:, self._mem]
-        return np.concatenate([base, self._seen[envs]], axis=1)
+            return obs
+        self._seen[envs] = obs[:, self._mem]
+        obs[:, self._mem_at :] = self._seen[envs]
+        return obs
 
     # ------------------------------------------------------------------ API
 
@@ -310,10 +310,6 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         self._blocked += p.refused[flat]
         terminated = p.outcome[z2] != 0
         truncated = ~terminated & (self._steps >= self.max_steps)
-        if self._phi_table is not None:
-            phi = np.where(terminated, 0.0, self._phi_table[z2])
-            reward += self._gamma * phi - self._phi
-            self._phi = phi
         self._z = z2
         fresh: np.ndarray | None = None
         if mode == AutoresetMode.NEXT_STEP and self._done.any():
@@ -533,6 +529,21 @@ class RandomGridVectorEnv(PoolVectorEnv):
         games = [TestGame(a, config.setting) for a in tests]
         super().__init__(num_envs, games, autoreset_mode=autoreset_mode, config=config.with_max_steps(4 * size * size))
         self.problem = f"random-{size}x{size}-{family}{n}" + ("" if world == "empty" else f"-{world}")
+
+
+def shaped_rewards(pool: CompiledPool, reward: np.ndarray, phi: np.ndarray, gamma: float) -> np.ndarray:
+    """The reward table with potential-based shaping: ``r + (gamma * phi(z') - phi(z))`` for
+    every (configuration ``z``, action), ``phi(z') = 0`` when ``z'`` ends the run.
+
+    The single env adds ``gamma * phi' - phi`` to the step's reward, ``phi`` the potential
+    of the configuration it steps from (0 only after a terminated step, when it does not step
+    again before a reset): a function of the configuration and the action, so it is a table
+    too, summed in the single env's order (the same floats).
+    """
+    phi_end = np.where(pool.outcome != 0, 0.0, phi)
+    here = np.repeat(np.arange(pool.n_z, dtype=np.int64), pool.n_actions)
+    out: np.ndarray = reward + (float(gamma) * phi_end[pool.next_z] - phi_end[here])
+    return out
 
 
 def autoreset_mode_of(mode: Any) -> AutoresetMode:
