@@ -172,13 +172,17 @@ class TorchTables:
     mask
         ``bool[n_z, A]``: the legal actions.
     obs_row, obs
-        ``int64[n_z]``, ``[n_rows, *obs_shape]``: each configuration's observation row.
+        ``int64[n_z]``, ``[n_rows, *obs_shape]``: each configuration's observation row
+        (with the memory, its last ``n_places`` entries are zero: a gather then writes the
+        memory bits into them).
     visited_bits
         ``int64[n_z, W]``: the places the configuration's observation shows the SUT at,
         packed 64 to a word (``W = 0`` without the visited-places memory).
     initial, test_of
         ``int64[n_tests]`` the reset configurations; ``int64[n_z]`` the test of each
         configuration.
+    place_word, place_bit
+        ``int64[n_places]``: the word and bit of each place in the packed memory.
     n_tests, n_actions, max_steps, n_places
         The pool's tests, the action columns, the step budget, the places of the memory
         (0 without it).
@@ -200,6 +204,8 @@ class TorchTables:
     visited_bits: torch.Tensor
     initial: torch.Tensor
     test_of: torch.Tensor
+    place_word: torch.Tensor
+    place_bit: torch.Tensor
     n_tests: int
     n_actions: int
     max_steps: int
@@ -219,10 +225,7 @@ class TorchTables:
     @property
     def obs_shape(self) -> tuple[int, ...]:
         """The shape of one env's full observation (memory included)."""
-        base = tuple(int(v) for v in self.obs.shape[1:])
-        if self.n_places:
-            return (base[0] + self.n_places,)
-        return base
+        return tuple(int(v) for v in self.obs.shape[1:])
 
     def to(self, device: str | torch.device) -> TorchTables:
         """The same tables on ``device``."""
@@ -297,11 +300,14 @@ def build_tables(
     reward = pool.rewards(step_cost, restricted_penalty, goal_reward, violation_penalty)
     if shaping > 0:
         reward = shaped_rewards(pool, reward, potentials(pool, list(games), DistancePotential(shaping)), shaping_gamma)
+    obs = pool.obs
     if memory_slice is not None:
         row_bits, n_places = _visited_words(pool.obs, memory_slice)
         bits = row_bits[pool.obs_row]
+        obs = np.concatenate([obs, np.zeros((obs.shape[0], n_places), dtype=obs.dtype)], axis=1)
     else:
         bits, n_places = np.zeros((pool.n_z, 0), dtype=np.int64), 0
+    places = np.arange(n_places, dtype=np.int64)
     dev = torch.device(device)
 
     def t(a: np.ndarray, dtype: torch.dtype) -> torch.Tensor:
@@ -317,10 +323,12 @@ def build_tables(
         outcome=t(pool.outcome, torch.int8),
         mask=t(pool.mask != 0, torch.bool),
         obs_row=t(pool.obs_row, torch.int64),
-        obs=torch.as_tensor(np.ascontiguousarray(pool.obs)).to(dev),
+        obs=torch.as_tensor(np.ascontiguousarray(obs)).to(dev),
         visited_bits=t(bits, torch.int64),
         initial=t(pool.initial, torch.int64),
         test_of=t(pool.test_of, torch.int64),
+        place_word=t(places // WORD, torch.int64),
+        place_bit=t(places % WORD, torch.int64),
         n_tests=len(pool.tests),
         n_actions=int(pool.n_actions),
         max_steps=int(max_steps),
@@ -531,17 +539,19 @@ def action_mask(tables: TorchTables, state: EnvState) -> torch.Tensor:
 
 def unpack_visited(tables: TorchTables, words: torch.Tensor, dtype: torch.dtype = torch.float32) -> torch.Tensor:
     """``[N, n_places]`` 0/1 of packed memory words ``int64[N, W]``."""
-    shifts = torch.arange(WORD, dtype=torch.int64, device=words.device)
-    bits = (words[:, :, None] >> shifts) & 1
-    return bits.reshape(words.shape[0], -1)[:, : tables.n_places].to(dtype)
+    return ((words.index_select(1, tables.place_word) >> tables.place_bit) & 1).to(dtype)
+
+
+def _with_memory(tables: TorchTables, rows: torch.Tensor, words: torch.Tensor) -> torch.Tensor:
+    """Gathered observation rows with the memory bits written into their last entries."""
+    if tables.n_places:
+        rows[:, rows.shape[1] - tables.n_places :] = unpack_visited(tables, words, rows.dtype)
+    return rows
 
 
 def observation_of(tables: TorchTables, z: torch.Tensor, visited: torch.Tensor) -> torch.Tensor:
     """The full observations of configurations ``z`` with memory ``visited``."""
-    rows = tables.obs.index_select(0, tables.obs_row.index_select(0, z))
-    if not tables.n_places:
-        return rows
-    return torch.cat([rows, unpack_visited(tables, visited, rows.dtype)], dim=1)
+    return _with_memory(tables, tables.obs.index_select(0, tables.obs_row.index_select(0, z)), visited)
 
 
 def observe(tables: TorchTables, state: EnvState) -> torch.Tensor:
@@ -568,10 +578,7 @@ def expand(tables: TorchTables, compact_obs: torch.Tensor) -> torch.Tensor:
 
         obs = expand(tables, compact(tables, state))   # == observe(tables, state)
     """
-    rows = tables.obs.index_select(0, compact_obs[:, 0])
-    if not tables.n_places:
-        return rows
-    return torch.cat([rows, unpack_visited(tables, compact_obs[:, 1:], rows.dtype)], dim=1)
+    return _with_memory(tables, tables.obs.index_select(0, compact_obs[:, 0]), compact_obs[:, 1:])
 
 
 def verdict_dict(verdict: Verdict) -> dict[str, torch.Tensor]:
