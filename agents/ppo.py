@@ -148,6 +148,23 @@ def load_model(path: str | Path, trust: bool | None = None) -> Any:
         raise PolicyError(f"{str(p)!r} is not a saved PPO model ({type(exc).__name__}: {detail})") from None
 
 
+def check_trusted(path: str | Path) -> None:
+    """Refuse early (before any other work) a model file that loading would unpickle,
+    without the user's trust; a missing or native file passes (:func:`load_model` reports it).
+
+    Raises
+    ------
+    agents.checkpoint.UntrustedModelError
+        For a stable-baselines3 zip that is neither trusted nor written by this process.
+    """
+    p = Path(path)
+    found = p if p.exists() else p.with_suffix(".zip")
+    if not found.is_file() or is_native_checkpoint(found) or is_own_file(found) or pickled_models_trusted():
+        return
+    if _is_zip(found):
+        raise refuse_pickled(found)
+
+
 def _is_zip(path: Path) -> bool:
     import zipfile
 

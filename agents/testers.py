@@ -16,6 +16,11 @@ Testers are named like systems under test (:func:`make_tester`):
                      folder ``PATH`` holds one per problem, ``PATH/<problem>.zip``
 ===================  ===================================================================
 
+A learned tester is a stable-baselines3 zip, which loading unpickles (code from the file
+runs): :func:`agents.ppo.load_model` loads it only when the user trusts it
+(``--trust-model``, :func:`agents.checkpoint.trust_pickled_models`) or this process wrote
+it, and raises :class:`agents.checkpoint.UntrustedModelError` otherwise.
+
 A tester is a callable ``tester(env) -> action`` reading the run of a
 :class:`~flowtest_env.multiagent.raw_env` (its tester observation: the system's state,
 the history, the agent's place), deterministic, so :mod:`flowtest_env.fairness` can

@@ -158,6 +158,11 @@ def check_config(config: BenchmarkConfig) -> None:
     if not config.suts:
         raise ProblemError("no system to benchmark: give --sut ppo and/or a system such as scripted:replanner")
     check_sut_names(config.others())
+    from agents.ppo import check_trusted
+
+    for sut in config.others():
+        if sut.startswith("ppo:"):
+            check_trusted(sut[4:])  # a pickled model is refused before any work
     if "ppo" in config.suts and not config.algos:
         raise ProblemError("--sut ppo needs at least one --algo")
     for algo in config.algos:

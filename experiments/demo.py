@@ -3,8 +3,10 @@
 Synthesizes the built-in examples (Maze 2 first), checks each test, and writes into one
 output folder a picture and an artifact per example plus a Markdown summary; then runs
 the correct, faulty, GR(1) and random systems under test against ``FlowTest-Maze2-v0``
-(and a PPO system, trained on it in about ten seconds, when the ``rl`` extra is
-installed) and writes the evaluation report. The folder is FlowTest's own:
+(and a PPO system, trained on it in about ten seconds by the native trainer, when the
+``rl`` extra is installed) and writes the evaluation report. A ``ppo-maze2.zip`` already in
+the folder is played only if it is a native checkpoint (data, :mod:`agents.checkpoint`);
+a stable-baselines3 zip there (code, when loaded) is refused unless ``--trust-model``. The folder is FlowTest's own:
 it carries a marker file, and the demo refuses to write into an existing folder without it,
 so nothing a user made is overwritten.
 """
@@ -19,6 +21,7 @@ import time
 from collections.abc import Callable
 from functools import partial
 from pathlib import Path
+from typing import Any
 
 from synthesis.artifacts.artifact import artifact_of
 from synthesis.artifacts.summary import summary_of
@@ -31,7 +34,7 @@ from .evaluate import evaluate, write_report
 from .exits import EXIT_OK
 from .outputs import json_safe, prepare_output_folder, write_atomically
 from .progress import StageProgress
-from .train import train
+from .train import train_native
 from .training import rl_installed
 
 MARKER = ".flowtest-demo"
@@ -43,6 +46,9 @@ DEMO_PPO_STEPS = 16_384
 """Training steps of the demo's PPO system (about ten seconds; ``python -m
 experiments.bench_ppo`` measures how many it needs, see docs/benchmarks.md)."""
 
+DEMO_PPO_SETTINGS: dict[str, Any] = {"n_envs": 16, "n_steps": 64, "batch_size": 256, "n_epochs": 4, "device": "cpu"}
+"""The native trainer's settings for the demo's small budget (one test: few envs, more epochs)."""
+
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Declare ``flowtest demo``'s arguments."""
@@ -52,6 +58,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--episodes", type=positive_int, default=5, help="evaluation episodes per system (default 5)")
     p.add_argument("--no-evaluation", action="store_true", help="only synthesize and draw, run no system under test")
+    p.add_argument("--trust-model", action="store_true",
+                   help="play a stable-baselines3 ppo-maze2.zip found in the folder, which unpickles it (code from the "
+                        "file runs); the demo's own model is a native checkpoint and never needs it")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines on stderr")
 
 
@@ -86,16 +95,38 @@ def run_evaluation_demo(out_dir: str | Path, episodes: int = 5, progress: Callab
     and return the path of ``report.html``."""
     out = Path(out_dir)
     suts = ["scripted:replanner", "gr1", "scripted:committed", "scripted:fuel-blind", "scripted:greedy", "random"]
-    model = (out / "ppo-maze2.zip").resolve()  # absolute: the replay commands work from anywhere
+    model = demo_model(out)  # absolute: the replay commands work from anywhere
     if not model.exists() and rl_installed():
         if progress is not None:
             progress(f"training a PPO system under test on FlowTest-Maze2-v0 ({DEMO_PPO_STEPS} steps)")
-        train("FlowTest-Maze2-v0", DEMO_PPO_STEPS, model, seed=0, progress_bar=False, eval_episodes=0)
+        train_native("FlowTest-Maze2-v0", DEMO_PPO_STEPS, model, seed=0, progress_bar=False, eval_episodes=0,
+                     eval_every=0, **DEMO_PPO_SETTINGS)
     if model.exists():
         suts.append(f"ppo:{model}")
     cells = evaluate(["FlowTest-Maze2-v0"], suts, episodes, 0, progress)
     write_report(cells, out)
     return out / "report.html"
+
+
+def demo_model(out_dir: Path) -> Path:
+    """Where the demo's PPO model lies in its evaluation folder (absolute)."""
+    return (Path(out_dir) / "ppo-maze2.zip").resolve()
+
+
+def check_demo_model(out_dir: Path) -> None:
+    """Refuse, before any work, a ``ppo-maze2.zip`` in the evaluation folder that is not a
+    native checkpoint (a stable-baselines3 zip runs code when loaded), unless trusted.
+
+    Raises
+    ------
+    agents.checkpoint.UntrustedModelError
+        For such a file without :func:`agents.checkpoint.trust_pickled_models`.
+    """
+    from agents.checkpoint import is_native_checkpoint, pickled_models_trusted, refuse_pickled
+
+    model = demo_model(out_dir)
+    if model.exists() and not is_native_checkpoint(model) and not pickled_models_trusted():
+        raise refuse_pickled(model)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -104,6 +135,12 @@ def run(args: argparse.Namespace) -> int:
 
     out: Path = args.out
     problems = [load_problem(name) for name in args.problems]  # every input checked before any work
+    if args.trust_model:
+        from agents.checkpoint import trust_pickled_models
+
+        trust_pickled_models(True)
+    if not args.no_evaluation:
+        check_demo_model(out / "evaluation")
     stems = file_stems([p.name for p in problems])
     prepare_folder(out)
     rows = []

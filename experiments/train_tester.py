@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from agents.checkpoint import mark_own_file
 from synthesis.model.errors import ProblemError
 
 from .arguments import nonnegative_int, positive_int
@@ -172,6 +173,7 @@ def train_tester(problem: str, steps: int, out: str | Path, system: str = "scrip
     curve = EpisodeCurve()
     seconds = learn(model, steps, curve, progress_bar)
     write_atomically(model_path, lambda tmp: model.save(str(tmp)))
+    mark_own_file(model_path)  # assessed below: this run wrote it, so it loads without --trust-model
     png = model_path.with_suffix(".png")
     write_atomically(png, lambda tmp: plot_tester_curve(curve.points, tmp, f"learned tester on {problem} vs {system} (seed {seed})"))
     summary = {
