@@ -19,9 +19,11 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import signal
 import sys
 import threading
+import warnings
 from collections.abc import Sequence
 from types import FrameType
 
@@ -29,6 +31,8 @@ from .arguments import ArgumentParser
 from .command import Command
 from .commands import COMMANDS
 from .exits import EXIT_INTERNAL, EXIT_INTERRUPTED, PROG, exit_code_for, flush_and_exit, say
+
+_ANSI = re.compile(r"\x1b\[[0-9;]*m")
 
 
 def build_parser(commands: Sequence[Command] = COMMANDS) -> argparse.ArgumentParser:
@@ -70,14 +74,25 @@ def terminate_as_interrupt() -> None:
         signal.signal(signal.SIGTERM, _terminated)
 
 
+def one_line_warning(message: Warning | str, category: type[Warning], filename: str, lineno: int,
+                     file: object = None, line: str | None = None) -> None:
+    """Show a warning as one plain line on stderr, ``flowtest: warning: ...`` (no source
+    line, no colours; gymnasium's ``WARN:`` prefix dropped)."""
+    text = _ANSI.sub("", str(message))
+    text = text[len("WARN: "):] if text.startswith("WARN: ") else text
+    say(f"{PROG}: warning: " + " ".join(text.split()))
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; return the exit code (see :mod:`experiments.exits`).
 
     When it runs as the process (``argv`` None), SIGTERM is handled as Ctrl-C: exit
-    130 with the one line ``flowtest: interrupted``, outputs written whole or not at all.
+    130 with the one line ``flowtest: interrupted``, outputs written whole or not at all;
+    and every warning is one line, ``flowtest: warning: ...``.
     """
     if argv is None:
         terminate_as_interrupt()
+        warnings.showwarning = one_line_warning
     try:
         parser = build_parser()
         args = parser.parse_args(argv)  # usage errors exit 2 via argparse

@@ -330,3 +330,21 @@ def test_a_control_character_never_comes_out_raw() -> None:
     assert shown == "start\\x1b[2J" and "\x1b" not in str(shown)
     assert printable("ok") == "ok"
     assert "\x1b" not in ansi(game, run, "engineer") and "\x1b" not in ansi(game, run)
+
+
+def test_the_edited_warning_is_one_line_from_the_console_script(tmp_path: Path) -> None:
+    """``flowtest`` shows a user's edited (but valid) artifact as one warning line, then runs it."""
+    import subprocess
+    import sys
+
+    d = copy.deepcopy(shipped("small-reactive"))
+    _one_more_restriction(d)
+    path = tmp_path / "edited.json"
+    path.write_text(json.dumps(d))
+    flowtest = Path(sys.executable).parent / "flowtest"
+    proc = subprocess.run([str(flowtest), "evaluate", "--env", str(path), "--sut", "random", "--episodes", "1", "--replay",
+                           "-q"], capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    warned = [line for line in proc.stderr.splitlines() if "changed after FlowTest wrote it" in line]
+    assert len(warned) == 1 and warned[0].startswith("flowtest: warning: artifact "), proc.stderr
+    assert "Traceback" not in proc.stderr and "\x1b" not in proc.stderr
