@@ -93,7 +93,7 @@ def content_digest(doc: Mapping[str, Any]) -> str:
     True
     """
     body = {k: v for k, v in doc.items() if k != DIGEST_KEY}
-    text = json.dumps(body, sort_keys=True, separators=(",", ":"), ensure_ascii=True, allow_nan=False)
+    text = json.dumps(body, sort_keys=True, separators=(",", ":"), ensure_ascii=True)
     return hashlib.sha256(text.encode("ascii")).hexdigest()
 
 
@@ -376,7 +376,7 @@ class TestArtifact:
 
     def save(self, path: str | Path) -> None:
         """Write the artifact as compact JSON (with its digest)."""
-        Path(path).write_text(json.dumps(self.to_dict(), separators=(",", ":"), allow_nan=False))
+        Path(path).write_text(json.dumps(self.to_dict(), separators=(",", ":")))
 
     @classmethod
     def load(cls, path: str | Path, verify: bool = True, require_digest: bool = False) -> TestArtifact:

@@ -57,7 +57,7 @@ def record_digest(record: Mapping[str, Any]) -> str:
     keys, no spaces, ASCII): the same definition as an artifact's
     (:func:`synthesis.artifacts.artifact.content_digest`)."""
     body = {k: v for k, v in record.items() if k != "digest"}
-    text = json.dumps(body, sort_keys=True, separators=(",", ":"), ensure_ascii=True, allow_nan=False)
+    text = json.dumps(body, sort_keys=True, separators=(",", ":"), ensure_ascii=True)
     return hashlib.sha256(text.encode("ascii")).hexdigest()
 
 
