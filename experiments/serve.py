@@ -27,6 +27,7 @@ run, served in turn.
 from __future__ import annotations
 
 import argparse
+import io
 import json
 import socketserver
 import sys
@@ -80,7 +81,7 @@ def serve_lines(runtime: Any, read_line: Callable[[], str], write: Callable[[str
         if not line:
             return
         if not line.endswith("\n") and len(line) >= MAX_REQUEST:
-            write(json.dumps({"ok": False, "error": f"request longer than {MAX_REQUEST} bytes"}) + "\n")
+            write(json.dumps({"ok": False, "error": f"request longer than {MAX_REQUEST} bytes"}, separators=(",", ":")) + "\n")
             return
         if not line.strip():
             continue
@@ -152,7 +153,9 @@ def run(args: argparse.Namespace) -> int:
         raise ProblemError("--max-steps must be at least 1")
     artifact = load_test(args.test)
     if args.port is None:
-        serve_stream(TestRuntime(artifact, args.max_steps), sys.stdin, sys.stdout)
+        # bytes that are not UTF-8 become U+FFFD (a request that is then answered with an error), not a crash
+        inp = io.TextIOWrapper(sys.stdin.buffer, encoding="utf-8", errors="replace") if hasattr(sys.stdin, "buffer") else sys.stdin
+        serve_stream(TestRuntime(artifact, args.max_steps), inp, sys.stdout)
         return EXIT_OK
     try:
         server = make_server(artifact, args.port, args.max_steps)

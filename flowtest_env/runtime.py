@@ -22,6 +22,7 @@ A **status** (:meth:`TestRuntime.status`) is a plain ``dict`` of JSON values: ``
 
 from __future__ import annotations
 
+import json
 from typing import Any
 
 from synthesis.artifacts.artifact import TestArtifact
@@ -89,7 +90,11 @@ def _int(x: Any) -> int:
 
 
 def _show(x: Any) -> str:
-    text = repr(x)
+    """``x`` as JSON (as the client wrote it), cut to 80 characters."""
+    try:
+        text = json.dumps(x)
+    except (TypeError, ValueError):
+        text = repr(x)
     return text if len(text) <= 80 else text[:80] + "..."
 
 

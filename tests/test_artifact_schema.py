@@ -50,7 +50,8 @@ def test_every_kind_is_shipped_or_synthesized_and_validates() -> None:
     from synthesis.problems.files import load_problem_file
 
     kinds = {json.loads(p.read_text())["kind"] for p in SHIPPED}
-    mixed = flowtest_env.make_env(load_problem_file(ROOT / "tests" / "data" / "ok_mixed.toml")).unwrapped.artifact
+    env: Any = flowtest_env.make_env(load_problem_file(ROOT / "tests" / "data" / "ok_mixed.toml")).unwrapped
+    mixed = env.artifact
     doc = json.loads(json.dumps(mixed.to_dict()))
     assert not list(validator().iter_errors(doc))
     assert kinds | {doc["kind"]} == {"static", "reactive", "mixed", "agent"}

@@ -11,6 +11,7 @@ import shlex
 import sys
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -243,7 +244,7 @@ def test_python_api_takes_planner_objects(project: Path) -> None:
     sys.path.insert(0, str(project))
     from bfs_planner import BfsPlanner  # type: ignore[import-not-found]
 
-    def stubborn(observation: dict, mask: object) -> str:
+    def stubborn(observation: dict[str, Any], mask: object) -> str:
         return "E" if "E" in observation["allowed"] else "stay"
 
     cells = evaluate(["warehouse.toml"], [BfsPlanner, lambda obs, mask: int(obs["mask"].index(1)), stubborn], 2)
@@ -258,12 +259,12 @@ def test_python_api_takes_planner_objects(project: Path) -> None:
 def test_a_python_planner_that_raises_or_lies_fails_its_run(project: Path) -> None:
     from experiments.evaluate import evaluate
 
-    def raises(observation: dict, mask: object) -> int:
+    def raises(observation: dict[str, Any], mask: object) -> int:
         if observation["step"] == 2:
             raise ZeroDivisionError("division by zero")
         return int(observation["mask"].index(1))
 
-    def lies(observation: dict, mask: object) -> int:
+    def lies(observation: dict[str, Any], mask: object) -> int:
         return 7
 
     cells = evaluate(["small-reactive"], [raises, lies, "scripted:replanner"], 2)

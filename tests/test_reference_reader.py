@@ -50,8 +50,9 @@ def test_the_reader_imports_nothing_but_json_and_stays_short() -> None:
 
 def _doc(name: str) -> dict[str, Any]:
     if name.endswith(".toml"):
-        return flowtest_env.make_env(load_problem_file(ROOT / name)).unwrapped.game.artifact.to_dict()
-    return json.loads(artifact_path(name).read_text())
+        u: Any = flowtest_env.make_env(load_problem_file(ROOT / name)).unwrapped
+        return dict(u.game.artifact.to_dict())
+    return dict(json.loads(artifact_path(name).read_text()))
 
 
 @pytest.mark.parametrize("kind", list(KINDS))
@@ -66,7 +67,7 @@ def test_the_reader_agrees_with_the_env_on_random_steps(kind: str) -> None:
         assert doc["kind"] == kind
         test = reader.Test(json.loads(json.dumps(doc)))  # what a file gives: plain JSON data
         env = flowtest_env.make_env(doc["name"] if not name.endswith(".toml") else load_problem_file(ROOT / name))
-        u = env.unwrapped
+        u: Any = env.unwrapped
         done_here, episodes = 0, 0
         while done_here < per_test:
             _, info = env.reset(seed=episodes)

@@ -11,6 +11,7 @@ import socket
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -28,7 +29,7 @@ def test_stepping_by_states_agrees_with_the_env(name: str) -> None:
     system entered; status and verdict agree after every step (the agent's place too)."""
     rng = random.Random(name)
     env = flowtest_env.make_env(name)
-    u = env.unwrapped
+    u: Any = env.unwrapped
     rt = TestRuntime.load(name)
     for episode in range(20):
         _, info = env.reset(seed=episode)
@@ -125,17 +126,18 @@ def test_serve_answers_each_line_and_goes_on_after_bad_ones() -> None:
     assert answers[9] == {"ok": True}
 
 
-def _flowtest(*args: str, **kwargs: object) -> subprocess.Popen[str]:
-    return subprocess.Popen([sys.executable, "-m", "experiments", *args], cwd=ROOT, text=True,  # type: ignore[call-overload]
-                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, **kwargs)
+def _flowtest(*args: str) -> subprocess.Popen[str]:
+    return subprocess.Popen([sys.executable, "-m", "experiments", *args], cwd=ROOT, text=True,
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
 
 
 def test_flowtest_serve_over_stdin_and_stdout() -> None:
-    proc = _flowtest("serve", "maze2")
-    out, err = proc.communicate('{"op":"reset"}\n{"op":"step","action":"N"}\n', timeout=120)
-    assert proc.returncode == 0, err
-    first, second = (json.loads(line) for line in out.splitlines())
+    proc = subprocess.run([sys.executable, "-m", "experiments", "serve", "maze2"], cwd=ROOT, capture_output=True,
+                          input=b'{"op":"reset"}\n{"op":"st\xffep"}\n{"op":"step","action":"N"}\n', timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    first, bad, second = (json.loads(line) for line in proc.stdout.decode().splitlines())
     assert first["status"]["agent"]["name"] and second["status"]["step"] == 1
+    assert not bad["ok"] and "unknown op" in bad["error"]  # a byte that is not UTF-8: an error answer, no crash
 
 
 def test_flowtest_serve_on_a_localhost_socket() -> None:
