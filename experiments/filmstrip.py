@@ -6,7 +6,9 @@ bars, the test agent, the hidden test cells), titled with the step, the SUT's ac
 what the test did (doors opened or closed, walls of the current fuel level shown or gone,
 the test agent moved, the action refused).
 Frames where nothing changed (waits) are left out; a long run keeps its first and last
-frames and an even sample of the others.
+frames and an even sample of the others. A run that violated the system objective keeps
+the frame where it did, marked in red with the broken conjunct and the cell
+(:func:`experiments.report.violation_of`), and the strip's title says it too.
 """
 
 from __future__ import annotations
@@ -43,10 +45,42 @@ def _events(game: Any, states: Sequence[Any], actions: Sequence[int]) -> list[st
     return out
 
 
-def frames_to_show(game: Any, states: Sequence[Any], limit: int = MAX_FRAMES) -> list[int]:
+def symbol_legend(game: Any) -> list[Any]:
+    """Legend handles for the renderer's symbols in the engineer's view (what a frame
+    shows), each proposition of the system objective named by its mark's colour, so a
+    hazard reads as ``hazard``, not as unlabelled dots."""
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
+    from flowtest_env import render
+    from flowtest_env.encoding import system_propositions
+
+    def rgb(c: tuple[int, int, int]) -> tuple[float, float, float]:
+        return (c[0] / 255, c[1] / 255, c[2] / 255)
+
+    handles: list[Any] = [
+        Line2D([], [], marker="o", color=rgb(render.SYSTEM), label="system under test", linestyle="", markersize=9),
+        Patch(facecolor=rgb(render.GOAL), label="goal"),
+        Line2D([], [], marker="o", markerfacecolor="none", markeredgewidth=2, color=rgb(render.TEST_CELL),
+               label="hidden test cell", linestyle="", markersize=9),
+        Patch(facecolor=rgb(render.BLOCKED), label="blocked cell"),
+        Line2D([], [], color=rgb(render.WALL), lw=4, label="wall"),
+        Line2D([], [], color=rgb(render.DOOR), lw=4, label="door closed now"),
+    ]
+    if game.has_agent:
+        handles.append(Line2D([], [], marker="D", color=rgb(render.AGENT), label="test agent", linestyle="", markersize=9))
+    if game.ts.kind == "fuel":
+        handles.append(Line2D([], [], marker="P", color=rgb(render.REFUEL), label="refuel", linestyle="", markersize=9))
+    for i, name in enumerate(system_propositions(game)):
+        colour = rgb(render.PALETTE[i % len(render.PALETTE)])
+        handles.append(Line2D([], [], marker="o", color=colour, label=name, linestyle="", markersize=6))
+    return handles
+
+
+def frames_to_show(game: Any, states: Sequence[Any], limit: int = MAX_FRAMES, keep_step: int | None = None) -> list[int]:
     """Indices of the states a filmstrip shows: the start, every step where the system,
     the test agent or the shown restrictions changed or an action was refused, the end;
-    evenly sampled down to ``limit``."""
+    evenly sampled down to ``limit``, ``keep_step`` (the violation) always kept."""
     keep = [0]
     for k in range(1, len(states)):
         a, b = states[k - 1], states[k]
@@ -58,6 +92,8 @@ def frames_to_show(game: Any, states: Sequence[Any], limit: int = MAX_FRAMES) ->
         keep.append(len(states) - 1)
     if len(keep) > limit:
         keep = [keep[int(round(j))] for j in np.linspace(0, len(keep) - 1, limit)]
+    if keep_step is not None and 0 <= keep_step < len(states) and keep_step not in keep:
+        keep[min(range(1, len(keep) - 1), key=lambda i: abs(keep[i] - keep_step), default=len(keep) - 1)] = keep_step
     return sorted(set(keep))
 
 
@@ -70,8 +106,11 @@ def filmstrip(game: Any, states: Sequence[Any], actions: Sequence[int], title: s
 
     from flowtest_env.render import make_renderer
 
+    from .report import violation_of
+
     renderer = make_renderer(game, tile, "engineer")
-    shown = frames_to_show(game, states)
+    broke = violation_of(game.artifact, [r.system for r in states]) if states and states[-1].outcome == "violated" else None
+    shown = frames_to_show(game, states, keep_step=None if broke is None else broke.step)
     events = _events(game, states, actions)
     frames = [renderer.frame(states[i]) for i in shown]
     h, w = frames[0].shape[:2]
@@ -79,7 +118,18 @@ def filmstrip(game: Any, states: Sequence[Any], actions: Sequence[int], title: s
     n_rows = (len(frames) + n_cols - 1) // n_cols
     fw = 1.9 if w <= 320 else 3.4
     width = max(fw * n_cols, 8.0)  # room for the title however few frames
-    fig, axes = plt.subplots(n_rows, n_cols, figsize=(width, fw * h / w * n_rows + 0.55 * n_rows + 0.8), squeeze=False)
+    note = "(… : steps left out before this frame, where nothing changed or to keep the strip short)"
+    lines = textwrap.wrap(title, int(width * 13))
+    if broke is not None:
+        lines += textwrap.wrap(broke.text().replace("broke", "The run broke the system objective's conjunct", 1),
+                               int(width * 13))
+    lines.append(note)
+    top = 0.17 * len(lines) + 0.15  # inches of the strip's title
+    frame_titles = 0.7 if broke is not None else 0.55  # the broken frame's title has a third line
+    handles = symbol_legend(game) if game.is_grid else []
+    bottom = 0.2 * -(-len(handles) // 6) + 0.1 if handles else 0.0  # inches of the legend, 6 symbols a row
+    height = fw * h / w * n_rows + frame_titles * n_rows + top + bottom
+    fig, axes = plt.subplots(n_rows, n_cols, figsize=(width, height), squeeze=False)
     for ax in axes.ravel():
         ax.set_axis_off()
     prev = 0
@@ -88,13 +138,34 @@ def filmstrip(game: Any, states: Sequence[Any], actions: Sequence[int], title: s
         label = "start" if i == 0 else events[i]
         quiet = i - prev - 1
         head = ("… " if quiet > 0 else "") + f"step {i}"
-        ax.set_title(f"{head}\n{label}", fontsize=8)
+        if broke is not None and i == broke.step:
+            ax.set_title(f"{head}: {label}\nBROKE {broke.conjunct}\nat {broke.where}", fontsize=8, color="#b00020",
+                         fontweight="bold")
+            for spine in ax.spines.values():
+                spine.set_visible(True)
+                spine.set_edgecolor("#b00020")
+                spine.set_linewidth(3)
+            ax.set_axis_on()
+            ax.set_xticks([])
+            ax.set_yticks([])
+        else:
+            ax.set_title(f"{head}\n{label}", fontsize=8)
         prev = i
-    note = "(… : steps left out before this frame, where nothing changed or to keep the strip short)"
-    fig.suptitle("\n".join(textwrap.wrap(title, int(width * 13)) + [note]), fontsize=9)
-    fig.tight_layout()
+    fig.suptitle("\n".join(lines), fontsize=9)
+    if handles:
+        fig.legend(handles=handles, loc="lower center", ncol=min(6, len(handles)), fontsize=8, frameon=False)
+    fig.tight_layout(rect=(0, bottom / height, 1, 1 - top / height))
     fig.savefig(path, dpi=100)
     plt.close(fig)
+
+
+def test_picture(game: Any, path: Path) -> None:
+    """The test's restrictions per history, one panel each, its propositions in the legend
+    (:func:`experiments.plots.plot_artifact`), to ``path`` (PNG): what the report's test
+    card shows. The format follows ``path``'s suffix (``.png``, ``.svg``, ``.pdf``)."""
+    from .plots import plot_artifact
+
+    plot_artifact(game.artifact, path, dpi=90, header=False)
 
 
 def start_picture(game: Any, path: Path, tile: int = 48) -> None:

@@ -18,8 +18,15 @@ Reactive and mixed tests get one panel per history that restricts something, tit
 with the history's name and what it means; static walls appear in every panel. A
 test whose restrictions are all static gets a single panel.
 
+On grids every proposition gets a colour of its own: a small square in the corner of each
+cell where it holds, and a legend line saying what it is (``H = hazard``, or the cells, or
+the fuel levels at which it holds), so a spill zone reads as a spill zone.
+
 An optional test-agent overlay shades the agent's cells (and marks its parks); agent
 problems pass it automatically through ``test.agent``.
+
+:func:`plot_artifact` draws the same panels from a loaded test artifact (what
+``flowtest evaluate``'s report shows of each test).
 
 Drawing uses a private :class:`matplotlib.figure.Figure` rendered by Agg (or the
 vector backends for ``.svg``/``.pdf``); pyplot's global state is never touched, so
@@ -61,6 +68,8 @@ EDGE = "#9a9a9a"
 AGENT = "#9ecae1"
 TEXT = "#202020"
 PROP = "#1f5fa0"
+#: one colour per proposition (in name order), none of them a colour with a meaning above
+PROP_COLOURS = ("#9467bd", "#ff7f0e", "#17becf", "#e377c2", "#8c564b", "#bcbd22", "#7f7f7f", "#2f4b7c")
 
 Cell = tuple[int, int]
 
@@ -101,7 +110,8 @@ def panels_of(test: Any) -> list[Panel]:
     return panels
 
 
-def plot_test(test: Any, path: str | Path, *, agent: Any = None, dpi: int = 110) -> Path:
+def plot_test(test: Any, path: str | Path, *, agent: Any = None, dpi: int = 110, max_cols: int | None = None,
+              header: bool = True) -> Path:
     """Draw ``test`` (a :class:`~synthesis.pipeline.SynthesizedTest`) to ``path``.
 
     Parameters
@@ -118,6 +128,12 @@ def plot_test(test: Any, path: str | Path, *, agent: Any = None, dpi: int = 110)
         ``cells`` are ignored.
     dpi
         Resolution of raster output.
+    max_cols
+        At most this many panels side by side (default: 4 on narrow grids, else 3); the
+        report asks for 2 so that a test's picture fits a card at laptop width.
+    header
+        Title the picture with the problem's name, kind, flow, cuts and objectives (the
+        report's cards say these in the page, so they leave it out).
 
     Returns
     -------
@@ -130,12 +146,154 @@ def plot_test(test: Any, path: str | Path, *, agent: Any = None, dpi: int = 110)
     panels = panels_of(test)
     overlay = _agent_overlay(test, agent)
     if ts.kind in ("grid", "fuel") and ts.layout is not None:
-        fig = _grid_figure(test, panels, overlay)
+        fig = _grid_figure(test, panels, overlay, max_cols)
     else:
-        fig = _graph_figure(test, panels, overlay)
+        fig = _graph_figure(test, panels, overlay, max_cols)
+    if header:
+        fig.suptitle(_header(test), fontsize=10)
     FigureCanvasAgg(fig)
     fig.savefig(path, format=fmt, dpi=dpi)
     return path
+
+
+@dataclass(frozen=True)
+class _Objective:
+    text: str
+
+
+@dataclass(frozen=True)
+class _ArtifactProblem:
+    name: str
+    kind: str
+    system: Any
+    system_objective: _Objective
+    test_objective: _Objective
+    agent: Any = None
+
+
+@dataclass(frozen=True)
+class _ArtifactRouting:
+    flow: int
+    cut_edges: np.ndarray
+    status: str
+
+
+@dataclass(frozen=True)
+class _ArtifactSpec:
+    """What the panels need of the specification product: history names and meanings."""
+
+    art: Any
+
+    def history_name(self, h: int) -> str:
+        return f"q{h}"
+
+    def describe(self, h: int) -> str:
+        """As :meth:`synthesis.graphs.automata.SpecificationProduct.describe`."""
+        comps = self.art.histories.components
+        if comps is None:
+            return "start"
+        s, t = (int(x) for x in comps[h])
+        bits = [b for b in (self.art.system_automaton.names[s], self.art.test_automaton.names[t]) if b]
+        return "; ".join(bits) or "start"
+
+
+@dataclass(frozen=True)
+class _ArtifactTest:
+    """A loaded artifact seen as the parts of a synthesized test that the pictures read."""
+
+    problem: _ArtifactProblem
+    routing: _ArtifactRouting
+    strategy: Any
+    spec: _ArtifactSpec
+    agent: Any = None
+
+
+def artifact_view(art: Any) -> Any:
+    """A :class:`~synthesis.artifacts.artifact.TestArtifact` as the synthesized test that
+    :func:`plot_test` and :func:`panels_of` read (problem, routing summary, restrictions,
+    history meanings, test agent)."""
+    summary = art.summary or {}
+    problem = _ArtifactProblem(
+        str(art.name), str(art.kind), art.system, _Objective(str(art.objectives.get("system", ""))),
+        _Objective(str(art.objectives.get("test", ""))),
+    )
+    routing = _ArtifactRouting(int(summary.get("flow", 0)), np.zeros(int(summary.get("n_cuts", 0))),
+                               str(summary.get("status", "unknown")))
+    return _ArtifactTest(problem, routing, art.strategy, _ArtifactSpec(art), art.agent)
+
+
+def plot_artifact(art: Any, path: str | Path, *, dpi: int = 110, max_cols: int | None = 2, header: bool = True) -> Path:
+    """Draw a loaded test artifact as :func:`plot_test` draws its synthesized test: one
+    panel per history that restricts something, static walls in every panel, the
+    propositions in the legend, the test agent's cells and parks.
+
+    Example::
+
+        import gymnasium as gym
+        game = gym.make("FlowTest-SmallReactive-v0").unwrapped.game
+        plot_artifact(game.artifact, "small-reactive.png")
+    """
+    return plot_test(artifact_view(art), path, dpi=dpi, max_cols=max_cols, header=header)
+
+
+def proposition_places(ts: Any) -> dict[str, tuple[list[Cell], str]]:
+    """Per proposition of a grid or fuel system (name order): the cells where it holds in
+    some state, and ``""`` when it holds in every state of those cells, else where exactly
+    (``"fuel 0"``: at fuel 0 there; fuel systems label states, not cells)."""
+    out: dict[str, tuple[list[Cell], str]] = {}
+    states_of: dict[str, list[int]] = {}
+    for s in range(ts.n_states):
+        for prop in ts.labels[s]:
+            states_of.setdefault(prop, []).append(s)
+    for prop in sorted(states_of):
+        states = states_of[prop]
+        cells = sorted({_cell_of_place(ts, int(ts.place[s])) for s in states})
+        note = ""
+        if ts.kind == "fuel":
+            places = {int(ts.place[s]) for s in states}
+            every = sum(int(np.count_nonzero(ts.place == p)) for p in places)
+            if every != len(states):
+                levels = sorted({int(ts.states[s][1]) for s in states})
+                note = "fuel " + ",".join(map(str, levels))
+        out[prop] = (cells, note)
+    return out
+
+
+def proposition_legend(ts: Any, limit: int = 4) -> list[tuple[str, str, str]]:
+    """``(proposition, where it holds, colour)`` for a legend: ``("hazard", "cells H",
+    "#e377c2")`` when one token names exactly its cells, else its cells (the first
+    ``limit``), and the fuel levels when it holds at some levels only; the colour of its
+    squares in the grid pictures. Graph systems: the states, no colour (the pictures
+    write the propositions under the nodes)."""
+    out: list[tuple[str, str, str]] = []
+    if ts.layout is None:
+        states_of: dict[str, list[str]] = {}
+        for s in range(ts.n_states):
+            for prop in ts.labels[s]:
+                states_of.setdefault(prop, []).append(str(ts.states[s]))
+        for prop in sorted(states_of):
+            names = states_of[prop]
+            more = f" and {len(names) - limit} more" if len(names) > limit else ""
+            out.append((prop, ("state " if len(names) == 1 else "states ") + ", ".join(names[:limit]) + more, ""))
+        return out
+    tokens = ts.layout.tokens
+    places = proposition_places(ts)
+    for prop, (cells, note) in places.items():
+        named = {tokens.get(c) for c in cells}
+        token = next(iter(named)) if len(named) == 1 else None
+        if token is not None and {c for c, t in tokens.items() if t == token} == set(cells):
+            where = f"cell{'s' if len(cells) > 1 else ''} {token}"
+        elif ts.kind == "fuel" and note and len(cells) == len({_cell_of_place(ts, p) for p in range(len(ts.places))}):
+            where = "every cell"
+        else:
+            more = f" and {len(cells) - limit} more" if len(cells) > limit else ""
+            where = ("cell " if len(cells) == 1 else "cells ") + ", ".join(f"({r}, {c})" for r, c in cells[:limit]) + more
+        out.append((prop, f"{where} at {note}" if note else where, _prop_colour(list(places), prop)))
+    return out
+
+
+def _prop_colour(props: Sequence[str], prop: str) -> str:
+    return PROP_COLOURS[list(props).index(prop) % len(PROP_COLOURS)]
 
 
 # --------------------------------------------------------------------------- shared
@@ -366,6 +524,16 @@ def _draw_grid_panel(ax: Axes, test: Any, panel: Panel, overlay: _Overlay | None
             elif cell not in lay.blocked and labels_of.get(cell):
                 ax.text(c + 0.5, r + 0.5, "\n".join(sorted(labels_of[cell])), ha="center", va="center", fontsize=8,
                         color=TEXT, zorder=3)
+    places = proposition_places(ts)
+    marks: dict[Cell, int] = {}  # squares drawn in a cell so far: several propositions line up
+    for prop, (cells, _) in places.items():
+        colour = _prop_colour(list(places), prop)
+        for r, c in cells:
+            if (r, c) in lay.blocked:
+                continue
+            k = marks[(r, c)] = marks.get((r, c), -1) + 1
+            ax.add_patch(Rectangle((c + 0.04 + 0.2 * (k % 4), r + 0.04 + 0.2 * (k // 4)), 0.17, 0.17, facecolor=colour,
+                                   edgecolor="none", zorder=3))
     lo_r, lo_c, hi_r, hi_c = 0, 0, lay.rows, lay.cols
     for park, (r, c) in parks:
         ax.add_patch(Rectangle((c + 0.06, r + 0.06), 0.88, 0.88, facecolor=AGENT, alpha=0.55, hatch="//",
@@ -397,11 +565,11 @@ def _draw_grid_panel(ax: Axes, test: Any, panel: Panel, overlay: _Overlay | None
         spine.set_visible(False)
 
 
-def _grid_figure(test: Any, panels: Sequence[Panel], overlay: _Overlay | None) -> Figure:
+def _grid_figure(test: Any, panels: Sequence[Panel], overlay: _Overlay | None, max_cols: int | None = None) -> Figure:
     lay = test.problem.system.layout
     cell = 0.62 if max(lay.rows, lay.cols) <= 8 else max(0.2, 5.0 / max(lay.rows, lay.cols))
     pw, ph = max(lay.cols * cell, 2.6) + 0.5, lay.rows * cell + 0.9
-    nrows, ncols = _layout_grid(len(panels), 4 if lay.cols <= 4 else 3)
+    nrows, ncols = _layout_grid(len(panels), max_cols or (4 if lay.cols <= 4 else 3))
     fig = Figure(figsize=(max(ncols * pw, 6.0), nrows * ph + 1.7), layout="constrained")
     axes = fig.subplots(nrows, ncols, squeeze=False)
     width = max(24, int(pw * 11))
@@ -410,7 +578,6 @@ def _grid_figure(test: Any, panels: Sequence[Panel], overlay: _Overlay | None) -
         ax.set_title(_wrap(panel.title, width), fontsize=9)
     for ax in list(axes.flat)[len(panels):]:
         ax.set_visible(False)
-    fig.suptitle(_header(test), fontsize=10)
     handles: list[Artist] = [
         Patch(facecolor=START, edgecolor=GRID_LINE, label="start"),
         Patch(facecolor=GOAL, edgecolor=GRID_LINE, label="goal (terminal)"),
@@ -434,7 +601,10 @@ def _grid_figure(test: Any, panels: Sequence[Panel], overlay: _Overlay | None) -
         handles.append(Patch(facecolor=AGENT, alpha=0.55, label="test agent cells"))
         if overlay.parks:
             handles.append(Patch(facecolor=AGENT, alpha=0.55, hatch="//", label="test agent park"))
-    fig.legend(handles=handles, loc="outside lower center", ncols=min(len(handles), 3), fontsize=8, frameon=False)
+    for prop, where, colour in proposition_legend(test.problem.system):
+        handles.append(Patch(facecolor=colour, label=f"{prop}: {where}"))
+    fig.legend(handles=handles, loc="outside lower center", ncols=min(len(handles), 2 if max_cols == 2 else 3), fontsize=8,
+               frameon=False)
     return fig
 
 
@@ -568,13 +738,13 @@ def _draw_graph_panel(ax: Axes, test: Any, panel: Panel, overlay: _Overlay | Non
     ax.set_axis_off()
 
 
-def _graph_figure(test: Any, panels: Sequence[Panel], overlay: _Overlay | None) -> Figure:
+def _graph_figure(test: Any, panels: Sequence[Panel], overlay: _Overlay | None, max_cols: int | None = None) -> Figure:
     ts = test.problem.system
     pos = layered_positions(ts)
     n_layers = len({x for x, _ in pos.values()})
     height = max(sum(1 for x, _ in pos.values() if x == lx) for lx in {x for x, _ in pos.values()})
     pw, ph = max(1.15 * n_layers + 0.6, 3.4), max(0.85 * height + 1.0, 2.4)
-    nrows, ncols = _layout_grid(len(panels), 3)
+    nrows, ncols = _layout_grid(len(panels), max_cols or 3)
     fig = Figure(figsize=(max(ncols * pw, 6.0), nrows * ph + 1.2), layout="constrained")
     axes = fig.subplots(nrows, ncols, squeeze=False)
     for ax, panel in zip(axes.flat, panels, strict=False):  # spare axes stay blank
@@ -582,7 +752,6 @@ def _graph_figure(test: Any, panels: Sequence[Panel], overlay: _Overlay | None) 
         ax.set_title(_wrap(panel.title, max(26, int(pw * 10))), fontsize=9)
     for ax in list(axes.flat)[len(panels):]:
         ax.set_visible(False)
-    fig.suptitle(_header(test), fontsize=10)
     handles: list[Artist] = [
         Line2D([], [], linestyle="", marker="o", markersize=10, markerfacecolor=START, markeredgecolor="#505050", label="start"),
         Line2D([], [], linestyle="", marker="o", markersize=10, markerfacecolor=GOAL, markeredgecolor="#505050", label="terminal"),

@@ -8,36 +8,23 @@ from typing import Any
 import numpy as np
 
 from .episodes import Trace, make_env
+from .report import test_title, violation_of
 
 
 def _trace_legend(ax: Any, game: Any) -> list[Any]:
-    """Legend entries for the path markers and the renderer's symbols, so a newcomer can
-    read a trace picture without the env docs."""
-    from matplotlib.lines import Line2D
-    from matplotlib.patches import Patch
+    """Legend entries for the path markers and the renderer's symbols (each proposition
+    of the system objective named), so a newcomer can read a trace picture without the
+    env docs."""
+    from .filmstrip import symbol_legend
 
-    from flowtest_env import render
-
-    def rgb(c: tuple[int, int, int]) -> tuple[float, float, float]:
-        return (c[0] / 255, c[1] / 255, c[2] / 255)
-
-    handles: list[Any] = list(ax.get_legend_handles_labels()[0])
-    handles += [
-        Line2D([], [], marker="o", color=rgb(render.SYSTEM), label="system under test", linestyle="", markersize=10),
-        Patch(facecolor=rgb(render.GOAL), label="goal"),
-        Line2D([], [], marker="o", markerfacecolor="none", markeredgewidth=2, color=rgb(render.TEST_CELL),
-               label="hidden test cell", linestyle="", markersize=10),
-        Patch(facecolor=rgb(render.BLOCKED), label="blocked cell"),
-        Line2D([], [], color=rgb(render.WALL), lw=4, label="wall"),
-    ]
-    if game.artifact.kind == "agent":
-        handles.append(Line2D([], [], marker="D", color=rgb(render.AGENT), label="test agent", linestyle="", markersize=10))
-    return handles
+    return list(ax.get_legend_handles_labels()[0]) + symbol_legend(game)
 
 
 def trace_picture(trace: Trace, path: Path) -> None:
     """Draw a run: on grids the engineer's view (walls, hidden test cells) at the end of
-    the run with the SUT's path numbered step by step; on graphs a strip of frames."""
+    the run with the SUT's path numbered step by step; on graphs a strip of frames. The
+    title names the test by its problem (never a path) and, for a violation, the broken
+    conjunct of the system objective, the step and the cell."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -52,12 +39,16 @@ def trace_picture(trace: Trace, path: Path) -> None:
     renderer = make_renderer(game, tile, "engineer")
     v = trace.verdict
     against = "" if trace.tester == "synthesized" else f" vs tester {trace.tester}"
+    name = test_title(trace.env_id, str(game.artifact.name))
     title = (
-        f"{trace.sut} on {trace.env_id}{against} (seed {trace.seed})\n"
+        f"{trace.sut} on {name}{against} (seed {trace.seed})\n"
         f"system objective {v['system_objective']}, test objective "
         f"{'realized' if v['test_objective_realized'] else 'not realized'}, {v['steps']} steps, "
         f"{v['restrictions']} restricted decisions"
     )
+    broke = violation_of(game.artifact, [r.system for r in trace.states]) if v.get("system_objective") == "violated" else None
+    if broke is not None:
+        title += "\n" + broke.text()
     if game.is_grid:
         fig, ax = plt.subplots(figsize=(7, 7.6))
         ax.imshow(renderer.frame(trace.states[-1]))
