@@ -549,15 +549,24 @@ def _with_memory(tables: TorchTables, rows: torch.Tensor, words: torch.Tensor) -
     return rows
 
 
-def observation_of(tables: TorchTables, z: torch.Tensor, visited: torch.Tensor) -> torch.Tensor:
-    """The full observations of configurations ``z`` with memory ``visited``."""
-    return _with_memory(tables, tables.obs.index_select(0, tables.obs_row.index_select(0, z)), visited)
+def _rows(tables: TorchTables, rows: torch.Tensor, out: torch.Tensor | None) -> torch.Tensor:
+    """``tables.obs[rows]``, into ``out`` when given."""
+    if out is None:
+        return tables.obs.index_select(0, rows)
+    return torch.index_select(tables.obs, 0, rows, out=out)
 
 
-def observe(tables: TorchTables, state: EnvState) -> torch.Tensor:
+def observation_of(tables: TorchTables, z: torch.Tensor, visited: torch.Tensor, out: torch.Tensor | None = None) -> torch.Tensor:
+    """The full observations of configurations ``z`` with memory ``visited`` (into
+    ``out``, ``[N, *obs_shape]`` of the table's dtype, when given: on the CPU a fresh
+    tensor of a large batch costs more than the gather, its pages are new each step)."""
+    return _with_memory(tables, _rows(tables, tables.obs_row.index_select(0, z), out), visited)
+
+
+def observe(tables: TorchTables, state: EnvState, out: torch.Tensor | None = None) -> torch.Tensor:
     """The full observation of every run (``[N, *obs_shape]``, memory appended), as the
-    NumPy env returns it."""
-    return observation_of(tables, state.z, state.visited)
+    NumPy env returns it (into ``out`` when given)."""
+    return observation_of(tables, state.z, state.visited, out)
 
 
 def compact_of(tables: TorchTables, z: torch.Tensor, visited: torch.Tensor) -> torch.Tensor:
@@ -571,14 +580,15 @@ def compact(tables: TorchTables, state: EnvState) -> torch.Tensor:
     return compact_of(tables, state.z, state.visited)
 
 
-def expand(tables: TorchTables, compact_obs: torch.Tensor) -> torch.Tensor:
-    """The full observation of compact observations ``int64[N, 1 + W]`` (on the device).
+def expand(tables: TorchTables, compact_obs: torch.Tensor, out: torch.Tensor | None = None) -> torch.Tensor:
+    """The full observation of compact observations ``int64[N, 1 + W]`` (on the device;
+    into ``out`` when given).
 
     Example::
 
         obs = expand(tables, compact(tables, state))   # == observe(tables, state)
     """
-    return _with_memory(tables, tables.obs.index_select(0, compact_obs[:, 0]), compact_obs[:, 1:])
+    return _with_memory(tables, _rows(tables, compact_obs[:, 0], out), compact_obs[:, 1:])
 
 
 def verdict_dict(verdict: Verdict) -> dict[str, torch.Tensor]:
@@ -607,6 +617,10 @@ class TorchVectorEnv(gym.vector.VectorEnv):
         ``"next_step"``, ``"same_step"`` or ``"disabled"`` (or Gymnasium's ``AutoresetMode``).
     compact
         Return compact observations (``int64[N, 1 + W]``, :func:`expand`).
+    copy
+        ``False``: write each step's observation into one buffer and return it (the last
+        observation is overwritten at the next step, as Gymnasium's ``copy=False``); on
+        the CPU a fresh large tensor each step costs more than the gather itself.
     check_actions
         Raise ``InvalidAction`` on an action outside the action space. It needs a host
         synchronisation per step, so by default only on the CPU device; unchecked, an
@@ -621,6 +635,7 @@ class TorchVectorEnv(gym.vector.VectorEnv):
         num_envs: int,
         autoreset_mode: Any = "next_step",
         compact: bool = False,
+        copy: bool = True,
         check_actions: bool | None = None,
         single_observation_space: spaces.Space[Any] | None = None,
         single_action_space: spaces.Space[Any] | None = None,
@@ -635,6 +650,8 @@ class TorchVectorEnv(gym.vector.VectorEnv):
         self.autoreset_mode = _GYM_MODES[mode]
         self.metadata = {"autoreset_mode": self.autoreset_mode}
         self.compact = bool(compact)
+        self.copy = bool(copy)
+        self._buffer: torch.Tensor | None = None
         self.check_actions = (self.device.type == "cpu") if check_actions is None else bool(check_actions)
         if single_observation_space is None:
             dtype = tables.obs.dtype
@@ -695,7 +712,7 @@ class TorchVectorEnv(gym.vector.VectorEnv):
             which = torch.ones(n, dtype=torch.bool, device=self.device)
         keys, given = self._keys(seed)
         self.state = restart(self.tables, self.state, which, keys, given)
-        return self._obs(self.state.z, self.state.visited), {"action_mask": action_mask(self.tables, self.state)}
+        return self._obs(self.state.z, self.state.visited, self._out()), {"action_mask": action_mask(self.tables, self.state)}
 
     def _keys(self, seed: int | Sequence[int | None] | None) -> tuple[torch.Tensor | None, torch.Tensor | None]:
         """The keys of a reset's seeds and which envs got one."""
@@ -747,7 +764,7 @@ class TorchVectorEnv(gym.vector.VectorEnv):
                 "_verdict": infos.pop("_verdict"),
             }
             infos["_final_info"] = out.ended
-        return self._obs(self.state.z, self.state.visited), out.reward, out.terminated, out.truncated, infos
+        return self._obs(self.state.z, self.state.visited, self._out()), out.reward, out.terminated, out.truncated, infos
 
     def _check(self, actions: Any) -> torch.Tensor:
         a = actions if isinstance(actions, torch.Tensor) else torch.as_tensor(np.asarray(actions))
@@ -763,10 +780,19 @@ class TorchVectorEnv(gym.vector.VectorEnv):
                 raise gym.error.InvalidAction(f"env {i}: action {int(a[i])} is outside {self.single_action_space}")
         return a
 
-    def _obs(self, z: torch.Tensor, visited: torch.Tensor) -> torch.Tensor:
+    def _out(self) -> torch.Tensor | None:
+        """The observation buffer (``copy=False``), else ``None``."""
+        if self.copy or self.compact:
+            return None
+        if self._buffer is None:
+            t = self.tables
+            self._buffer = torch.empty((self.num_envs, *t.obs_shape), dtype=t.obs.dtype, device=self.device)
+        return self._buffer
+
+    def _obs(self, z: torch.Tensor, visited: torch.Tensor, out: torch.Tensor | None = None) -> torch.Tensor:
         if self.compact:
             return compact_of(self.tables, z, visited)
-        return observation_of(self.tables, z, visited)
+        return observation_of(self.tables, z, visited, out)
 
     def expand(self, compact_obs: torch.Tensor) -> torch.Tensor:
         """The full observations of this env's compact ones (:func:`expand`)."""
@@ -835,8 +861,8 @@ def tables_of(env: Any, device: str | torch.device = "cpu", reward_dtype: torch.
 
 
 def make_vec(env_id: str, num_envs: int, device: str | torch.device = "cpu", *, autoreset_mode: Any = "next_step",
-             compact: bool = False, check_actions: bool | None = None, reward_dtype: torch.dtype = torch.float32,
-             **options: Any) -> TorchVectorEnv:
+             compact: bool = False, copy: bool = True, check_actions: bool | None = None,
+             reward_dtype: torch.dtype = torch.float32, **options: Any) -> TorchVectorEnv:
     """A :class:`TorchVectorEnv` of a registered FlowTest ID with the NumPy vector env's
     ``options`` (``memory``, ``shaping``, ``max_steps``, ``pool``...), on ``device``.
 
@@ -847,7 +873,7 @@ def make_vec(env_id: str, num_envs: int, device: str | torch.device = "cpu", *, 
     np_env = gym.make_vec(env_id, num_envs=1, vectorization_mode="vector_entry_point", **options)
     return TorchVectorEnv.from_numpy(
         np_env, num_envs=num_envs, device=device, reward_dtype=reward_dtype, autoreset_mode=autoreset_mode,
-        compact=compact, check_actions=check_actions,
+        compact=compact, copy=copy, check_actions=check_actions,
     )
 
 

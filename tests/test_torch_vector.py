@@ -367,3 +367,17 @@ def test_the_compact_observation_is_small() -> None:
     c, _ = env.reset(seed=0)
     assert c.shape == (2, 2) and c.dtype == torch.int64
     assert env.expand(c).shape == (2, 306 + 25)
+
+
+def test_copy_false_writes_every_observation_into_one_buffer() -> None:
+    fresh = tv.make_vec("FlowTest-Maze2-v0", 4, memory="visited")
+    reused = tv.make_vec("FlowTest-Maze2-v0", 4, memory="visited", copy=False)
+    o1, _ = fresh.reset(seed=1)
+    o2, _ = reused.reset(seed=1)
+    first = o2
+    for t in range(30):
+        assert torch.equal(o1, o2), t
+        a = torch.full((4,), t % 5, dtype=torch.int64)
+        o1, *_ = fresh.step(a)
+        o2, *_ = reused.step(a)
+        assert o2 is first  # the same buffer, overwritten
