@@ -325,11 +325,11 @@ class PythonPlanner:
             try:
                 self.planner = target(self.messages.test) if _accepts_one(target) else target()
             except Exception as exc:
-                raise PolicyError(f"{name}: the factory raised {type(exc).__name__}: {exc}") from None
+                raise PolicyError(f"the factory raised {type(exc).__name__}: {exc}") from None
         act = getattr(self.planner, "act", None)
         self._act = act if callable(act) else self.planner
         if not callable(self._act):
-            raise PolicyError(f"{name}: the factory returned a {type(self.planner).__name__} with no act(observation, mask)")
+            raise PolicyError(f"the factory returned a {type(self.planner).__name__} with no act(observation, mask)")
 
     def reset(self, seed: int | None = None) -> None:
         self.messages.count = 0
@@ -390,17 +390,17 @@ def command_words(arg: str) -> list[str]:
     try:
         words = shlex.split(arg)
     except ValueError as exc:
-        raise PolicyError(f"cmd:{arg}: cannot split the command ({exc})") from None
+        raise PolicyError(f"cannot split the command ({exc})") from None
     if not words:
         raise PolicyError("cmd: needs a command, e.g. cmd:\"python3 planner.py\"")
     prog = words[0]
     if os.sep in prog or (os.altsep and os.altsep in prog):
         if not Path(prog).is_file():
-            raise PolicyError(f"cmd:{arg}: no program {prog!r} (from {os.getcwd()})")
+            raise PolicyError(f"no program {prog!r} (from {os.getcwd()})")
         if not os.access(prog, os.X_OK):
-            raise PolicyError(f"cmd:{arg}: {prog!r} is not executable (chmod +x, or run it through its interpreter)")
+            raise PolicyError(f"{prog!r} is not executable (chmod +x, or run it through its interpreter)")
     elif shutil.which(prog) is None:
-        raise PolicyError(f"cmd:{arg}: command {prog!r} not found on PATH")
+        raise PolicyError(f"command {prog!r} not found on PATH")
     return words
 
 

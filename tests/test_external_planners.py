@@ -288,3 +288,10 @@ def test_benchmark_scores_a_planner_process_through_make_policy(project: Path) -
     assert traces["cmd:python3 bfs_planner.py"][0].verdict["system_objective"] == "met"
     lied = traces["cmd:python3 lie.py"][0]
     assert lied.kind == "sut" and "which the test does not allow now" in lied.reason
+
+
+def test_a_factory_that_raises_is_one_error_line(project: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    write(project, "moody.py", "class Planner:\n    def __init__(self, test):\n        raise ValueError('no map for ' + test['name'])\n")
+    code = main(["evaluate", "--env", "warehouse.toml", "--sut", "python:moody:Planner", "--out", "r", "-q"])
+    err = capsys.readouterr().err
+    assert code == 2 and err.strip() == "error: --sut python:moody:Planner: the factory raised ValueError: no map for warehouse"
