@@ -27,7 +27,7 @@ from .problems.diagnose import check_problem_consistency
 from .problems.limits import MAX_GRAPH_EDGES, check_size
 from .problems.problem import CAP_KEYS, Problem, build_graphs, check_caps
 from .routing import cpsat, scip
-from .routing.caps import CAP_NOUNS, Fewest, caps_text, fewest_within
+from .routing.caps import CAP_NOUNS, Fewest, caps_text, check_caps_reachable, fewest_within
 from .routing.milp import AUTO_CPSAT_MODES, RoutingResult, solve_routing
 from .routing.model import BACKENDS, MilpOptions
 from .routing.restrictions import strategy_from_routing
@@ -246,6 +246,7 @@ def synthesize(problem: Problem, options: SynthesisOptions | None = None) -> Syn
         problem, remaining_time(problem, options, time.perf_counter() - started, int(products.virtual.n_edges))
     )
     try:
+        check_caps_reachable(products, milp)
         routing = solve_routing(products, milp)
     except InconsistentProblem as exc:
         raise over_caps(products, milp, exc, note, None if limit is None else started + limit) from None
@@ -289,7 +290,7 @@ def over_caps(
     ``no test with at most 3 doors routes ... : the fewest that does is 5 doors``. That
     solve ends by ``deadline`` (the synthesis's, a ``perf_counter`` time; ``None``: at most
     :data:`~synthesis.routing.caps.FEWEST_SECONDS`)."""
-    if not milp.caps or exc.reason != "unroutable":
+    if not milp.caps or exc.reason != "unroutable" or str(exc).startswith("no test with"):
         return exc
     note("no test within the caps: finding how few restrictions a test needs")
     left = deadline
@@ -380,6 +381,7 @@ def synthesize_agent_test(
         problem, remaining_time(problem, options, time.perf_counter() - started, int(products.virtual.n_edges))
     )
     try:
+        check_caps_reachable(products, milp)
         outcome = counterexample_loop(
             products,
             agent,

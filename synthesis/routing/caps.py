@@ -16,10 +16,13 @@ from dataclasses import dataclass, replace
 
 import highspy
 import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import breadth_first_order
 
 from ..graphs.consistency import check_consistency
 from ..graphs.products import Products
-from .model import MilpOptions, build_model
+from ..model.errors import InconsistentProblem
+from .model import MilpOptions, build_model, cut_groups, model_edges, physical_items
 from .result import required_entries
 from .solver_control import quiet_highs, run_highs
 
@@ -93,6 +96,28 @@ def fewest_within(products: Products, options: MilpOptions, cap: str, deadline: 
     return Fewest(max(int(np.ceil(bound - 1e-6)), 0) if np.isfinite(bound) else 0, False)
 
 
+def check_caps_reachable(products: Products, options: MilpOptions) -> None:
+    """Refuse caps far below what the problem needs before any solve: a cap ``N`` below
+    :func:`disjoint_bypasses` (``N + 1`` walks around the test objective that share no item
+    it counts) admits no test.
+
+    Raises
+    ------
+    InconsistentProblem
+        ``"unroutable"``, naming the cap and the walks that prove it.
+    """
+    for cap, limit in options.caps.items():
+        walks = disjoint_bypasses(products, options, cap, stop_above=limit)
+        if walks > limit:
+            noun = CAP_NOUNS[cap].split(" (")[0]
+            raise InconsistentProblem(
+                "unroutable",
+                f"no test with {caps_text({cap: limit})} routes every successful execution through the test objective: "
+                f"at least {walks} {noun} are needed ({walks} ways from the start to the goal around the test objective "
+                f"share no {noun[:-1]} this cap counts, and a test must close each); raise the cap or drop it",
+            )
+
+
 def caps_text(caps: dict[str, int]) -> str:
     """``"at most 3 doors and at most 2 walls"``."""
     def noun(k: str, n: int) -> str:
@@ -101,3 +126,52 @@ def caps_text(caps: dict[str, int]) -> str:
 
     parts = [f"at most {n} {noun(k, n)}" for k, n in caps.items()]
     return " and ".join(parts)
+
+
+def disjoint_bypasses(products: Products, options: MilpOptions, cap: str, stop_above: int) -> int:
+    """A lower bound on the items ``cap`` counts that every test needs: the number of
+    ``Src -> Tgt`` walks avoiding I (bypasses) found one after another, each over edges
+    whose items no earlier walk used, and which no item the cap leaves out (a wall, for a
+    cap on doors) can close. Every test closes each bypass with an item the cap counts
+    (method.md c4-c5), a different one for each (they share none), so it needs at least as
+    many. Shortest walks first (fewest edges); stops once ``stop_above`` are found.
+
+    Cheap (one breadth-first search of G per walk), so a cap far below what the problem
+    needs is refused before any solve.
+    """
+    g = products.virtual
+    groups = cut_groups(products, options)
+    me = model_edges(products, groups, check_consistency(products))
+    items = physical_items(products, groups)
+    counted_item = items.kinds(cap)
+    c5 = np.flatnonzero(me.c5)
+    eu, ev, grp = me.eu[c5], me.ev[c5], me.grp[c5]
+    cuttable = me.has_var[grp]
+    item = items.of_group[grp]
+    # an edge an uncounted item can close is no part of a bypass the cap must pay for
+    usable = ~cuttable | counted_item[item]
+    n = g.n_nodes
+    src = int(g.initial)
+    target = np.flatnonzero(products.target)
+    found = 0
+    while found <= stop_above:
+        e = np.flatnonzero(usable)
+        rows = np.concatenate([eu[e], target])
+        cols = np.concatenate([ev[e], np.full(target.size, n)])
+        adj = sp.csr_matrix((np.ones(rows.size, dtype=np.int8), (rows, cols)), shape=(n + 1, n + 1))
+        _, pred = breadth_first_order(adj, src, directed=True, return_predecessors=True)
+        if pred[n] < 0:  # no bypass left
+            break
+        # the walk's edges: back from the super sink along predecessors
+        path_nodes = [n]
+        while path_nodes[-1] != src:
+            path_nodes.append(int(pred[path_nodes[-1]]))
+        path_nodes.reverse()
+        walk = set(zip(path_nodes[:-2], path_nodes[1:-1], strict=True))
+        on_walk = np.array([(int(a), int(b)) in walk for a, b in zip(eu[e], ev[e], strict=True)], dtype=bool)
+        used = np.unique(item[e[on_walk & cuttable[e]]])
+        if used.size == 0:  # a bypass nothing can close: no test at all (the solve says unroutable)
+            return 0
+        found += 1
+        usable &= ~np.isin(item, used)
+    return found

@@ -323,7 +323,7 @@ def run_in_solver_thread(
             if abandon_at is not None and now > abandon_at:
                 interrupt()
                 _left_behind(thread)
-                raise SolverAbandoned("the solver did not stop at its time limit; left behind")
+                raise SolverAbandoned("no solution was found within the time limit (the solver, still busy, was stopped)")
         if control is not None and control.stop_requested:  # the solver saw the stop first
             raise KeyboardInterrupt
     except KeyboardInterrupt:
