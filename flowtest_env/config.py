@@ -27,6 +27,8 @@ import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 from .encoding import OBS_KINDS
 from .validation import finite_float, one_of, positive_int
 
@@ -71,6 +73,12 @@ class EnvConfig:
         ``0`` (off) or the scale of potential-based shaping towards the SUT's objective.
     shaping_gamma
         The shaping's discount, in ``[0, 1]``.
+    numeric_infos
+        ``False``: ``info["system_state"]`` is the state as JSON data (``[row, col]``,
+        ``[[row, col], fuel]`` or a name) and ``info["verdict"]["system_objective"]`` a
+        word; ``True``: numbers only, for libraries that turn infos into tensors (TorchRL):
+        the SUT's state index (``env.game.state_json(i)`` names it) and the outcome code
+        (0 open, 1 met, 2 violated: :data:`flowtest_env.compiled.OUTCOMES`).
 
     Raises
     ------
@@ -93,6 +101,7 @@ class EnvConfig:
     memory: str = "none"
     shaping: float = 0.0
     shaping_gamma: float = 0.99
+    numeric_infos: bool = False
 
     def __post_init__(self) -> None:
         checked = validate(self)
@@ -142,7 +151,10 @@ def validate(config: EnvConfig) -> dict[str, Any]:
     gamma = finite_float("shaping_gamma", c.shaping_gamma)
     if not 0.0 <= gamma <= 1.0:
         raise ValueError(f"shaping_gamma must be a discount in [0, 1], not {c.shaping_gamma!r}")
+    if not isinstance(c.numeric_infos, (bool, np.bool_)):
+        raise ValueError(f"numeric_infos must be True or False, not {c.numeric_infos!r}")
     return {
+        "numeric_infos": bool(c.numeric_infos),
         "setting": c.setting, "max_steps": max_steps, "obs_kind": c.obs_kind, "pad_to": pad_to,
         "render_mode": c.render_mode, "view": c.view, "tile_size": tile_size, **weights, "memory": c.memory,
         "shaping": shaping, "shaping_gamma": gamma,

@@ -23,6 +23,7 @@ from synthesis.artifacts.artifact import TestArtifact
 from synthesis.problems.random_grid import FAMILIES
 from synthesis.problems.random_worlds import POOL_KINDS, WORLDS
 
+from .compiled import OUTCOMES
 from .config import EnvConfig
 from .draws import draw_test
 from .encoding import Encoder, ObservationLayout, make_encoder
@@ -153,6 +154,9 @@ class FlowTestEnv(gym.Env[np.ndarray, np.int64]):
     run's history, which the observation alone does not show). ``shaping``: 0 (off,
     default) or the scale of potential-based shaping towards the SUT's own objective, with
     discount ``shaping_gamma`` (as :class:`~flowtest_env.wrappers.DistanceShaping`).
+    ``numeric_infos``: ``True`` for numbers-only infos (the state index, the outcome code
+    0/1/2), which libraries that turn infos into tensors (TorchRL) need. All options are
+    one :class:`~flowtest_env.config.EnvConfig` (``env.config``).
 
     ## Registered Configurations
 
@@ -181,6 +185,7 @@ class FlowTestEnv(gym.Env[np.ndarray, np.int64]):
         shaping: float = 0.0,
         shaping_gamma: float = 0.99,
         problem: TestLike | None = None,
+        numeric_infos: bool = False,
     ) -> None:
         if problem is not None:  # the older name of `test`
             test = problem
@@ -188,6 +193,7 @@ class FlowTestEnv(gym.Env[np.ndarray, np.int64]):
             setting=setting, max_steps=max_steps, obs_kind=obs_kind, pad_to=pad_to, render_mode=render_mode, view=view,
             tile_size=tile_size, step_cost=step_cost, restricted_penalty=restricted_penalty, goal_reward=goal_reward,
             violation_penalty=violation_penalty, memory=memory, shaping=shaping, shaping_gamma=shaping_gamma,
+            numeric_infos=numeric_infos,
         )
         game = game_for(test, config.setting)
         self._configure([game], config.with_max_steps(default_max_steps(game)))
@@ -310,11 +316,18 @@ class FlowTestEnv(gym.Env[np.ndarray, np.int64]):
         truncated = not terminated and run.steps >= self.max_steps
         info = self._info(run)
         if terminated or truncated:
-            info["verdict"] = self.game.verdict(run)
+            info["verdict"] = self._verdict(run)
         return self._observe(run), float(reward), terminated, truncated, info
 
     def _info(self, run: RunState) -> dict[str, Any]:
-        return {"system_state": self.game.state_json(run.system), "action_mask": self.game.action_mask(run)}
+        state = np.int64(run.system) if self.config.numeric_infos else self.game.state_json(run.system)
+        return {"system_state": state, "action_mask": self.game.action_mask(run)}
+
+    def _verdict(self, run: RunState) -> dict[str, Any]:
+        v = self.game.verdict(run)
+        if self.config.numeric_infos:
+            v["system_objective"] = OUTCOMES.index(v["system_objective"])
+        return v
 
     def observation_layout(self) -> ObservationLayout:
         """Which entries of the observation are which (the current test's; see
@@ -778,11 +791,13 @@ class RandomGridEnv(FlowTestEnv):
         memory: str = "none",
         shaping: float = 0.0,
         shaping_gamma: float = 0.99,
+        numeric_infos: bool = False,
     ) -> None:
         config = EnvConfig(
             setting=setting, max_steps=max_steps, obs_kind=obs_kind, pad_to=pad_to, render_mode=render_mode, view=view,
             tile_size=tile_size, step_cost=step_cost, restricted_penalty=restricted_penalty, goal_reward=goal_reward,
             violation_penalty=violation_penalty, memory=memory, shaping=shaping, shaping_gamma=shaping_gamma,
+            numeric_infos=numeric_infos,
         )
         size, family, n, seeds, kind, world = random_grid_pool(size, family, n, seeds, kind, pool, split, count, world)
         tests = random_pool(size, family, n, seeds, kind, world=world)

@@ -165,6 +165,7 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         if config.shaping > 0:  # potential-based shaping folded into the reward table
             self._reward = shaped_rewards(p, self._reward, potentials(p, self.games, DistancePotential(config.shaping)), config.shaping_gamma)
         self._outcome_names = np.array(OUTCOMES, dtype=object)
+        self._state_index = np.concatenate([t.system for t in p.tests]).astype(np.int64)  # numeric_infos' system_state
         self._all = np.ones(self.num_envs, dtype=bool)
         self._z = np.zeros(self.num_envs, dtype=np.int64)
         self._test = np.zeros(self.num_envs, dtype=np.int64)
@@ -362,15 +363,16 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         table: read them, do not change them in place) and ``action_mask``; with ``only``,
         those of the envs of ``only`` (``None``/zeros elsewhere, as ``SyncVectorEnv`` lays
         out the infos of some envs)."""
+        states = self._state_index if self.config.numeric_infos else self.pool.system_state
         if only is None:
             return {
-                "system_state": self.pool.system_state[z],
+                "system_state": states[z],
                 "_system_state": self._all.copy(),
                 "action_mask": np.take(self.pool.mask, z, axis=0),
                 "_action_mask": self._all.copy(),
             }
         return {
-            "system_state": np.where(only, self.pool.system_state[z], None),
+            "system_state": np.where(only, states[z], states.dtype.type(0) if self.config.numeric_infos else None),
             "_system_state": only.copy(),
             "action_mask": np.where(only[:, None], np.take(self.pool.mask, z, axis=0), np.int8(0)),
             "_action_mask": only.copy(),
@@ -379,7 +381,10 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
     def _verdict(self, z: np.ndarray, ended: np.ndarray) -> dict[str, Any]:
         """The verdict arrays of the envs that ended (zeros/``None`` elsewhere, as a
         ``SyncVectorEnv`` lays out its infos)."""
-        names = np.where(ended, self._outcome_names[self.pool.outcome[z]], None)
+        if self.config.numeric_infos:
+            names: np.ndarray = np.where(ended, self.pool.outcome[z].astype(np.int64), np.int64(0))
+        else:
+            names = np.asarray(np.where(ended, self._outcome_names[self.pool.outcome[z]], None))
         zero = np.int64(0)
         return {
             "system_objective": names,

@@ -178,3 +178,52 @@ def test_masked_reset_keeps_the_other_runs() -> None:
     assert np.array_equal(obs[[0, 2]], before[[0, 2]])
     assert env.verdicts()["steps"].tolist() == [steps[0], 0, steps[2]]
     assert infos["_system_state"].tolist() == [False, True, False] and infos["system_state"][0] is None
+
+
+@pytest.mark.parametrize("mode", MODES, ids=lambda m: m.name)
+def test_numeric_infos_equal_sync_vector_env(mode: AutoresetMode) -> None:
+    """``numeric_infos=True``: numbers only (the state index, the outcome code), the same in
+    the single and the vector env."""
+    vec, ref = _pair("FlowTest-Refueling-v0", 6, mode, max_steps=25, numeric_infos=True, memory="visited")
+    compare(vec, ref, steps=120, seed=3)
+    _, infos = vec.reset(seed=0)
+    assert infos["system_state"].dtype == np.int64
+
+
+def _numbers_only(infos: dict[str, Any]) -> None:
+    for key, value in infos.items():
+        if isinstance(value, dict):
+            _numbers_only(value)
+        elif key != "final_obs":
+            assert value.dtype != object, key
+
+
+def test_numeric_infos_hold_numbers_only() -> None:
+    env = FlowTestVectorEnv(4, "refueling", autoreset_mode="SAME_STEP", numeric_infos=True, max_steps=3)
+    _, infos = env.reset(seed=0)
+    _numbers_only(infos)
+    ended = False
+    for _ in range(3):
+        _, _, te, tr, infos = env.step(np.full(4, 4))
+        _numbers_only(infos)
+        ended = ended or bool((te | tr).any())
+    assert ended and infos["final_info"]["verdict"]["system_objective"].dtype == np.int64
+    single = gym.make("FlowTest-Refueling-v0", numeric_infos=True)
+    _, info = single.reset(seed=0)
+    assert single.unwrapped.game.state_json(int(info["system_state"])) == gym.make("FlowTest-Refueling-v0").reset(seed=0)[1]["system_state"]
+
+
+@pytest.mark.slow  # importing torch and TorchRL takes about 20 s
+@pytest.mark.parametrize("mode", ["SAME_STEP", "DISABLED"])
+def test_torchrl_gym_wrapper_takes_the_vector_env(mode: str) -> None:
+    """TorchRL's ``GymWrapper`` runs the vector env through episode ends in the two modes
+    it accepts (numeric infos: TorchRL turns infos into tensors)."""
+    pytest.importorskip("torchrl")
+    from torchrl.envs import GymWrapper
+
+    venv = gym.make_vec("FlowTest-Maze2-v0", num_envs=8, vectorization_mode="vector_entry_point", autoreset_mode=mode,
+                        memory="visited", numeric_infos=True, max_steps=10)
+    env = GymWrapper(venv, device="cpu")
+    rollout = env.rollout(35, break_when_any_done=False)
+    assert tuple(rollout.batch_size) == (8, 35)
+    assert int(rollout["next", "done"].sum()) >= 8 * 3  # every env ended at least three episodes
