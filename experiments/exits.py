@@ -17,7 +17,7 @@ code  meaning
       (:class:`~synthesis.model.errors.CheckFailed`, a FlowTest bug); ``flowtest
       evaluate``: a test failed its guarantee in a run
 5     no solution within the time limit (:class:`TimeoutError`)
-130   interrupted (Ctrl-C)
+130   interrupted (Ctrl-C, or SIGTERM, which takes the same path)
 ====  =========================================================================
 """
 
