@@ -58,15 +58,19 @@ def symbol_legend(game: Any) -> list[Any]:
     def rgb(c: tuple[int, int, int]) -> tuple[float, float, float]:
         return (c[0] / 255, c[1] / 255, c[2] / 255)
 
+    strategy = game.artifact.strategy
     handles: list[Any] = [
         Line2D([], [], marker="o", color=rgb(render.SYSTEM), label="system under test", linestyle="", markersize=9),
         Patch(facecolor=rgb(render.GOAL), label="goal"),
         Line2D([], [], marker="o", markerfacecolor="none", markeredgewidth=2, color=rgb(render.TEST_CELL),
                label="hidden test cell", linestyle="", markersize=9),
-        Patch(facecolor=rgb(render.BLOCKED), label="blocked cell"),
-        Line2D([], [], color=rgb(render.WALL), lw=4, label="wall"),
-        Line2D([], [], color=rgb(render.DOOR), lw=4, label="door closed now"),
     ]
+    if game.ts.layout is not None and game.ts.layout.blocked:
+        handles.append(Patch(facecolor=rgb(render.BLOCKED), label="blocked cell"))
+    if strategy.static_obstacles.any():
+        handles.append(Line2D([], [], color=rgb(render.WALL), lw=4, label="wall"))
+    if (strategy.restrictions & ~strategy.static_obstacles[None, :]).any():
+        handles.append(Line2D([], [], color=rgb(render.DOOR), lw=4, label="door closed now"))
     if game.has_agent:
         handles.append(Line2D([], [], marker="D", color=rgb(render.AGENT), label="test agent", linestyle="", markersize=9))
     if game.ts.kind == "fuel":
@@ -165,7 +169,8 @@ def test_picture(game: Any, path: Path) -> None:
     card shows. The format follows ``path``'s suffix (``.png``, ``.svg``, ``.pdf``)."""
     from .plots import plot_artifact
 
-    plot_artifact(game.artifact, path, dpi=90, header=False)
+    # graphs one panel a row (a node-link panel is wide), grids two
+    plot_artifact(game.artifact, path, dpi=90, header=False, max_cols=2 if game.is_grid else 1)
 
 
 def start_picture(game: Any, path: Path, tile: int = 48) -> None:

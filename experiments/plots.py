@@ -568,7 +568,8 @@ def _draw_grid_panel(ax: Axes, test: Any, panel: Panel, overlay: _Overlay | None
 def _grid_figure(test: Any, panels: Sequence[Panel], overlay: _Overlay | None, max_cols: int | None = None) -> Figure:
     lay = test.problem.system.layout
     cell = 0.62 if max(lay.rows, lay.cols) <= 8 else max(0.2, 5.0 / max(lay.rows, lay.cols))
-    pw, ph = max(lay.cols * cell, 2.6) + 0.5, lay.rows * cell + 0.9
+    pw = max(lay.cols * cell, 2.6) + 0.5
+    ph = (pw - 0.5) * lay.rows / lay.cols + 0.9  # equal aspect: a narrow grid widened to 2.6 in grows as tall
     nrows, ncols = _layout_grid(len(panels), max_cols or (4 if lay.cols <= 4 else 3))
     fig = Figure(figsize=(max(ncols * pw, 6.0), nrows * ph + 1.7), layout="constrained")
     axes = fig.subplots(nrows, ncols, squeeze=False)

@@ -289,9 +289,14 @@ def violation_of_trace(trace: Any) -> dict[str, Any] | None:
         return None
     game = _GAMES.get(trace.env_id)
     if game is None:
+        from synthesis.model.errors import ProblemError
+
         from .episodes import make_env
 
-        env = make_env(trace.env_id)
+        try:
+            env = make_env(trace.env_id)
+        except ProblemError:  # not one test (a pool's split): the reason alone is reported
+            return None
         game = env.unwrapped.game
         env.close()
         if len(_GAMES) > 64:
@@ -371,7 +376,7 @@ dl.glossary dt{font-weight:700}dl.glossary dd{margin:0}
 .tests{display:grid;grid-template-columns:repeat(auto-fill,minmax(min(100%,480px),1fr));gap:1em}
 .test{border:1px solid #ddd;padding:.6em;min-width:0}.test h3{margin:.1em 0 .3em;overflow-wrap:anywhere}
 .test img{width:100%;height:auto;border:1px solid #eee}
-table.props{margin:.4em 0;font-size:.88em}table.props td{text-align:left;padding:2px 6px}
+table.props{margin:.4em 0;font-size:.88em}table.props caption{text-align:left}table.props td{text-align:left;padding:2px 6px}
 table.props td:first-child{font-family:ui-monospace,monospace;white-space:nowrap}
 .swatch{display:inline-block;width:.8em;height:.8em;margin-right:.4em;vertical-align:-.05em;border:1px solid #888}
 code{background:#f3f3f3;padding:2px 4px;overflow-wrap:anywhere}
@@ -487,7 +492,9 @@ def _test_card(env: str, title: str, t: TestInfo | None) -> list[str]:
         f"<p class='small'>{e(CAPTIONS.get(t.kind, CAPTIONS['reactive']))} The start is green, the goal gold.</p>"
     )
     if t.propositions:
-        parts.append("<table class='props'><caption class='small'>propositions (the squares in the cells)</caption>")
+        squares = any(colour for _, _, colour in t.propositions)
+        parts.append("<table class='props'><caption class='small'>propositions"
+                     + (" (the coloured squares in the cells)" if squares else "") + "</caption>")
         for name, where, colour in t.propositions:
             swatch = (f"<span class='swatch' style='background:{e(colour)}'></span>"
                       if re.fullmatch(r"#[0-9a-fA-F]{6}", colour) else "")
@@ -595,6 +602,8 @@ def render_html(
             parts.append(f"<p class='broke'>Seed {broken['seed']} broke <code>{e(str(v['conjunct']))}</code> of the "
                          f"system objective at step {e(str(v.get('step')))}, {e(_where_words(str(v.get('where', ''))))}"
                          + ("" if v.get("alone", True) else " (no conjunct alone: they cannot all hold any more)")
+                         + (": from there it can no longer be met" if v.get("kind") in ("visit", "sequenced", "delayed")
+                            else "")
                          + ".</p>")
         pics = r.get("pictures", {})
         if "filmstrip" in pics:

@@ -18,7 +18,8 @@ from agents.registry import make_policy
 from experiments.episodes import run_episode
 from experiments.evaluate import Cell, evaluate, write_report
 from experiments.filmstrip import MAX_FRAMES, frames_to_show, symbol_legend
-from experiments.plots import artifact_view, panels_of, plot_artifact
+from experiments.filmstrip import test_picture as draw_test_picture
+from experiments.plots import artifact_view, panels_of
 from experiments.report import (
     STYLE,
     TestInfo,
@@ -224,9 +225,8 @@ def test_namesake_tests_get_their_own_files_anchors_and_pictures(namesakes: tupl
         (src,) = re.findall(r"<img src='([^']+)'", card)
         pictures.append(src)
         # the card's picture is its own test's: the same bytes as that test's artifact drawn afresh
-        art = _game(gym.make("FlowTest-v0", test=env)).artifact
         fresh = out / "fresh.png"
-        plot_artifact(art, fresh, dpi=90, header=False)
+        draw_test_picture(_game(gym.make("FlowTest-v0", test=env)), fresh)
         assert (out / src).read_bytes() == fresh.read_bytes(), env
     assert len(set(pictures)) == 4 and len({p.lower() for p in pictures}) == 4
     # every run picture and failure anchor is one pair's own
@@ -263,7 +263,7 @@ def test_each_card_draws_the_restrictions_per_history_and_names_the_propositions
     art = _game(gym.make("FlowTest-v0", test=env)).artifact
     assert len(panels_of(artifact_view(art))) >= 1 and any(p.restricted.any() for p in panels_of(artifact_view(art)))
     fresh = tmp_path / "fresh.png"
-    plot_artifact(art, fresh, dpi=90, header=False)
+    draw_test_picture(_game(gym.make("FlowTest-v0", test=env)), fresh)
     assert (out / info.picture).read_bytes() == fresh.read_bytes()
     assert info.problem == "warehouse-alpha"
     legend = {name: (where, colour) for name, where, colour in info.propositions}
