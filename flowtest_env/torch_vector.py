@@ -371,9 +371,10 @@ class EnvState(NamedTuple):
 
 
 class Verdict(NamedTuple):
-    """A verdict per env (meaningful where the episode ended): outcome code (``int8``,
-    :data:`~flowtest_env.compiled.OUTCOMES`), test objective realized, restrictions,
-    blocked attempts and steps."""
+    """The verdict of every env's episode as it stands after the step (read it where the
+    episode ended, :attr:`StepOutput.ended`; :func:`masked_verdict` zeroes the others):
+    outcome code (``int8``, :data:`~flowtest_env.compiled.OUTCOMES`), test objective
+    realized, restrictions, blocked attempts and steps."""
 
     system_objective: torch.Tensor
     test_objective_realized: torch.Tensor
@@ -392,7 +393,7 @@ class StepOutput(NamedTuple):
     ended
         ``terminated | truncated``.
     verdict
-        The verdict of each env whose episode ended this step.
+        The verdict of each env's episode (meaningful where ``ended``).
     final_z, final_visited
         The configuration and memory the ended episodes stopped in (``"same_step"``:
         the final observation; equal to the state's elsewhere).
@@ -458,7 +459,7 @@ def restart(
     episode counter of a restarted env goes one on, or back to 0 with its key from
     ``new_key`` where ``reseed`` (``bool[N]``, default ``which`` when ``new_key`` is given:
     a reset with a seed). No host synchronisation."""
-    ep = state.episode + which.to(torch.int64)
+    ep = state.episode + which  # bool promotes to int64
     key = state.key
     if new_key is not None:
         again = which if reseed is None else (reseed & which)
@@ -466,12 +467,11 @@ def restart(
         ep = torch.where(again, torch.zeros_like(ep), ep)
     z0 = start_configurations(tables, key, ep, state.home)
     z = torch.where(which, z0, state.z)
-    zero = torch.zeros_like(state.steps)
     return EnvState(
         z=z,
-        steps=torch.where(which, zero, state.steps),
-        restrictions=torch.where(which, zero, state.restrictions),
-        blocked=torch.where(which, zero, state.blocked),
+        steps=state.steps.masked_fill(which, 0),
+        restrictions=state.restrictions.masked_fill(which, 0),
+        blocked=state.blocked.masked_fill(which, 0),
         key=key,
         episode=ep,
         home=state.home,
@@ -500,8 +500,8 @@ def step(tables: TorchTables, state: EnvState, actions: torch.Tensor, autoreset:
     z2 = tables.next_z.index_select(0, flat)
     reward = tables.reward.index_select(0, flat)
     steps = state.steps + 1
-    restrictions = state.restrictions + tables.restricted.index_select(0, z).to(torch.int64)
-    blocked = state.blocked + tables.refused.index_select(0, flat).to(torch.int64)
+    restrictions = state.restrictions + tables.restricted.index_select(0, z)  # bool promotes to int64
+    blocked = state.blocked + tables.refused.index_select(0, flat)
     terminated = tables.terminal.index_select(0, z2)
     truncated = ~terminated & (steps >= tables.max_steps)
     visited = state.visited | tables.visited_bits.index_select(0, z2)
@@ -509,20 +509,18 @@ def step(tables: TorchTables, state: EnvState, actions: torch.Tensor, autoreset:
     if autoreset == "next_step":
         pending = state.done
         new = restart(tables, new, pending)
-        reward = torch.where(pending, torch.zeros_like(reward), reward)
+        reward = reward.masked_fill(pending, 0)
         terminated = terminated & ~pending
         truncated = truncated & ~pending
     elif autoreset not in ("same_step", "disabled"):
         raise ValueError(f"unknown autoreset mode {autoreset!r}; expected one of {', '.join(AUTORESET_MODES)}")
     ended = terminated | truncated
-    zero = torch.zeros_like(steps)
-    outcome = tables.outcome.index_select(0, new.z)
     verdict = Verdict(
-        system_objective=torch.where(ended, outcome, torch.full_like(outcome, -1)),
-        test_objective_realized=tables.test_realized.index_select(0, new.z) & ended,
-        restrictions=torch.where(ended, new.restrictions, zero),
-        blocked_attempts=torch.where(ended, new.blocked, zero),
-        steps=torch.where(ended, new.steps, zero),
+        system_objective=tables.outcome.index_select(0, new.z),
+        test_objective_realized=tables.test_realized.index_select(0, new.z),
+        restrictions=new.restrictions,
+        blocked_attempts=new.blocked,
+        steps=new.steps,
     )
     final_z, final_visited = new.z, new.visited
     if autoreset == "same_step":
@@ -591,9 +589,17 @@ def expand(tables: TorchTables, compact_obs: torch.Tensor, out: torch.Tensor | N
     return _with_memory(tables, _rows(tables, compact_obs[:, 0], out), compact_obs[:, 1:])
 
 
-def verdict_dict(verdict: Verdict) -> dict[str, torch.Tensor]:
-    """The verdict as the infos' ``verdict`` dict (the single env's keys)."""
-    return dict(verdict._asdict())
+def masked_verdict(verdict: Verdict, ended: torch.Tensor) -> dict[str, torch.Tensor]:
+    """The infos' ``verdict`` dict (the single env's keys): the values of the envs that
+    ended, ``-1`` (outcome) or zero elsewhere."""
+    zero = torch.zeros_like(verdict.steps)
+    return {
+        "system_objective": torch.where(ended, verdict.system_objective, torch.full_like(verdict.system_objective, -1)),
+        "test_objective_realized": verdict.test_objective_realized & ended,
+        "restrictions": torch.where(ended, verdict.restrictions, zero),
+        "blocked_attempts": torch.where(ended, verdict.blocked_attempts, zero),
+        "steps": torch.where(ended, verdict.steps, zero),
+    }
 
 
 # ---------------------------------------------------------------- the Gymnasium-like env
@@ -751,7 +757,7 @@ class TorchVectorEnv(gym.vector.VectorEnv):
         self.state, out = step(self.tables, self.state, a, self.mode)
         infos: dict[str, Any] = {
             "action_mask": action_mask(self.tables, self.state),
-            "verdict": verdict_dict(out.verdict),
+            "verdict": masked_verdict(out.verdict, out.ended),
             "_verdict": out.ended,
         }
         if self.mode == "same_step":
@@ -887,6 +893,6 @@ def make_tables(env_id: str, device: str | torch.device = "cpu", reward_dtype: t
 __all__ = [
     "AUTORESET_MODES", "EnvState", "StepOutput", "TorchTables", "TorchVectorEnv", "Verdict", "action_mask",
     "build_tables", "compact", "compact_of", "draw_tests", "expand", "make_tables", "make_vec", "mix64", "observation_of",
-    "observe", "outcome_names", "reset_state", "restart", "shaped_rewards", "step", "tables_of",
+    "observe", "outcome_names", "reset_state", "restart", "shaped_rewards", "step", "tables_of", "masked_verdict",
     "unpack_visited",
 ]

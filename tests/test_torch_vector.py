@@ -99,7 +99,7 @@ def compare(ref: Any, env: tv.TorchVectorEnv, steps: int, seed: int, p_any: floa
         assert torch.equal(twin.expand(c), o2)
     assert np.array_equal(o1, _np(o2)) and _np(o2).dtype == o1.dtype
     assert np.array_equal(i1["action_mask"] > 0, _np(i2["action_mask"]))
-    n = int(env.single_action_space.n)
+    n = env.tables.n_actions
     counts = {"ended": 0, "met": 0, "violated": 0, "tests": 0}
     seen: set[int] = set()
     for t in range(steps):
@@ -276,7 +276,7 @@ def test_memory_and_shaping_on_a_graph_and_a_padded_pool_like_the_numpy_env() ->
 
 def test_options_match_a_sync_vector_env_of_the_single_env() -> None:
     """The torch env against the single env itself, not only through the NumPy env."""
-    kw = {"memory": "visited", "shaping": 10.0, "max_steps": 25}
+    kw: dict[str, Any] = {"memory": "visited", "shaping": 10.0, "max_steps": 25}
     ref = gym.make_vec("FlowTest-Maze1-v0", num_envs=4, vectorization_mode="sync",
                        vector_kwargs={"autoreset_mode": AutoresetMode.SAME_STEP}, **kw)
     env, twin = twins(_numpy("FlowTest-Maze1-v0", 4, "same_step", **kw), "same_step")
@@ -359,7 +359,7 @@ def test_flowtest_env_imports_without_torch() -> None:
 
 def test_the_compact_observation_is_small() -> None:
     """The point of the compact form: a row index and packed memory words, not the floats."""
-    ref = gym.make_vec("FlowTest-Maze2-v0", num_envs=2, vectorization_mode="vector_entry_point")
+    ref = PoolVectorEnv(2, ["maze2"])
     game = builtin_game("maze2", "instantaneous")
     where = position_slice(make_encoder(game, "flat"))
     tables = tv.build_tables(ref.pool, ref.games, max_steps=100, memory_slice=where)
