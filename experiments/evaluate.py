@@ -69,7 +69,17 @@ from .command import Command
 from .episodes import Trace, make_env, make_tester_env, run_episode, sut_policy
 from .exits import EXIT_CHECK_FAILED, EXIT_OK
 from .outputs import json_safe, prepare_output_folder, write_atomically
-from .report import GLOSSARY, TestInfo, fold_rows, outcome_class, render_html, test_name
+from .report import (
+    GLOSSARY,
+    TestInfo,
+    file_key,
+    fold_rows,
+    outcome_class,
+    render_html,
+    test_infos,
+    test_name,
+    violation_of_trace,
+)
 from .trace_picture import trace_picture
 
 DEFAULT_STEP_TIMEOUT = 10.0
@@ -210,6 +220,7 @@ class Cell:
                     "reason": t.reason,
                     "verdict": t.verdict,
                     "replay": self.replay(t),
+                    "violation": violation_of_trace(t),
                 }
                 for t in fails[:MAX_LISTED]
             ],
@@ -343,46 +354,11 @@ def evaluate(
 # --------------------------------------------------------------------------- pictures
 
 
-def _slug(text: str, limit: int = 60) -> str:
-    """A file-name fragment of ``text``; a long one (a planner's command) is cut and
-    told apart by a digest of the whole."""
-    out = "".join(ch if ch.isalnum() else "-" for ch in text).strip("-").lower()
-    if len(out) <= limit:
-        return out
-    import hashlib
-
-    return out[:limit].rstrip("-") + "-" + hashlib.sha256(text.encode("utf-8", "replace")).hexdigest()[:8]
-
-
-
 # --------------------------------------------------------------------------- reports
 
 
 def _pct(x: float | None) -> str:
     return "–" if x is None else f"{100 * x:.0f} %"
-
-
-def test_infos(env_ids: Sequence[str], out: Path) -> list[TestInfo]:
-    """Draw each test at its start into ``out/tests/`` and collect what the report shows
-    of it (problem, kind, objectives, step budget)."""
-    from .filmstrip import start_picture
-
-    (out / "tests").mkdir(exist_ok=True)
-    infos = []
-    for env_id in env_ids:
-        env = make_env(env_id)
-        u = env.unwrapped
-        game = u.game
-        env.close()
-        name = f"tests/{_slug(env_id)}.png"
-        write_atomically(out / name, partial(start_picture, game))
-        art = game.artifact
-        infos.append(TestInfo(
-            env_id=env_id, problem=str(art.name), kind=str(art.kind),
-            system_objective=str(art.objectives.get("system", "")), test_objective=str(art.objectives.get("test", "")),
-            max_steps=int(u.max_steps), picture=name,
-        ))
-    return infos
 
 
 def _filmstrip(trace: Trace, path: Path) -> None:
@@ -414,11 +390,11 @@ def write_report(cells: Sequence[Cell], out: Path, tests: Sequence[TestInfo] | N
         for label, tr in (("typical", typical), ("failing", failing)):
             if tr is None:
                 continue
-            name = f"traces/{_slug(cell.sut)}--{_slug(cell_name)}--{label}.png"
+            name = f"traces/{file_key(cell.sut)}--{file_key(cell_name)}--{label}.png"
             write_atomically(out / name, partial(trace_picture, tr))
             cell.pictures[label] = name
         if failing is not None:
-            name = f"traces/{_slug(cell.sut)}--{_slug(cell_name)}--filmstrip.png"
+            name = f"traces/{file_key(cell.sut)}--{file_key(cell_name)}--filmstrip.png"
             write_atomically(out / name, partial(_filmstrip, failing))
             cell.pictures["filmstrip"] = name
     if tests is None:
