@@ -51,10 +51,15 @@ import numpy as np
 import torch
 from torch import nn
 
+from flowtest_env.compiled import OUTCOMES
+
 from .checkpoint import Checkpoint, CheckpointError, load_checkpoint, save_checkpoint
 
 ALGOS = ("ppo", "recurrent-ppo")
 """The native algorithms: masked PPO with an MLP, and with a GRU."""
+
+ENV_BACKENDS = ("torch", "numpy")
+"""Who steps the tests: the NumPy vector env, or its torch twin on the training device."""
 
 
 @dataclass
@@ -82,6 +87,7 @@ class NativeArgs:
     memory: str = "visited"  # "visited" (places occupied this episode) or "none"
     obs_kind: str = "flat"  # the env's observation: "flat" or "padded"
     shaping: float = 0.0  # env option: potential-based shaping scale (0 = off)
+    env_backend: str = "torch"  # "torch" (flowtest_env.torch_vector, on the device) or "numpy" (flowtest_env.vector)
     seed: int = 0  # seeds the envs, the network and every sample
     device: str = "auto"  # "auto" (cuda when there is one), "cpu", "cuda", "cuda:1", ...
     threads: int = 1  # torch CPU threads (fixed, so a seed gives the same run)
@@ -123,6 +129,8 @@ def check_args(a: NativeArgs) -> None:
         raise ValueError(f"hidden must be positive layer widths, not {a.hidden}")
     if a.memory not in ("none", "visited"):
         raise ValueError(f"unknown memory {a.memory!r}; expected 'none' or 'visited'")
+    if a.env_backend not in ENV_BACKENDS:
+        raise ValueError(f"unknown env_backend {a.env_backend!r}; expected one of {', '.join(ENV_BACKENDS)}")
     if a.obs_kind not in ("flat", "padded"):
         raise ValueError(f"obs_kind must be 'flat' or 'padded' for the native trainer, not {a.obs_kind!r}")
     resolve_device(a.device)
@@ -167,6 +175,9 @@ def _mlp(n_in: int, widths: Sequence[int], n_out: int, out_std: float) -> nn.Seq
     layers.append(_layer(n_in, n_out, out_std))
     return nn.Sequential(*layers)
 
+
+MET_CODE = OUTCOMES.index("met")
+"""The outcome code of ``"met"`` in the torch env's verdicts."""
 
 MASKED_LOGIT = -1e8
 """The logit of an illegal action (its probability is exactly 0 in float32)."""
@@ -240,15 +251,16 @@ def network_settings(args: NativeArgs) -> dict[str, Any]:
 # --------------------------------------------------------------------------- the env and its memory
 
 
-def make_vec_env(args: NativeArgs) -> Any:
-    """``args.num_envs`` runs of ``args.env_id`` in one NumPy vector env
-    (``vectorization_mode="vector_entry_point"``), with the env options of ``args``.
+def make_vec_env(args: NativeArgs) -> tuple[Any, Any, bool]:
+    """``args.num_envs`` runs of ``args.env_id`` with the env options of ``args``: the
+    NumPy vector env (``vectorization_mode="vector_entry_point"``), and the env to step
+    (that one, or with ``env_backend="torch"`` its torch twin on the training device);
+    and whether the env itself appends the visited-places memory (``memory="visited"``).
 
     Raises
     ------
     ValueError
-        If the env cannot be made with these options (e.g. shaping on a vector env
-        without it).
+        If the env cannot be made with these options.
     """
     import gymnasium as gym
 
@@ -259,10 +271,22 @@ def make_vec_env(args: NativeArgs) -> Any:
         kwargs["obs_kind"] = args.obs_kind
     if args.shaping > 0:
         kwargs["shaping"], kwargs["shaping_gamma"] = float(args.shaping), float(args.gamma)
+    env_memory = args.memory == "visited"
+    with_memory: dict[str, Any] = {**kwargs, "memory": "visited"} if env_memory else kwargs
     try:
-        return gym.make_vec(args.env_id, num_envs=args.num_envs, vectorization_mode="vector_entry_point", **kwargs)
+        try:
+            np_env = gym.make_vec(args.env_id, num_envs=args.num_envs, vectorization_mode="vector_entry_point",
+                                  **with_memory)
+        except TypeError:  # a vector env without the memory option: the trainer keeps it
+            env_memory = False
+            np_env = gym.make_vec(args.env_id, num_envs=args.num_envs, vectorization_mode="vector_entry_point", **kwargs)
     except TypeError as exc:
         raise ValueError(f"{args.env_id}: the vector env does not take these options ({exc})") from None
+    if args.env_backend == "torch":
+        from flowtest_env.torch_vector import TorchVectorEnv
+
+        return np_env, TorchVectorEnv.from_numpy(np_env, device=resolve_device(args.device)), env_memory
+    return np_env, np_env, env_memory
 
 
 def shared_position_slice(games: Sequence[Any], obs_kind: str) -> slice:
@@ -351,6 +375,7 @@ class Runner:
     def __init__(self, env: Any, agent: Agent, where: slice | None, device: torch.device, seed: int) -> None:
         self.env, self.agent, self.device = env, agent, device
         self.n = int(env.num_envs)
+        self.torch_env = hasattr(env, "tables")  # flowtest_env.torch_vector: tensors in, tensors out
         obs, infos = env.reset(seed=seed)
         self.memory = VisitedBits(where)
         self.start = torch.ones(self.n, dtype=torch.bool, device=device)
@@ -358,11 +383,11 @@ class Runner:
         self.x = self.memory(self._tensor(obs), self.start)
         self.mask = self._tensor(infos["action_mask"]).bool()
         self.h = agent.initial_state(self.n, device)
-        self.ret = np.zeros(self.n)
+        self.ret = torch.zeros(self.n, dtype=torch.float64, device=device)
         self.stats = EpisodeStats()
 
-    def _tensor(self, a: np.ndarray) -> torch.Tensor:
-        return torch.as_tensor(np.asarray(a), device=self.device)
+    def _tensor(self, a: Any) -> torch.Tensor:
+        return torch.as_tensor(a if isinstance(a, torch.Tensor) else np.asarray(a), device=self.device)
 
     def collect(self, num_steps: int) -> Rollout:
         """:func:`collect_rollout`."""
@@ -381,11 +406,11 @@ class Runner:
                 a = sample(logits)
                 logprobs[t] = torch.log_softmax(logits, dim=-1).gather(1, a.unsqueeze(1)).squeeze(1)
             actions[t], values[t] = a, value
-            o, r, term, trunc, infos = self.env.step(a.cpu().numpy())
+            o, r, term, trunc, infos = self.env.step(a if self.torch_env else a.cpu().numpy())
             rewards[t] = self._tensor(r).float()
             terminated[t], truncated[t] = self._tensor(term), self._tensor(trunc)
-            self._episode_ends(np.asarray(r), np.asarray(term) | np.asarray(trunc), infos)
             done = terminated[t] | truncated[t]
+            self._episode_ends(rewards[t], done, infos)
             self.start = self.reset_step  # the autoreset step's observation is a new episode's first
             self.reset_step = done
             self.x = self.memory(self._tensor(o), self.start)
@@ -394,14 +419,19 @@ class Runner:
             next_value = self.agent.value(self.x, self.h, self.start)
         return Rollout(obs, masks, actions, logprobs, values, rewards, terminated, truncated, valid, starts, h0, next_value)
 
-    def _episode_ends(self, r: np.ndarray, done: np.ndarray, infos: dict[str, Any]) -> None:
+    def _episode_ends(self, r: torch.Tensor, done: torch.Tensor, infos: dict[str, Any]) -> None:
         self.ret += r
-        if done.any():
-            v = infos["verdict"]
-            for i in np.flatnonzero(done).tolist():
-                self.stats.rows.append((float(self.ret[i]), v["system_objective"][i] == "met",
-                                        bool(v["test_objective_realized"][i]), int(v["restrictions"][i]), int(v["steps"][i])))
-                self.ret[i] = 0.0
+        if not bool(done.any()):
+            return
+        v = infos["verdict"]
+        idx = torch.nonzero(done).squeeze(1)
+        outcome = v["system_objective"]
+        met = (outcome == MET_CODE) if isinstance(outcome, torch.Tensor) else torch.as_tensor(np.asarray(outcome == "met"))
+        cols = [self.ret[idx].cpu().numpy(), met.to(self.device)[idx].cpu().numpy()]
+        cols += [self._tensor(v[k])[idx].cpu().numpy() for k in ("test_objective_realized", "restrictions", "steps")]
+        for ret, m, real, restr, steps in zip(*cols, strict=True):
+            self.stats.rows.append((float(ret), bool(m), bool(real), int(restr), int(steps)))
+        self.ret[idx] = 0.0
 
 
 def sample(logits: torch.Tensor) -> torch.Tensor:
@@ -692,18 +722,18 @@ def train(args: NativeArgs, out: str | Path | None = None, heldout: Sequence[Any
     torch.set_num_threads(int(args.threads))
     torch.manual_seed(args.seed)
     np.random.seed(args.seed)
-    env = env if env is not None else make_vec_env(args)
-    inner = env.unwrapped
+    np_env, env, env_memory = make_vec_env(args) if env is None else (env, env, False)
+    inner = np_env.unwrapped
     games = list(getattr(inner, "games", []))
-    obs_size = int(np.prod(env.single_observation_space.shape))
     n_actions = int(env.single_action_space.n)
     where = shared_position_slice(games, args.obs_kind) if args.memory == "visited" else None
+    mem_size = where.stop - where.start if where is not None else 0
+    obs_size = int(np.prod(env.single_observation_space.shape)) - (mem_size if env_memory else 0)  # without memory
     net = network_settings(args)
-    agent = Agent(obs_size + (where.stop - where.start if where else 0), n_actions, net["hidden"], net["kind"],
-                  net["gru_hidden"]).to(device)
+    agent = Agent(obs_size + mem_size, n_actions, net["hidden"], net["kind"], net["gru_hidden"]).to(device)
     optimizer = torch.optim.Adam(agent.parameters(), lr=args.learning_rate, eps=1e-5)
     generator = torch.Generator().manual_seed(args.seed)
-    runner = Runner(env, agent, where, device, args.seed)
+    runner = Runner(env, agent, None if env_memory else where, device, args.seed)
     splits = {"train": (games, _budgets(games))} if evaluate_train and games else {}
     if heldout:
         splits["heldout"] = (list(heldout), _budgets(heldout))

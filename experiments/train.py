@@ -280,6 +280,7 @@ NATIVE_DEFAULTS: dict[str, Any] = {
     "obs_kind": "flat",
     "pad_to": 8,
     "device": "auto",
+    "env_backend": "torch",
     "threads": 1,
 }
 """The native trainer's settings: 128 envs x 32 steps per rollout (4,096 steps), minibatches
@@ -342,7 +343,7 @@ def native_args(settings: dict[str, Any], env_id: str, env_kwargs: dict[str, Any
         max_grad_norm=float(settings["max_grad_norm"]), hidden=tuple(int(w) for w in settings["net_arch"]),
         gru_hidden=int(settings["gru_hidden_size"]), memory=settings["memory"], obs_kind=settings["obs_kind"],
         shaping=float(settings["shaping"]), seed=int(seed), device=str(settings["device"]),
-        threads=int(settings["threads"]), eval_every=int(eval_every),
+        threads=int(settings["threads"]), eval_every=int(eval_every), env_backend=str(settings["env_backend"]),
     )
 
 
@@ -493,6 +494,7 @@ SETTING_HELP: dict[str, str] = {
     "gru_hidden_size": "GRU width (native recurrent-ppo)", "gae_lambda": "GAE lambda", "clip_range": "PPO ratio clip",
     "vf_coef": "value loss weight", "max_grad_norm": "gradient clip",
     "device": "auto (cuda when torch sees one), cpu, cuda, cuda:N", "threads": "torch CPU threads",
+    "env_backend": "who steps the tests: torch (the torch env on --device) or numpy (the NumPy vector env)",
     "shaping": "env option: shaping scale, 0 = off",
     "memory": "env option: the SUT's memory, none or visited", "obs_kind": "env option: flat, grid or padded",
     "pad_to": "env option: grid side of obs_kind=padded",
@@ -542,8 +544,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
             kw["type"] = _net_arch
         elif key == "algo":
             kw["choices"] = tuple(dict.fromkeys([*NATIVE_ALGOS, *ALGOS]))
-        elif key in ("memory", "obs_kind"):
-            kw["choices"] = {"memory": ("none", "visited"), "obs_kind": ("flat", "grid", "padded")}[key]
+        elif key in ("memory", "obs_kind", "env_backend"):
+            kw["choices"] = {"memory": ("none", "visited"), "obs_kind": ("flat", "grid", "padded"),
+                             "env_backend": ("torch", "numpy")}[key]
         elif key == "device":
             kw["type"] = str
         else:
