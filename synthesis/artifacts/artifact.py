@@ -126,7 +126,8 @@ def _walk_plain(x: Any, path: str, source: str, names: bool = True) -> None:
             continue
         elif isinstance(v, int):
             if not -MAX_INT < v < MAX_INT:
-                raise ProblemError(f"artifact {source}: field {at}: an integer of {len(str(abs(v)))} digits is out of range")
+                raise ProblemError(f"artifact {source}: field {at}: an integer of about {int(v.bit_length() * 0.30103) + 1} digits is out of "
+                                   f"range (at most {MAX_INT} in magnitude)")
         elif isinstance(v, float):
             continue
         elif isinstance(v, dict):
