@@ -45,6 +45,9 @@ episode ended resets that env, its action ignored, reward 0), ``"same_step"`` (t
 resets within the step that ended it; the observation is the new episode's, the last one is
 ``infos["final_obs"]``, the verdict is in ``infos["final_info"]``) or ``"disabled"`` (the
 caller resets ended envs with ``reset(options={"reset_mask": mask})``), as the NumPy env.
+One difference, to stay free of host synchronisation: stepping an env that ended under
+``"disabled"`` without resetting it is not refused (the NumPy env raises ``ResetNeeded``):
+its run stays where it ended and it reports the end again.
 
 **Infos.** Every step returns ``infos["action_mask"]`` (``bool[N, n_actions]``) and
 ``infos["verdict"]`` with ``infos["_verdict"]`` (``bool[N]``, the envs whose episode ended

@@ -171,7 +171,7 @@ def test_every_registered_env_steps_like_the_numpy_env(env_id: str) -> None:
     env, twin = twins(ref)
     assert env.single_observation_space == ref.single_observation_space
     assert env.single_action_space == ref.single_action_space
-    counts = compare(ref, env, steps=200, seed=7, p_any=0.3, twin=twin)
+    counts = compare(ref, env, steps=130, seed=7, p_any=0.3, twin=twin)
     assert counts["ended"] >= 6
     if env_id == "FlowTest-RandomGrid-v0":
         assert counts["tests"] == 3
