@@ -81,30 +81,6 @@ EXPLORED_STATES_PER_SECOND = 10_000
 """About how many automaton states the exact count explores per second: with a deadline,
 the exploration is cut to what the time left allows."""
 
-EXPLORE_WORK = 400_000
-"""The most automaton states times letters the exact history count explores (about 2.5 s:
-20,000 states of 22 letters took 2.7 s on a loaded machine); beyond it the problem is
-refused on the cheap bound, so the check never runs for minutes (a 22-state path with 20
-visits explored for 393 s and 1.5 GB before this budget)."""
-
-WORK_PER_SECOND = 150_000
-"""States times letters the exploration gets through per second (measured as above): a
-time limit bounds the exploration to :data:`CHECK_SHARE` of it at this rate."""
-
-CHECK_SHARE = 0.25
-"""The most of a synthesis's time limit the size check may spend."""
-
-
-def explore_budget(n_letters: int, seconds: float | None) -> int:
-    """The most automaton states the exact history count explores: :data:`EXPLORE_WORK`
-    over the letters, and under a time limit of ``seconds`` left, :data:`CHECK_SHARE` of
-    it at :data:`WORK_PER_SECOND` (at least 100 states)."""
-    work = float(EXPLORE_WORK)
-    if seconds is not None:
-        work = min(work, max(seconds, 0.0) * CHECK_SHARE * WORK_PER_SECOND)
-    return max(int(work) // max(n_letters, 1), 100)
-
-
 def check_size(problem: Problem, max_edges: int | None, deadline: float | None = None) -> SizeEstimate | None:
     """Refuse ``problem`` if its product graph may exceed ``max_edges`` (``None``: no limit).
 
