@@ -15,8 +15,10 @@ Two ways to use it::
 
     envs = make_vec("FlowTest-Maze2-v0", num_envs=4096, device="cuda", memory="visited")
     obs, infos = envs.reset(seed=0)                 # float32[4096, 331] on the GPU
-    actions = torch.multinomial(infos["action_mask"].float(), 1).squeeze(1)
-    obs, rewards, terminated, truncated, infos = envs.step(actions)
+    for _ in range(100):
+        mask = infos["action_mask"]                 # bool[4096, 5] (all false after an episode's end)
+        actions = torch.argmax(torch.rand(mask.shape, device=mask.device) * mask, dim=1)
+        obs, rewards, terminated, truncated, infos = envs.step(actions)
 
 :class:`TorchVectorEnv` is a Gymnasium-like vector env whose arrays are tensors on
 ``device``; the *functional step* below it (:func:`reset_state`, :func:`step`,
