@@ -146,9 +146,9 @@ def plot_test(test: Any, path: str | Path, *, agent: Any = None, dpi: int = 110,
     panels = panels_of(test)
     overlay = _agent_overlay(test, agent)
     if ts.kind in ("grid", "fuel") and ts.layout is not None:
-        fig = _grid_figure(test, panels, overlay, max_cols)
+        fig = _grid_figure(test, panels, overlay, max_cols, header)
     else:
-        fig = _graph_figure(test, panels, overlay, max_cols)
+        fig = _graph_figure(test, panels, overlay, max_cols, header)
     if header:
         fig.suptitle(_header(test), fontsize=10)
     FigureCanvasAgg(fig)
@@ -565,13 +565,14 @@ def _draw_grid_panel(ax: Axes, test: Any, panel: Panel, overlay: _Overlay | None
         spine.set_visible(False)
 
 
-def _grid_figure(test: Any, panels: Sequence[Panel], overlay: _Overlay | None, max_cols: int | None = None) -> Figure:
+def _grid_figure(test: Any, panels: Sequence[Panel], overlay: _Overlay | None, max_cols: int | None = None,
+                 header: bool = True) -> Figure:
     lay = test.problem.system.layout
     cell = 0.62 if max(lay.rows, lay.cols) <= 8 else max(0.2, 5.0 / max(lay.rows, lay.cols))
     pw = max(lay.cols * cell, 2.6) + 0.5
     ph = (pw - 0.5) * lay.rows / lay.cols + 0.9  # equal aspect: a narrow grid widened to 2.6 in grows as tall
     nrows, ncols = _layout_grid(len(panels), max_cols or (4 if lay.cols <= 4 else 3))
-    fig = Figure(figsize=(max(ncols * pw, 6.0), nrows * ph + 1.7), layout="constrained")
+    fig = Figure(figsize=(max(ncols * pw, 6.0), nrows * ph + (1.7 if header else 1.2)), layout="constrained")
     axes = fig.subplots(nrows, ncols, squeeze=False)
     width = max(24, int(pw * 11))
     for ax, panel in zip(axes.flat, panels, strict=False):  # spare axes stay blank
@@ -739,14 +740,15 @@ def _draw_graph_panel(ax: Axes, test: Any, panel: Panel, overlay: _Overlay | Non
     ax.set_axis_off()
 
 
-def _graph_figure(test: Any, panels: Sequence[Panel], overlay: _Overlay | None, max_cols: int | None = None) -> Figure:
+def _graph_figure(test: Any, panels: Sequence[Panel], overlay: _Overlay | None, max_cols: int | None = None,
+                  header: bool = True) -> Figure:
     ts = test.problem.system
     pos = layered_positions(ts)
     n_layers = len({x for x, _ in pos.values()})
     height = max(sum(1 for x, _ in pos.values() if x == lx) for lx in {x for x, _ in pos.values()})
     pw, ph = max(1.15 * n_layers + 0.6, 3.4), max(0.85 * height + 1.0, 2.4)
     nrows, ncols = _layout_grid(len(panels), max_cols or 3)
-    fig = Figure(figsize=(max(ncols * pw, 6.0), nrows * ph + 1.2), layout="constrained")
+    fig = Figure(figsize=(max(ncols * pw, 6.0), nrows * ph + (1.2 if header else 0.8)), layout="constrained")
     axes = fig.subplots(nrows, ncols, squeeze=False)
     for ax, panel in zip(axes.flat, panels, strict=False):  # spare axes stay blank
         _draw_graph_panel(ax, test, panel, overlay, pos)

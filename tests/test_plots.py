@@ -130,7 +130,8 @@ def test_fuel_restriction_notes_fuel_levels() -> None:
     mask[m] = True
     same = np.flatnonzero((ts.place[ts.src] == a) & (ts.place[ts.dst] == b))
     if same.size > 1:
-        assert _fuel_note(ts, mask, a, b) == f"fuel {ts.states[int(ts.src[m])][1]}"
+        state: Any = ts.states[int(ts.src[m])]  # (cell, fuel) on a fuel grid
+        assert _fuel_note(ts, mask, a, b) == f"fuel {state[1]}"
     mask[same] = True
     assert _fuel_note(ts, mask, a, b) is None  # every level: a plain one-way marker
 
@@ -157,11 +158,13 @@ def test_agent_overlay(name: str, tmp_path: Path) -> None:
     plain, overlaid, via_test = tmp_path / "plain.png", tmp_path / "agent.png", tmp_path / "via_test.png"
     plot_test(test, plain, dpi=50)
     plot_test(test, overlaid, agent=SimpleNamespace(cells=cells, parks=parks), dpi=50)
-    plot_test(dataclasses.replace(test, agent=SimpleNamespace(cells=cells, parks=[])), via_test, dpi=50)
+    duck: Any = SimpleNamespace(cells=cells, parks=[])  # any object with cells, as plot_test documents
+    plot_test(dataclasses.replace(test, agent=duck), via_test, dpi=50)
     assert plain.read_bytes() != overlaid.read_bytes()
     assert plain.read_bytes() != via_test.read_bytes()
     # the artifact's form: cells as written in the problem, parks with the cells they are entered from
-    as_written = [list(ts.places[int(p)]) if ts.kind == "grid" else ts.places[int(p)] for p in cells]
+    places: list[Any] = list(ts.places)
+    as_written = [list(places[int(p)]) if ts.kind == "grid" else places[int(p)] for p in cells]
     mapping = tmp_path / "mapping.png"
     plot_test(test, mapping, agent={"cells": as_written, "parks": [{"name": "P", "from": as_written[:1]}]}, dpi=50)
     png_size(mapping)
@@ -169,3 +172,36 @@ def test_agent_overlay(name: str, tmp_path: Path) -> None:
     ignored = tmp_path / "ignored.png"
     plot_test(test, ignored, agent=SimpleNamespace(strategy="table"), dpi=50)
     png_size(ignored)
+
+
+def test_an_artifact_is_drawn_with_its_synthesized_tests_panels(tmp_path: Path) -> None:
+    """plot_artifact (the report's test cards) reads a loaded artifact as plot_test reads
+    the synthesized test it was made from: the same panels, titles and restrictions."""
+    from experiments.plots import artifact_view, plot_artifact
+    from synthesis.artifacts.artifact import TestArtifact, artifact_of
+    from synthesis.artifacts.summary import summary_of
+
+    for name in ("small-reactive", "example1", "beaver-rescue", str(DATA / "ok_mixed.toml")):
+        test = synthesized(name)
+        art = TestArtifact.from_dict(artifact_of(test, summary_of(test)).to_dict())
+        mine, theirs = panels_of(artifact_view(art)), panels_of(test)
+        assert [p.title for p in mine] == [p.title for p in theirs], name
+        assert all(np.array_equal(a.restricted, b.restricted) for a, b in zip(mine, theirs, strict=True))
+        with_header, without = tmp_path / "a.png", tmp_path / "b.png"
+        plot_artifact(art, with_header)
+        plot_artifact(art, without, header=False)
+        assert png_size(with_header)[1] > png_size(without)[1] > 150  # the header is the picture's title only
+
+
+def test_propositions_are_named_with_where_they_hold() -> None:
+    """Each proposition gets a legend line: the token that names exactly its cells, else
+    its cells; on fuel grids the fuel levels where it holds; a colour of its own."""
+    from experiments.plots import proposition_legend
+
+    legend = {p: (where, colour) for p, where, colour in proposition_legend(load_problem("small-reactive").system)}
+    assert legend["goal"][0] == "cell T" and legend["I1"][0] == "cell I1" and legend["I2"][0] == "cell I2"
+    assert len({c for _, c in legend.values()}) == 3 and all(c.startswith("#") for _, c in legend.values())
+    fuel = {p: where for p, where, _ in proposition_legend(load_problem("refueling").system)}
+    assert fuel["unsafe"].endswith("at fuel 0") and fuel["low"].endswith("at fuel 1") and fuel["goal"] == "cell T"
+    graph = {p: (where, colour) for p, where, colour in proposition_legend(load_problem("beaver-rescue").system)}
+    assert graph["beaver"] == ("state beaver", "")  # graphs write propositions under their nodes
