@@ -203,17 +203,23 @@ def _reachable(next_z: np.ndarray, start: int) -> np.ndarray:
     return np.flatnonzero(seen)
 
 
-def compile_test(game: TestGame, encoder: Encoder, n_actions: int | None = None) -> CompiledTest:
+def compile_test(game: TestGame, encoder: Encoder, n_actions: int | None = None, accumulative: bool = False) -> CompiledTest:
     """Compile ``game`` (observations by ``encoder``) with ``n_actions`` action columns
     (default the game's own; more columns are invalid actions).
+
+    In the accumulative setting the observation also shows the restrictions of the states
+    visited under the current history, which no configuration holds: with
+    ``accumulative=True`` the rows are those of the current state alone (the
+    instantaneous view), and the caller adds the visited states' restrictions (as the
+    vector env does, :class:`~flowtest_env.vector.PoolVectorEnv`).
 
     Raises
     ------
     ValueError
-        On the accumulative setting (its observation depends on the states visited, not
-        on the configuration) or fewer action columns than the game has.
+        On the accumulative setting without ``accumulative=True``, or fewer action
+        columns than the game has.
     """
-    if game.setting != "instantaneous":
+    if game.setting != "instantaneous" and not accumulative:
         raise ValueError(
             f"the vectorized env supports setting='instantaneous' only, not {game.setting!r} "
             "(the accumulative observation depends on the states visited under the history)"
@@ -346,13 +352,13 @@ def potentials(pool: CompiledPool, games: list[TestGame], potential: Callable[[T
     return out
 
 
-def compile_pool(games: list[TestGame], encoders: list[Encoder]) -> CompiledPool:
+def compile_pool(games: list[TestGame], encoders: list[Encoder], accumulative: bool = False) -> CompiledPool:
     """Compile every test of a pool into one numbering (action columns and observation
-    axes padded to the largest)."""
+    axes padded to the largest; ``accumulative``: as for :func:`compile_test`)."""
     if not games or len(games) != len(encoders):
         raise ValueError("a pool needs at least one test and one encoder per test")
     n_actions = max(g.n_actions for g in games)
-    tests = tuple(compile_test(g, e, n_actions) for g, e in zip(games, encoders, strict=True))
+    tests = tuple(compile_test(g, e, n_actions, accumulative) for g, e in zip(games, encoders, strict=True))
     ndim = {t.obs.ndim for t in tests}
     if len(ndim) != 1:
         raise ValueError("the pool's tests have observations of different ranks (mix of 'grid' and 'flat'?)")

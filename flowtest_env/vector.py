@@ -22,8 +22,8 @@ checked by the same validator): ``max_steps``, ``obs_kind``, ``pad_to``, the rew
 weights, ``memory="visited"`` (the places each env's SUT has occupied, one bulk array
 update a step), ``shaping``/``shaping_gamma`` (the potential compiled into a
 per-configuration table), ``render_mode="rgb_array"``, ``view``, ``tile_size``;
-``setting="instantaneous"`` only (the accumulative observation depends on the states
-visited under the history, not on the configuration).
+``setting`` (the accumulative setting's restrictions of the states visited under the history
+kept per env as the single env keeps them).
 
 **Autoreset modes** (``autoreset_mode=``, a :class:`gymnasium.vector.AutoresetMode` or its
 name, also through ``gym.make_vec(..., autoreset_mode=...)``), as Gymnasium's
@@ -129,18 +129,17 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         elif options:
             raise TypeError("pass the env options either as config= or as keyword arguments, not both")
         one_of("render_mode", config.render_mode, (None, *self.metadata["render_modes"]))
-        if config.setting == "accumulative":
-            raise ValueError(
-                "the vectorized env supports setting='instantaneous' only, not 'accumulative' "
-                "(the accumulative observation depends on the states visited under the history)"
-            )
         self.games: list[TestGame] = pool_games(games, config.setting)
+        settings = {g.setting for g in self.games}
+        if len(settings) > 1:
+            raise ValueError("the pool mixes tests of the instantaneous and the accumulative setting; pass setting= to choose one")
         config = config.with_max_steps(max(default_max_steps(g) for g in self.games))
         assert config.max_steps is not None
         self.config = config
         self.encoders: list[Encoder] = [make_encoder(g, config.obs_kind, config.pad_to) for g in self.games]
         self._mem: slice | None = shared_position_slice(self.encoders) if config.memory == "visited" else None
-        self.pool: CompiledPool = compile_pool(self.games, self.encoders)
+        accumulative = settings == {"accumulative"}
+        self.pool: CompiledPool = compile_pool(self.games, self.encoders, accumulative)
         p = self.pool
         self.metadata = {**type(self).metadata, "autoreset_mode": self.autoreset_mode}
         self.num_envs = num_envs
@@ -173,6 +172,11 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         self._restrictions = np.zeros(self.num_envs, dtype=np.int64)
         self._blocked = np.zeros(self.num_envs, dtype=np.int64)
         self._seen = np.zeros((self.num_envs, mem_size), dtype=np.float32) if self._mem is not None else None
+        # accumulative setting: the shown-restriction entries of the states visited under the current history
+        self._shown: np.ndarray | None = shared_shown_entries(self.encoders) if accumulative else None
+        self._history = np.concatenate([t.history for t in p.tests]).astype(np.int64)
+        self._shown_now = np.zeros((num_envs, 0 if self._shown is None else self._shown.size), dtype=p.obs.dtype)
+        self._shown_h = np.zeros(num_envs, dtype=np.int64)
         # the observation rows, with room for the memory (filled per step) when there is one
         self._mem_at = int(np.prod(p.obs_shape))
         self._obs_table = p.obs if self._mem is None else np.concatenate([p.obs, np.zeros((p.obs.shape[0], mem_size), np.float32)], axis=1)
@@ -207,6 +211,8 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         """The batch observation now (``fresh``: envs whose episode just started, their
         memory restarts)."""
         obs: np.ndarray = np.take(self._obs_table, self.pool.obs_row[self._z], axis=0)  # faster than fancy indexing
+        if self._shown is not None:
+            self._accumulate(obs, None, fresh)
         if self._seen is None:
             return obs
         if fresh is not None:
@@ -218,11 +224,35 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
     def _observe_envs(self, envs: np.ndarray) -> np.ndarray:
         """The observations of ``envs`` alone, their episodes just started."""
         obs: np.ndarray = np.take(self._obs_table, self.pool.obs_row[self._z[envs]], axis=0)
+        if self._shown is not None:
+            self._accumulate(obs, envs, np.arange(envs.size))
         if self._seen is None:
             return obs
         self._seen[envs] = obs[:, self._mem]
         obs[:, self._mem_at :] = self._seen[envs]
         return obs
+
+    def _accumulate(self, obs: np.ndarray, envs: np.ndarray | None, fresh: np.ndarray | None) -> None:
+        """Accumulative setting: add to ``obs`` (the rows of ``envs``) the restrictions
+        shown on the states visited under the current history, as the single env's
+        ``visited`` set does (restarted when the history changes or the episode starts;
+        ``envs``: ``None`` for every env; ``fresh``: the rows whose episode just started)."""
+        assert self._shown is not None
+        flat = obs.reshape(obs.shape[0], -1)
+        every = envs is None
+        h = self._history[self._z if every else self._z[envs]]
+        restart = h != (self._shown_h if every else self._shown_h[envs])
+        if fresh is not None:
+            restart[fresh] = True
+        acc = self._shown_now if every else self._shown_now[envs]  # every env: updated in place
+        acc[restart] = 0
+        np.maximum(acc, flat[:, self._shown], out=acc)
+        flat[:, self._shown] = acc
+        if every:
+            self._shown_h = h
+        else:
+            self._shown_now[envs] = acc
+            self._shown_h[envs] = h
 
     # ------------------------------------------------------------------ API
 
@@ -600,6 +630,31 @@ def pool_games(games: Any, setting: str | None) -> list[TestGame]:
     if not out:
         raise ValueError("the pool holds no test")
     return out
+
+
+def shared_shown_entries(encoders: list[Encoder]) -> np.ndarray:
+    """The flat indices of the entries a shown restriction sets (the ``wall_*``/``door_*``
+    planes, a graph's ``shown_restriction`` block), the same for every encoder of a pool.
+
+    Raises
+    ------
+    ValueError
+        If the pool's tests put them at different entries (use ``obs_kind="padded"``).
+    """
+    found = set()
+    for enc in encoders:
+        lay = enc.layout()
+        plane = int(np.prod(lay.grid)) if lay.kind == "grid" and lay.grid is not None else 1
+        idx = [
+            np.arange(seg.start * plane, seg.stop * plane)
+            for seg in lay.segments
+            if seg.name.startswith(("wall_", "door_")) or seg.name == "shown_restriction"
+        ]
+        found.add(tuple(np.concatenate(idx).tolist()) if idx else ())
+    if len(found) != 1:
+        raise ValueError("the accumulative setting needs the pool's tests to show restrictions at the same entries; "
+                         "these differ (use obs_kind='padded')")
+    return np.array(found.pop(), dtype=np.int64)
 
 
 def available_memory() -> int | None:

@@ -227,8 +227,8 @@ def test_invalid_actions_are_rejected_like_the_single_env() -> None:
 
 
 def test_bad_arguments_raise_clear_errors() -> None:
-    with pytest.raises(ValueError, match="instantaneous"):
-        gym.make_vec("FlowTest-SmallReactive-v0", num_envs=2, vectorization_mode="vector_entry_point", setting="accumulative")
+    with pytest.raises(ValueError, match="instantaneous and the accumulative"):  # one setting per pool
+        PoolVectorEnv(2, [builtin_game("small-reactive", "accumulative"), builtin_game("maze2", "instantaneous")])
     with pytest.raises(ValueError, match="obs_kind"):
         gym.make_vec("FlowTest-Maze2-v0", num_envs=2, vectorization_mode="vector_entry_point", obs_kind="pixels")
     with pytest.raises(ValueError, match="num_envs"):

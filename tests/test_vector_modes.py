@@ -227,3 +227,33 @@ def test_torchrl_gym_wrapper_takes_the_vector_env(mode: str) -> None:
     rollout = env.rollout(35, break_when_any_done=False)
     assert tuple(rollout.batch_size) == (8, 35)
     assert int(rollout["next", "done"].sum()) >= 8 * 3  # every env ended at least three episodes
+
+
+@pytest.mark.parametrize("mode", MODES, ids=lambda m: m.name)
+@pytest.mark.parametrize("env_id,options", [
+    ("FlowTest-SmallReactive-v0", {}), ("FlowTest-SmallReactive-v0", {"obs_kind": "grid"}),
+    ("FlowTest-SmallReactive-v0", {"obs_kind": "padded", "memory": "visited"}), ("FlowTest-Maze2-v0", {"memory": "visited"}),
+    ("FlowTest-BeaverRescue-v0", {}), ("FlowTest-MotionPrimitives-v0", {}), ("FlowTest-Patrolling-v0", {"shaping": 5.0}),
+])
+def test_accumulative_setting_equals_sync_vector_env(env_id: str, options: dict[str, Any], mode: AutoresetMode) -> None:
+    """The accumulative setting shows the restrictions of every state visited under the
+    current history: the vector env keeps them per env as the single env does."""
+    vec, ref = _pair(env_id, 4, mode, setting="accumulative", max_steps=30, **options)
+    compare(vec, ref, steps=120, seed=5)
+
+
+def test_accumulative_observation_shows_more_than_the_instantaneous_one() -> None:
+    """The comparison above is not trivial: somewhere the two settings' observations differ."""
+    rng = np.random.default_rng(0)
+    acc = FlowTestVectorEnv(8, "small-reactive", setting="accumulative", max_steps=30)
+    ins = FlowTestVectorEnv(8, "small-reactive", setting="instantaneous", max_steps=30)
+    o1, i1 = acc.reset(seed=0)
+    o2, _ = ins.reset(seed=0)
+    differ = 0
+    for _ in range(60):
+        a = _actions(rng, i1["action_mask"], 5, 0.0)
+        o1, _, _, _, i1 = acc.step(a)
+        o2, _, _, _, _ = ins.step(a)
+        assert np.all(o1 >= o2)  # the accumulative view adds shown restrictions, never removes one
+        differ += int(np.any(o1 != o2, axis=1).sum())
+    assert differ > 0
