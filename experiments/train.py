@@ -513,7 +513,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="native: FlowTest's batched masked PPO (default; a native checkpoint); sb3: stable-baselines3 "
                         "(an SB3 zip, which loading unpickles)")
     p.add_argument("--steps", type=positive_int, default=None,
-                   help="training time steps (default: native 2000000, sb3 50000)")
+                   help="training time steps (default: native 1500000, sb3 50000)")
     p.add_argument("--out", type=Path, required=True, help="model file (.zip); the curve goes next to it (.png)")
     p.add_argument("--seed", type=nonnegative_int, default=0, help="seed (default 0)")
     p.add_argument("--pool", metavar="NAME", default=None,
@@ -590,7 +590,7 @@ def run(args: argparse.Namespace) -> int:
     for path, what in ((model_path, "model"), (model_path.with_suffix(".png"), "curve"),
                        (model_path.with_suffix(".json"), "training summary")):
         check_output_path(path, args.force, what)
-    steps = args.steps if args.steps is not None else (50_000 if args.trainer == "sb3" else 2_000_000)
+    steps = args.steps if args.steps is not None else (50_000 if args.trainer == "sb3" else 1_500_000)
     shown = " ".join(f"{_flag(k)} {_shown(v)}" for k, v in settings.items())
     extra = "".join(f" --{k} {v}" for k, v in pool.items())
     sys.stderr.write(f"flowtest: training with --trainer {args.trainer} --steps {steps} --seed {args.seed}{extra} {shown}\n")
