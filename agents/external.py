@@ -425,15 +425,20 @@ def _stop(proc: subprocess.Popen[str]) -> None:
         pass
 
 
+MAX_LINE = 1 << 16
+"""Longest line read from a planner at once (a longer one arrives in pieces, the first of
+which is not an action)."""
+
+
 def _pump(stream: IO[str], into: queue.Queue[str | None]) -> None:
-    for line in stream:
+    while line := stream.readline(MAX_LINE):
         into.put(line)
     into.put(None)
 
 
 def _keep_tail(stream: IO[str], tail: deque[str]) -> None:
-    for line in stream:
-        tail.append(line.rstrip("\n"))
+    while line := stream.readline(MAX_LINE):
+        tail.append(line.rstrip("\n")[:300])
 
 
 class CommandPlanner:
@@ -526,6 +531,16 @@ class CommandPlanner:
         where = f"step {msg['step']}"
         if self.proc is None:
             raise PlannerError(f"{where}: the planner is not running (reset was not called)")
+        try:
+            early = self.lines.get_nowait()
+        except queue.Empty:
+            early = ""
+        if early is None:
+            raise self._crashed(where)
+        if early:
+            self._drop()
+            raise PlannerError(f"{where}: the planner wrote {_short(early)} before it was asked (one line per step "
+                               "on standard output; write logs to standard error)")
         self._send(msg, where)
         line = self._receive(where)
         try:

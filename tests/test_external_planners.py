@@ -295,3 +295,13 @@ def test_a_factory_that_raises_is_one_error_line(project: Path, capsys: pytest.C
     code = main(["evaluate", "--env", "warehouse.toml", "--sut", "python:moody:Planner", "--out", "r", "-q"])
     err = capsys.readouterr().err
     assert code == 2 and err.strip() == "error: --sut python:moody:Planner: the factory raised ValueError: no map for warehouse"
+
+
+def test_a_planner_that_writes_unasked_lines_fails_its_run(project: Path) -> None:
+    from experiments.evaluate import evaluate
+
+    write(project, "banner.py", "import sys\nprint('BFS planner v2 ready', flush=True)\n"
+                                "for line in sys.stdin:\n    if '\"step\"' in line[:20]:\n        print('stay', flush=True)\n")
+    cells = evaluate(["small-reactive"], ["cmd:python3 banner.py"], 2)
+    assert "wrote 'BFS planner v2 ready' before it was asked" in cells[0].traces[0].planner_error or (
+        "step 0: answered 'BFS planner v2 ready', which is not an action" in cells[0].traces[0].planner_error)
