@@ -706,7 +706,8 @@ class VectorActionMaskObservation(gym.vector.VectorWrapper):
     """Put the batched legal-action mask into the observation, as
     :class:`~flowtest_env.wrappers.ActionMaskObservation` does for one env: a ``Dict``
     with ``"observation"`` (``[num_envs, ...]``) and ``"action_mask"``
-    (``int8[num_envs, n_actions]``, taken from ``infos["action_mask"]``)."""
+    (``int8[num_envs, n_actions]``, taken from ``infos["action_mask"]``), in every
+    autoreset mode (``SAME_STEP``'s ``final_obs`` become such dicts too)."""
 
     def __init__(self, env: VectorEnv) -> None:
         super().__init__(env)
@@ -717,17 +718,33 @@ class VectorActionMaskObservation(gym.vector.VectorWrapper):
             {"observation": env.single_observation_space, "action_mask": spaces.Box(0, 1, shape=(n,), dtype=np.int8)}
         )
         self.observation_space = batch_space(self.single_observation_space, env.num_envs)
+        self._last: np.ndarray | None = None
 
     def reset(
         self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         # gymnasium 1.4 types VectorEnv.reset's seed as int | None; its vector envs and ours take a list too
         obs, infos = self.env.reset(seed=seed, options=options)  # type: ignore[arg-type]
-        return {"observation": obs, "action_mask": infos["action_mask"]}, infos
+        return {"observation": obs, "action_mask": self._mask(infos)}, infos
 
     def step(self, actions: Any) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         obs, reward, terminated, truncated, infos = self.env.step(actions)
-        return {"observation": obs, "action_mask": infos["action_mask"]}, reward, terminated, truncated, infos
+        if "final_obs" in infos:  # SAME_STEP: the ended episodes' last observations get their masks too
+            final, masks = infos["final_obs"].copy(), infos["final_info"]["action_mask"]
+            for i in np.flatnonzero(infos["_final_obs"]).tolist():
+                final[i] = {"observation": final[i], "action_mask": masks[i]}
+            infos = {**infos, "final_obs": final}
+        return {"observation": obs, "action_mask": self._mask(infos)}, reward, terminated, truncated, infos
+
+    def _mask(self, infos: dict[str, Any]) -> np.ndarray:
+        """The batch's masks now: from the infos, and for the envs a masked reset left
+        alone (absent from its infos) the masks they had."""
+        mask: np.ndarray = infos["action_mask"]
+        some = infos["_action_mask"]
+        if not some.all() and self._last is not None:
+            mask = np.where(some[:, None], mask, self._last)
+        self._last = mask
+        return mask
 
 
 __all__ = [

@@ -257,3 +257,31 @@ def test_accumulative_observation_shows_more_than_the_instantaneous_one() -> Non
         assert np.all(o1 >= o2)  # the accumulative view adds shown restrictions, never removes one
         differ += int(np.any(o1 != o2, axis=1).sum())
     assert differ > 0
+
+
+@pytest.mark.parametrize("mode", MODES, ids=lambda m: m.name)
+def test_mask_in_the_observation_in_every_mode(mode: AutoresetMode) -> None:
+    from flowtest_env import ActionMaskObservation
+    from flowtest_env.vector import VectorActionMaskObservation
+
+    vec = VectorActionMaskObservation(gym.make_vec("FlowTest-Maze1-v0", num_envs=4, vectorization_mode="vector_entry_point",
+                                                   autoreset_mode=mode, max_steps=15))
+    ref = gym.make_vec("FlowTest-Maze1-v0", num_envs=4, vectorization_mode="sync", wrappers=[ActionMaskObservation],
+                       vector_kwargs={"autoreset_mode": mode}, max_steps=15)
+    rng = np.random.default_rng(0)
+    o1, i1 = vec.reset(seed=4)
+    o2, i2 = ref.reset(seed=4)
+    _same((o1, i1), (o2, i2), "reset")
+    ends = 0
+    for t in range(80):
+        a = _actions(rng, o1["action_mask"], 5, 0.2)
+        o1, r1, te1, tr1, i1 = vec.step(a)
+        o2, r2, te2, tr2, i2 = ref.step(a)
+        _same((o1, r1, te1, tr1, i1), (o2, r2, te2, tr2, i2), f"step {t}")
+        ended = te1 | tr1
+        ends += int(ended.sum())
+        if mode == AutoresetMode.DISABLED and ended.any():
+            o1, i1 = vec.reset(options={"reset_mask": ended.copy()})
+            o2, i2 = ref.reset(options={"reset_mask": ended.copy()})
+            _same((o1, i1), (o2, i2), f"step {t}: masked reset")
+    assert ends >= 8
