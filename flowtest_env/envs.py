@@ -723,7 +723,8 @@ class RandomGridEnv(FlowTestEnv):
 
     Random grid worlds of the paper's scalability study: an empty ``size x size`` grid
     with a start, a goal and one cell per proposition, drawn by seed. Each reset draws
-    one problem of a pool of seeded instances (with ``self.np_random``); the pool is
+    one problem of a pool of seeded instances (episode ``e`` after ``reset(seed=k)`` plays
+    :func:`flowtest_env.draws.draw_test` ``(k, e, len(pool))``, as the vector envs do); the pool is
     synthesized with deterministic budgets (:func:`flowtest_env.random_grid.pool_options`)
     once per FlowTest and solver version and cached in memory and on disk
     (``$FLOWTEST_CACHE_DIR``, default ``~/.cache/flowtest``, under a key of the versions and
