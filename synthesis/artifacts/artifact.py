@@ -63,11 +63,12 @@ DIGEST_KEY = "digest"
 """The top-level field holding :func:`content_digest` of the rest of the document, as
 ``{"sha256": "<64 lowercase hex digits>"}``."""
 
-MAX_TABLE_CELLS = 5_000_000
+MAX_TABLE_CELLS = 2_000_000
 """Largest look-up table an artifact may declare (histories x moves, histories x states x
 action slots, the test agent's memory x rows x states, the closed loop's configurations):
-ten times the product-graph edges synthesis allows by default
-(:data:`synthesis.problems.limits.MAX_GRAPH_EDGES`), a few hundred MB of tables at most."""
+four times the product-graph edges synthesis allows by default
+(:data:`synthesis.problems.limits.MAX_GRAPH_EDGES`, itself about 6 GB while solving), so
+loading and checking any artifact FlowTest can make takes a few hundred MB at most."""
 
 MAX_LAYOUT_CELLS = 1_000_000
 """Largest grid layout (rows x cols) an artifact may declare."""
