@@ -376,7 +376,7 @@ dl.glossary dt{font-weight:700}dl.glossary dd{margin:0}
 .tests{display:grid;grid-template-columns:repeat(auto-fill,minmax(min(100%,480px),1fr));gap:1em}
 .test{border:1px solid #ddd;padding:.6em;min-width:0}.test h3{margin:.1em 0 .3em;overflow-wrap:anywhere}
 .test img{width:100%;height:auto;border:1px solid #eee}
-table.props{margin:.4em 0;font-size:.88em}table.props caption{text-align:left}table.props td{text-align:left;padding:2px 6px}
+table.props{margin:.2em 0 .6em;font-size:.88em}p.props{margin:.4em 0 0}table.props td{text-align:left;padding:2px 6px}
 table.props td:first-child{font-family:ui-monospace,monospace;white-space:nowrap}
 .swatch{display:inline-block;width:.8em;height:.8em;margin-right:.4em;vertical-align:-.05em;border:1px solid #888}
 code{background:#f3f3f3;padding:2px 4px;overflow-wrap:anywhere}
@@ -493,8 +493,8 @@ def _test_card(env: str, title: str, t: TestInfo | None) -> list[str]:
     )
     if t.propositions:
         squares = any(colour for _, _, colour in t.propositions)
-        parts.append("<table class='props'><caption class='small'>propositions"
-                     + (" (the coloured squares in the cells)" if squares else "") + "</caption>")
+        parts.append("<p class='small props'>Propositions" + (" (the coloured squares in the cells)" if squares else "")
+                     + ":</p><table class='props'>")
         for name, where, colour in t.propositions:
             swatch = (f"<span class='swatch' style='background:{e(colour)}'></span>"
                       if re.fullmatch(r"#[0-9a-fA-F]{6}", colour) else "")
