@@ -175,6 +175,7 @@ def milp_options(problem: Problem, options: SynthesisOptions) -> MilpOptions:
         backend=options.backend,
         work_limit=options.work_limit,
         caps=caps_of(problem, options),
+        one_way_walls=problem.one_way_walls,
     )
 
 
@@ -290,7 +291,7 @@ def over_caps(
     ``no test with at most 3 doors routes ... : the fewest that does is 5 doors``. That
     solve ends by ``deadline`` (the synthesis's, a ``perf_counter`` time; ``None``: at most
     :data:`~synthesis.routing.caps.FEWEST_SECONDS`)."""
-    if not milp.caps or exc.reason != "unroutable" or str(exc).startswith("no test with"):
+    if not milp.caps or exc.reason not in ("unroutable", "infeasible") or str(exc).startswith("no test with"):
         return exc
     note("no test within the caps: finding how few restrictions a test needs")
     left = deadline
@@ -306,6 +307,12 @@ def over_caps(
         if fewest.value <= limit and not fewest.exact:
             fewest = Fewest(limit + 1, False) if len(milp.caps) == 1 else fewest
         parts.append(fewest.text(CAP_NOUNS[cap]))
+    if exc.reason == "infeasible":  # a test agent's loop: the caps with the agent's own limits
+        return InconsistentProblem(
+            "infeasible",
+            f"no test with {caps_text(milp.caps)} exists for this test agent: {exc}; routing alone (the agent aside): "
+            f"{'; '.join(parts)}; raise the cap or drop it",
+        )
     return InconsistentProblem(
         "unroutable",
         f"no test with {caps_text(milp.caps)} routes every successful execution through the test objective "

@@ -29,7 +29,7 @@ _TOP_KEYS = {"name", "description", "system", "labels", "objectives", "environme
 _GRID_KEYS = {"grid", "start", "terminal", "restrictable"}
 _GRAPH_KEYS = {"states", "edges", "start", "terminal", "stay", "restrictable"}
 _OBJ_KEYS = {"system", "test"}
-_ENV_KEYS = {"kind", "static", "bidirectional_cuts", "time_limit", "setting", "agent", *CAP_KEYS}
+_ENV_KEYS = {"kind", "static", "bidirectional_cuts", "time_limit", "setting", "agent", "one_way_walls", *CAP_KEYS}
 
 
 def _unknown(section: str, got: dict[str, Any], allowed: set[str]) -> None:
@@ -198,7 +198,12 @@ def problem_from_dict(data: dict[str, Any], source: str = "<problem>", max_cells
     if "setting" in env:
         extras["setting"] = env["setting"]
     caps = check_caps({k: env[k] for k in CAP_KEYS if k in env}, f" in [environment]{where}")
-    kw: dict[str, Any] = {"static_moves": static_moves, "time_limit": time_limit, "extras": extras, "caps": caps}
+    one_way = env.get("one_way_walls", kind == "static" and bidir is False)
+    if not isinstance(one_way, bool):
+        raise ProblemError(f"`one_way_walls` in [environment]{where} must be true or false")
+    kw: dict[str, Any] = {
+        "static_moves": static_moves, "time_limit": time_limit, "extras": extras, "caps": caps, "one_way_walls": one_way,
+    }
     if "agent" in env:
         kw["agent"] = agent_from_toml(env["agent"], ts, cell_of, f"[environment.agent]{where}")
     elif kind == "agent":

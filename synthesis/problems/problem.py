@@ -101,6 +101,11 @@ class Problem:
         Caps on what a test may use (:data:`CAP_KEYS`: ``max_walls``, ``max_doors``,
         ``max_restrictions``), counted as physical restrictions (moves of the system between
         two places, a two-way wall once); absent keys: no cap.
+    one_way_walls
+        Whether a static restriction may block one direction of a move and leave the move
+        back open (``MilpOptions.one_way_walls``). True here (the built-in problems, as
+        published); problem files default to false unless a static problem sets
+        ``bidirectional_cuts = false``.
     """
 
     name: str
@@ -116,6 +121,7 @@ class Problem:
     description: str = ""
     extras: dict[str, Any] = field(default_factory=dict)
     caps: dict[str, int] = field(default_factory=dict)
+    one_way_walls: bool = True
 
     def __post_init__(self) -> None:
         if self.kind == "agent" and self.static_moves is None and self.agent is not None:

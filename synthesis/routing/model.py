@@ -21,6 +21,7 @@ from scipy.sparse.csgraph import breadth_first_order
 from ..graphs.consistency import check_consistency
 from ..graphs.products import Products, reachable
 from ..model.errors import InconsistentProblem
+from ..model.systems import TransitionSystem
 from ..problems.problem import TIE_PLACES
 from .cut_bound import CutBound, static_cut_bound
 from .flow_bound import static_flow_bound
@@ -160,6 +161,13 @@ class MilpOptions:
         (:meth:`~synthesis.routing.cover_rows.CoverSeparator.separate`). With a cap the
         dominance reduction is off (its proof swaps one cut group for another, which may
         add a physical restriction).
+    one_way_walls
+        Whether a static restriction may block a move while the move back stays open. Off,
+        the two directions of a move in the static area share one cut (a wall blocks both
+        ways), and a static move whose move back lies outside the static area cannot be
+        restricted at all (the wall would be one-way). On (the default here, and for the
+        built-in problems: their shipped answers), walls follow ``bidirectional`` alone.
+        Problem files default to off (``one_way_walls`` in ``[environment]``).
     """
 
     mode: str = "reactive"
@@ -187,6 +195,7 @@ class MilpOptions:
     backend: str = "auto"
     work_limit: float | None = None
     caps: dict[str, int] = field(default_factory=dict)
+    one_way_walls: bool = True
 
     @property
     def deterministic(self) -> bool:
@@ -323,6 +332,15 @@ def cut_groups(products: Products, options: MilpOptions) -> CutGroups:
         return a * n + b, n * n
 
     move_key, span = pair_key(static_place)  # static tie key of each move
+    restrictable = ts.restrictable
+    if not options.one_way_walls:
+        # walls block both ways: the two directions of a static move share one key, and a
+        # static move whose move back is not static cannot be a wall at all
+        n_pl = np.int64(int(static_place.max()) + 1)
+        a = static_place[ts.src].astype(np.int64)
+        b = static_place[ts.dst].astype(np.int64)
+        move_key = np.minimum(a, b) * n_pl + np.maximum(a, b)
+        restrictable = restrictable & ~(static_moves & _back_not_static(ts, static_moves))
     reactive_key, reactive_span = pair_key(reactive_place)
     is_static = static_moves[g.move]
     history = g.hist[g.src].astype(np.int64)
@@ -331,7 +349,7 @@ def cut_groups(products: Products, options: MilpOptions) -> CutGroups:
     of_edge = of_edge.ravel()
     n = keys.size
     weight = np.bincount(of_edge, minlength=n)
-    unrestrictable = np.bincount(of_edge, weights=~ts.restrictable[g.move], minlength=n) > 0
+    unrestrictable = np.bincount(of_edge, weights=~restrictable[g.move], minlength=n) > 0
     return CutGroups(
         of_edge=of_edge,
         keys=keys,
@@ -340,6 +358,18 @@ def cut_groups(products: Products, options: MilpOptions) -> CutGroups:
         static=keys < span,
         move_key=move_key,
     )
+
+
+def _back_not_static(ts: TransitionSystem, static_moves: np.ndarray) -> np.ndarray:
+    """``bool`` per move: a move back exists (between the same two states) and is not static."""
+    n = np.int64(ts.n_states)
+    fwd = ts.src.astype(np.int64) * n + ts.dst
+    back = ts.dst.astype(np.int64) * n + ts.src
+    order = np.argsort(fwd)
+    pos = np.minimum(np.searchsorted(fwd[order], back), fwd.size - 1)
+    exists = fwd[order][pos] == back
+    out: np.ndarray = exists & ~static_moves[order[pos]]
+    return out
 
 
 def static_moves_of(products: Products, options: MilpOptions) -> np.ndarray:
