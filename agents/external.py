@@ -28,7 +28,8 @@ FlowTest to the planner:
     Once, when the process starts. ``test``: ``name``, ``kind`` (``static``, ``reactive``,
     ``mixed``, ``agent``), ``objective`` (the system objective, the SUT's own task; never
     the hidden test objective), ``system`` (the transition system as the artifact writes
-    it: ``states``, ``moves``, ``labels``, ``layout``, ...; docs/artifact-schema.md),
+    it: ``states``, ``moves``, ``labels``, ``layout``, ...; docs/artifact-schema.md; the
+    labels only of the system objective's propositions, as the environments show them),
     ``actions`` (the action names of a grid: ``N S E W stay``; on graphs ``null``: the
     names are given per step), ``max_steps`` and ``agent`` (whether a test agent moves).
 ``{"type": "reset", "seed": S}``

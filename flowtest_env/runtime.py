@@ -38,15 +38,30 @@ class RuntimeRefused(ValueError):
 
 def describe(game: TestGame, max_steps: int | None) -> dict[str, Any]:
     """The public description of a test, as the system under test may know it: its name,
-    kind, the system objective (never the hidden test objective), the transition system as
-    the artifact holds it, the grid's action names (``None`` on graphs), the step budget
-    and whether a test agent moves."""
+    kind, the system objective, the transition system as the artifact holds it, the grid's
+    action names (``None`` on graphs), the step budget and whether a test agent moves.
+
+    What the environments never show the system is left out here too: the test objective,
+    and in ``system`` every proposition the system objective does not name (``labels`` keep
+    only the system objective's) and the names of the grid cells that carry one
+    (``layout.tokens``)."""
+    from synthesis.model.specs import parse_formula, propositions
+
     art = game.artifact
+    system = art.system.to_dict()
+    visible = set(propositions(parse_formula(art.objectives.get("system", "true"))))
+    labels = system["labels"]
+    hidden_places = {int(art.system.place[s]) for s, lab in enumerate(labels) if set(lab) - visible}
+    hidden_cells = [game.ts.places[p] for p in hidden_places]
+    system["labels"] = [[p for p in lab if p in visible] for lab in labels]
+    if system.get("layout"):
+        system["layout"] = {**system["layout"], "tokens": [
+            t for t in system["layout"]["tokens"] if (t[0], t[1]) not in hidden_cells]}
     return {
         "name": art.name,
         "kind": art.kind,
         "objective": art.objectives.get("system", ""),
-        "system": art.system.to_dict(),
+        "system": system,
         "actions": [*GRID_ACTIONS, "stay"] if game.is_grid else None,
         "max_steps": max_steps,
         "agent": game.has_agent,

@@ -163,3 +163,18 @@ def test_flowtest_serve_on_a_localhost_socket() -> None:
 def test_serve_refuses_an_unknown_test(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["serve", "no-such-test"]) == 2
     assert capsys.readouterr().err.startswith("error: ")
+
+
+@pytest.mark.parametrize("name,hidden", [("small-reactive", ["I1", "I2"]), ("maze2", ["I1", "I2"]),
+                                         ("refueling", [])])
+def test_the_public_description_hides_the_test_objective(name: str, hidden: list[str]) -> None:
+    rt = TestRuntime.load(name)
+    test = rt.describe()
+    art = rt.game.artifact
+    assert test["objective"] == art.objectives["system"] and "test" not in test
+    shown = {p for lab in test["system"]["labels"] for p in lab}
+    for p in hidden:
+        assert p in {q for lab in art.system.to_dict()["labels"] for q in lab}  # the artifact has it
+        assert p not in shown
+        assert all(t[2] != p for t in (test["system"]["layout"] or {"tokens": []})["tokens"])
+    assert shown  # the system objective's own propositions stay
