@@ -409,7 +409,7 @@ class StepOutput(NamedTuple):
 def start_configurations(tables: TorchTables, key: torch.Tensor, episode: torch.Tensor, home: torch.Tensor) -> torch.Tensor:
     """``int64[N]``: the reset configuration of episode ``episode`` of each env."""
     if tables.n_tests == 1:
-        return tables.initial.index_select(0, torch.zeros_like(home))
+        return tables.initial[:1].expand(home.shape[0])
     if tables.assignment == "fixed":
         return tables.initial.index_select(0, home % tables.n_tests)
     return tables.initial.index_select(0, draw_tests(key, episode, tables.n_tests))
@@ -437,12 +437,14 @@ def reset_state(
         seeds = list(seed)
         if len(seeds) != n:
             raise ValueError(f"{len(seeds)} seeds for {n} envs")
+        if any(isinstance(s, bool) or not isinstance(s, (int, np.integer)) or s < 0 for s in seeds):
+            raise ValueError("seeds must be non-negative integers")
         keys = torch.as_tensor([_key_bits(int(s)) for s in seeds], dtype=torch.int64, device=dev)
     if keys.shape != (n,):
         raise ValueError(f"expected {n} keys, got a tensor of shape {tuple(keys.shape)}")
     ep = torch.zeros(n, dtype=torch.int64, device=dev) if episode is None else episode.to(device=dev, dtype=torch.int64)
     home = torch.arange(n, dtype=torch.int64, device=dev)
-    z = start_configurations(tables, keys, ep, home)
+    z = start_configurations(tables, keys, ep, home).contiguous()
     zero = torch.zeros(n, dtype=torch.int64, device=dev)
     return EnvState(
         z=z, steps=zero, restrictions=zero.clone(), blocked=zero.clone(), key=keys, episode=ep, home=home,
@@ -896,7 +898,7 @@ def make_tables(env_id: str, device: str | torch.device = "cpu", reward_dtype: t
 
 
 __all__ = [
-    "AUTORESET_MODES", "EnvState", "StepOutput", "TorchTables", "TorchVectorEnv", "Verdict", "action_mask",
+    "AUTORESET_MODES", "EnvState", "StepOutput", "TorchTables", "TorchVectorEnv", "Verdict", "action_mask", "autoreset_name",
     "build_tables", "compact", "compact_of", "draw_tests", "expand", "make_tables", "make_vec", "mix64", "observation_of",
     "observe", "outcome_names", "reset_state", "restart", "shaped_rewards", "step", "tables_of", "masked_verdict",
     "unpack_visited",
