@@ -513,6 +513,8 @@ def _markdown(records: Sequence[dict[str, Any]]) -> str:
         lines.append("")
         for r in rows:
             pics = r["pictures"]
+            if r.get("stopped"):
+                lines += [f"**{test_name(r)}** — stopped: {r['stopped']}", ""]
             if r["failures"]:
                 f = r["failures"][0]
                 lines += [f"**{test_name(r)}** — first failure ({f['kind']}): {f['reason']}. Replay:", "",

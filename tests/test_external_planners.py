@@ -202,6 +202,8 @@ def test_misbehaving_planners_in_the_cli_report_and_replay(project: Path, capsys
         f = records[f"cmd:python3 {name}"]["failures"][0]
         assert reason in f["reason"]
         assert html_escaped(reason.split(": ")[-1][:30]) in page or reason.split(": ")[-1][:30] in page
+    md = (project / "report" / "report.md").read_text()
+    assert md.count("— stopped: the planner failed in run 1 of 2 (seed 0)") == len(BAD_PLANNERS)
     crash = records["cmd:python3 crash.py"]["failures"][0]
     assert main(replay_args(crash["replay"], project)) == 0
     assert "out of battery at step 3" in capsys.readouterr().out
