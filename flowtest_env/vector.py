@@ -122,12 +122,7 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         num_envs = positive_int("num_envs", num_envs)
         one_of("assignment", assignment, ("random", "fixed"))
         self.autoreset_mode = autoreset_mode_of(autoreset_mode)
-        if config is None:
-            config, rest = split_options(options)
-            if rest:
-                raise TypeError(f"{type(self).__name__} got unexpected keyword arguments: {', '.join(sorted(rest))}")
-        elif options:
-            raise TypeError("pass the env options either as config= or as keyword arguments, not both")
+        config = _config_of(type(self).__name__, config, options)
         one_of("render_mode", config.render_mode, (None, *self.metadata["render_modes"]))
         self.games: list[TestGame] = pool_games(games, config.setting)
         settings = {g.setting for g in self.games}
@@ -521,13 +516,12 @@ class FlowTestVectorEnv(PoolVectorEnv):
         test: Any = "maze2",
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         problem: Any = None,
+        config: EnvConfig | None = None,
         **options: Any,
     ) -> None:
         if problem is not None:
             test = problem
-        config, rest = split_options(options)
-        if rest:
-            raise TypeError(f"{type(self).__name__} got unexpected keyword arguments: {', '.join(sorted(rest))}")
+        config = _config_of(type(self).__name__, config, options)
         positive_int("num_envs", num_envs)
         game = game_for(test, config.setting)
         super().__init__(num_envs, [game], autoreset_mode=autoreset_mode, config=config.with_max_steps(default_max_steps(game)))
@@ -553,17 +547,36 @@ class RandomGridVectorEnv(PoolVectorEnv):
         count: int = 8,
         world: str = "empty",
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
+        config: EnvConfig | None = None,
         **options: Any,
     ) -> None:
-        config, rest = split_options(options)
-        if rest:
-            raise TypeError(f"{type(self).__name__} got unexpected keyword arguments: {', '.join(sorted(rest))}")
+        config = _config_of(type(self).__name__, config, options)
         positive_int("num_envs", num_envs)
         size, family, n, seeds, kind, world = random_grid_pool(size, family, n, seeds, kind, pool, split, count, world)
         tests = random_pool(size, family, n, seeds, kind, world=world)
         games = [TestGame(a, config.setting) for a in tests]
         super().__init__(num_envs, games, autoreset_mode=autoreset_mode, config=config.with_max_steps(4 * size * size))
         self.problem = f"random-{size}x{size}-{family}{n}" + ("" if world == "empty" else f"-{world}")
+
+
+def _config_of(who: str, config: EnvConfig | None, options: dict[str, Any]) -> EnvConfig:
+    """The env options given as ``config=`` or as keyword arguments (not both).
+
+    Raises
+    ------
+    TypeError
+        On a keyword argument that is no option, or options given both ways.
+    """
+    if config is not None:
+        if options:
+            raise TypeError(f"{who}: pass the env options either as config= or as keyword arguments, not both")
+        if not isinstance(config, EnvConfig):
+            raise TypeError(f"{who}: config must be an EnvConfig, not {type(config).__name__}")
+        return config
+    config, rest = split_options(options)
+    if rest:
+        raise TypeError(f"{who} got unexpected keyword arguments: {', '.join(sorted(rest))}")
+    return config
 
 
 def shaped_rewards(pool: CompiledPool, reward: np.ndarray, phi: np.ndarray, gamma: float) -> np.ndarray:

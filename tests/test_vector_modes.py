@@ -285,3 +285,21 @@ def test_mask_in_the_observation_in_every_mode(mode: AutoresetMode) -> None:
             o2, i2 = ref.reset(options={"reset_mask": ended.copy()})
             _same((o1, i1), (o2, i2), f"step {t}: masked reset")
     assert ends >= 8
+
+
+def test_options_as_one_config() -> None:
+    """The vector envs take the options as one EnvConfig too, and refuse unknown ones."""
+    from flowtest_env import EnvConfig
+    from flowtest_env.vector import RandomGridVectorEnv
+
+    config = EnvConfig(memory="visited", shaping=2.0, max_steps=9)
+    env = FlowTestVectorEnv(3, "maze2", config=config)
+    assert env.config == config and env.max_steps == 9
+    same = FlowTestVectorEnv(3, "maze2", memory="visited", shaping=2.0, max_steps=9)
+    assert np.array_equal(env.reset(seed=1)[0], same.reset(seed=1)[0])
+    with pytest.raises(TypeError, match="not both"):
+        FlowTestVectorEnv(3, "maze2", config=config, memory="none")
+    with pytest.raises(TypeError, match="bogus"):
+        FlowTestVectorEnv(3, "maze2", bogus=1)
+    with pytest.raises(TypeError, match="bogus"):
+        RandomGridVectorEnv(3, bogus=1)
