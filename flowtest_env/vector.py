@@ -167,13 +167,14 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         self._restrictions = np.zeros(self.num_envs, dtype=np.int64)
         self._blocked = np.zeros(self.num_envs, dtype=np.int64)
         self._seen = np.zeros((self.num_envs, mem_size), dtype=np.float32) if self._mem is not None else None
+        self._mem_at = int(np.prod(p.obs_shape))
         # accumulative setting: the shown-restriction entries of the states visited under the current history
-        self._shown: np.ndarray | None = shared_shown_entries(self.encoders) if accumulative else None
+        self._shown: np.ndarray | slice | None = shared_shown_entries(self.encoders) if accumulative else None
         self._history = np.concatenate([t.history for t in p.tests]).astype(np.int64)
-        self._shown_now = np.zeros((num_envs, 0 if self._shown is None else self._shown.size), dtype=p.obs.dtype)
+        n_shown = 0 if self._shown is None else int(np.zeros(self._mem_at, dtype=np.int8)[self._shown].size)
+        self._shown_now = np.zeros((num_envs, n_shown), dtype=p.obs.dtype)
         self._shown_h = np.zeros(num_envs, dtype=np.int64)
         # the observation rows, with room for the memory (filled per step) when there is one
-        self._mem_at = int(np.prod(p.obs_shape))
         self._obs_table = p.obs if self._mem is None else np.concatenate([p.obs, np.zeros((p.obs.shape[0], mem_size), np.float32)], axis=1)
         self._done = np.zeros(self.num_envs, dtype=bool)  # episodes ended and not reset yet
         self._keys = np.zeros(self.num_envs, dtype=np.uint64)  # the test draws' keys (flowtest_env.draws)
@@ -645,9 +646,10 @@ def pool_games(games: Any, setting: str | None) -> list[TestGame]:
     return out
 
 
-def shared_shown_entries(encoders: list[Encoder]) -> np.ndarray:
+def shared_shown_entries(encoders: list[Encoder]) -> np.ndarray | slice:
     """The flat indices of the entries a shown restriction sets (the ``wall_*``/``door_*``
-    planes, a graph's ``shown_restriction`` block), the same for every encoder of a pool.
+    planes, a graph's ``shown_restriction`` block), the same for every encoder of a pool
+    (a slice when they are one block).
 
     Raises
     ------
@@ -667,7 +669,10 @@ def shared_shown_entries(encoders: list[Encoder]) -> np.ndarray:
     if len(found) != 1:
         raise ValueError("the accumulative setting needs the pool's tests to show restrictions at the same entries; "
                          "these differ (use obs_kind='padded')")
-    return np.array(found.pop(), dtype=np.int64)
+    entries = np.array(found.pop(), dtype=np.int64)
+    if entries.size and np.array_equal(entries, np.arange(entries[0], entries[0] + entries.size)):
+        return slice(int(entries[0]), int(entries[0]) + entries.size)  # one block (the usual case): views, no copies
+    return entries
 
 
 def available_memory() -> int | None:
