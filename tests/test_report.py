@@ -208,7 +208,7 @@ def namesakes(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[str]
         _problem(root / "a.toml", GRIDS[3]),
     ]
     out = root / "report"
-    cells = evaluate(envs, ["scripted:committed", "random"], 2, seed=0)
+    cells = evaluate(envs, ["scripted:replanner", "scripted:greedy"], 1, seed=0)
     records = write_report(cells, out)
     return out, envs, records
 
@@ -232,6 +232,11 @@ def test_namesake_tests_get_their_own_files_anchors_and_pictures(namesakes: tupl
     # every run picture and failure anchor is one pair's own
     files = [name for r in records for name in r["pictures"].values()]
     assert len(files) == len(set(files)) and len({f.lower() for f in files}) == len(files)
+    assert any(r["n_failures"] for r in records) and any(not r["n_failures"] for r in records)
+    # scripted:greedy walks into the hazard: results.json names the broken conjunct, the report shows it
+    broken = [f["violation"] for r in records for f in r["failures"] if f["verdict"]["system_objective"] == "violated"]
+    assert broken and all(v["conjunct"] == "G !hazard" and v["where"] == "(1, 1)" for v in broken)
+    assert page.count("class='broke'") == len(broken)
     fail_ids = re.findall(r"<h3 id='(fail-[^']+)'", page)
     assert len(fail_ids) == len(set(fail_ids)) == sum(1 for r in records if r["n_failures"])
 
