@@ -280,7 +280,7 @@ NATIVE_DEFAULTS: dict[str, Any] = {
     "obs_kind": "flat",
     "pad_to": 8,
     "device": "auto",
-    "env_backend": "torch",
+    "env_backend": "auto",
     "threads": 1,
 }
 """The native trainer's settings: 128 envs x 32 steps per rollout (4,096 steps), minibatches
@@ -494,7 +494,8 @@ SETTING_HELP: dict[str, str] = {
     "gru_hidden_size": "GRU width (native recurrent-ppo)", "gae_lambda": "GAE lambda", "clip_range": "PPO ratio clip",
     "vf_coef": "value loss weight", "max_grad_norm": "gradient clip",
     "device": "auto (cuda when torch sees one), cpu, cuda, cuda:N", "threads": "torch CPU threads",
-    "env_backend": "who steps the tests: torch (the torch env on --device) or numpy (the NumPy vector env)",
+    "env_backend": "who steps the tests: torch (the torch env on --device), numpy (the NumPy vector env), auto (torch "
+                   "on a GPU, numpy on the CPU)",
     "shaping": "env option: shaping scale, 0 = off",
     "memory": "env option: the SUT's memory, none or visited", "obs_kind": "env option: flat, grid or padded",
     "pad_to": "env option: grid side of obs_kind=padded",
@@ -546,7 +547,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
             kw["choices"] = tuple(dict.fromkeys([*NATIVE_ALGOS, *ALGOS]))
         elif key in ("memory", "obs_kind", "env_backend"):
             kw["choices"] = {"memory": ("none", "visited"), "obs_kind": ("flat", "grid", "padded"),
-                             "env_backend": ("torch", "numpy")}[key]
+                             "env_backend": ("auto", "torch", "numpy")}[key]
         elif key == "device":
             kw["type"] = str
         else:
