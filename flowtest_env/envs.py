@@ -709,6 +709,18 @@ def random_grid_pool(
         n = None if n is None else positive_int("n", n)
     else:
         count = positive_int("count", count)
+        # n=1 passes: specs of earlier versions listed it next to a pool
+        defaults: dict[str, tuple[Any, ...]] = {
+            "size": (5,), "family": ("reachability",), "n": (None, 1), "seeds": (tuple(range(8)),), "kind": ("reactive",),
+            "world": ("empty",),
+        }
+        given = {"size": size, "family": family, "n": n, "seeds": seeds, "kind": kind, "world": world}
+        clash = [k for k, v in given.items() if v not in defaults[k]]
+        if clash:
+            raise ValueError(
+                f"pool={pool!r} decides the size, family, n, seeds, kind and world; it cannot be combined with "
+                f"{', '.join(f'{k}={given[k]!r}' for k in clash)} (pass split= and count= to choose its seeds)"
+            )
     size, family, n, seeds, kind, world = random_grid_arguments(pool, split, count, size, family, n, seeds, kind, world)
     one_of("family", family, tuple(FAMILIES))
     one_of("kind", kind, POOL_KINDS)

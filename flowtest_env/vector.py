@@ -479,7 +479,8 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         )
 
     def render(self) -> tuple[np.ndarray, ...] | None:
-        """``rgb_array``: one picture per env (drawn one by one; not for the hot loop)."""
+        """``rgb_array``: one picture per env (drawn one by one; not for the hot loop; in the
+        accumulative setting the restrictions of the current state only)."""
         if self.render_mode is None:
             gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array' to make_vec()")
             return None

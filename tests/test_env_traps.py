@@ -94,3 +94,13 @@ def test_human_rendering_built_directly_says_how() -> None:
     pytest.importorskip("pygame")
     with pytest.raises(ValueError, match="HumanRendering"):
         FlowTestEnv("maze2", render_mode="human")
+
+
+@pytest.mark.parametrize("kwargs", [{"seeds": [3, 4]}, {"size": 7}, {"family": "reaction"}, {"kind": "static"}])
+def test_a_pool_is_not_combined_with_the_arguments_it_decides(kwargs: dict[str, object]) -> None:
+    """``pool=`` decides the grid and the seeds: other values for them would be ignored
+    silently, so they are refused (by the single and the vector env alike)."""
+    with pytest.raises(ValueError, match="cannot be combined"):
+        gym.make("FlowTest-RandomGrid-v0", pool="reachability1/5x5", **kwargs)
+    with pytest.raises(ValueError, match="cannot be combined"):
+        gym.make_vec("FlowTest-RandomGrid-v0", num_envs=2, vectorization_mode="vector_entry_point", pool="reachability1/5x5", **kwargs)
