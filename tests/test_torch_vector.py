@@ -381,3 +381,24 @@ def test_copy_false_writes_every_observation_into_one_buffer() -> None:
         o1, *_ = fresh.step(a)
         o2, *_ = reused.step(a)
         assert o2 is first  # the same buffer, overwritten
+
+
+@pytest.mark.slow
+def test_the_functional_step_compiles_and_gives_the_eager_results() -> None:
+    """``torch.compile`` takes the step as it is (what a GPU trainer does to fuse it)."""
+    tables = tv.make_tables("FlowTest-RandomGrid-v0", size=3, seeds=[0, 1, 2], max_steps=10, memory="visited")
+
+    def advance(s: tv.EnvState, a: Any) -> tuple[tv.EnvState, Any, Any]:
+        s, out = tv.step(tables, s, a, "same_step")
+        return s, out.reward, tv.observe(tables, s)
+
+    fused = torch.compile(advance, dynamic=False)
+    eager_state = compiled_state = tv.reset_state(tables, 64, seed=2)
+    gen = torch.Generator().manual_seed(0)
+    for _ in range(40):
+        mask = tv.action_mask(tables, eager_state)
+        a = torch.argmax(torch.rand(mask.shape, generator=gen) * mask, dim=1)
+        eager_state, r1, o1 = advance(eager_state, a)
+        compiled_state, r2, o2 = fused(compiled_state, a)
+        assert torch.equal(r1, r2) and torch.equal(o1, o2)
+        assert all(torch.equal(x, y) for x, y in zip(eager_state, compiled_state, strict=True))
