@@ -80,6 +80,7 @@ from .compiled import OUTCOMES, CompiledPool, potentials
 from .draws import GOLDEN_I64, MAX_TESTS, MIX1_I64, MIX2_I64
 from .encoding import make_encoder
 from .game import TestGame
+from .vector import shaped_rewards
 from .wrappers import DistancePotential, shared_position_slice
 
 AUTORESET_MODES: tuple[str, ...] = ("next_step", "same_step", "disabled")
@@ -234,17 +235,6 @@ class TorchTables:
         return replace(self, **moved)
 
 
-def shaped_rewards(pool: CompiledPool, base: np.ndarray, phi: np.ndarray, gamma: float) -> np.ndarray:
-    """``base + (gamma * phi(z') - phi(z))`` per ``(z, action)``, ``phi(z') = 0`` when the
-    step ends the run: the single env's ``reward += gamma * phi - last`` in float64."""
-    a = pool.n_actions
-    z2 = pool.next_z
-    phi2 = np.where(pool.outcome[z2] != 0, 0.0, phi[z2])
-    phi1 = np.repeat(phi, a)
-    out: np.ndarray = base + (float(gamma) * phi2 - phi1)
-    return out
-
-
 def _visited_words(obs: np.ndarray, where: slice) -> tuple[np.ndarray, int]:
     """``int64[n_rows, W]`` the places each observation row shows (packed), and the count
     of places. The position entries must be 0 or 1 (a one-hot of the SUT's place)."""
@@ -298,6 +288,11 @@ def build_tables(
         raise ValueError(f"{len(games)} games for a pool of {len(pool.tests)} tests")
     if len(pool.tests) > MAX_TESTS:
         raise ValueError(f"a pool holds at most {MAX_TESTS} tests")
+    if any(g.setting != "instantaneous" for g in games):
+        raise ValueError(
+            "the torch env supports setting='instantaneous' only (the accumulative observation depends on the "
+            "states visited under the history; the NumPy vector env has it)"
+        )
     reward = pool.rewards(step_cost, restricted_penalty, goal_reward, violation_penalty)
     if shaping > 0:
         reward = shaped_rewards(pool, reward, potentials(pool, list(games), DistancePotential(shaping)), shaping_gamma)
@@ -900,6 +895,6 @@ def make_tables(env_id: str, device: str | torch.device = "cpu", reward_dtype: t
 __all__ = [
     "AUTORESET_MODES", "EnvState", "StepOutput", "TorchTables", "TorchVectorEnv", "Verdict", "action_mask", "autoreset_name",
     "build_tables", "compact", "compact_of", "draw_tests", "expand", "make_tables", "make_vec", "mix64", "observation_of",
-    "observe", "outcome_names", "reset_state", "restart", "shaped_rewards", "step", "tables_of", "masked_verdict",
+    "observe", "outcome_names", "reset_state", "restart", "step", "tables_of", "masked_verdict",
     "unpack_visited",
 ]

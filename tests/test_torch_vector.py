@@ -339,6 +339,8 @@ def test_bad_use_raises_clear_errors() -> None:
         env.reset(options={"reset_mask": torch.ones(2, dtype=torch.bool)})
     with pytest.raises(ValueError, match="num_envs"):
         tv.make_vec("FlowTest-Maze2-v0", 0)
+    with pytest.raises(ValueError, match="instantaneous"):  # the NumPy env has the accumulative setting, this one not
+        tv.make_vec("FlowTest-SmallReactive-v0", 2, setting="accumulative")
 
 
 def test_outcome_codes_name_the_outcomes() -> None:
