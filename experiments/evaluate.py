@@ -78,6 +78,7 @@ from .report import (
     render_html,
     test_infos,
     test_name,
+    test_title,
     violation_of_trace,
 )
 from .trace_picture import trace_picture
@@ -368,7 +369,7 @@ def _filmstrip(trace: Trace, path: Path) -> None:
     game = env.unwrapped.game
     env.close()
     v = trace.verdict
-    title = (f"{trace.sut} on {trace.env_id}, seed {trace.seed}: {trace.reason or v['system_objective']} "
+    title = (f"{trace.sut} on {test_title(trace.env_id, str(game.artifact.name))}, seed {trace.seed}: {trace.reason or v['system_objective']} "
              f"(system objective {v['system_objective']}, {v['steps']} steps)")
     filmstrip(game, trace.states, trace.actions, title, path)
 
