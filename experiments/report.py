@@ -450,6 +450,8 @@ def _cell(r: dict[str, Any], anchor: str) -> str:
         fails.append(f"{r['test_failures']} FlowTest bug")
     if fails:
         lines.append(f"<span class='small'>{', '.join(fails)}</span>")
+    if r.get("stopped"):
+        lines.append(f"<span class='small' title='{html.escape(str(r['stopped']), quote=True)}'>stopped early</span>")
     body = "<br>".join(lines)
     if r["n_failures"]:
         body = f"<a href='#{anchor}' title='see the failing runs'>{body}</a>"
@@ -595,6 +597,8 @@ def render_html(
             f"<p>{r['n_failures']} of {r['episodes']} runs failed. First failure (seed {f0['seed']}, "
             f"{'FlowTest bug' if f0['kind'] == 'test' else 'the SUT'}): {e(f0['reason'])}.</p>"
         )
+        if r.get("stopped"):
+            parts.append(f"<p>Stopped: {e(str(r['stopped']))}.</p>")
         broken = next((f for f in r["failures"] if isinstance(f.get("violation"), dict)
                        and "conjunct" in f["violation"]), None)
         if broken is not None:

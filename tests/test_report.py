@@ -324,7 +324,9 @@ def test_hostile_names_are_escaped_in_titles_and_legends(tmp_path: Path) -> None
               "failures": [{"seed": 0, "kind": "sut", "reason": "violated <bad-e>", "verdict": {}, "replay": "r",
                             "violation": {"conjunct": "G !<bad-f>", "step": 1, "where": "(0, <bad-g>)", "alone": True,
                                           "text": "broke G !<bad-h>"}}]}
+    record["stopped"] = "the planner <bad-i> failed in run 1 of 2 (seed 0)"
     page = render_html([record], [info])
+    assert "stopped early" in page and "Stopped: the planner &lt;bad-i&gt; failed in run 1 of 2 (seed 0)." in page
     for raw in ("<script>", "<img src=x", "<svg", "<bad-", "onmouseover='x", "tests/x'.png"):
         assert raw not in page, raw
     assert html_lib.escape("<script>alert(1)</script>") in page
