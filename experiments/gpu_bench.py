@@ -124,7 +124,8 @@ def bench_torch(case: str, tables: tv.TorchTables, num_envs: int, seconds: float
     gen = torch.Generator(device=device).manual_seed(0)
     holder = {"state": state}
     a_n = tables.n_actions
-    buffer = torch.empty((num_envs, *tables.obs_shape), dtype=tables.obs.dtype, device=device)
+    observes = case in ("maze2-obs-visited", "pool-padded")
+    buffer = torch.empty((num_envs, *tables.obs_shape), dtype=tables.obs.dtype, device=device) if observes else None
 
     def advance(s: tv.EnvState, u: torch.Tensor) -> tuple[tv.EnvState, torch.Tensor | None]:
         a = torch.argmax(u * tables.mask.index_select(0, s.z), dim=1)
@@ -167,7 +168,7 @@ def fits(tables: tv.TorchTables, num_envs: int) -> bool:
     the device's free memory with room to spare (CPU: always)."""
     if tables.device.type != "cuda":
         return True
-    per_env = 8 * 16 + tables.n_actions * 8 + 4 * int(np.prod(tables.obs_shape)) * 3
+    per_env = 8 * 16 + tables.n_actions * 8 + 4 * int(np.prod(tables.obs_shape)) * 2
     free, _ = torch.cuda.mem_get_info(tables.device)
     return num_envs * per_env < 0.6 * free
 

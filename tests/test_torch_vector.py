@@ -12,6 +12,7 @@ verdicts and the test each env plays. Skipped when torch is not installed.
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 from typing import Any
@@ -404,3 +405,20 @@ def test_the_functional_step_compiles_and_gives_the_eager_results() -> None:
         compiled_state, r2, o2 = fused(compiled_state, a)
         assert torch.equal(r1, r2) and torch.equal(o1, o2)
         assert all(torch.equal(x, y) for x, y in zip(eager_state, compiled_state, strict=True))
+
+
+def test_the_benchmark_script_runs_and_writes_its_figures(tmp_path: Any, capsys: Any) -> None:
+    from experiments import gpu_bench
+
+    out = tmp_path / "bench.json"
+    code = gpu_bench.main(["--cases", "maze2-tables", "maze2-obs-visited", "--devices", "numpy", "cpu", "--sizes", "8",
+                           "--numpy-sizes", "8", "--seconds", "0.05", "--out", str(out)])
+    assert code == 0
+    doc = json.loads(out.read_text())
+    rows = {(r["case"], r["backend"]): r for r in doc["rows"]}
+    assert set(rows) == {(c, b) for c in ("maze2-tables", "maze2-obs-visited") for b in ("numpy", "torch-cpu")}
+    assert all(r["steps_per_s"] > 0 and r["num_envs"] == 8 for r in rows.values())
+    assert "machine" in doc and "steps/s" in capsys.readouterr().out
+    if not torch.cuda.is_available():
+        assert gpu_bench.main(["--devices", "cuda"]) == 2
+        assert "error: " in capsys.readouterr().err
