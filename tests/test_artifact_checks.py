@@ -13,9 +13,9 @@ import copy
 import json
 import shutil
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import gymnasium as gym
 import pytest
@@ -30,8 +30,15 @@ SHIPPED = Path(artifacts.__file__).parent / "artifacts"
 NAMES = sorted(p.stem for p in SHIPPED.glob("*.json"))
 
 
+def _artifact(env: gym.Env[Any, Any]) -> TestArtifact:
+    """The test a FlowTest env plays."""
+    art = cast(Any, env.unwrapped).artifact
+    assert isinstance(art, TestArtifact)
+    return art
+
 def shipped(name: str) -> dict[str, Any]:
-    return json.loads((SHIPPED / f"{name}.json").read_text())
+    doc: dict[str, Any] = json.loads((SHIPPED / f"{name}.json").read_text())
+    return doc
 
 
 def test_manifest_lists_every_shipped_artifact_with_its_bytes() -> None:
@@ -47,18 +54,18 @@ def test_shipped_artifacts_pass_every_check_and_carry_their_problems_hash(name: 
     assert art.source == problem_source_hash(BUILTINS[name]())
 
 
-def _empty_restrictions(d: dict) -> None:
+def _empty_restrictions(d: dict[str, Any]) -> None:
     d["strategy"]["restrictions"] = {}
     d["strategy"]["static_obstacles"] = []
 
 
-def _swap_automata(d: dict) -> None:
+def _swap_automata(d: dict[str, Any]) -> None:
     other = shipped("small-reactive")
     d["automata"] = other["automata"]
     d["letters"] = other["letters"]
 
 
-EDITS: list[tuple[str, str, Callable[[dict], None], str]] = [
+EDITS: list[tuple[str, str, Callable[[dict[str, Any]], None], str]] = [
     ("example1", "restrictions emptied", _empty_restrictions, "bypass flow"),
     ("small-reactive", "restrictions emptied", _empty_restrictions, "bypass flow"),
     ("maze2", "restrictions emptied", _empty_restrictions, "bypass flow"),
@@ -96,7 +103,7 @@ EDITS: list[tuple[str, str, Callable[[dict], None], str]] = [
 
 @pytest.mark.parametrize("name,what,edit,words", EDITS, ids=[f"{e[0]}-{e[1]}" for e in EDITS])
 def test_edited_artifact_is_refused_naming_what_is_wrong(
-    tmp_path: Path, name: str, what: str, edit: Callable[[dict], None], words: str
+    tmp_path: Path, name: str, what: str, edit: Callable[[dict[str, Any]], None], words: str
 ) -> None:
     d = copy.deepcopy(shipped(name))
     edit(d)
@@ -130,7 +137,7 @@ def test_artifact_files_that_are_not_artifacts(tmp_path: Path) -> None:
 
 
 @pytest.fixture
-def own_artifacts(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+def own_artifacts(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[Path]:
     """A copy of the shipped artifacts and an empty cache under ``tmp_path``."""
     monkeypatch.setattr(artifacts, "ARTIFACT_DIR", tmp_path / "shipped")
     shutil.copytree(SHIPPED, tmp_path / "shipped")
@@ -170,7 +177,7 @@ def test_edited_cache_entry_is_refused_with_a_warning_and_rebuilt(own_artifacts:
     cached.write_text(json.dumps(d))
     with pytest.warns(UserWarning, match="refused a cache entry.*bypass flow"):
         env = gym.make("FlowTest-SmallReactive-v0")
-    assert env.unwrapped.artifact.strategy.restrictions.any()  # the true test, not the edited one
+    assert _artifact(env).strategy.restrictions.any()  # the true test, not the edited one
     artifacts.load_builtin.cache_clear()
     artifacts.builtin_game.cache_clear()
     with warnings.catch_warnings():
@@ -185,7 +192,7 @@ def test_cache_entry_of_another_problem_is_refused(own_artifacts: Path) -> None:
     shutil.copy(SHIPPED / "example1.json", cached)
     with pytest.warns(UserWarning, match="another problem"):
         env = gym.make("FlowTest-SmallReactive-v0")
-    assert env.unwrapped.artifact.name == "small-reactive"
+    assert _artifact(env).name == "small-reactive"
 
 
 def test_edited_random_grid_cache_entry_is_refused(own_artifacts: Path) -> None:

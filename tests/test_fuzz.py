@@ -259,7 +259,7 @@ def _parallel_property(data: st.DataObject) -> None:
             with pytest.raises(gym.error.ResetNeeded):
                 env.step({a: 0 for a in env.possible_agents})
             return
-        actions: dict[str, Any] = {a: data.draw(st.integers(0, env.action_space(a).n - 1)) for a in env.agents}
+        actions: dict[str, Any] = {a: data.draw(st.integers(0, int(env.action_space(a).n) - 1)) for a in env.agents}
         if data.draw(st.booleans(), label="invalid?"):
             victim = data.draw(st.sampled_from(list(actions)), label="agent")
             actions[victim] = data.draw(invalid_actions(int(env.action_space(victim).n)), label="invalid action")

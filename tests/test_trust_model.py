@@ -18,7 +18,7 @@ import tracemalloc
 import warnings
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import gymnasium as gym
 import pytest
@@ -45,8 +45,15 @@ SHIPPED = Path(artifacts.__file__).parent / "artifacts"
 DATA = Path(__file__).resolve().parent / "data"
 
 
+def _artifact(env: gym.Env[Any, Any]) -> TestArtifact:
+    """The test a FlowTest env plays."""
+    art = cast(Any, env.unwrapped).artifact
+    assert isinstance(art, TestArtifact)
+    return art
+
 def shipped(name: str) -> dict[str, Any]:
-    return json.loads((SHIPPED / f"{name}.json").read_text())
+    doc: dict[str, Any] = json.loads((SHIPPED / f"{name}.json").read_text())
+    return doc
 
 
 def rehash(d: dict[str, Any]) -> dict[str, Any]:
@@ -162,7 +169,7 @@ def test_the_problem_file_cache_never_serves_another_problems_test(tmp_path: Pat
     sources._LOADED.clear()
     with pytest.warns(UserWarning, match="another problem file"):
         env = gym.make("FlowTest-v0", test=str(a))
-    assert env.unwrapped.artifact.name == "ok-grid" and env.unwrapped.artifact.kind == "static"
+    assert _artifact(env).name == "ok-grid" and _artifact(env).kind == "static"
     with warnings.catch_warnings():  # the entry was rebuilt: the next process takes it silently
         warnings.simplefilter("error")
         sources._LOADED.clear()
@@ -184,7 +191,7 @@ def test_a_users_edited_but_valid_artifact_is_checked_and_reported(tmp_path: Pat
     path.write_text(json.dumps(d))
     with pytest.warns(EditedArtifactWarning, match="changed after FlowTest wrote it"):
         env = gym.make("FlowTest-v0", test=str(path))
-    assert env.unwrapped.artifact.edited
+    assert _artifact(env).edited
 
 
 def test_an_edited_but_valid_cache_entry_is_refused_and_rebuilt(tmp_path: Path, cache: Path) -> None:
@@ -230,9 +237,14 @@ def test_an_edited_pool_record_is_refused_and_synthesized_again(cache: Path, mon
     assert record["digest"]["sha256"]
     record["summary"]["status"] = "optimal-by-hand"
     path.write_text(json.dumps(record) + "\n")
-    built = []
+    built: list[tuple[Any, ...]] = []
     real = rg.pool_record
-    monkeypatch.setattr(rg, "pool_record", lambda *a, **k: built.append(a) or real(*a, **k))
+
+    def counted(*a: Any, **k: Any) -> dict[str, Any]:
+        built.append(a)
+        return real(*a, **k)
+
+    monkeypatch.setattr(rg, "pool_record", counted)
     with pytest.warns(UserWarning, match="changed after FlowTest wrote it"):
         (again,) = rg.build_pool(5, "reachability", 1, [0])
     assert built, "the seed was synthesized again"
