@@ -27,6 +27,8 @@ import warnings
 from collections.abc import Sequence
 from types import FrameType
 
+from synthesis.routing.solver_control import solves_running
+
 from .arguments import ArgumentParser
 from .command import Command
 from .commands import COMMANDS
@@ -96,7 +98,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         parser = build_parser()
         args = parser.parse_args(argv)  # usage errors exit 2 via argparse
-        return int(args.run(args))
+        code = int(args.run(args))
+        if argv is None and solves_running():
+            # a solver run abandoned at the time limit (solver_control.SolverAbandoned) would be
+            # joined at interpreter exit: its answer is not needed, so leave now (outputs are
+            # already written whole)
+            flush_and_exit(code)
+        return code
     except KeyboardInterrupt:
         # the user's own act, not an error: one plain line, no traceback
         say(f"{PROG}: interrupted")
