@@ -623,6 +623,10 @@ class TorchVectorEnv(gym.vector.VectorEnv):
         Runs in the batch.
     autoreset_mode
         ``"next_step"``, ``"same_step"`` or ``"disabled"`` (or Gymnasium's ``AutoresetMode``).
+        ``"same_step"`` gathers two observations a step (``infos["final_obs"]`` for every
+        env, as knowing which ended would need a host synchronisation); a trainer that
+        wants only the ended envs' final observations reads :attr:`StepOutput.final_z`
+        through the functional step.
     compact
         Return compact observations (``int64[N, 1 + W]``, :func:`expand`).
     copy
