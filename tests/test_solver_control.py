@@ -43,7 +43,11 @@ def test_a_stop_request_ends_a_running_solve_within_a_second() -> None:
     h = market_split()
     control = SolveControl()
     statuses: list[str | None] = []
-    threading.Timer(0.5, lambda: (statuses.append(status_line(control)), control.request_stop())).start()
+    def look_then_stop() -> None:
+        statuses.append(status_line(control))
+        control.request_stop()
+
+    threading.Timer(0.5, look_then_stop).start()
     t0 = time.perf_counter()
     with pytest.raises(KeyboardInterrupt):
         run_highs(h, None, control=control, phase="market split")
