@@ -27,7 +27,7 @@ from .problems.diagnose import check_problem_consistency
 from .problems.limits import MAX_GRAPH_EDGES, check_size
 from .problems.problem import CAP_KEYS, Problem, build_graphs, check_caps
 from .routing import cpsat, scip
-from .routing.caps import CAP_NOUNS, Fewest, caps_text, check_caps_reachable, fewest_within
+from .routing.caps import CAP_NOUNS, Fewest, caps_text, check_caps_reachable, disjoint_bypasses, fewest_within
 from .routing.milp import AUTO_CPSAT_MODES, RoutingResult, solve_routing
 from .routing.model import BACKENDS, MilpOptions
 from .routing.restrictions import strategy_from_routing
@@ -251,6 +251,8 @@ def synthesize(problem: Problem, options: SynthesisOptions | None = None) -> Syn
         routing = solve_routing(products, milp)
     except InconsistentProblem as exc:
         raise over_caps(products, milp, exc, note, None if limit is None else started + limit) from None
+    except TimeoutError as exc:
+        raise capped_timeout(products, milp, exc) from None
     setting = options.setting or problem.extras.get("setting", "instantaneous")
     strategy = strategy_from_routing(products, routing, setting)
     if routing.status != "optimal":
@@ -280,6 +282,20 @@ def check_caps_held(problem: Problem, strategy: TestStrategy, caps: dict[str, in
         used = cap_count(counts, cap)
         if used > limit:
             raise CheckFailed(f"the test uses {used} {CAP_NOUNS[cap]}, above its cap {cap} = {limit}")
+
+
+def capped_timeout(products: Products, milp: MilpOptions, exc: TimeoutError) -> TimeoutError:
+    """A time limit that ended a capped solve before any test: ``exc`` with what is known of
+    the caps (the bypass bound of :func:`synthesis.routing.caps.disjoint_bypasses`, proven),
+    so the user can tell a cap too tight from a time limit too short."""
+    if not milp.caps:
+        return exc
+    known = []
+    for cap, limit in milp.caps.items():
+        walks = disjoint_bypasses(products, milp, cap, stop_above=limit)
+        noun = CAP_NOUNS[cap].split(" (")[0]
+        known.append(f"at least {walks} {noun} are needed (proven), at most {limit} allowed")
+    return TimeoutError(f"{exc}; no test with {caps_text(milp.caps)} was found, nor proven impossible: {'; '.join(known)}")
 
 
 def over_caps(
