@@ -52,6 +52,10 @@ RECORD_KEYS: tuple[str, ...] = ("seed", "attempt", "cuts", "static", "summary", 
 """The fields of a record, in the order they are written."""
 
 
+class EditedRecord(ProblemError):
+    """A record that is not the one FlowTest wrote (its digest is missing or wrong)."""
+
+
 def record_digest(record: Mapping[str, Any]) -> str:
     """SHA-256 (hex) of a record without its ``digest`` field, as canonical JSON (sorted
     keys, no spaces, ASCII): the same definition as an artifact's
@@ -102,9 +106,8 @@ def rebuild_artifact(
         return _rebuild(record, size, family, n, world, kind, extras)
     except (CheckFailed, InconsistentProblem) as exc:
         raise ProblemError(f"pool record of seed {record.get('seed')!r} fails its check: {exc}") from None
-    except ProblemError as exc:
-        seed = record.get("seed") if isinstance(record, dict) else None
-        raise ProblemError(f"pool record of seed {seed!r}: {exc}") from None
+    except EditedRecord as exc:
+        raise ProblemError(f"pool record of seed {record.get('seed')!r}: {exc}") from None
     except (KeyError, TypeError, ValueError, AttributeError, IndexError, OverflowError) as exc:
         raise ProblemError(f"pool record of seed {record.get('seed')!r} is malformed ({type(exc).__name__}: {exc})") from None
 
@@ -151,7 +154,7 @@ def _rebuild(
     # last, so that a record whose answer fails a check is told so: one that passes them all
     # but is not the record FlowTest wrote (one more cut, a summary edited) is refused here
     if record["digest"] != {"sha256": record_digest(record)}:
-        raise ProblemError("the record was changed after FlowTest wrote it (its digest is not that of its content)")
+        raise EditedRecord("the record was changed after FlowTest wrote it (its digest is not that of its content)")
     # graph_seconds: not measured here; a rebuilt test's summary holds no timings
     test = SynthesizedTest(problem, spec, products, routing, strategy, checks, graph_seconds=0.0, agent=agent)
     return artifact_of(test, summary, extras)
