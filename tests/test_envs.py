@@ -556,7 +556,8 @@ def _comparable(art: Any) -> dict[str, Any]:
     same test: the solver's statistics (``summary["stats"]``: times, node counts, rounds),
     every ``*_seconds`` figure, and the versions it was made under
     (``extras["provenance"]["versions"]``: the synthesis sources' digest changes with any
-    edit; ``extras.made_with``: the solver; the answer is what is compared)."""
+    edit; ``extras.made_with``: the solver; ``digest``: a hash of all of it, timings included;
+    the answer is what is compared)."""
 
     def strip(x: Any) -> Any:
         if isinstance(x, dict):
@@ -569,6 +570,7 @@ def _comparable(art: Any) -> dict[str, Any]:
     d["summary"].pop("stats", None)
     d["extras"].get("provenance", {}).pop("versions", None)
     d["extras"].pop(SOLVER_KEY, None)  # provenance: which solver made it, not what it is
+    d.pop("digest", None)  # over the whole document, timings included: differs whenever they do
     return strip(d)
 
 
