@@ -66,8 +66,9 @@ class NumericVectorEnv(VectorWrapper):
         self.metadata = dict(inner.metadata)
 
     def reset(self, *, seed: Any = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
-        obs, infos = self.env.reset(seed=seed, options=options)
-        return obs, {"action_mask": infos["action_mask"].astype(bool), **self._numeric(self.flowtest.verdicts())}
+        obs, _ = self.env.reset(seed=seed, options=options)
+        # every env's mask, also after a partial reset (reset_mask), whose infos cover the reset envs only
+        return obs, {"action_mask": self.flowtest.action_masks(), **self._numeric(self.flowtest.verdicts())}
 
     def step(self, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         obs, reward, terminated, truncated, infos = self.env.step(actions)
