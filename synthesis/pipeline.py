@@ -321,7 +321,7 @@ def over_caps(
             parts.append(f"{CAP_NOUNS[cap]}: no test routes it within the other caps")
             continue
         if fewest.value <= limit and not fewest.exact:
-            fewest = Fewest(limit + 1, False) if len(milp.caps) == 1 else fewest
+            fewest = Fewest(limit + 1, False, fewest.timed_out) if len(milp.caps) == 1 else fewest
         parts.append(fewest.text(CAP_NOUNS[cap]))
     if exc.reason == "infeasible":  # a test agent's loop: the caps with the agent's own limits
         return InconsistentProblem(

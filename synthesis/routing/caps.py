@@ -40,6 +40,7 @@ class Fewest:
 
     value: int | None
     exact: bool
+    timed_out: bool = False  # not exact because the deadline ended the solve (else: a relaxation's optimum)
 
     def text(self, noun: str) -> str:
         """``"the fewest is 5 doors"``, ``"at least 5 doors are needed"``."""
@@ -49,7 +50,9 @@ class Fewest:
             return f"how many {noun} would do was not settled within the time left"
         if self.exact:
             return f"the fewest that does is {self.value} {noun}"
-        return f"at least {self.value} {noun} are needed (not proven exactly within the time left)"
+        if self.timed_out:
+            return f"at least {self.value} {noun} are needed (not proven exactly within the time left)"
+        return f"at least {self.value} {noun} are needed"
 
 
 def fewest_within(products: Products, options: MilpOptions, cap: str, deadline: float | None = None) -> Fewest:
@@ -84,7 +87,7 @@ def fewest_within(products: Products, options: MilpOptions, cap: str, deadline: 
     try:
         run_highs(h, deadline, control=options.control, phase="the fewest restrictions a test needs")
     except TimeoutError:
-        return Fewest(0, False)
+        return Fewest(0, False, timed_out=True)
     status = h.getModelStatus()
     if status == highspy.HighsModelStatus.kInfeasible:
         return Fewest(None, True)
@@ -93,7 +96,7 @@ def fewest_within(products: Products, options: MilpOptions, cap: str, deadline: 
     if status == highspy.HighsModelStatus.kOptimal:
         return Fewest(int(round(info.objective_function_value)), not relaxed)
     bound = float(info.mip_dual_bound)
-    return Fewest(max(int(np.ceil(bound - 1e-6)), 0) if np.isfinite(bound) else 0, False)
+    return Fewest(max(int(np.ceil(bound - 1e-6)), 0) if np.isfinite(bound) else 0, False, timed_out=True)
 
 
 def check_caps_reachable(products: Products, options: MilpOptions) -> None:
