@@ -100,12 +100,13 @@ from gymnasium import spaces
 from pettingzoo import AECEnv, ParallelEnv
 from pettingzoo.utils import wrappers
 
+from .config import EnvConfig
 from .encoding import make_encoder
 from .envs import default_max_steps
 from .game import MET, OPEN, VIOLATED, RunState, TestGame
 from .render import Renderer, ansi, make_renderer
 from .sources import TestLike, game_for
-from .validation import action_index, finite_float, one_of, positive_int
+from .validation import action_index, one_of, positive_int
 
 TESTER, SYSTEM = "tester_0", "system_0"
 INFO_KINDS = ("full", "numeric")
@@ -145,8 +146,9 @@ class raw_env(AECEnv):  # type: ignore[misc]  # noqa: N801 - PettingZoo's module
         Obstacle display setting (``"instantaneous"``/``"accumulative"``).
     max_cycles
         Rounds before truncation (default: the single-agent env's ``max_steps``).
-    obs_kind
-        The system's observation encoding (``"flat"`` or ``"grid"``).
+    obs_kind, pad_to
+        The system's observation encoding (``"flat"``, ``"grid"`` or ``"padded"`` with
+        grid side ``pad_to``).
     render_mode
         ``"rgb_array"`` or ``"ansi"``.
     view
@@ -194,11 +196,14 @@ class raw_env(AECEnv):  # type: ignore[misc]  # noqa: N801 - PettingZoo's module
         mask_key: str = "action_mask",
         info_kind: str = "full",
         same_spaces: bool = False,
+        pad_to: int = 8,
     ) -> None:
         super().__init__()
-        one_of("render_mode", render_mode, (None, *self.metadata["render_modes"]))
-        one_of("setting", setting, (None, "instantaneous", "accumulative"))
-        one_of("view", view, ("system", "engineer"))
+        # the options shared with the single-agent and vector envs, checked by their one validator
+        config = EnvConfig(setting=setting, obs_kind=obs_kind, pad_to=pad_to, render_mode=render_mode, view=view,
+                           tile_size=tile_size, step_cost=step_cost, restricted_penalty=restricted_penalty)
+        one_of("render_mode", config.render_mode, (None, *self.metadata["render_modes"]))
+        self.config = config
         one_of("info_kind", info_kind, INFO_KINDS)
         for name, key in (("obs_key", obs_key), ("mask_key", mask_key)):
             if not isinstance(key, str) or not key:
@@ -214,12 +219,12 @@ class raw_env(AECEnv):  # type: ignore[misc]  # noqa: N801 - PettingZoo's module
         self.game: TestGame = game
         self.problem = game.artifact.name
         self.max_cycles = positive_int("max_cycles", max_cycles if max_cycles is not None else default_max_steps(game))
-        self.render_mode = render_mode
-        self.view = view
-        self.tile_size = positive_int("tile_size", tile_size)
-        self.step_cost = finite_float("step_cost", step_cost)
-        self.restricted_penalty = finite_float("restricted_penalty", restricted_penalty)
-        self.encoder = make_encoder(game, obs_kind)
+        self.render_mode = config.render_mode
+        self.view = config.view
+        self.tile_size = config.tile_size
+        self.step_cost = config.step_cost
+        self.restricted_penalty = config.restricted_penalty
+        self.encoder = make_encoder(game, config.obs_kind, config.pad_to)
         system_first = game.has_agent and not game.agent_first
         self.possible_agents = [SYSTEM, TESTER] if system_first else [TESTER, SYSTEM]
         n_test = game.n_agent_states if game.has_agent else 1 << game.n_slots
