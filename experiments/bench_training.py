@@ -161,8 +161,8 @@ def main(argv: list[str] | None = None) -> int:
         add(sb3_row("sb3 MaskablePPO (flowtest defaults)", pool, args.sb3_steps, net, {}))
         add(sb3_row("sb3 MaskablePPO (native's PPO settings)", pool, args.sb3_steps, net,
                     {"n_envs": 128, "n_steps": 32, "batch_size": 1024, "n_epochs": 2}))
-    add(native_row("native (numpy env, the CPU default)", pool, args.native_steps, net, "numpy"))
-    add(native_row("native (torch env on the CPU)", pool, args.native_steps, net, "torch"))
+    add(native_row("native (torch env on the CPU, the default)", pool, args.native_steps, net, "torch"))
+    add(native_row("native (numpy env)", pool, args.native_steps, net, "numpy"))
     add(numpy_env_row(pool, args.env_envs, args.env_steps))
     add(torch_env_row(pool, args.env_envs, args.env_steps, "cpu"))
     if torch.cuda.is_available():
