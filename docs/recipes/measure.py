@@ -87,7 +87,8 @@ def runs() -> dict[str, Callable[[], dict[str, Any]]]:
                                              "env_alone": torchrl_vector_alone("SAME_STEP", 64, 64 * 50)},
         "torchrl_vector DISABLED": lambda: {**recipe("torchrl_vector").main(mode="DISABLED", num_envs=16, steps=2048),
                                             "env_alone": torchrl_vector_alone("DISABLED", 64, 64 * 50)},
-        "torchrl_pettingzoo parallel": lambda: {**recipe("torchrl_pettingzoo").main(api="parallel", steps=512), "env_alone": torchrl_pettingzoo_alone("parallel", 200)},
+        "torchrl_pettingzoo parallel": lambda: {**recipe("torchrl_pettingzoo").main(api="parallel", steps=512),
+                                                "env_alone": torchrl_pettingzoo_alone("parallel", 200)},
         "torchrl_pettingzoo aec": lambda: {**recipe("torchrl_pettingzoo").main(api="aec", steps=512), "env_alone": torchrl_pettingzoo_alone("aec", 200)},
         "tianshou_aec": lambda: recipe("tianshou_aec").main(steps=1024, num_envs=8),
     }
