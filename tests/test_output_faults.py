@@ -127,9 +127,14 @@ def _fault_case(tmp_path: Path, cache: Path, how: str) -> None:
         sources.problem_cache_path(_problem(tmp_path), raw).mkdir(parents=True)
     elif how == "not creatable":
         os.environ["FLOWTEST_CACHE_DIR"] = "/proc/flowtest-cache-cannot-exist"
+    elif how == "read-only":
+        if os.geteuid() == 0:
+            pytest.skip("root writes into a read-only folder; 'not creatable' covers the fault as root")
+        cache.mkdir(parents=True)
+        cache.chmod(0o500)
 
 
-@pytest.mark.parametrize("how", ["a file", "an entry that is a folder", "not creatable"])
+@pytest.mark.parametrize("how", ["a file", "an entry that is a folder", "not creatable", "read-only"])
 def test_a_faulty_cache_is_a_warning_and_the_test_is_kept_in_memory(
     tmp_path: Path, cache: Path, how: str, monkeypatch: pytest.MonkeyPatch
 ) -> None:
