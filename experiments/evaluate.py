@@ -79,9 +79,9 @@ from .report import (
     test_infos,
     test_name,
     test_title,
-    violation_of_trace,
 )
 from .trace_picture import trace_picture
+from .violations import violation_of_trace
 
 DEFAULT_STEP_TIMEOUT = 10.0
 """``--step-timeout``'s default (:data:`agents.external.DEFAULT_STEP_TIMEOUT`, which the

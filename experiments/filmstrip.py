@@ -8,7 +8,7 @@ the test agent moved, the action refused).
 Frames where nothing changed (waits) are left out; a long run keeps its first and last
 frames and an even sample of the others. A run that violated the system objective keeps
 the frame where it did, marked in red with the broken conjunct and the cell
-(:func:`experiments.report.violation_of`), and the strip's title says it too.
+(:func:`experiments.violations.violation_of`), and the strip's title says it too.
 """
 
 from __future__ import annotations
@@ -110,7 +110,7 @@ def filmstrip(game: Any, states: Sequence[Any], actions: Sequence[int], title: s
 
     from flowtest_env.render import make_renderer
 
-    from .report import violation_of
+    from .violations import violation_of
 
     renderer = make_renderer(game, tile, "engineer")
     broke = violation_of(game.artifact, [r.system for r in states]) if states and states[-1].outcome == "violated" else None

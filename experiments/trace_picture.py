@@ -8,7 +8,8 @@ from typing import Any
 import numpy as np
 
 from .episodes import Trace, make_env
-from .report import test_title, violation_of
+from .report import test_title
+from .violations import violation_of
 
 
 def _trace_legend(ax: Any, game: Any) -> list[Any]:

@@ -28,13 +28,11 @@ from experiments.report import (
     fold_rows,
     outcome_class,
     render_html,
-    violation_of,
-    violation_of_trace,
-    written_conjuncts,
 )
 from experiments.report import test_anchor as card_anchor
 from experiments.report import test_infos as draw_test_infos
 from experiments.report import test_titles as titles_of
+from experiments.violations import violation_of, violation_of_trace, written_conjuncts
 
 
 def _game(env: Any) -> Any:
