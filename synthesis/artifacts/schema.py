@@ -10,7 +10,9 @@ automata against the objectives, the restrictions against the product graphs).
 
 from __future__ import annotations
 
+import json
 import re
+import sys
 from typing import Any
 
 from ..model.errors import ProblemError
@@ -449,7 +451,4 @@ def json_schema() -> dict[str, Any]:
 
 
 if __name__ == "__main__":  # pragma: no cover - python -m synthesis.artifacts.schema
-    import json
-    import sys
-
     sys.stdout.write(json.dumps(json_schema(), indent=1) + "\n")
