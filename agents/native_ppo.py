@@ -60,9 +60,9 @@ ALGOS = ("ppo", "recurrent-ppo")
 
 ENV_BACKENDS = ("auto", "torch", "numpy")
 """Who steps the tests: the NumPy vector env, or its torch twin on the training device
-(``auto``: the torch env: alone it steps slower than the NumPy env on the CPU, but in the
-training loop it was faster in every measurement, CPU included, since nothing is converted
-between NumPy and torch; both give the same runs)."""
+(``auto``: the torch env: alone it steps slower than the NumPy env on the CPU, but the two
+train at the same rate within noise there, it spares the NumPy/torch conversions, and on a
+GPU it keeps the tests on the device; both give the same runs)."""
 
 
 @dataclass
