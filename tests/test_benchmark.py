@@ -20,7 +20,7 @@ import pytest
 from agents.checkpoint import mark_own_file
 from experiments import benchmark as bench
 from experiments.cli import main
-from experiments.evaluate import Trace
+from experiments.episodes import Trace
 
 pytest.importorskip("sb3_contrib")
 
