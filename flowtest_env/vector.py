@@ -739,6 +739,12 @@ class VectorActionMaskObservation(gym.vector.VectorWrapper):
         self.observation_space = batch_space(self.single_observation_space, env.num_envs)
         self._last: np.ndarray | None = None
 
+    @property
+    def autoreset_mode(self) -> AutoresetMode:
+        """The wrapped env's autoreset mode (libraries such as TorchRL read the attribute)."""
+        mode: AutoresetMode = self.env.autoreset_mode  # type: ignore[attr-defined]
+        return mode
+
     def reset(
         self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:

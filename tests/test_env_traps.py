@@ -15,7 +15,7 @@ import flowtest_env
 from flowtest_env.artifacts import builtin_game
 from flowtest_env.envs import FlowTestEnv, render_modes
 from flowtest_env.sources import load_test
-from flowtest_env.vector import PoolVectorEnv
+from flowtest_env.vector import PoolVectorEnv, VectorActionMaskObservation
 from synthesis.pipeline import synthesize
 from synthesis.problems.builtins import example1, small_reactive
 
@@ -104,3 +104,11 @@ def test_a_pool_is_not_combined_with_the_arguments_it_decides(kwargs: dict[str, 
         gym.make("FlowTest-RandomGrid-v0", pool="reachability1/5x5", **kwargs)
     with pytest.raises(ValueError, match="cannot be combined"):
         gym.make_vec("FlowTest-RandomGrid-v0", num_envs=2, vectorization_mode="vector_entry_point", pool="reachability1/5x5", **kwargs)
+
+
+@pytest.mark.parametrize("mode", ["NEXT_STEP", "SAME_STEP", "DISABLED"])
+def test_the_mask_observation_wrapper_says_its_autoreset_mode(mode: str) -> None:
+    """TorchRL's GymWrapper reads ``autoreset_mode`` off whatever env it is given."""
+    inner = gym.make_vec("FlowTest-SmallReactive-v0", 2, vectorization_mode="vector_entry_point", autoreset_mode=mode)
+    wrapped = VectorActionMaskObservation(inner)
+    assert wrapped.autoreset_mode == inner.autoreset_mode == gym.vector.AutoresetMode[mode]
