@@ -13,7 +13,10 @@ import atexit
 import os
 import shutil
 import tempfile
+from collections.abc import Iterator
 from pathlib import Path
+
+import pytest
 
 SANDBOX_ENV = "FLOWTEST_TEST_SANDBOX"
 """Set to the session's temporary folder once the environment points into it."""
@@ -47,3 +50,13 @@ def _sandbox() -> Path:
 
 
 SANDBOX = _sandbox()
+
+
+@pytest.fixture(scope="module")
+def pool_cache(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
+    """A private pool cache (never the user's)."""
+    mp = pytest.MonkeyPatch()
+    path = tmp_path_factory.mktemp("flowtest-cache")
+    mp.setenv("FLOWTEST_CACHE_DIR", str(path))
+    yield path
+    mp.undo()

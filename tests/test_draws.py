@@ -4,7 +4,6 @@ follow it episode by episode."""
 
 from __future__ import annotations
 
-from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -53,16 +52,6 @@ def test_pool_size_is_bounded() -> None:
         draw_test(0, 0, 0)
     with pytest.raises(ValueError, match="tests"):
         draw_tests(np.zeros(1, dtype=np.uint64), np.zeros(1), MAX_TESTS + 1)
-
-
-@pytest.fixture(scope="module")
-def pool_cache(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
-    """A private pool cache (never the user's)."""
-    mp = pytest.MonkeyPatch()
-    path = tmp_path_factory.mktemp("flowtest-cache")
-    mp.setenv("FLOWTEST_CACHE_DIR", str(path))
-    yield path
-    mp.undo()
 
 
 def test_single_env_plays_the_drawn_tests(pool_cache: Path) -> None:

@@ -4,7 +4,6 @@ vector env, a pool-based spec, ``render_mode="human"`` without pygame."""
 from __future__ import annotations
 
 import sys
-from collections.abc import Iterator
 from pathlib import Path
 
 import gymnasium as gym
@@ -18,16 +17,6 @@ from flowtest_env.sources import load_test
 from flowtest_env.vector import PoolVectorEnv, VectorActionMaskObservation
 from synthesis.pipeline import synthesize
 from synthesis.problems.builtins import example1, small_reactive
-
-
-@pytest.fixture(scope="module")
-def pool_cache(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
-    """A private pool cache (never the user's)."""
-    mp = pytest.MonkeyPatch()
-    path = tmp_path_factory.mktemp("flowtest-cache")
-    mp.setenv("FLOWTEST_CACHE_DIR", str(path))
-    yield path
-    mp.undo()
 
 
 def test_pool_vector_env_takes_loaded_pools(pool_cache: Path) -> None:

@@ -8,7 +8,6 @@ do not exist), over many autoresets (short step budgets force truncations too).
 
 from __future__ import annotations
 
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -122,16 +121,6 @@ def test_compiled_tables_follow_the_game_rules(problem: str) -> None:
             assert bool(ct.refused[z, a]) == (out.restricted or out.invalid)
             assert OUTCOMES[int(ct.outcome[nz])] == r.outcome
             assert bool(ct.restricted[z]) == (r.restrictions == 1)
-
-
-@pytest.fixture(scope="module")
-def pool_cache(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
-    """A private pool cache (never the user's)."""
-    mp = pytest.MonkeyPatch()
-    path = tmp_path_factory.mktemp("flowtest-cache")
-    mp.setenv("FLOWTEST_CACHE_DIR", str(path))
-    yield path
-    mp.undo()
 
 
 def test_random_grid_pool_trajectories_equal_the_single_env(pool_cache: Path) -> None:

@@ -10,7 +10,6 @@ as TorchRL does.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -25,16 +24,6 @@ from flowtest_env.vector import FlowTestVectorEnv, autoreset_mode_of
 MODES = [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP, AutoresetMode.DISABLED]
 KINDS = {"static": "FlowTest-Example1-v0", "reactive": "FlowTest-SmallReactive-v0", "agent": "FlowTest-Maze2-v0",
          "fuel": "FlowTest-Refueling-v0", "graph": "FlowTest-BeaverRescue-v0"}
-
-
-@pytest.fixture(scope="module")
-def pool_cache(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
-    """A private pool cache (never the user's)."""
-    mp = pytest.MonkeyPatch()
-    path = tmp_path_factory.mktemp("flowtest-cache")
-    mp.setenv("FLOWTEST_CACHE_DIR", str(path))
-    yield path
-    mp.undo()
 
 
 def _pair(env_id: str, n: int, mode: AutoresetMode, **kw: Any) -> tuple[Any, Any]:
