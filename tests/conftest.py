@@ -44,6 +44,7 @@ def _sandbox() -> Path:
             "XDG_DATA_HOME": str(home / ".local" / "share"),
             "FLOWTEST_CACHE_DIR": str(home / ".cache" / "flowtest"),
             "MPLCONFIGDIR": str(root / "mpl"),
+            "SB3_LOGDIR": str(root / "sb3-logs"),  # stable-baselines3 makes an empty log folder per model in /tmp otherwise
         }
     )
     return root
