@@ -491,6 +491,18 @@ def _fuel_note(ts: Any, mask: np.ndarray, a: int, b: int) -> str | None:
     return "fuel " + ",".join(map(str, levels))
 
 
+def _static_area(test: Any) -> set[tuple[int, int]]:
+    """The place pairs (each border once) of a mixed test's static area: the moves where its
+    problem allows walls, drawn whether or not a wall was put there."""
+    problem = getattr(test, "problem", None)
+    area = getattr(problem, "static_moves", None)
+    if problem is None or getattr(problem, "kind", None) != "mixed" or area is None:
+        return set()
+    ts = problem.system
+    pairs = {(min(a, b), max(a, b)) for a, b in _place_pairs(ts, np.asarray(area, dtype=bool))}
+    return {(a, b) for a, b in pairs if _adjacent(_cell_of_place(ts, a), _cell_of_place(ts, b))}
+
+
 def _draw_grid_panel(ax: Axes, test: Any, panel: Panel, overlay: _Overlay | None) -> None:
     ts = test.problem.system
     lay = ts.layout
@@ -541,6 +553,9 @@ def _draw_grid_panel(ax: Axes, test: Any, panel: Panel, overlay: _Overlay | None
         ax.text(c + 0.5, r + 0.5, park.name, ha="center", va="center", fontsize=7, fontweight="bold", color=TEXT, zorder=4)
         lo_r, lo_c, hi_r, hi_c = min(lo_r, r), min(lo_c, c), max(hi_r, r + 1), max(hi_c, c + 1)
     ax.add_patch(Rectangle((0, 0), lay.cols, lay.rows, fill=False, edgecolor=WALL, linewidth=2.5, zorder=4))
+    for a, b in sorted(_static_area(test)):  # where a mixed test may put walls, as the user typed it
+        (x0, y0), (x1, y1) = _border(_cell_of_place(ts, a), _cell_of_place(ts, b))
+        ax.plot([x0, x1], [y0, y1], color=WALL, linewidth=1.2, linestyle=(0, (2, 2)), alpha=0.6, zorder=4)
     moves = _place_pairs(ts, np.ones(ts.n_moves, dtype=bool))
     static = _place_pairs(ts, test.strategy.static_obstacles)
     for a, b in sorted(static):
@@ -586,6 +601,9 @@ def _grid_figure(test: Any, panels: Sequence[Panel], overlay: _Overlay | None, m
     ]
     if lay.blocked:
         handles.append(Patch(facecolor=BLOCKED, label="blocked cell"))
+    if _static_area(test):
+        handles.append(Line2D([], [], color=WALL, linewidth=1.2, linestyle=(0, (2, 2)), alpha=0.6,
+                              label="static area (walls only here)"))
     if test.strategy.static_obstacles.any():
         handles.append(Line2D([], [], color=WALL, linewidth=5, label="static wall"))
         ts = test.problem.system

@@ -205,3 +205,19 @@ def test_propositions_are_named_with_where_they_hold() -> None:
     assert fuel["unsafe"].endswith("at fuel 0") and fuel["low"].endswith("at fuel 1") and fuel["goal"] == "cell T"
     graph = {p: (where, colour) for p, where, colour in proposition_legend(load_problem("beaver-rescue").system)}
     assert graph["beaver"] == ("state beaver", "")  # graphs write propositions under their nodes
+
+
+def test_a_mixed_picture_draws_the_static_area_typed_in(tmp_path: Path) -> None:
+    """The borders of ``[environment] static`` (each once, whichever way it was typed) are drawn
+    dashed in every panel, with a legend line, whether or not a wall was put there."""
+    from experiments.plots import _static_area
+
+    test = synthesized(str(DATA / "ok_mixed.toml"))
+    ts = test.problem.system
+    cells = {tuple(map(int, ts.places[a])) for pair in _static_area(test) for a in pair}
+    borders = {frozenset((tuple(map(int, ts.places[a])), tuple(map(int, ts.places[b])))) for a, b in _static_area(test)}
+    typed = [((0, 1), (0, 2)), ((0, 2), (0, 1)), ((1, 2), (1, 1)), ((1, 0), (2, 0)), ((0, 1), (0, 0)), ((2, 1), (1, 1))]
+    assert borders == {frozenset(p) for p in typed} and cells <= {c for p in typed for c in p}
+    assert _static_area(synthesized("small-reactive")) == set()  # only a mixed test has one
+    path = plot_test(test, tmp_path / "mixed.svg")
+    assert "static area (walls only here)" in path.read_text()
