@@ -185,20 +185,21 @@ def success_rate(model: Any, env_id: str, episodes: int = 100, seed: int = 10_00
     return met / episodes
 
 
-def plot_curve(points: list[EpisodeEnd], path: Path, title: str) -> None:
-    """Success rate and return (moving averages over 20 episodes) against time steps."""
+def _curve_axes() -> tuple[Any, tuple[Any, Any]]:
+    """A learning-curve figure: met share above, episode return below, one step axis."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, (a1, a2) = plt.subplots(2, 1, figsize=(7, 5.5), sharex=True)
-    if points:
-        steps = np.array([p.step for p in points])
-        succ = moving_average([float(p.met) for p in points])
-        ret = moving_average([p.ret for p in points])
-        a1.plot(steps[len(steps) - len(succ) :], 100 * succ, color="#2ca02c")
-        a2.plot(steps[len(steps) - len(ret) :], ret, color="#1f77b4")
+    fig, axes = plt.subplots(2, 1, figsize=(7, 5.5), sharex=True)
+    return fig, (axes[0], axes[1])
+
+
+def _save_curve(fig: Any, a1: Any, a2: Any, title: str, path: Path) -> None:
+    """Label, title and write a :func:`_curve_axes` figure to ``path``, then free it."""
+    import matplotlib.pyplot as plt
+
     a1.set_ylabel("system objective met (%)")
     a1.set_ylim(-5, 105)
     a2.set_ylabel("episode return")
@@ -209,6 +210,18 @@ def plot_curve(points: list[EpisodeEnd], path: Path, title: str) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
+
+
+def plot_curve(points: list[EpisodeEnd], path: Path, title: str) -> None:
+    """Success rate and return (moving averages over 20 episodes) against time steps."""
+    fig, (a1, a2) = _curve_axes()
+    if points:
+        steps = np.array([p.step for p in points])
+        succ = moving_average([float(p.met) for p in points])
+        ret = moving_average([p.ret for p in points])
+        a1.plot(steps[len(steps) - len(succ) :], 100 * succ, color="#2ca02c")
+        a2.plot(steps[len(steps) - len(ret) :], ret, color="#1f77b4")
+    _save_curve(fig, a1, a2, title, path)
 
 
 def train(env_id: str, steps: int, out: str | Path, seed: int = 0, progress_bar: bool = True,
@@ -361,12 +374,7 @@ def vector_env_id(env_id: str, env_kwargs: dict[str, Any]) -> tuple[str, dict[st
 
 def plot_native_curve(rows: list[dict[str, Any]], path: Path, title: str) -> None:
     """Training episodes' met share and return, and the greedy evaluations, against steps."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, (a1, a2) = plt.subplots(2, 1, figsize=(7, 5.5), sharex=True)
+    fig, (a1, a2) = _curve_axes()
     ep = [r for r in rows if "episode/met" in r]
     if ep:
         a1.plot([r["step"] for r in ep], [100 * r["episode/met"] for r in ep], color="#2ca02c", lw=1,
@@ -377,17 +385,8 @@ def plot_native_curve(rows: list[dict[str, Any]], path: Path, title: str) -> Non
         ev = [r for r in rows if key in r]
         if ev:
             a1.plot([r["step"] for r in ev], [100 * r[key] for r in ev], "o-", color=color, lw=1.5, label=label)
-    a1.set_ylabel("system objective met (%)")
-    a1.set_ylim(-5, 105)
     a1.legend(fontsize=8, loc="lower right")
-    a2.set_ylabel("episode return")
-    a2.set_xlabel("time steps")
-    for a in (a1, a2):
-        a.grid(alpha=0.3)
-    a1.set_title(title, fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    _save_curve(fig, a1, a2, title, path)
 
 
 def train_native(env_id: str, steps: int, out: str | Path, seed: int = 0, progress_bar: bool = True,
