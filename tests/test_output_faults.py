@@ -212,32 +212,7 @@ def test_a_huge_env_file_is_one_error_line_from_flowtest_train(
 # -------------------------------------------------------- break 13: SIGTERM is Ctrl-C
 
 
-def test_sigterm_takes_the_ctrl_c_path_on_the_console_script(tmp_path: Path) -> None:
-    """SIGTERM while HiGHS runs a long solve: exit 130 as for Ctrl-C, one line, no
-    traceback, nothing on stdout, no (partial or hidden) output file."""
-    art = tmp_path / "mars.json"
-    proc = subprocess.Popen(
-        [str(FLOWTEST), "synthesize", "mars-exploration", "--json", "--out", str(art), "--progress", "0.3"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-        preexec_fn=lambda: signal.signal(signal.SIGTERM, signal.SIG_DFL),
-    )
-    assert proc.stderr is not None
-    seen = []
-    for line in proc.stderr:  # a status line with a bound: HiGHS's search runs
-        seen.append(line)
-        if "bound" in line:
-            break
-    else:
-        pytest.fail("no solver status line: " + "".join(seen))
-    t0 = time.perf_counter()
-    proc.send_signal(signal.SIGTERM)
-    out, err = proc.communicate(timeout=60)
-    elapsed = time.perf_counter() - t0
-    assert proc.returncode == 130, err
-    assert elapsed < 2.0, f"exit {elapsed:.2f} s after SIGTERM"
-    assert out == "" and "Traceback" not in err
-    assert err.splitlines()[-1] == "flowtest: interrupted"
-    assert list(tmp_path.iterdir()) == [], "no output file, partial or whole"
+# (the SIGTERM twin of Ctrl-C on the console script: tests/test_cli.py test_ctrl_c_on_the_console_script)
 
 
 @pytest.mark.slow
