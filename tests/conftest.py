@@ -12,6 +12,8 @@ from __future__ import annotations
 import atexit
 import os
 import shutil
+import signal
+import subprocess
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
@@ -61,3 +63,18 @@ def pool_cache(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
     mp.setenv("FLOWTEST_CACHE_DIR", str(path))
     yield path
     mp.undo()
+
+
+def start_until(argv: list[str], marker: str, sig: signal.Signals = signal.SIGINT) -> subprocess.Popen[str]:
+    """Start ``argv`` (stdout and stderr piped, ``sig`` at its default action even if our
+    caller ignores it) and read its standard error until a line holds ``marker``: the
+    moment a test sends it a signal. Fails the test if the process ends first."""
+    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(sig, signal.SIG_DFL))
+    assert proc.stderr is not None
+    seen = []
+    for line in proc.stderr:
+        seen.append(line)
+        if marker in line:
+            return proc
+    pytest.fail(f"no line with {marker!r}: " + "".join(seen))

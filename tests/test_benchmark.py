@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import json
 import signal
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -16,6 +15,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from conftest import start_until
 
 from agents.checkpoint import mark_own_file
 from experiments import benchmark as bench
@@ -211,20 +211,11 @@ def test_same_seeds_same_table(tmp_path: Path, capsys: pytest.CaptureFixture[str
 
 def test_ctrl_c_during_training(tmp_path: Path) -> None:
     """SIGINT while a baseline trains: exit 130 within 2 s, one line, nothing on stdout."""
-    proc = subprocess.Popen(
+    proc = start_until(
         [str(FLOWTEST), "benchmark", "--pool", POOL, "--train-count", "2", "--test-count", "2", "--sut", "ppo",
          "--algo", "recurrent-ppo", "--steps", "100000", "--out", str(tmp_path / "b"), "--json"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+        "training recurrent-ppo", signal.SIGINT,
     )
-    assert proc.stderr is not None
-    seen = []
-    for line in proc.stderr:
-        seen.append(line)
-        if "training recurrent-ppo" in line:
-            break
-    else:
-        pytest.fail("never started training: " + "".join(seen))
     time.sleep(1.0)
     t0 = time.perf_counter()
     proc.send_signal(signal.SIGINT)

@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from conftest import start_until
 
 from experiments import cli
 from experiments.cli import main
@@ -391,19 +392,10 @@ def test_ctrl_c_on_the_console_script(sig: signal.Signals, tmp_path: Path) -> No
     exit 130 within 2 s, one line, no traceback, nothing on stdout, no (partial or hidden)
     output file; SIGTERM takes the same path."""
     art = tmp_path / "mars.json"
-    proc = subprocess.Popen(
+    proc = start_until(
         [str(FLOWTEST), "synthesize", "mars-exploration", "--json", "--out", str(art), "--progress", "0.3"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-        preexec_fn=lambda: signal.signal(sig, signal.SIG_DFL),  # even if our caller ignores it
+        "bound", sig,  # a status line with a bound: HiGHS's search runs
     )
-    assert proc.stderr is not None
-    seen = []
-    for line in proc.stderr:  # a status line with a bound: HiGHS's search runs
-        seen.append(line)
-        if "bound" in line:
-            break
-    else:
-        pytest.fail("no solver status line: " + "".join(seen))
     t0 = time.perf_counter()
     proc.send_signal(sig)
     out, err = proc.communicate(timeout=60)

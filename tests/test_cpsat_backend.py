@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from conftest import start_until
 from test_optimality import compare_reactive, compare_static, graph_instance, grid_instance
 
 from experiments.cli import main
@@ -168,19 +169,10 @@ def test_ctrl_c_on_the_console_script_ends_the_child(tmp_path: Path) -> None:
     """SIGINT while CP-SAT runs (mars-exploration, phase 1): exit 130 within 2 s, nothing
     on stdout, no output file, and the child process is gone within a second."""
     art = tmp_path / "mars.json"
-    proc = subprocess.Popen(
+    proc = start_until(
         [str(FLOWTEST), "synthesize", "mars-exploration", "--backend", "cpsat", "--json", "--out", str(art), "--progress", "0.3"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+        "phase 1 (maximum flow): best", signal.SIGINT,
     )
-    assert proc.stderr is not None
-    seen = []
-    for line in proc.stderr:
-        seen.append(line)
-        if "phase 1 (maximum flow): best" in line:
-            break
-    else:
-        pytest.fail("no solver status line: " + "".join(seen))
     children = Path(f"/proc/{proc.pid}/task/{proc.pid}/children")
     kids = [int(p) for p in children.read_text().split()] if children.exists() else []
     t0 = time.perf_counter()

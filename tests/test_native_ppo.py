@@ -11,7 +11,6 @@ from __future__ import annotations
 import copy
 import json
 import signal
-import subprocess
 import sys
 import time
 import zipfile
@@ -21,6 +20,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import pytest
+from conftest import start_until
 
 torch = pytest.importorskip("torch")
 
@@ -219,20 +219,11 @@ def test_ctrl_c_while_training_leaves_nothing_half_written(tmp_path: Path) -> No
     file in the output folder."""
     out = tmp_path / "out"
     out.mkdir()
-    proc = subprocess.Popen(
+    proc = start_until(
         [str(FLOWTEST), "train", "small-reactive", "--steps", "100000000", "--num-envs", "8", "--net-arch", "16",
          "--out", str(out / "m.zip"), "--log-dir", str(out / "logs"), "--device", "cpu"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+        "training with", signal.SIGINT,
     )
-    assert proc.stderr is not None
-    seen = []
-    for line in proc.stderr:
-        seen.append(line)
-        if "training with" in line:
-            break
-    else:
-        pytest.fail("never started training: " + "".join(seen))
     deadline = time.time() + 60
     while not (out / "logs" / "progress.csv").exists() and time.time() < deadline:
         time.sleep(0.2)
