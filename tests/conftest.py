@@ -17,6 +17,7 @@ import subprocess
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -78,3 +79,24 @@ def start_until(argv: list[str], marker: str, sig: signal.Signals = signal.SIGIN
         if marker in line:
             return proc
     pytest.fail(f"no line with {marker!r}: " + "".join(seen))
+
+
+@pytest.fixture()
+def cache(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    """A private test cache folder (not created yet) and empty in-memory caches of loaded
+    tests (a module with other needs defines its own ``cache``)."""
+    from flowtest_env import sources
+
+    monkeypatch.setenv("FLOWTEST_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setattr(sources, "_LOADED", {})
+    monkeypatch.setattr(sources, "_GAMES", {})
+    return tmp_path / "cache"
+
+
+def played_artifact(env: Any) -> Any:
+    """The :class:`~synthesis.artifacts.artifact.TestArtifact` a FlowTest env plays."""
+    from synthesis.artifacts.artifact import TestArtifact
+
+    art = env.unwrapped.artifact
+    assert isinstance(art, TestArtifact)
+    return art

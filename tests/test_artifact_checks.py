@@ -15,10 +15,11 @@ import shutil
 import warnings
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any, cast
+from typing import Any
 
 import gymnasium as gym
 import pytest
+from conftest import played_artifact
 
 import flowtest_env  # noqa: F401  (registers the envs)
 import flowtest_env.artifacts as artifacts
@@ -29,12 +30,6 @@ from synthesis.problems.builtins import BUILTINS
 SHIPPED = Path(artifacts.__file__).parent / "artifacts"
 NAMES = sorted(p.stem for p in SHIPPED.glob("*.json"))
 
-
-def _artifact(env: gym.Env[Any, Any]) -> TestArtifact:
-    """The test a FlowTest env plays."""
-    art = cast(Any, env.unwrapped).artifact
-    assert isinstance(art, TestArtifact)
-    return art
 
 def shipped(name: str) -> dict[str, Any]:
     doc: dict[str, Any] = json.loads((SHIPPED / f"{name}.json").read_text())
@@ -177,7 +172,7 @@ def test_edited_cache_entry_is_refused_with_a_warning_and_rebuilt(own_artifacts:
     cached.write_text(json.dumps(d))
     with pytest.warns(UserWarning, match="refused a cache entry.*bypass flow"):
         env = gym.make("FlowTest-SmallReactive-v0")
-    assert _artifact(env).strategy.restrictions.any()  # the true test, not the edited one
+    assert played_artifact(env).strategy.restrictions.any()  # the true test, not the edited one
     artifacts.load_builtin.cache_clear()
     artifacts.builtin_game.cache_clear()
     with warnings.catch_warnings():
@@ -192,7 +187,7 @@ def test_cache_entry_of_another_problem_is_refused(own_artifacts: Path) -> None:
     shutil.copy(SHIPPED / "example1.json", cached)
     with pytest.warns(UserWarning, match="another problem"):
         env = gym.make("FlowTest-SmallReactive-v0")
-    assert _artifact(env).name == "small-reactive"
+    assert played_artifact(env).name == "small-reactive"
 
 
 def test_edited_random_grid_cache_entry_is_refused(own_artifacts: Path) -> None:

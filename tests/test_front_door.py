@@ -25,13 +25,6 @@ from synthesis.problems.files import load_problem_file
 DATA = Path(__file__).resolve().parent / "data"
 
 
-@pytest.fixture()
-def cache(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
-    """A private cache folder and an empty in-memory cache."""
-    monkeypatch.setenv("FLOWTEST_CACHE_DIR", str(tmp_path / "cache"))
-    monkeypatch.setattr(sources, "_LOADED", {})
-    return tmp_path / "cache"
-
 
 @pytest.fixture()
 def problem_file(tmp_path: Path) -> Path:

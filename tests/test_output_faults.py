@@ -19,10 +19,11 @@ import sys
 import time
 import tracemalloc
 from pathlib import Path
-from typing import Any, cast
+from typing import Any
 
 import gymnasium as gym
 import pytest
+from conftest import played_artifact
 
 import flowtest_env
 import flowtest_env.random_grid as rg
@@ -37,20 +38,6 @@ ROOT = Path(__file__).resolve().parents[1]
 FLOWTEST = Path(sys.executable).parent / "flowtest"
 
 
-def _artifact(env: gym.Env[Any, Any]) -> TestArtifact:
-    """The test a FlowTest env plays."""
-    art = cast(Any, env.unwrapped).artifact
-    assert isinstance(art, TestArtifact)
-    return art
-
-
-@pytest.fixture()
-def cache(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
-    """A private cache folder (not created) and empty in-memory caches."""
-    monkeypatch.setenv("FLOWTEST_CACHE_DIR", str(tmp_path / "cache"))
-    monkeypatch.setattr(sources, "_LOADED", {})
-    monkeypatch.setattr(sources, "_GAMES", {})
-    return tmp_path / "cache"
 
 
 def _problem(tmp_path: Path, name: str = "mine") -> Path:
@@ -142,7 +129,7 @@ def test_a_faulty_cache_is_a_warning_and_the_test_is_kept_in_memory(
     _fault_case(tmp_path, cache, how)
     with pytest.warns(UserWarning, match="kept in memory"):
         env = gym.make("FlowTest-v0", test=str(_problem(tmp_path)))
-    assert _artifact(env).name == "ok-grid"
+    assert played_artifact(env).name == "ok-grid"
     assert _tmp_files(cache) == [] and _tmp_files(tmp_path) == []
 
 

@@ -18,10 +18,11 @@ import tracemalloc
 import warnings
 from dataclasses import replace
 from pathlib import Path
-from typing import Any, cast
+from typing import Any
 
 import gymnasium as gym
 import pytest
+from conftest import played_artifact
 
 import flowtest_env
 import flowtest_env.artifacts as artifacts
@@ -45,12 +46,6 @@ SHIPPED = Path(artifacts.__file__).parent / "artifacts"
 DATA = Path(__file__).resolve().parent / "data"
 
 
-def _artifact(env: gym.Env[Any, Any]) -> TestArtifact:
-    """The test a FlowTest env plays."""
-    art = cast(Any, env.unwrapped).artifact
-    assert isinstance(art, TestArtifact)
-    return art
-
 def shipped(name: str) -> dict[str, Any]:
     doc: dict[str, Any] = json.loads((SHIPPED / f"{name}.json").read_text())
     return doc
@@ -61,14 +56,6 @@ def rehash(d: dict[str, Any]) -> dict[str, Any]:
     d["source"] = {"sha256": source_hash(d["system"], d["objectives"], d["kind"])}
     return d
 
-
-@pytest.fixture()
-def cache(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
-    """A private cache folder and empty in-memory caches."""
-    monkeypatch.setenv("FLOWTEST_CACHE_DIR", str(tmp_path / "cache"))
-    monkeypatch.setattr(sources, "_LOADED", {})
-    monkeypatch.setattr(sources, "_GAMES", {})
-    return tmp_path / "cache"
 
 
 # ---------------------------------------------------------------- the digest
@@ -169,7 +156,7 @@ def test_the_problem_file_cache_never_serves_another_problems_test(tmp_path: Pat
     sources._LOADED.clear()
     with pytest.warns(UserWarning, match="another problem file"):
         env = gym.make("FlowTest-v0", test=str(a))
-    assert _artifact(env).name == "ok-grid" and _artifact(env).kind == "static"
+    assert played_artifact(env).name == "ok-grid" and played_artifact(env).kind == "static"
     with warnings.catch_warnings():  # the entry was rebuilt: the next process takes it silently
         warnings.simplefilter("error")
         sources._LOADED.clear()
@@ -191,7 +178,7 @@ def test_a_users_edited_but_valid_artifact_is_checked_and_reported(tmp_path: Pat
     path.write_text(json.dumps(d))
     with pytest.warns(EditedArtifactWarning, match="changed after FlowTest wrote it"):
         env = gym.make("FlowTest-v0", test=str(path))
-    assert _artifact(env).edited
+    assert played_artifact(env).edited
 
 
 def test_an_edited_but_valid_cache_entry_is_refused_and_rebuilt(tmp_path: Path, cache: Path) -> None:
