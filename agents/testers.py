@@ -12,7 +12,7 @@ Testers are named like systems under test (:func:`make_tester`):
 ===================  ===================================================================
 ``synthesized``      the synthesized test strategy (FlowTest's test, with its guarantees)
 ``ppo:PATH``         a learned tester: a MaskablePPO model trained by
-                     ``flowtest train-tester`` (:mod:`experiments.train_tester`); a
+                     ``flowtest train-tester`` (:mod:`experiments.cli.train_tester`); a
                      folder ``PATH`` holds one per problem, ``PATH/<problem>.zip``
 ===================  ===================================================================
 

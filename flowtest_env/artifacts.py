@@ -1,7 +1,7 @@
 """Where environments get their synthesized tests: shipped artifacts and the on-disk cache.
 
 Built-in problems ship their artifacts in ``flowtest_env/artifacts/<name>.json``
-(written by ``experiments/build_artifacts.py``), so ``gym.make`` never solves anything.
+(written by ``experiments/tools/build_artifacts.py``), so ``gym.make`` never solves anything.
 If an artifact is missing (a development checkout before the build), the problem is
 synthesized once and the result cached under :func:`cache_dir`, filed under a key of the
 FlowTest and solver versions and the options (:func:`builtin_cache_path`): an answer
@@ -20,7 +20,7 @@ in full on load (:meth:`synthesis.artifacts.artifact.TestArtifact.load`: schema,
 source hash, automata, restrictions against its own product graphs, a test agent's
 controller in closed loop). A shipped artifact must have exactly the bytes FlowTest
 shipped (:data:`MANIFEST`, the SHA-256 of each file, written by
-``experiments/build_artifacts.py``) and its own digest, and is then checked in full like a
+``experiments/tools/build_artifacts.py``) and its own digest, and is then checked in full like a
 cache entry (mars-exploration, the largest, in about 0.15 s). Both must carry the source
 hash of the built-in problem they stand for. An edited file, or one made for another problem, is refused with a message
 naming what is wrong (a cache entry is then synthesized again, with a warning).
@@ -177,7 +177,7 @@ def load_shipped(path: Path, expected_source: str) -> TestArtifact:
     ProblemError
         If the file is not the one FlowTest shipped, or fails its checks.
     """
-    fix = f"reinstall FlowTest or run `python -m experiments.build_artifacts {path.stem} --force`"
+    fix = f"reinstall FlowTest or run `python -m experiments.tools.build_artifacts {path.stem} --force`"
     want = shipped_digests(path.parent).get(path.name)
     if want is None:
         raise ProblemError(f"artifact {path} is not listed in {MANIFEST.name}; {fix}")
@@ -257,7 +257,7 @@ def load_builtin(name: str) -> TestArtifact:
             warn_refused_entry(exc)
     logger.warn(
         f"no shipped artifact for {name!r}: synthesizing it now (this can take minutes for large problems); "
-        f"`python -m experiments.build_artifacts {name}` ships it, the result is cached in {cached}"
+        f"`python -m experiments.tools.build_artifacts {name}` ships it, the result is cached in {cached}"
     )
     art = synthesize_artifact(name)
     write_cache_entry(cached, art)

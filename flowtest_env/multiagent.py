@@ -84,7 +84,7 @@ With the synthesized tester no state of the parallel game traps the system, and 
 met run realizes the test objective except where the test agent must step in front of
 the system right after the system's move: patrolling (physical walls), whose agent must
 block the way into (3, 2) and, one round late in the parallel game, lets the system slip
-past (``tests/test_multiagent.py`` explores every system behaviour and checks both). For
+past (``tests/flowtest_env/test_multiagent.py`` explores every system behaviour and checks both). For
 exact turn-by-turn play, for patrolling's guarantee, and for a learned tester, use the
 AEC version.
 """

@@ -3,7 +3,7 @@
 Before any test module (and so any FlowTest module) is imported, ``HOME``, the XDG base
 folders and ``FLOWTEST_CACHE_DIR`` are pointed into one temporary folder for the session
 (shared by pytest-xdist workers, which inherit the environment, and removed at exit by the
-process that made it). ``tests/test_pools.py`` proves it: a test run with a fresh fake
+process that made it). ``tests/flowtest_env/test_pools.py`` proves it: a test run with a fresh fake
 home leaves that home empty.
 """
 
@@ -23,6 +23,9 @@ import pytest
 
 SANDBOX_ENV = "FLOWTEST_TEST_SANDBOX"
 """Set to the session's temporary folder once the environment points into it."""
+
+BURNER = "while True:\n    pass\n"
+"""A Python program that keeps one core busy (``python -c BURNER``): the tests that load the machine start one per core."""
 
 REAL_HOME_ENV = "FLOWTEST_TEST_REAL_HOME"
 """The home folder the session started with (for the test that proves it stays untouched)."""

@@ -4,7 +4,7 @@ Plain Python with no import but ``json``, written to be ported line by line (C++
 PLC): lists, dicts and integers only. It plays every kind of test (static walls, reactive
 doors, mixed, and a test agent with its controller table) exactly as FlowTest's
 environments do; FlowTest's test suite holds it to them step by step
-(tests/test_reference_reader.py). The fields it reads are explained in
+(tests/docs/test_reference_reader.py). The fields it reads are explained in
 docs/artifact-schema.md.
 
     test = Test(json.load(open("maze2.json")))

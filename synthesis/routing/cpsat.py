@@ -10,7 +10,7 @@ capacities ``K (1 - d)`` (integral for the same reason), MILP-agent's place bina
 reachability from ``Src`` outside I (the fact the coupling rows of
 :mod:`synthesis.routing.model` rest on). Every coefficient is integral, so a row
 ``lo <= a x <= hi`` is ``ceil(lo) <= a x <= floor(hi)``. The exhaustive-optimality tests
-(``tests/test_optimality.py``) hold this backend to that claim.
+(``tests/synthesis/test_optimality.py``) hold this backend to that claim.
 
 CP-SAT runs in a child process (:mod:`synthesis.routing.cpsat_worker`): OR-Tools bundles
 its own ``libhighs.so.1``, which cannot share a process with highspy. The model goes over

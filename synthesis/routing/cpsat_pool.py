@@ -4,7 +4,7 @@
 :mod:`synthesis.routing.cpsat_worker` (OR-Tools cannot share a process with highspy). A
 child is started before it is needed when that pays: :func:`prestart` lets it load
 OR-Tools while this process does other work, and ``flowtest synthesize`` calls it first
-thing, before its own imports (:mod:`experiments.prestart`). Whoever may have started one
+thing, before its own imports (:mod:`experiments.cli.prestart`). Whoever may have started one
 ends it with :func:`close_idle_workers` when it is not (or no longer) needed.
 
 This module imports the standard library only, so that starting a child costs the caller

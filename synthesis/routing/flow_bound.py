@@ -57,7 +57,7 @@ two-value knapsack over a few states, solved exactly by dynamic programming over
 (capped at the bound already known). Every step over-estimates ``min(E, X)`` of the true
 ``A``, so every valid cut set has flow at most the bound, and the optimum of method.md §5 is
 kept: the bound only proves a flow level empty, or tells phase 1 that the heuristic's flow
-is the maximum (``tests/test_flow_bound.py`` checks it against brute force).
+is the maximum (``tests/synthesis/test_flow_bound.py`` checks it against brute force).
 
 (L4) Every fact above holds with I replaced by any set ``I'`` of nodes of G that holds I and
 no ``Tgt`` node. A valid ``S`` is valid for ``I'``: a walk from ``Src`` to ``Tgt`` outside

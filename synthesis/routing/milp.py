@@ -1174,7 +1174,7 @@ def _run(
     within less than 1 of HiGHS's dual bound (both objectives are integral, so this is a
     proof), not only HiGHS's word. HiGHS 1.16.0 with a start and presolve can return the
     start itself while it reports (and proves) a better objective: the proven optimum of
-    the reduced model, not postsolved (``tests/test_highs_start.py``). When the returned
+    the reduced model, not postsolved (``tests/synthesis/test_highs_start.py``). When the returned
     solution does not have the objective HiGHS reports, or violates the model, the solve
     is run again without any start (``clearSolver``); if that still disagrees the answer
     is at most ``"feasible"``, with the gap its own objective leaves to the bound.

@@ -135,7 +135,7 @@ class MilpOptions:
     offer_starts
         Offer HiGHS the heuristic's answer (phase 1) and the phase-1 answer (phase 2) as
         starts (each checked against the model first). Without, they are still kept as
-        the fallback answers of a time-limited solve. (``experiments.bench_starts``
+        the fallback answers of a time-limited solve. (``experiments.lab.bench_starts``
         measures both.)
     control
         Shared with the caller while HiGHS runs: Ctrl-C / stop requests, and the live
@@ -867,9 +867,9 @@ def phase2_integral_columns(rm: RoutingModel, options: MilpOptions) -> np.ndarra
 
     So every cut set phase 2 admits is admitted with ``mu`` and ``f`` integral, at the same
     cost. (:mod:`synthesis.routing.cpsat` rests on the same facts, with every column
-    integral.) Checked on the generators' models (``tests/test_integral_phase2.py``: each
+    integral.) Checked on the generators' models (``tests/synthesis/test_integral_phase2.py``: each
     step on solutions with fractional ``mu`` and ``f``) and by the exhaustive comparisons of
-    ``tests/test_optimality.py`` run with these columns integral.
+    ``tests/synthesis/test_optimality.py`` run with these columns integral.
     """
     if not options.integral_phase2 or options.mode != "reactive" or rm.model.n_row < INTEGRAL_PHASE2_MIN_ROWS:
         return np.zeros(0, dtype=np.int64)
@@ -955,7 +955,7 @@ def _add_feasibility(
     phase 2's LP bound on the large reactive models is the same with the feasibility flows
     or without any (docs/benchmarks.md, "Session 11"), and a model with ``n_d`` times fewer
     closing rows (5x5 reaction |AP| = 7 #1: 23,831 rows instead of 41,035) runs more
-    branch-and-bound nodes per second. Checked by ``tests/test_flow_rows.py``.
+    branch-and-bound nodes per second. Checked by ``tests/synthesis/test_flow_rows.py``.
     """
     g, gs = products.virtual, products.system
     ts = products.ts

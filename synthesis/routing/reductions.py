@@ -20,7 +20,7 @@ of ``S``. Facts used below, for a valid ``S`` and a flow of the model under ``S`
 * (F2) the cost of ``S`` (phase 2) is ``sum_{g in S} weight[g]``, every weight >= 1.
 
 The rules, each fixing only groups that some optimum (for rules 1 and 2: every optimum)
-leaves open, so the optimum of method.md §5 is kept (``tests/test_reductions.py`` checks
+leaves open, so the optimum of method.md §5 is kept (``tests/synthesis/test_reductions.py`` checks
 each against brute force on tiny instances):
 
 1. **Never needed.** A group with no edge on any bypass walk. For a valid ``S`` holding it,

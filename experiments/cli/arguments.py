@@ -1,0 +1,68 @@
+"""Argument parsing shared by every command: the parser's error contract and value types.
+
+A usage error is one ``error: ...`` line on stderr and exit code 2
+(:data:`~experiments.cli.exits.EXIT_INVALID`); argparse would print its usage block first.
+The types below reject a bad value with a message that says what was expected.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from typing import NoReturn
+
+from .exits import EXIT_INVALID
+from .exits import error as error_line
+
+
+class ArgumentParser(argparse.ArgumentParser):
+    """argparse with FlowTest's error contract: a usage error is one ``error: ...`` line
+    on stderr and exit code 2 (argparse would print the usage block first)."""
+
+    def error(self, message: str) -> NoReturn:
+        error_line(f"{self.prog}: {message} (see `{self.prog} --help`)")
+        raise SystemExit(EXIT_INVALID)
+
+
+def positive_seconds(text: str) -> float:
+    """An argparse type: a finite number of seconds > 0 (time limits)."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of seconds, got {text!r}") from None
+    if not math.isfinite(v) or v <= 0:
+        raise argparse.ArgumentTypeError(f"expected a positive number of seconds, got {text!r}")
+    return v
+
+
+def relative_gap(text: str) -> float:
+    """An argparse type: a relative MIP gap in ``[0, 1)``."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a relative gap such as 0.01, got {text!r}") from None
+    if not (0.0 <= v < 1.0):
+        raise argparse.ArgumentTypeError(f"the relative gap must be in [0, 1), got {text!r}")
+    return v
+
+
+def nonnegative_int(text: str) -> int:
+    """An argparse type: an integer >= 0 (seeds)."""
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a non-negative integer, got {text!r}") from None
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"expected a non-negative integer, got {text!r}")
+    return v
+
+
+def positive_int(text: str) -> int:
+    """An argparse type: an integer >= 1 (episodes, steps, threads)."""
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
+    if v <= 0:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
+    return v

@@ -1,0 +1,238 @@
+"""The native masked PPO (agents/native_ppo.py): the autoreset step never reaches the
+loss, truncation is bootstrapped and termination is not, masks hold, a seed gives the
+same run, and ``flowtest train`` writes a native checkpoint that plays as ``ppo:PATH``.
+
+Tiny envs and a few hundred steps keep these fast; the learning figures are in
+docs/benchmarks.md.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import signal
+import sys
+import time
+import zipfile
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from conftest import start_until
+
+torch = pytest.importorskip("torch")
+
+import flowtest_env  # noqa: E402,F401
+from agents.checkpoint import is_native_checkpoint, load_checkpoint  # noqa: E402
+from agents.native_ppo import (  # noqa: E402
+    Agent,
+    NativeArgs,
+    Rollout,
+    Runner,
+    advantages,
+    collect_rollout,
+    masked_logits,
+    minibatch_indices,
+    ppo_update,
+    shared_position_slice,
+    train,
+)
+from experiments.cli.cli import main  # noqa: E402
+
+FLOWTEST = Path(sys.executable).parent / "flowtest"
+
+
+def _runner(kind: str, max_steps: int = 3, n: int = 4, seed: int = 0) -> tuple[Runner, Agent, NativeArgs]:
+    """A runner on small-reactive whose episodes end every few steps (``max_steps``)."""
+    env: Any = gym.make_vec("FlowTest-SmallReactive-v0", num_envs=n, vectorization_mode="vector_entry_point",
+                            max_steps=max_steps)
+    torch.manual_seed(seed)
+    where = shared_position_slice(env.unwrapped.games, "flat")
+    obs_size = int(env.single_observation_space.shape[0]) + (where.stop - where.start)
+    agent = Agent(obs_size, int(env.single_action_space.n), (16,), "gru" if kind == "recurrent-ppo" else "mlp", 8)
+    args = NativeArgs(algo=kind, num_envs=n, num_steps=12, num_minibatches=2, update_epochs=2, hidden=(16,), gru_hidden=8)
+    return Runner(env, agent, where, torch.device("cpu"), seed), agent, args
+
+
+@pytest.mark.parametrize("kind", ["ppo", "recurrent-ppo"])
+def test_the_autoreset_step_is_never_trained_on(kind: str) -> None:
+    """With NEXT_STEP autoreset the step after an episode end is a reset whose action the
+    env ignores. The rollout marks exactly those steps invalid, the MLP's minibatches hold
+    exactly the valid steps, and whatever is recorded at an autoreset step (action, its
+    log-probability, reward, mask) changes nothing in the update."""
+    runner, agent, args = _runner(kind)
+    first = collect_rollout(runner, 12)
+    r = collect_rollout(runner, 12)  # a second rollout: the carried-over flags count too
+    done = (r.terminated | r.truncated).numpy()
+    done_before = np.concatenate([(first.terminated | first.truncated).numpy()[-1:], done[:-1]])
+    np.testing.assert_array_equal(r.valid.numpy(), ~done_before)
+    reset = ~r.valid.numpy()
+    assert reset.sum() >= 4  # episodes of 3 steps: plenty of autoreset steps
+    # the env's own contract at those steps: reward 0, neither terminated nor truncated
+    assert (r.rewards.numpy()[reset] == 0).all() and not done[reset].any()
+    # the MLP trains on every valid step once, and on no other
+    g = torch.Generator().manual_seed(0)
+    chosen = torch.cat(minibatch_indices(r.valid, 3, g)).numpy()
+    assert sorted(chosen.tolist()) == np.flatnonzero(r.valid.numpy().reshape(-1)).tolist()
+    # garbage at the autoreset steps: the update is bit-for-bit the same
+    bad = copy.copy(r)
+    inv = ~r.valid
+    bad.actions = torch.where(inv, (r.actions + 1) % agent.n_actions, r.actions)
+    bad.logprobs = torch.where(inv, torch.full_like(r.logprobs, -50.0), r.logprobs)
+    bad.rewards = torch.where(inv, torch.full_like(r.rewards, 1e3), r.rewards)
+    bad.masks = torch.where(inv.unsqueeze(-1), torch.ones_like(r.masks), r.masks)
+    params = []
+    for rollout in (r, bad):
+        a = copy.deepcopy(agent)
+        opt = torch.optim.Adam(a.parameters(), lr=1e-2)
+        ppo_update(a, opt, args, rollout, torch.Generator().manual_seed(1))
+        params.append([p.detach().clone() for p in a.parameters()])
+    for p, q in zip(*params, strict=True):
+        assert torch.equal(p, q)
+    # and the same garbage at a valid step does change it (the check can fail)
+    worse = copy.copy(r)
+    k = int(np.flatnonzero(r.valid.numpy().reshape(-1))[0])
+    worse.rewards = r.rewards.clone().reshape(-1)
+    worse.rewards[k] = 1e3
+    worse.rewards = worse.rewards.reshape(r.rewards.shape)
+    a = copy.deepcopy(agent)
+    ppo_update(a, torch.optim.Adam(a.parameters(), lr=1e-2), args, worse, torch.Generator().manual_seed(1))
+    assert any(not torch.equal(p, q) for p, q in zip(a.parameters(), params[0], strict=True))
+
+
+def _rollout(terminated: bool) -> Rollout:
+    """One env, three steps: a step, the episode's last step (terminated or truncated),
+    then the autoreset step."""
+    f = torch.zeros
+    return Rollout(
+        obs=f((3, 1, 2)), masks=torch.ones((3, 1, 2), dtype=torch.bool), actions=torch.zeros((3, 1), dtype=torch.long),
+        logprobs=f((3, 1)), values=torch.tensor([[0.5], [0.25], [2.0]]), rewards=torch.tensor([[0.1], [0.2], [0.0]]),
+        terminated=torch.tensor([[False], [terminated], [False]]), truncated=torch.tensor([[False], [not terminated], [False]]),
+        valid=torch.tensor([[True], [True], [False]]), starts=torch.tensor([[True], [False], [False]]),
+        h0=f((1, 0)), next_value=torch.tensor([7.0]),
+    )
+
+
+def test_truncation_bootstraps_the_last_observation_and_termination_nothing() -> None:
+    gamma, lam = 0.9, 0.8
+    for terminated in (True, False):
+        adv, ret = advantages(_rollout(terminated), gamma, lam)
+        last = 0.2 + (0.0 if terminated else gamma * 2.0) - 0.25  # V(o_2) = 2.0: the episode's last observation
+        assert adv[1, 0].item() == pytest.approx(last)
+        assert adv[0, 0].item() == pytest.approx(0.1 + gamma * 0.25 - 0.5 + gamma * lam * last)
+        assert ret[1, 0].item() == pytest.approx(last + 0.25)
+
+
+def test_masked_logits_give_illegal_actions_no_probability() -> None:
+    logits = torch.tensor([[3.0, 1.0, 2.0], [0.0, 0.0, 0.0]])
+    mask = torch.tensor([[False, True, True], [False, False, False]])
+    p = torch.softmax(masked_logits(logits, mask), dim=-1)
+    assert p[0, 0].item() == 0.0 and p[0, 1:].sum().item() == pytest.approx(1.0)
+    assert torch.isfinite(p[1]).all()  # a terminal state's empty mask (the autoreset step) stays defined
+    runner, _, _ = _runner("ppo")
+    r = collect_rollout(runner, 12)
+    taken = r.masks.gather(-1, r.actions.unsqueeze(-1)).squeeze(-1)
+    assert taken[r.valid].all()  # every trained action was legal
+
+
+@pytest.mark.parametrize("algo", ["ppo", "recurrent-ppo"])
+def test_a_seed_gives_the_same_run_and_the_checkpoint_plays_it(tmp_path: Path, algo: str) -> None:
+    """Twice the same seed, once on the torch env and once on the NumPy env: the same
+    tensors bit for bit (the two envs give the same runs)."""
+    args = NativeArgs(env_id="FlowTest-SmallReactive-v0", algo=algo, total_steps=512, num_envs=8, num_steps=16,
+                      num_minibatches=2, hidden=(16,), gru_hidden=8, device="cpu", eval_every=256, env_backend="torch")
+    a = train(args, out=tmp_path / "a.zip", progress_bar=False)
+    args.env_backend = "numpy"
+    b = train(args, out=tmp_path / "b.zip", progress_bar=False)
+    ca, cb = load_checkpoint(tmp_path / "a.zip"), load_checkpoint(tmp_path / "b.zip")
+    assert ca.tensors.keys() == cb.tensors.keys()
+    for k in ca.tensors:
+        np.testing.assert_array_equal(ca.tensors[k], cb.tensors[k])
+    assert a.evaluations == b.evaluations and a.steps == 512
+    assert [s for s, _ in a.evaluations] == [0, 256, 512]
+    assert ca.settings["network"]["kind"] == ("gru" if algo == "recurrent-ppo" else "mlp")
+    assert ca.settings["training"]["seed"] == 0 and ca.settings["n_actions"] == a.agent.n_actions
+    # the greedy score the trainer measured is the score of the saved file, played one env at a time
+    from agents.registry import make_policy
+    from experiments.cli.episodes import run_episode
+
+    env = gym.make("FlowTest-SmallReactive-v0")
+    policy = make_policy(f"ppo:{tmp_path / 'a.zip'}", env)
+    t = run_episode(env, policy, "small-reactive", "ppo", 0, record=False)
+    assert (t.verdict["system_objective"] == "met") == (a.final["train"]["met"] == 1.0)
+
+
+def test_flowtest_train_native_writes_every_setting_logs_and_a_safe_checkpoint(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    model = tmp_path / "m.zip"
+    code = main(["train", "small-reactive", "--steps", "1024", "--num-envs", "8", "--n-steps", "16", "--net-arch", "16",
+                 "--out", str(model), "--log-dir", str(tmp_path / "logs"), "--eval-every", "512", "--eval-episodes", "2",
+                 "--device", "cpu", "-q"])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    assert "--trainer native" in err and "--n-envs 8" in err and "--net-arch 16" in err and "--device cpu" in err
+    assert "greedy on the env's tests" in out and f"--sut ppo:{model}" in out
+    saved = json.loads(model.with_suffix(".json").read_text())
+    assert saved["trainer"] == "native" and saved["steps"] == 1024 and saved["settings"]["n_envs"] == 8
+    assert saved["native_args"]["num_envs"] == 8 and saved["device"] == "cpu"
+    assert model.with_suffix(".png").stat().st_size > 5_000
+    rows = (tmp_path / "logs" / "progress.csv").read_text().splitlines()
+    assert rows[0].startswith("step,") and "episode/met" in rows[0] and "eval/train_met" in rows[0]
+    assert len(rows) > 4
+    # the model file: JSON settings and .npy tensors only, nothing pickled
+    assert is_native_checkpoint(model)
+    with zipfile.ZipFile(model) as z:
+        names = z.namelist()
+    assert names[0] == "flowtest-policy.json" and all(n.startswith("tensors/") and n.endswith(".npy") for n in names[1:])
+    code = main(["evaluate", "--env", "small-reactive", "--sut", f"ppo:{model}", "--episodes", "2",
+                 "--out", str(tmp_path / "r"), "-q"])
+    assert code == 0, capsys.readouterr().err
+    assert "warning" not in capsys.readouterr().err  # data, not code: no opt-in, no warning
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["--lstm-hidden-size", "8"], "a setting of --trainer sb3"),
+    (["--trainer", "sb3", "--device", "cpu"], "a setting of the native trainer"),
+    (["--trainer", "sb3", "--pool", "reachability1/5x5"], "go with the native trainer"),
+    (["--algo", "maskable-ppo", "--trainer", "sb3", "--gru-hidden-size", "4"], "a setting of the native trainer"),
+    (["--device", "tpu"], "device"),
+    (["--count", "4"], "go with --pool"),
+    (["--pool", "nonsense/5x5"], "unknown family"),
+])
+def test_bad_training_flags_are_one_error_line(tmp_path: Path, capsys: pytest.CaptureFixture[str], argv: list[str],
+                                               says: str) -> None:
+    out = tmp_path / "m.zip"
+    try:
+        code = main(["train", "small-reactive", "--out", str(out), *argv])
+    except SystemExit as exc:
+        code = int(exc.code or 0)
+    stdout, err = capsys.readouterr()
+    assert code == 2 and stdout == ""
+    assert err.count("\n") == 1 and err.startswith("error: ") and says in err, err
+    assert not out.exists()
+
+
+def test_ctrl_c_while_training_leaves_nothing_half_written(tmp_path: Path) -> None:
+    """SIGINT mid-training: exit 130, one line, and no model, curve, summary or temporary
+    file in the output folder."""
+    out = tmp_path / "out"
+    out.mkdir()
+    proc = start_until(
+        [str(FLOWTEST), "train", "small-reactive", "--steps", "100000000", "--num-envs", "8", "--net-arch", "16",
+         "--out", str(out / "m.zip"), "--log-dir", str(out / "logs"), "--device", "cpu"],
+        "training with", signal.SIGINT,
+    )
+    deadline = time.time() + 60
+    while not (out / "logs" / "progress.csv").exists() and time.time() < deadline:
+        time.sleep(0.2)
+    proc.send_signal(signal.SIGINT)
+    stdout, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert stdout == "" and "Traceback" not in err
+    left = sorted(p.name for p in out.iterdir())
+    assert left == ["logs"], left  # no model, curve, summary, nor any .tmp
+    assert all(not p.name.startswith(".") for p in (out / "logs").iterdir())
+    rows = (out / "logs" / "progress.csv").read_text().splitlines()
+    assert rows[0].startswith("step,") and all(r.count(",") == rows[0].count(",") for r in rows)

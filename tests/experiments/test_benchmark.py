@@ -1,0 +1,226 @@
+"""``flowtest benchmark``: its outputs, and that its numbers come from the runs.
+
+Tiny pools (4x4 grids, a few tests) and a few hundred training steps keep these fast; the
+real run and its figures are in docs/benchmarks.md.
+"""
+
+from __future__ import annotations
+
+import json
+import signal
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from conftest import start_until
+
+from agents.checkpoint import mark_own_file
+from experiments.cli import benchmark as bench
+from experiments.cli.cli import main
+from experiments.cli.episodes import Trace
+
+pytest.importorskip("sb3_contrib")
+
+FLOWTEST = Path(sys.executable).parent / "flowtest"
+POOL = "safety2/4x4"
+"""A pool whose tests build in a fraction of a second and that a random walk fails
+(``G !p2``: it steps on the forbidden cell)."""
+
+
+def run(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
+    """``main(argv)`` (a usage error exits through argparse) with stdout and stderr."""
+    try:
+        code = main(argv)
+    except SystemExit as exc:
+        code = int(exc.code or 0)
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def _system(doc: dict[str, Any], name: str) -> dict[str, Any]:
+    return next(e for e in doc["systems"] if e["name"] == name)
+
+
+def test_references_meet_every_test_and_random_does_not(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Without training: stdout is the JSON only; the replanner and GR(1) meet and realize
+    on every test of both splits; a random system does not; the table's numbers are those
+    of the report's runs (results.json), and every file is written."""
+    out = tmp_path / "b"
+    code, stdout, err = run(["benchmark", "--pool", POOL, "--train-count", "6", "--test-count", "6",
+                             "--sut", "scripted:replanner", "--sut", "gr1", "random", "--out", str(out), "--json", "-q"], capsys)
+    assert code == 0, err
+    doc = json.loads(stdout)  # the whole of stdout is one JSON document
+    assert stdout.count("\n") == 1 and err == ""
+    assert doc["pool"] == POOL and doc["splits"]["train"]["count"] == 6 and doc["splits"]["test"]["seeds"] == [2_000_000, 2_000_005]
+    for ref in ("scripted:replanner", "gr1"):
+        e = _system(doc, ref)
+        assert e["kind"] == "reference"
+        for split in ("train", "test"):
+            assert e[split]["met"]["mean"] == 1.0 and e[split]["realized"]["mean"] == 1.0
+            assert e[split]["test_failures"] == 0
+        assert e["gap"]["mean"] == 0.0
+    rnd = _system(doc, "random")
+    assert rnd["kind"] == "system"
+    assert min(rnd["train"]["met"]["mean"], rnd["test"]["met"]["mean"]) < 1.0
+    assert doc["headline"]["held_out_gap"] == {}  # no baseline trained
+    # the table is computed from the runs the report shows
+    records = json.loads((out / "results.json").read_text())
+    for r in records:
+        split = "train" if " train " in r["env"] else "test"
+        assert r["episodes"] == 6
+        assert _system(doc, r["sut"])[split]["met"]["mean"] == pytest.approx(r["system_objective_met_rate"])
+        for f in r["failures"]:  # a replay command per failing run, on that test's own file
+            env = f["replay"].split("--env ")[1].split(" ")[0]
+            assert Path(env).is_file() and Path(env).parent == (out / "pool" / split).resolve()
+    for name in ("table.md", "table.json", "report.html", "report.md", ".flowtest-benchmark"):
+        assert (out / name).is_file(), name
+    assert not (out / "learning-curves.png").exists()  # no baseline, no curve
+    assert len(list((out / "pool" / "train").glob("seed*.json"))) == 6
+    md = (out / "table.md").read_text()
+    assert "| scripted:replanner | reference | – | 100.0 % | 100.0 % | +0.0 pp |" in md
+    assert "matrix" in (out / "report.html").read_text()
+
+
+def test_refuses_to_overwrite_without_force(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "b"
+    argv = ["benchmark", "--pool", POOL, "--train-count", "2", "--test-count", "2", "--sut", "scripted:replanner",
+            "--out", str(out), "-q"]
+    assert run(argv, capsys)[0] == 0
+    before = (out / "table.json").read_text()
+    code, stdout, err = run(argv, capsys)
+    assert code == 2 and stdout == "" and err.count("\n") == 1
+    assert err.startswith("error: benchmark folder") and "--force" in err
+    code, _, err = run(argv + ["--force"], capsys)
+    assert code == 0, err
+    assert json.loads((out / "table.json").read_text())["systems"] == json.loads(before)["systems"]
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "notes.txt").write_text("mine")
+    code, _, err = run(argv[:-3] + ["--out", str(mine)], capsys)
+    assert code == 2 and "already holds files" in err
+    assert (mine / "notes.txt").read_text() == "mine"
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["--pool", "nonsense/5x5"], "unknown family"),
+    (["--pool", "reaction2/5x4"], "not a square size"),
+    (["--pool", POOL, "--sut", "scripted:nosuch"], "unknown scripted SUT"),
+    (["--pool", POOL, "--sut", "nosuch"], "unknown policy"),
+    (["--pool", POOL, "--sut", "ppo", "--steps", "0"], "positive integer"),
+    (["--pool", POOL, "--sut", "ppo", "--algo", "dqn"], "invalid choice"),
+])
+def test_bad_input_is_one_error_line(tmp_path: Path, capsys: pytest.CaptureFixture[str], argv: list[str], says: str) -> None:
+    out = tmp_path / "b"
+    code, stdout, err = run(["benchmark", *argv, "--out", str(out)], capsys)
+    assert code == 2 and stdout == ""
+    assert err.count("\n") == 1 and err.startswith("error: ") and says in err, err
+    assert not out.exists()  # refused before any work or file
+
+
+def test_metrics_and_confidence_intervals_from_runs() -> None:
+    """The table's numbers are computed from the runs' verdicts."""
+    def trace(outcome: str, realized: bool, restrictions: int, steps: int) -> Trace:
+        t = Trace("t.json", "s", 0)
+        t.verdict = {"system_objective": outcome, "test_objective_realized": realized,
+                     "restrictions": restrictions, "steps": steps}
+        return t
+
+    m = bench.split_metrics([trace("met", True, 2, 10), trace("met", True, 4, 20), trace("violated", False, 0, 5),
+                             trace("open", False, 6, 100)])
+    assert m["met"] == 0.5 and m["realized"] == 1.0 and m["restrictions"] == 3.0 and m["steps"] == 15.0
+    assert (m["violated"], m["open"], m["tests"]) == (1, 1, 4)
+    none = bench.split_metrics([trace("open", False, 1, 100)])
+    assert none["met"] == 0.0 and none["realized"] is None and none["steps"] is None
+    s = bench.mean_ci([0.5, 0.7])
+    assert s["mean"] == pytest.approx(0.6) and s["ci95"] == pytest.approx(12.7062 * 0.1 / 1.0, rel=1e-4)
+    assert bench.mean_ci([0.3])["ci95"] is None and bench.mean_ci([None])["mean"] is None
+    three = bench.mean_ci([1.0, 0.0, 0.5, None])
+    assert three["mean"] == pytest.approx(0.5) and three["ci95"] == pytest.approx(4.3027 * 0.5 / 3 ** 0.5, rel=1e-4)
+
+
+@pytest.mark.parametrize("algo", ["maskable-ppo", "recurrent-ppo"])
+def test_batch_evaluation_gives_the_single_env_verdicts(tmp_path: Path, algo: str) -> None:
+    """The learning curves' batch evaluation (one PoolVectorEnv, every test at once) gives
+    exactly the verdicts of the single env that scores the systems and replays their runs,
+    with the memory wrapper (MaskablePPO) and with an LSTM state (RecurrentPPO)."""
+    from experiments.cli.train import make_model, make_training_vec_env
+
+    config = bench.BenchmarkConfig(POOL, suts=("ppo",), algos=(algo,), train_count=5, test_count=5)
+    splits = bench.load_splits(config, tmp_path, progress=False)
+    settings = bench.baseline_settings(algo, "sb3")
+    env = make_training_vec_env(bench.POOL_ENV_ID, 0, {**settings, "n_envs": 1}, {"pool": POOL, "split": "train", "count": 5})
+    model = make_model(env, settings, 3)  # untrained: a fixed, arbitrary deterministic policy
+    path = tmp_path / "m.zip"
+    model.save(str(path))
+    mark_own_file(path)  # written by this test: scored without --trust-model
+    for split in splits.values():
+        games, budgets = bench._games_and_budgets(split)
+        batch = bench.batch_verdicts(model, games, settings["memory"], budgets)
+        single = bench.score_systems([f"ppo:{path}"], split)[f"ppo:{path}"]
+        for key in ("system_objective", "test_objective_realized", "restrictions", "steps"):
+            assert list(batch[key]) == [t.verdict[key] for t in single], key
+
+
+def test_baselines_train_and_are_scored(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A tiny end-to-end run with training: a model and a curve per seed, the curve's last
+    point equals the single-env score of the saved model, the gap is train minus held-out
+    per seed, and the figure and the report are written."""
+    out = tmp_path / "b"
+    code, stdout, err = run(["benchmark", "--pool", POOL, "--train-count", "4", "--test-count", "3", "--sut", "ppo",
+                             "--algo", "maskable-ppo", "--steps", "1024", "--seeds", "0", "1", "--curve-points", "2",
+                             "--out", str(out), "-q"], capsys)
+    assert code == 0, err
+    assert "held-out gap (train met - held-out met): maskable-ppo" in stdout
+    doc = json.loads((out / "table.json").read_text())
+    e = _system(doc, "maskable-ppo")
+    assert e["kind"] == "baseline" and [r["seed"] for r in e["runs"]] == [0, 1]
+    for run_, training in zip(e["runs"], e["training"], strict=True):
+        assert Path(training["model"]).is_file() and run_["sut"] == f"ppo:{training['model']}"
+        steps = [p[0] for p in training["curve"]]
+        assert steps[0] == 0 and steps[-1] == training["steps"] == 1024
+        assert training["curve"][-1][1:] == [run_["train"]["met"], run_["test"]["met"]]
+        assert run_["gap"] == pytest.approx(run_["train"]["met"] - run_["test"]["met"])
+    assert e["gap"]["mean"] == pytest.approx(np.mean([r["gap"] for r in e["runs"]]))
+    assert doc["headline"]["held_out_gap"]["maskable-ppo"] == e["gap"]
+    assert (out / "learning-curves.png").stat().st_size > 10_000
+    assert len(list((out / "models").glob("*.zip"))) == 2
+
+
+@pytest.mark.slow
+def test_same_seeds_same_table(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Deterministic given seeds: two runs give the same numbers and curves (only the
+    times and paths differ)."""
+    docs = []
+    for name in ("a", "b"):
+        code, stdout, err = run(["benchmark", "--pool", POOL, "--train-count", "3", "--test-count", "3",
+                                 "--sut", "ppo", "scripted:replanner", "--steps", "1024", "--seeds", "0", "1",
+                                 "--curve-points", "2", "--out", str(tmp_path / name), "--json", "-q"], capsys)
+        assert code == 0, err
+        docs.append(json.loads(stdout))
+    for doc in docs:
+        for e in doc["systems"]:
+            for r in e["runs"]:
+                r.pop("sut")
+            for t in e.get("training", []):
+                t.pop("seconds"), t.pop("curve_seconds"), t.pop("model")
+    assert docs[0]["systems"] == docs[1]["systems"]
+
+
+def test_ctrl_c_during_training(tmp_path: Path) -> None:
+    """SIGINT while a baseline trains: exit 130 within 2 s, one line, nothing on stdout."""
+    proc = start_until(
+        [str(FLOWTEST), "benchmark", "--pool", POOL, "--train-count", "2", "--test-count", "2", "--sut", "ppo",
+         "--algo", "recurrent-ppo", "--steps", "100000", "--out", str(tmp_path / "b"), "--json"],
+        "training recurrent-ppo", signal.SIGINT,
+    )
+    time.sleep(1.0)
+    t0 = time.perf_counter()
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert time.perf_counter() - t0 < 2.0
+    assert out == "" and "Traceback" not in err
+    assert err.splitlines()[-1] == "flowtest: interrupted"

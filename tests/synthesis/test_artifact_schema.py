@@ -1,0 +1,138 @@
+"""The artifact's JSON Schema: docs/artifact-schema.json is what ``json_schema()`` generates,
+it is a valid draft 2020-12 schema, every shipped artifact (and freshly synthesized mixed and
+reactive tests) validates, it refuses what FlowTest's own loader refuses on shape, and
+docs/artifact-schema.md explains every field it names."""
+
+from __future__ import annotations
+
+import copy
+import json
+import re
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+jsonschema = pytest.importorskip("jsonschema")
+
+from flowtest_env.artifacts import ARTIFACT_DIR  # noqa: E402
+from synthesis.artifacts.artifact import FORMAT, VERSION  # noqa: E402
+from synthesis.artifacts.schema import SCHEMA_VERSION, json_schema, validate_artifact  # noqa: E402
+from synthesis.model.errors import ProblemError  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[2]
+SCHEMA_FILE = ROOT / "docs" / "artifact-schema.json"
+PAGE = ROOT / "docs" / "artifact-schema.md"
+SHIPPED = sorted(ARTIFACT_DIR.glob("*.json"))
+
+
+def validator() -> Any:
+    return jsonschema.Draft202012Validator(json.loads(SCHEMA_FILE.read_text()))
+
+
+def test_the_schema_file_is_the_generated_schema() -> None:
+    assert json.loads(SCHEMA_FILE.read_text()) == json_schema(), (
+        "docs/artifact-schema.json is out of date: python -m synthesis.artifacts.schema > docs/artifact-schema.json")
+    jsonschema.Draft202012Validator.check_schema(json_schema())
+    assert SCHEMA_VERSION == VERSION and json_schema()["properties"]["format"] == {"const": FORMAT}
+
+
+@pytest.mark.parametrize("path", SHIPPED, ids=[p.stem for p in SHIPPED])
+def test_every_shipped_artifact_validates(path: Path) -> None:
+    doc = json.loads(path.read_text())
+    errors = [f"{e.json_path}: {e.message[:200]}" for e in validator().iter_errors(doc)]
+    assert not errors, errors
+
+
+def test_every_kind_is_shipped_or_synthesized_and_validates() -> None:
+    import flowtest_env
+    from synthesis.problems.files import load_problem_file
+
+    kinds = {json.loads(p.read_text())["kind"] for p in SHIPPED}
+    env: Any = flowtest_env.make_env(load_problem_file(ROOT / "tests" / "data" / "ok_mixed.toml")).unwrapped
+    mixed = env.artifact
+    doc = json.loads(json.dumps(mixed.to_dict()))
+    assert not list(validator().iter_errors(doc))
+    assert kinds | {doc["kind"]} == {"static", "reactive", "mixed", "agent"}
+
+
+def _set(path: str, value: Any) -> Callable[[dict[str, Any]], None]:
+    def edit(doc: dict[str, Any]) -> None:
+        *keys, last = path.split(".")
+        target: Any = doc
+        for k in keys:
+            target = target[int(k)] if isinstance(target, list) else target[k]
+        if value is _DELETE:
+            del target[last]
+        elif isinstance(target, list):
+            target[int(last)] = value
+        else:
+            target[last] = value
+    return edit
+
+
+_DELETE = object()
+
+BROKEN: dict[str, tuple[str, Callable[[dict[str, Any]], None]]] = {
+    "kind": ("small-reactive", _set("kind", "sometimes")),
+    "version": ("small-reactive", _set("version", 2)),
+    "empty name": ("small-reactive", _set("name", "")),
+    "no source": ("small-reactive", _set("source", _DELETE)),
+    "bad source": ("small-reactive", _set("source.sha256", "xyz")),
+    "stay not a bit": ("small-reactive", _set("system.stay.0", 2)),
+    "system kind": ("small-reactive", _set("system.kind", "hexagons")),
+    "grid state": ("small-reactive", _set("system.states.0", "S")),
+    "fuel state": ("refueling", _set("system.states.0", [1, 2])),
+    "graph state": ("beaver-rescue", _set("system.states.0", [0, 1])),
+    "negative move": ("small-reactive", _set("system.moves.0", [0, -1])),
+    "setting": ("small-reactive", _set("strategy.setting", "sometimes")),
+    "history key": ("small-reactive", _set("strategy.restrictions", {"01": [0]})),
+    "no agent in an agent test": ("maze2", _set("agent", None)),
+    "an agent in a reactive test": ("small-reactive", lambda d: d.update(agent=copy.deepcopy(_doc("maze2")["agent"]))),
+    "controller first": ("maze2", _set("agent.controller.first", "nobody")),
+    "flow 0": ("small-reactive", _set("summary.flow", 0)),
+    "histories without components": ("small-reactive", _set("automata.histories.components", None)),
+    "accepting not a bit": ("small-reactive", _set("automata.test.accepting.0.0", True)),
+}
+
+
+def _doc(name: str) -> dict[str, Any]:
+    return dict(json.loads((ARTIFACT_DIR / f"{name}.json").read_text()))
+
+
+@pytest.mark.parametrize("case", list(BROKEN))
+def test_the_schema_refuses_what_the_loader_refuses(case: str) -> None:
+    name, edit = BROKEN[case]
+    doc = _doc(name)
+    edit(doc)
+    assert list(validator().iter_errors(doc)), f"the schema accepts a broken artifact ({case})"
+    with pytest.raises(ProblemError):
+        validate_artifact(doc, f"{name}.json", FORMAT, VERSION)
+
+
+def test_the_schema_refuses_an_unknown_field_and_a_malformed_digest() -> None:
+    for edit in (_set("colour", "red"), _set("digest", {"sha256": "0" * 64, "md5": ""}), _set("system.wormholes", [])):
+        doc = _doc("maze1")
+        edit(doc)
+        assert list(validator().iter_errors(doc))
+
+
+def _field_names(node: Any) -> Iterator[str]:
+    if isinstance(node, dict):
+        for key, value in node.get("properties", {}).items():
+            yield key
+            yield from _field_names(value)
+        for key, value in node.items():
+            if key != "properties":
+                yield from _field_names(value)
+    elif isinstance(node, list):
+        for item in node:
+            yield from _field_names(item)
+
+
+def test_the_page_explains_every_field() -> None:
+    page = PAGE.read_text()
+    named = set(re.findall(r"`([a-z_0-9]+)`", page))
+    missing = sorted(set(_field_names(json_schema())) - named)
+    assert not missing, f"docs/artifact-schema.md does not explain: {missing}"

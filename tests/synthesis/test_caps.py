@@ -1,0 +1,442 @@
+"""Tests one can build: walls and doors counted as a person counts them, caps on what a test
+may use (``max_walls``, ``max_doors``, ``max_restrictions``) honoured by every backend and
+checked, a clear exit 3 when no test fits, and the messages of inconsistent problems that
+name the cause, on a small warehouse floor (a dock, a spill zone, an aisle, a loading bay).
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from experiments.cli.cli import main
+from synthesis import pipeline
+from synthesis.checks.physical import physical_counts
+from synthesis.model.errors import InconsistentProblem, ProblemError
+from synthesis.model.systems import grid_world
+from synthesis.problems.files import load_problem_file
+from synthesis.problems.load import load_problem
+from synthesis.problems.problem import build_graphs, make_problem
+from synthesis.routing import scip
+from synthesis.routing.caps import disjoint_bypasses
+from synthesis.routing.milp import solve_routing
+
+FLOOR = """
+S  .  .  .  .  .  .  .  .  .
+.  #  #  #  A  A  #  #  #  .
+.  .  .  .  A  A  .  .  .  .
+.  #  #  #  A  A  #  #  #  .
+.  .  .  X  A  A  .  .  .  .
+.  #  #  #  A  A  #  #  #  .
+B  .  .  .  .  .  .  .  .  D
+"""
+
+# the spill zone across the whole floor: no way to the dock keeps G !hazard
+SPILL_EVERYWHERE = """
+S  .  .  .  .  .  .  .  .  .
+.  #  #  #  A  A  #  #  #  .
+.  .  .  .  A  A  .  .  .  .
+X  X  X  X  X  X  X  X  X  X
+.  .  .  .  A  A  .  .  .  .
+.  #  #  #  A  A  #  #  #  .
+B  .  .  .  .  .  .  .  .  D
+"""
+
+# the bay behind the spill zone: every way through it breaks G !hazard
+BAY_BEHIND_SPILL = """
+S  .  .  .  .  .  .  .  .  .
+.  #  #  #  A  A  #  #  #  .
+.  .  .  .  A  A  .  .  .  .
+.  #  #  #  A  A  #  #  #  .
+.  .  .  .  A  A  .  .  .  .
+#  #  #  #  A  A  #  #  #  .
+B  X  .  .  .  .  .  .  .  D
+"""
+
+
+def warehouse(
+    tmp_path: Path, *, grid: str = FLOOR, test: str = "F bay & F aisle", kind: str = "reactive", extra: str = ""
+) -> Path:
+    """The 7x10 warehouse problem file: start S, dock D (the goal), bay B, aisle A, spill X."""
+    path = tmp_path / f"warehouse-{kind}.toml"
+    path.write_text(
+        f'name = "warehouse"\n[system]\ngrid = """{grid}"""\nstart = "S"\nterminal = ["D"]\n'
+        '[labels]\ndock = ["D"]\nbay = ["B"]\naisle = ["A"]\nhazard = ["X"]\n'
+        f'[objectives]\nsystem = "F dock & G !hazard"\ntest = "{test}"\n'
+        f'[environment]\nkind = "{kind}"\n{extra}'
+    )
+    return path
+
+
+def run(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
+    code = main(argv)
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def error_line(err: str) -> str:
+    """The one ``error:`` line of a command's stderr (progress lines aside)."""
+    lines = [line for line in err.splitlines() if not line.startswith("flowtest: ")]
+    assert len(lines) == 1 and lines[0].startswith("error: "), err
+    assert "Traceback" not in err
+    return lines[0]
+
+
+# --------------------------------------------------------------------------- walls and doors
+
+
+def test_walls_count_physical_moves_not_cuts() -> None:
+    """example1: 4 walls (three two-way, one into the goal), 14 product-graph cuts."""
+    test = pipeline.synthesize(load_problem("example1"))
+    counts = physical_counts(test.problem.system, test.strategy)
+    assert counts.as_dict() == {"walls": 4, "doors": 0, "restrictions": 4, "one_way_walls": 0}
+    assert test.routing.cut_edges.size == 14
+
+
+def test_summary_counts_walls_and_doors_first(capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, _ = run(["synthesize", "small-reactive", "--json", "-q"], capsys)
+    assert code == 0
+    summary = json.loads(out)
+    keys = list(summary)
+    assert keys.index("n_walls") < keys.index("n_doors") < keys.index("n_cuts")
+    assert (summary["n_walls"], summary["n_doors"], summary["n_cuts"]) == (0, 3, 4)
+    assert len(summary["physical"]["doors"]) == 3 and summary["physical"]["walls"] == []
+    code, out, _ = run(["synthesize", "small-reactive", "-q"], capsys)
+    assert "uses         0 walls, 3 doors" in out
+    assert out.index("uses") < out.index("cuts         4 edges")
+
+
+def test_one_way_wall_is_named(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A static problem that allows one-way walls (bidirectional_cuts = false) and uses one:
+    the summary says so. One-way walls are counted from the strategy: a wall whose move back
+    stays open."""
+    path = tmp_path / "corridor.toml"
+    path.write_text(
+        'name = "corridor"\n[system]\ngrid = """\nS . T\n. I .\n"""\nstart = "S"\nterminal = ["T"]\n'
+        '[labels]\ngoal = ["T"]\nI = ["I"]\n[objectives]\nsystem = "F goal"\ntest = "F I"\n'
+        '[environment]\nkind = "static"\nbidirectional_cuts = false\n'
+    )
+    code, out, err = run(["synthesize", str(path), "--json", "-q"], capsys)
+    assert code == 0, err
+    summary = json.loads(out)
+    one_way = summary["physical"]["one_way_walls"]
+    assert summary["n_one_way_walls"] == len(one_way) >= 1
+    code, out, _ = run(["synthesize", str(path), "-q"], capsys)
+    assert "one-way" in out and "block one way only" in out
+
+
+# --------------------------------------------------------------------------- caps
+
+
+def test_caps_in_the_problem_file(tmp_path: Path) -> None:
+    problem = load_problem_file(warehouse(tmp_path, extra="max_doors = 3\nmax_walls = 0\n"))
+    assert problem.caps == {"max_doors": 3, "max_walls": 0}
+    for bad, needle in (("max_doors = -1", "max_doors"), ("max_doors = 1.5", "max_doors"), ("max_doors = true", "max_doors"),
+                        ("max_door = 3", "unknown key 'max_door'"), ("max_walls = " + "9" * 4000, "max_walls")):
+        with pytest.raises(ProblemError, match=needle):
+            load_problem_file(warehouse(tmp_path, extra=bad + "\n"))
+
+
+BACKENDS = ["highs", "cpsat", "cover", *(["scip"] if scip.available() else [])]
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_every_backend_honours_the_caps(backend: str) -> None:
+    """small-reactive uses 3 doors at flow 2; at most 2 doors gives flow 1 with 2, on every
+    backend; at most 1 door has no test, which the backend proves itself (the pipeline's
+    bypass bound, which would refuse it first, is left out here); the message then names
+    the fewest that route it: 2."""
+    problem = load_problem("small-reactive")
+    test = pipeline.synthesize(problem, pipeline.SynthesisOptions(backend=backend, caps={"max_doors": 2}))
+    assert physical_counts(problem.system, test.strategy).as_dict()["doors"] == 2
+    assert (test.routing.flow, test.routing.status) == (1, "optimal")
+    _, products = build_graphs(problem)
+    milp = pipeline.milp_options(problem, pipeline.SynthesisOptions(backend=backend, caps={"max_doors": 1}))
+    with pytest.raises(InconsistentProblem) as err:
+        solve_routing(products, milp)
+    assert err.value.reason == "unroutable"
+    said = pipeline.over_caps(products, milp, err.value, lambda msg: None)
+    assert "no test with at most 1 door routes" in str(said) and "the fewest that does is 2 doors" in str(said)
+
+
+def _exhaustive_static(problem_name: str, cap: int) -> tuple[int, int] | None:
+    """The least-restrictive test with at most ``cap`` walls of a static built-in, by trying
+    every wall set (walls as unordered pairs of cells, both ways): (flow, cuts) or None."""
+    from synthesis.checks.verify import bypass_flow, routed_flow
+    from synthesis.model.strategy import TestStrategy
+    from synthesis.routing.traps import trapped_entries
+
+    problem = load_problem(problem_name)
+    _, products = build_graphs(problem)
+    ts = problem.system
+    pairs = sorted({(min(int(ts.place[a]), int(ts.place[b])), max(int(ts.place[a]), int(ts.place[b])))
+                    for a, b in zip(ts.src, ts.dst, strict=True) if ts.place[a] != ts.place[b]})
+    best: tuple[int, int] | None = None
+    g = products.virtual
+    for k in range(cap + 1):
+        for walls in itertools.combinations(pairs, k):
+            wall_set = set(walls)
+            static = np.array([(min(int(ts.place[a]), int(ts.place[b])), max(int(ts.place[a]), int(ts.place[b]))) in wall_set
+                               for a, b in zip(ts.src, ts.dst, strict=True)])
+            strategy = TestStrategy(static, np.zeros((products.spec.dba.n_states, ts.n_moves), dtype=bool))
+            blocked = strategy.blocked[g.hist[g.src], g.move]
+            if bypass_flow(products, blocked) != 0 or trapped_entries(products, strategy.blocked, {}):
+                continue
+            flow = routed_flow(products, blocked)
+            if flow < 1:
+                continue
+            cuts = int(blocked.sum())
+            if best is None or (flow, -cuts) > (best[0], -best[1]):
+                best = (flow, cuts)
+    return best
+
+
+@pytest.mark.parametrize("cap", [2, 3])
+def test_capped_static_optimum_matches_exhaustive_search(cap: int) -> None:
+    """example1 with at most ``cap`` walls: the MILP's answer (largest flow, then fewest
+    cuts) equals the best over every wall set of at most ``cap`` walls."""
+    want = _exhaustive_static("example1", cap)
+    problem = load_problem("example1")
+    try:
+        test = pipeline.synthesize(problem, pipeline.SynthesisOptions(caps={"max_walls": cap}))
+    except InconsistentProblem:
+        assert want is None
+        return
+    assert want is not None
+    assert (test.routing.flow, int(test.routing.cut_edges.size)) == want
+    assert physical_counts(problem.system, test.strategy).as_dict()["walls"] <= cap
+
+
+def test_cap_on_the_command_line_and_exit_3(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = warehouse(tmp_path, test="F bay")
+    code, out, err = run(["synthesize", str(path), "--json", "-q", "--max-doors", "4"], capsys)
+    assert code == 0, err
+    summary = json.loads(out)
+    assert summary["n_doors"] <= 4 and summary["caps"] == {"max_doors": 4}
+    code, out, err = run(["synthesize", str(path), "-q", "--max-doors", "0"], capsys)
+    assert code == 3 and out == ""
+    line = error_line(err)
+    assert "no test with at most 0 doors" in line and "doors are needed" in line
+    with pytest.raises(SystemExit) as exit_:  # argparse's usage error
+        main(["synthesize", str(path), "-q", "--max-doors", "-2"])
+    assert exit_.value.code == 2
+    assert "--max-doors" in error_line(capsys.readouterr().err)
+
+
+def test_a_cap_below_the_disjoint_bypasses_is_refused_before_solving() -> None:
+    """The lower bound of the caps: bypasses that share no door. On small-reactive two ways
+    round the test objective share no door, so at most 1 door is refused at once."""
+    problem = load_problem("small-reactive")
+    _, products = build_graphs(problem)
+    milp = pipeline.milp_options(problem, pipeline.SynthesisOptions(caps={"max_doors": 5}))
+    assert disjoint_bypasses(products, milp, "max_doors", stop_above=5) == 2
+    problem.caps = {"max_doors": 1}
+    with pytest.raises(InconsistentProblem, match="at least 2 doors are needed"):
+        pipeline.synthesize(problem)
+
+
+def test_caps_hold_on_an_agent_problem() -> None:
+    """maze1's test agent blocks 3 doors; with at most 2 there is no test, said as such."""
+    problem = load_problem("maze1")
+    test = pipeline.synthesize(problem, pipeline.SynthesisOptions(caps={"max_doors": 3}))
+    assert physical_counts(problem.system, test.strategy).as_dict()["doors"] <= 3
+    with pytest.raises(InconsistentProblem, match="at most 2 doors"):
+        pipeline.synthesize(problem, pipeline.SynthesisOptions(caps={"max_doors": 2}))
+
+
+# --------------------------------------------------------------------------- messages
+
+
+def test_spill_zone_on_every_way_is_named(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    code, _, err = run(["synthesize", str(warehouse(tmp_path, grid=SPILL_EVERYWHERE, test="F bay")), "-q"], capsys)
+    assert code == 3
+    line = error_line(err)
+    assert "(unreachable)" in line and "G(!hazard)" in line and "makes the goal unreachable" in line
+
+
+def test_walled_off_dock_is_named(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    walled = FLOOR.replace(".  #  #  #  A  A  #  #  #  .\nB", ".  #  #  #  A  A  #  #  #  #\nB").replace(".  .  D", ".  #  D")
+    code, _, err = run(["synthesize", str(warehouse(tmp_path, grid=walled, test="F bay")), "-q"], capsys)
+    assert code == 3
+    line = error_line(err)
+    assert "`F dock` cannot be met: no way from the start gets there" in line
+
+
+def test_unroutable_visit_is_named(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    code, _, err = run(["synthesize", str(warehouse(tmp_path, grid=BAY_BEHIND_SPILL)), "-q"], capsys)
+    assert code == 3
+    line = error_line(err)
+    assert "(unroutable)" in line and "`F bay` cannot be routed" in line and "breaks `G(!hazard)`" in line
+    assert "F aisle" not in line.split("cannot be routed")[0]  # the aisle visit is not blamed
+
+
+def test_test_objective_implied_by_the_system_objective(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``test = "F dock"`` with the dock the goal: said exactly, never the false sentence
+    "no execution that meets the system objective also meets the test objective"."""
+    code, _, err = run(["synthesize", str(warehouse(tmp_path, test="F dock")), "-q"], capsys)
+    assert code == 3
+    line = error_line(err)
+    assert "already implies the test objective `F dock`" in line and "needs no restriction" in line
+    assert "also meets the test objective" not in line
+
+
+def test_implied_on_a_grid_built_in_python() -> None:
+    ts = grid_world([(0, 0), (0, 1), (0, 2)], 1, 3, (0, 0), [(0, 2)], {(0, 2): {"goal", "I"}})
+    with pytest.raises(InconsistentProblem, match="already implies") as err:
+        pipeline.synthesize(make_problem("u", ts, "F goal", "F I", "reactive"))
+    assert err.value.reason == "unroutable"
+
+
+# --------------------------------------------------------------------------- problem files
+
+
+def test_huge_integer_in_a_problem_file_is_one_error_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    for extra in ("time_limit = " + "9" * 5000, "time_limit = " + "9" * 4000, "max_walls = " + "7" * 5000):
+        path = warehouse(tmp_path, extra=extra + "\n")
+        code, out, err = run(["synthesize", str(path), "-q"], capsys)
+        assert code == 2 and out == ""
+        line = error_line(err)
+        assert len(line) < 400, line
+
+
+# --------------------------------------------------------------------------- large problems and time
+
+
+def test_a_large_problem_says_so_at_the_start(capsys: pytest.CaptureFixture[str]) -> None:
+    code, _, err = run(["synthesize", "mars-exploration", "--time-limit", "1", "--json"], capsys)
+    first = err.splitlines()[0]
+    assert "mars-exploration is large" in first and "may run for minutes" in first
+    assert "time limit of 1 s" in first and "--max-walls" in first
+    code, _, err = run(["synthesize", "small-reactive", "--json"], capsys)
+    assert "is large" not in err
+
+
+def _graph500(tmp_path: Path, seed: int = 3) -> Path:
+    """A legal 500-state graph (a path with 700 random two-way shortcuts) with three visits."""
+    import random
+
+    rng = random.Random(seed)
+    n = 500
+    edges = set()
+    for i in range(n - 1):
+        edges |= {(i, i + 1), (i + 1, i)}
+    for _ in range(700):
+        a, b = rng.randrange(n), rng.randrange(n)
+        if a != b:
+            edges |= {(a, b), (b, a)}
+    edges = {(a, b) for a, b in edges if a != n - 1}
+    states = ", ".join(f'"s{i}"' for i in range(n))
+    pairs = ", ".join(f'["s{a}", "s{b}"]' for a, b in sorted(edges))
+    path = tmp_path / "g500.toml"
+    path.write_text(
+        f'name = "g500"\n[system]\nstates = [{states}]\nedges = [{pairs}]\nstart = "s0"\nterminal = ["s499"]\n'
+        '[labels]\ngoal = ["s499"]\na = ["s120"]\nb = ["s260"]\nc = ["s380"]\n'
+        '[objectives]\nsystem = "F goal"\ntest = "F a & F b & F c"\n[environment]\nkind = "reactive"\n'
+    )
+    return path
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("limit", [3.0, 5.0])
+def test_time_limit_holds_graphs_and_checks_included(tmp_path: Path, limit: float) -> None:
+    """A 500-state graph whose solve takes longer than the limit: the whole synthesis (size
+    check, graphs, solve, checks) ends within the limit and a few percent."""
+    problem = load_problem_file(_graph500(tmp_path))
+    t0 = time.perf_counter()
+    test = pipeline.synthesize(problem, pipeline.SynthesisOptions(time_limit=limit))
+    took = time.perf_counter() - t0
+    assert test.routing.status == "feasible"  # the limit, not the proof, ended it
+    assert took <= limit * 1.05 + 0.5, took
+    from experiments.cli.human_summary import human_summary
+    from synthesis.artifacts.summary import summary_of
+
+    first = human_summary(test, summary_of(test)).splitlines()[0]
+    assert "unknown" not in first and ("gap " in first or "no bound yet" in first), first
+
+
+# --------------------------------------------------------------------------- 30x30 floor
+
+
+def floor30(tmp_path: Path, kind: str) -> Path:
+    """A 30x30 warehouse floor: racks with gaps, an aisle down the middle, a spill zone."""
+    n = 30
+    rows = [["." for _ in range(n)] for _ in range(n)]
+    for r in (5, 12, 19, 26):
+        for c in range(2, 28):
+            if c not in (14, 15):
+                rows[r][c] = "#"
+    for r in range(3, 27):
+        rows[r][14] = rows[r][15] = "A"
+    for r in range(14, 17):
+        for c in range(20, 24):
+            rows[r][c] = "X"
+    rows[0][0], rows[29][29], rows[29][0] = "S", "D", "B"
+    grid = "\n".join("  ".join(row) for row in rows)
+    return warehouse(tmp_path, grid="\n" + grid + "\n", kind=kind)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("kind", "cap", "n"), [("static", "walls", 50), ("static", "walls", 1), ("reactive", "doors", 1)])
+def test_30x30_floor_cap_gives_a_test_within_it_or_exit_3(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], kind: str, cap: str, n: int
+) -> None:
+    path = floor30(tmp_path, kind)
+    code, out, err = run(["synthesize", str(path), "--json", "-q", "--time-limit", "90", f"--max-{cap}", str(n)], capsys)
+    if code == 0:
+        summary = json.loads(out)
+        assert summary[f"n_{cap}"] <= n
+    else:
+        assert code == 3, err
+        line = error_line(err)
+        assert f"no test with at most {n} {cap[:-1] if n == 1 else cap}" in line and "needed" in line
+
+
+# --------------------------------------------------------------------------- one-way walls
+
+
+def test_walls_block_both_ways_unless_the_problem_allows_one_way() -> None:
+    """With ``one_way_walls`` off, a static cut group holds both directions of its move, and
+    a static move whose move back is outside the static area (a test agent's default static
+    area: moves into the cells it never occupies) cannot be cut: no one-way wall can come
+    out. On (the built-ins, as published) such a move may be cut alone."""
+    from dataclasses import replace
+
+    from synthesis.routing.model import cut_groups, model_edges
+
+    problem = load_problem("maze2")
+    _, products = build_graphs(problem)
+    ts = problem.system
+    static = np.asarray(problem.static_moves, dtype=bool)
+    back = {(int(a), int(b)): m for m, (a, b) in enumerate(zip(ts.src, ts.dst, strict=True))}
+    lonely = np.array([static[m] and (int(b), int(a)) in back and not static[back[(int(b), int(a))]]
+                       for m, (a, b) in enumerate(zip(ts.src, ts.dst, strict=True))])
+    assert lonely.any()  # the default static area is one-directional somewhere
+    base = pipeline.milp_options(problem, pipeline.SynthesisOptions())
+    for one_way in (True, False):
+        opts = replace(base, one_way_walls=one_way)
+        groups = cut_groups(products, opts)
+        me = model_edges(products, groups)
+        g = products.virtual
+        cuttable_lonely = me.has_var[groups.of_edge] & lonely[g.move]
+        assert cuttable_lonely.any() == one_way
+        if not one_way:  # both directions of a static move share a group
+            key_of_move = {int(g.move[e]): int(groups.of_edge[e]) for e in range(g.n_edges) if static[g.move[e]]}
+            for m, k in key_of_move.items():
+                r = back.get((int(ts.dst[m]), int(ts.src[m])))
+                if r is not None and r in key_of_move:
+                    assert key_of_move[r] == k
+
+
+def test_problem_files_default_to_two_way_walls(tmp_path: Path) -> None:
+    assert load_problem_file(warehouse(tmp_path, kind="mixed", extra="static = []\n")).one_way_walls is False
+    assert load_problem_file(warehouse(tmp_path, kind="mixed", extra="static = []\none_way_walls = true\n")).one_way_walls
+    assert load_problem_file(warehouse(tmp_path, kind="static", extra="bidirectional_cuts = false\n")).one_way_walls
+    assert not load_problem_file(warehouse(tmp_path, kind="static")).one_way_walls
+    with pytest.raises(ProblemError, match="one_way_walls"):
+        load_problem_file(warehouse(tmp_path, extra="one_way_walls = 1\n"))
+    assert load_problem("maze2").one_way_walls  # the built-ins keep their published answers
