@@ -19,7 +19,7 @@ Rules (method.md §6-7)
 * **Attempts.** An invalid or restricted action leaves the SUT in place (as a stay)
   and is counted in ``blocked_attempts``; the legal-action mask never offers one.
 * **The test agent** answers every SUT step from its synthesized table
-  (:class:`synthesis.agent.controller.AgentController`); when it moves first it also answers once
+  (:class:`synthesis.test_agent.controller.AgentController`); when it moves first it also answers once
   at reset.
 * **Termination.** The run ends when the system objective is *met* (the history's
   ``q_sys`` accepts) or *violated*: no run from the SUT's state and history that
@@ -43,7 +43,7 @@ from typing import Any
 
 import numpy as np
 
-from synthesis.agent.controller import AgentController
+from synthesis.test_agent.controller import AgentController
 from synthesis.artifacts.artifact import TestArtifact
 
 GRID_ACTIONS: tuple[str, ...] = ("N", "S", "E", "W")

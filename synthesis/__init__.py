@@ -8,7 +8,7 @@ The package is split by stage; each sub-package imports only from those before i
   grids, size limits;
 * :mod:`synthesis.routing` — the routing MILP, its heuristic and the HiGHS runner (§5);
 * :mod:`synthesis.checks` — the independent checks of a test (Theorems 1, 2);
-* :mod:`synthesis.agent` — the dynamic test agent (§7);
+* :mod:`synthesis.test_agent` — the dynamic test agent (§7);
 * :mod:`synthesis.pipeline` — :func:`synthesize`, the one entry point;
 * :mod:`synthesis.artifacts` — the JSON summary, the versioned test artifact, cache keys.
 

@@ -2,7 +2,7 @@
 
 :func:`synthesize` is the one entry point for every kind of problem; agent problems go
 through :func:`synthesize_agent_test`, which runs the counterexample-guided loop of
-:mod:`synthesis.agent.loop` on the same graphs and MILP options.
+:mod:`synthesis.test_agent.loop` on the same graphs and MILP options.
 """
 
 from __future__ import annotations
@@ -15,14 +15,14 @@ from typing import Any
 
 import numpy as np
 
-from .agent.loop import AgentSynthesis, counterexample_loop
+from .test_agent.loop import AgentSynthesis, counterexample_loop
 from .checks.physical import cap_count, physical_counts
 from .checks.verify import CheckReport, check_test, restricted_edges, routed_flow
 from .graphs.automata import SpecificationProduct
 from .graphs.products import Products
 from .model.errors import CheckFailed, InconsistentProblem, ProblemError
 from .model.strategy import SETTINGS, TestStrategy
-from .model.test_agent import TestAgent
+from .model.agent_system import TestAgent
 from .problems.diagnose import check_problem_consistency
 from .problems.limits import MAX_GRAPH_EDGES, check_size
 from .problems.problem import CAP_KEYS, Problem, build_graphs, check_caps
@@ -347,7 +347,7 @@ def synthesize_agent_test(
     """Synthesize a test agent strategy for an agent problem (method.md §7).
 
     Builds the graphs and the problem's MILP options and runs
-    :func:`synthesis.agent.loop.counterexample_loop` on them.
+    :func:`synthesis.test_agent.loop.counterexample_loop` on them.
 
     Parameters
     ----------
@@ -360,10 +360,10 @@ def synthesize_agent_test(
         agent's ``max_iterations`` (100 unless the problem says otherwise).
     prefilter
         Exclude, before the first solve, the cuts no agent can hold (see
-        :func:`~synthesis.agent.loop.counterexample_loop`).
+        :func:`~synthesis.test_agent.loop.counterexample_loop`).
     reasons
         Exclude with each rejected cut set every cut set rejected for the same reason
-        (see :func:`~synthesis.agent.loop.counterexample_loop`); ``False`` excludes the cut
+        (see :func:`~synthesis.test_agent.loop.counterexample_loop`); ``False`` excludes the cut
         set alone (the loop of method.md §7 as written; same answer, more solves).
     started
         ``perf_counter`` time the synthesis began (default: now): the time limit runs from it.
@@ -371,7 +371,7 @@ def synthesize_agent_test(
     Returns
     -------
     SynthesizedTest
-        With ``agent`` an :class:`~synthesis.agent.loop.AgentSynthesis`.
+        With ``agent`` an :class:`~synthesis.test_agent.loop.AgentSynthesis`.
 
     Raises
     ------

@@ -124,7 +124,7 @@ def plot_test(test: Any, path: str | Path, *, agent: Any = None, dpi: int = 110,
         An optional test-agent overlay: any object (or mapping) with ``cells`` (places
         of T, ``(row, col)`` cells or state names: where the agent moves) and optionally
         ``parks`` (see :func:`_agent_overlay`). Defaults to ``test.agent``, then
-        ``test.problem.agent`` (a :class:`synthesis.model.test_agent.TestAgent`); objects without
+        ``test.problem.agent`` (a :class:`synthesis.model.agent_system.TestAgent`); objects without
         ``cells`` are ignored.
     dpi
         Resolution of raster output.
@@ -360,7 +360,7 @@ def _agent_overlay(test: Any, agent: Any) -> _Overlay | None:
     """Read a duck-typed agent overlay; ``None`` when there is nothing to draw.
 
     ``cells`` items are places of T (indices into ``ts.places``, which are the state
-    indices on grid and graph systems, as :class:`synthesis.model.test_agent.TestAgent` keeps
+    indices on grid and graph systems, as :class:`synthesis.model.agent_system.TestAgent` keeps
     them), ``(row, col)`` cells or state names. ``parks`` items are objects or
     mappings with a ``name`` and ``entries`` (indices into ``cells``) or ``from``
     (cells), or plain places/cells drawn as parks.

@@ -20,8 +20,8 @@ import statistics
 import time
 from collections.abc import Sequence
 
-from synthesis.agent import gr1
-from synthesis.agent.game import build_agent_game
+from synthesis.test_agent import gr1
+from synthesis.test_agent.game import build_agent_game
 from synthesis.pipeline import synthesize
 from synthesis.problems.load import load_problem
 

@@ -2,7 +2,7 @@
 
 For every problem it runs the counterexample-guided loop twice, excluding each rejected
 cut set alone (``reasons=False``, method.md §7 as written) and with its reason
-(:mod:`synthesis.agent.reasons`, the default), checks that both answers have the same
+(:mod:`synthesis.test_agent.reasons`, the default), checks that both answers have the same
 flow, blocked places and cuts, and reports MILP solves and seconds; then it times the
 default ``flowtest synthesize FILE --json`` end to end (a fresh process) for the problem
 files.

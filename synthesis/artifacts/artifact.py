@@ -11,7 +11,7 @@ An artifact cannot lie: loading checks every field against the schema
 content, its automata are those of its objectives, and its restrictions pass the
 independent checks of :mod:`synthesis.checks.verify` on its own product graphs (bypass flow 0,
 the flow of its summary, feasibility) and, for a test agent, its controller passes the
-closed-loop check of :mod:`synthesis.agent.closed_loop` (its moves legal, the restrictions
+closed-loop check of :mod:`synthesis.test_agent.closed_loop` (its moves legal, the restrictions
 realized exactly, the system never trapped). Any failure is a :class:`ProblemError` that
 names what is wrong.
 
@@ -40,8 +40,8 @@ from typing import Any
 
 import numpy as np
 
-from ..agent.closed_loop import verify_closed_loop
-from ..agent.controller import AgentController
+from ..test_agent.closed_loop import verify_closed_loop
+from ..test_agent.controller import AgentController
 from ..checks.verify import check_test
 from ..graphs.automata import DBA, specification_product
 from ..graphs.products import build_products
@@ -49,7 +49,7 @@ from ..model.errors import CheckFailed, ProblemError, ProblemTooLarge
 from ..model.specs import parse_objective
 from ..model.strategy import TestStrategy
 from ..model.systems import TransitionSystem
-from ..model.test_agent import Park, TestAgent, places_of_cells
+from ..model.agent_system import Park, TestAgent, places_of_cells
 from ..pipeline import SynthesizedTest
 from ..problems.files import MAX_FILE_BYTES, read_limited
 from ..problems.limits import check_file_size

@@ -13,7 +13,7 @@ and checks it as a fresh synthesis is checked: the restrictions pass
 :func:`synthesis.checks.verify.check_test` (bypass flow 0, the stated flow, a way to the goal
 from every history's entry nodes); for a test agent, the GR(1) game of the restrictions
 is solved again and its strategy checked and tabulated
-(:func:`synthesis.agent.realize_agent_strategy`), and the table must have the size the
+(:func:`synthesis.test_agent.realize_agent_strategy`), and the table must have the size the
 record states. Everything is deterministic: one record gives one artifact on every
 machine. A record that fails raises :class:`ProblemError` naming the check.
 
@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from ..agent.loop import AgentSynthesis, realize_agent_strategy
+from ..test_agent.loop import AgentSynthesis, realize_agent_strategy
 from ..checks.verify import check_test
 from ..model.errors import CheckFailed, InconsistentProblem, ProblemError
 from ..pipeline import SynthesizedTest

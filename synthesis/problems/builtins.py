@@ -11,7 +11,7 @@ import tomllib
 from collections.abc import Callable
 
 from ..model.systems import Cell, fuel_grid_world, graph_system, grid_world
-from ..model.test_agent import make_test_agent, places_of_cells
+from ..model.agent_system import make_test_agent, places_of_cells
 from .files import problem_from_dict
 from .problem import Problem, make_problem
 

@@ -18,7 +18,7 @@ from ..model.errors import ProblemError
 from ..model.specs import Objective, check_proposition_name, check_propositions, holds, parse_objective
 from ..model.strategy import SETTINGS
 from ..model.systems import TransitionSystem
-from ..model.test_agent import TestAgent
+from ..model.agent_system import TestAgent
 
 KINDS = ("static", "reactive", "mixed", "agent")
 
@@ -94,7 +94,7 @@ class Problem:
     time_limit
         Default solver time limit in seconds (``None``: none).
     agent
-        The test agent of an agent problem (:mod:`synthesis.model.test_agent`).
+        The test agent of an agent problem (:mod:`synthesis.model.agent_system`).
     description
         One paragraph for people.
     caps

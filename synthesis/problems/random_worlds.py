@@ -48,7 +48,7 @@ from typing import TypeVar
 
 from ..model.errors import InconsistentProblem, ProblemError
 from ..model.systems import Cell, TransitionSystem, fuel_grid_world, grid_world
-from ..model.test_agent import TestAgent, make_test_agent, places_of_cells
+from ..model.agent_system import TestAgent, make_test_agent, places_of_cells
 from .problem import Problem, make_problem
 from .random_grid import MAX_ATTEMPTS, draw_special_cells, family_objectives, random_problem
 

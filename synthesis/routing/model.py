@@ -41,8 +41,8 @@ class Exclusion:
     :attr:`cut` and none of :attr:`open` (cut-group keys, see :func:`cut_groups`).
 
     A rejected cut set ``C`` alone is ``Exclusion(C)``; the counterexample loop of
-    :mod:`synthesis.agent.loop` excludes, with the reason the agent lost
-    (:mod:`synthesis.agent.reasons`), a small core of ``C`` and the groups that must stay
+    :mod:`synthesis.test_agent.loop` excludes, with the reason the agent lost
+    (:mod:`synthesis.test_agent.reasons`), a small core of ``C`` and the groups that must stay
     open for the reason to hold.
     """
 

@@ -152,8 +152,8 @@ def test_fuel_grid_with_reactive_restrictions(tmp_path: Path) -> None:
 def test_agent_overlay(name: str, tmp_path: Path) -> None:
     test = synthesized(name)
     ts = test.problem.system
-    cells = np.array([0, 1, len(ts.places) - 1])  # places of T, as synthesis.agent.loop keeps them
-    # parks as synthesis.model.test_agent.Park (a name, entries into `cells`) and as plain cells/places
+    cells = np.array([0, 1, len(ts.places) - 1])  # places of T, as synthesis.test_agent.loop keeps them
+    # parks as synthesis.model.agent_system.Park (a name, entries into `cells`) and as plain cells/places
     parks: list[Any] = [SimpleNamespace(name="above", entries=(0, 1)), (2, 5) if ts.kind == "grid" else 0]
     plain, overlaid, via_test = tmp_path / "plain.png", tmp_path / "agent.png", tmp_path / "via_test.png"
     plot_test(test, plain, dpi=50)

@@ -62,3 +62,16 @@ def test_nothing_outside_the_lab_imports_the_lab() -> None:
                 if module.startswith("experiments.lab") or (module == "experiments" and "lab" in names):
                     offenders.append(str(path.relative_to(ROOT)))
     assert not offenders, f"product modules import the lab: {sorted(set(offenders))}"
+
+
+def test_the_wheel_leaves_the_lab_out() -> None:
+    """The packages pyproject.toml installs (the same find as the wheel's) hold the command line
+    and the maintainer tools, never the lab."""
+    import tomllib
+
+    from setuptools import find_packages
+
+    find = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["tool"]["setuptools"]["packages"]["find"]
+    packages = set(find_packages(where=str(ROOT), include=find["include"], exclude=find.get("exclude", [])))
+    assert {"experiments", "experiments.cli", "experiments.tools", "synthesis", "flowtest_env", "agents"} <= packages
+    assert not [p for p in packages if p.startswith("experiments.lab")], packages

@@ -1,4 +1,4 @@
-"""Generalized counterexamples of the agent loop (issue 18 pt 6, synthesis/agent/reasons.py):
+"""Generalized counterexamples of the agent loop (issue 18 pt 6, synthesis/test_agent/reasons.py):
 the rules of a whole cut set are its game, every cut set an exclusion removes is one the loop
 would reject, and the loop's answer keeps its flow and cost with fewer or equal work."""
 
@@ -10,13 +10,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from synthesis.agent import gr1
-from synthesis.agent.game import build_agent_game, build_game, trapped_nodes
-from synthesis.agent.loop import _restrictable_for_agent
-from synthesis.agent.reasons import _rules, reason_groups, trap_reason, unrealizable_reason
+from synthesis.test_agent import gr1
+from synthesis.test_agent.game import build_agent_game, build_game, trapped_nodes
+from synthesis.test_agent.loop import _restrictable_for_agent
+from synthesis.test_agent.reasons import _rules, reason_groups, trap_reason, unrealizable_reason
 from synthesis.graphs.products import Products
 from synthesis.model.strategy import TestStrategy
-from synthesis.model.test_agent import TestAgent
+from synthesis.model.agent_system import TestAgent
 from synthesis.pipeline import SynthesisOptions, build_graphs, milp_options, synthesize_agent_test
 from synthesis.problems.files import load_problem_file
 from synthesis.problems.load import load_problem

@@ -1,4 +1,4 @@
-"""Tests for the explicit-state GR(1) solver :mod:`synthesis.agent.gr1`.
+"""Tests for the explicit-state GR(1) solver :mod:`synthesis.test_agent.gr1`.
 
 Cross-checking against omega
 ----------------------------
@@ -44,7 +44,7 @@ import time
 import numpy as np
 import pytest
 
-from synthesis.agent.gr1 import (
+from synthesis.test_agent.gr1 import (
     GR1Game,
     GR1Result,
     GR1Strategy,

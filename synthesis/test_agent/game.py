@@ -5,7 +5,7 @@ Players and turns
 The test agent is the controlled player (the GR(1) *system*); the system under test
 (SUT) is its environment. A game *position* is a configuration at the SUT's turn,
 ``(v, a)`` with ``v = (x_sys, q_hist)`` a node of the virtual product graph G and ``a``
-an agent state (a cell of the agent or a park). One round of :class:`~synthesis.agent.gr1.GR1Game`
+an agent state (a cell of the agent or a park). One round of :class:`~synthesis.test_agent.gr1.GR1Game`
 is one SUT step followed by one agent step, so ``turn`` (g3, g4, a3) is built into the
 rounds and needs no variable:
 
@@ -74,7 +74,7 @@ import numpy as np
 
 from ..graphs.products import Products, coreachable, reachable
 from ..model.strategy import TestStrategy
-from ..model.test_agent import TestAgent
+from ..model.agent_system import TestAgent
 from ..routing.model import CutGroups
 from .gr1 import GR1Game
 
@@ -205,7 +205,7 @@ class GameRules:
     ``cut`` edges and leaves the ``open`` ones open: its game lets the SUT take only
     the open edges and holds the agent only to what every such cut set asks, so an
     agent that wins one of those cut sets' games wins this one too
-    (:mod:`synthesis.agent.reasons` uses that to exclude all of them at once).
+    (:mod:`synthesis.test_agent.reasons` uses that to exclude all of them at once).
 
     Attributes
     ----------

@@ -9,7 +9,7 @@ agent may win the game of the larger set (the smaller one can even lose for want
 restriction: with no cut at all the agent must stay clear of every place the SUT could
 enter next). What *is* monotone is a reason with both sides: a set ``K`` of groups that are
 cut and a set ``O`` of groups that stay open. The game of the rules ``(K, O)``
-(:func:`synthesis.agent.game.build_game`: the SUT takes only open edges, the agent must
+(:func:`synthesis.test_agent.game.build_game`: the SUT takes only open edges, the agent must
 realize the cut reactive edges, must stay off the places of open edges, and g8 holds only
 where it holds for every such cut set) is won by the agent whenever the game of any cut set
 ``C' ⊇ K`` with ``C' ∩ O = ∅`` is: every SUT move of the ``(K, O)`` game is a move of
@@ -35,7 +35,7 @@ from scipy.sparse.csgraph import breadth_first_order
 
 from ..graphs.products import Products, coreachable, reachable
 from ..model.strategy import TestStrategy
-from ..model.test_agent import TestAgent
+from ..model.agent_system import TestAgent
 from ..routing.model import CutGroups, Exclusion
 from . import gr1
 from .game import AgentGame, GameRules, build_game, ended_nodes
@@ -206,7 +206,7 @@ def trap_reason(
     products: Products, groups: CutGroups, cut_mask: np.ndarray, strategy: TestStrategy, node: int
 ) -> Reason:
     """The reason the cut set ``cut_mask`` traps the SUT at ``node`` (a node of
-    :func:`~synthesis.agent.game.trapped_nodes` for ``strategy``, the cut set's test).
+    :func:`~synthesis.test_agent.game.trapped_nodes` for ``strategy``, the cut set's test).
 
     ``K`` = the cuts on the edges that leave the region the SUT can still reach from the
     trap, then fewer while they alone still close every way from the trap to ``Tgt``;

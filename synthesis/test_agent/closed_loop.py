@@ -10,7 +10,7 @@ import numpy as np
 from ..graphs.products import Products, coreachable
 from ..model.errors import CheckFailed
 from ..model.strategy import TestStrategy
-from ..model.test_agent import TestAgent
+from ..model.agent_system import TestAgent
 from .controller import AgentController
 from .game import blocking_places, ended_nodes, reactive_restrictions, walled_off_nodes
 
@@ -46,7 +46,7 @@ def verify_closed_loop(
     * g8: the agent never stays at its turn in a place that blocks every path;
     * the agent never traps the system: from every reachable configuration where the
       test goes on and the static walls alone leave the system a way to its goal
-      (:func:`~synthesis.agent.game.walled_off_nodes`: a correct system never walks into
+      (:func:`~synthesis.test_agent.game.walled_off_nodes`: a correct system never walks into
       a node the walls it sees doom), a configuration with the system at its goal is
       reachable;
     * every run that reaches the goal passed through the test objective (the last node

@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from ..graphs.products import Products
-from ..model.test_agent import TestAgent
+from ..model.agent_system import TestAgent
 from .game import AgentGame
 from .gr1 import GR1Strategy
 

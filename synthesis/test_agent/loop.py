@@ -4,11 +4,11 @@ strategy, or a proof that none exists.
 :func:`counterexample_loop` solves MILP-agent (the routing MILP of
 :mod:`synthesis.routing.milp` in mode ``"mixed"`` with the problem's static area, the
 blocked-state penalties ``block_states`` and the exclusion rows of rejected cut sets),
-builds the test-agent game of :mod:`synthesis.agent.game` for each cut set and solves it
-with :mod:`synthesis.agent.gr1`; a cut set the agent cannot realize is excluded
+builds the test-agent game of :mod:`synthesis.test_agent.game` for each cut set and solves it
+with :mod:`synthesis.test_agent.gr1`; a cut set the agent cannot realize is excluded
 (``sum_{e in C} d_e <= |C| - 1``) and the MILP solved again. The winning strategy is
-tabulated (:mod:`synthesis.agent.controller`) and checked in closed loop
-(:mod:`synthesis.agent.closed_loop`), by the GR(1) strategy check and by the routing checks
+tabulated (:mod:`synthesis.test_agent.controller`) and checked in closed loop
+(:mod:`synthesis.test_agent.closed_loop`), by the GR(1) strategy check and by the routing checks
 of :mod:`synthesis.checks.verify`. :func:`synthesis.pipeline.synthesize_agent_test` wraps it
 into a :class:`~synthesis.pipeline.SynthesizedTest`.
 """
@@ -28,7 +28,7 @@ from ..graphs.products import Products
 from ..model.errors import CheckFailed, InconsistentProblem
 from ..model.strategy import TestStrategy
 from ..model.systems import TransitionSystem
-from ..model.test_agent import TestAgent, place_json
+from ..model.agent_system import TestAgent, place_json
 from ..routing.milp import RoutingResult, solve_routing
 from ..routing.model import Exclusion, MilpOptions, cut_groups
 from ..routing.restrictions import strategy_from_routing
@@ -163,12 +163,12 @@ def counterexample_loop(
     The loop: exclude what no agent can realize (a move into a place the agent can
     never occupy at the system's turn is unrestrictable; cuts it could never hold are
     excluded); solve MILP-agent; reject the cut set if it traps the system somewhere
-    reachable (:func:`~synthesis.agent.game.trapped_nodes`); build the test-agent game
+    reachable (:func:`~synthesis.test_agent.game.trapped_nodes`); build the test-agent game
     from ``R(q)`` and ``Obs`` and solve it; if the agent cannot win, exclude the cut set
-    with every cut set rejected for the same reason (:mod:`synthesis.agent.reasons`; with
+    with every cut set rejected for the same reason (:mod:`synthesis.test_agent.reasons`; with
     ``reasons=False`` the cut set alone, ``sum_{e in C} d_e <= |C| - 1``) and solve again. The winning strategy is tabulated
     (:class:`AgentController`) and checked in closed loop (:func:`verify_closed_loop`),
-    by :func:`synthesis.agent.gr1.verify_strategy` and by the routing checks of
+    by :func:`synthesis.test_agent.gr1.verify_strategy` and by the routing checks of
     :mod:`synthesis.checks.verify`.
 
     Parameters
@@ -189,12 +189,12 @@ def counterexample_loop(
         Bound on MILP solves.
     prefilter
         Exclude, before the first solve, the cuts no agent can hold
-        (:func:`~synthesis.agent.game.realizability_exclusions`); this never changes the
+        (:func:`~synthesis.test_agent.game.realizability_exclusions`); this never changes the
         optimum, only which equally good cut set is tried first and how many solves the
         loop needs.
     reasons
         Exclude with each rejected cut set every cut set rejected for the same reason
-        (:mod:`synthesis.agent.reasons`: a core of cuts and the groups that must stay
+        (:mod:`synthesis.test_agent.reasons`: a core of cuts and the groups that must stay
         open), not the cut set alone; sound, so the answer keeps its flow and cost, and
         the loop needs fewer solves.
     closed_loop
@@ -323,7 +323,7 @@ def realize_agent_strategy(
 ) -> tuple[AgentGame, AgentController, ClosedLoopReport]:
     """The test agent's strategy for a routing strategy already known to be realizable
     (a stored test's restrictions): the test-agent game solved again, its GR(1) strategy
-    checked (:func:`synthesis.agent.gr1.verify_strategy`), tabulated and checked in closed loop,
+    checked (:func:`synthesis.test_agent.gr1.verify_strategy`), tabulated and checked in closed loop,
     exactly as :func:`counterexample_loop` does for its last cut set. Deterministic:
     the same restrictions give the same table.
 
