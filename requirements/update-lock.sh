@@ -11,7 +11,7 @@ find_links=()
 [ -d /opt/wheels ] && find_links=(--find-links /opt/wheels)
 # start from the current pins, so only what must move moves (uv reads its output file as preferences)
 grep -v '^#' requirements/lock.txt 2>/dev/null | sed -E 's/^torch==([0-9.]+) /torch==\1+cpu /' > requirements/lock.txt.new || true
-"$uv_bin" pip compile pyproject.toml --extra test --extra rl --extra bench --extra render --extra recipes --extra scip \
+"$uv_bin" pip compile pyproject.toml --extra test --extra rl --extra bench --extra render --extra recipes \
     --python-version 3.11 --python-platform x86_64-manylinux_2_28 "${find_links[@]}" \
     --no-header --annotation-style line --quiet "$@" -o requirements/lock.txt.new
 {

@@ -15,23 +15,23 @@ from typing import Any
 
 import numpy as np
 
-from .test_agent.loop import AgentSynthesis, counterexample_loop
 from .checks.physical import cap_count, physical_counts
 from .checks.verify import CheckReport, check_test, restricted_edges, routed_flow
 from .graphs.automata import SpecificationProduct
 from .graphs.products import Products
+from .model.agent_system import TestAgent
 from .model.errors import CheckFailed, InconsistentProblem, ProblemError
 from .model.strategy import SETTINGS, TestStrategy
-from .model.agent_system import TestAgent
 from .problems.diagnose import check_problem_consistency
 from .problems.limits import MAX_GRAPH_EDGES, check_size
 from .problems.problem import CAP_KEYS, Problem, build_graphs, check_caps
-from .routing import cpsat, scip
+from .routing import cpsat
 from .routing.caps import CAP_NOUNS, Fewest, caps_text, check_caps_reachable, disjoint_bypasses, fewest_within
 from .routing.milp import AUTO_CPSAT_MODES, RoutingResult, solve_routing
 from .routing.model import BACKENDS, MilpOptions
 from .routing.restrictions import strategy_from_routing
 from .routing.solver_control import SolveControl
+from .test_agent.loop import AgentSynthesis, counterexample_loop
 
 
 @dataclass(frozen=True)
@@ -96,8 +96,6 @@ def check_options(options: SynthesisOptions) -> None:
         raise ProblemError(f"unknown solver backend {options.backend!r}; expected one of {', '.join(BACKENDS)}")
     if options.backend == "cpsat":
         cpsat.require()
-    if options.backend == "scip":
-        scip.require()
     w = options.work_limit
     if w is not None and (isinstance(w, bool) or not isinstance(w, (int, float)) or not math.isfinite(w) or w <= 0):
         raise ProblemError(f"option work_limit must be a positive finite number, not {w!r}")

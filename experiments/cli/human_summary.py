@@ -115,9 +115,7 @@ def human_summary(test: Any, summary: dict[str, Any]) -> str:
     if "backend" in stats:
         packages = {
             "highs": "HiGHS, highspy",
-            "cover": "wall-cover master on HiGHS, highspy",
             "cpsat": "OR-Tools CP-SAT, ortools",
-            "scip": "wall-cover master in one SCIP tree, pyscipopt",
         }
         package = packages.get(stats["backend"], stats["backend"])
         lines.append(f"  solver       {stats['backend']} ({package} {stats.get('solver_version', '?')})")

@@ -57,8 +57,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--threads", metavar="N", type=positive_int, help="solver threads (default 1: the same answer on every machine; at most the machine's CPUs)")
     p.add_argument(
         "--backend", choices=BACKENDS, default="auto",
-        help="the solver of the routing model: highs, cpsat (OR-Tools CP-SAT), cover (wall-cover master), "
-        "scip (that master in one SCIP tree; extra flowtest[scip]) "
+        help="the solver of the routing model: highs, cpsat (OR-Tools CP-SAT) "
         "or auto (default: CP-SAT for static and reactive models of 900-3,000 rows, else HiGHS)",
     )
     p.add_argument("--setting", choices=SETTINGS, help="how reactive obstacles are shown (default: the problem's, else instantaneous)")
@@ -130,10 +129,6 @@ def run(args: argparse.Namespace) -> int:
         from synthesis.routing.cpsat import require
 
         require()
-    if args.backend == "scip":
-        from synthesis.routing import scip
-
-        scip.require()
     from synthesis.problems.files import MAX_GRID_CELLS
 
     max_cells = None if args.no_size_limit else MAX_GRID_CELLS

@@ -1,10 +1,10 @@
-"""Benchmark: the routing solver backends (HiGHS, OR-Tools CP-SAT, SCIP one-tree cover) on the same problems.
+"""Benchmark: the routing solver backends (HiGHS, OR-Tools CP-SAT) on the same problems.
 
 Usage::
 
     nice -n 10 .venv/bin/python -m experiments.lab.bench_backends [--time-limit S] [--work-limit W] [--seeds N]
         [--builtins NAME ...] [--sizes 5 10] [--families reachability reaction:3 ...] [--kinds static reactive]
-        [--json FILE] [--backends highs cpsat scip cover]
+        [--json FILE] [--backends highs cpsat]
 
 For each problem (built-ins, then seeded random grids of every size, family and kind static /
 reactive, the first consistent attempt of seeds 0..N-1) and each backend, one synthesis in this
@@ -35,12 +35,12 @@ from synthesis.pipeline import SynthesisOptions, synthesize
 from synthesis.problems.load import load_problem
 from synthesis.problems.problem import Problem
 from synthesis.problems.random_grid import FAMILIES, first_consistent, random_problem
-from synthesis.routing import cpsat, scip
+from synthesis.routing import cpsat
 
 BUILTINS = ("small-reactive", "example1", "beaver-rescue", "motion-primitives", "maze1", "maze2", "patrolling", "refueling", "mars-exploration")
 BACKENDS = ("highs", "cpsat")
-"""The backends run by default; ``--backends`` may add ``scip`` (the optional extra) and ``cover``."""
-CHOICES = ("highs", "cpsat", "scip", "cover")
+"""The backends run by default (and the choices of ``--backends``)."""
+CHOICES = BACKENDS
 KINDS = ("static", "reactive")
 
 
@@ -76,7 +76,6 @@ def run(problem: Problem, backend: str, time_limit: float | None, work_limit: fl
         "rounds": len(test.agent.iterations) if test.agent is not None else 1,
         "binaries": r.stats["binary_vars"],
         "rows": r.stats["constraints"],
-        "nodes": r.stats.get("master_nodes"),
     }
 
 
@@ -135,12 +134,10 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if "cpsat" in args.backends:
         cpsat.require()
-    if "scip" in args.backends:
-        scip.require()
     rows: list[dict[str, Any]] = []
     work = "" if args.work_limit is None else f", CP-SAT work limit {args.work_limit:g} deterministic s per phase"
-    print(f"ortools {cpsat.ortools_version()}, pyscipopt {scip.scip_version()}, time limit {args.time_limit:g} s per synthesis{work}\n", flush=True)
-    head = "| group | problem | backend | status | flow | cuts | solve s | CPU s | child start s | nodes (scip, cover) | CP-SAT work |"
+    print(f"ortools {cpsat.ortools_version()}, time limit {args.time_limit:g} s per synthesis{work}\n", flush=True)
+    head = "| group | problem | backend | status | flow | cuts | solve s | CPU s | child start s | CP-SAT work |"
     print(head)
     print("|---" * (head.count("|") - 1) + "|", flush=True)
     for group, label, problem in cases(args.builtins, args.sizes, args.families, args.seeds, tuple(args.kinds)):
@@ -149,7 +146,7 @@ def main(argv: list[str] | None = None) -> int:
             rows.append(row)
             print(
                 f"| {group} | {label} | {backend} | {row['status']} | {_fmt(row['flow'])} | {_fmt(row['n_cuts'])} | "
-                f"{_fmt(row.get('solve_s'))} | {_fmt(row['cpu_s'])} | {_fmt(row.get('spawn_s'))} | {_fmt(row.get('nodes'))} | "
+                f"{_fmt(row.get('solve_s'))} | {_fmt(row['cpu_s'])} | {_fmt(row.get('spawn_s'))} | "
                 f"{_fmt(row.get('cpsat_work'))} |",
                 flush=True,
             )

@@ -10,7 +10,7 @@ verdict) and the seconds and CPU seconds (this process and its CP-SAT children).
 
 Usage::
 
-    python -m experiments.lab.bench_patrolling_walls [--backends cpsat highs cover] [--tie static]
+    python -m experiments.lab.bench_patrolling_walls [--backends cpsat highs] [--tie static]
         [--time-limit S]
 
 Prints a Markdown table on standard output, the progress lines on standard error.
@@ -96,7 +96,7 @@ def markdown(rows: Sequence[dict[str, Any]]) -> str:
 
 def main(argv: Sequence[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--backends", nargs="+", default=["cpsat", "highs", "cover"])
+    parser.add_argument("--backends", nargs="+", default=["cpsat", "highs"])
     parser.add_argument("--tie", choices=TIE_PLACES, default="static")
     parser.add_argument("--time-limit", type=float, default=None, help="seconds per synthesis (default: none)")
     args = parser.parse_args(argv)

@@ -1,5 +1,5 @@
-"""The rows of the wall-cover master (:mod:`synthesis.routing.wall_cover`): which checks a
-cut set fails, and the valid row over the cut binaries each failure gives.
+"""The separator of the implicit hitting set (:mod:`synthesis.routing.hitting_set`): which
+checks a cut set fails, and the valid row over the cut binaries each failure gives.
 
 A cut set is a ``bool`` per cut group (:class:`~synthesis.routing.model.CutGroups`); the
 master's columns are the groups with a binary, then (MILP-agent) one ``d_state`` per place
@@ -21,7 +21,6 @@ a cut may enter. The checks, all graph searches in bulk (SciPy's ``csgraph``):
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -29,7 +28,6 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order, dijkstra, maximum_flow
 
 from ..graphs.products import Products
-from .heuristic import RoutingGuess
 from .model import CutGroups, MilpOptions, ModelEdges, PhysicalItems, physical_items, static_moves_of
 from .result import blocked_of_edges
 from .traps import trapped_configurations, trapped_entries
@@ -139,75 +137,11 @@ class CoverSeparator:
         hit = cut[self.place_pairs[:, 1]]
         return np.unique(self.place_pairs[hit, 0])
 
-    def master_point(self, cut: np.ndarray) -> np.ndarray:
-        """The master's columns for a cut set (``d_state`` at its least value)."""
-        x = np.zeros(self.n_col)
-        x[: self.var.size] = cut[self.var]
-        if self.places.size:
-            x[self.var.size :] = np.isin(self.places, self.blocked_places(cut))
-        return x
-
     def cost_of(self, cut: np.ndarray) -> float:
         """The master objective of a cut set."""
         return float(self.groups.weight[cut].sum() + self.place_cost * self.blocked_places(cut).size)
 
-    def guess(self) -> RoutingGuess:
-        """The routing heuristic's answer (traps tested on the required entry nodes)."""
-        return self.me.guess(self.products, traps=self._trap_test() if self.required else None)
-
-    def guess_cut(self, guess: RoutingGuess) -> np.ndarray | None:
-        """The heuristic's cut set, or ``None`` when an exclusion rejects it."""
-        cut: np.ndarray = guess.cut_groups & self.me.has_var
-        keys = set(self.groups.keys[cut].tolist())
-        if any(excluded.excludes(keys) for excluded in self.options.exclusions):
-            return None
-        return cut
-
-    def _trap_test(self) -> Callable[[np.ndarray], bool]:
-        def traps(cut: np.ndarray) -> bool:
-            return bool(trapped_entries(self.products, self.blocked(cut), self.required))
-
-        return traps
-
-    # ------------------------------------------------------------------ rows up front
-
-    def exclusion_rows(self) -> list[Row]:
-        """(d) ``sum_{cut} d - sum_{open} d <= |cut| - 1`` per :class:`~.model.Exclusion`
-        whose ``cut`` groups can all be cut here (else it excludes nothing); ``open``
-        groups that can never be cut drop out."""
-        rows = []
-        for excluded in self.options.exclusions:
-            cut_cols = self._cols_of(excluded.cut)
-            if excluded.cut and np.all(cut_cols >= 0):
-                open_cols = self._cols_of(excluded.open)
-                open_cols = np.unique(open_cols[open_cols >= 0])
-                cut_cols = np.unique(cut_cols)
-                vals = np.concatenate([np.ones(cut_cols.size), -np.ones(open_cols.size)])
-                rows.append(Row(np.concatenate([cut_cols, open_cols]), vals, -np.inf, float(cut_cols.size - 1)))
-        return rows
-
-    def _cols_of(self, keys: tuple[int, ...]) -> np.ndarray:
-        """The master column of each cut-group key (``-1``: no binary, or no such group)."""
-        allk = self.groups.keys
-        want = np.asarray(keys, dtype=np.int64)
-        pos = np.minimum(np.searchsorted(allk, want), allk.size - 1)
-        out: np.ndarray = np.where(allk[pos] == want, self.col_of[pos], -1)
-        return out
-
-    def place_rows(self) -> list[Row]:
-        """MILP-agent: ``d_state(p) - d_g >= 0`` for each group entering place ``p``."""
-        nv = self.var.size
-        out = []
-        for p, grp in self.place_pairs.tolist():
-            pc = nv + int(np.searchsorted(self.places, p))
-            out.append(Row(np.array([pc, self.col_of[grp]]), np.array([1.0, -1.0]), 0.0, np.inf))
-        return out
-
     # ------------------------------------------------------------------ separation
-
-    def bypass_with_all_cut(self) -> bool:
-        """Whether a bypass path stays open with every group with a binary cut."""
-        return self._bypass_paths(np.ones(self.groups.keys.size, dtype=bool), 1) != []
 
     def separate(self, cut: np.ndarray, flow: int, paths: int = PATHS_PER_ROUND) -> tuple[list[tuple[str, Row]], list[FlowCut]]:
         """What a cut set violates at flow level ``flow``: the ``(kind, row)`` pairs of

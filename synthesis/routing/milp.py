@@ -60,7 +60,7 @@ from scipy.sparse.csgraph import breadth_first_order, maximum_flow
 from ..graphs.consistency import check_consistency
 from ..graphs.products import Products
 from ..model.errors import InconsistentProblem
-from . import cpsat, hitting_set, scip, wall_cover
+from . import cpsat, hitting_set
 from .cover_rows import CoverSeparator
 from .heuristic import RoutingGuess
 from .model import BACKENDS, CutGroups, MilpOptions, RoutingModel, build_model, model_cut_bound, phase2_integral_columns, static_moves_of
@@ -104,12 +104,6 @@ def solve_routing(products: Products, options: MilpOptions | None = None) -> Rou
     """
     options = options or MilpOptions()
     check_backend(options)
-    if options.backend == "cover":
-        result = wall_cover.solve_cover(products, options)
-        return replace(result, stats={**result.stats, "solver_version": backend_version("cover")})
-    if options.backend == "scip":
-        result = wall_cover.solve_cover(products, options, solve_level=scip.solve_level_scip, backend="scip")
-        return replace(result, stats={**result.stats, "solver_version": backend_version("scip")})
     # small reactive models start with every history's flows (adding them lazily costs
     # more rounds than it saves there); reactive ones whose flows would swamp the model
     # start without
@@ -170,8 +164,6 @@ def check_backend(options: MilpOptions) -> None:
         raise ValueError(f"unknown flow_rows option {options.flow_rows!r}; expected one of {', '.join(FLOW_ROWS)}")
     if options.backend == "cpsat":
         cpsat.require()
-    if options.backend == "scip":
-        scip.require()
 
 
 AUTO_CPSAT_ROWS: dict[str, tuple[int, int]] = {"static": (200, 15_000), "reactive": (200, 2_500)}
@@ -194,7 +186,7 @@ cells, one worker each, 30 s each, measured under load, so CPU seconds and proof
 
 The rule reads the built model only, so the choice, and with it the answer, is the same on
 every machine with the locked install. Agent problems (mode ``"mixed"``, many small MILPs)
-stay on HiGHS. The ``cover`` backend is never chosen: it proved nothing faster than HiGHS."""
+stay on HiGHS."""
 
 AUTO_CPSAT_MODES: tuple[str, ...] = tuple(AUTO_CPSAT_ROWS)
 """The routing modes in which ``"auto"`` may run CP-SAT (agent problems, mode ``"mixed"``, stay on HiGHS)."""
@@ -203,12 +195,7 @@ AUTO_CPSAT_MODES: tuple[str, ...] = tuple(AUTO_CPSAT_ROWS)
 def auto_backend(rm: RoutingModel, options: MilpOptions) -> str:
     """The backend ``"auto"`` runs on a built model (see :data:`AUTO_CPSAT_ROWS`: by mode and
     rows); HiGHS when OR-Tools is missing. A function of the model and options only, so the choice, and with
-    it the answer, is the same on every machine with the locked install. Never ``"cover"``:
-    the wall-cover master proved nothing HiGHS did not and was slower wherever a solve took
-    more than a tenth of a second (docs/benchmarks.md, "The ``cover`` backend"). Never
-    ``"scip"`` either: an optional extra (the choice must be the same on every install), and
-    measured slower than this choice on refueling and the random grids (docs/benchmarks.md,
-    "SCIP one-tree branch and cut")."""
+    it the answer, is the same on every machine with the locked install."""
     lo, hi = AUTO_CPSAT_ROWS.get(options.mode, (1, 0))
     if lo <= rm.model.n_row <= hi and cpsat.available():
         return "cpsat"
@@ -245,8 +232,6 @@ def backend_version(backend: str) -> str:
     """The version of the package a backend's answers depend on (highspy, OR-Tools)."""
     if backend == "cpsat":
         return cpsat.ortools_version() or "unknown"
-    if backend == "scip":
-        return scip.scip_version() or "unknown"
     return solver_version()
 
 

@@ -1,6 +1,6 @@
-"""What a routing solve returns, whichever backend ran it (:mod:`synthesis.routing.milp`'s
-flow MILP on HiGHS, :mod:`synthesis.routing.wall_cover`'s cut-group master), and the
-restrictions an answer puts on each history: what the trap searches read."""
+"""What a routing solve returns, whichever backend ran it (HiGHS or CP-SAT, see
+:mod:`synthesis.routing.milp`), and the restrictions an answer puts on each history: what
+the trap searches read."""
 
 from __future__ import annotations
 

@@ -364,10 +364,9 @@ def _join_left_behind() -> None:
 
 @dataclass(frozen=True)
 class OptionalSolver:
-    """A solver package a backend needs (OR-Tools for ``cpsat``, PySCIPOpt for ``scip``):
-    whether it is installed, a one-line error when it is asked for and missing, its version.
-    Checked without importing the package (OR-Tools cannot share a process with highspy;
-    PySCIPOpt costs 0.1 s to import)."""
+    """A solver package a backend needs (OR-Tools for ``cpsat``): whether it is installed, a
+    one-line error when it is asked for and missing, its version. Checked without importing
+    the package (OR-Tools cannot share a process with highspy)."""
 
     package: str
     missing: str  # the error message when the backend is asked for without the package

@@ -22,7 +22,6 @@ from synthesis.model.systems import grid_world
 from synthesis.problems.files import load_problem_file
 from synthesis.problems.load import load_problem
 from synthesis.problems.problem import build_graphs, make_problem
-from synthesis.routing import scip
 from synthesis.routing.caps import disjoint_bypasses
 from synthesis.routing.milp import solve_routing
 
@@ -142,7 +141,7 @@ def test_caps_in_the_problem_file(tmp_path: Path) -> None:
             load_problem_file(warehouse(tmp_path, extra=bad + "\n"))
 
 
-BACKENDS = ["highs", "cpsat", "cover", *(["scip"] if scip.available() else [])]
+BACKENDS = ["highs", "cpsat"]
 
 
 @pytest.mark.parametrize("backend", BACKENDS)

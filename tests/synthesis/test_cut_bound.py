@@ -31,7 +31,7 @@ from synthesis.model.systems import fuel_grid_world
 from synthesis.pipeline import SynthesisOptions, milp_options, synthesize
 from synthesis.problems.problem import Problem, build_graphs, make_problem
 from synthesis.problems.random_grid import first_consistent
-from synthesis.routing import cpsat, scip
+from synthesis.routing import cpsat
 from synthesis.routing.cut_bound import static_cut_bound
 from synthesis.routing.milp import _cut_proof, _phase2_cost
 from synthesis.routing.model import RoutingModel, build_model
@@ -229,21 +229,6 @@ def test_bound_proves_phase_2_of_a_10x10_grid(seed: int, bound: int) -> None:
         assert test.routing.stats["cut_bound"]["proven"]
 
 
-@pytest.mark.parametrize("backend", ["cover", "scip"])
-def test_cover_backends_use_both_walls_bounds(backend: str) -> None:
-    """The wall-cover backends start from the walls' flow bound (2 here, where the heuristic's
-    is 4: else their top-down search starts with masters at flows 4 and 3) and check the cut
-    bound's candidates at each level: on this grid the heuristic's test meets the cut bound
-    at flow 2, so no master is solved at all."""
-    if backend == "scip" and not scip.available():
-        pytest.skip("PySCIPOpt is not installed")
-    _, problem, _ = first_consistent(10, "reachability", 1, 0, "static")
-    test = synthesize(problem, SynthesisOptions(backend=backend, node_limit=2000))
-    assert test.routing.status == "optimal" and test.routing.flow == 2 and test.routing.cut_edges.size == 24
-    assert test.checks.bypass_flow == 0
-    assert test.routing.stats["rounds"] == 0 and test.routing.stats["master_solves"] == 0
-
-
 def test_candidate_proves_the_maximum_flow_of_a_10x10_grid() -> None:
     """Seed 6: the heuristic's flow is 1, the walls' flow bound 2; a candidate of the cut bound
     at flow 2 passes the checks, so phase 1 is proven by it, and it costs the cut bound (22), so
@@ -261,13 +246,13 @@ def test_candidate_proves_the_maximum_flow_of_a_10x10_grid() -> None:
     assert test.routing.stats["cpsat"]["runs"] == 0 and test.routing.stats["cut_bound"]["proven"]
 
 
-@pytest.mark.parametrize("backend", ["cover", "scip"])
-def test_cover_levels_the_cut_bound_proves_empty(backend: str) -> None:
+@pytest.mark.parametrize("backend", ["highs", "cpsat"])
+def test_a_level_the_cut_bound_proves_empty(backend: str) -> None:
     """On this 3x3 grid the cut bound is infinite at flow 2, the heuristic's upper bound (no
-    cut set has flow 2), so the wall-cover backends skip that level's master; the answer is
-    still the exhaustive optimum (``test_optimality.compare_static``)."""
-    if backend == "scip" and not scip.available():
-        pytest.skip("PySCIPOpt is not installed")
+    cut set has flow 2); the answer is still the exhaustive optimum
+    (``test_optimality.compare_static``)."""
+    if backend == "cpsat" and not cpsat.available():
+        pytest.skip("OR-Tools is not installed")
     problem = grid_instance(392, 3, 3, "static", True)
     _, products = build_graphs(problem)
     rm = build_model(products, milp_options(problem, SynthesisOptions()), {}, check_consistency(products))

@@ -38,7 +38,7 @@ from synthesis.model.errors import InconsistentProblem
 from synthesis.model.systems import TransitionSystem, graph_system, grid_world
 from synthesis.pipeline import SynthesisOptions, SynthesizedTest, synthesize
 from synthesis.problems.problem import Problem, build_graphs, make_problem
-from synthesis.routing import cpsat, scip
+from synthesis.routing import cpsat
 
 #: The brute force enumerates method.md §5 exactly (entry-node feasibility only).
 METHOD_EXACT = SynthesisOptions(closed_loop=False)
@@ -46,9 +46,7 @@ METHOD_EXACT = SynthesisOptions(closed_loop=False)
 #: Every solver backend installed answers the same exhaustive comparisons (issue 18).
 BACKENDS = [
     "highs",
-    "cover",
     pytest.param("cpsat", marks=pytest.mark.skipif(not cpsat.available(), reason="OR-Tools is not installed (a core dependency, missing here)")),
-    pytest.param("scip", marks=pytest.mark.skipif(not scip.available(), reason="PySCIPOpt (the scip extra) is not installed")),
 ]
 
 
