@@ -43,8 +43,8 @@ from typing import Any
 
 import numpy as np
 
-from synthesis.test_agent.controller import AgentController
 from synthesis.artifacts.artifact import TestArtifact
+from synthesis.test_agent.controller import AgentController
 
 GRID_ACTIONS: tuple[str, ...] = ("N", "S", "E", "W")
 """Action names of grid problems, in action order; action 4 is ``stay``."""

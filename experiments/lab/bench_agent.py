@@ -20,10 +20,10 @@ import statistics
 import time
 from collections.abc import Sequence
 
-from synthesis.test_agent import gr1
-from synthesis.test_agent.game import build_agent_game
 from synthesis.pipeline import synthesize
 from synthesis.problems.load import load_problem
+from synthesis.test_agent import gr1
+from synthesis.test_agent.game import build_agent_game
 
 PROBLEMS = ("maze1", "maze2", "patrolling")
 END_TO_END_TARGET = 5.0

@@ -40,20 +40,20 @@ from typing import Any
 
 import numpy as np
 
-from ..test_agent.closed_loop import verify_closed_loop
-from ..test_agent.controller import AgentController
 from ..checks.verify import check_test
 from ..graphs.automata import DBA, specification_product
 from ..graphs.products import build_products
+from ..model.agent_system import Park, TestAgent, places_of_cells
 from ..model.errors import CheckFailed, ProblemError, ProblemTooLarge
 from ..model.specs import parse_objective
 from ..model.strategy import TestStrategy
 from ..model.systems import TransitionSystem
-from ..model.agent_system import Park, TestAgent, places_of_cells
 from ..pipeline import SynthesizedTest
 from ..problems.files import MAX_FILE_BYTES, read_limited
 from ..problems.limits import check_file_size
 from ..problems.problem import Problem
+from ..test_agent.closed_loop import verify_closed_loop
+from ..test_agent.controller import AgentController
 from .schema import validate_artifact
 
 FORMAT = "flowtest-test"

@@ -35,7 +35,6 @@ from typing import Any
 
 import numpy as np
 
-from ..test_agent.loop import AgentSynthesis, realize_agent_strategy
 from ..checks.verify import check_test
 from ..model.errors import CheckFailed, InconsistentProblem, ProblemError
 from ..pipeline import SynthesizedTest
@@ -43,6 +42,7 @@ from ..problems.problem import build_graphs
 from ..problems.random_worlds import world_problem
 from ..routing.milp import RoutingResult
 from ..routing.restrictions import strategy_from_routing
+from ..test_agent.loop import AgentSynthesis, realize_agent_strategy
 from .artifact import TestArtifact, artifact_of
 from .summary import DERIVED_KEYS, DERIVED_STATS, derived_summary, without_timings
 

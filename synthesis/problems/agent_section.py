@@ -5,9 +5,9 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
+from ..model.agent_system import DEFAULT_MAX_ITERATIONS, TestAgent, make_test_agent
 from ..model.errors import ProblemError
 from ..model.systems import TransitionSystem
-from ..model.agent_system import DEFAULT_MAX_ITERATIONS, TestAgent, make_test_agent
 
 _AGENT_KEYS = {"cells", "start", "parks", "moves", "stay", "first", "max_iterations"}
 _PARK_KEYS = {"name", "from"}

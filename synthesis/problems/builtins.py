@@ -10,8 +10,8 @@ from __future__ import annotations
 import tomllib
 from collections.abc import Callable
 
-from ..model.systems import Cell, fuel_grid_world, graph_system, grid_world
 from ..model.agent_system import make_test_agent, places_of_cells
+from ..model.systems import Cell, fuel_grid_world, graph_system, grid_world
 from .files import problem_from_dict
 from .problem import Problem, make_problem
 

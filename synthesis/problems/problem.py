@@ -14,11 +14,11 @@ import numpy as np
 
 from ..graphs.automata import SpecificationProduct, specification_product
 from ..graphs.products import Products, build_products
+from ..model.agent_system import TestAgent
 from ..model.errors import ProblemError
 from ..model.specs import Objective, check_proposition_name, check_propositions, holds, parse_objective
 from ..model.strategy import SETTINGS
 from ..model.systems import TransitionSystem
-from ..model.agent_system import TestAgent
 
 KINDS = ("static", "reactive", "mixed", "agent")
 

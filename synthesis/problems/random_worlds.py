@@ -46,9 +46,9 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable
 from typing import TypeVar
 
+from ..model.agent_system import TestAgent, make_test_agent, places_of_cells
 from ..model.errors import InconsistentProblem, ProblemError
 from ..model.systems import Cell, TransitionSystem, fuel_grid_world, grid_world
-from ..model.agent_system import TestAgent, make_test_agent, places_of_cells
 from .problem import Problem, make_problem
 from .random_grid import MAX_ATTEMPTS, draw_special_cells, family_objectives, random_problem
 

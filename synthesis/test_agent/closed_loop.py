@@ -8,9 +8,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..graphs.products import Products, coreachable
+from ..model.agent_system import TestAgent
 from ..model.errors import CheckFailed
 from ..model.strategy import TestStrategy
-from ..model.agent_system import TestAgent
 from .controller import AgentController
 from .game import blocking_places, ended_nodes, reactive_restrictions, walled_off_nodes
 

@@ -73,8 +73,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..graphs.products import Products, coreachable, reachable
-from ..model.strategy import TestStrategy
 from ..model.agent_system import TestAgent
+from ..model.strategy import TestStrategy
 from ..routing.model import CutGroups
 from .gr1 import GR1Game
 

@@ -25,10 +25,10 @@ import numpy as np
 
 from ..checks.verify import CheckReport, check_test
 from ..graphs.products import Products
+from ..model.agent_system import TestAgent, place_json
 from ..model.errors import CheckFailed, InconsistentProblem
 from ..model.strategy import TestStrategy
 from ..model.systems import TransitionSystem
-from ..model.agent_system import TestAgent, place_json
 from ..routing.milp import RoutingResult, solve_routing
 from ..routing.model import Exclusion, MilpOptions, cut_groups
 from ..routing.restrictions import strategy_from_routing

@@ -34,8 +34,8 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order
 
 from ..graphs.products import Products, coreachable, reachable
-from ..model.strategy import TestStrategy
 from ..model.agent_system import TestAgent
+from ..model.strategy import TestStrategy
 from ..routing.model import CutGroups, Exclusion
 from . import gr1
 from .game import AgentGame, GameRules, build_game, ended_nodes

@@ -11,19 +11,19 @@ import numpy as np
 import pytest
 
 from flowtest_env.game import TestGame
+from synthesis.artifacts.artifact import TestArtifact, artifact_of
+from synthesis.artifacts.summary import summary_of
+from synthesis.model.agent_system import make_test_agent, places_of_cells
+from synthesis.model.errors import CheckFailed, InconsistentProblem, ProblemError
+from synthesis.pipeline import SynthesisOptions, SynthesizedTest, synthesize
+from synthesis.problems.files import load_problem_file
+from synthesis.problems.load import load_problem
+from synthesis.problems.problem import Problem
 from synthesis.test_agent import gr1
 from synthesis.test_agent.closed_loop import verify_closed_loop
 from synthesis.test_agent.controller import AgentController
 from synthesis.test_agent.game import blocking_places, build_agent_game, trapped_nodes, walled_off_nodes
 from synthesis.test_agent.loop import AgentSynthesis
-from synthesis.artifacts.artifact import TestArtifact, artifact_of
-from synthesis.artifacts.summary import summary_of
-from synthesis.model.errors import CheckFailed, InconsistentProblem, ProblemError
-from synthesis.model.agent_system import make_test_agent, places_of_cells
-from synthesis.pipeline import SynthesisOptions, SynthesizedTest, synthesize
-from synthesis.problems.files import load_problem_file
-from synthesis.problems.load import load_problem
-from synthesis.problems.problem import Problem
 
 AGENT_BUILTINS = ("maze1", "maze2", "patrolling")
 #: physical walls make patrolling's MILP take minutes (docs/benchmarks.md, "Patrolling with

@@ -10,13 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from synthesis.test_agent import gr1
-from synthesis.test_agent.game import build_agent_game, build_game, trapped_nodes
-from synthesis.test_agent.loop import _restrictable_for_agent
-from synthesis.test_agent.reasons import _rules, reason_groups, trap_reason, unrealizable_reason
 from synthesis.graphs.products import Products
-from synthesis.model.strategy import TestStrategy
 from synthesis.model.agent_system import TestAgent
+from synthesis.model.strategy import TestStrategy
 from synthesis.pipeline import SynthesisOptions, build_graphs, milp_options, synthesize_agent_test
 from synthesis.problems.files import load_problem_file
 from synthesis.problems.load import load_problem
@@ -26,6 +22,10 @@ from synthesis.routing import cpsat
 from synthesis.routing.milp import RoutingResult
 from synthesis.routing.model import CutGroups, Exclusion, MilpOptions, cut_groups
 from synthesis.routing.restrictions import strategy_from_routing
+from synthesis.test_agent import gr1
+from synthesis.test_agent.game import build_agent_game, build_game, trapped_nodes
+from synthesis.test_agent.loop import _restrictable_for_agent
+from synthesis.test_agent.reasons import _rules, reason_groups, trap_reason, unrealizable_reason
 
 MAZE_ALL = Path(__file__).resolve().parents[2] / "docs" / "data" / "agent-problems" / "maze-all-free.toml"
 
