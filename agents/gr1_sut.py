@@ -25,7 +25,7 @@ Assumptions on the test environment (the controller is correct only under them):
    stay (the tests' restrictions depend on the history, which changes only when the
    SUT makes progress on the test objective); when the SUT sees it lifted it drops it;
 3. **the tester never blocks every path forever** — from the SUT's state some way to its
-   goal stays open (method.md's feasibility, and (g8) for a test agent: it never stays
+   goal stays open (docs/method.md's feasibility, and (g8) for a test agent: it never stays
    two steps in a row on a cell that blocks every path).
 
 Because the test is reactive, no *fixed* controller is winning for every restriction

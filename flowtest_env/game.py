@@ -5,7 +5,7 @@ holds only look-up tables; a :class:`RunState` is the small mutable state of one
 Every rule below is a table or dictionary look-up, so nothing is solved at step time
 (design.md: "a step is a few array or dictionary look-ups").
 
-Rules (method.md §6-7)
+Rules (docs/method.md §6-7)
 ----------------------
 * **Moves.** The system under test (SUT) picks an *action*: on grids ``N, S, E, W,
   stay`` (actions 0-4); on graphs one action per outgoing edge *slot* of its current
@@ -15,7 +15,7 @@ Rules (method.md §6-7)
   restricted while the history is ``h`` iff ``artifact.strategy.blocked[h, move]``
   (static walls included). Agent problems: static walls, and every move into the place
   the test agent occupies (the agent realizes the reactive restrictions ``R(q)`` by
-  standing there, method.md §7). Stay is always allowed on non-terminal states.
+  standing there, docs/method.md §7). Stay is always allowed on non-terminal states.
 * **Attempts.** An invalid or restricted action leaves the SUT in place (as a stay)
   and is counted in ``blocked_attempts``; the legal-action mask never offers one.
 * **The test agent** answers every SUT step from its synthesized table

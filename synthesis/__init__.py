@@ -1,9 +1,9 @@
-"""FlowTest's synthesis: from a problem to a checked test (method.md).
+"""FlowTest's synthesis: from a problem to a checked test (docs/method.md).
 
 The package is split by stage; each sub-package imports only from those before it:
 
 * :mod:`synthesis.model` — transition systems, objectives, test strategies, errors;
-* :mod:`synthesis.graphs` — the objectives' automata and the product graphs (method.md §3-4);
+* :mod:`synthesis.graphs` — the objectives' automata and the product graphs (docs/method.md §3-4);
 * :mod:`synthesis.problems` — the :class:`Problem` value, problem files, built-ins, random
   grids, size limits;
 * :mod:`synthesis.routing` — the routing MILP, its heuristic and the HiGHS runner (§5);

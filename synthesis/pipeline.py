@@ -52,7 +52,7 @@ class SynthesisOptions:
     progress: Callable[[str], None] | None = None
     agent_iterations: int | None = None  # bound on the counterexample-guided loop
     # also forbid restrictions that trap the system off entry nodes (one-way moves);
-    # off by default: method.md §5 exactly (see solve_routing)
+    # off by default: docs/method.md §5 exactly (see solve_routing)
     closed_loop: bool = False
     # Ctrl-C and the live solver status, shared with the caller (see solver_control)
     control: SolveControl | None = None
@@ -342,7 +342,7 @@ def synthesize_agent_test(
     reasons: bool = True,
     started: float | None = None,
 ) -> SynthesizedTest:
-    """Synthesize a test agent strategy for an agent problem (method.md §7).
+    """Synthesize a test agent strategy for an agent problem (docs/method.md §7).
 
     Builds the graphs and the problem's MILP options and runs
     :func:`synthesis.test_agent.loop.counterexample_loop` on them.
@@ -362,7 +362,7 @@ def synthesize_agent_test(
     reasons
         Exclude with each rejected cut set every cut set rejected for the same reason
         (see :func:`~synthesis.test_agent.loop.counterexample_loop`); ``False`` excludes the cut
-        set alone (the loop of method.md §7 as written; same answer, more solves).
+        set alone (the loop of docs/method.md §7 as written; same answer, more solves).
     started
         ``perf_counter`` time the synthesis began (default: now): the time limit runs from it.
 

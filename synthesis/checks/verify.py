@@ -12,7 +12,7 @@ enforce and search the product graphs directly.
   on the map the system sees from its first step, so an entry node is kept when
   ``Tgt_sys`` is reachable from it on that map (T without the walls): one the walls
   alone doom is entered by no correct system. For a purely static test this leaves
-  ``F >= 1`` as its feasibility, as method.md §5 says;
+  ``F >= 1`` as its feasibility, as docs/method.md §5 says;
 * **no trap in the closed loop**: no configuration reachable under the restrictions
   loses, through them, a way to the goal it would otherwise have.
 """
@@ -161,7 +161,7 @@ def check_test(
     """Run every check; raise :class:`CheckFailed` (a FlowTest bug) if one fails.
 
     Trapped configurations off entry nodes are always counted in the report; they fail
-    it only with ``closed_loop=True`` (method.md §5 does not forbid them).
+    it only with ``closed_loop=True`` (docs/method.md §5 does not forbid them).
     """
     blocked = restricted_edges(products, strategy)
     report = CheckReport(

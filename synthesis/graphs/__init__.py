@@ -1,1 +1,1 @@
-"""Automata of the objectives and the product graphs G and G_sys (method.md §3-4)."""
+"""Automata of the objectives and the product graphs G and G_sys (docs/method.md §3-4)."""

@@ -1,6 +1,6 @@
 """Deterministic Büchi automata (DBA) of objectives, and the specification product B_pi.
 
-Conventions (method.md §3):
+Conventions (docs/method.md §3):
 
 * An automaton reads the *label* of a state, i.e. the set of propositions true there.
   Its alphabet is the list of distinct labels that occur in the transition system at
@@ -82,7 +82,7 @@ def _truth(f: Formula, letters: Sequence[Label]) -> np.ndarray:
 
 
 def task_automaton(task: Task, letters: Sequence[Label]) -> DBA:
-    """The DBA of one sub-task (method.md §3)."""
+    """The DBA of one sub-task (docs/method.md §3)."""
     k = len(letters)
     truth = [_truth(p, letters) for p in task.props]
     if task.kind in ("visit", "sequenced"):
@@ -252,7 +252,7 @@ class SpecificationProduct:
 def specification_product(
     sys_objective: Objective, test_objective: Objective, letters: Sequence[Label], max_states: int | None = None
 ) -> SpecificationProduct:
-    """Build B_sys, B_test and their reachable product B_pi (method.md §3).
+    """Build B_sys, B_test and their reachable product B_pi (docs/method.md §3).
 
     ``max_states`` bounds every product explored (:class:`ProblemTooLarge` beyond it).
     """

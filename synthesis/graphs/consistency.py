@@ -1,4 +1,4 @@
-"""The two inconsistent problems of method.md §5, decided on the product graphs alone: no
+"""The two inconsistent problems of docs/method.md §5, decided on the product graphs alone: no
 routing MILP can change them (the goal is unreachable, or no execution reaching it passes
 the test objective)."""
 
@@ -11,7 +11,7 @@ from .products import Products, coreachable
 
 
 def check_consistency(products: Products) -> np.ndarray:
-    """Raise :class:`InconsistentProblem` for the two cases of method.md §5.
+    """Raise :class:`InconsistentProblem` for the two cases of docs/method.md §5.
 
     Returns the mask of G's nodes that can reach ``Tgt``.
     """

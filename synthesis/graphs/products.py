@@ -1,4 +1,4 @@
-"""Product graphs (method.md §4): the virtual product G = T x B_pi and G_sys = T x B_sys.
+"""Product graphs (docs/method.md §4): the virtual product G = T x B_pi and G_sys = T x B_sys.
 
 A product node ``(s, q)`` is numbered densely; the arrays ``state[v]`` and ``hist[v]``
 give its parts. Products are built in bulk: every move of T is paired with every
@@ -71,7 +71,7 @@ class ProductGraph:
 
 
 def build_product(ts: TransitionSystem, dba: DBA) -> ProductGraph:
-    """The reachable synchronous product ``T x B`` (method.md §4)."""
+    """The reachable synchronous product ``T x B`` (docs/method.md §4)."""
     nq = dba.n_states
     letter = ts.letter_of_state(dba.letters)
     q = np.arange(nq, dtype=np.int64)

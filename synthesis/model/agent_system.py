@@ -1,4 +1,4 @@
-"""The test agent's transition system ``T_TA`` (method.md §7): what an agent problem adds.
+"""The test agent's transition system ``T_TA`` (docs/method.md §7): what an agent problem adds.
 
 :class:`TestAgent` lives on the *places* of ``T`` (cells; on a fuel grid the agent occupies a
 cell, i.e. every fuel level of it), plus *park* states outside ``T`` from which it blocks
@@ -38,7 +38,7 @@ class Park:
 
 @dataclass
 class TestAgent:
-    """The test agent's transition system ``T_TA`` (method.md §7).
+    """The test agent's transition system ``T_TA`` (docs/method.md §7).
 
     Agent states are numbered: first the cells (``0 .. n_cells - 1``, each a place of
     ``T``), then the parks. A move ``(a, a')`` of :attr:`moves` is one step of the agent;

@@ -1,4 +1,4 @@
-"""Objectives: the formula syntax of problem files and the sub-task patterns of method.md §2.
+"""Objectives: the formula syntax of problem files and the sub-task patterns of docs/method.md §2.
 
 A formula is parsed into a small syntax tree, split at its top-level conjunction and
 each conjunct is classified as one of the patterns
@@ -394,7 +394,7 @@ def parse_objective(text: str, role: str) -> Objective:
     Raises
     ------
     ProblemError
-        On a syntax error, or a conjunct outside the fragment of method.md §2 (the
+        On a syntax error, or a conjunct outside the fragment of docs/method.md §2 (the
         message names the conjunct).
     """
     if not isinstance(text, str):

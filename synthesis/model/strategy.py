@@ -1,4 +1,4 @@
-"""Test strategies (method.md §6): which moves are restricted, given the history.
+"""Test strategies (docs/method.md §6): which moves are restricted, given the history.
 
 A :class:`TestStrategy` is what an environment enforces. ``blocked[q]`` is the mask of
 moves of T restricted while the history is ``q``: the static obstacles (walls for the

@@ -1,7 +1,7 @@
 """Transition systems T = (S, A, delta, s0, AP, L): grid worlds, fuel grid worlds, graphs.
 
 A :class:`TransitionSystem` is plain data over integer-indexed arrays. Its moves
-exclude the stay self-loop (method.md §2: it can never be restricted and is left
+exclude the stay self-loop (docs/method.md §2: it can never be restricted and is left
 out of every flow network); ``stay[s]`` says whether a state may stay in place.
 States keep a user-facing key (``(row, col)``, ``((row, col), fuel)`` or a name) in
 a side table; ``place[s]`` is the location a state occupies (its cell, or itself on

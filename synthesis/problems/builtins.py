@@ -244,7 +244,7 @@ def patrolling() -> Problem:
     from row 0 or row 5. Static area: everything off column 2.
 
     Physical walls, as paper-examples.md asks: the static area's cuts are tied across fuel
-    levels and directions (``tie_places="static"``, ``bidirectional_cuts=True``, method.md
+    levels and directions (``tie_places="static"``, ``bidirectional_cuts=True``, docs/method.md
     §5 c14), one wall per pair of cells, while the test agent's cuts (moves into column 2)
     stay per move and history. Proven optimal at flow 1, the paper's figure, with 27 cuts
     and its test agent realized after 2 loop rounds (the first cut set traps the system at

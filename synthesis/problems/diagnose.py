@@ -1,7 +1,7 @@
 """Why a problem has no test: the conjunct or the visit to blame, in the user's words.
 
 :func:`~synthesis.graphs.consistency.check_consistency` decides the two inconsistent cases
-of method.md §5 on the product graphs. This module says which part of the problem causes
+of docs/method.md §5 on the product graphs. This module says which part of the problem causes
 them, by building the product graphs again for parts of the objectives (small problems
 only: at most :data:`MAX_DIAGNOSIS_EDGES` edges of G):
 
@@ -10,7 +10,7 @@ only: at most :data:`MAX_DIAGNOSIS_EDGES` edges of G):
 * **implied**: the system objective already implies the test objective (``test = "F dock"``
   with the dock the goal): every execution that meets the system objective meets the
   test objective too, so a test needs no restriction and there is nothing to route
-  (reason ``"unroutable"``, as method.md §5 has it: no execution passes the test
+  (reason ``"unroutable"``, as docs/method.md §5 has it: no execution passes the test
   objective *before* the goal; the message says it is implied);
 * **unroutable**: the visit of the test objective (``F bay``) that no execution meeting the
   system objective makes before the goal, and, where one does, the system conjunct that

@@ -183,7 +183,7 @@ def _tie_mode(value: object) -> str:
 
 
 def _check_goal_terminal(ts: TransitionSystem, objective: Objective) -> None:
-    """method.md §2: some visit task's last proposition holds only at terminal states."""
+    """docs/method.md §2: some visit task's last proposition holds only at terminal states."""
     for task in objective.tasks:
         if not task.is_visit:
             continue
@@ -198,7 +198,7 @@ def _check_goal_terminal(ts: TransitionSystem, objective: Objective) -> None:
 
 
 def build_graphs(problem: Problem) -> tuple[SpecificationProduct, Products]:
-    """Automata and product graphs of a problem (method.md §3-4)."""
+    """Automata and product graphs of a problem (docs/method.md §3-4)."""
     ts = problem.system
     spec = specification_product(problem.system_objective, problem.test_objective, ts.letters())
     return spec, build_products(ts, spec)

@@ -15,7 +15,7 @@ Spec families for a size parameter ``n``:
 * ``safety``: ``phi_sys = F p1 & G !p2 & ... & G !pn`` (``p1`` the goal), ``phi_test = F p0``.
 
 What "inconsistent" means is the caller's choice (:func:`first_consistent`): by default
-the two cases of method.md §5 that no routing MILP can change (the goal is unreachable,
+the two cases of docs/method.md §5 that no routing MILP can change (the goal is unreachable,
 or no execution reaching it passes the test objective), decided on the product graphs
 alone, so MILP-static and MILP-reactive see the same instance. The Gymnasium pool
 (``flowtest_env.random_grid``) instead redraws until a test is synthesized.
@@ -135,7 +135,7 @@ def random_problem(size: int, family: str, n: int, seed: int, attempt: int = 0, 
 
 
 def graph_consistency(problem: Problem) -> None:
-    """Raise :class:`InconsistentProblem` for method.md §5's two inconsistent cases.
+    """Raise :class:`InconsistentProblem` for docs/method.md §5's two inconsistent cases.
 
     Decided on the product graphs only (no MILP): the goal is unreachable, or no
     ``Src -> Tgt`` path passes ``I``. Independent of the environment kind.

@@ -17,8 +17,8 @@ A pool instance is named by ``(size, family, n, seed, attempt, world, kind)``:
     cell's proposition. Static walls are tied across fuel levels (as in refueling);
 
 * ``kind``: the environment, ``"reactive"`` (reactive doors: restrictions that open and
-  close with the history, method.md §6), ``"static"`` (walls for the whole test) or
-  ``"agent"`` (a test agent, method.md §7): the agent lives on one column of the grid
+  close with the history, docs/method.md §6), ``"static"`` (walls for the whole test) or
+  ``"agent"`` (a test agent, docs/method.md §7): the agent lives on one column of the grid
   that holds neither the start nor the goal, drawn by seed, moves one cell up or down
   or stays, starts on a drawn cell of its column, and parks off the grid above row 0 or
   below the last row; the system moves first. Its static area is every move into a

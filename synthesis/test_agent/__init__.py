@@ -1,4 +1,4 @@
-"""The dynamic test agent (method.md §7): game, GR(1) solver, counterexample loop.
+"""The dynamic test agent (docs/method.md §7): game, GR(1) solver, counterexample loop.
 
 Three words, three things (FlowTest never says plain "agent" for more than one of them):
 

@@ -1,4 +1,4 @@
-"""Closed-loop verification of a test agent (method.md §7), independent of the GR(1) solver:
+"""Closed-loop verification of a test agent (docs/method.md §7), independent of the GR(1) solver:
 the test under the agent's controller explored against every behaviour of the system."""
 
 from __future__ import annotations

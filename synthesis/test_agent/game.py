@@ -1,4 +1,4 @@
-"""The test-agent game of method.md §7 as an explicit GR(1) game over integer arrays.
+"""The test-agent game of docs/method.md §7 as an explicit GR(1) game over integer arrays.
 
 Players and turns
 -----------------
@@ -329,7 +329,7 @@ def legal_positions(products: Products, rules: GameRules, agent_place: np.ndarra
 
 
 def build_agent_game(products: Products, strategy: TestStrategy, agent: TestAgent) -> AgentGame:
-    """Build the test-agent game for the restrictions of ``strategy`` (method.md §7).
+    """Build the test-agent game for the restrictions of ``strategy`` (docs/method.md §7).
 
     Parameters
     ----------

@@ -1,4 +1,4 @@
-"""The counterexample-guided loop of method.md §7: from a routing cut set to a test agent
+"""The counterexample-guided loop of docs/method.md §7: from a routing cut set to a test agent
 strategy, or a proof that none exists.
 
 :func:`counterexample_loop` solves MILP-agent (the routing MILP of
@@ -158,7 +158,7 @@ def counterexample_loop(
     note: Callable[[str], None] | None = None,
     graph_seconds: float = 0.0,
 ) -> AgentOutcome:
-    """Synthesize a test agent strategy on the product graphs of an agent problem (method.md §7).
+    """Synthesize a test agent strategy on the product graphs of an agent problem (docs/method.md §7).
 
     The loop: exclude what no agent can realize (a move into a place the agent can
     never occupy at the system's turn is unrestrictable; cuts it could never hold are
