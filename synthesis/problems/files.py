@@ -7,7 +7,6 @@ through :func:`read_limited` (regular files up to :data:`MAX_FILE_BYTES`).
 
 from __future__ import annotations
 
-import math
 import os
 import re
 import stat
@@ -19,11 +18,11 @@ from typing import Any
 import numpy as np
 
 from ..model.errors import ProblemError, ProblemTooLarge
+from ..model.option_rules import FLAG, SECONDS, SETTING
 from ..model.specs import check_proposition_name
-from ..model.strategy import SETTINGS
 from ..model.systems import Cell, TransitionSystem, graph_system, grid_world
 from .agent_section import agent_from_toml
-from .problem import CAP_KEYS, KINDS, Problem, check_caps, make_problem, shown
+from .problem import CAP_KEYS, KINDS, Problem, check_caps, make_problem
 
 _TOP_KEYS = {"name", "description", "system", "labels", "objectives", "environment"}
 _GRID_KEYS = {"grid", "start", "terminal", "restrictable"}
@@ -43,14 +42,6 @@ def _unknown(section: str, got: dict[str, Any], allowed: set[str]) -> None:
 def _is_int(x: Any) -> bool:
     """An integer that is not a boolean (TOML's ``true`` is not the number 1)."""
     return isinstance(x, int) and not isinstance(x, bool)
-
-
-def _finite(x: int | float) -> bool:
-    """Whether a number is finite as a float (an integer too large for one is not)."""
-    try:
-        return math.isfinite(x)
-    except OverflowError:
-        return False
 
 
 def _is_cell(x: Any) -> bool:
@@ -168,17 +159,14 @@ def problem_from_dict(data: dict[str, Any], source: str = "<problem>", max_cells
     for key in ("start", "terminal"):
         if key not in system:
             raise ProblemError(f"missing `{key}` in [system]{where}")
-    time_limit = env.get("time_limit")
-    if time_limit is not None and (
-        not isinstance(time_limit, (int, float)) or isinstance(time_limit, bool)
-        or not _finite(time_limit) or time_limit <= 0
-    ):
-        raise ProblemError(f"`time_limit` in [environment]{where} must be a positive finite number of seconds, not {shown(time_limit)}")
+    # the solver options a problem file may hold follow the rules the Python options and the
+    # command line follow (synthesis.model.option_rules): the same bad value, the same reason
+    time_limit = SECONDS.check(env.get("time_limit"), f"`time_limit` in [environment]{where}")
     bidir = env.get("bidirectional_cuts")
-    if bidir is not None and not isinstance(bidir, bool):
-        raise ProblemError(f"`bidirectional_cuts` in [environment]{where} must be true or false")
-    if "setting" in env and env["setting"] not in SETTINGS:
-        raise ProblemError(f"`setting` in [environment]{where} is {env['setting']!r}; expected one of {', '.join(SETTINGS)}")
+    if bidir is not None:
+        FLAG.check(bidir, f"`bidirectional_cuts` in [environment]{where}")
+    if "setting" in env:
+        SETTING.check(env["setting"], f"`setting` in [environment]{where}")
     if "static" in env and kind not in ("mixed", "agent"):
         raise ProblemError(f"`static` in [environment]{where} is for mixed and agent problems, not {kind!r} ones")
     if "agent" in env and kind != "agent":
@@ -199,8 +187,7 @@ def problem_from_dict(data: dict[str, Any], source: str = "<problem>", max_cells
         extras["setting"] = env["setting"]
     caps = check_caps({k: env[k] for k in CAP_KEYS if k in env}, f" in [environment]{where}")
     one_way = env.get("one_way_walls", kind == "static" and bidir is False)
-    if not isinstance(one_way, bool):
-        raise ProblemError(f"`one_way_walls` in [environment]{where} must be true or false")
+    FLAG.check(one_way, f"`one_way_walls` in [environment]{where}")
     kw: dict[str, Any] = {
         "static_moves": static_moves, "time_limit": time_limit, "extras": extras, "caps": caps, "one_way_walls": one_way,
     }
