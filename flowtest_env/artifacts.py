@@ -21,7 +21,7 @@ source hash, automata, restrictions against its own product graphs, a test agent
 controller in closed loop). A shipped artifact must have exactly the bytes FlowTest
 shipped (:data:`MANIFEST`, the SHA-256 of each file, written by
 ``experiments/tools/build_artifacts.py``) and its own digest, and is then checked in full like a
-cache entry (mars-exploration, the largest, in about 0.15 s). Both must carry the source
+cache entry (no solver runs, so this is quick even for mars-exploration, the largest). Both must carry the source
 hash of the built-in problem they stand for. An edited file, or one made for another problem, is refused with a message
 naming what is wrong (a cache entry is then synthesized again, with a warning).
 
@@ -185,7 +185,7 @@ def load_shipped(path: Path, expected_source: str) -> TestArtifact:
         raise ProblemError(f"artifact {path} is not the file FlowTest shipped (its SHA-256 differs: edited?); {fix}")
     try:
         art = TestArtifact.load(path, verify=False, require_digest=True)
-        verify_artifact(art, str(path), expected_source)  # every check: a few to 150 ms
+        verify_artifact(art, str(path), expected_source)  # every check; no solver runs
     except ProblemError as exc:
         raise ProblemError(f"{exc}; {fix}") from None
     return art

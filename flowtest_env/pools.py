@@ -1,4 +1,4 @@
-"""Named test pools with ``train`` / ``validation`` / ``test`` splits (issue 16, point 1).
+"""Named test pools with ``train`` / ``validation`` / ``test`` splits.
 
 A pool is a seeded family of random grid problems, named::
 

@@ -99,9 +99,9 @@ POOL_WORK_LIMIT = 10.0
 """CP-SAT's deterministic seconds per phase for pool tests (``SynthesisOptions.work_limit``):
 ``auto`` runs CP-SAT on static models of 200-15,000 rows and reactive ones of 200-2,500
 (:data:`synthesis.routing.milp.AUTO_CPSAT_ROWS`), where the node limit does not apply, so this
-bounds their work the same way. Every 5x5 study instance CP-SAT proved when the rule was
-measured took at most 1.8 deterministic seconds (docs/benchmarks.md, "auto's backend rule per
-model kind"); 10 is a few CPU seconds per phase."""
+bounds their work the same way. 10 leaves a wide margin over what the 5x5 study instances
+CP-SAT proves need (docs/benchmarks.md, "auto's backend rule per model kind") and is a few CPU
+seconds per phase."""
 
 MAX_POOL_FILE_BYTES = 256 * 1024 * 1024
 """Largest split file read (its size checked before it is read): about 800,000 records."""

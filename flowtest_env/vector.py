@@ -748,7 +748,7 @@ class VectorActionMaskObservation(gym.vector.VectorWrapper):
     def reset(
         self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-        # gymnasium 1.4 types VectorEnv.reset's seed as int | None; its vector envs and ours take a list too
+        # gymnasium's annotations type VectorEnv.reset's seed as int | None; its vector envs and ours take a list too
         obs, infos = self.env.reset(seed=seed, options=options)  # type: ignore[arg-type]
         return {"observation": obs, "action_mask": self._mask(infos)}, infos
 

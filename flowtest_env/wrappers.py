@@ -57,14 +57,14 @@ class ActionMaskObservation(
 
     def __init__(self, env: gym.Env[np.ndarray, np.int64]) -> None:
         gym.utils.RecordConstructorArgs.__init__(self)  # so gymnasium.make(env.spec) rebuilds it
-        # gymnasium 1.4 types Wrapper.__init__'s env (and Wrapper.env) with the wrapper's own
+        # gymnasium's annotations type Wrapper.__init__'s env (and Wrapper.env) with the wrapper's own
         # observation type instead of the wrapped env's; `_inner` keeps the wrapped env's types
         super().__init__(env)  # type: ignore[arg-type]
         self._inner = env
         if not isinstance(env.action_space, spaces.Discrete):
             raise TypeError(f"ActionMaskObservation needs a Discrete action space, not {env.action_space}")
         n = int(env.action_space.n)
-        # gymnasium 1.4 types spaces.Dict as a Space of dicts of spaces, not of samples
+        # gymnasium's annotations type spaces.Dict as a Space of dicts of spaces, not of samples
         self.observation_space = spaces.Dict(  # type: ignore[assignment]
             {"observation": env.observation_space, "action_mask": spaces.Box(0, 1, shape=(n,), dtype=np.int8)}
         )
@@ -210,7 +210,7 @@ class VisitedPlaces(gym.ObservationWrapper[np.ndarray, np.int64, np.ndarray], gy
     does not show (the test objective stays hidden), so the observation alone is not
     Markov for the SUT: on ``FlowTest-Maze2-v0`` the SUT must pass some cells twice and
     act differently the second time, and no policy of the observation alone does (a
-    plain MaskablePPO stays at 0 %). With this memory it learns the test
+    plain MaskablePPO never learns it). With this memory it learns the test
     (docs/benchmarks.md). Same as the env option ``memory="visited"``.
 
     Usable with any library: ``VisitedPlaces(gymnasium.make("FlowTest-Maze2-v0"))``.

@@ -180,9 +180,9 @@ def milp_options(problem: Problem, options: SynthesisOptions) -> MilpOptions:
 CHECK_SECONDS_PER_EDGE = 1e-4
 """Seconds per edge of G kept back from the solver's time limit for what follows its last
 run: the answer read back and checked against the model, the strategy, the independent
-checks, the summary, and the solver's late look at its clock. Measured on a loaded machine
-on a 500-state graph of 19,000 edges (``tests/synthesis/test_limits.py``'s): 0.6 s after the last
-HiGHS run, which itself stopped up to 0.5 s past its limit."""
+checks, the summary, and the solver's late look at its clock. Sized from the 500-state graph of
+19,000 edges of ``tests/synthesis/test_limits.py``, with room for a loaded machine (the figures
+are in docs/history.md)."""
 
 RESERVE_SHARE = 0.2
 """At most this share of the time limit is kept back for what follows the solve."""

@@ -112,7 +112,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             # we are the process (the console script): leave now. Exiting normally would
             # wait at interpreter shutdown for a solver thread that has not yet reached a
             # point where it notices the stop (solver_control.solves_running()), and
-            # tearing torch down after a training run takes seconds under load. Outputs
+            # tearing torch down after a training run can take seconds. Outputs
             # are written atomically and their temporary files removed while the
             # interrupt unwound, so no partial file is left behind.
             flush_and_exit(EXIT_INTERRUPTED)

@@ -2,11 +2,11 @@
 
 A fresh CP-SAT child (:mod:`synthesis.routing.cpsat_worker`) takes a fraction of a second
 to start, and importing the command line (NumPy, SciPy, HiGHS, FlowTest) about as long;
-one after the other they were a third of refueling's whole command. So the console script
+one after the other they are a large share of a short command such as refueling's. So the console script
 (:mod:`experiments.cli.console`) asks :func:`prestart_for` first thing, with the raw
 arguments: when they may lead to a CP-SAT solve (``synthesize`` with ``--backend`` auto
 or cpsat), a child starts and loads OR-Tools on the other core while this process
-imports. The guess is cheap to get wrong: an unused child costs about 0.06 CPU s, and
+imports. The guess is cheap to get wrong: an unused child costs a small fraction of a CPU second, and
 :mod:`experiments.cli.synthesize` ends it as soon as the problem shows that ``auto`` will not
 pick CP-SAT, and in any case when the command ends.
 

@@ -75,7 +75,7 @@ MAX_LAYOUT_CELLS = 1_000_000
 
 MAX_EXPLORED_STATES = 100_000
 """At most this many automaton states are explored to derive an artifact's automata again
-(about ten seconds): a file cannot buy a longer search by declaring many histories."""
+(seconds of work): a file cannot buy a longer search by declaring many histories."""
 
 MAX_INT = 2**53
 """Integers in an artifact are below this in magnitude (what every JSON reader holds exactly)."""

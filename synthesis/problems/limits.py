@@ -1,8 +1,8 @@
 """Resource limits: problems far beyond what can be solved are refused before any work.
 
 The routing MILP has a binary variable per edge of the product graph G = T x B_pi, and
-building G alone holds several arrays per edge; a 1000x1000 grid reached 14 GB before
-this check. :func:`estimate_size` bounds G from the problem alone, cheaply (no automaton
+building G alone holds several arrays per edge, so a large enough grid exhausts memory before
+any solver runs. :func:`estimate_size` bounds G from the problem alone, cheaply (no automaton
 product is built): at most ``n_moves`` edges per history, and at most the product of the
 sub-task automata's sizes as histories. :func:`check_size` refuses a problem whose bound
 exceeds the limit, with the estimate and the way to go on (``--no-size-limit`` on the

@@ -1,5 +1,5 @@
 """Why the counterexample loop rejects a cut set, as an exclusion of every cut set with the
-same reason (issue 18, point 6).
+same reason.
 
 A rejected cut set ``C`` alone excludes one cut set per MILP solve. Unrealizability is
 **not monotone** in the cut set, so "exclude every superset of a core of ``C``" would be
