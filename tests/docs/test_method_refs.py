@@ -211,6 +211,26 @@ def test_no_development_history_tag_in_product_code() -> None:
     assert not found, "development-history tags belong in commit messages and docs:\n" + "\n".join(found)
 
 
+# --- the other docs ----------------------------------------------------------------------------
+
+
+def test_the_docs_cite_the_method_in_the_repository() -> None:
+    """The README and the docs pages point at docs/method.md (not at a copy outside the
+    repository), and every section of it they cite exists."""
+    page = method()
+    found = []
+    for path in [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]:
+        rel = path.relative_to(ROOT)
+        for i, line in enumerate(path.read_text().splitlines(), 1):
+            if re.search(r"\.\./[\w./-]*method\.md", line):
+                found.append(f"{rel}:{i}: cites a method page outside the repository; the method is docs/method.md")
+            for m in re.finditer(r"method\.md,?\s*§\s*(\d+)((?:\s*[-–/,]\s*§?\s*\d+)*)", line):
+                for n in [int(m.group(1)), *map(int, re.findall(r"\d+", m.group(2)))]:
+                    if n not in page.sections:
+                        found.append(f"{rel}:{i}: docs/method.md has no §{n}")
+    assert not found, "\n".join(found)
+
+
 # --- the checkers fail on bad text ---------------------------------------------------------------
 
 _BAD = '''"""Module (docs/method.md §9), constraints c15 and (g3-g9), anchor docs/method.md#nowhere.
