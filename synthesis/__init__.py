@@ -58,7 +58,7 @@ _PUBLIC: dict[str, str] = {
     "verify_artifact": ".artifacts.artifact",
 }
 """Where each public name lives: imported on first use (PEP 562), so importing one module of
-the package (say ``synthesis.routing.cpsat_pool`` at the start of ``flowtest synthesize``)
+the package (say ``synthesis.routing.backends.cpsat_pool`` at the start of ``flowtest synthesize``)
 does not load all of them with NumPy, SciPy and HiGHS."""
 
 

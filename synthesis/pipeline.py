@@ -25,7 +25,7 @@ from .model.strategy import SETTINGS, TestStrategy
 from .problems.diagnose import check_problem_consistency
 from .problems.limits import MAX_GRAPH_EDGES, check_size
 from .problems.problem import CAP_KEYS, Problem, build_graphs, check_caps
-from .routing import cpsat
+from .routing.backends import cpsat
 from .routing.caps import CAP_NOUNS, Fewest, caps_text, check_caps_reachable, disjoint_bypasses, fewest_within
 from .routing.milp import AUTO_CPSAT_MODES, RoutingResult, solve_routing
 from .routing.model import BACKENDS, MilpOptions

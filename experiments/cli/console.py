@@ -22,7 +22,7 @@ from types import FrameType
 
 def _interrupted_while_starting(signum: int, frame: FrameType | None) -> None:
     try:
-        pool = sys.modules.get("synthesis.routing.cpsat_pool")
+        pool = sys.modules.get("synthesis.routing.backends.cpsat_pool")
         if pool is not None:  # a prestarted CP-SAT child goes with us
             pool.kill_idle_now()
         sys.stderr.write("flowtest: interrupted\n")
@@ -40,7 +40,7 @@ def main() -> None:
     if term:
         signal.signal(signal.SIGTERM, _interrupted_while_starting)
     from experiments.cli.prestart import prestart_for
-    from synthesis.routing.cpsat_pool import close_idle_workers
+    from synthesis.routing.backends.cpsat_pool import close_idle_workers
 
     prestart_for(sys.argv[1:])
     from experiments.cli.cli import main as cli_main

@@ -1,6 +1,6 @@
 """Start the CP-SAT child at the very start of ``flowtest synthesize``, before the command's imports.
 
-A fresh CP-SAT child (:mod:`synthesis.routing.cpsat_worker`) takes a fraction of a second
+A fresh CP-SAT child (:mod:`synthesis.routing.backends.cpsat_worker`) takes a fraction of a second
 to start, and importing the command line (NumPy, SciPy, HiGHS, FlowTest) about as long;
 one after the other they are a large share of a short command such as refueling's. So the console script
 (:mod:`experiments.cli.console`) asks :func:`prestart_for` first thing, with the raw
@@ -10,7 +10,7 @@ imports. The guess is cheap to get wrong: an unused child costs a small fraction
 :mod:`experiments.cli.synthesize` ends it as soon as the problem shows that ``auto`` will not
 pick CP-SAT, and in any case when the command ends.
 
-This module imports no more than :mod:`synthesis.routing.cpsat_pool` (the standard library).
+This module imports no more than :mod:`synthesis.routing.backends.cpsat_pool` (the standard library).
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from importlib.util import find_spec
 
-from synthesis.routing.cpsat_pool import prestart
+from synthesis.routing.backends.cpsat_pool import prestart
 
 BACKENDS_WITH_CPSAT = ("auto", "cpsat")
 """The ``--backend`` values under which ``flowtest synthesize`` may solve on CP-SAT."""

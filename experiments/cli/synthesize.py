@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any
 from synthesis import pipeline
 from synthesis.model.errors import ProblemError
 from synthesis.problems.limits import MAX_GRAPH_EDGES
-from synthesis.routing.cpsat_pool import close_idle_workers
+from synthesis.routing.backends.cpsat_pool import close_idle_workers
 from synthesis.routing.solver_control import SolveControl, status_line, stdout_guard
 
 from .arguments import positive_int, positive_seconds, relative_gap
@@ -126,7 +126,7 @@ def run(args: argparse.Namespace) -> int:
     if args.threads is not None and args.threads > cpus:
         raise ProblemError(f"--threads {args.threads} is more than the {cpus} CPUs of this machine")
     if args.backend == "cpsat":  # refused before any work when the extra is missing
-        from synthesis.routing.cpsat import require
+        from synthesis.routing.backends.cpsat import require
 
         require()
     from synthesis.problems.files import MAX_GRID_CELLS

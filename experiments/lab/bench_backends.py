@@ -35,7 +35,7 @@ from synthesis.pipeline import SynthesisOptions, synthesize
 from synthesis.problems.load import load_problem
 from synthesis.problems.problem import Problem
 from synthesis.problems.random_grid import FAMILIES, first_consistent, random_problem
-from synthesis.routing import cpsat
+from synthesis.routing.backends import cpsat
 
 BUILTINS = ("small-reactive", "example1", "beaver-rescue", "motion-primitives", "maze1", "maze2", "patrolling", "refueling", "mars-exploration")
 BACKENDS = ("highs", "cpsat")

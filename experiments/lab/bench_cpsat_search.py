@@ -8,11 +8,11 @@ Usage::
 Builds the routing model :func:`synthesis.routing.model.build_model` gives the problem (with
 the feasibility flows of its required entry nodes, as the first solve of
 :func:`synthesis.routing.milp.solve_routing` has them) and, in one CP-SAT child
-(:class:`synthesis.routing.cpsat.CpSatSession`), asks for a test at the heuristic's flow upper
+(:class:`synthesis.routing.backends.cpsat.CpSatSession`), asks for a test at the heuristic's flow upper
 bound (a feasibility solve, ``reach``) from the heuristic's answer as a hint, once per search
 and random seed, each under ``--work-limit`` deterministic seconds: ``default`` is CP-SAT's
 default search (with its LP relaxation), ``max-flow`` is
-:data:`synthesis.routing.cpsat.MAX_FLOW_SEARCH`. Prints one Markdown row per run: what it
+:data:`synthesis.routing.backends.cpsat.MAX_FLOW_SEARCH`. Prints one Markdown row per run: what it
 found (``found``: a test at the bound; ``infeasible``: proven none; ``unknown``: the budget
 ran out), the deterministic and CPU seconds it took. Deterministic seconds are the
 load-independent figure; CPU seconds on a shared machine are upper bounds.
@@ -29,7 +29,7 @@ from synthesis.graphs.consistency import check_consistency
 from synthesis.pipeline import SynthesisOptions, milp_options
 from synthesis.problems.load import load_problem
 from synthesis.problems.problem import build_graphs
-from synthesis.routing import cpsat
+from synthesis.routing.backends import cpsat
 from synthesis.routing.milp import _guess_solution, _trap_test  # what solve_routing's first solve starts from
 from synthesis.routing.model import build_model
 from synthesis.routing.result import required_entries

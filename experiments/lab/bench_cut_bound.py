@@ -1,4 +1,4 @@
-"""Benchmark: the walls' cut bound of MILP-static (:mod:`synthesis.routing.cut_bound`) on random
+"""Benchmark: the walls' cut bound of MILP-static (:mod:`synthesis.routing.bounds.cut_bound`) on random
 grids, and what it changes in a solve.
 
 Usage::

@@ -1,4 +1,4 @@
-"""Benchmark: the walls' flow bound of MILP-static (:mod:`synthesis.routing.flow_bound`) on
+"""Benchmark: the walls' flow bound of MILP-static (:mod:`synthesis.routing.bounds.flow_bound`) on
 random grids, and what it changes in a solve.
 
 Usage::
@@ -33,7 +33,7 @@ from synthesis.graphs.consistency import check_consistency
 from synthesis.pipeline import SynthesisOptions, milp_options
 from synthesis.problems.problem import Problem, build_graphs
 from synthesis.problems.random_grid import first_consistent, paper_ap
-from synthesis.routing import cpsat
+from synthesis.routing.backends import cpsat
 from synthesis.routing.milp import solve_routing
 from synthesis.routing.model import BACKENDS, build_model
 from synthesis.routing.restrictions import strategy_from_routing

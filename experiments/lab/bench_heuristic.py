@@ -6,7 +6,7 @@ Usage::
     .venv/bin/python -m experiments.lab.bench_heuristic --cells reaction:3:10 reachability:3:20 --instances 20
 
 For each random grid instance of the paper's study (MILP-static: walls tied across
-histories), runs :func:`synthesis.routing.heuristic.guess_routing` on the routing
+histories), runs :func:`synthesis.routing.bounds.heuristic.guess_routing` on the routing
 model's edges twice: the greedy growth alone, and with the place-simple route seed. A
 first test (flow >= 1) from the heuristic means the MILP starts from a checked answer,
 so a time-limited solve can never come back empty. Prints a Markdown table: instances

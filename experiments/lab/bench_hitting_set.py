@@ -1,4 +1,4 @@
-"""Benchmark: phase 2 of MILP-static by the implicit hitting set (synthesis.routing.hitting_set)
+"""Benchmark: phase 2 of MILP-static by the implicit hitting set (synthesis.routing.backends.hitting_set)
 alone, on the random grid study's static instances, in deterministic figures.
 
 Usage::
@@ -27,8 +27,8 @@ from synthesis.graphs.consistency import check_consistency
 from synthesis.pipeline import SynthesisOptions, milp_options
 from synthesis.problems.problem import build_graphs
 from synthesis.problems.random_grid import first_consistent, random_problem
-from synthesis.routing import hitting_set
-from synthesis.routing.cover_rows import CoverSeparator
+from synthesis.routing.backends import hitting_set
+from synthesis.routing.backends.separator import CoverSeparator
 from synthesis.routing.model import build_model
 
 

@@ -30,7 +30,7 @@ from synthesis.model.errors import InconsistentProblem
 from synthesis.pipeline import SynthesisOptions, synthesize
 from synthesis.problems.builtins import patrolling
 from synthesis.problems.problem import TIE_PLACES, Problem
-from synthesis.routing import cpsat
+from synthesis.routing.backends import cpsat
 
 
 def variant(tie: str) -> Problem:

@@ -28,7 +28,7 @@ from synthesis.pipeline import SynthesisOptions, milp_options
 from synthesis.problems.load import load_problem
 from synthesis.problems.problem import Problem, build_graphs
 from synthesis.problems.random_grid import first_consistent, paper_ap
-from synthesis.routing import cpsat
+from synthesis.routing.backends import cpsat
 from synthesis.routing.milp import _phase1_cpsat, _trap_test  # phase 1 as solve_routing runs it
 from synthesis.routing.model import build_model
 from synthesis.routing.result import required_entries

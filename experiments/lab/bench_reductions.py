@@ -10,7 +10,7 @@ Builds each problem's routing model as :func:`synthesis.pipeline.synthesize` wou
 options of :func:`synthesis.pipeline.milp_options`, the feasibility flows a first round
 starts with) and prints, per built-in and per random grid cell (MILP-static and
 MILP-reactive, the study's seeded instances), the cut groups with a binary and how many
-each rule of :mod:`synthesis.routing.reductions` fixes open, and the seconds the
+each rule of :mod:`synthesis.routing.bounds.reductions` fixes open, and the seconds the
 reductions take. ``--solve NAME ...`` also synthesizes those built-ins with the
 reductions on and off (deterministic budget: one thread, no wall clock) and prints the
 answers and routing solve times, which must agree on flow and cuts.

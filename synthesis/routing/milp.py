@@ -14,7 +14,7 @@ Reductions, none of which changes the optimum of method.md §5:
   transition, c14 pairs, fuel levels) share one binary, weighted by the number of
   edges of G it stands for. A group that touches no constraint c5 is never worth
   cutting (cutting only lowers flow and tightens feasibility) and gets no binary.
-* **Groups fixed open** (:mod:`synthesis.routing.reductions`): cut groups no bypass
+* **Groups fixed open** (:mod:`synthesis.routing.bounds.reductions`): cut groups no bypass
   walk crosses, groups on every route through I, and (MILP-static) dominated groups get
   upper bound 0, so the solver branches on fewer binaries.
 * **Lexicographic objective in two phases.** ``F - (1/|E|) sum d`` with integral F
@@ -60,9 +60,9 @@ from scipy.sparse.csgraph import breadth_first_order, maximum_flow
 from ..graphs.consistency import check_consistency
 from ..graphs.products import Products
 from ..model.errors import InconsistentProblem
-from . import cpsat, hitting_set
-from .cover_rows import CoverSeparator
-from .heuristic import RoutingGuess
+from .backends import cpsat, hitting_set
+from .backends.separator import CoverSeparator
+from .bounds.heuristic import RoutingGuess
 from .model import BACKENDS, CutGroups, MilpOptions, RoutingModel, build_model, model_cut_bound, phase2_integral_columns, static_moves_of
 from .result import RoutingResult as RoutingResult
 from .result import blocked_by as blocked_by
@@ -156,7 +156,7 @@ def check_backend(options: MilpOptions) -> None:
     ValueError
         For an unknown backend name.
     ProblemError
-        For ``"cpsat"`` without OR-Tools installed (:data:`synthesis.routing.cpsat.MISSING`).
+        For ``"cpsat"`` without OR-Tools installed (:data:`synthesis.routing.backends.cpsat.MISSING`).
     """
     if options.backend not in BACKENDS:
         raise ValueError(f"unknown routing backend {options.backend!r}; expected one of {', '.join(BACKENDS)}")
@@ -337,7 +337,7 @@ def _phase1(
     cost[rm.cols.flow[rm.out_src]] = 1.0
     h.changeColsCost(rm.n_col, np.arange(rm.n_col, dtype=np.int32), cost)
     if rm.flow_bound is not None:
-        # MILP-static's walls' bound (synthesis.routing.flow_bound), below the LP's: as the
+        # MILP-static's walls' bound (synthesis.routing.bounds.flow_bound), below the LP's: as the
         # row F <= bound, HiGHS stops as soon as a test attains it (valid for phase 2 too)
         out = rm.cols.flow[rm.out_src].astype(np.int32)
         h.addRow(-highspy.kHighsInf, rm.flow_bound + 0.5, out.size, out, np.ones(out.size))
@@ -390,7 +390,7 @@ def _solve_once_cpsat(
     graph_seconds: float,
     by_auto: bool = False,
 ) -> RoutingResult:
-    """:func:`_solve_once` on CP-SAT (:mod:`synthesis.routing.cpsat`): the same model and
+    """:func:`_solve_once` on CP-SAT (:mod:`synthesis.routing.backends.cpsat`): the same model and
     phases, in a child process that holds the model between them; chosen ``by_auto``, phase 2
     of MILP-static with few free groups tries the hitting set first (:func:`_hitting_set`)."""
     note = options.progress or (lambda msg: None)
@@ -433,7 +433,7 @@ def _phase1_cpsat(
     """:func:`_phase1` on CP-SAT: the heuristic's answer (or a checked candidate of the walls'
     cut bound) proves the maximum flow when it attains the upper bound; else CP-SAT maximises the flow from it (as a hint) with its
     default search, whose LP bound proves small cases at once, for at most
-    :data:`~synthesis.routing.cpsat.PROOF_WORK` deterministic seconds. If that does not
+    :data:`~synthesis.routing.backends.cpsat.PROOF_WORK` deterministic seconds. If that does not
     prove it, phase 1 asks level by level, from the flow above the best test known, whether
     a test of that flow exists (:func:`_reach_level`): found, the best test and the level
     rise; proven impossible, the best test is the maximum (the row ``F <= level - 1`` is
@@ -512,9 +512,9 @@ def _reach_level(
     not (random 5x5 reaction grids' flow 2 in 1-30 deterministic seconds, and level 1 of
     the grids without a test, docs/benchmarks.md), and it finds tests there too. At the top
     (``level == cap``: a test there is the maximum),
-    :data:`~synthesis.routing.cpsat.MAX_FLOW_SEARCH` (no LP, quick restarts, from ``best`` as a
+    :data:`~synthesis.routing.backends.cpsat.MAX_FLOW_SEARCH` (no LP, quick restarts, from ``best`` as a
     hint: finds mars-exploration's flow 2, where the default search does not) gets one turn
-    of :data:`~synthesis.routing.cpsat.LEVEL_WORK` first, then the default search what is
+    of :data:`~synthesis.routing.backends.cpsat.LEVEL_WORK` first, then the default search what is
     left (one run: CP-SAT cannot resume a search, and restarting it with doubling budgets
     cost the 5x5 reaction grids 2-6 times the single run's proof). A test found raises
     ``best`` and the level; a level proven empty makes ``best`` the maximum (``cap = level -
@@ -604,12 +604,12 @@ class _HittingSet:
 def _hitting_set(
     products: Products, rm: RoutingModel, x: np.ndarray, flow: int, options: MilpOptions, clock: Clock, proof: _CutProof | None
 ) -> _HittingSet | None:
-    """Phase 2 of MILP-static by the implicit hitting set (:mod:`synthesis.routing.hitting_set`)
+    """Phase 2 of MILP-static by the implicit hitting set (:mod:`synthesis.routing.backends.hitting_set`)
     where it applies: MILP-static without exclusions, places objective or closed-loop traps, at
-    most :data:`~synthesis.routing.hitting_set.IHS_MAX_GROUPS` free groups, flow at most
-    :data:`~synthesis.routing.hitting_set.IHS_MAX_FLOW`, and no cut bound proof already in hand.
+    most :data:`~synthesis.routing.backends.hitting_set.IHS_MAX_GROUPS` free groups, flow at most
+    :data:`~synthesis.routing.backends.hitting_set.IHS_MAX_FLOW`, and no cut bound proof already in hand.
     It starts from the cheaper of phase 1's answer and the cut bound's candidate, with the cut bound as its lower bound, and has a deterministic budget
-    (:class:`~synthesis.routing.hitting_set.HittingSetBudget`: rounds and the master's
+    (:class:`~synthesis.routing.backends.hitting_set.HittingSetBudget`: rounds and the master's
     deterministic seconds, at most ``options.work_limit``) and the user's wall clock. Its answer
     becomes a whole model solution (:func:`_model_solution`), checked against the model.
     ``None`` where it does not apply."""
@@ -695,7 +695,7 @@ def _solves_at(arrays: cpsat.ModelArrays, rm: RoutingModel, x: np.ndarray, flow:
 
 @dataclass(frozen=True)
 class _CutProof:
-    """MILP-static's walls' cut bound at phase 2's flow level (:mod:`synthesis.routing.cut_bound`:
+    """MILP-static's walls' cut bound at phase 2's flow level (:mod:`synthesis.routing.bounds.cut_bound`:
     every valid cut set with that flow costs at least :attr:`bound`) and its cheapest
     candidate, completed into a model solution and checked (``None``: none passed)."""
 

@@ -23,10 +23,10 @@ from ..graphs.products import Products, reachable
 from ..model.errors import InconsistentProblem
 from ..model.systems import TransitionSystem
 from ..problems.problem import TIE_PLACES
-from .cut_bound import CutBound, static_cut_bound
-from .flow_bound import static_flow_bound
-from .heuristic import RouteSeed, RoutingGuess, guess_routing, open_flow_bound
-from .reductions import Reductions, reduce_groups
+from .bounds.cut_bound import CutBound, static_cut_bound
+from .bounds.flow_bound import static_flow_bound
+from .bounds.heuristic import RouteSeed, RoutingGuess, guess_routing, open_flow_bound
+from .bounds.reductions import Reductions, reduce_groups
 from .solver_control import SolveControl
 
 MODES = ("static", "reactive", "mixed")
@@ -106,15 +106,15 @@ class MilpOptions:
         :func:`solve_routing`), ``"eager"`` (all at once: one round, and every
         incumbent of a time-limited solve is trap-free) or ``"lazy"`` (where they bind).
     reductions
-        Fix open, before any solve, the cut groups that :mod:`synthesis.routing.reductions`
+        Fix open, before any solve, the cut groups that :mod:`synthesis.routing.bounds.reductions`
         proves some optimum leaves open (column upper bound 0); off only to measure them.
     flow_bound
         MILP-static: lower the flow upper bound phase 1 starts from to the walls' bound of
-        :mod:`synthesis.routing.flow_bound` (a proof, so the optimum is kept); off only to
+        :mod:`synthesis.routing.bounds.flow_bound` (a proof, so the optimum is kept); off only to
         measure it.
     cut_bound
         MILP-static: at phase 2's flow level, the walls' cut bound of
-        :mod:`synthesis.routing.cut_bound` (a proof) and its minimum cuts' wall sets, completed
+        :mod:`synthesis.routing.bounds.cut_bound` (a proof) and its minimum cuts' wall sets, completed
         and checked, as a start: an answer that costs the bound is proven optimal at that
         level, with or without a search; off only to measure it.
     integral_phase2
@@ -142,7 +142,7 @@ class MilpOptions:
         :mod:`synthesis.routing.solver_control`).
     backend
         The solver of the model (:data:`BACKENDS`): ``"highs"`` (HiGHS's branch and cut),
-        ``"cpsat"`` (OR-Tools CP-SAT in a child process: :mod:`synthesis.routing.cpsat`),
+        ``"cpsat"`` (OR-Tools CP-SAT in a child process: :mod:`synthesis.routing.backends.cpsat`),
         or ``"auto"`` (the default:
         :func:`synthesis.routing.milp.auto_backend` decides on the built model).
     work_limit
@@ -153,7 +153,7 @@ class MilpOptions:
         Caps on the physical restrictions a test may use (``max_walls``, ``max_doors``,
         ``max_restrictions``; :func:`physical_items` says what one is): rows of the model
         (:func:`_add_caps`), lazy rows of the hitting set's separator
-        (:meth:`~synthesis.routing.cover_rows.CoverSeparator.separate`). With a cap the
+        (:meth:`~synthesis.routing.backends.separator.CoverSeparator.separate`). With a cap the
         dominance reduction is off (its proof swaps one cut group for another, which may
         add a physical restriction).
     one_way_walls
@@ -575,7 +575,7 @@ class RoutingModel:
     rows: Rows
     out_src: np.ndarray  # model edges leaving Src: their flow is F
     reductions: Reductions  # the cut groups fixed open (d = 0) before the solve
-    flow_bound: int | None = None  # MILP-static: the walls' flow bound where below the heuristic's (synthesis.routing.flow_bound)
+    flow_bound: int | None = None  # MILP-static: the walls' flow bound where below the heuristic's (synthesis.routing.bounds.flow_bound)
     caps: CapRows | None = None  # the caps' items and rows (options.caps), None without caps
 
     def guess(self, products: Products, traps: Callable[[np.ndarray], bool] | None = None) -> RoutingGuess:
@@ -635,7 +635,7 @@ def build_model(
     The blocks go in in a fixed order (columns f, d, mu; rows c2, c3, c4-c5, couplings;
     the feasibility flows; MILP-agent's places; the exclusions), so the model, and with it
     HiGHS's answer, is the same on every run. The cut groups that
-    :func:`~synthesis.routing.reductions.reduce_groups` fixes open get upper bound 0."""
+    :func:`~synthesis.routing.bounds.reductions.reduce_groups` fixes open get upper bound 0."""
     g = products.virtual
     groups = cut_groups(products, options)
     me = model_edges(products, groups, keep_node)
@@ -699,7 +699,7 @@ def _add_caps(m: _Model, products: Products, groups: CutGroups, cut: np.ndarray,
 
 
 def model_flow_bound(products: Products, options: MilpOptions, me: ModelEdges) -> int | None:
-    """MILP-static: :func:`~synthesis.routing.flow_bound.static_flow_bound` where it is below
+    """MILP-static: :func:`~synthesis.routing.bounds.flow_bound.static_flow_bound` where it is below
     the maximum flow with every group open (the heuristic's bound), else ``None``; ``None``
     in the other modes too, where cuts depend on the history and the bound's proof does not
     hold (and with ``options.flow_bound`` off). So a model whose bound does not improve is
@@ -713,7 +713,7 @@ def model_flow_bound(products: Products, options: MilpOptions, me: ModelEdges) -
 
 
 def model_cut_bound(products: Products, options: MilpOptions, groups: CutGroups, me: ModelEdges, level: int) -> CutBound | None:
-    """MILP-static: :func:`~synthesis.routing.cut_bound.static_cut_bound` of this model's cut
+    """MILP-static: :func:`~synthesis.routing.bounds.cut_bound.static_cut_bound` of this model's cut
     groups at flow ``level``; ``None`` in the other modes (cuts depend on the history), for
     MILP-agent's places objective (the bound counts cuts only), with ``options.cut_bound`` off,
     or where the bound does not apply."""
@@ -861,7 +861,7 @@ def phase2_integral_columns(rm: RoutingModel, options: MilpOptions) -> np.ndarra
        ``(f', d, mu', x)`` is a solution.
 
     So every cut set phase 2 admits is admitted with ``mu`` and ``f`` integral, at the same
-    cost. (:mod:`synthesis.routing.cpsat` rests on the same facts, with every column
+    cost. (:mod:`synthesis.routing.backends.cpsat` rests on the same facts, with every column
     integral.) Checked on the generators' models (``tests/synthesis/test_integral_phase2.py``: each
     step on solutions with fractional ``mu`` and ``f``) and by the exhaustive comparisons of
     ``tests/synthesis/test_optimality.py`` run with these columns integral.

@@ -1,5 +1,5 @@
 """``flowtest synthesize`` starts its CP-SAT child before its own imports (experiments/cli/prestart.py,
-synthesis/routing/cpsat_pool.py): the child is used when CP-SAT runs, and always reaped (when
+synthesis/routing/backends/cpsat_pool.py): the child is used when CP-SAT runs, and always reaped (when
 HiGHS runs, on an agent problem, on errors, on Ctrl-C); the answer is the one of an in-process
 synthesis, stdout holds the JSON alone, and the early start loads nothing heavy.
 """
@@ -22,7 +22,7 @@ from synthesis import pipeline
 from synthesis.artifacts.summary import summary_of, without_timings
 from synthesis.pipeline import SynthesisOptions, synthesize
 from synthesis.problems.load import load_problem
-from synthesis.routing import cpsat, cpsat_pool
+from synthesis.routing.backends import cpsat, cpsat_pool
 
 FLOWTEST = Path(sys.executable).parent / "flowtest"
 
@@ -207,7 +207,7 @@ def test_the_early_start_loads_nothing_heavy() -> None:
     the two small modules, not NumPy, SciPy, HiGHS or the rest of FlowTest."""
     code = (
         "import sys; import experiments.cli.prestart; "
-        "print(sorted(m for m in ('numpy', 'scipy', 'highspy', 'synthesis.pipeline', 'synthesis.routing.cpsat', 'experiments.cli.cli') "
+        "print(sorted(m for m in ('numpy', 'scipy', 'highspy', 'synthesis.pipeline', 'synthesis.routing.backends.cpsat', 'experiments.cli.cli') "
         "if m in sys.modules))"
     )
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)

@@ -18,7 +18,7 @@ from synthesis.problems.files import load_problem_file
 from synthesis.problems.load import load_problem
 from synthesis.problems.problem import Problem
 from synthesis.problems.random_worlds import world_problem
-from synthesis.routing import cpsat
+from synthesis.routing.backends import cpsat
 from synthesis.routing.milp import RoutingResult
 from synthesis.routing.model import CutGroups, Exclusion, MilpOptions, cut_groups
 from synthesis.routing.restrictions import strategy_from_routing

@@ -30,7 +30,8 @@ from synthesis.model.errors import InconsistentProblem, ProblemError
 from synthesis.pipeline import SynthesisOptions, synthesize
 from synthesis.problems.load import load_problem
 from synthesis.problems.random_grid import first_consistent
-from synthesis.routing import cpsat, milp, model, solver_control
+from synthesis.routing import milp, model, solver_control
+from synthesis.routing.backends import cpsat
 from synthesis.routing.solver_control import SolveControl
 
 FLOWTEST = Path(sys.executable).parent / "flowtest"

@@ -1,4 +1,4 @@
-"""The walls' cut bound of MILP-static (synthesis/routing/cut_bound.py) never exceeds the
+"""The walls' cut bound of MILP-static (synthesis/routing/bounds/cut_bound.py) never exceeds the
 fewest cuts at a flow level, its accepted candidates are valid and optimal, and it proves
 phase 2 of a 10x10 grid without a search.
 
@@ -31,8 +31,8 @@ from synthesis.model.systems import fuel_grid_world
 from synthesis.pipeline import SynthesisOptions, milp_options, synthesize
 from synthesis.problems.problem import Problem, build_graphs, make_problem
 from synthesis.problems.random_grid import first_consistent
-from synthesis.routing import cpsat
-from synthesis.routing.cut_bound import static_cut_bound
+from synthesis.routing.backends import cpsat
+from synthesis.routing.bounds.cut_bound import static_cut_bound
 from synthesis.routing.milp import _cut_proof, _phase2_cost
 from synthesis.routing.model import RoutingModel, build_model
 

@@ -1,4 +1,4 @@
-"""The walls' flow bound of MILP-static (synthesis/routing/flow_bound.py) never cuts off a
+"""The walls' flow bound of MILP-static (synthesis/routing/bounds/flow_bound.py) never cuts off a
 valid wall set, fires where the heuristic's bound is loose, and settles phase 1 on a 10x10 grid.
 
 * on small static grids of the exhaustive-optimality generators (walls both ways, one-way
@@ -31,7 +31,7 @@ from synthesis.model.systems import graph_system, grid_world
 from synthesis.pipeline import SynthesisOptions, milp_options, synthesize
 from synthesis.problems.problem import Problem, build_graphs, make_problem
 from synthesis.problems.random_grid import first_consistent
-from synthesis.routing import flow_bound
+from synthesis.routing.bounds import flow_bound
 from synthesis.routing.model import build_model
 
 

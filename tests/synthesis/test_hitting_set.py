@@ -1,4 +1,4 @@
-"""The implicit hitting set of MILP-static's phase 2 (synthesis.routing.hitting_set) and its use by
+"""The implicit hitting set of MILP-static's phase 2 (synthesis.routing.backends.hitting_set) and its use by
 ``auto`` (synthesis.routing.milp._hitting_set), held to exhaustive enumeration on tiny grids
 (tests/synthesis/test_optimality.py's instances and brute force): at the maximum flow its proven answer
 has the fewest cuts of all wall sets, a level above it is proven empty, and through ``auto``
@@ -18,8 +18,9 @@ from synthesis.graphs.products import Products
 from synthesis.model.errors import InconsistentProblem
 from synthesis.pipeline import SynthesisOptions, milp_options
 from synthesis.problems.problem import Problem, build_graphs
-from synthesis.routing import cpsat, hitting_set, milp
-from synthesis.routing.cover_rows import CoverSeparator
+from synthesis.routing import milp
+from synthesis.routing.backends import cpsat, hitting_set
+from synthesis.routing.backends.separator import CoverSeparator
 from synthesis.routing.model import build_model
 
 pytestmark = pytest.mark.skipif(not cpsat.available(), reason="OR-Tools is not installed (a core dependency, missing here)")

@@ -38,7 +38,7 @@ from synthesis.model.errors import InconsistentProblem
 from synthesis.model.systems import TransitionSystem, graph_system, grid_world
 from synthesis.pipeline import SynthesisOptions, SynthesizedTest, synthesize
 from synthesis.problems.problem import Problem, build_graphs, make_problem
-from synthesis.routing import cpsat
+from synthesis.routing.backends import cpsat
 
 #: The brute force enumerates method.md §5 exactly (entry-node feasibility only).
 METHOD_EXACT = SynthesisOptions(closed_loop=False)

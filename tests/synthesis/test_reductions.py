@@ -1,4 +1,4 @@
-"""The cut-group reductions (synthesis/routing/reductions.py) are what they claim and keep
+"""The cut-group reductions (synthesis/routing/bounds/reductions.py) are what they claim and keep
 the optimum.
 
 * every group a rule fixes open satisfies the rule's definition, checked with networkx on

@@ -1,11 +1,11 @@
 """The routing MILP's primal heuristic and its time budget.
 
-* :func:`synthesis.routing.heuristic.simple_route`: on random grids of the paper's study,
+* :func:`synthesis.routing.bounds.heuristic.simple_route`: on random grids of the paper's study,
   every route it returns starts at ``Src``, follows edges of G, passes I, ends in
   ``Tgt`` and never returns to a cell, and its moves alone leave no ``Src -> Tgt`` path
   outside I; with it, the heuristic finds a first test where the greedy growth alone
   finds none.
-* :func:`synthesis.routing.heuristic.disjoint_routes`: on 10x10 grids with two test cells,
+* :func:`synthesis.routing.bounds.heuristic.disjoint_routes`: on 10x10 grids with two test cells,
   the routes it returns share no cell but where the history changes, each is a route of G,
   and grown from them the heuristic reaches flow 2 (the walls' flow bound) where pairs of
   place-simple routes gave 1; its answer passes the solution checks below.
@@ -26,7 +26,7 @@ from synthesis.graphs.products import Products, reachable
 from synthesis.pipeline import SynthesisOptions, milp_options, synthesize
 from synthesis.problems.problem import Problem, build_graphs
 from synthesis.problems.random_grid import first_consistent
-from synthesis.routing.heuristic import RouteSeed, RoutingGuess, Work, disjoint_routes, guess_routing, simple_route, simple_routes
+from synthesis.routing.bounds.heuristic import RouteSeed, RoutingGuess, Work, disjoint_routes, guess_routing, simple_route, simple_routes
 from synthesis.routing.model import ModelEdges, build_model, cut_groups, model_edges
 from synthesis.routing.solver_control import Clock
 

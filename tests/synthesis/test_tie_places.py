@@ -19,7 +19,7 @@ from synthesis.pipeline import SynthesisOptions, milp_options, synthesize
 from synthesis.problems.builtins import patrolling, refueling
 from synthesis.problems.load import load_problem
 from synthesis.problems.problem import TIE_PLACES, Problem, build_graphs, make_problem
-from synthesis.routing import cpsat
+from synthesis.routing.backends import cpsat
 from synthesis.routing.model import CutGroups, MilpOptions, build_model, cut_groups
 
 

@@ -1,6 +1,6 @@
 """A combinatorial upper bound on the maximum flow of MILP-static (issue 18, 10x10 grids).
 
-The routing heuristic's bound (:func:`synthesis.routing.heuristic.flow_upper_bound`, the
+The routing heuristic's bound (:func:`synthesis.routing.bounds.heuristic.flow_upper_bound`, the
 maximum flow with every group open) ignores that the walls which route every bypass through I
 are walls in I too. On random grids it is 3-4 where no wall set gives more than 2, and proving
 that the flow level above the optimum is empty was the part of a 10x10 MILP-static solve that
@@ -83,7 +83,7 @@ larger ``Y``: its argument uses only L1 and ``Y`` inside ``Z``. Why: on the safe
 (``G !p2``) every state is in ``A`` through the histories where ``p2`` was visited, and the
 bound said nothing; without them the enclosure sees the test cell again (random 10x10 safety
 grids: docs/benchmarks.md, session 11). This variant is the flow bound's only
-(``live=True`` of :func:`entry_choices`); :mod:`synthesis.routing.cut_bound` keeps L0-L3.
+(``live=True`` of :func:`entry_choices`); :mod:`synthesis.routing.bounds.cut_bound` keeps L0-L3.
 
 Only MILP-static (every cut history-independent); with ``Src`` in I there is no entry edge
 to count and no bound.
@@ -96,7 +96,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..graphs.products import Products, coreachable, reachable
+from ...graphs.products import Products, coreachable, reachable
 
 #: States of ``Y`` (heads of entry edges) up to which the bound is computed: it takes
 #: ``2^|Y|`` graph searches. A count, so whether it runs is the same on every machine.
@@ -114,7 +114,7 @@ class EntryChoice:
     every ``A`` with this ``A & Y``, capped at the known bound; ``split``: ``E`` and ``X`` by
     the other states' membership (:class:`Split`). Every valid cut set's ``A``
     has ``R`` inside ``region`` and flow at most ``flow`` for its own ``A & Y``.
-    (:mod:`synthesis.routing.cut_bound` reuses the choices for the cost of the walls.)"""
+    (:mod:`synthesis.routing.bounds.cut_bound` reuses the choices for the cost of the walls.)"""
 
     in_a_y: np.ndarray
     out_y: np.ndarray

@@ -12,7 +12,7 @@ reachability from ``Src`` outside I (the fact the coupling rows of
 ``lo <= a x <= hi`` is ``ceil(lo) <= a x <= floor(hi)``. The exhaustive-optimality tests
 (``tests/synthesis/test_optimality.py``) hold this backend to that claim.
 
-CP-SAT runs in a child process (:mod:`synthesis.routing.cpsat_worker`): OR-Tools bundles
+CP-SAT runs in a child process (:mod:`synthesis.routing.backends.cpsat_worker`): OR-Tools bundles
 its own ``libhighs.so.1``, which cannot share a process with highspy. The model goes over
 as arrays (plain bytes: the child loads no NumPy); the child keeps it between the two phases. Its search is deterministic: one
 worker, a fixed ``random_seed``, and as a budget CP-SAT's deterministic time
@@ -34,8 +34,8 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
+from ..solver_control import POLL, OptionalSolver, SolveControl, SolveStatus
 from .cpsat_pool import WORKER, close_idle_workers, give_back, prestart, take_worker
-from .solver_control import POLL, OptionalSolver, SolveControl, SolveStatus
 
 MISSING = "the cpsat backend needs OR-Tools, which is not installed: pip install 'ortools>=9.15,<9.16' (see docs/install.md)"
 """The one-line error when ``--backend cpsat`` is asked for without the extra."""

@@ -1,7 +1,7 @@
 """The CP-SAT child processes: starting one, keeping one idle for the next solve, ending them.
 
-:mod:`synthesis.routing.cpsat` solves on a child running
-:mod:`synthesis.routing.cpsat_worker` (OR-Tools cannot share a process with highspy). A
+:mod:`synthesis.routing.backends.cpsat` solves on a child running
+:mod:`synthesis.routing.backends.cpsat_worker` (OR-Tools cannot share a process with highspy). A
 child is started before it is needed when that pays: :func:`prestart` lets it load
 OR-Tools while this process does other work, and ``flowtest synthesize`` calls it first
 thing, before its own imports (:mod:`experiments.cli.prestart`). Whoever may have started one
@@ -28,7 +28,7 @@ WORKER = Path(__file__).resolve().with_name("cpsat_worker.py")
 
 
 class Worker:
-    """One child process running :mod:`synthesis.routing.cpsat_worker`, and the two ends
+    """One child process running :mod:`synthesis.routing.backends.cpsat_worker`, and the two ends
     of the pipes to it (:class:`multiprocessing.connection.Connection`)."""
 
     def __init__(self) -> None:

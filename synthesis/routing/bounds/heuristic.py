@@ -34,7 +34,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import maximum_flow, shortest_path
 
-from ..graphs.products import reachable
+from ...graphs.products import reachable
 
 
 @dataclass

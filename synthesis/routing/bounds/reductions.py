@@ -62,7 +62,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order
 
-from ..graphs.products import Products, coreachable, reachable
+from ...graphs.products import Products, coreachable, reachable
 
 #: Static models with more cut groups with a binary than this skip the dominance rule: it
 #: costs four graph searches per group (0.4-3 s on the 10x10 grids' 164-180 walls, measured

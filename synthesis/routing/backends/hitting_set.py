@@ -3,9 +3,9 @@ cut groups, with CP-SAT as the master: what ``auto`` runs first on static models
 groups (:func:`synthesis.routing.milp._phase2_cpsat`).
 
 The master is the 0-1 problem ``min sum_g weight_g d_g`` over the binaries of the groups that
-may be cut (:class:`~synthesis.routing.cover_rows.CoverSeparator`'s columns), with only the rows
+may be cut (:class:`~synthesis.routing.backends.separator.CoverSeparator`'s columns), with only the rows
 found so far. Each round solves it to its proven optimum ``C`` and asks
-:meth:`~synthesis.routing.cover_rows.CoverSeparator.separate` what ``C`` fails at level ``F``:
+:meth:`~synthesis.routing.backends.separator.CoverSeparator.separate` what ``C`` fails at level ``F``:
 
 (a) an open bypass path (``Src -> Tgt`` over the c5 edges, avoiding I) gives "cut one of its
     distinct groups" (several group-disjoint paths per round). Every cut set of MILP-static
@@ -15,7 +15,7 @@ found so far. Each round solves it to its proven optimum ``C`` and asks
     minimum cut under ``K``; at ``F = 1`` the no-good "open one of ``K``"). Max-flow min-cut:
     every cut set with flow at least ``F`` leaves at least ``F`` of those edges open, and a
     group stands for at most ``min(n_g, F)`` of the ``F`` edge-disjoint paths' crossings, so the
-    row is valid (proof in :mod:`synthesis.routing.cover_rows`).
+    row is valid (proof in :mod:`synthesis.routing.backends.separator`).
 
 MILP-static's cut sets of flow ``F`` are exactly those that pass (a) and (b) (no open bypass is
 c4-c5 over binary cuts; c2-c3 with the flow row is a flow of value ``F`` over the open edges), so
@@ -24,7 +24,7 @@ optimum that passes every check is optimal, and so is the incumbent once the low
 its cost. Each round adds rows the master's answer violates, so no answer comes twice and the
 search ends (at most ``2^groups`` rounds; in practice hundreds).
 
-The master lives in one CP-SAT child (:class:`~synthesis.routing.cpsat.CpSatSession`) for the
+The master lives in one CP-SAT child (:class:`~synthesis.routing.backends.cpsat.CpSatSession`) for the
 whole search: rows are added to the model it holds, each round is a fresh CP-SAT search on it
 (CP-SAT cannot resume one). Measured on the 5x5 reaction |AP|=7 static grid seed 13 (40 groups,
 flow 1): HiGHS as the master (the ``cover`` backend's) took 0.37 s per master solve (163 in 60 s),
@@ -42,9 +42,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
+from ..solver_control import SolveControl
 from . import cpsat
-from .cover_rows import CoverSeparator, Row
-from .solver_control import SolveControl
+from .separator import CoverSeparator, Row
 
 KEEP = 64
 """Solutions of each master search (in the order found, the optimum last) whose failures become
@@ -55,7 +55,7 @@ solve. Measured on the 5x5 reaction |AP|=7 static seed 13: 190 rounds instead of
 
 KEPT_PATHS = 4
 """Bypass paths separated per kept solution (the master's optimum gets
-:data:`~synthesis.routing.cover_rows.PATHS_PER_ROUND`): the kept solutions are many, and their
+:data:`~synthesis.routing.backends.separator.PATHS_PER_ROUND`): the kept solutions are many, and their
 separation, not the master, took most of the time on the 5x5 reaction grids."""
 
 

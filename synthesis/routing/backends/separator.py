@@ -1,4 +1,4 @@
-"""The separator of the implicit hitting set (:mod:`synthesis.routing.hitting_set`): which
+"""The separator of the implicit hitting set (:mod:`synthesis.routing.backends.hitting_set`): which
 checks a cut set fails, and the valid row over the cut binaries each failure gives.
 
 A cut set is a ``bool`` per cut group (:class:`~synthesis.routing.model.CutGroups`); the
@@ -27,10 +27,10 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order, dijkstra, maximum_flow
 
-from ..graphs.products import Products
-from .model import CutGroups, MilpOptions, ModelEdges, PhysicalItems, physical_items, static_moves_of
-from .result import blocked_of_edges
-from .traps import trapped_configurations, trapped_entries
+from ...graphs.products import Products
+from ..model import CutGroups, MilpOptions, ModelEdges, PhysicalItems, physical_items, static_moves_of
+from ..result import blocked_of_edges
+from ..traps import trapped_configurations, trapped_entries
 
 #: Group-disjoint bypass paths separated per round.
 PATHS_PER_ROUND = 16

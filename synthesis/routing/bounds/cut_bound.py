@@ -4,11 +4,11 @@ sets of its minimum cuts (issue 18, 10x10 grids).
 Phase 2 of a routing solve (the fewest cuts at the settled flow ``F``) is where the LP bounds
 are weakest (docs/benchmarks.md, "10x10 (issue 18, session 9)": 9.5-20 against tests of
 24-168 cuts). :func:`static_cut_bound` bounds the cost of the walls from the enclosure that
-:mod:`synthesis.routing.flow_bound` proves, in one minimum cut per choice of ``A & Y``, and
+:mod:`synthesis.routing.bounds.flow_bound` proves, in one minimum cut per choice of ``A & Y``, and
 returns the wall sets of those minimum cuts: where one of them, completed into a checked
 routing answer, costs what the bound says, phase 2 is proven without a search.
 
-Terms as in :mod:`synthesis.routing.flow_bound`: a valid cut set ``S`` of MILP-static closes
+Terms as in :mod:`synthesis.routing.bounds.flow_bound`: a valid cut set ``S`` of MILP-static closes
 cut groups (every edge of G over the same move of T shares its group's cut value, c9; a
 group stands for ``weight`` edges of G, and phase 2 minimises ``cost(S)``, the weight of the
 groups ``S`` closes); ``R`` is what ``Src`` reaches outside I over open edges of the whole G,
@@ -20,7 +20,7 @@ Lemmas, for a valid ``S`` whose flow is at least ``F``:
 * (C1) Every move ``s -> s'`` of T with ``s`` in ``A`` and ``s'`` outside ``A | Y`` (and
   ``s != s'``) has its group closed by ``S``: flow_bound's L1 (an open move from a state of
   ``A`` leads into ``A | Y``; it holds for every valid ``S``, whatever its flow).
-* (C2) ``A & Y`` is one of the choices :func:`~synthesis.routing.flow_bound.entry_choices`
+* (C2) ``A & Y`` is one of the choices :func:`~synthesis.routing.bounds.flow_bound.entry_choices`
   ranges over (the start's state is in ``A``; the choices are every subset of the eligible
   states of ``Y`` holding it, the ineligible ones are never in ``A`` by L0), and for that
   choice: ``A`` holds the start's state and the choice's ``A & Y``; ``A`` lies inside the
@@ -48,7 +48,7 @@ Lemmas, for a valid ``S`` whose flow is at least ``F``:
   states outside the region's, C2), so it is at least the minimum such cut.
 
 * (C5) The states next to ``Y``. For one choice, flow_bound's ``E`` and ``X`` depend on the
-  membership in ``A`` of a few more states (:class:`~synthesis.routing.flow_bound.Split`'s
+  membership in ``A`` of a few more states (:class:`~synthesis.routing.bounds.flow_bound.Split`'s
   items: those with a counted entry, exit or edge into ``Tgt``): ``S``'s own ``A`` gives its
   items one membership, under which ``min(E, X) >= F`` (L2, L3 with the over-estimates, as in
   C2), and ``A`` holds the items of that membership and none of the others, so C4 holds with
@@ -92,7 +92,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order, maximum_flow
 
-from ..graphs.products import Products
+from ...graphs.products import Products
 from .flow_bound import Split, entry_choices
 
 #: Largest common factor the fractional capacities (C3) are scaled by; above it they are

@@ -25,7 +25,7 @@ standard output or corrupt a message. The child ignores SIGINT (the parent ends 
 Ctrl-C) and ends itself when its parent dies.
 
 Every column of the routing model is integral here (CP-SAT has integer variables only);
-why that keeps the optimum is said in :mod:`synthesis.routing.cpsat`.
+why that keeps the optimum is said in :mod:`synthesis.routing.backends.cpsat`.
 """
 
 from __future__ import annotations
