@@ -90,6 +90,34 @@ def test_relative_links_resolve(page: Path) -> None:
     assert not broken, f"{page.relative_to(ROOT)}: " + "; ".join(broken)
 
 
+def links_into_benchmarks() -> list[tuple[Path, str]]:
+    """(page, target) for every link of another docs page that points into the benchmark pages."""
+    found = []
+    for page in sorted((ROOT / "docs").rglob("*.md")):
+        if page == INDEX or PAGES_DIR in page.parents:
+            continue
+        for target in LINK.findall(outside_code(page.read_text())):
+            path = target.partition("#")[0]
+            if path and not re.match(r"[a-z]+:", target):
+                dest = (page.parent / path).resolve()
+                if dest == INDEX or PAGES_DIR in dest.parents:
+                    found.append((page, target))
+    return found
+
+
+def test_other_docs_link_to_existing_benchmark_headings() -> None:
+    """The other docs pages' links into the benchmark pages reach a file and a heading."""
+    links = links_into_benchmarks()
+    assert links, "no docs page links into the benchmark pages any more: the pattern is wrong"
+    broken = []
+    for page, target in links:
+        path, _, anchor = target.partition("#")
+        dest = (page.parent / path).resolve()
+        if not dest.exists() or (anchor and anchor not in anchors(dest)):
+            broken.append(f"{page.relative_to(ROOT)}: {target}")
+    assert not broken, f"links into the benchmark pages that do not resolve: {broken}"
+
+
 def module_exists(name: str) -> bool:
     path = ROOT.joinpath(*name.split("."))
     return path.with_suffix(".py").is_file() or (path / "__main__.py").is_file()
