@@ -59,6 +59,19 @@ def _sandbox() -> Path:
 SANDBOX = _sandbox()
 
 
+def _small_reactive_toml() -> str:
+    from synthesis.problems.builtins import SMALL_REACTIVE
+
+    lines = SMALL_REACTIVE.replace('name = "small-reactive"', 'name = "t"', 1).strip().splitlines()
+    return "\n".join(line for line in lines if not line.startswith("description = ")) + "\n"
+
+
+SMALL_REACTIVE_TOML = _small_reactive_toml()
+"""The paper's small-reactive example as a problem file (``name = "t"``, no description):
+the built-in's own text (:data:`synthesis.problems.builtins.SMALL_REACTIVE`), which tests
+edit line by line instead of typing the problem out again."""
+
+
 @pytest.fixture(scope="module")
 def pool_cache(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
     """A private pool cache (never the user's)."""

@@ -10,29 +10,13 @@ import os
 from pathlib import Path
 
 import pytest
+from conftest import SMALL_REACTIVE_TOML
 
 from synthesis.model.errors import ProblemError
 from synthesis.model.specs import MAX_FORMULA_DEPTH, parse_objective
 from synthesis.problems.files import MAX_FILE_BYTES, load_problem_file, problem_from_dict
 
-GRID = '''name = "t"
-[system]
-grid = """
-I1 .  T
-S  .  I2
-"""
-start = "S"
-terminal = ["T"]
-[labels]
-goal = ["T"]
-I1 = ["I1"]
-I2 = ["I2"]
-[objectives]
-system = "F goal"
-test = "F I1 & F I2"
-[environment]
-kind = "reactive"
-'''
+GRID = SMALL_REACTIVE_TOML
 
 GRAPH = '''[system]
 states = ["a", "b", "c"]
