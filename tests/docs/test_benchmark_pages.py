@@ -47,10 +47,12 @@ def slug(heading: str) -> str:
 
 
 def anchors(page: Path) -> set[str]:
-    """Every anchor GitHub gives the headings of ``page`` (a repeated one gets -1, -2, ...)."""
+    """Every anchor of ``page``: GitHub's for its headings (a repeated one gets -1, -2, ...) and
+    the ``<a id="...">`` it sets by hand (the index keeps the old notebook's anchors that way)."""
     seen: dict[str, int] = {}
-    found = set()
-    for line in outside_code(page.read_text()).split("\n"):
+    text = outside_code(page.read_text())
+    found = set(re.findall(r'<a id="([^"]+)"></a>', text))
+    for line in text.split("\n"):
         m = re.match(r"#{1,6} (.+)", line)
         if m:
             base = slug(m.group(1))
@@ -64,6 +66,20 @@ def test_slug_matches_github() -> None:
     assert slug("CP-SAT's phase 1") == "cp-sats-phase-1"
     assert slug("Session 11 (issue 18): MILP-reactive on 5x5 reaction |AP| = 7") == ("session-11-issue-18-milp-reactive-on-5x5-reaction-ap--7")
     assert slug("Fitting `reachability1/5x5`'s train split") == "fitting-reachability15x5s-train-split"
+
+
+def test_index_keeps_the_notebooks_section_anchors() -> None:
+    """Every section of the old notebook (history.md's ## headings, less the history page's own)
+    has its old anchor on docs/benchmarks.md, on a row that links the section in history.md."""
+    index = INDEX.read_text()
+    history = PAGES_DIR / "history.md"
+    own = {"retired-backends-and-scripts"}
+    for line in outside_code(history.read_text()).split("\n"):
+        if line.startswith("## ") and slug(line[3:]) not in own:
+            anchor = slug(line[3:])
+            assert f'<a id="{anchor}"></a>[' in index and f"(benchmarks/history.md#{anchor})" in index, (
+                f"docs/benchmarks.md has no row for the notebook section #{anchor}"
+            )
 
 
 def test_index_lists_every_page() -> None:
@@ -91,9 +107,9 @@ def test_relative_links_resolve(page: Path) -> None:
 
 
 def links_into_benchmarks() -> list[tuple[Path, str]]:
-    """(page, target) for every link of another docs page that points into the benchmark pages."""
+    """(page, target) for every link of the README or another docs page into the benchmark pages."""
     found = []
-    for page in sorted((ROOT / "docs").rglob("*.md")):
+    for page in [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]:
         if page == INDEX or PAGES_DIR in page.parents:
             continue
         for target in LINK.findall(outside_code(page.read_text())):
@@ -106,7 +122,8 @@ def links_into_benchmarks() -> list[tuple[Path, str]]:
 
 
 def test_other_docs_link_to_existing_benchmark_headings() -> None:
-    """The other docs pages' links into the benchmark pages reach a file and a heading."""
+    """The README's and the other docs pages' links into the benchmark pages reach a file and a
+    heading (an old notebook anchor on docs/benchmarks.md reaches its row of the index)."""
     links = links_into_benchmarks()
     assert links, "no docs page links into the benchmark pages any more: the pattern is wrong"
     broken = []
