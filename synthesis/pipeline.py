@@ -28,7 +28,8 @@ from .problems.problem import CAP_KEYS, Problem, build_graphs, check_caps
 from .routing.backends import cpsat
 from .routing.caps import CAP_NOUNS, Fewest, caps_text, check_caps_reachable, disjoint_bypasses, fewest_within
 from .routing.milp import AUTO_CPSAT_MODES, RoutingResult, solve_routing
-from .routing.model import BACKENDS, MilpOptions
+from .routing.model import BACKENDS
+from .routing.options import MilpOptions
 from .routing.restrictions import strategy_from_routing
 from .routing.solver_control import SolveControl
 from .test_agent.loop import AgentSynthesis, counterexample_loop

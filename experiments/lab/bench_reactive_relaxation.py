@@ -42,7 +42,8 @@ from synthesis.pipeline import SynthesisOptions, milp_options
 from synthesis.problems.problem import build_graphs
 from synthesis.problems.random_grid import first_consistent, random_problem
 from synthesis.routing.milp import _phase2_cost, _trap_test
-from synthesis.routing.model import MilpOptions, RoutingModel, build_model
+from synthesis.routing.model import RoutingModel, build_model
+from synthesis.routing.options import MilpOptions
 from synthesis.routing.result import blocked_of_edges, required_entries
 from synthesis.routing.solver_control import quiet_highs
 from synthesis.routing.traps import trapped_entries

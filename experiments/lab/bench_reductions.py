@@ -33,7 +33,8 @@ from synthesis.problems.builtins import BUILTINS
 from synthesis.problems.problem import Problem, build_graphs
 from synthesis.problems.random_grid import PAPER_SPECS, first_consistent, paper_ap
 from synthesis.routing.milp import EAGER_FLOW_LIMIT, solve_routing
-from synthesis.routing.model import MilpOptions, build_model
+from synthesis.routing.model import build_model
+from synthesis.routing.options import MilpOptions
 from synthesis.routing.result import required_entries
 
 RULES = ("never_needed", "never_closed", "dominated")

@@ -22,7 +22,8 @@ from scipy.sparse.csgraph import breadth_first_order
 from ..graphs.consistency import check_consistency
 from ..graphs.products import Products
 from ..model.errors import InconsistentProblem
-from .model import MilpOptions, build_model, cut_groups, model_edges, physical_items
+from .model import build_model, cut_groups, model_edges, physical_items
+from .options import MilpOptions
 from .result import required_entries
 from .solver_control import quiet_highs, run_highs
 

@@ -63,7 +63,8 @@ from ..model.errors import InconsistentProblem
 from .backends import cpsat, hitting_set
 from .backends.separator import CoverSeparator
 from .bounds.heuristic import RoutingGuess
-from .model import BACKENDS, CutGroups, MilpOptions, RoutingModel, build_model, model_cut_bound, phase2_integral_columns, static_moves_of
+from .model import BACKENDS, CutGroups, RoutingModel, build_model, model_cut_bound, phase2_integral_columns, static_moves_of
+from .options import MilpOptions
 from .result import RoutingResult as RoutingResult
 from .result import blocked_by as blocked_by
 from .result import blocked_of_edges, required_entries

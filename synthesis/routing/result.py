@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from ..graphs.products import Products
-from .model import MilpOptions
+from .options import MilpOptions
 
 
 @dataclass(frozen=True)

@@ -30,7 +30,8 @@ from ..model.errors import CheckFailed, InconsistentProblem
 from ..model.strategy import TestStrategy
 from ..model.systems import TransitionSystem
 from ..routing.milp import RoutingResult, solve_routing
-from ..routing.model import Exclusion, MilpOptions, cut_groups
+from ..routing.model import cut_groups
+from ..routing.options import Exclusion, MilpOptions
 from ..routing.restrictions import strategy_from_routing
 from . import gr1
 from .closed_loop import ClosedLoopReport, verify_closed_loop

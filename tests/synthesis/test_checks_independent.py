@@ -27,7 +27,7 @@ from synthesis.problems.builtins import BUILTINS
 from synthesis.problems.problem import build_graphs
 from synthesis.routing import traps
 from synthesis.routing.milp import solve_routing
-from synthesis.routing.model import MilpOptions
+from synthesis.routing.options import MilpOptions
 from synthesis.routing.restrictions import strategy_from_routing
 
 PACKAGE = Path(synthesis.__file__).parent

@@ -325,7 +325,7 @@ def test_auto_backend_edges(mode: str, rows: int, backend: str) -> None:
     from types import SimpleNamespace
 
     from synthesis.routing.milp import auto_backend
-    from synthesis.routing.model import MilpOptions
+    from synthesis.routing.options import MilpOptions
 
     rm: Any = SimpleNamespace(model=SimpleNamespace(n_row=rows))
     assert auto_backend(rm, MilpOptions(mode=mode)) == backend

@@ -27,13 +27,13 @@ import pytest
 from test_optimality import compare_reactive, graph_instance, grid_instance
 
 import synthesis.routing.milp as milp
-import synthesis.routing.model as model
 from synthesis.graphs.consistency import check_consistency
 from synthesis.graphs.products import Products
 from synthesis.model.errors import InconsistentProblem
 from synthesis.pipeline import SynthesisOptions, milp_options
 from synthesis.problems.problem import Problem, build_graphs, make_problem
-from synthesis.routing.model import MilpOptions, RoutingModel, build_model
+from synthesis.routing.model import RoutingModel, build_model
+from synthesis.routing.options import MilpOptions
 from synthesis.routing.result import blocked_of_edges, required_entries
 from synthesis.routing.traps import trapped_entries
 
@@ -199,4 +199,4 @@ def test_where_auto_writes_rows_per_cut(monkeypatch: pytest.MonkeyPatch) -> None
     assert not milp.per_cut_flow_rows(no_flows, highs)
     with pytest.raises(ValueError, match="flow_rows"):
         milp.check_backend(replace(options, flow_rows="rows"))
-    assert model.MilpOptions().flow_rows == "auto"
+    assert MilpOptions().flow_rows == "auto"

@@ -32,7 +32,7 @@ import numpy as np
 import pytest
 
 from synthesis.routing.milp import _ModelView, _run, _set_solution, _violation
-from synthesis.routing.model import MilpOptions
+from synthesis.routing.options import MilpOptions
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 MODEL = DATA / "highs_start_presolve.mps"

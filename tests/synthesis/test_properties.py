@@ -499,7 +499,7 @@ def test_feasibility_flows_eager_or_lazy_give_the_same_optimum(seed: int, kind: 
 
 def test_unknown_feasibility_option_is_rejected() -> None:
     from synthesis.routing.milp import solve_routing
-    from synthesis.routing.model import MilpOptions
+    from synthesis.routing.options import MilpOptions
 
     _, products = build_graphs(grid_problem(40_000, "reactive"))
     with pytest.raises(ValueError, match="feasibility"):

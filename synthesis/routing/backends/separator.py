@@ -28,7 +28,8 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order, dijkstra, maximum_flow
 
 from ...graphs.products import Products
-from ..model import CutGroups, MilpOptions, ModelEdges, PhysicalItems, physical_items, static_moves_of
+from ..model import CutGroups, ModelEdges, PhysicalItems, physical_items, static_moves_of
+from ..options import MilpOptions
 from ..result import blocked_of_edges
 from ..traps import trapped_configurations, trapped_entries
 
