@@ -16,16 +16,32 @@ env takes it::
     ...
     ValueError: max_steps must be a positive integer, not 2.7
 
-An env that supports only part of an option's values (the vector env: no accumulative
-setting, ``rgb_array`` rendering only) refuses the rest after this check, naming the
-option.
+Every env takes its options the same way, through :func:`config_from`: as keyword arguments
+(``gym.make("FlowTest-Maze2-v0", max_steps=50)``) or as one ``config=EnvConfig(...)``, and
+exposes the checked object as ``env.config``. No env restates the option list: the
+constructors take ``config=None, **options`` and :func:`with_option_signature` gives them
+the options' signature for ``help()`` and ``inspect.signature``::
+
+    >>> import inspect
+    >>> from flowtest_env.envs import FlowTestEnv
+    >>> inspect.signature(FlowTestEnv).parameters["max_steps"].default is None
+    True
+
+An env that supports only part of an option's values (the vector env: ``rgb_array``
+rendering only) refuses the rest after this check, naming the option. The two-player
+PettingZoo env (:mod:`flowtest_env.multiagent`) applies the options of the game and the
+picture and the system's rewards, and refuses a value other than the default for the
+options of the single-agent learner it has no use for (:data:`MULTIAGENT_UNUSED`), after
+checking it with the same validator.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import inspect
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -161,7 +177,16 @@ def validate(config: EnvConfig) -> dict[str, Any]:
     }
 
 
-def split_options(options: dict[str, Any]) -> tuple[EnvConfig, dict[str, Any]]:
+MULTIAGENT_UNUSED: tuple[str, ...] = ("memory", "shaping", "shaping_gamma", "numeric_infos")
+"""The options the two-player env has no use for: the learner's memory and reward shaping
+(single-agent wrappers of the system's observation and reward) and ``numeric_infos`` (the
+two-player env's own ``info_kind="numeric"`` does that job for both players)."""
+
+DEFAULTS: dict[str, Any] = {f.name: f.default for f in dataclasses.fields(EnvConfig)}
+"""Each option's default value."""
+
+
+def split_options(options: Mapping[str, Any]) -> tuple[EnvConfig, dict[str, Any]]:
     """``(EnvConfig of the options it names, the other options)``: how an env with extra
     arguments of its own (a pool, ``num_envs``) takes the shared ones."""
     mine = {k: v for k, v in options.items() if k in FIELDS}
@@ -169,4 +194,80 @@ def split_options(options: dict[str, Any]) -> tuple[EnvConfig, dict[str, Any]]:
     return EnvConfig(**mine), rest
 
 
-__all__ = ["EnvConfig", "FIELDS", "MEMORY_KINDS", "RENDER_MODES", "SETTINGS", "VIEWS", "split_options", "validate"]
+def config_from(who: str, config: EnvConfig | None, options: Mapping[str, Any], defaults: Mapping[str, Any] | None = None) -> EnvConfig:
+    """The options of the env ``who``, given as ``config=`` or as keyword arguments (not both).
+
+    ``defaults`` are the env's own defaults where they differ from :class:`EnvConfig`'s
+    (the two-player env shows the engineer's view); they apply to keyword arguments only,
+    a ``config`` is taken as it is.
+
+    Raises
+    ------
+    TypeError
+        On a keyword argument that is no option, on options given both ways, or on a
+        ``config`` that is not an :class:`EnvConfig`.
+    ValueError
+        On an option's value (:func:`validate`).
+
+    Example::
+
+        >>> config_from("FlowTestEnv", None, {"max_steps": 9}).max_steps
+        9
+        >>> config_from("raw_env", None, {}, defaults={"view": "engineer"}).view
+        'engineer'
+    """
+    if config is not None:
+        if options:
+            raise TypeError(f"{who}: pass the env options either as config= or as keyword arguments, not both")
+        if not isinstance(config, EnvConfig):
+            raise TypeError(f"{who}: config must be an EnvConfig, not {type(config).__name__}")
+        return config
+    unknown = sorted(k for k in options if k not in FIELDS)
+    if unknown:
+        raise TypeError(f"{who} got unexpected keyword arguments: {', '.join(unknown)}")
+    return EnvConfig(**{**(defaults or {}), **options})
+
+
+def refuse_unused(who: str, config: EnvConfig, unused: tuple[str, ...], why: str) -> None:
+    """Refuse a value other than the default for the options ``who`` has no use for (the
+    value itself has passed :func:`validate` already).
+
+    Raises
+    ------
+    ValueError
+        Naming the first such option and ``why``.
+    """
+    for name in unused:
+        if getattr(config, name) != DEFAULTS[name]:
+            raise ValueError(f"{who} does not take {name}={getattr(config, name)!r} ({why}); leave it at its default {DEFAULTS[name]!r}")
+
+
+C = TypeVar("C", bound=type)
+
+
+def with_option_signature(exclude: tuple[str, ...] = (), **defaults: Any) -> Callable[[C], C]:
+    """A class decorator: the class's ``__init__(..., config=None, **options)`` shows the
+    options of :class:`EnvConfig` (less ``exclude``, with the env's own ``defaults``) as
+    keyword-only parameters in ``help()`` and :func:`inspect.signature`, so the option list
+    is written once, here, and still read at each env."""
+
+    def decorate(cls: C) -> C:
+        init = cls.__init__  # type: ignore[misc]
+        sig = inspect.signature(init)
+        params = [p for p in sig.parameters.values() if p.kind is not inspect.Parameter.VAR_KEYWORD]
+        taken = {p.name for p in params}
+        hints = {f.name: f.type for f in dataclasses.fields(EnvConfig)}
+        params += [
+            inspect.Parameter(name, inspect.Parameter.KEYWORD_ONLY, default=defaults.get(name, DEFAULTS[name]), annotation=hints[name])
+            for name in FIELDS if name not in exclude and name not in taken
+        ]
+        init.__signature__ = sig.replace(parameters=params)
+        return cls
+
+    return decorate
+
+
+__all__ = [
+    "DEFAULTS", "EnvConfig", "FIELDS", "MEMORY_KINDS", "MULTIAGENT_UNUSED", "RENDER_MODES", "SETTINGS", "VIEWS", "config_from",
+    "refuse_unused", "split_options", "validate", "with_option_signature",
+]

@@ -24,7 +24,7 @@ from synthesis.problems.random_grid import FAMILIES
 from synthesis.problems.random_worlds import POOL_KINDS, WORLDS
 
 from .compiled import OUTCOMES
-from .config import EnvConfig
+from .config import EnvConfig, config_from, with_option_signature
 from .draws import draw_test
 from .encoding import Encoder, ObservationLayout, make_encoder
 from .game import GRID_ACTIONS, MET, VIOLATED, GameError, RunState, TestGame
@@ -86,6 +86,7 @@ def check_human_rendering() -> None:
         ) from e
 
 
+@with_option_signature()
 class FlowTestEnv(gym.Env[np.ndarray, np.int64]):
     """## Description
 
@@ -156,7 +157,8 @@ class FlowTestEnv(gym.Env[np.ndarray, np.int64]):
     discount ``shaping_gamma`` (as :class:`~flowtest_env.wrappers.DistanceShaping`).
     ``numeric_infos``: ``True`` for numbers-only infos (the state index, the outcome code
     0/1/2), which libraries that turn infos into tensors (TorchRL) need. All options are
-    one :class:`~flowtest_env.config.EnvConfig` (``env.config``).
+    one :class:`~flowtest_env.config.EnvConfig` (``env.config``), given as keyword
+    arguments or as ``config=EnvConfig(...)``.
 
     ## Registered Configurations
 
@@ -167,34 +169,10 @@ class FlowTestEnv(gym.Env[np.ndarray, np.int64]):
 
     metadata: dict[str, Any] = {"render_modes": render_modes(), "render_fps": 4}
 
-    def __init__(
-        self,
-        test: TestLike = "maze2",
-        setting: str | None = None,
-        max_steps: int | None = None,
-        obs_kind: str = "flat",
-        pad_to: int = 8,
-        render_mode: str | None = None,
-        view: str = "system",
-        tile_size: int = 32,
-        step_cost: float = 0.01,
-        restricted_penalty: float = 0.05,
-        goal_reward: float = 1.0,
-        violation_penalty: float = 1.0,
-        memory: str = "none",
-        shaping: float = 0.0,
-        shaping_gamma: float = 0.99,
-        problem: TestLike | None = None,
-        numeric_infos: bool = False,
-    ) -> None:
+    def __init__(self, test: TestLike = "maze2", *, problem: TestLike | None = None, config: EnvConfig | None = None, **options: Any) -> None:
         if problem is not None:  # the older name of `test`
             test = problem
-        config = EnvConfig(
-            setting=setting, max_steps=max_steps, obs_kind=obs_kind, pad_to=pad_to, render_mode=render_mode, view=view,
-            tile_size=tile_size, step_cost=step_cost, restricted_penalty=restricted_penalty, goal_reward=goal_reward,
-            violation_penalty=violation_penalty, memory=memory, shaping=shaping, shaping_gamma=shaping_gamma,
-            numeric_infos=numeric_infos,
-        )
+        config = config_from(type(self).__name__, config, options)
         game = game_for(test, config.setting)
         self._configure([game], config.with_max_steps(default_max_steps(game)))
         self.problem = game.artifact.name
@@ -730,6 +708,7 @@ def random_grid_pool(
     return positive_int("size", size), family, positive_int("n", n), seeds, kind, world
 
 
+@with_option_signature()
 class RandomGridEnv(FlowTestEnv):
     """## Description
 
@@ -786,32 +765,15 @@ class RandomGridEnv(FlowTestEnv):
         n: int | None = None,
         seeds: list[int] | tuple[int, ...] = tuple(range(8)),
         kind: str = "reactive",
-        setting: str | None = None,
-        max_steps: int | None = None,
-        obs_kind: str = "flat",
-        pad_to: int = 8,
+        *,
         pool: str | None = None,
         split: str = "train",
         count: int = 8,
         world: str = "empty",
-        render_mode: str | None = None,
-        view: str = "system",
-        tile_size: int = 32,
-        step_cost: float = 0.01,
-        restricted_penalty: float = 0.05,
-        goal_reward: float = 1.0,
-        violation_penalty: float = 1.0,
-        memory: str = "none",
-        shaping: float = 0.0,
-        shaping_gamma: float = 0.99,
-        numeric_infos: bool = False,
+        config: EnvConfig | None = None,
+        **options: Any,
     ) -> None:
-        config = EnvConfig(
-            setting=setting, max_steps=max_steps, obs_kind=obs_kind, pad_to=pad_to, render_mode=render_mode, view=view,
-            tile_size=tile_size, step_cost=step_cost, restricted_penalty=restricted_penalty, goal_reward=goal_reward,
-            violation_penalty=violation_penalty, memory=memory, shaping=shaping, shaping_gamma=shaping_gamma,
-            numeric_infos=numeric_infos,
-        )
+        config = config_from(type(self).__name__, config, options)
         size, family, n, seeds, kind, world = random_grid_pool(size, family, n, seeds, kind, pool, split, count, world)
         tests = random_pool(size, family, n, seeds, kind, world=world)
         games = [TestGame(a, config.setting) for a in tests]

@@ -56,7 +56,8 @@ function of the tester's observation (:class:`SynthesizedTester`).
 
 ## Rewards
 
-``system_0``: ``-step_cost`` per step, +1 when its objective is met, -1 when violated.
+``system_0``: ``-step_cost`` per step, ``+goal_reward`` (1) when its objective is met,
+``-violation_penalty`` (1) when violated (the options of the single-agent env).
 ``tester_0``: at the end of a run that met the system objective, +1 if the test
 objective was realized, -1 if not.
 
@@ -100,7 +101,7 @@ from gymnasium import spaces
 from pettingzoo import AECEnv, ParallelEnv
 from pettingzoo.utils import wrappers
 
-from .config import EnvConfig
+from .config import MULTIAGENT_UNUSED, EnvConfig, config_from, refuse_unused, with_option_signature
 from .encoding import make_encoder
 from .envs import default_max_steps
 from .game import MET, OPEN, VIOLATED, RunState, TestGame
@@ -113,6 +114,9 @@ INFO_KINDS = ("full", "numeric")
 """``info_kind`` values: the single-agent env's infos, or numbers only (see the module docstring)."""
 OUTCOME_CODES: dict[str, int] = {OPEN: 0, MET: 1, VIOLATED: 2}
 """``system_objective`` in numeric infos: 0 open, 1 met, 2 violated."""
+MULTIAGENT_DEFAULTS: dict[str, Any] = {"view": "engineer"}
+"""Where the two-player env's option defaults differ from :class:`~flowtest_env.config.EnvConfig`'s:
+its pictures show the hidden test cells."""
 NUMERIC_INFO_KEYS = ("system_state", "system_objective", "test_objective_realized", "restrictions", "blocked_attempts", "steps")
 """The keys of every agent's numeric infos, at every reset and step."""
 
@@ -133,6 +137,7 @@ def parallel_env(**kwargs: Any) -> ParallelFlowTestEnv:
 
 
 # pettingzoo ships no type information (AECEnv, ParallelEnv are Any to mypy)
+@with_option_signature(exclude=MULTIAGENT_UNUSED, **MULTIAGENT_DEFAULTS)
 class raw_env(AECEnv):  # type: ignore[misc]  # noqa: N801 - PettingZoo's module shape
     """The AEC tester-vs-system environment (see the module docstring).
 
@@ -142,17 +147,22 @@ class raw_env(AECEnv):  # type: ignore[misc]  # noqa: N801 - PettingZoo's module
         The test: a built-in name (``maze2``, ``small-reactive``, ...), a problem file,
         an artifact file, or a ``Problem``/``SynthesizedTest``/``TestArtifact``
         (:func:`flowtest_env.sources.load_test`); ``problem`` is an older name for it.
-    setting
-        Obstacle display setting (``"instantaneous"``/``"accumulative"``).
     max_cycles
-        Rounds before truncation (default: the single-agent env's ``max_steps``).
-    obs_kind, pad_to
-        The system's observation encoding (``"flat"``, ``"grid"`` or ``"padded"`` with
-        grid side ``pad_to``).
-    render_mode
-        ``"rgb_array"`` or ``"ansi"``.
-    view
-        ``"engineer"`` (default: shows the hidden test cells) or ``"system"``.
+        Rounds before truncation (PettingZoo's name of ``max_steps``; default: the
+        single-agent env's ``max_steps``).
+    config, options
+        The env options, one :class:`~flowtest_env.config.EnvConfig` (``env.config``) as
+        ``config=`` or its fields as keyword arguments, checked by the same validator as
+        the single-agent and vector envs' (:func:`~flowtest_env.config.config_from`).
+        Those that apply here: ``setting`` (which restrictions are shown), ``max_steps``,
+        ``obs_kind`` and ``pad_to`` (the system's observation), ``render_mode``
+        (``"rgb_array"`` or ``"ansi"``), ``view`` (default ``"engineer"``: the picture
+        shows the hidden test cells), ``tile_size``, and the system's rewards
+        ``step_cost``, ``restricted_penalty`` (also the tester's, for a refused action),
+        ``goal_reward`` and ``violation_penalty``. The learner's ``memory``, ``shaping``,
+        ``shaping_gamma`` and ``numeric_infos`` do not apply
+        (:data:`~flowtest_env.config.MULTIAGENT_UNUSED`; ``info_kind`` is this env's own):
+        a value other than their default is refused with a ``ValueError``.
     obs_key, mask_key
         The names of the observation's two Dict entries (``"observation"``,
         ``"action_mask"``; RLlib's masking modules read ``"observations"``).
@@ -183,27 +193,26 @@ class raw_env(AECEnv):  # type: ignore[misc]  # noqa: N801 - PettingZoo's module
     def __init__(
         self,
         test: TestLike = "maze2",
-        setting: str | None = None,
+        *,
         max_cycles: int | None = None,
-        obs_kind: str = "flat",
-        render_mode: str | None = None,
-        view: str = "engineer",
-        tile_size: int = 32,
-        step_cost: float = 0.01,
-        restricted_penalty: float = 0.05,
         problem: TestLike | None = None,
         obs_key: str = "observation",
         mask_key: str = "action_mask",
         info_kind: str = "full",
         same_spaces: bool = False,
-        pad_to: int = 8,
+        config: EnvConfig | None = None,
+        **options: Any,
     ) -> None:
         super().__init__()
         # the options shared with the single-agent and vector envs, checked by their one validator
-        config = EnvConfig(setting=setting, obs_kind=obs_kind, pad_to=pad_to, render_mode=render_mode, view=view,
-                           tile_size=tile_size, step_cost=step_cost, restricted_penalty=restricted_penalty)
+        config = config_from("raw_env", config, options, defaults=MULTIAGENT_DEFAULTS)
+        refuse_unused("the two-player env", config, MULTIAGENT_UNUSED, "it applies to the single-agent and vector envs")
         one_of("render_mode", config.render_mode, (None, *self.metadata["render_modes"]))
-        self.config = config
+        if max_cycles is not None:  # PettingZoo's name of the step budget
+            max_cycles = positive_int("max_cycles", max_cycles)
+            if config.max_steps is not None and config.max_steps != max_cycles:
+                raise ValueError(f"max_cycles={max_cycles!r} and max_steps={config.max_steps!r}: max_cycles is the two-player name of max_steps, give one")
+            config = config.replace(max_steps=max_cycles)
         one_of("info_kind", info_kind, INFO_KINDS)
         for name, key in (("obs_key", obs_key), ("mask_key", mask_key)):
             if not isinstance(key, str) or not key:
@@ -215,15 +224,20 @@ class raw_env(AECEnv):  # type: ignore[misc]  # noqa: N801 - PettingZoo's module
         self.obs_key, self.mask_key, self.info_kind, self.same_spaces = obs_key, mask_key, info_kind, same_spaces
         if problem is not None:  # the older name of `test`
             test = problem
-        game = game_for(test, setting, external_tester=True)
+        game = game_for(test, config.setting, external_tester=True)
         self.game: TestGame = game
         self.problem = game.artifact.name
-        self.max_cycles = positive_int("max_cycles", max_cycles if max_cycles is not None else default_max_steps(game))
+        config = config.with_max_steps(default_max_steps(game))
+        assert config.max_steps is not None
+        self.config = config
+        self.max_cycles = config.max_steps
         self.render_mode = config.render_mode
         self.view = config.view
         self.tile_size = config.tile_size
         self.step_cost = config.step_cost
         self.restricted_penalty = config.restricted_penalty
+        self.goal_reward = config.goal_reward
+        self.violation_penalty = config.violation_penalty
         self.encoder = make_encoder(game, config.obs_kind, config.pad_to)
         system_first = game.has_agent and not game.agent_first
         self.possible_agents = [SYSTEM, TESTER] if system_first else [TESTER, SYSTEM]
@@ -401,10 +415,10 @@ class raw_env(AECEnv):  # type: ignore[misc]  # noqa: N801 - PettingZoo's module
             self.rewards[SYSTEM] -= self.step_cost
             if run.done:
                 if run.outcome == MET:
-                    self.rewards[SYSTEM] += 1.0
+                    self.rewards[SYSTEM] += self.goal_reward
                     self.rewards[TESTER] += 1.0 if g.test_accepting[run.history] else -1.0
                 elif run.outcome == VIOLATED:
-                    self.rewards[SYSTEM] -= 1.0
+                    self.rewards[SYSTEM] -= self.violation_penalty
                 self.terminations = {x: True for x in self.agents}
         if agent == self.possible_agents[-1]:
             self._rounds += 1
@@ -441,6 +455,7 @@ class ParallelFlowTestEnv(ParallelEnv):  # type: ignore[misc]  # pettingzoo ship
 
     def __init__(self, **kwargs: Any) -> None:
         self.aec_env = raw_env(**kwargs)
+        self.config: EnvConfig = self.aec_env.config
         self.possible_agents = list(self.aec_env.possible_agents)
         self.render_mode = self.aec_env.render_mode
         self.agents: list[str] = []

@@ -67,7 +67,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from .compiled import OUTCOMES, CompiledPool, compile_pool, potentials
-from .config import EnvConfig, split_options
+from .config import EnvConfig, config_from, with_option_signature
 from .draws import draw_tests, key_of_seed
 from .encoding import Encoder, ObservationLayout, Segment, make_encoder
 from .envs import default_max_steps, random_grid_pool
@@ -79,6 +79,7 @@ from .validation import one_of, positive_int
 from .wrappers import DistancePotential, shared_position_slice
 
 
+@with_option_signature()
 class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
     """A batch of FlowTest runs over a pool of tests (see the module docstring).
 
@@ -122,7 +123,7 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         num_envs = positive_int("num_envs", num_envs)
         one_of("assignment", assignment, ("random", "fixed"))
         self.autoreset_mode = autoreset_mode_of(autoreset_mode)
-        config = _config_of(type(self).__name__, config, options)
+        config = config_from(type(self).__name__, config, options)
         one_of("render_mode", config.render_mode, (None, *self.metadata["render_modes"]))
         self.games: list[TestGame] = pool_games(games, config.setting)
         settings = {g.setting for g in self.games}
@@ -496,6 +497,7 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         return tuple(frames)
 
 
+@with_option_signature()
 class FlowTestVectorEnv(PoolVectorEnv):
     """The vector entry point of ``FlowTest-v0`` and ``FlowTest-<Name>-v0``: ``num_envs``
     runs of one test (``test``: anything :func:`flowtest_env.sources.load_test` takes;
@@ -523,13 +525,14 @@ class FlowTestVectorEnv(PoolVectorEnv):
     ) -> None:
         if problem is not None:
             test = problem
-        config = _config_of(type(self).__name__, config, options)
+        config = config_from(type(self).__name__, config, options)
         positive_int("num_envs", num_envs)
         game = game_for(test, config.setting)
         super().__init__(num_envs, [game], autoreset_mode=autoreset_mode, config=config.with_max_steps(default_max_steps(game)))
         self.problem = game.artifact.name
 
 
+@with_option_signature()
 class RandomGridVectorEnv(PoolVectorEnv):
     """The vector entry point of ``FlowTest-RandomGrid-v0``: the arguments of
     :class:`~flowtest_env.envs.RandomGridEnv` (checked by the same functions), plus
@@ -552,33 +555,13 @@ class RandomGridVectorEnv(PoolVectorEnv):
         config: EnvConfig | None = None,
         **options: Any,
     ) -> None:
-        config = _config_of(type(self).__name__, config, options)
+        config = config_from(type(self).__name__, config, options)
         positive_int("num_envs", num_envs)
         size, family, n, seeds, kind, world = random_grid_pool(size, family, n, seeds, kind, pool, split, count, world)
         tests = random_pool(size, family, n, seeds, kind, world=world)
         games = [TestGame(a, config.setting) for a in tests]
         super().__init__(num_envs, games, autoreset_mode=autoreset_mode, config=config.with_max_steps(4 * size * size))
         self.problem = f"random-{size}x{size}-{family}{n}" + ("" if world == "empty" else f"-{world}")
-
-
-def _config_of(who: str, config: EnvConfig | None, options: dict[str, Any]) -> EnvConfig:
-    """The env options given as ``config=`` or as keyword arguments (not both).
-
-    Raises
-    ------
-    TypeError
-        On a keyword argument that is no option, or options given both ways.
-    """
-    if config is not None:
-        if options:
-            raise TypeError(f"{who}: pass the env options either as config= or as keyword arguments, not both")
-        if not isinstance(config, EnvConfig):
-            raise TypeError(f"{who}: config must be an EnvConfig, not {type(config).__name__}")
-        return config
-    config, rest = split_options(options)
-    if rest:
-        raise TypeError(f"{who} got unexpected keyword arguments: {', '.join(sorted(rest))}")
-    return config
 
 
 def shaped_rewards(pool: CompiledPool, reward: np.ndarray, phi: np.ndarray, gamma: float) -> np.ndarray:
