@@ -186,14 +186,6 @@ DEFAULTS: dict[str, Any] = {f.name: f.default for f in dataclasses.fields(EnvCon
 """Each option's default value."""
 
 
-def split_options(options: Mapping[str, Any]) -> tuple[EnvConfig, dict[str, Any]]:
-    """``(EnvConfig of the options it names, the other options)``: how an env with extra
-    arguments of its own (a pool, ``num_envs``) takes the shared ones."""
-    mine = {k: v for k, v in options.items() if k in FIELDS}
-    rest = {k: v for k, v in options.items() if k not in FIELDS}
-    return EnvConfig(**mine), rest
-
-
 def config_from(who: str, config: EnvConfig | None, options: Mapping[str, Any], defaults: Mapping[str, Any] | None = None) -> EnvConfig:
     """The options of the env ``who``, given as ``config=`` or as keyword arguments (not both).
 
@@ -269,5 +261,5 @@ def with_option_signature(exclude: tuple[str, ...] = (), **defaults: Any) -> Cal
 
 __all__ = [
     "DEFAULTS", "EnvConfig", "FIELDS", "MEMORY_KINDS", "MULTIAGENT_UNUSED", "RENDER_MODES", "SETTINGS", "VIEWS", "config_from",
-    "refuse_unused", "split_options", "validate", "with_option_signature",
+    "refuse_unused", "validate", "with_option_signature",
 ]
