@@ -169,6 +169,7 @@ class _ArtifactProblem:
     system_objective: _Objective
     test_objective: _Objective
     agent: Any = None
+    static_moves: np.ndarray | None = None  # a mixed test's static area (TestArtifact.static_area)
 
 
 @dataclass(frozen=True)
@@ -211,11 +212,11 @@ class _ArtifactTest:
 def artifact_view(art: Any) -> Any:
     """A :class:`~synthesis.artifacts.artifact.TestArtifact` as the synthesized test that
     :func:`plot_test` and :func:`panels_of` read (problem, routing summary, restrictions,
-    history meanings, test agent)."""
+    history meanings, test agent, a mixed test's static area)."""
     summary = art.summary or {}
     problem = _ArtifactProblem(
         str(art.name), str(art.kind), art.system, _Objective(str(art.objectives.get("system", ""))),
-        _Objective(str(art.objectives.get("test", ""))),
+        _Objective(str(art.objectives.get("test", ""))), static_moves=getattr(art, "static_area", None),
     )
     routing = _ArtifactRouting(int(summary.get("flow", 0)), np.zeros(int(summary.get("n_cuts", 0))),
                                str(summary.get("status", "unknown")))

@@ -313,8 +313,9 @@ CAPTIONS: dict[str, str] = {
     "static": "Static test: the black walls stand for the whole run.",
     "reactive": "Reactive test: one panel per history (what the run has seen so far) that closes doors; a red bar is "
                 "a door closed in that history (one way: the arrow's move is refused).",
-    "mixed": "Mixed test: black walls stand for the whole run; one panel per history that closes doors, a red bar "
-             "is a door closed in that history (one way: the arrow's move is refused).",
+    "mixed": "Mixed test: black walls stand for the whole run, and only in the static area the problem gives them "
+             "(its borders dashed); one panel per history that closes doors, a red bar is a door closed in that "
+             "history (one way: the arrow's move is refused).",
     "agent": "Agent test: the test agent moves in the blue cells and stands in the way; a red bar is a move it "
              "blocks in that history (one panel per history).",
 }

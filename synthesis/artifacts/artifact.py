@@ -287,6 +287,19 @@ class TestArtifact:
     """Loaded from a file whose digest was missing or wrong (checked in full, see the module docstring)."""
     _letter: np.ndarray = field(init=False, repr=False, compare=False)  # letter index of each state
 
+    @property
+    def static_area(self) -> np.ndarray | None:
+        """A mixed test's static area as the problem typed it in (``bool`` per move: the moves
+        where a wall may stand, whether or not one does), from ``extras["static_moves"]``;
+        ``None`` for other kinds and for files written before FlowTest carried it. Running
+        the test needs none of it: the pictures draw it."""
+        area = self.extras.get("static_moves")
+        if area is None:
+            return None
+        mask = np.zeros(self.system.n_moves, dtype=bool)
+        mask[np.asarray(area, dtype=np.int64)] = True
+        return mask
+
     def initial_history(self) -> int:
         """The history after reading ``L(s0)``."""
         ts = self.system
@@ -443,6 +456,11 @@ def verify_artifact(
         raise ProblemError(f"{where}: its system, objectives or kind do not match its source hash (the file was edited)")
     if expected_source is not None and art.source != expected_source:
         raise ProblemError(f"{where} was synthesized from another problem than the one asked for (source hash mismatch)")
+    area = art.static_area
+    if area is not None and bool((art.strategy.static_obstacles & ~area).any()):
+        m = int(np.flatnonzero(art.strategy.static_obstacles & ~area)[0])
+        raise ProblemError(f"{where}: field strategy.static_obstacles: move {m} is a wall outside the static area of "
+                           "extras.static_moves (the file was edited)")
     if art.letters != art.system.letters():
         raise ProblemError(f"{where}: field letters is not the alphabet of its system's labels")
     # the automata derived again are compared with those the file declares: no larger product is explored
@@ -535,6 +553,17 @@ def artifact_of(test: SynthesizedTest, summary: dict[str, Any], extras: Mapping[
         summary=summary,
         objectives={"system": p.system_objective.text, "test": p.test_objective.text},
         agent=None if test.agent is None else test.agent.to_dict(),
-        extras={"history_descriptions": [spec.describe(h) for h in range(spec.dba.n_states)], **(extras or {})},
+        extras={**_own_extras(test), **(extras or {})},
         source=problem_source_hash(p),
     )
+
+
+def _own_extras(test: SynthesizedTest) -> dict[str, Any]:
+    """What an artifact carries about its test beyond running it: each history's meaning and,
+    for a mixed test, the static area typed in (``static_moves``: move indices), so a picture
+    of the artifact draws the area as ``flowtest synthesize --plot`` does."""
+    p, spec = test.problem, test.spec
+    out: dict[str, Any] = {"history_descriptions": [spec.describe(h) for h in range(spec.dba.n_states)]}
+    if p.kind == "mixed" and p.static_moves is not None:
+        out["static_moves"] = np.flatnonzero(np.asarray(p.static_moves, dtype=bool)).tolist()
+    return out

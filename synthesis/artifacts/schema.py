@@ -305,6 +305,13 @@ def validate_artifact(d: Any, source: str, fmt: str, version: int) -> None:
     descr = extras.get("history_descriptions")
     if descr is not None:
         _strs(w, descr, "extras.history_descriptions", n_hist)
+    area = extras.get("static_moves")
+    if area is not None:
+        if kind != "mixed":
+            raise w.fail("extras.static_moves", f"a {kind} test has no static area typed in (mixed tests only)")
+        moves = _ints(w, area, "extras.static_moves", 0, m)
+        if len(set(moves)) != len(moves) or moves != sorted(moves):
+            raise w.fail("extras.static_moves", "is not a list of move indices in increasing order, each once")
     src = _dict(w, _get(w, d, "source", ""), "source")
     digest = _get(w, src, "sha256", "source")
     if not isinstance(digest, str) or not _HEX64.fullmatch(digest):
@@ -437,7 +444,8 @@ def json_schema() -> dict[str, Any]:
             }),
             "agent": {"anyOf": [{"type": "null"}, {"$ref": "#/$defs/agent"}]},
             "summary": {"type": "object", "required": ["flow"], "properties": {"flow": {"type": "integer", "minimum": 1}}},
-            "extras": {"type": "object", "properties": {"history_descriptions": array({"type": "string"})}},
+            "extras": {"type": "object", "properties": {"history_descriptions": array({"type": "string"}),
+                                                        "static_moves": array(nat, uniqueItems=True)}},
             "source": obj({"sha256": hex64}),
             "digest": obj({"sha256": hex64}),
         },
@@ -445,6 +453,8 @@ def json_schema() -> dict[str, Any]:
             {"if": {"properties": {"kind": {"const": "agent"}}},
              "then": {"required": ["agent"], "properties": {"agent": {"$ref": "#/$defs/agent"}}},
              "else": {"properties": {"agent": {"type": "null"}}}},
+            {"if": {"properties": {"kind": {"const": "mixed"}}},
+             "else": {"properties": {"extras": {"not": {"required": ["static_moves"]}}}}},
         ],
         "$defs": {"cell": cell, "system": system, "agent": agent},
     }

@@ -379,3 +379,34 @@ def test_the_card_and_the_filmstrip_name_the_broken_conjunct(tmp_path: Path) -> 
     # the filmstrip keeps the frame of the violation however long the run
     game = _game(genv)
     assert v["step"] in frames_to_show(game, trace.states, limit=3, keep_step=v["step"])
+
+
+MIXED = (Path(__file__).resolve().parents[1] / "data" / "ok_mixed.toml")
+
+
+def test_a_mixed_card_draws_the_static_area_typed_in(tmp_path: Path) -> None:
+    """A mixed test's card picture draws its static area (dashed borders, a legend line), as
+    ``flowtest synthesize --plot`` does: the artifact carries the area, so the report's panels
+    read it; without it (an older file) the picture differs. The caption says what the dashes are."""
+    import dataclasses
+
+    from experiments.cli.plots import _static_area, plot_artifact, plot_test
+
+    out = tmp_path / "out"
+    (info,) = draw_test_infos([str(MIXED)], out)
+    art = _game(gym.make("FlowTest-v0", test=str(MIXED))).artifact
+    assert info.kind == "mixed" and art.static_area is not None and int(art.static_area.sum()) == 6
+    view = artifact_view(art)
+    assert len(_static_area(view)) == 5  # ok_mixed.toml types six moves: five borders, one both ways
+    svg = plot_artifact(art, tmp_path / "card.svg", header=False).read_text()
+    assert "static area (walls only here)" in svg
+    without = dataclasses.replace(view, problem=dataclasses.replace(view.problem, static_moves=None))
+    assert _static_area(without) == set()
+    assert "static area (walls only here)" not in plot_test(without, tmp_path / "old.svg", header=False).read_text()
+    fresh = tmp_path / "fresh.png"
+    draw_test_picture(_game(gym.make("FlowTest-v0", test=str(MIXED))), fresh)
+    assert (out / info.picture).read_bytes() == fresh.read_bytes()
+    record = {"env": str(MIXED), "sut": "s", "episodes": 1, "seed": 0, "system_objective_met_rate": 1.0,
+              "test_objective_realized_rate": 1.0, "violated": 0, "open": 0, "mean_restrictions": 0.0, "mean_steps": 3.0,
+              "test_failures": 0, "n_failures": 0, "failures": [], "pictures": {}}
+    assert "static area the problem gives them (its borders dashed)" in _card(render_html([record], [info]), str(MIXED))

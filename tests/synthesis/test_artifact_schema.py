@@ -94,6 +94,8 @@ BROKEN: dict[str, tuple[str, Callable[[dict[str, Any]], None]]] = {
     "flow 0": ("small-reactive", _set("summary.flow", 0)),
     "histories without components": ("small-reactive", _set("automata.histories.components", None)),
     "accepting not a bit": ("small-reactive", _set("automata.test.accepting.0.0", True)),
+    "a static area in a reactive test": ("small-reactive", _set("extras.static_moves", [0, 1])),
+    "a static area in a static test": ("example1", _set("extras.static_moves", [0])),
 }
 
 
@@ -136,3 +138,69 @@ def test_the_page_explains_every_field() -> None:
     named = set(re.findall(r"`([a-z_0-9]+)`", page))
     missing = sorted(set(_field_names(json_schema())) - named)
     assert not missing, f"docs/artifact-schema.md does not explain: {missing}"
+
+
+def _mixed_doc() -> dict[str, Any]:
+    """A freshly synthesized mixed test (tests/data/ok_mixed.toml) as plain data."""
+    import flowtest_env
+    from synthesis.problems.files import load_problem_file
+
+    env: Any = flowtest_env.make_env(load_problem_file(ROOT / "tests" / "data" / "ok_mixed.toml")).unwrapped
+    return dict(json.loads(json.dumps(env.artifact.to_dict())))
+
+
+def test_a_mixed_test_carries_its_static_area_and_older_files_still_load() -> None:
+    """The static area typed in (six moves of ok_mixed.toml) is ``extras.static_moves``, read
+    back as ``TestArtifact.static_area``; its walls lie in it. A file without it (written
+    before FlowTest carried it) loads, with no area."""
+    import warnings
+
+    import numpy as np
+
+    from synthesis.artifacts.artifact import EditedArtifactWarning, TestArtifact, with_digest
+    from synthesis.problems.files import load_problem_file
+
+    doc = _mixed_doc()
+    problem = load_problem_file(ROOT / "tests" / "data" / "ok_mixed.toml")
+    assert problem.static_moves is not None
+    want = np.flatnonzero(problem.static_moves).tolist()
+    assert doc["extras"]["static_moves"] == want and len(want) == 6
+    art = TestArtifact.from_dict(doc, require_digest=True)
+    assert art.static_area is not None and np.flatnonzero(art.static_area).tolist() == want
+    assert not (art.strategy.static_obstacles & ~art.static_area).any()
+    older = copy.deepcopy(doc)
+    del older["extras"]["static_moves"]
+    assert not list(validator().iter_errors(older))
+    assert TestArtifact.from_dict(with_digest(older), require_digest=True).static_area is None
+    for key, value in (("shipped", _doc("small-reactive")), ("maze2", _doc("maze2"))):
+        assert TestArtifact.from_dict(value, verify=False).static_area is None, key
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", EditedArtifactWarning)
+        assert TestArtifact.from_dict(older).static_area is None
+
+
+def test_a_malformed_static_area_is_refused() -> None:
+    """Negative or repeated move indices: refused by the schema and the loader; an index past
+    the moves or out of order (what a JSON Schema cannot say): by the loader; a wall outside
+    the area: by the loader's check of meaning (naming the field)."""
+    from synthesis.artifacts.artifact import TestArtifact, with_digest
+
+    doc = _mixed_doc()
+    m = len(doc["system"]["moves"])
+    area = doc["extras"]["static_moves"]
+    for bad in ([m], [-1], [area[0], area[0]]):
+        broken = copy.deepcopy(doc)
+        broken["extras"]["static_moves"] = bad
+        assert bool(list(validator().iter_errors(broken))) == (bad != [m]), bad
+        with pytest.raises(ProblemError, match="extras.static_moves"):
+            validate_artifact(broken, "mixed.json", FORMAT, VERSION)
+    unsorted = copy.deepcopy(doc)
+    unsorted["extras"]["static_moves"] = list(reversed(area))
+    with pytest.raises(ProblemError, match="increasing order"):
+        validate_artifact(unsorted, "mixed.json", FORMAT, VERSION)
+    walls = doc["strategy"]["static_obstacles"]
+    assert walls, "ok_mixed's test puts a wall in its static area"
+    narrowed = copy.deepcopy(doc)
+    narrowed["extras"]["static_moves"] = [i for i in area if i != walls[0]]
+    with pytest.raises(ProblemError, match="outside the static area"):
+        TestArtifact.from_dict(with_digest(narrowed), require_digest=True)
