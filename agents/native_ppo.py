@@ -58,6 +58,14 @@ from .checkpoint import Checkpoint, CheckpointError, load_checkpoint, save_check
 ALGOS = ("ppo", "recurrent-ppo")
 """The native algorithms: masked PPO with an MLP, and with a GRU."""
 
+LEVEL_SAMPLING = ("uniform", "plr")
+"""How each episode's test is chosen: the env's own uniform draws, or prioritized level
+replay (:class:`LevelSampler`)."""
+
+PLR_SCORES = ("pvl", "gae")
+"""PLR's level scores: positive value loss (the mean of the positive GAE advantages of the
+level's last run) or the mean GAE magnitude."""
+
 ENV_BACKENDS = ("auto", "torch", "numpy")
 """Who steps the tests: the NumPy vector env, or its torch twin on the training device
 (``auto``: the torch env: alone it steps slower than the NumPy env on the CPU, but the two
@@ -95,6 +103,10 @@ class NativeArgs:
     device: str = "auto"  # "auto" (cuda when there is one), "cpu", "cuda", "cuda:1", ...
     threads: int = 1  # torch CPU threads (fixed, so a seed gives the same run)
     eval_every: int = 250_000  # steps between greedy evaluations on the train (and held-out) tests; 0: at the end only
+    level_sampling: str = "uniform"  # "uniform" (the env's own draws) or "plr" (prioritized level replay over the train tests)
+    plr_score: str = "pvl"  # PLR's level score: "pvl" (positive value loss) or "gae" (mean GAE magnitude)
+    plr_temperature: float = 0.1  # PLR's rank temperature (beta)
+    plr_staleness: float = 0.1  # PLR's staleness weight (rho)
 
     def batch_size(self) -> int:
         """Steps per rollout (all envs)."""
@@ -136,6 +148,14 @@ def check_args(a: NativeArgs) -> None:
         raise ValueError(f"unknown env_backend {a.env_backend!r}; expected one of {', '.join(ENV_BACKENDS)}")
     if a.obs_kind not in ("flat", "padded"):
         raise ValueError(f"obs_kind must be 'flat' or 'padded' for the native trainer, not {a.obs_kind!r}")
+    if a.level_sampling not in LEVEL_SAMPLING:
+        raise ValueError(f"unknown level_sampling {a.level_sampling!r}; expected one of {', '.join(LEVEL_SAMPLING)}")
+    if a.plr_score not in PLR_SCORES:
+        raise ValueError(f"unknown plr_score {a.plr_score!r}; expected one of {', '.join(PLR_SCORES)}")
+    if not float(a.plr_temperature) > 0 or not 0 <= float(a.plr_staleness) <= 1:
+        raise ValueError("plr_temperature must be positive and plr_staleness in [0, 1]")
+    if a.level_sampling == "plr" and a.env_backend == "torch":
+        raise ValueError("level_sampling 'plr' chooses each episode's test in the NumPy env: use env_backend 'numpy' or 'auto'")
     resolve_device(a.device)
 
 
@@ -286,7 +306,7 @@ def make_vec_env(args: NativeArgs) -> tuple[Any, Any, bool]:
     except TypeError as exc:
         raise ValueError(f"{args.env_id}: the vector env does not take these options ({exc})") from None
     device = resolve_device(args.device)
-    if args.env_backend in ("torch", "auto"):
+    if args.env_backend == "torch" or (args.env_backend == "auto" and args.level_sampling != "plr"):
         from flowtest_env.torch_vector import TorchVectorEnv
 
         return np_env, TorchVectorEnv.from_numpy(np_env, device=device), env_memory
@@ -354,6 +374,7 @@ class Rollout:
     starts: torch.Tensor
     h0: torch.Tensor
     next_value: torch.Tensor
+    levels: np.ndarray | None = None  # int64[T, N]: the test each obs[t, i] belongs to (level sampling only)
 
 
 class EpisodeStats:
@@ -376,8 +397,10 @@ class Runner:
     """Steps the vector env with the agent and keeps what carries over between rollouts:
     the last observation, masks, episode flags, the memory, the GRU state, returns."""
 
-    def __init__(self, env: Any, agent: Agent, where: slice | None, device: torch.device, seed: int) -> None:
+    def __init__(self, env: Any, agent: Agent, where: slice | None, device: torch.device, seed: int,
+                 levels: Callable[[], np.ndarray] | None = None) -> None:
         self.env, self.agent, self.device = env, agent, device
+        self.levels = levels  # the test each env plays now (recorded per step when given)
         self.n = int(env.num_envs)
         self.torch_env = hasattr(env, "tables")  # flowtest_env.torch_vector: tensors in, tensors out
         obs, infos = env.reset(seed=seed)
@@ -402,8 +425,11 @@ class Runner:
         logprobs, values, rewards = (torch.zeros((T, N), device=dev) for _ in range(3))
         terminated, truncated, valid, starts = (torch.zeros((T, N), dtype=torch.bool, device=dev) for _ in range(4))
         h0 = self.h.clone()
+        levels = np.zeros((T, N), dtype=np.int64) if self.levels is not None else None
         for t in range(T):
             obs[t], masks[t], starts[t], valid[t] = self.x, self.mask, self.start, ~self.reset_step
+            if levels is not None and self.levels is not None:
+                levels[t] = self.levels()
             with torch.no_grad():
                 logits, value, self.h = self.agent.step(self.x, self.h, self.start)
                 logits = masked_logits(logits, self.mask)
@@ -421,7 +447,8 @@ class Runner:
             self.mask = self._tensor(infos["action_mask"]).bool()
         with torch.no_grad():
             next_value = self.agent.value(self.x, self.h, self.start)
-        return Rollout(obs, masks, actions, logprobs, values, rewards, terminated, truncated, valid, starts, h0, next_value)
+        return Rollout(obs, masks, actions, logprobs, values, rewards, terminated, truncated, valid, starts, h0, next_value,
+                       levels)
 
     def _episode_ends(self, r: torch.Tensor, done: torch.Tensor, infos: dict[str, Any]) -> None:
         self.ret += r
@@ -547,6 +574,128 @@ def _step(agent: Agent, optimizer: torch.optim.Optimizer, loss: torch.Tensor, ma
     optimizer.step()
 
 
+# --------------------------------------------------------------------------- prioritized level replay
+
+
+class LevelSampler:
+    """Prioritized level replay over a fixed set of training tests (levels), after Jiang,
+    Grefenstette and Rocktäschel, *Prioritized Level Replay*, ICML 2021 (written from the
+    paper's description).
+
+    Each level has a **score**, the learning potential its last run showed: ``"pvl"``, the
+    positive value loss (the mean over the run's steps of ``max(A_t, 0)``, ``A_t`` the GAE
+    advantage), or ``"gae"``, the mean of ``|A_t|``; and a **staleness**, the episodes
+    started since it was last chosen. When an episode starts, its level is
+
+    * with probability ``seen / n_levels`` (the share of levels played so far, the paper's
+      replay decision for a finite training set) a **replay**: drawn from
+      ``P = (1 - rho) * P_S + rho * P_C`` over the seen levels, where ``P_S`` is the
+      rank-based prioritization ``h_i^(1/beta) / sum_j h_j^(1/beta)`` with ``h_i = 1 /
+      rank(score_i)`` (rank 1: the highest score) and ``P_C`` is proportional to the
+      staleness;
+    * otherwise a level never played, uniformly.
+
+    ``beta`` is ``temperature``, ``rho`` is ``staleness``. Scores are updated after each
+    rollout from the runs it holds (a run cut by the rollout's end is scored on the steps so
+    far, and rescored by the next rollout). Seeded: the same seed and scores give the same
+    levels.
+    """
+
+    def __init__(self, n_levels: int, score: str = "pvl", temperature: float = 0.1, staleness: float = 0.1,
+                 seed: int = 0) -> None:
+        if n_levels < 1:
+            raise ValueError("level sampling needs at least one level")
+        if score not in PLR_SCORES:
+            raise ValueError(f"unknown plr_score {score!r}; expected one of {', '.join(PLR_SCORES)}")
+        self.n = int(n_levels)
+        self.score_kind = score
+        self.temperature, self.staleness = float(temperature), float(staleness)
+        self.scores = np.zeros(self.n, dtype=np.float64)
+        self.seen = np.zeros(self.n, dtype=bool)
+        self.last = np.zeros(self.n, dtype=np.int64)  # the episode count when each level was last chosen
+        self.episodes = 0
+        self.replays = 0
+        self.rng = np.random.default_rng(seed)
+
+    def replay_distribution(self) -> np.ndarray:
+        """``float[n_levels]``: the replay probabilities (0 for levels never played)."""
+        p = np.zeros(self.n, dtype=np.float64)
+        idx = np.flatnonzero(self.seen)
+        if idx.size == 0:
+            return p
+        order = np.argsort(-self.scores[idx], kind="stable")
+        rank = np.empty(idx.size, dtype=np.float64)
+        rank[order] = np.arange(1, idx.size + 1)
+        ps = (1.0 / rank) ** (1.0 / self.temperature)
+        ps /= ps.sum()
+        stale = (self.episodes - self.last[idx]).astype(np.float64)
+        pc = stale / stale.sum() if stale.sum() > 0 else np.full(idx.size, 1.0 / idx.size)
+        p[idx] = (1.0 - self.staleness) * ps + self.staleness * pc
+        out: np.ndarray = p / p.sum()
+        return out
+
+    def choose(self, envs: np.ndarray) -> np.ndarray:
+        """The levels of the episodes starting now in ``envs`` (one each)."""
+        k = int(np.asarray(envs).size)
+        out = np.zeros(k, dtype=np.int64)
+        if k == 0:
+            return out
+        unseen = np.flatnonzero(~self.seen)
+        replay = self.rng.random(k) < (self.n - unseen.size) / self.n
+        if unseen.size == 0:
+            replay[:] = True
+        n_replay = int(replay.sum())
+        if n_replay:
+            out[replay] = self.rng.choice(self.n, size=n_replay, p=self.replay_distribution())
+        if k - n_replay:
+            out[~replay] = self.rng.choice(unseen, size=k - n_replay)
+        self.replays += n_replay
+        self.episodes += k
+        self.last[out] = self.episodes
+        return out
+
+    def update(self, levels: np.ndarray, adv: np.ndarray, valid: np.ndarray, starts: np.ndarray) -> None:
+        """Score the levels of a rollout's runs (arrays ``[T, N]``: the level of each step,
+        the GAE advantages, the valid steps, the episodes' first steps)."""
+        T, N = adv.shape
+        seg = np.cumsum(np.asarray(starts, dtype=np.int64), axis=0)  # which run of env i a step belongs to
+        key = (np.arange(N)[None, :] * (T + 1) + seg)[valid]
+        a = np.asarray(adv, dtype=np.float64)[valid]
+        value = np.maximum(a, 0.0) if self.score_kind == "pvl" else np.abs(a)
+        sums = np.bincount(key, weights=value, minlength=N * (T + 1))
+        counts = np.bincount(key, minlength=N * (T + 1))
+        level_of = np.zeros(N * (T + 1), dtype=np.int64)
+        level_of[key] = np.asarray(levels, dtype=np.int64)[valid]
+        runs = np.flatnonzero(counts)
+        self.scores[level_of[runs]] = sums[runs] / counts[runs]
+        self.seen[level_of[runs]] = True
+
+    def stats(self) -> dict[str, float]:
+        """For the log: levels seen, the share of replays, the mean score of the seen levels."""
+        seen = int(self.seen.sum())
+        return {"levels_seen": float(seen), "replay_share": self.replays / max(1, self.episodes),
+                "mean_score": float(self.scores[self.seen].mean()) if seen else 0.0}
+
+
+def level_sampler(args: NativeArgs, env: Any, n_levels: int) -> LevelSampler | None:
+    """With ``level_sampling="plr"``: a :class:`LevelSampler` over the env's tests, made
+    the chooser of every episode's test in ``env`` (a :class:`~flowtest_env.vector.PoolVectorEnv`);
+    ``None`` otherwise.
+
+    Raises
+    ------
+    ValueError
+        If the env cannot have its tests chosen (not a pool env of the NumPy backend).
+    """
+    if args.level_sampling != "plr":
+        return None
+    if n_levels < 1 or not hasattr(env, "_choose_tests") or not hasattr(env, "test_index"):
+        raise ValueError(f"level_sampling 'plr' needs a pool vector env of the NumPy backend, not {type(env).__name__}")
+    sampler = LevelSampler(n_levels, args.plr_score, args.plr_temperature, args.plr_staleness, args.seed)
+    setattr(env, "_choose_tests", sampler.choose)  # noqa: B010 - the env's chooser of each episode's test
+    return sampler
+
+
 # --------------------------------------------------------------------------- greedy evaluation
 
 
@@ -611,6 +760,58 @@ class GreedyActor:
             logits, _, self.h = self.agent.step(xt, self.h, st)
             logits = masked_logits(logits, torch.as_tensor(np.asarray(masks, dtype=bool), device=self.device))
             out: np.ndarray = torch.argmax(logits, dim=-1).cpu().numpy()
+            return out
+
+
+class BatchActor:
+    """A native agent as a batched policy of :mod:`flowtest_env.scoring`:
+    ``actor(observations, masks) -> actions`` on the env's own observations (the actor adds
+    the visited-places memory itself when the agent was trained with it, and carries the
+    GRU state). ``deterministic``: the most likely legal action (greedy); otherwise one
+    sampled from the masked policy with a torch generator that ``reset(n, seed)`` seeds,
+    so the same seed gives the same runs.
+
+    Example::
+
+        from flowtest_env.scoring import score_policy
+        model = load_native("policy.zip")
+        greedy = score_policy(model.batch_policy(), pool="reachability1/5x5", split="test", count=1000)
+        sampled = score_policy(model.batch_policy(deterministic=False), pool="reachability1/5x5", split="test",
+                               count=1000, runs=8)
+    """
+
+    def __init__(self, agent: Agent, where: slice | None, deterministic: bool = True, device: str | torch.device = "cpu") -> None:
+        self.agent, self.where, self.deterministic = agent, where, deterministic
+        self.device = torch.device(device)
+        self.memory = VisitedBits(where)
+        self.h: torch.Tensor | None = None
+        self.start = True
+        self.generator = torch.Generator(device=self.device).manual_seed(0)
+
+    def reset(self, num_runs: int, seed: int) -> None:
+        """Before a batch of runs: forget the memory and the GRU state; seed the sampling."""
+        self.memory = VisitedBits(self.where)
+        self.h = None
+        self.start = True
+        self.generator = torch.Generator(device=self.device).manual_seed(int(seed))
+
+    def __call__(self, observations: np.ndarray, masks: np.ndarray) -> np.ndarray:
+        with torch.no_grad():
+            obs = torch.as_tensor(np.asarray(observations, dtype=np.float32), device=self.device)
+            n = obs.shape[0]
+            start = torch.full((n,), self.start, dtype=torch.bool, device=self.device)
+            self.start = False
+            x = self.memory(obs, start)
+            if self.h is None or self.h.shape[0] != n:
+                self.h = self.agent.initial_state(n, self.device)
+            logits, _, self.h = self.agent.step(x, self.h, start)
+            logits = masked_logits(logits, torch.as_tensor(np.asarray(masks, dtype=bool), device=self.device))
+            if self.deterministic:
+                a = torch.argmax(logits, dim=-1)
+            else:
+                u = torch.rand(logits.shape, generator=self.generator, device=self.device).clamp_(1e-12, 1.0)
+                a = torch.argmax(logits - torch.log(-torch.log(u)), dim=-1)
+            out: np.ndarray = a.cpu().numpy()
             return out
 
 
@@ -711,10 +912,11 @@ def _budgets(games: Sequence[Any]) -> list[int]:
 
 
 def train(args: NativeArgs, out: str | Path | None = None, heldout: Sequence[Any] = (), log_dir: str | Path | None = None,
-          progress_bar: bool = True, evaluate_train: bool = True, env: Any = None) -> TrainResult:
+          progress_bar: bool = True, evaluate_train: bool | int = True, env: Any = None) -> TrainResult:
     """Train a masked PPO agent (see the module docstring), evaluating it greedily on the
-    env's own tests (the train tests) and on ``heldout`` games every ``args.eval_every``
-    steps and at the end; save the checkpoint to ``out`` (atomically) when given.
+    env's own tests (the train tests; with ``evaluate_train=N`` the first ``N`` of them) and
+    on ``heldout`` games every ``args.eval_every`` steps and at the end; save the checkpoint
+    to ``out`` (atomically) when given.
 
     Raises
     ------
@@ -737,8 +939,11 @@ def train(args: NativeArgs, out: str | Path | None = None, heldout: Sequence[Any
     agent = Agent(obs_size + mem_size, n_actions, net["hidden"], net["kind"], net["gru_hidden"]).to(device)
     optimizer = torch.optim.Adam(agent.parameters(), lr=args.learning_rate, eps=1e-5)
     generator = torch.Generator().manual_seed(args.seed)
-    runner = Runner(env, agent, None if env_memory else where, device, args.seed)
-    splits = {"train": (games, _budgets(games))} if evaluate_train and games else {}
+    sampler = level_sampler(args, inner, len(games))
+    runner = Runner(env, agent, None if env_memory else where, device, args.seed,
+                    levels=(lambda: np.asarray(inner.test_index)) if sampler is not None else None)
+    shown = games if evaluate_train is True else games[:int(evaluate_train)]
+    splits = {"train": (shown, _budgets(shown))} if evaluate_train and games else {}
     if heldout:
         splits["heldout"] = (list(heldout), _budgets(heldout))
     logs = Logs(log_dir, quiet=not progress_bar)
@@ -773,12 +978,19 @@ def train(args: NativeArgs, out: str | Path | None = None, heldout: Sequence[Any
                 optimizer.param_groups[0]["lr"] = args.learning_rate * (1.0 - step / total)
             num_steps = min(args.num_steps, (total - step) // args.num_envs)  # the last rollout may be shorter
             rollout = collect_rollout(runner, num_steps)
+            if sampler is not None and rollout.levels is not None:
+                adv, _ = advantages(rollout, args.gamma, args.gae_lambda)
+                sampler.update(rollout.levels, adv.cpu().numpy(), rollout.valid.cpu().numpy(), rollout.starts.cpu().numpy())
+                info_plr = {f"plr/{k}": v for k, v in sampler.stats().items()}
+            else:
+                info_plr = {}
             info = ppo_update(agent, optimizer, args, rollout, generator)
             step += num_steps * args.num_envs
             episode = runner.stats.take()
             elapsed = time.perf_counter() - t0 - eval_seconds
             logs.add(step, {"train/steps_per_second": step / max(elapsed, 1e-9), "train/lr": optimizer.param_groups[0]["lr"],
-                            **{f"episode/{k}": v for k, v in episode.items()}, **{f"loss/{k}": v for k, v in info.items()}})
+                            **{f"episode/{k}": v for k, v in episode.items()}, **{f"loss/{k}": v for k, v in info.items()},
+                            **info_plr})
             if bar is not None:
                 bar.update(num_steps * args.num_envs)
                 if "met" in episode:
@@ -880,6 +1092,13 @@ class NativeModel:
         self.flowtest_obs = {"obs_kind": str(obs.get("obs_kind", "flat")), "pad_to": int(obs.get("pad_to", 8))}
         self.observation_space = spaces.Box(0.0, 1.0, shape=(self.agent.obs_size,), dtype=np.float32)
         self._actor = GreedyActor(self.agent, torch.device("cpu"))
+        pos = ck.settings.get("position")
+        self.position = slice(int(pos[0]), int(pos[1])) if self.flowtest_memory == "visited" and pos else None
+
+    def batch_policy(self, deterministic: bool = True) -> BatchActor:
+        """This model as a batched policy of :mod:`flowtest_env.scoring` (greedy, or
+        sampled from its masked policy): :class:`BatchActor`."""
+        return BatchActor(self.agent, self.position, deterministic)
 
     def predict(self, obs: Any, state: Any = None, episode_start: Any = None, deterministic: bool = True,
                 action_masks: Any = None) -> tuple[np.ndarray, Any]:
@@ -909,6 +1128,6 @@ def load_native(path: str | Path) -> NativeModel:
     return NativeModel(load_checkpoint(path))
 
 
-__all__ = ["ALGOS", "NativeArgs", "Agent", "Rollout", "Runner", "TrainResult", "NativeModel", "advantages",
+__all__ = ["ALGOS", "NativeArgs", "Agent", "BatchActor", "LevelSampler", "Rollout", "Runner", "TrainResult", "NativeModel", "advantages",
            "batch_verdicts", "check_args", "collect_rollout", "load_native", "masked_logits", "minibatch_indices",
            "ppo_update", "resolve_device", "save_policy", "train"]

@@ -1,50 +1,57 @@
-"""``flowtest benchmark --pool NAME``: the standard learned baselines on a test pool, scored
-on tests they never trained on.
+"""``flowtest benchmark --pool NAME``: the learned baselines on a test pool, scored by a fixed
+protocol on tests they never trained on, between a random floor and a reference ceiling.
 
-What it does, in order (each step a plain function below):
+The protocol (docs/benchmark-protocol.md has the reasons for each choice):
 
 1. **The pool** (:func:`load_splits`): the first ``train_count`` tests of the pool's
-   ``train`` split and the first ``test_count`` of its ``test`` split
-   (:mod:`flowtest_env.pools`: the splits are seed ranges that never overlap), each
-   written to ``OUT/pool/<split>/seed<N>.json`` so every run can be replayed with
-   ``flowtest evaluate --env <that file> ... --replay``.
-2. **The baselines** (:func:`train_baseline`), for every algorithm and training seed,
-   trained on ``FlowTest-RandomGrid-v0`` drawing from the train split. With the native
-   trainer (default, :mod:`agents.native_ppo`): masked PPO with an MLP and the
-   visited-places memory (``maskable-ppo``) and masked PPO with a GRU (``recurrent-ppo``),
-   :data:`NATIVE_BASELINES`; with ``--trainer sb3``: sb3-contrib's MaskablePPO with the
-   memory wrapper (the ``memory="visited"`` env option,
-   :class:`flowtest_env.wrappers.VisitedPlaces`) and RecurrentPPO (an LSTM, its own
-   memory), :data:`BASELINES`. During training the learning curve is measured on the
-   train tests and on the held-out tests by greedy play of every test once, all of them
-   in one :class:`~flowtest_env.vector.PoolVectorEnv` batch (:func:`batch_verdicts`).
-3. **The scores** (:func:`score_systems`): every system plays every test once through
-   the single env, exactly as ``flowtest evaluate`` and its replay commands run it (a
-   pool test is deterministic and so are the policies, so one run per test is the whole
-   evaluation): the saved models, the references (the scripted replanner and the GR(1)
-   system, correct by construction: they should meet every test) and any other system
-   named with ``--sut``.
-4. **The table** (:func:`benchmark_table`): per system, on the train and on the held-out
-   tests, the share of tests whose system objective was met, the test objective realized
-   among those (the synthesized test guarantees 100 %), the restrictions hit and the
-   steps, with 95 % confidence intervals over the training seeds (Student's t); the
-   **held-out gap**, train met minus held-out met, is the headline number.
-5. **The outputs** in ``OUT``: ``table.md`` and ``table.json`` (the same numbers, with the
-   curves and settings), ``learning-curves.png``, the evaluation report of
-   :mod:`experiments.cli.evaluate` (``report.html``, ``report.md``, ``results.json``: a matrix
-   of systems x splits, the failing runs with filmstrips and replay commands), the
-   models (``models/``) and the pool tests (``pool/``).
+   ``train`` split (the baselines train on them), the first ``validation_count`` of its
+   ``validation`` split (the learning curves, i.e. model monitoring; no model selection is
+   done) and the first ``test_count`` of its ``test`` split (held out: never seen in
+   training). The splits are disjoint seed ranges (:mod:`flowtest_env.pools`); where the
+   tests come from is pluggable (``source``, :data:`flowtest_env.scoring.PoolSource`).
+   The tests that are scored are written to ``OUT/pool/<split>/seed<N>.json`` so every
+   run in the report replays with ``flowtest evaluate --env <that file> ... --replay``.
+2. **The baselines** (:func:`train_baseline`), per algorithm and training seed, on the
+   train split, for ``steps`` time steps: with the native trainer (default,
+   :mod:`agents.native_ppo`) masked PPO with the visited-places memory
+   (``maskable-ppo``), with a GRU (``recurrent-ppo``) and with prioritized level replay
+   over the train tests (``plr-ppo``); with ``--trainer sb3`` sb3-contrib's MaskablePPO
+   and RecurrentPPO. Only ``maskable-ppo`` trains by default (the time budget); the others
+   on request (``--algo``).
+3. **The scores.** Every system on every split: the learned policies greedily (each test
+   once) **and** sampled (``runs`` seeded runs per test), every test x run of a split in
+   one :class:`~flowtest_env.vector.PoolVectorEnv` batch (:mod:`flowtest_env.scoring`);
+   ``random`` (the **floor**, ``runs`` runs per test, batched too); the **references**
+   (the scripted replanner and the GR(1) system, correct by construction: the
+   **ceiling**) and any system that is not batched through the single env, once per test.
+   The floor and the ceiling are always scored: they define the scale.
+4. **The statistics**: per split, the **normalized score** ``(met - floor) / (ceiling -
+   floor)`` (0 = random, 1 = reference; floor and ceiling are the split's own), its
+   interquartile mean over training seeds with a stratified-bootstrap 95 % interval (seeds
+   resampled, and tests within each seed's stratum), the mean over the worst 10 % of the
+   held-out tests, raw met, test objective realized, restrictions, steps, and the held-out
+   gap (train met minus held-out met).
+5. **The generalization curve** (:func:`generalization_curve`): the held-out normalized
+   score of the first baseline trained on the first 16, 64, 256, 1,024 train tests
+   (``curve_seeds`` seeds each, the same steps) and on all ``train_count`` (the main runs).
+6. **The outputs** in ``OUT``: ``table.md`` and ``table.json`` (the results file,
+   docs/benchmark-protocol.md), ``learning-curves.png``, ``generalization.png``, the
+   evaluation report of :mod:`experiments.cli.evaluate` on a sample of each split's tests
+   (``report.html``, ``report.md``, ``results.json``), the models and the scored tests.
 
-Every number is seeded: the pool tests (a seed names a test), training (torch on one
-thread, seeded envs), evaluation (deterministic policies on deterministic tests), so the
-same command gives the same table; only the times differ.
+Every number is seeded (the tests, training, the sampled runs, the bootstrap), so the same
+command gives the same table; only the times differ.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
+import os
+import platform
+import subprocess
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -73,8 +80,19 @@ BENCHMARK_MARKER = ".flowtest-benchmark"
 """The file that marks a folder as a benchmark's: ``--out`` refuses any other non-empty
 folder, and any earlier benchmark, unless ``--force``."""
 
+RESULTS_FORMAT = "flowtest-benchmark"
+RESULTS_VERSION = 2
+"""``table.json``'s ``format`` and ``version`` (docs/benchmark-protocol.md)."""
+
 POOL_ENV_ID = "FlowTest-RandomGrid-v0"
 """The env the baselines train on (its ``pool``, ``split``, ``count`` options)."""
+
+BENCH_ALGOS: tuple[str, ...] = (*ALGOS, "plr-ppo")
+"""The baselines ``--algo`` may name: ``flowtest train``'s algorithms and PPO with
+prioritized level replay (native trainer only)."""
+
+DEFAULT_ALGOS: tuple[str, ...] = ("maskable-ppo",)
+"""The baselines ``--sut ppo`` trains by default (the others on request: the time budget)."""
 
 BASELINES: dict[str, dict[str, Any]] = {
     "maskable-ppo": {"algo": "maskable-ppo", "memory": "visited"},
@@ -91,21 +109,39 @@ steps an LSTM through every episode boundary of a minibatch in Python, which is 
 NATIVE_BASELINES: dict[str, dict[str, Any]] = {
     "maskable-ppo": {"algo": "ppo", "memory": "visited", "device": "cpu"},
     "recurrent-ppo": {"algo": "recurrent-ppo", "device": "cpu"},
+    "plr-ppo": {"algo": "ppo", "memory": "visited", "device": "cpu"},
 }
 """Settings of each baseline with the native trainer (the default), over
 :data:`~experiments.cli.train.NATIVE_DEFAULTS`: masked PPO with an MLP and the visited-places
-memory, and masked PPO with a GRU (its own memory); on the CPU, so a seed gives the same
-table."""
+memory, masked PPO with a GRU (its own memory), and the first with prioritized level replay
+(:data:`LEVEL_SAMPLING`); on the CPU, so a seed gives the same table."""
+
+LEVEL_SAMPLING: dict[str, str] = {"plr-ppo": "plr"}
+"""The baselines that choose their training tests themselves (``NativeArgs.level_sampling``;
+:class:`agents.native_ppo.LevelSampler`, the defaults of Jiang et al. 2021)."""
+
+RANDOM = "random"
+"""The floor: uniform over the legal actions (:func:`flowtest_env.scoring.random_policy`)."""
 
 REFERENCES: tuple[str, ...] = ("scripted:replanner", "gr1")
-"""Systems correct by construction: they should meet the system objective on every test."""
+"""Systems correct by construction: they should meet the system objective on every test;
+the best of them on a split is that split's ceiling."""
 
-DEFAULT_SUTS: tuple[str, ...] = ("ppo", *REFERENCES)
-"""``--sut`` when none is given: the baselines of ``--algo`` and the references."""
+DEFAULT_SUTS: tuple[str, ...] = ("ppo", RANDOM, *REFERENCES)
+"""``--sut`` when none is given: the baselines of ``--algo``, the floor and the references."""
+
+SPLIT_NAMES: tuple[str, ...] = ("train", "validation", "test")
+"""The pool's splits, in the order the table shows them."""
+
+REPORT_SPLITS: tuple[str, ...] = ("train", "test")
+"""The splits the HTML report shows (a sample of their tests each)."""
 
 RUN_SEED = 0
-"""The seed of every scoring run (the tests and the policies are deterministic; it
-matters only to a random system, and it is the ``--seed`` of the replay commands)."""
+"""The seed of every scoring batch and single-env run (it matters to a sampled or random
+policy; it is the ``--seed`` of the replay commands)."""
+
+WORST_SHARE = 0.1
+"""The worst share of the held-out tests whose mean score the table shows (CVaR-style)."""
 
 T95: dict[int, float] = {}
 
@@ -115,28 +151,51 @@ T95: dict[int, float] = {}
 
 @dataclass(frozen=True)
 class BenchmarkConfig:
-    """What ``flowtest benchmark`` runs (the defaults fit 30 minutes on 2 shared cores)."""
+    """What ``flowtest benchmark`` runs. The defaults are the protocol's and fit 30 minutes
+    on 2 shared cores for a standard pool (docs/benchmark-protocol.md, *Budget*)."""
 
     pool: str
     suts: tuple[str, ...] = DEFAULT_SUTS
-    algos: tuple[str, ...] = ALGOS
-    train_count: int = 128
-    test_count: int = 32
-    steps: int = 80_000
-    seeds: tuple[int, ...] = (0, 1, 2)
-    curve_points: int = 10
+    algos: tuple[str, ...] = DEFAULT_ALGOS
+    train_count: int = 4096
+    validation_count: int = 256
+    test_count: int = 1000
+    train_eval_count: int = 1000
+    steps: int = 400_000
+    seeds: tuple[int, ...] = tuple(range(10))
+    runs: int = 8
+    curve_sizes: tuple[int, ...] = (16, 64, 256, 1024)
+    curve_seeds: int = 3
+    curve_points: int = 5
     trainer: str = "native"
+    report_tests: int = 20
+    bootstrap: int = 2000
 
     def baselines(self) -> list[str]:
         """The algorithms to train: ``--sut ppo`` stands for every ``--algo``; an
         algorithm may also be named itself (``--sut recurrent-ppo``)."""
-        named = [s for s in self.suts if s in ALGOS]
+        named = [s for s in self.suts if s in BENCH_ALGOS]
         algos = list(self.algos) if "ppo" in self.suts else []
         return list(dict.fromkeys(algos + named))
 
     def others(self) -> list[str]:
-        """The systems scored as they are (references, ``random``, ``ppo:PATH``, ...)."""
-        return [s for s in dict.fromkeys(self.suts) if s != "ppo" and s not in ALGOS]
+        """The systems scored as they are: the floor, the references, and any other
+        (``ppo:PATH``, ``python:M:N``, ...), in that order."""
+        given = [s for s in dict.fromkeys(self.suts) if s != "ppo" and s not in BENCH_ALGOS]
+        return list(dict.fromkeys([RANDOM, *REFERENCES, *given]))
+
+    def counts(self) -> dict[str, int]:
+        """Tests loaded per split."""
+        return {"train": self.train_count, "validation": self.validation_count, "test": self.test_count}
+
+    def scored(self, split: str) -> int:
+        """Tests scored per split (the train split: its first ``train_eval_count``)."""
+        return min(self.train_count, self.train_eval_count) if split == "train" else self.counts()[split]
+
+    def curve(self) -> list[int]:
+        """The generalization curve's training-set sizes: ``curve_sizes`` below
+        ``train_count``, then ``train_count`` (the main runs)."""
+        return sorted({n for n in self.curve_sizes if 0 < n < self.train_count} | {self.train_count})
 
 
 def check_config(config: BenchmarkConfig) -> None:
@@ -151,8 +210,8 @@ def check_config(config: BenchmarkConfig) -> None:
 
     try:
         parse_pool(config.pool)
-        split_seeds("train", config.train_count)
-        split_seeds("test", config.test_count)
+        for split, count in config.counts().items():
+            split_seeds(split, count)
     except ValueError as exc:
         raise ProblemError(f"--pool {config.pool}: {exc}") from None
     if not config.suts:
@@ -166,10 +225,13 @@ def check_config(config: BenchmarkConfig) -> None:
     if "ppo" in config.suts and not config.algos:
         raise ProblemError("--sut ppo needs at least one --algo")
     for algo in config.algos:
-        if algo not in ALGOS:
-            raise ProblemError(f"unknown --algo {algo!r}; expected one of {', '.join(ALGOS)}")
+        if algo not in BENCH_ALGOS:
+            raise ProblemError(f"unknown --algo {algo!r}; expected one of {', '.join(BENCH_ALGOS)}")
     if config.trainer not in TRAINERS:
         raise ProblemError(f"unknown --trainer {config.trainer!r}; expected one of {', '.join(TRAINERS)}")
+    for name in ("runs", "train_eval_count", "report_tests", "bootstrap", "curve_points"):
+        if int(getattr(config, name)) < 1:
+            raise ProblemError(f"--{name.replace('_', '-')} must be at least 1")
     if config.baselines():
         if config.trainer == "sb3":
             require_rl()
@@ -179,10 +241,12 @@ def check_config(config: BenchmarkConfig) -> None:
             raise ProblemError("--seeds needs at least one training seed")
         if config.steps < 1:
             raise ProblemError("--steps must be at least 1")
-        if config.curve_points < 1:
-            raise ProblemError("--curve-points must be at least 1")
+        if config.curve_seeds < 0:
+            raise ProblemError("--curve-seeds must not be negative")
         for algo in config.baselines():
             if config.trainer == "sb3":
+                if algo not in BASELINES:
+                    raise ProblemError(f"--algo {algo}: a baseline of the native trainer only (not --trainer sb3)")
                 check_settings(baseline_settings(algo, "sb3"))
             else:
                 baseline_settings(algo)
@@ -193,7 +257,10 @@ def baseline_settings(algo: str, trainer: str = "native") -> dict[str, Any]:
     ``NATIVE_DEFAULTS``, or with ``trainer="sb3"`` :data:`BASELINES` over ``DEFAULTS``."""
     if trainer == "sb3":
         return {**DEFAULTS, **BASELINES[algo]}
-    return native_settings(NATIVE_BASELINES[algo])
+    settings = native_settings(NATIVE_BASELINES[algo])
+    if algo in LEVEL_SAMPLING:
+        settings = {**settings, "level_sampling": LEVEL_SAMPLING[algo]}
+    return settings
 
 
 # --------------------------------------------------------------------------- the pool
@@ -201,8 +268,8 @@ def baseline_settings(algo: str, trainer: str = "native") -> dict[str, Any]:
 
 @dataclass
 class Split:
-    """The tests of one split of the pool: artifacts, the files they were written to, and
-    the label of the split's column in the report."""
+    """The tests of one split of the pool: artifacts (all loaded), the files the scored
+    ones were written to (the first ``len(files)``), and the label of its report column."""
 
     name: str
     label: str
@@ -210,19 +277,39 @@ class Split:
     artifacts: list[TestArtifact]
     files: list[Path] = field(default_factory=list)
 
+    @property
+    def scored(self) -> list[TestArtifact]:
+        """The tests this split is scored on."""
+        return self.artifacts[:len(self.files)]
 
-def load_splits(config: BenchmarkConfig, out: Path, progress: bool | None = None) -> dict[str, Split]:
-    """The train and test splits of the pool (built on demand and cached, see
-    :func:`flowtest_env.pools.load_pool`), each test written to
-    ``out/pool/<split>/seed<N>.json``."""
+
+def load_splits(config: BenchmarkConfig, out: Path, progress: bool | None = None,
+                source: Callable[[str, str, int], Sequence[TestArtifact]] | None = None) -> dict[str, Split]:
+    """The train, validation and test splits of the pool (``source(pool, split, count)``;
+    default :func:`flowtest_env.pools.load_pool`, built on demand and cached), each scored
+    test written to ``out/pool/<split>/seed<N>.json``.
+
+    Raises
+    ------
+    ProblemError
+        If the source gives fewer tests than asked.
+    """
     from flowtest_env.pools import load_pool, split_seeds
 
+    def default(pool: str, split: str, count: int) -> Sequence[TestArtifact]:
+        return load_pool(pool, split, count, progress=progress)
+
+    load = source or default
     splits = {}
-    for name, count, what in (("train", config.train_count, "tests"), ("test", config.test_count, "held-out tests")):
+    for name in SPLIT_NAMES:
+        count = config.counts()[name]
         seeds = list(split_seeds(name, count))
-        arts = load_pool(config.pool, name, count, progress=progress)
-        split = Split(name, f"{config.pool} {name} ({count} {what})", seeds, arts)
-        for seed, art in zip(seeds, arts, strict=True):
+        arts = list(load(config.pool, name, count))
+        if len(arts) < count:
+            raise ProblemError(f"--pool {config.pool}: its {name} split has {len(arts)} tests, fewer than the {count} asked")
+        what = "held-out tests" if name == "test" else "tests"
+        split = Split(name, f"{config.pool} {name} ({config.scored(name)} of {count} {what})", seeds, arts[:count])
+        for seed, art in zip(seeds[:config.scored(name)], split.artifacts, strict=False):
             path = (out / "pool" / name / f"seed{seed}.json").resolve()
             write_atomically(path, art.save)
             split.files.append(path)
@@ -230,51 +317,89 @@ def load_splits(config: BenchmarkConfig, out: Path, progress: bool | None = None
     return splits
 
 
-# --------------------------------------------------------------------------- batch evaluation
+def _games_and_budgets(split: Split) -> tuple[list[Any], list[int]]:
+    from flowtest_env.envs import default_max_steps
+    from flowtest_env.game import TestGame
+
+    games = [TestGame(a) for a in split.scored]
+    return games, [default_max_steps(g) for g in games]
+
+
+# --------------------------------------------------------------------------- batched models
+
+
+class ModelBatchPolicy:
+    """A saved model (native or stable-baselines3, as :func:`agents.ppo.load_model` gives
+    it) as a batched policy of :mod:`flowtest_env.scoring`: greedy (``deterministic``) or
+    sampled, adding the visited-places memory when the model has it (``where``: the SUT's
+    place in the observation) and carrying a recurrent state. Sampling is seeded by
+    ``reset`` (torch's global generator, which stable-baselines3 samples from)."""
+
+    def __init__(self, model: Any, where: slice | None, deterministic: bool = True) -> None:
+        kind = type(model).__name__
+        self.model, self.where, self.deterministic = model, where, deterministic
+        self.recurrent = bool(getattr(model, "recurrent", kind == "RecurrentPPO"))
+        self.maskable = bool(getattr(model, "maskable", kind == "MaskablePPO"))
+        self.state: Any = None
+        self.seen: np.ndarray | None = None
+
+    def reset(self, num_runs: int, seed: int) -> None:
+        import torch
+
+        torch.manual_seed(int(seed))
+        self.state, self.seen = None, None
+
+    def __call__(self, observations: np.ndarray, masks: np.ndarray) -> np.ndarray:
+        obs = np.asarray(observations, dtype=np.float32)
+        starts = np.full(obs.shape[0], self.seen is None)
+        if self.where is not None:
+            here = obs[:, self.where]
+            self.seen = here.copy() if self.seen is None else np.maximum(self.seen, here)
+            obs = np.concatenate([obs, self.seen], axis=1)
+        elif self.seen is None:
+            self.seen = np.zeros((obs.shape[0], 0), dtype=np.float32)
+        kw: dict[str, Any] = {"deterministic": self.deterministic}
+        if self.maskable:
+            kw["action_masks"] = masks
+        if self.recurrent:
+            kw["state"], kw["episode_start"] = self.state, starts
+        actions, self.state = self.model.predict(obs, **kw)
+        return np.asarray(actions)
+
+
+def _model_where(model: Any, games: Sequence[Any], memory: str) -> slice | None:
+    from agents.native_ppo import shared_position_slice
+
+    if memory != "visited":
+        return None
+    return shared_position_slice(games, "flat")
 
 
 def batch_verdicts(model: Any, games: Sequence[Any], memory: str, budgets: Sequence[int]) -> dict[str, np.ndarray]:
     """Let the deterministic policy of ``model`` (a saved model as :func:`agents.ppo.load_model`
     gives it: native or stable-baselines3) play every test of ``games`` once, all at once in
-    one :class:`~flowtest_env.vector.PoolVectorEnv` (env ``i`` plays test ``i``), and return
-    the verdict arrays: ``system_objective`` (``"met"``, ``"violated"``, ``"open"``),
-    ``test_objective_realized``, ``restrictions``, ``steps``
-    (:func:`agents.native_ppo.batch_verdicts`).
-
-    Each test ends where the single env would end it: at its outcome, or at its own step
-    budget ``budgets[i]`` (``"open"``). ``memory`` is the model's (``"visited"`` appends
-    the places visited, as :class:`~flowtest_env.wrappers.VisitedPlaces`); a recurrent
-    model carries its state, a maskable one gets the masks.
+    one :class:`~flowtest_env.vector.PoolVectorEnv`, and return the verdict arrays
+    (``system_objective``, ``test_objective_realized``, ``restrictions``, ``steps``), one
+    entry per test. Each test ends at its outcome or its own step budget ``budgets[i]``
+    (the tests' :func:`~flowtest_env.envs.default_max_steps`, which the batch uses).
 
     Raises
     ------
     ValueError
         If the tests do not share where the observation holds the system's place.
     """
-    from agents.native_ppo import batch_verdicts as play_all
-    from agents.native_ppo import shared_position_slice
+    from flowtest_env.envs import default_max_steps
+    from flowtest_env.scoring import play_batch
 
-    where = shared_position_slice(games, "flat") if memory == "visited" else None
-    kind = type(model).__name__
-    recurrent = bool(getattr(model, "recurrent", kind == "RecurrentPPO"))
-    maskable = bool(getattr(model, "maskable", kind == "MaskablePPO"))
-    state: list[Any] = [None]
-
-    def act(x: np.ndarray, masks: np.ndarray, starts: np.ndarray) -> np.ndarray:
-        kw: dict[str, Any] = {"deterministic": True}
-        if maskable:
-            kw["action_masks"] = masks
-        if recurrent:
-            kw["state"], kw["episode_start"] = state[0], starts
-        actions, state[0] = model.predict(x, **kw)
-        return np.asarray(actions)
-
-    return play_all(act, games, budgets, where, seed=RUN_SEED)
+    if list(budgets) != [default_max_steps(g) for g in games]:
+        raise ValueError("the batch plays each test to its own default step budget")
+    policy = ModelBatchPolicy(model, _model_where(model, games, memory), deterministic=True)
+    return {k: v[0] for k, v in play_batch(policy, games, 1, RUN_SEED).items()}
 
 
 class CurveRecorder:
     """An SB3 callback that measures the learning curve: the share of the train tests and
-    of the held-out tests whose system objective the deterministic policy meets
+    of the validation tests whose system objective the deterministic policy meets
     (:func:`batch_verdicts`), for the model as it is after learning from ``step`` time
     steps: at the start, at the first rollout after every ``every`` steps, and at the end.
     It only reads the model: training goes exactly as without it."""
@@ -320,7 +445,8 @@ class CurveRecorder:
 
 @dataclass
 class TrainedBaseline:
-    """One trained model: algorithm, seed, where it is saved, its curve and time."""
+    """One trained model: algorithm, seed, training tests, where it is saved, its curve and
+    time, and its batched policies (greedy and sampled)."""
 
     algo: str
     seed: int
@@ -329,6 +455,8 @@ class TrainedBaseline:
     seconds: float
     curve_seconds: float
     curve: list[tuple[int, dict[str, float]]]
+    train_tests: int = 0
+    policies: dict[str, Any] = field(default_factory=dict)
 
     @property
     def sut(self) -> str:
@@ -336,54 +464,57 @@ class TrainedBaseline:
         return f"ppo:{self.path}"
 
 
-def _games_and_budgets(split: Split) -> tuple[list[Any], list[int]]:
-    from flowtest_env.envs import default_max_steps
-    from flowtest_env.game import TestGame
-
-    games = [TestGame(a) for a in split.artifacts]
-    return games, [default_max_steps(g) for g in games]
-
-
-def train_baseline(
-    config: BenchmarkConfig, algo: str, seed: int, splits: dict[str, Split], out: Path, progress_bar: bool = False
-) -> TrainedBaseline:
-    """Train one baseline on the train split (``config.steps`` time steps, rounded up to
-    whole rollouts), recording its learning curve on the train and the held-out tests;
-    save it to ``out/models/<algo>-seed<seed>.zip``."""
+def train_baseline(config: BenchmarkConfig, algo: str, seed: int, splits: dict[str, Split], out: Path,
+                   progress_bar: bool = False, train_tests: int | None = None, name: str | None = None) -> TrainedBaseline:
+    """Train one baseline on the first ``train_tests`` (default: all ``train_count``) tests
+    of the train split (``config.steps`` time steps, rounded up to whole rollouts),
+    recording its greedy learning curve on the scored train tests and the validation tests;
+    save it to ``out/models/<name or algo-seedN>.zip``."""
+    count = int(train_tests or config.train_count)
     every = max(1, math.ceil(config.steps / config.curve_points))
-    path = (out / "models" / f"{algo}-seed{seed}.zip").resolve()
-    pool_options = {"pool": config.pool, "split": "train", "count": config.train_count}
+    path = (out / "models" / f"{name or f'{algo}-seed{seed}'}.zip").resolve()
     if config.trainer == "native":
-        return _train_native_baseline(config, algo, seed, splits, path, every, progress_bar)
+        return _train_native_baseline(config, algo, seed, splits, path, every, progress_bar, count)
     settings = baseline_settings(algo, "sb3")
+    pool_options = {"pool": config.pool, "split": "train", "count": count}
     env = make_training_vec_env(POOL_ENV_ID, seed, settings, pool_options)
     model = make_model(env, settings, seed)
-    recorder = CurveRecorder(every, settings["memory"], {name: _games_and_budgets(s) for name, s in splits.items()})
-
+    shown = {"train": _games_and_budgets(splits["train"]), "validation": _games_and_budgets(splits["validation"])}
+    shown["train"] = (shown["train"][0][:count], shown["train"][1][:count])
+    recorder = CurveRecorder(every, settings["memory"], shown)
     seconds = learn(model, config.steps, recorder, progress_bar)
     write_atomically(path, lambda tmp: model.save(str(tmp)))
     mark_own_file(path)  # scored below without --trust-model: this run wrote it
     env.close()
-    return TrainedBaseline(algo, seed, path, int(model.num_timesteps), seconds, recorder.seconds, recorder.points)
+    where = _model_where(model, shown["train"][0], settings["memory"])
+    policies = {"greedy": ModelBatchPolicy(model, where, True), "sampled": ModelBatchPolicy(model, where, False)}
+    return TrainedBaseline(algo, seed, path, int(model.num_timesteps), seconds, recorder.seconds, recorder.points, count,
+                           policies)
 
 
 def _train_native_baseline(config: BenchmarkConfig, algo: str, seed: int, splits: dict[str, Split], path: Path,
-                           every: int, progress_bar: bool) -> TrainedBaseline:
-    """One baseline with the native trainer on the train split's tests (the env plays
-    exactly them), its greedy curve measured by the trainer on the train and held-out tests."""
-    from agents.native_ppo import save_policy
+                           every: int, progress_bar: bool, count: int) -> TrainedBaseline:
+    """One baseline with the native trainer on the first ``count`` train tests (the env
+    plays exactly them), its greedy curve measured by the trainer on the scored train tests
+    and the validation tests."""
+    from agents.native_ppo import BatchActor, save_policy
     from agents.native_ppo import train as native_train
     from flowtest_env.game import TestGame
 
     settings = baseline_settings(algo)
-    pool_options = {"pool": config.pool, "split": "train", "count": config.train_count}
+    pool_options = {"pool": config.pool, "split": "train", "count": count}
     args = native_args(settings, POOL_ENV_ID, pool_options, config.steps, seed, eval_every=every)
-    heldout = [TestGame(a) for a in splits["test"].artifacts]
-    result = native_train(args, heldout=heldout, progress_bar=progress_bar)
+    if "level_sampling" in settings:
+        args = dataclasses.replace(args, level_sampling=settings["level_sampling"])
+    monitor = [TestGame(a) for a in splits["validation"].scored]
+    result = native_train(args, heldout=monitor, progress_bar=progress_bar, evaluate_train=min(count, config.scored("train")))
     write_atomically(path, lambda tmp: save_policy(tmp, result.agent, result.settings))
-    names = {"train": "train", "heldout": "test"}
+    names = {"train": "train", "heldout": "validation"}
     curve = [(step, {names[k]: v["met"] for k, v in rates.items()}) for step, rates in result.evaluations]
-    return TrainedBaseline(algo, seed, path, result.steps, result.seconds, result.eval_seconds, curve)
+    pos = result.settings.get("position")
+    where = slice(int(pos[0]), int(pos[1])) if pos else None
+    policies = {"greedy": BatchActor(result.agent, where, True), "sampled": BatchActor(result.agent, where, False)}
+    return TrainedBaseline(algo, seed, path, result.steps, result.seconds, result.eval_seconds, curve, count, policies)
 
 
 # --------------------------------------------------------------------------- scoring
@@ -405,9 +536,10 @@ def _policy_factory(sut: str) -> Callable[[Any], Any]:
     return lambda env: make_policy(sut, env)
 
 
-def score_systems(suts: Sequence[str], split: Split) -> dict[str, list[Trace]]:
-    """Every system plays every test of ``split`` once (seed :data:`RUN_SEED`), through
-    the single env of the test's file, as ``flowtest evaluate --env FILE`` runs it.
+def score_systems(suts: Sequence[str], split: Split, limit: int | None = None) -> dict[str, list[Trace]]:
+    """Every system plays every scored test of ``split`` (the first ``limit`` of them when
+    given) once (seed :data:`RUN_SEED`), through the single env of the test's file, as
+    ``flowtest evaluate --env FILE`` runs it.
 
     Raises
     ------
@@ -418,7 +550,7 @@ def score_systems(suts: Sequence[str], split: Split) -> dict[str, list[Trace]]:
 
     factories = {sut: _policy_factory(sut) for sut in suts}
     traces: dict[str, list[Trace]] = {sut: [] for sut in suts}
-    for path in split.files:
+    for path in split.files[:limit]:
         env = make_env(str(path))
         for sut, factory in factories.items():
             try:
@@ -426,15 +558,84 @@ def score_systems(suts: Sequence[str], split: Split) -> dict[str, list[Trace]]:
             except PolicyError as exc:
                 raise ProblemError(f"--sut {sut} cannot play the pool's tests: {exc}") from None
             traces[sut].append(run_episode(env, policy, str(path), sut, RUN_SEED))
+            close = getattr(policy, "close", None)
+            if callable(close):
+                close()
         env.close()
     return traces
 
 
+def batched_system(sut: str, runs: int) -> dict[str, Any] | None:
+    """The batched policies of a system that has them (``{"greedy": policy, "sampled":
+    policy}``, either may be missing), or ``None`` when it plays through the single env:
+    ``random`` (sampled only), a native checkpoint ``ppo:PATH`` (both), and a
+    ``python:MODULE:NAME`` object marked ``batched = True`` (a class is instantiated with
+    no argument; its ``deterministic`` attribute, default true, says whether it is greedy).
+
+    Raises
+    ------
+    ProblemError
+        If the named object cannot be loaded.
+    """
+    from agents.base import PolicyError
+    from flowtest_env.scoring import random_policy
+
+    if sut == RANDOM:
+        return {"sampled": random_policy()}
+    if sut.startswith("ppo:"):
+        from agents.checkpoint import CheckpointError, is_native_checkpoint
+
+        if not is_native_checkpoint(sut[4:]):
+            return None
+        from agents.native_ppo import load_native
+
+        try:
+            model = load_native(sut[4:])
+        except CheckpointError as exc:
+            raise ProblemError(f"--sut {sut}: {exc}") from None
+        return {"greedy": model.batch_policy(True), "sampled": model.batch_policy(False)}
+    if sut.startswith("python:"):
+        from agents.external import resolve
+
+        try:
+            obj = resolve(sut[len("python:"):])
+        except PolicyError as exc:
+            raise ProblemError(f"--sut {sut}: {exc}") from None
+        if not getattr(obj, "batched", False):
+            return None
+        policy = obj() if isinstance(obj, type) else obj
+        return {"greedy" if getattr(policy, "deterministic", True) else "sampled": policy}
+    return None
+
+
+def verdict_metrics(v: dict[str, np.ndarray]) -> dict[str, Any]:
+    """The numbers of one policy on one split from verdict arrays ``[runs, tests]``: ``met``
+    (share of runs met), ``realized`` (share of the met runs that realized the test
+    objective), ``restrictions`` (mean per run), ``steps`` (mean of the met runs),
+    ``violated``, ``open``, ``test_failures`` (met runs that did not realize the test
+    objective: a FlowTest bug), ``runs`` and ``tests``, and ``per_test`` (share of each
+    test's runs met)."""
+    from flowtest_env.scoring import summarize
+
+    s = summarize(v)
+    met = np.asarray(v["system_objective"]) == "met"
+    realized = np.asarray(v["test_objective_realized"], dtype=bool)
+    return {"tests": s.tests, "runs": s.runs, "met": s.met, "realized": s.realized, "restrictions": s.restrictions,
+            "steps": s.steps, "violated": s.violated, "open": s.open, "test_failures": int((met & ~realized).sum()),
+            "per_test": list(s.per_test_met)}
+
+
+def trace_verdicts(traces: Sequence[Trace]) -> dict[str, np.ndarray]:
+    """The verdict arrays ``[1, tests]`` of single-env runs."""
+    return {k: np.array([[t.verdict[k] for t in traces]], dtype=object if k == "system_objective" else None)
+            for k in ("system_objective", "test_objective_realized", "restrictions", "steps")}
+
+
 def split_metrics(traces: Sequence[Trace]) -> dict[str, Any]:
-    """The numbers of one system on one split: ``met`` (share of the tests whose system
-    objective was met), ``realized`` (share of those that realized the test objective;
-    ``None`` if none met), ``restrictions`` (mean restricted decisions per run),
-    ``steps`` (mean steps of the runs that met; ``None`` if none), and counts."""
+    """The numbers of one system on one split from single-env runs: ``met`` (share of the
+    tests whose system objective was met), ``realized`` (share of those that realized the
+    test objective; ``None`` if none met), ``restrictions`` (mean restricted decisions per
+    run), ``steps`` (mean steps of the runs that met; ``None`` if none), and counts."""
     met = [t for t in traces if t.verdict["system_objective"] == "met"]
     n = len(traces)
     return {
@@ -473,68 +674,164 @@ def mean_ci(values: Sequence[float | None]) -> dict[str, Any]:
     return {"mean": mean, "ci95": ci, "values": list(values)}
 
 
+def normalized_summary(per_seed_tests: Sequence[Sequence[float]], floor: float | None, ceiling: float | None,
+                       reps: int, seed: int = 0) -> dict[str, Any]:
+    """The normalized score of one policy on one split from its per-test met shares
+    ``[seeds][tests]``: ``iqm`` (the interquartile mean over seeds of each seed's normalized
+    score) with its stratified-bootstrap 95 % interval ``low``, ``high``
+    (:func:`flowtest_env.scoring.stratified_bootstrap`), ``mean`` over seeds, the
+    ``worst10`` (the mean normalized score of the worst 10 % of the tests, each test's met
+    averaged over seeds) and its raw ``worst10_met``; ``None`` values when there is no scale
+    (no floor or ceiling, or the ceiling not above the floor)."""
+    from flowtest_env.scoring import normalized, stratified_bootstrap, worst_share_mean
+
+    m = np.asarray(per_seed_tests, dtype=np.float64)
+    worst = worst_share_mean(m.mean(axis=0), WORST_SHARE)
+    out: dict[str, Any] = {"iqm": None, "low": None, "high": None, "mean": None, "worst10": normalized(worst, floor, ceiling),
+                           "worst10_met": worst, "seeds": int(m.shape[0]), "tests": int(m.shape[1])}
+    if floor is None or ceiling is None or not ceiling > floor:
+        return out
+    z = (m - floor) / (ceiling - floor)
+    point, low, high = stratified_bootstrap(z, reps=reps, seed=seed)
+    out.update(iqm=point, low=low, high=high, mean=float(z.mean()))
+    return out
+
+
 # --------------------------------------------------------------------------- the table
 
 
-def benchmark_table(
-    config: BenchmarkConfig,
-    splits: dict[str, Split],
-    trained: Sequence[TrainedBaseline],
-    traces: dict[str, dict[str, list[Trace]]],
-) -> dict[str, Any]:
-    """The benchmark's numbers (``table.json``): per system its per-seed metrics on both
-    splits, their means with confidence intervals, and the held-out gap (train met minus
-    held-out met, per seed); the headline is each baseline's gap."""
-    systems: list[dict[str, Any]] = []
-    groups: list[tuple[str, str, list[tuple[int | None, str]]]] = []
-    for algo in config.baselines():
-        runs: list[tuple[int | None, str]] = [(b.seed, b.sut) for b in trained if b.algo == algo]
-        groups.append((algo, "baseline", runs))
-    for sut in config.others():
-        groups.append((sut, "reference" if sut in REFERENCES else "system", [(None, sut)]))
-    for name, kind, runs in groups:
-        per_seed = []
-        for seed, sut in runs:
-            row: dict[str, Any] = {"seed": seed, "sut": sut, **{s: split_metrics(traces[s][sut]) for s in splits}}
-            row["gap"] = None if row["train"]["met"] is None or row["test"]["met"] is None else row["train"]["met"] - row["test"]["met"]
-            per_seed.append(row)
-        summary: dict[str, Any] = {}
-        for s in splits:
-            summary[s] = {key: mean_ci([r[s][key] for r in per_seed]) for key in ("met", "realized", "restrictions", "steps")}
-            summary[s]["test_failures"] = sum(r[s]["test_failures"] for r in per_seed)
-        summary["gap"] = mean_ci([r["gap"] for r in per_seed])
-        entry: dict[str, Any] = {"name": name, "kind": kind, "runs": per_seed, **summary}
-        if kind == "baseline":
-            mine = [b for b in trained if b.algo == name]
-            entry["settings"] = baseline_settings(name, config.trainer)
-            entry["training"] = [
-                {"seed": b.seed, "steps": b.steps, "seconds": round(b.seconds, 1), "curve_seconds": round(b.curve_seconds, 1),
-                 "model": str(b.path), "curve": [[step, rates.get("train"), rates.get("test")] for step, rates in b.curve]}
-                for b in mine
-            ]
-        systems.append(entry)
+@dataclass
+class SystemRuns:
+    """What one system did: per seed (or once) and split, the metrics of its greedy and
+    sampled play (``None`` where it has no such mode)."""
+
+    name: str
+    kind: str  # baseline, floor, reference, system
+    runs: list[dict[str, Any]]  # {"seed", "sut", split: {"greedy": metrics|None, "sampled": metrics|None}}
+
+
+def scale_of(systems: Sequence[SystemRuns]) -> dict[str, dict[str, Any]]:
+    """Per split, the floor (random's met) and the ceiling (the best reference's met)."""
+    scale: dict[str, dict[str, Any]] = {}
+    floor = next((s for s in systems if s.kind == "floor"), None)
+    refs = [s for s in systems if s.kind == "reference"]
+    for split in SPLIT_NAMES:
+        f = floor.runs[0][split]["sampled"]["met"] if floor and floor.runs[0].get(split) else None
+        best, who = None, None
+        for r in refs:
+            if r.runs[0].get(split):
+                met = r.runs[0][split]["greedy"]["met"]
+                if best is None or met > best:
+                    best, who = met, r.name
+        scale[split] = {"floor": f, "ceiling": best, "ceiling_from": who}
+    return scale
+
+
+def _mode_summary(runs: Sequence[dict[str, Any]], split: str, mode: str, scale: dict[str, Any], reps: int) -> dict[str, Any] | None:
+    rows = [r[split][mode] for r in runs if r.get(split) and r[split].get(mode)]
+    if not rows:
+        return None
+    out: dict[str, Any] = {key: mean_ci([r[key] for r in rows]) for key in ("met", "realized", "restrictions", "steps")}
+    out["runs_per_test"] = rows[0]["runs"]
+    out["test_failures"] = sum(r["test_failures"] for r in rows)
+    out["normalized"] = normalized_summary([r["per_test"] for r in rows], scale["floor"], scale["ceiling"], reps)
+    return out
+
+
+def system_entry(s: SystemRuns, scale: dict[str, dict[str, Any]], reps: int) -> dict[str, Any]:
+    """A system's entry in ``table.json`` (docs/benchmark-protocol.md, *The results file*)."""
+    entry: dict[str, Any] = {"name": s.name, "kind": s.kind, "runs": []}
+    for r in s.runs:
+        row: dict[str, Any] = {"seed": r["seed"], "sut": r["sut"]}
+        for split in SPLIT_NAMES:
+            if not r.get(split):
+                continue
+            main = r[split]["greedy"] or r[split]["sampled"]
+            row[split] = {k: main[k] for k in ("met", "realized", "restrictions", "steps", "test_failures")}
+            row[split]["greedy"] = r[split]["greedy"]
+            row[split]["sampled"] = r[split]["sampled"]
+        tr, te = row.get("train"), row.get("test")
+        row["gap"] = None if tr is None or te is None or tr["met"] is None or te["met"] is None else tr["met"] - te["met"]
+        entry["runs"].append(row)
+    for split in SPLIT_NAMES:
+        greedy = _mode_summary(s.runs, split, "greedy", scale[split], reps)
+        sampled = _mode_summary(s.runs, split, "sampled", scale[split], reps)
+        main = greedy or sampled
+        if main is None:
+            continue
+        entry[split] = {k: main[k] for k in ("met", "realized", "restrictions", "steps", "test_failures")}
+        entry[split]["headline_mode"] = "greedy" if greedy else "sampled"
+        entry[split]["greedy"], entry[split]["sampled"] = greedy, sampled
+    entry["gap"] = mean_ci([r["gap"] for r in entry["runs"]])
+    return entry
+
+
+def _commit() -> str | None:
+    try:
+        root = Path(__file__).resolve().parents[2]
+        out = subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True, text=True, timeout=5, check=False)
+        return out.stdout.strip() or None if out.returncode == 0 else None
+    except (OSError, subprocess.SubprocessError):
+        return None
+
+
+def machine() -> dict[str, Any]:
+    """Where the benchmark ran: platform, processor, CPU count, load average at the end."""
+    try:
+        load = [round(x, 2) for x in os.getloadavg()]
+    except OSError:
+        load = None
+    return {"platform": platform.platform(), "processor": platform.processor() or platform.machine(),
+            "cpus": os.cpu_count(), "load_average": load, "python": platform.python_version()}
+
+
+def benchmark_table(config: BenchmarkConfig, splits: dict[str, Split], systems: Sequence[SystemRuns],
+                    trained: Sequence[TrainedBaseline], curve: list[dict[str, Any]] | None = None) -> dict[str, Any]:
+    """The benchmark's results document (``table.json``; docs/benchmark-protocol.md)."""
+    scale = scale_of(systems)
+    entries = [system_entry(s, scale, config.bootstrap) for s in systems]
+    for e in entries:
+        if e["kind"] != "baseline":
+            continue
+        mine = [b for b in trained if b.algo == e["name"] and b.train_tests == config.train_count]
+        e["settings"] = baseline_settings(e["name"], config.trainer)
+        e["training"] = [
+            {"seed": b.seed, "steps": b.steps, "seconds": round(b.seconds, 1), "curve_seconds": round(b.curve_seconds, 1),
+             "model": str(b.path), "curve": [[step, rates.get("train"), rates.get("validation")] for step, rates in b.curve]}
+            for b in mine
+        ]
+    baselines = [e for e in entries if e["kind"] == "baseline"]
+    headline = {
+        "normalized_held_out": {e["name"]: {m: (e["test"][m] or {}).get("normalized") for m in ("greedy", "sampled")}
+                                for e in baselines if "test" in e},
+        "held_out_gap": {e["name"]: e["gap"] for e in baselines},
+    }
     return {
+        "format": RESULTS_FORMAT, "version": RESULTS_VERSION,
         "pool": config.pool,
-        "splits": {s: {"count": len(sp.seeds), "seeds": [sp.seeds[0], sp.seeds[-1]]} for s, sp in splits.items()},
+        "splits": {s: {"count": len(sp.artifacts), "scored": len(sp.files), "seeds": [sp.seeds[0], sp.seeds[-1]]}
+                   for s, sp in splits.items()},
         "config": {"steps": config.steps, "seeds": list(config.seeds), "algos": config.baselines(), "trainer": config.trainer,
-                   "curve_points": config.curve_points, "suts": list(config.suts)},
-        "headline": {"held_out_gap": {e["name"]: e["gap"] for e in systems if e["kind"] == "baseline"}},
-        "systems": systems,
+                   "runs": config.runs, "curve_points": config.curve_points, "curve_sizes": config.curve(),
+                   "curve_seeds": config.curve_seeds, "suts": list(config.suts), "bootstrap": config.bootstrap,
+                   "train_eval_count": config.train_eval_count, "report_tests": config.report_tests},
+        "budget": {"steps_per_run": config.steps,
+                   "training_runs": len(trained),
+                   "training_steps": int(sum(b.steps for b in trained))},
+        "scale": scale,
+        "headline": headline,
+        "systems": entries,
+        "generalization": curve or [],
+        "commit": _commit(),
+        "machine": machine(),
     }
 
 
-def _pct(stat: dict[str, Any]) -> str:
-    if stat["mean"] is None:
+def _pct(stat: dict[str, Any] | None) -> str:
+    if not stat or stat["mean"] is None:
         return "–"
     ci = "" if stat["ci95"] is None else f" ± {100 * stat['ci95']:.1f}"
     return f"{100 * stat['mean']:.1f} %{ci}"
-
-
-def _num(stat: dict[str, Any]) -> str:
-    if stat["mean"] is None:
-        return "–"
-    ci = "" if stat["ci95"] is None else f" ± {stat['ci95']:.1f}"
-    return f"{stat['mean']:.1f}{ci}"
 
 
 def _gap(stat: dict[str, Any]) -> str:
@@ -544,8 +841,20 @@ def _gap(stat: dict[str, Any]) -> str:
     return f"{100 * stat['mean']:+.1f} pp{ci}"
 
 
-TABLE_COLUMNS = ["system", "kind", "seeds", "train: met", "held-out: met", "held-out gap", "held-out: realized (of met)",
-                 "held-out: restrictions", "held-out: steps (met runs)"]
+def _norm(n: dict[str, Any] | None) -> str:
+    if not n or n.get("iqm") is None:
+        return "–"
+    return f"{n['iqm']:.2f} [{n['low']:.2f}, {n['high']:.2f}]"
+
+
+def _mode(e: dict[str, Any], split: str, mode: str) -> dict[str, Any] | None:
+    s = e.get(split)
+    return None if s is None else s.get(mode)
+
+
+TABLE_COLUMNS = ["system", "kind", "seeds", "held-out normalized, greedy: IQM [95 % CI]", "held-out normalized, sampled",
+                 "held-out met, greedy", "held-out met, sampled", "worst 10 % held-out (normalized)", "validation met",
+                 "train met", "held-out gap", "held-out realized (of met)"]
 
 
 def table_rows(doc: dict[str, Any]) -> list[list[str]]:
@@ -553,52 +862,76 @@ def table_rows(doc: dict[str, Any]) -> list[list[str]]:
     rows = []
     for e in doc["systems"]:
         seeds = ", ".join(str(r["seed"]) for r in e["runs"]) if e["kind"] == "baseline" else "–"
-        rows.append([e["name"], e["kind"], seeds, _pct(e["train"]["met"]), _pct(e["test"]["met"]), _gap(e["gap"]),
-                     _pct(e["test"]["realized"]), _num(e["test"]["restrictions"]), _num(e["test"]["steps"])])
+        g, s = _mode(e, "test", "greedy"), _mode(e, "test", "sampled")
+        head = g or s
+        worst = "–"
+        if head and head["normalized"]["worst10"] is not None:
+            worst = f"{head['normalized']['worst10']:.2f} ({100 * head['normalized']['worst10_met']:.1f} % met)"
+        rows.append([e["name"], e["kind"], seeds, _norm(g["normalized"] if g else None), _norm(s["normalized"] if s else None),
+                     _pct(g["met"] if g else None), _pct(s["met"] if s else None), worst,
+                     _pct(e["validation"]["met"] if "validation" in e else None), _pct(e["train"]["met"] if "train" in e else None),
+                     _gap(e["gap"]), _pct(e["test"]["realized"] if "test" in e else None)])
     return rows
 
 
 def headline_text(doc: dict[str, Any]) -> str:
-    """One line: each baseline's held-out gap."""
-    parts = [f"{name} {_gap(stat)}" for name, stat in doc["headline"]["held_out_gap"].items()]
-    return "held-out gap (train met - held-out met): " + ("; ".join(parts) if parts else "no baseline trained")
+    """One line: each baseline's held-out normalized score (IQM and interval), greedy."""
+    parts = []
+    for name, modes in doc["headline"]["normalized_held_out"].items():
+        parts.append(f"{name} {_norm(modes.get('greedy'))} greedy, {_norm(modes.get('sampled'))} sampled")
+    return "held-out normalized score (0 = random, 1 = reference): " + ("; ".join(parts) if parts else "no baseline trained")
 
 
 def table_markdown(doc: dict[str, Any]) -> str:
-    """``table.md``: the headline, the table, and what the columns mean."""
-    tr, te = doc["splits"]["train"], doc["splits"]["test"]
-    cfg = doc["config"]
+    """``table.md``: the headline, the budget, the table, the curve and what the columns mean."""
+    sp, cfg, sc = doc["splits"], doc["config"], doc["scale"]
+
+    def frac(x: float | None) -> str:
+        return "–" if x is None else f"{100 * x:.1f} %"
+
     lines = [
         f"# FlowTest benchmark: {doc['pool']}", "",
         f"**{headline_text(doc)}**", "",
-        f"Train split: {tr['count']} tests (seeds {tr['seeds'][0]}-{tr['seeds'][1]}); held-out: the test split, "
-        f"{te['count']} tests (seeds {te['seeds'][0]}-{te['seeds'][1]}), never seen in training. Baselines: "
-        f"{cfg['steps']:,} time steps per run, training seeds {', '.join(map(str, cfg['seeds']))}; the final model "
-        "is scored (no model selection).", "",
+        f"Splits: train {sp['train']['count']} tests (the first {sp['train']['scored']} scored), validation "
+        f"{sp['validation']['count']}, held-out test {sp['test']['count']} (never seen in training). "
+        f"Scale per split (met): floor = random ({cfg['runs']} runs per test) "
+        + ", ".join(f"{s} {frac(sc[s]['floor'])}" for s in SPLIT_NAMES)
+        + "; ceiling = the best reference " + ", ".join(f"{s} {frac(sc[s]['ceiling'])}" for s in SPLIT_NAMES) + ".", "",
+        f"**Budget**: {cfg['steps']:,} time steps per training run, {doc['budget']['training_runs']} runs "
+        f"({doc['budget']['training_steps']:,} steps in all, trainer {cfg['trainer']}); training seeds "
+        f"{', '.join(map(str, cfg['seeds']))}; the final model is scored (no model selection).", "",
         "| " + " | ".join(TABLE_COLUMNS) + " |", "|" + "---|" * len(TABLE_COLUMNS),
     ]
     lines += ["| " + " | ".join(row) + " |" for row in table_rows(doc)]
+    if doc["generalization"]:
+        lines += ["", "## Generalization curve (held-out normalized score against training tests)", "",
+                  "| training tests | seeds | greedy: IQM [95 % CI] | sampled: IQM [95 % CI] | train met (greedy) |",
+                  "|---|---|---|---|---|"]
+        for p in doc["generalization"]:
+            lines.append(f"| {p['train_tests']:,} | {len(p['seeds'])} | {_norm(p['greedy'])} | {_norm(p['sampled'])} | "
+                         f"{frac(p['train_met'])} |")
     lines += [
         "",
-        "Each system plays each test once (the tests and the policies are deterministic). *Met*: share of the tests "
-        "whose system objective was met. *Realized (of met)*: share of those runs that also realized the hidden test "
-        "objective (the synthesized test guarantees 100 %). *Restrictions*: mean number of decisions taken while a "
-        "move was restricted. *Steps*: mean steps of the runs that met. ± is the half-width of the 95 % confidence "
-        "interval of the mean over training seeds (Student's t). *Held-out gap*: train met minus held-out met, in "
-        "percentage points, per seed, then averaged.",
+        "*Normalized*: (met - floor) / (ceiling - floor) on the split, 0 = random, 1 = the reference; IQM: the "
+        "interquartile mean over training seeds of each seed's score; [95 % CI]: stratified bootstrap (seeds resampled, "
+        f"tests resampled within each seed), {cfg['bootstrap']} replicates. *Greedy*: each test played once by the most "
+        f"likely action; *sampled*: {cfg['runs']} seeded runs per test drawn from the policy. *Worst 10 %*: the mean "
+        "over the 10 % of held-out tests the policy met least often. *Met*: share of runs whose system objective was "
+        "met (± 95 % t-interval over seeds). *Realized (of met)*: share of those that also realized the hidden test "
+        "objective (the synthesized test guarantees 100 %). *Held-out gap*: train met minus held-out met per seed.",
     ]
-    bugs = [e["name"] for e in doc["systems"] if e["train"]["test_failures"] or e["test"]["test_failures"]]
+    bugs = [e["name"] for e in doc["systems"] if any(e.get(s, {}).get("test_failures") for s in SPLIT_NAMES)]
     if bugs:
         lines += ["", f"**FLOWTEST BUG: a test failed its guarantee for {', '.join(bugs)}; see report.html.**"]
     return "\n".join(lines) + "\n"
 
 
-COLORS = {"maskable-ppo": "#1f77b4", "recurrent-ppo": "#d62728"}
+COLORS = {"maskable-ppo": "#1f77b4", "recurrent-ppo": "#d62728", "plr-ppo": "#9467bd"}
 
 
 def plot_learning_curves(doc: dict[str, Any], path: Path) -> None:
-    """Share of tests met against time steps, per baseline: on the train tests (solid)
-    and the held-out tests (dashed), the mean over seeds with its 95 % band."""
+    """Share of tests met against time steps, per baseline: on the scored train tests
+    (solid) and the validation tests (dashed), the mean over seeds with its 95 % band."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -606,28 +939,63 @@ def plot_learning_curves(doc: dict[str, Any], path: Path) -> None:
 
     fig, ax = plt.subplots(figsize=(7.5, 4.6))
     for e in doc["systems"]:
-        if e["kind"] != "baseline" or not e["training"]:
+        if e["kind"] != "baseline" or not e.get("training"):
             continue
         color = COLORS.get(e["name"], None)
         steps = [p[0] for p in e["training"][0]["curve"]]
-        for col, split, style in ((1, "train", "-"), (2, "held-out", "--")):
+        for col, split, style in ((1, "train", "-"), (2, "validation", "--")):
             runs = [[p[col] for p in t["curve"]] for t in e["training"] if len(t["curve"]) == len(steps)]
             stats = [mean_ci([r[k] for r in runs]) for k in range(len(steps))]
+            if any(s["mean"] is None for s in stats):
+                continue
             mean = np.array([100 * s["mean"] for s in stats])
             ax.plot(steps, mean, style, color=color, lw=2, label=f"{e['name']}, {split} tests")
             if len(runs) > 1:
                 half = np.array([100 * (s["ci95"] or 0.0) for s in stats])
                 ax.fill_between(steps, np.clip(mean - half, 0, 100), np.clip(mean + half, 0, 100), color=color, alpha=0.12)
-    refs = [e["name"] for e in doc["systems"] if e["kind"] == "reference" and e["test"]["met"]["mean"] is not None]
-    if refs:
-        best = min(next(e for e in doc["systems"] if e["name"] == r)["test"]["met"]["mean"] for r in refs)
-        ax.axhline(100 * best, color="#2ca02c", lw=1, ls=":", label=f"{', '.join(refs)} (held-out)")
+    floor = doc["scale"]["validation"]["floor"]
+    if floor is not None:
+        ax.axhline(100 * floor, color="#7f7f7f", lw=1, ls=":", label="random (validation)")
+    ceiling = doc["scale"]["validation"]["ceiling"]
+    if ceiling is not None:
+        ax.axhline(100 * ceiling, color="#2ca02c", lw=1, ls=":", label="reference (validation)")
     ax.set_xlabel("time steps")
     ax.set_ylabel("tests whose system objective is met (%)")
     ax.set_ylim(-3, 103)
     ax.grid(alpha=0.3)
-    ax.set_title(f"{doc['pool']}: {doc['splits']['train']['count']} train tests, "
-                 f"{doc['splits']['test']['count']} held-out tests (mean over seeds, 95 % band)", fontsize=10)
+    ax.set_title(f"{doc['pool']}: greedy play during training (mean over seeds, 95 % band)", fontsize=10)
+    ax.legend(fontsize=8, loc="best")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def plot_generalization(doc: dict[str, Any], path: Path) -> None:
+    """The held-out normalized score (IQM with its 95 % interval) against the number of
+    training tests (log scale), greedy and sampled."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    pts = doc["generalization"]
+    fig, ax = plt.subplots(figsize=(6.5, 4.2))
+    for mode, color in (("greedy", "#1f77b4"), ("sampled", "#ff7f0e")):
+        xs = [p["train_tests"] for p in pts if p[mode]["iqm"] is not None]
+        if not xs:
+            continue
+        ys = np.array([p[mode]["iqm"] for p in pts if p[mode]["iqm"] is not None])
+        lo = np.array([p[mode]["low"] for p in pts if p[mode]["iqm"] is not None])
+        hi = np.array([p[mode]["high"] for p in pts if p[mode]["iqm"] is not None])
+        ax.plot(xs, ys, "o-", color=color, lw=2, label=f"{pts[0]['algo']}, {mode}")
+        ax.fill_between(xs, lo, hi, color=color, alpha=0.15)
+    ax.axhline(0.0, color="#7f7f7f", lw=1, ls=":", label="random (0)")
+    ax.axhline(1.0, color="#2ca02c", lw=1, ls=":", label="reference (1)")
+    ax.set_xscale("log", base=2)
+    ax.set_xlabel("training tests")
+    ax.set_ylabel("held-out normalized score (IQM, 95 % CI)")
+    ax.grid(alpha=0.3)
+    ax.set_title(f"{doc['pool']}: generalization ({doc['splits']['test']['count']} held-out tests)", fontsize=10)
     ax.legend(fontsize=8, loc="best")
     fig.tight_layout()
     fig.savefig(path, dpi=100)
@@ -637,7 +1005,7 @@ def plot_learning_curves(doc: dict[str, Any], path: Path) -> None:
 # --------------------------------------------------------------------------- the whole run
 
 
-def _split_infos(splits: dict[str, Split], out: Path) -> list[TestInfo]:
+def _split_infos(splits: dict[str, Split], out: Path, shown: int) -> list[TestInfo]:
     """What the report shows of each split's column: the first test's picture and the
     pool's objectives (the same formulas for every test of a pool)."""
     from flowtest_env.envs import default_max_steps
@@ -646,56 +1014,178 @@ def _split_infos(splits: dict[str, Split], out: Path) -> list[TestInfo]:
     from .filmstrip import start_picture
 
     infos = []
-    for split in splits.values():
+    for name in REPORT_SPLITS:
+        split = splits[name]
         art = split.artifacts[0]
         game = TestGame(art)
-        name = f"tests/{split.name}-split-first.png"
-        write_atomically(out / name, partial(start_picture, game))
+        picture = f"tests/{split.name}-split-first.png"
+        write_atomically(out / picture, partial(start_picture, game))
         infos.append(TestInfo(
-            env_id=split.label, problem=f"{art.name} (the first of {len(split.seeds)})", kind=str(art.kind),
+            env_id=_report_label(split, shown), problem=f"{art.name} (the first of {len(split.seeds)})", kind=str(art.kind),
             system_objective=str(art.objectives.get("system", "")), test_objective=str(art.objectives.get("test", "")),
-            max_steps=default_max_steps(game), picture=name,
+            max_steps=default_max_steps(game), picture=picture,
         ))
     return infos
 
 
+def _report_label(split: Split, shown: int) -> str:
+    return f"{split.label.rsplit(' (', 1)[0]} (report: the first {min(shown, len(split.files))} tests)"
+
+
+def score_all(config: BenchmarkConfig, splits: dict[str, Split], trained: Sequence[TrainedBaseline],
+              say: Callable[[str], None]) -> tuple[list[SystemRuns], dict[str, dict[str, list[Trace]]]]:
+    """Score every system on every split (module docstring, step 3); return the systems'
+    runs and the single-env traces (for the report)."""
+    from flowtest_env.game import TestGame
+    from flowtest_env.scoring import play_batch
+
+    games = {name: [TestGame(a) for a in split.scored] for name, split in splits.items()}
+
+    def batched(policies: dict[str, Any]) -> dict[str, Any]:
+        row: dict[str, Any] = {}
+        for split in SPLIT_NAMES:
+            row[split] = {"greedy": None, "sampled": None}
+            for mode, policy in policies.items():
+                v = play_batch(policy, games[split], 1 if mode == "greedy" else config.runs, RUN_SEED)
+                row[split][mode] = verdict_metrics(v)
+        return row
+
+    systems: list[SystemRuns] = []
+    for algo in config.baselines():
+        runs = []
+        for b in (b for b in trained if b.algo == algo and b.train_tests == config.train_count):
+            say(f"scoring {algo} seed {b.seed} (greedy, and {config.runs} sampled runs per test)")
+            runs.append({"seed": b.seed, "sut": b.sut, **batched(b.policies)})
+        systems.append(SystemRuns(algo, "baseline", runs))
+    single: list[str] = []
+    for sut in config.others():
+        policies = batched_system(sut, config.runs)
+        kind = "floor" if sut == RANDOM else "reference" if sut in REFERENCES else "system"
+        if policies is None:
+            single.append(sut)
+            systems.append(SystemRuns(sut, kind, []))
+            continue
+        say(f"scoring {sut} in one batch per split")
+        systems.append(SystemRuns(sut, kind, [{"seed": None, "sut": sut, **batched(policies)}]))
+    traces: dict[str, dict[str, list[Trace]]] = {}
+    report_suts = [RANDOM] + [b.sut for b in _report_models(config, trained)]
+    for name, split in splits.items():
+        say(f"scoring {', '.join(single) or 'no system'} through the single env on the {len(split.files)} {name} tests"
+            + (" and the report's sample" if name in REPORT_SPLITS else ""))
+        traces[name] = score_systems(single, split)
+        if name in REPORT_SPLITS:
+            traces[name].update(score_systems(report_suts, split, config.report_tests))
+    for s in systems:
+        if s.name in single:
+            s.runs.append({"seed": None, "sut": s.name, **{n: {"greedy": verdict_metrics(trace_verdicts(traces[n][s.name])),
+                                                                "sampled": None} for n in SPLIT_NAMES}})
+    return systems, traces
+
+
+def _report_models(config: BenchmarkConfig, trained: Sequence[TrainedBaseline]) -> list[TrainedBaseline]:
+    """The models the report shows: each baseline's first seed."""
+    out = []
+    for algo in config.baselines():
+        first = next((b for b in trained if b.algo == algo and b.train_tests == config.train_count), None)
+        if first is not None:
+            out.append(first)
+    return out
+
+
+def generalization_curve(config: BenchmarkConfig, splits: dict[str, Split], trained: list[TrainedBaseline],
+                         main: SystemRuns | None, scale: dict[str, Any], out: Path, say: Callable[[str], None],
+                         progress_bar: bool) -> list[dict[str, Any]]:
+    """The generalization curve (module docstring, step 5): per training-set size, the
+    held-out normalized score (greedy and sampled) of the first baseline, and its greedy
+    met on its own training tests."""
+    from flowtest_env.game import TestGame
+    from flowtest_env.scoring import play_batch
+
+    if main is None or not main.runs:
+        return []
+    algo = main.name
+    held = [TestGame(a) for a in splits["test"].scored]
+    points = []
+    for n in config.curve():
+        if n == config.train_count:
+            rows = [(r["test"]["greedy"]["per_test"], r["test"]["sampled"]["per_test"], r["train"]["greedy"]["met"])
+                    for r in main.runs]
+            seeds = [int(r["seed"]) for r in main.runs]
+        else:
+            rows, seeds = [], list(config.seeds[:config.curve_seeds])
+            own = [TestGame(a) for a in splits["train"].artifacts[:min(n, config.scored("train"))]]
+            for seed in seeds:
+                say(f"generalization curve: training {algo} seed {seed} on {n} train tests ({config.steps:,} steps)")
+                b = train_baseline(config, algo, seed, splits, out, progress_bar, train_tests=n, name=f"curve-{algo}-{n}-seed{seed}")
+                trained.append(b)
+                g = play_batch(b.policies["greedy"], held, 1, RUN_SEED)
+                s = play_batch(b.policies["sampled"], held, config.runs, RUN_SEED)
+                tr = play_batch(b.policies["greedy"], own, 1, RUN_SEED)
+                rows.append((verdict_metrics(g)["per_test"], verdict_metrics(s)["per_test"], verdict_metrics(tr)["met"]))
+        if not rows:
+            continue
+        points.append({
+            "algo": algo, "train_tests": n, "seeds": seeds,
+            "greedy": normalized_summary([r[0] for r in rows], scale["floor"], scale["ceiling"], config.bootstrap),
+            "sampled": normalized_summary([r[1] for r in rows], scale["floor"], scale["ceiling"], config.bootstrap),
+            "train_met": float(np.mean([r[2] for r in rows])),
+        })
+    return points
+
+
 def run_benchmark(config: BenchmarkConfig, out: Path, say: Callable[[str], None] = lambda _: None,
-                  progress_bar: bool = False) -> dict[str, Any]:
+                  progress_bar: bool = False,
+                  source: Callable[[str, str, int], Sequence[TestArtifact]] | None = None) -> dict[str, Any]:
     """Run the benchmark (see the module docstring) into the folder ``out`` (created; it
-    is not checked here: the command checks it first) and return ``table.json``'s document."""
+    is not checked here: the command checks it first) and return ``table.json``'s document.
+    ``source`` loads the pool's tests (default :func:`flowtest_env.pools.load_pool`)."""
     t_start = time.perf_counter()
     check_config(config)
     out.mkdir(parents=True, exist_ok=True)
-    say(f"loading the pool {config.pool}: {config.train_count} train and {config.test_count} held-out tests")
+    say(f"loading the pool {config.pool}: {config.train_count} train, {config.validation_count} validation and "
+        f"{config.test_count} held-out tests")
     t0 = time.perf_counter()
-    splits = load_splits(config, out, progress=progress_bar)
+    splits = load_splits(config, out, progress=progress_bar, source=source)
     pool_seconds = time.perf_counter() - t0
-    trained = []
+    trained: list[TrainedBaseline] = []
     for algo in config.baselines():
         for seed in config.seeds:
             say(f"training {algo} seed {seed} on the train split ({config.steps:,} steps)")
             b = train_baseline(config, algo, seed, splits, out, progress_bar)
             final = b.curve[-1][1]
-            say(f"  {b.seconds:.0f} s; met {100 * final['train']:.0f} % of train, {100 * final['test']:.0f} % of held-out tests")
+            say(f"  {b.seconds:.0f} s; greedy: met {100 * final['train']:.0f} % of train, "
+                f"{100 * final['validation']:.0f} % of validation tests")
             trained.append(b)
-    suts = [b.sut for b in trained] + config.others()
-    traces: dict[str, dict[str, list[Trace]]] = {}
+    train_seconds = sum(b.seconds for b in trained)
     t0 = time.perf_counter()
-    for name, split in splits.items():
-        say(f"scoring {len(suts)} systems on the {len(split.files)} tests of the {name} split")
-        traces[name] = score_systems(suts, split)
+    systems, traces = score_all(config, splits, trained, say)
     score_seconds = time.perf_counter() - t0
-    doc = benchmark_table(config, splits, trained, traces)
-    say("writing the table, the learning curves and the report")
-    cells = [Cell(split.label, sut, traces[name][sut], RUN_SEED, 0.0) for sut in suts for name, split in splits.items()]
-    write_report(cells, out, _split_infos(splits, out))
-    doc["seconds"] = {"pool": round(pool_seconds, 1), "training": round(sum(b.seconds for b in trained), 1),
-                      "scoring": round(score_seconds, 1), "total": round(time.perf_counter() - t_start, 1)}
+    scale = scale_of(systems)
+    main = next((s for s in systems if s.kind == "baseline"), None)
+    t0 = time.perf_counter()
+    curve = generalization_curve(config, splits, trained, main, scale["test"], out, say, progress_bar)
+    curve_seconds = time.perf_counter() - t0
+    doc = benchmark_table(config, splits, systems, trained, curve)
+    say("writing the table, the curves and the report")
+    cells = []
+    for name in REPORT_SPLITS:
+        label = _report_label(splits[name], config.report_tests)
+        for sut, runs in traces[name].items():
+            cells.append(Cell(label, sut, runs[:config.report_tests], RUN_SEED, 0.0))
+    cells.sort(key=lambda c: c.sut)
+    write_report(cells, out, _split_infos(splits, out, config.report_tests))
+    doc["seconds"] = {"pool": round(pool_seconds, 1), "training": round(train_seconds, 1),
+                      "scoring": round(score_seconds, 1), "generalization": round(curve_seconds, 1),
+                      "total": round(time.perf_counter() - t_start, 1)}
     doc["outputs"] = {k: str((out / v).resolve()) for k, v in OUTPUTS.items()}
-    if trained:
+    if any(e["kind"] == "baseline" and e.get("training") for e in doc["systems"]):
         write_atomically(out / OUTPUTS["curves"], lambda tmp: plot_learning_curves(doc, tmp))
     else:
         doc["outputs"].pop("curves")
+    if doc["generalization"]:
+        write_atomically(out / OUTPUTS["generalization"], lambda tmp: plot_generalization(doc, tmp))
+    else:
+        doc["outputs"].pop("generalization")
     write_text(out / OUTPUTS["table_md"], table_markdown(doc))
     write_text(out / OUTPUTS["table_json"], json.dumps(json_safe(doc), indent=1) + "\n")
     return doc
@@ -710,7 +1200,8 @@ def write_text(path: Path, text: str) -> None:
     write_atomically(path, write)
 
 
-OUTPUTS = {"table_md": "table.md", "table_json": "table.json", "curves": "learning-curves.png", "report": "report.html"}
+OUTPUTS = {"table_md": "table.md", "table_json": "table.json", "curves": "learning-curves.png",
+           "generalization": "generalization.png", "report": "report.html"}
 """The main files a benchmark writes into ``--out``."""
 
 
@@ -721,31 +1212,47 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     """The options of ``flowtest benchmark`` (defaults: :class:`BenchmarkConfig`)."""
     d = BenchmarkConfig("")
     p.add_argument("--pool", required=True, metavar="NAME",
-                   help="the test pool: <family><n>/<size>x<size>[/static], e.g. reaction2/5x5 (flowtest_env.pools)")
+                   help="the test pool: <family><n>/<size>x<size>[/<world>][/<kind>], e.g. reachability1/5x5 (flowtest_env.pools)")
     p.add_argument("--sut", action="extend", nargs="+", metavar="SYSTEM",
-                   help="systems (repeatable): ppo (train the baselines of --algo), maskable-ppo, recurrent-ppo, "
-                        "scripted:replanner, gr1, random, scripted:<name>, ppo:PATH "
+                   help="systems (repeatable): ppo (train the baselines of --algo), maskable-ppo, recurrent-ppo, plr-ppo, "
+                        "scripted:<name>, gr1, ppo:PATH, python:MODULE:NAME (a planner, or a batched policy marked "
+                        "batched = True), cmd:COMMAND; random and the references are always scored "
                         f"(default: {' '.join(DEFAULT_SUTS)})")
-    p.add_argument("--algo", nargs="+", choices=ALGOS, default=list(d.algos),
-                   help=f"the baselines --sut ppo trains (default: {' '.join(d.algos)})")
+    p.add_argument("--algo", nargs="+", choices=BENCH_ALGOS, default=list(d.algos),
+                   help=f"the baselines --sut ppo trains (default: {' '.join(d.algos)}; plr-ppo: native trainer only)")
     p.add_argument("--train-count", type=positive_int, default=d.train_count,
                    help=f"tests of the train split to train on (default {d.train_count})")
+    p.add_argument("--validation-count", type=positive_int, default=d.validation_count,
+                   help=f"tests of the validation split, for the learning curves (default {d.validation_count})")
     p.add_argument("--test-count", type=positive_int, default=d.test_count,
                    help=f"held-out tests of the test split to score on (default {d.test_count})")
+    p.add_argument("--train-eval-count", type=positive_int, default=d.train_eval_count,
+                   help=f"train tests scored (the first N; default {d.train_eval_count})")
     p.add_argument("--steps", type=positive_int, default=d.steps,
                    help=f"training time steps per baseline and seed (default {d.steps})")
     p.add_argument("--seeds", nargs="+", type=nonnegative_int, default=list(d.seeds),
-                   help=f"training seeds; the confidence intervals are over them (default {' '.join(map(str, d.seeds))})")
+                   help="training seeds; the intervals are over them and the tests (default 0..9)")
+    p.add_argument("--runs", type=positive_int, default=d.runs,
+                   help=f"sampled runs per test of a stochastic policy (and of random) (default {d.runs})")
+    p.add_argument("--curve-sizes", nargs="*", type=positive_int, default=list(d.curve_sizes),
+                   help="training-set sizes of the generalization curve besides --train-count "
+                        f"(default {' '.join(map(str, d.curve_sizes))}; none: give the flag alone)")
+    p.add_argument("--curve-seeds", type=nonnegative_int, default=d.curve_seeds,
+                   help=f"training seeds per generalization-curve size (the first N of --seeds; default {d.curve_seeds})")
     p.add_argument("--curve-points", type=positive_int, default=d.curve_points,
                    help=f"learning-curve measurements per training run, besides the start (default {d.curve_points})")
+    p.add_argument("--report-tests", type=positive_int, default=d.report_tests,
+                   help=f"tests of each split the HTML report shows (default {d.report_tests})")
+    p.add_argument("--bootstrap", type=positive_int, default=d.bootstrap,
+                   help=f"bootstrap replicates of the intervals (default {d.bootstrap})")
     p.add_argument("--trainer", choices=TRAINERS, default=d.trainer,
                    help="who trains the baselines: native (FlowTest's batched PPO, default) or sb3 (stable-baselines3)")
     p.add_argument("--trust-model", action="store_true",
                    help="load stable-baselines3 zips given as --sut ppo:PATH, which unpickles them (code from the file "
                         "runs); native checkpoints never need it")
     p.add_argument("--out", type=Path, required=True,
-                   help="output folder (table.md, table.json, learning-curves.png, report.html, models/, pool/); "
-                        "an existing non-empty folder is refused unless --force")
+                   help="output folder (table.md, table.json, learning-curves.png, generalization.png, report.html, "
+                        "models/, pool/); an existing non-empty folder is refused unless --force")
     p.add_argument("--force", action="store_true", help="overwrite the files of an earlier benchmark in --out")
     p.add_argument("--json", action="store_true", help="print table.json's document (only it) on stdout")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
@@ -771,8 +1278,10 @@ def run(args: argparse.Namespace) -> int:
 
     config = BenchmarkConfig(
         pool=args.pool, suts=tuple(args.sut or DEFAULT_SUTS), algos=tuple(dict.fromkeys(args.algo)),
-        train_count=args.train_count, test_count=args.test_count, steps=args.steps,
-        seeds=tuple(dict.fromkeys(args.seeds)), curve_points=args.curve_points, trainer=args.trainer,
+        train_count=args.train_count, validation_count=args.validation_count, test_count=args.test_count,
+        train_eval_count=args.train_eval_count, steps=args.steps, seeds=tuple(dict.fromkeys(args.seeds)), runs=args.runs,
+        curve_sizes=tuple(args.curve_sizes), curve_seeds=args.curve_seeds, curve_points=args.curve_points,
+        trainer=args.trainer, report_tests=args.report_tests, bootstrap=args.bootstrap,
     )
     if args.trust_model:
         from agents.checkpoint import trust_pickled_models
@@ -793,11 +1302,12 @@ def run(args: argparse.Namespace) -> int:
         return EXIT_OK
     sys.stdout.write(table_markdown(doc).split("\n", 2)[2])
     sys.stdout.write(f"\ntime: {doc['seconds']['total']:.0f} s\n")
-    for key in ("table_md", "table_json", "curves", "report"):
+    for key in ("table_md", "table_json", "curves", "generalization", "report"):
         if key in doc["outputs"]:
             sys.stdout.write(f"{key.replace('_', '.')}: {doc['outputs'][key]}\n")
     sys.stdout.flush()
     return EXIT_OK
 
 
-COMMAND = Command("benchmark", "train the learned baselines on a test pool and score them on held-out tests", add_arguments, run)
+COMMAND = Command("benchmark", "train the learned baselines on a test pool and score them on held-out tests, "
+                               "between a random floor and a reference ceiling", add_arguments, run)

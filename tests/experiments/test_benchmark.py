@@ -49,7 +49,7 @@ def test_references_meet_every_test_and_random_does_not(tmp_path: Path, capsys: 
     on every test of both splits; a random system does not; the table's numbers are those
     of the report's runs (results.json), and every file is written."""
     out = tmp_path / "b"
-    code, stdout, err = run(["benchmark", "--pool", POOL, "--train-count", "6", "--test-count", "6",
+    code, stdout, err = run(["benchmark", "--pool", POOL, "--train-count", "6", "--test-count", "6", "--validation-count", "3",
                              "--sut", "scripted:replanner", "--sut", "gr1", "random", "--out", str(out), "--json", "-q"], capsys)
     assert code == 0, err
     doc = json.loads(stdout)  # the whole of stdout is one JSON document
@@ -63,15 +63,24 @@ def test_references_meet_every_test_and_random_does_not(tmp_path: Path, capsys: 
             assert e[split]["test_failures"] == 0
         assert e["gap"]["mean"] == 0.0
     rnd = _system(doc, "random")
-    assert rnd["kind"] == "system"
+    assert rnd["kind"] == "floor"  # the floor: 8 sampled runs per test, batched
     assert min(rnd["train"]["met"]["mean"], rnd["test"]["met"]["mean"]) < 1.0
+    assert rnd["test"]["sampled"]["runs_per_test"] == 8 and rnd["test"]["greedy"] is None
     assert doc["headline"]["held_out_gap"] == {}  # no baseline trained
-    # the table is computed from the runs the report shows
+    # the scale: random is 0, the references 1
+    for split in ("train", "validation", "test"):
+        assert doc["scale"][split]["floor"] == rnd[split]["met"]["mean"] and doc["scale"][split]["ceiling"] == 1.0
+        assert _system(doc, "gr1")[split]["greedy"]["normalized"]["iqm"] == 1.0
+        assert rnd[split]["sampled"]["normalized"]["iqm"] == pytest.approx(0.0)
+    # the references' numbers are those of the report's runs (results.json); random's report runs are its
+    # single-env runs (one per test), the table's its batched sampled runs
     records = json.loads((out / "results.json").read_text())
+    assert {r["sut"] for r in records} == {"scripted:replanner", "gr1", "random"}
     for r in records:
         split = "train" if " train " in r["env"] else "test"
         assert r["episodes"] == 6
-        assert _system(doc, r["sut"])[split]["met"]["mean"] == pytest.approx(r["system_objective_met_rate"])
+        if r["sut"] != "random":
+            assert _system(doc, r["sut"])[split]["met"]["mean"] == pytest.approx(r["system_objective_met_rate"])
         for f in r["failures"]:  # a replay command per failing run, on that test's own file
             env = f["replay"].split("--env ")[1].split(" ")[0]
             assert Path(env).is_file() and Path(env).parent == (out / "pool" / split).resolve()
@@ -80,14 +89,14 @@ def test_references_meet_every_test_and_random_does_not(tmp_path: Path, capsys: 
     assert not (out / "learning-curves.png").exists()  # no baseline, no curve
     assert len(list((out / "pool" / "train").glob("seed*.json"))) == 6
     md = (out / "table.md").read_text()
-    assert "| scripted:replanner | reference | – | 100.0 % | 100.0 % | +0.0 pp |" in md
+    assert "| scripted:replanner | reference | – | 1.00 [1.00, 1.00] | – | 100.0 % | – | 1.00 (100.0 % met) | 100.0 % | 100.0 % | +0.0 pp |" in md
     assert "matrix" in (out / "report.html").read_text()
 
 
 def test_refuses_to_overwrite_without_force(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "b"
-    argv = ["benchmark", "--pool", POOL, "--train-count", "2", "--test-count", "2", "--sut", "scripted:replanner",
-            "--out", str(out), "-q"]
+    argv = ["benchmark", "--pool", POOL, "--train-count", "2", "--test-count", "2", "--validation-count", "2",
+            "--sut", "scripted:replanner", "--out", str(out), "-q"]
     assert run(argv, capsys)[0] == 0
     before = (out / "table.json").read_text()
     code, stdout, err = run(argv, capsys)
@@ -148,7 +157,7 @@ def test_batch_evaluation_gives_the_single_env_verdicts(tmp_path: Path, algo: st
     with the memory wrapper (MaskablePPO) and with an LSTM state (RecurrentPPO)."""
     from experiments.cli.train import make_model, make_training_vec_env
 
-    config = bench.BenchmarkConfig(POOL, suts=("ppo",), algos=(algo,), train_count=5, test_count=5)
+    config = bench.BenchmarkConfig(POOL, suts=("ppo",), algos=(algo,), train_count=5, test_count=5, validation_count=2)
     splits = bench.load_splits(config, tmp_path, progress=False)
     settings = bench.baseline_settings(algo, "sb3")
     env = make_training_vec_env(bench.POOL_ENV_ID, 0, {**settings, "n_envs": 1}, {"pool": POOL, "split": "train", "count": 5})
@@ -166,14 +175,16 @@ def test_batch_evaluation_gives_the_single_env_verdicts(tmp_path: Path, algo: st
 
 def test_baselines_train_and_are_scored(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """A tiny end-to-end run with training: a model and a curve per seed, the curve's last
-    point equals the single-env score of the saved model, the gap is train minus held-out
-    per seed, and the figure and the report are written."""
+    point equals the batched greedy score of the model on the train and validation tests,
+    the gap is train minus held-out per seed, the generalization curve has a point per
+    training-set size, and the figures and the report are written."""
     out = tmp_path / "b"
-    code, stdout, err = run(["benchmark", "--pool", POOL, "--train-count", "4", "--test-count", "3", "--sut", "ppo",
-                             "--algo", "maskable-ppo", "--steps", "1024", "--seeds", "0", "1", "--curve-points", "2",
+    code, stdout, err = run(["benchmark", "--pool", POOL, "--train-count", "4", "--test-count", "3", "--validation-count", "2",
+                             "--sut", "ppo", "--algo", "maskable-ppo", "--steps", "1024", "--seeds", "0", "1",
+                             "--curve-points", "2", "--curve-sizes", "2", "--curve-seeds", "1", "--runs", "2",
                              "--out", str(out), "-q"], capsys)
     assert code == 0, err
-    assert "held-out gap (train met - held-out met): maskable-ppo" in stdout
+    assert "held-out normalized score (0 = random, 1 = reference): maskable-ppo" in stdout
     doc = json.loads((out / "table.json").read_text())
     e = _system(doc, "maskable-ppo")
     assert e["kind"] == "baseline" and [r["seed"] for r in e["runs"]] == [0, 1]
@@ -181,12 +192,19 @@ def test_baselines_train_and_are_scored(tmp_path: Path, capsys: pytest.CaptureFi
         assert Path(training["model"]).is_file() and run_["sut"] == f"ppo:{training['model']}"
         steps = [p[0] for p in training["curve"]]
         assert steps[0] == 0 and steps[-1] == training["steps"] == 1024
-        assert training["curve"][-1][1:] == [run_["train"]["met"], run_["test"]["met"]]
+        assert training["curve"][-1][1:] == [run_["train"]["met"], run_["validation"]["met"]]
         assert run_["gap"] == pytest.approx(run_["train"]["met"] - run_["test"]["met"])
+        assert run_["test"]["sampled"]["runs"] == 2 and run_["test"]["greedy"]["runs"] == 1
     assert e["gap"]["mean"] == pytest.approx(np.mean([r["gap"] for r in e["runs"]]))
     assert doc["headline"]["held_out_gap"]["maskable-ppo"] == e["gap"]
+    assert doc["headline"]["normalized_held_out"]["maskable-ppo"]["greedy"] == e["test"]["greedy"]["normalized"]
+    curve = doc["generalization"]
+    assert [p["train_tests"] for p in curve] == [2, 4] and [p["seeds"] for p in curve] == [[0], [0, 1]]
+    assert curve[-1]["greedy"] == e["test"]["greedy"]["normalized"]  # the last point is the main runs
+    assert doc["budget"] == {"steps_per_run": 1024, "training_runs": 3, "training_steps": 3 * 1024}
     assert (out / "learning-curves.png").stat().st_size > 10_000
-    assert len(list((out / "models").glob("*.zip"))) == 2
+    assert (out / "generalization.png").stat().st_size > 10_000
+    assert len(list((out / "models").glob("*.zip"))) == 3
 
 
 @pytest.mark.slow
@@ -195,7 +213,7 @@ def test_same_seeds_same_table(tmp_path: Path, capsys: pytest.CaptureFixture[str
     times and paths differ)."""
     docs = []
     for name in ("a", "b"):
-        code, stdout, err = run(["benchmark", "--pool", POOL, "--train-count", "3", "--test-count", "3",
+        code, stdout, err = run(["benchmark", "--pool", POOL, "--train-count", "3", "--test-count", "3", "--validation-count", "2",
                                  "--sut", "ppo", "scripted:replanner", "--steps", "1024", "--seeds", "0", "1",
                                  "--curve-points", "2", "--out", str(tmp_path / name), "--json", "-q"], capsys)
         assert code == 0, err
@@ -212,7 +230,8 @@ def test_same_seeds_same_table(tmp_path: Path, capsys: pytest.CaptureFixture[str
 def test_ctrl_c_during_training(tmp_path: Path) -> None:
     """SIGINT while a baseline trains: exit 130 within 2 s, one line, nothing on stdout."""
     proc = start_until(
-        [str(FLOWTEST), "benchmark", "--pool", POOL, "--train-count", "2", "--test-count", "2", "--sut", "ppo",
+        [str(FLOWTEST), "benchmark", "--pool", POOL, "--train-count", "2", "--test-count", "2", "--validation-count", "2",
+         "--sut", "ppo",
          "--algo", "recurrent-ppo", "--steps", "100000", "--out", str(tmp_path / "b"), "--json"],
         "training recurrent-ppo", signal.SIGINT,
     )

@@ -1,0 +1,344 @@
+"""Score any batched policy on a test pool by the benchmark's protocol, and the protocol's
+statistics (docs/benchmark-protocol.md).
+
+A **batched policy** is a callable from a batch of observations and action masks to
+actions::
+
+    actions = policy(observations, masks)   # float/uint8 [n, obs], bool [n, n_actions] -> int [n]
+
+It may also have ``reset(num_runs, seed)``, called once before a batch of runs starts (each
+row of the batch then plays one run from its first observation, so a recurrent policy
+knows where its episodes begin). Every run of every test is played at once in one
+:class:`~flowtest_env.vector.PoolVectorEnv` (``assignment="fixed"``: row ``i`` plays test
+``i % n_tests``, run ``i // n_tests``), each ending where the single env would end it: at
+its outcome or at its own step budget. So scoring 1,000 tests x 8 runs is one batch of
+8,000 rows, seconds on a CPU::
+
+    import numpy as np
+    from flowtest_env.scoring import score_policy
+
+    def first_legal(observations, masks):
+        return np.argmax(masks, axis=1)
+
+    score = score_policy(first_legal, pool="reachability1/5x5", split="test", count=100, runs=1)
+    score.met, score.realized, score.per_test_met[:5]
+
+A policy that draws random actions is played ``runs`` times per test (seeded: run ``k``
+of the batch gets ``seed`` through ``reset``); a deterministic (greedy) one needs one run.
+:func:`random_policy` is the protocol's floor. The references (the scripted replanner and
+the GR(1) system) are not batched: ``flowtest benchmark`` plays them through the single env.
+
+The statistics (:func:`iqm`, :func:`stratified_bootstrap`, :func:`worst_share_mean`,
+:func:`normalized`) are plain NumPy, seeded, and documented with their choices in
+docs/benchmark-protocol.md. This module imports neither torch nor the agents.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass
+from typing import Any, Protocol
+
+import numpy as np
+
+from .envs import default_max_steps
+from .game import TestGame
+
+__all__ = ["BatchPolicy", "PolicyScore", "PoolSource", "iqm", "load_tests", "normalized", "play_batch", "random_policy",
+           "score_policy", "stratified_bootstrap", "summarize", "worst_share_mean"]
+
+
+class BatchPolicy(Protocol):
+    """``policy(observations, masks) -> actions`` for a batch (module docstring)."""
+
+    def __call__(self, observations: np.ndarray, masks: np.ndarray) -> np.ndarray: ...
+
+
+PoolSource = Callable[[str, str, int], Sequence[Any]]
+"""Where the tests of a pool come from: ``source(pool, split, count)`` returns the first
+``count`` tests of the split (artifacts or :class:`~flowtest_env.game.TestGame`). The
+default is :func:`flowtest_env.pools.load_pool`; a caller with its own records passes its
+own loader."""
+
+
+def _default_source(pool: str, split: str, count: int) -> Sequence[Any]:
+    from .pools import load_pool
+
+    return load_pool(pool, split, count, progress=False)
+
+
+def load_tests(pool: str, split: str, count: int, source: PoolSource | None = None) -> list[TestGame]:
+    """The first ``count`` tests of a pool's split as games, from ``source`` (default:
+    :func:`flowtest_env.pools.load_pool`).
+
+    Raises
+    ------
+    ValueError
+        On a bad pool name, split or count (the source's own error).
+    """
+    tests = (source or _default_source)(pool, split, count)
+    return [t if isinstance(t, TestGame) else TestGame(t) for t in tests]
+
+
+# --------------------------------------------------------------------------- playing
+
+
+def play_batch(policy: Callable[[np.ndarray, np.ndarray], Any], games: Sequence[TestGame], runs: int = 1, seed: int = 0,
+               obs_kind: str = "flat") -> dict[str, np.ndarray]:
+    """Play ``runs`` runs of every test of ``games`` with ``policy``, all at once in one
+    :class:`~flowtest_env.vector.PoolVectorEnv`, and return the verdict arrays, each of
+    shape ``[runs, n_tests]``: ``system_objective`` (``"met"``, ``"violated"``,
+    ``"open"``), ``test_objective_realized``, ``restrictions``, ``steps``.
+
+    Each run ends where the single env ends it: at its outcome, or at its test's own step
+    budget (:func:`flowtest_env.envs.default_max_steps`, ``"open"``). ``policy.reset(n,
+    seed)`` is called first when the policy has it; rows keep stepping after their run ended
+    (their actions no longer matter) until every run has ended.
+
+    Raises
+    ------
+    ValueError
+        If ``runs < 1``, there is no test, or the policy answers a batch of the wrong shape.
+    """
+    from .vector import PoolVectorEnv
+
+    if runs < 1:
+        raise ValueError(f"runs must be at least 1, not {runs}")
+    if not games:
+        raise ValueError("no test to play")
+    t = len(games)
+    n = runs * t
+    budgets = np.array([default_max_steps(g) for g in games], dtype=np.int64)
+    limit = np.tile(budgets, runs)
+    env = PoolVectorEnv(n, list(games), assignment="fixed", max_steps=int(budgets.max()), obs_kind=obs_kind)
+    try:
+        reset = getattr(policy, "reset", None)
+        if callable(reset):
+            reset(n, seed)
+        obs, infos = env.reset(seed=seed)
+        done = np.zeros(n, dtype=bool)
+        result: dict[str, np.ndarray] = {
+            "system_objective": np.full(n, "open", dtype=object),
+            "test_objective_realized": np.zeros(n, dtype=bool),
+            "restrictions": np.zeros(n, dtype=np.int64),
+            "steps": np.zeros(n, dtype=np.int64),
+        }
+        while not done.all():
+            actions = np.asarray(policy(obs, infos["action_mask"].astype(bool)))
+            if actions.shape != (n,):
+                raise ValueError(f"the policy answered actions of shape {actions.shape} for a batch of {n}")
+            obs, _, terminated, _, infos = env.step(actions.astype(np.int64))
+            now = env.verdicts()
+            ended = ~done & (terminated | (now["steps"] >= limit))
+            for key, values in result.items():
+                values[ended] = now[key][ended]
+            done |= ended
+    finally:
+        env.close()
+    return {k: v.reshape(runs, t) for k, v in result.items()}
+
+
+class random_policy:  # noqa: N801 - used like a function: random_policy(seed)
+    """The protocol's floor: uniform over the legal actions of each row, seeded (a row
+    without a legal action gets action 0). ``reset(n, seed)`` restarts its generator, so
+    the same seed gives the same runs.
+
+    Example::
+
+        score_policy(random_policy(), pool="reachability1/5x5", split="test", count=1000, runs=8)
+    """
+
+    def __init__(self, seed: int = 0) -> None:
+        self.rng = np.random.default_rng(seed)
+
+    def reset(self, num_runs: int, seed: int) -> None:
+        self.rng = np.random.default_rng(seed)
+
+    def __call__(self, observations: np.ndarray, masks: np.ndarray) -> np.ndarray:
+        u = self.rng.random(masks.shape)
+        out: np.ndarray = np.argmax(np.where(masks, u, -1.0), axis=1)
+        return out
+
+
+# --------------------------------------------------------------------------- the result
+
+
+@dataclass(frozen=True)
+class PolicyScore:
+    """A policy's score on tests, by the protocol (:func:`score_policy`); JSON by
+    :meth:`to_json`.
+
+    Attributes
+    ----------
+    tests, runs, seed
+        How many tests, runs per test, and the seed of the batch.
+    met
+        Share of all runs whose system objective was met.
+    realized
+        Share of the met runs that also realized the hidden test objective (a synthesized
+        test guarantees 1.0); ``None`` when no run met.
+    restrictions
+        Mean restricted decisions per run.
+    steps
+        Mean steps of the met runs (``None`` when none met).
+    violated, open
+        Runs whose system objective was violated / still open at the step budget.
+    per_test_met
+        Per test (in the order given), the share of its runs that met.
+    """
+
+    tests: int
+    runs: int
+    seed: int
+    met: float
+    realized: float | None
+    restrictions: float
+    steps: float | None
+    violated: int
+    open: int
+    per_test_met: tuple[float, ...]
+
+    def to_json(self) -> dict[str, Any]:
+        """The fields as a JSON object (``per_test_met`` a list)."""
+        d = asdict(self)
+        d["per_test_met"] = list(self.per_test_met)
+        return d
+
+
+def summarize(verdicts: dict[str, np.ndarray], seed: int = 0) -> PolicyScore:
+    """The :class:`PolicyScore` of verdict arrays of shape ``[runs, n_tests]`` (as
+    :func:`play_batch` returns them)."""
+    so = np.asarray(verdicts["system_objective"])
+    runs, t = so.shape
+    met = so == "met"
+    n_met = int(met.sum())
+    realized = np.asarray(verdicts["test_objective_realized"], dtype=bool)
+    return PolicyScore(
+        tests=int(t), runs=int(runs), seed=int(seed),
+        met=float(met.mean()),
+        realized=float((realized & met).sum() / n_met) if n_met else None,
+        restrictions=float(np.mean(verdicts["restrictions"])),
+        steps=float(np.asarray(verdicts["steps"])[met].mean()) if n_met else None,
+        violated=int((so == "violated").sum()), open=int((so == "open").sum()),
+        per_test_met=tuple(float(x) for x in met.mean(axis=0)),
+    )
+
+
+def score_policy(policy: Callable[[np.ndarray, np.ndarray], Any], pool: str | None = None, split: str = "test",
+                 count: int = 1000, runs: int = 1, seed: int = 0, tests: Sequence[Any] | None = None,
+                 source: PoolSource | None = None, obs_kind: str = "flat") -> PolicyScore:
+    """Score a batched policy (module docstring) on the first ``count`` tests of a pool's
+    split, or on ``tests`` (artifacts or games) when given, playing each test ``runs``
+    times in one batch (:func:`play_batch`).
+
+    Use ``runs=1`` for a deterministic (greedy) policy and ``runs=K`` (the benchmark uses
+    8) for one that samples; the benchmark reports both for its learned baselines.
+    ``source`` loads the pool (:data:`PoolSource`; default
+    :func:`flowtest_env.pools.load_pool`).
+
+    Example::
+
+        from flowtest_env.scoring import random_policy, score_policy
+        floor = score_policy(random_policy(), pool="reachability1/5x5", split="test", count=1000, runs=8)
+        print(f"random meets {100 * floor.met:.1f} % of the runs")
+
+    Raises
+    ------
+    ValueError
+        On neither ``pool`` nor ``tests``, a bad pool name, split or count, ``runs < 1``, or
+        a policy answering the wrong shape.
+    """
+    if tests is None:
+        if pool is None:
+            raise ValueError("score_policy needs pool= (a pool name) or tests= (a list of tests)")
+        games = load_tests(pool, split, count, source)
+    else:
+        games = [t if isinstance(t, TestGame) else TestGame(t) for t in tests]
+    return summarize(play_batch(policy, games, runs, seed, obs_kind), seed)
+
+
+# --------------------------------------------------------------------------- statistics
+
+
+def normalized(value: float | None, floor: float | None, ceiling: float | None) -> float | None:
+    """``(value - floor) / (ceiling - floor)``: 0 at the floor (random), 1 at the ceiling
+    (the reference); ``None`` when a number is missing or the ceiling is not above the floor
+    (then no scale exists)."""
+    if value is None or floor is None or ceiling is None or not ceiling > floor:
+        return None
+    return (float(value) - float(floor)) / (float(ceiling) - float(floor))
+
+
+def iqm(values: Sequence[float] | np.ndarray) -> float:
+    """The interquartile mean: the mean of the values left after cutting
+    ``floor(0.25 n)`` of the lowest and as many of the highest (the 25 % trimmed mean; for
+    fewer than 4 values, the plain mean).
+
+    Raises
+    ------
+    ValueError
+        On no value.
+    """
+    x = np.sort(np.asarray(values, dtype=np.float64).ravel())
+    if x.size == 0:
+        raise ValueError("iqm of no value")
+    k = int(math.floor(0.25 * x.size))
+    return float(x[k:x.size - k].mean())
+
+
+def worst_share_mean(per_test: Sequence[float] | np.ndarray, share: float = 0.1) -> float:
+    """The mean of the worst ``share`` of the per-test scores (at least one test): the
+    CVaR-style score on the hardest tests.
+
+    Raises
+    ------
+    ValueError
+        On no test or a share outside (0, 1].
+    """
+    x = np.sort(np.asarray(per_test, dtype=np.float64).ravel())
+    if x.size == 0:
+        raise ValueError("no test")
+    if not 0 < share <= 1:
+        raise ValueError(f"share must be in (0, 1], not {share}")
+    k = max(1, int(math.ceil(share * x.size)))
+    return float(x[:k].mean())
+
+
+def seed_iqm(scores: np.ndarray) -> float:
+    """The IQM over seeds (rows) of each seed's mean over tests (columns)."""
+    return iqm(np.asarray(scores, dtype=np.float64).mean(axis=1))
+
+
+def stratified_bootstrap(scores: np.ndarray, statistic: Callable[[np.ndarray], float] = seed_iqm, reps: int = 2000,
+                         seed: int = 0, confidence: float = 0.95) -> tuple[float, float, float]:
+    """``(point, low, high)``: ``statistic(scores)`` and its percentile bootstrap interval.
+
+    ``scores`` is ``[seeds, tests]`` (one row per training seed; each entry a test's score
+    for that seed). Each of ``reps`` replicates draws the seeds with replacement and, within
+    each drawn seed's stratum, that seed's tests with replacement (a stratified, two-level
+    bootstrap: the interval covers the variation between training seeds and the sampling of
+    the tests); with one seed only the tests are resampled. Seeded: the same inputs give the
+    same interval.
+
+    Raises
+    ------
+    ValueError
+        On an empty score matrix, ``reps < 1`` or a confidence outside (0, 1).
+    """
+    x = np.asarray(scores, dtype=np.float64)
+    if x.ndim != 2 or x.size == 0:
+        raise ValueError(f"scores must be a non-empty [seeds, tests] matrix, not of shape {x.shape}")
+    if reps < 1 or not 0 < confidence < 1:
+        raise ValueError("reps must be at least 1 and confidence in (0, 1)")
+    s, t = x.shape
+    rng = np.random.default_rng(seed)
+    stats = np.empty(reps)
+    rows = np.arange(s)[:, None]
+    for r in range(reps):
+        who = rng.integers(0, s, size=s) if s > 1 else np.zeros(1, dtype=np.int64)
+        cols = rng.integers(0, t, size=(s, t))
+        stats[r] = statistic(x[who][rows, cols])
+    alpha = (1 - confidence) / 2
+    low, high = np.quantile(stats, [alpha, 1 - alpha])
+    return float(statistic(x)), float(low), float(high)
