@@ -48,7 +48,7 @@ from synthesis.model.errors import ProblemError
 from synthesis.pipeline import SynthesisOptions, synthesize
 from synthesis.problems.builtins import BUILTINS
 from synthesis.problems.files import read_limited
-from synthesis.routing.milp import backend_version
+from synthesis.routing.solve import backend_version
 
 from .game import TestGame
 

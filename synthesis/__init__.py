@@ -30,7 +30,7 @@ if TYPE_CHECKING:
     from .problems.files import load_problem_file
     from .problems.load import load_problem
     from .problems.problem import Problem, make_problem
-    from .routing.milp import RoutingResult
+    from .routing.result import RoutingResult
     from .routing.solver_control import SolveControl
 
 _PUBLIC: dict[str, str] = {
@@ -42,7 +42,7 @@ _PUBLIC: dict[str, str] = {
     "Problem": ".problems.problem",
     "ProblemError": ".model.errors",
     "ProblemTooLarge": ".model.errors",
-    "RoutingResult": ".routing.milp",
+    "RoutingResult": ".routing.result",
     "SolveControl": ".routing.solver_control",
     "SynthesisOptions": ".pipeline",
     "SynthesizedTest": ".pipeline",

@@ -26,11 +26,12 @@ from .problems.diagnose import check_problem_consistency
 from .problems.limits import MAX_GRAPH_EDGES, check_size
 from .problems.problem import CAP_KEYS, Problem, build_graphs, check_caps
 from .routing.backends import cpsat
+from .routing.backends.rules import AUTO_CPSAT_MODES
 from .routing.caps import CAP_NOUNS, Fewest, caps_text, check_caps_reachable, disjoint_bypasses, fewest_within
-from .routing.milp import AUTO_CPSAT_MODES, RoutingResult, solve_routing
-from .routing.model import BACKENDS
-from .routing.options import MilpOptions
+from .routing.options import BACKENDS, MilpOptions
 from .routing.restrictions import strategy_from_routing
+from .routing.result import RoutingResult
+from .routing.solve import solve_routing
 from .routing.solver_control import SolveControl
 from .test_agent.loop import AgentSynthesis, counterexample_loop
 
@@ -148,7 +149,7 @@ def routing_mode(problem: Problem) -> str:
 
 def may_use_cpsat(problem: Problem, backend: str) -> bool:
     """Whether synthesizing ``problem`` on ``backend`` may solve on CP-SAT: ``"cpsat"``, or
-    ``"auto"`` on a static or reactive problem (:data:`~synthesis.routing.milp.AUTO_CPSAT_MODES`;
+    ``"auto"`` on a static or reactive problem (:data:`~synthesis.routing.backends.rules.AUTO_CPSAT_MODES`;
     the model's size decides later) with OR-Tools installed. Known before any graph is built,
     so a CP-SAT child started early can be ended at once when it will not be used."""
     return backend == "cpsat" or (backend == "auto" and routing_mode(problem) in AUTO_CPSAT_MODES and cpsat.available())

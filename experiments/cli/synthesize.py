@@ -37,7 +37,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     """Declare ``flowtest synthesize``'s arguments."""
     from synthesis.model.strategy import SETTINGS
     from synthesis.problems.builtins import BUILTINS
-    from synthesis.routing.model import BACKENDS
+    from synthesis.routing.options import BACKENDS
 
     p.add_argument(
         "problem",

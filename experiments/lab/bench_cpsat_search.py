@@ -7,7 +7,7 @@ Usage::
 
 Builds the routing model :func:`synthesis.routing.model.build_model` gives the problem (with
 the feasibility flows of its required entry nodes, as the first solve of
-:func:`synthesis.routing.milp.solve_routing` has them) and, in one CP-SAT child
+:func:`synthesis.routing.solve.solve_routing` has them) and, in one CP-SAT child
 (:class:`synthesis.routing.backends.cpsat.CpSatSession`), asks for a test at the heuristic's flow upper
 bound (a feasibility solve, ``reach``) from the heuristic's answer as a hint, once per search
 and random seed, each under ``--work-limit`` deterministic seconds: ``default`` is CP-SAT's
@@ -30,8 +30,11 @@ from synthesis.pipeline import SynthesisOptions, milp_options
 from synthesis.problems.load import load_problem
 from synthesis.problems.problem import build_graphs
 from synthesis.routing.backends import cpsat
-from synthesis.routing.milp import _guess_solution, _trap_test  # what solve_routing's first solve starts from
 from synthesis.routing.model import build_model
+from synthesis.routing.phases import (
+    guess_solution,  # what solve_routing's first solve starts from
+    trap_test,
+)
 from synthesis.routing.result import required_entries
 
 SEARCHES = {"default": None, "max-flow": cpsat.MAX_FLOW_SEARCH}
@@ -50,8 +53,8 @@ def main(argv: list[str] | None = None) -> int:
     options = milp_options(problem, SynthesisOptions())
     entries = required_entries(products, options)
     rm = build_model(products, options, entries, check_consistency(products))
-    guess = rm.guess(products, traps=_trap_test(products, rm.groups, entries))
-    hint = _guess_solution(products, rm, guess, options)
+    guess = rm.guess(products, traps=trap_test(products, rm.groups, entries))
+    hint = guess_solution(products, rm, guess, options)
     cost = np.zeros(rm.n_col)
     cost[rm.cols.flow[rm.out_src]] = 1.0
     a = rm.model.matrix().tocsr()

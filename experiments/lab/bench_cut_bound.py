@@ -30,8 +30,9 @@ from synthesis.graphs.consistency import check_consistency
 from synthesis.model.errors import InconsistentProblem
 from synthesis.pipeline import SynthesisOptions, milp_options
 from synthesis.problems.problem import Problem, build_graphs
-from synthesis.routing.milp import _cut_proof, _phase2_cost
+from synthesis.routing.certificates import cut_proof
 from synthesis.routing.model import build_model
+from synthesis.routing.phases import phase2_cost
 
 from .bench_flow_bound import instance_arguments, options_of, solve, static_instances
 
@@ -44,11 +45,11 @@ def cut_bounds(problem: Problem) -> dict[str, Any]:
     rm = build_model(products, opts, {}, check_consistency(products))
     guess = rm.guess(products)
     top = guess.upper_bound
-    cost = _phase2_cost(rm, opts)
+    cost = phase2_cost(rm, opts)
     levels: dict[int, tuple[float, float | None]] = {}
     t0 = time.process_time()
     for level in range(1, top + 1):
-        proof = _cut_proof(products, rm, opts, {}, level)
+        proof = cut_proof(products, rm, opts, {}, level)
         if proof is None:
             continue
         levels[level] = (proof.bound, None if proof.x is None else float(cost @ proof.x))

@@ -34,9 +34,10 @@ from synthesis.pipeline import SynthesisOptions, milp_options
 from synthesis.problems.problem import Problem, build_graphs
 from synthesis.problems.random_grid import first_consistent, paper_ap
 from synthesis.routing.backends import cpsat
-from synthesis.routing.milp import solve_routing
-from synthesis.routing.model import BACKENDS, build_model
+from synthesis.routing.model import build_model
+from synthesis.routing.options import BACKENDS
 from synthesis.routing.restrictions import strategy_from_routing
+from synthesis.routing.solve import solve_routing
 
 DEFAULT_FAMILIES = ("reachability:1", "reachability:2", "reachability:3", "reaction:2", "reaction:3", "safety:2")
 

@@ -6,8 +6,8 @@ Usage::
     nice -n 10 .venv/bin/python -m experiments.lab.bench_phase1 --builtins mars-exploration --families --work-limit 60
 
 For each built-in named (``--builtins``, its own MILP) and each MILP-static instance of the
-study (``first_consistent(size, family, n, seed, "static")``) it builds the routing model as :func:`synthesis.routing.milp.solve_routing`'s first
-solve does and runs phase 1 alone (:func:`synthesis.routing.milp._phase1_cpsat`: the heuristic,
+study (``first_consistent(size, family, n, seed, "static")``) it builds the routing model as :func:`synthesis.routing.solve.solve_routing`'s first
+solve does and runs phase 1 alone (:func:`synthesis.routing.backends.cpsat_phases.phase1_cpsat`: the heuristic,
 CP-SAT's default search for ``cpsat.PROOF_WORK``, then the level search ``_reach_level``) under
 ``--work-limit`` deterministic seconds, in one CP-SAT child. Prints one Markdown row per
 instance: the model's rows, the heuristic's flow and upper bound, phase 1's outcome (``optimal``:
@@ -29,8 +29,9 @@ from synthesis.problems.load import load_problem
 from synthesis.problems.problem import Problem, build_graphs
 from synthesis.problems.random_grid import first_consistent, paper_ap
 from synthesis.routing.backends import cpsat
-from synthesis.routing.milp import _phase1_cpsat, _trap_test  # phase 1 as solve_routing runs it
+from synthesis.routing.backends.cpsat_phases import phase1_cpsat  # phase 1 as solve_routing runs it
 from synthesis.routing.model import build_model
+from synthesis.routing.phases import trap_test
 from synthesis.routing.result import required_entries
 from synthesis.routing.solver_control import Clock
 
@@ -41,7 +42,7 @@ def phase1(problem: Problem, name: str, work_limit: float) -> str:
     options = milp_options(problem, SynthesisOptions(backend="cpsat", work_limit=work_limit))
     entries = required_entries(products, options)
     rm = build_model(products, options, entries, check_consistency(products))
-    guess = rm.guess(products, traps=_trap_test(products, rm.groups, entries))
+    guess = rm.guess(products, traps=trap_test(products, rm.groups, entries))
     a = rm.model.matrix().tocsr()
     col_lo, col_hi, row_lo, row_hi = rm.model.bounds()
     t0 = time.perf_counter()
@@ -56,7 +57,7 @@ def phase1(problem: Problem, name: str, work_limit: float) -> str:
 
         session.solve = record  # type: ignore[method-assign]
         try:
-            first, _ = _phase1_cpsat(session, rm, products, options, entries, Clock(None, None))
+            first, _ = phase1_cpsat(session, rm, products, options, entries, Clock(None, None))
             outcome, flow = first.status, str(int(round(rm.flow_of(first.x))))
             if outcome == "optimal" and flow == "0":
                 outcome = "unroutable"  # flow 0 proven the maximum: what synthesize reports

@@ -39,9 +39,10 @@ from synthesis.graphs.consistency import check_consistency
 from synthesis.pipeline import SynthesisOptions, milp_options
 from synthesis.problems.problem import build_graphs
 from synthesis.problems.random_grid import first_consistent, random_problem
-from synthesis.routing.milp import _phase2_cost, solve_routing
 from synthesis.routing.model import RoutingModel, build_model
+from synthesis.routing.phases import phase2_cost
 from synthesis.routing.result import required_entries
+from synthesis.routing.solve import solve_routing
 from synthesis.routing.solver_control import quiet_highs
 
 VARIANTS = ("continuous", "binary", "binary-flows", "no-feasibility")
@@ -107,7 +108,7 @@ def run(
     else:
         first = solve_routing(products, replace(options, backend="highs", time_limit=time_limit or 600.0, after_first=0.01))
         flow, how = first.flow, "phase 1"
-    cost = _phase2_cost(rm, options)
+    cost = phase2_cost(rm, options)
     for variant in variants:
         h = phase2_highs(rm, cost, flow, variant)
         root = root_bound(h)

@@ -41,9 +41,9 @@ from synthesis.graphs.products import Products, reachable
 from synthesis.pipeline import SynthesisOptions, milp_options
 from synthesis.problems.problem import build_graphs
 from synthesis.problems.random_grid import first_consistent, random_problem
-from synthesis.routing.milp import _phase2_cost, _trap_test
 from synthesis.routing.model import RoutingModel, build_model
 from synthesis.routing.options import MilpOptions
+from synthesis.routing.phases import phase2_cost, trap_test
 from synthesis.routing.result import blocked_of_edges, required_entries
 from synthesis.routing.solver_control import quiet_highs
 from synthesis.routing.traps import trapped_entries
@@ -64,7 +64,7 @@ def phase1(products: Products, options: MilpOptions, keep: np.ndarray, time_limi
     """The heuristic's flow and bound against the relaxation's maximum flow."""
     required = required_entries(products, options)
     full = build_model(products, options, dict(required), keep)
-    guess = full.guess(products, traps=_trap_test(products, full.groups, dict(required)))
+    guess = full.guess(products, traps=trap_test(products, full.groups, dict(required)))
     rm = build_model(products, options, {}, keep)
     cost = np.zeros(rm.n_col)
     cost[rm.cols.flow[rm.out_src]] = 1.0
@@ -88,7 +88,7 @@ def lazy(products: Products, options: MilpOptions, keep: np.ndarray, flow: int |
     required = required_entries(products, options)
     if flow is None:
         full = build_model(products, options, dict(required), keep)
-        guess = full.guess(products, traps=_trap_test(products, full.groups, dict(required)))
+        guess = full.guess(products, traps=trap_test(products, full.groups, dict(required)))
         if guess.flow != guess.upper_bound:
             return [f"the heuristic does not settle the flow ({guess.flow} of at most {guess.upper_bound}): give --flow"]
         flow = guess.flow
@@ -96,7 +96,7 @@ def lazy(products: Products, options: MilpOptions, keep: np.ndarray, flow: int |
     lines = []
     for rnd in range(1, rounds + 1):
         rm = build_model(products, options, dict(entries), keep)
-        h = phase2_highs(rm, _phase2_cost(rm, options), flow, "binary-flows")
+        h = phase2_highs(rm, phase2_cost(rm, options), flow, "binary-flows")
         h.setOptionValue("time_limit", time_limit)
         c0 = time.process_time()
         h.run()
@@ -119,7 +119,7 @@ def cover_rows(products: Products, options: MilpOptions, keep: np.ndarray, flow:
     """Phase 2's LP with every feasibility flow, then rounds of violated no-trap rows."""
     required = required_entries(products, options)
     rm = build_model(products, options, dict(required), keep)
-    h = phase2_highs(rm, _phase2_cost(rm, options), flow, "continuous")
+    h = phase2_highs(rm, phase2_cost(rm, options), flow, "continuous")
     cont = np.arange(rm.n_col, dtype=np.int32)
     h.changeColsIntegrality(cont.size, cont, np.full(cont.size, highspy.HighsVarType.kContinuous))
     n, targets = products.system.n_nodes, products.system_target

@@ -32,10 +32,10 @@ from synthesis.pipeline import SynthesisOptions, milp_options
 from synthesis.problems.builtins import BUILTINS
 from synthesis.problems.problem import Problem, build_graphs
 from synthesis.problems.random_grid import PAPER_SPECS, first_consistent, paper_ap
-from synthesis.routing.milp import EAGER_FLOW_LIMIT, solve_routing
 from synthesis.routing.model import build_model
 from synthesis.routing.options import MilpOptions
 from synthesis.routing.result import required_entries
+from synthesis.routing.solve import EAGER_FLOW_LIMIT, solve_routing
 
 RULES = ("never_needed", "never_closed", "dominated")
 

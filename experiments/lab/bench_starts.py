@@ -22,7 +22,7 @@ from dataclasses import replace
 from synthesis.pipeline import SynthesisOptions, milp_options
 from synthesis.problems.load import load_problem
 from synthesis.problems.problem import build_graphs
-from synthesis.routing.milp import solve_routing
+from synthesis.routing.solve import solve_routing
 from synthesis.routing.solver_control import solver_version
 
 DEFAULT = ("example1", "small-reactive", "beaver-rescue", "motion-primitives", "patrolling", "refueling")

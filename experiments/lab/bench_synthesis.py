@@ -22,7 +22,7 @@ from synthesis.artifacts.summary import summary_of
 from synthesis.pipeline import SynthesisOptions, synthesize
 from synthesis.problems.builtins import BUILTINS
 from synthesis.problems.load import load_problem
-from synthesis.routing.model import BACKENDS
+from synthesis.routing.options import BACKENDS
 
 DEFAULT = ("example1", "small-reactive", "beaver-rescue", "motion-primitives", "refueling", "mars-exploration")
 

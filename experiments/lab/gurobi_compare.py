@@ -4,18 +4,18 @@ FlowTest solves the routing MILP (method.md §5) in two phases on HiGHS (maximum
 then fewest cuts at that flow), seeded by a heuristic. The paper solved one MILP with the
 combined objective ``F - (1/|E|) sum_e d_e`` on Gurobi. To compare the two without a
 second copy of the MILP builder, :func:`capture_models` records the model that
-:mod:`synthesis.routing.milp` hands to HiGHS during a synthesis, :func:`combined_model` gives it
+:mod:`synthesis.routing.solve` hands to HiGHS during a synthesis, :func:`combined_model` gives it
 the paper's one combined objective (scaled by ``|E|``: ``|E| F - sum_e d_e``, the same
 optimum with integral coefficients, so an absolute gap below 1 proves it), and
 :func:`write_mps` writes it with ``Highs.writeModel`` for :func:`solve_gurobi` to read
 with ``gurobipy.read``. :func:`solve_highs_combined` solves the same file on HiGHS in
 one phase, which separates the solver's share from the formulation's.
 
-The recorder wraps the ``highspy.Highs`` object that ``synthesis.routing.milp._highs`` returns
+The recorder wraps the ``highspy.Highs`` object that ``synthesis.routing.backends.highs.new_highs`` returns
 and reads three calls of the builder: ``passModel`` (the constraints), the last
 ``changeColsCost`` (phase 2's cut weights: the number of edges of G per cut group)
 and phase 2's ``addRow`` (its columns are the flow out of ``Src``). It depends on
-those internals; an exported model from ``synthesis.routing.milp`` would replace it.
+those internals; an exported model from ``synthesis.routing.solve`` would replace it.
 
 Gurobi is optional (the ``bench`` extra); nothing here imports it at module level.
 """
@@ -86,10 +86,10 @@ class Capture:
 
 @contextlib.contextmanager
 def capture_models() -> Iterator[Capture]:
-    """Record the routing models :mod:`synthesis.routing.milp` builds inside the ``with`` block."""
-    from synthesis.routing import milp
+    """Record the routing models :mod:`synthesis.routing.solve` builds inside the ``with`` block."""
+    from synthesis.routing.backends import highs
 
-    original = milp._highs
+    original = highs.new_highs
     cap = Capture()
 
     def recording(options: Any) -> Any:
@@ -97,11 +97,11 @@ def capture_models() -> Iterator[Capture]:
         cap.recorders.append(rec)
         return rec
 
-    milp._highs = recording
+    highs.new_highs = recording
     try:
         yield cap
     finally:
-        milp._highs = original
+        highs.new_highs = original
 
 
 def combined_model(model: CapturedModel, n_edges: int) -> highspy.HighsLp:

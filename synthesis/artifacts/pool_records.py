@@ -40,8 +40,8 @@ from ..model.errors import CheckFailed, InconsistentProblem, ProblemError
 from ..pipeline import SynthesizedTest
 from ..problems.problem import build_graphs
 from ..problems.random_worlds import world_problem
-from ..routing.milp import RoutingResult
 from ..routing.restrictions import strategy_from_routing
+from ..routing.result import RoutingResult
 from ..test_agent.loop import AgentSynthesis, realize_agent_strategy
 from .artifact import TestArtifact, artifact_of
 from .summary import DERIVED_KEYS, DERIVED_STATS, derived_summary, without_timings

@@ -5,7 +5,7 @@ edges it is built on, and the model itself as named column and row blocks.
 answer, is the same on every run: columns (:class:`Columns`: flows ``f``, cut binaries
 ``d``, reachability ``mu``), rows (:class:`Rows`: c2, c3, c4-c5, the couplings), the
 aggregated feasibility flows (c6-c8, :class:`FeasibilityFlow`), MILP-agent's ``d_state``
-columns and rows, the exclusions. Solving it is :mod:`synthesis.routing.milp`.
+columns and rows, the exclusions. Solving it is :mod:`synthesis.routing.solve`.
 """
 
 from __future__ import annotations
@@ -28,9 +28,6 @@ from .bounds.flow_bound import static_flow_bound
 from .bounds.heuristic import RouteSeed, RoutingGuess, guess_routing, open_flow_bound
 from .bounds.reductions import Reductions, reduce_groups
 from .options import MODES, Exclusion, MilpOptions
-
-BACKENDS = ("auto", "highs", "cpsat")
-"""The solvers of the routing model (``MilpOptions.backend``; ``flowtest synthesize --backend``)."""
 
 
 class _Model:

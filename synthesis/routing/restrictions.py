@@ -8,7 +8,7 @@ import numpy as np
 
 from ..graphs.products import Products
 from ..model.strategy import TestStrategy
-from .milp import RoutingResult
+from .result import RoutingResult
 
 
 def strategy_from_routing(products: Products, routing: RoutingResult, setting: str) -> TestStrategy:

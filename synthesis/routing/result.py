@@ -1,5 +1,5 @@
 """What a routing solve returns, whichever backend ran it (HiGHS or CP-SAT, see
-:mod:`synthesis.routing.milp`), and the restrictions an answer puts on each history: what
+:mod:`synthesis.routing.solve`), and the restrictions an answer puts on each history: what
 the trap searches read."""
 
 from __future__ import annotations
@@ -50,7 +50,7 @@ class RoutingResult:
 
 def required_entries(products: Products, options: MilpOptions) -> dict[int, np.ndarray]:
     """Per history, the G_sys entry nodes the feasibility flows must serve: none for
-    MILP-static (its walls are on the map, see :func:`synthesis.routing.milp.solve_routing`),
+    MILP-static (its walls are on the map, see :func:`synthesis.routing.solve.solve_routing`),
     else the kept entry nodes of method.md §5."""
     return {} if options.mode == "static" else products.kept_entries
 

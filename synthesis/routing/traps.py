@@ -9,7 +9,7 @@ The two share only the pure graph primitive :func:`synthesis.graphs.products.cor
 on ``G_sys`` from the test strategy an environment enforces; this module stacks the
 histories as disjoint layers of one graph and runs a single search over all of them
 (in chunks that bound memory), from the MILP's own restrictions
-(:func:`synthesis.routing.milp.blocked_by`). ``tests/synthesis/test_checks_independent.py`` holds
+(:func:`synthesis.routing.result.blocked_by`). ``tests/synthesis/test_checks_independent.py`` holds
 this to account: a lazy-row generator that misses a trap is caught by the checks.
 """
 

@@ -2,7 +2,7 @@
 strategy, or a proof that none exists.
 
 :func:`counterexample_loop` solves MILP-agent (the routing MILP of
-:mod:`synthesis.routing.milp` in mode ``"mixed"`` with the problem's static area, the
+:mod:`synthesis.routing.solve` in mode ``"mixed"`` with the problem's static area, the
 blocked-state penalties ``block_states`` and the exclusion rows of rejected cut sets),
 builds the test-agent game of :mod:`synthesis.test_agent.game` for each cut set and solves it
 with :mod:`synthesis.test_agent.gr1`; a cut set the agent cannot realize is excluded
@@ -29,10 +29,11 @@ from ..model.agent_system import TestAgent, place_json
 from ..model.errors import CheckFailed, InconsistentProblem
 from ..model.strategy import TestStrategy
 from ..model.systems import TransitionSystem
-from ..routing.milp import RoutingResult, solve_routing
 from ..routing.model import cut_groups
 from ..routing.options import Exclusion, MilpOptions
 from ..routing.restrictions import strategy_from_routing
+from ..routing.result import RoutingResult
+from ..routing.solve import solve_routing
 from . import gr1
 from .closed_loop import ClosedLoopReport, verify_closed_loop
 from .controller import AgentController, controller_from_strategy

@@ -19,10 +19,10 @@ from synthesis.problems.load import load_problem
 from synthesis.problems.problem import Problem
 from synthesis.problems.random_worlds import world_problem
 from synthesis.routing.backends import cpsat
-from synthesis.routing.milp import RoutingResult
 from synthesis.routing.model import CutGroups, cut_groups
 from synthesis.routing.options import Exclusion, MilpOptions
 from synthesis.routing.restrictions import strategy_from_routing
+from synthesis.routing.result import RoutingResult
 from synthesis.test_agent import gr1
 from synthesis.test_agent.game import build_agent_game, build_game, trapped_nodes
 from synthesis.test_agent.loop import _restrictable_for_agent

@@ -23,7 +23,7 @@ from synthesis.problems.files import load_problem_file
 from synthesis.problems.load import load_problem
 from synthesis.problems.problem import build_graphs, make_problem
 from synthesis.routing.caps import disjoint_bypasses
-from synthesis.routing.milp import solve_routing
+from synthesis.routing.solve import solve_routing
 
 FLOOR = """
 S  .  .  .  .  .  .  .  .  .

@@ -18,7 +18,8 @@ import numpy as np
 import pytest
 
 import synthesis
-import synthesis.routing.milp as milp
+import synthesis.routing.phases as phases
+import synthesis.routing.solve as solve
 from synthesis.checks import verify
 from synthesis.graphs.products import Products
 from synthesis.model.errors import CheckFailed
@@ -26,9 +27,9 @@ from synthesis.pipeline import SynthesisOptions, milp_options
 from synthesis.problems.builtins import BUILTINS
 from synthesis.problems.problem import build_graphs
 from synthesis.routing import traps
-from synthesis.routing.milp import solve_routing
 from synthesis.routing.options import MilpOptions
 from synthesis.routing.restrictions import strategy_from_routing
+from synthesis.routing.solve import solve_routing
 
 PACKAGE = Path(synthesis.__file__).parent
 
@@ -90,7 +91,8 @@ def test_a_broken_lazy_row_generator_is_caught_by_the_checks(monkeypatch: pytest
     """The MILP's trap search made blind (it never sees a trap, so no feasibility row is
     added): the answer traps the system, and the independent checks say so."""
     products, options = _small_reactive()
-    monkeypatch.setattr(milp, "trapped_entries", lambda products, blocked, entries: {})
+    monkeypatch.setattr(solve, "trapped_entries", lambda products, blocked, entries: {})
+    monkeypatch.setattr(phases, "trapped_entries", lambda products, blocked, entries: {})
     routing = solve_routing(products, options)
     assert routing.stats["feasibility_rounds"] == 1
     with pytest.raises(CheckFailed, match="no way to the goal"):

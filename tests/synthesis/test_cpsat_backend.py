@@ -30,8 +30,8 @@ from synthesis.model.errors import InconsistentProblem, ProblemError
 from synthesis.pipeline import SynthesisOptions, synthesize
 from synthesis.problems.load import load_problem
 from synthesis.problems.random_grid import first_consistent
-from synthesis.routing import milp, model, solver_control
-from synthesis.routing.backends import cpsat
+from synthesis.routing import certificates, model, solver_control
+from synthesis.routing.backends import cpsat, cpsat_phases
 from synthesis.routing.solver_control import SolveControl
 
 FLOWTEST = Path(sys.executable).parent / "flowtest"
@@ -83,7 +83,7 @@ def test_deterministic_budget_gives_the_same_test() -> None:
 
 @needs_ortools
 def test_the_level_search_keeps_the_optimum(monkeypatch: pytest.MonkeyPatch) -> None:
-    """Phase 1's feasibility solves level by level (``milp._reach_level``: the default
+    """Phase 1's feasibility solves level by level (``cpsat_phases.reach_level``: the default
     search below the top level, ``cpsat.MAX_FLOW_SEARCH`` and the default search in turn at
     it), which follow the default search where that does not prove the maximum flow within
     ``cpsat.PROOF_WORK``, forced on every solve of exhaustive comparisons: the same optima as
@@ -95,7 +95,8 @@ def test_the_level_search_keeps_the_optimum(monkeypatch: pytest.MonkeyPatch) -> 
     empty; the exhaustive comparisons of tests/synthesis/test_optimality.py run with both)."""
     monkeypatch.setattr(cpsat, "PROOF_WORK", 1e-9)
     monkeypatch.setattr(model, "model_flow_bound", lambda *args: None)
-    monkeypatch.setattr(milp, "_guess_solution", lambda *args: None)
+    monkeypatch.setattr(cpsat_phases, "guess_solution", lambda *args: None)
+    monkeypatch.setattr(certificates, "guess_solution", lambda *args: None)
     outcomes: list[str] = []
     real = cpsat.CpSatSession.solve
 
@@ -319,12 +320,12 @@ def test_auto_runs_the_measured_rule(name: str, backend: str) -> None:
     ],
 )
 def test_auto_backend_edges(mode: str, rows: int, backend: str) -> None:
-    """The rule's edges per mode (:data:`synthesis.routing.milp.AUTO_CPSAT_ROWS`, inclusive):
+    """The rule's edges per mode (:data:`synthesis.routing.backends.rules.AUTO_CPSAT_ROWS`, inclusive):
     a reactive model of 2,706 rows (the 5x5 reachability |AP| = 4 cell) goes to HiGHS, a
     static one of 13,000 (reaction |AP| = 7) to CP-SAT, an agent problem's never."""
     from types import SimpleNamespace
 
-    from synthesis.routing.milp import auto_backend
+    from synthesis.routing.backends.rules import auto_backend
     from synthesis.routing.options import MilpOptions
 
     rm: Any = SimpleNamespace(model=SimpleNamespace(n_row=rows))

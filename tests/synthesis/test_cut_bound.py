@@ -33,8 +33,9 @@ from synthesis.problems.problem import Problem, build_graphs, make_problem
 from synthesis.problems.random_grid import first_consistent
 from synthesis.routing.backends import cpsat
 from synthesis.routing.bounds.cut_bound import static_cut_bound
-from synthesis.routing.milp import _cut_proof, _phase2_cost
+from synthesis.routing.certificates import cut_proof
 from synthesis.routing.model import RoutingModel, build_model
+from synthesis.routing.phases import phase2_cost
 
 MAX_GROUPS = 13  # enumerate at most 2^13 cut group sets per instance
 
@@ -106,7 +107,7 @@ def _check(problems: list[Problem]) -> tuple[int, int, int, int]:
                 continue
             positive += cb.value > 0
             tight += 0 < cb.value == truth
-            proof = _cut_proof(products, rm, options, {}, level)
+            proof = cut_proof(products, rm, options, {}, level)
             if proof is None or proof.x is None:
                 continue
             accepted += 1
@@ -114,7 +115,7 @@ def _check(problems: list[Problem]) -> tuple[int, int, int, int]:
             for e in np.flatnonzero(rm.cut_of(proof.x)[rm.groups.of_edge]).tolist():
                 cut |= 1 << e
             n_cuts = bin(cut).count("1")
-            assert n_cuts == float(_phase2_cost(rm, options) @ proof.x)
+            assert n_cuts == float(phase2_cost(rm, options) @ proof.x)
             assert not bypass_exists(v, cut), f"{problem.name}: an accepted candidate leaves a bypass"
             assert max_flow(v, cut) == level, f"{problem.name}: an accepted candidate has flow {max_flow(v, cut)}, not {level}"
             assert n_cuts >= best[level]
@@ -210,7 +211,7 @@ def test_no_bound_outside_milp_static() -> None:
     _, products = build_graphs(problem)
     options = milp_options(problem, SynthesisOptions())
     rm = build_model(products, options, {}, check_consistency(products))
-    assert _cut_proof(products, rm, options, {}, 1) is None
+    assert cut_proof(products, rm, options, {}, 1) is None
 
 
 @pytest.mark.parametrize(("seed", "bound"), [(0, 24), (1, 32)])

@@ -10,10 +10,10 @@
   exactly when the routing MILP's own trap search finds no trapped entry node; both
   outcomes are counted, so the check cannot pass vacuously;
 * the exhaustive comparisons of ``tests/synthesis/test_optimality.py`` (whose tiny models are far
-  below :data:`~synthesis.routing.milp.PER_CUT_MIN_ROWS`), and the same on
+  below :data:`~synthesis.routing.backends.rules.PER_CUT_MIN_ROWS`), and the same on
   :func:`reaction_instance`, run here with the per-cut rows on every reactive model on
   HiGHS, and agree;
-* where ``"auto"`` chooses them (:func:`~synthesis.routing.milp.per_cut_flow_rows`).
+* where ``"auto"`` chooses them (:func:`~synthesis.routing.backends.rules.per_cut_flow_rows`).
 """
 
 from __future__ import annotations
@@ -26,7 +26,8 @@ import numpy as np
 import pytest
 from test_optimality import compare_reactive, graph_instance, grid_instance
 
-import synthesis.routing.milp as milp
+import synthesis.routing.backends.rules as rules
+import synthesis.routing.solve as solve
 from synthesis.graphs.consistency import check_consistency
 from synthesis.graphs.products import Products
 from synthesis.model.errors import InconsistentProblem
@@ -104,14 +105,14 @@ def _flows_admit(rm: RoutingModel, cut: np.ndarray) -> bool:
 def _spy_builds(monkeypatch: pytest.MonkeyPatch) -> list[tuple[str, bool]]:
     """Record each model the solve builds: its ``flow_rows`` and whether it has feasibility flows."""
     built: list[tuple[str, bool]] = []
-    original = milp.build_model
+    original = solve.build_model
 
     def spy(products: Products, options: MilpOptions, entries: dict[int, np.ndarray], keep: np.ndarray) -> RoutingModel:
         rm = original(products, options, entries, keep)
         built.append((options.flow_rows, bool(rm.cols.feasibility)))
         return rm
 
-    monkeypatch.setattr(milp, "build_model", spy)
+    monkeypatch.setattr(solve, "build_model", spy)
     return built
 
 
@@ -149,7 +150,7 @@ def test_exhaustive_optimum_with_per_cut_rows(seed: int, monkeypatch: pytest.Mon
     """With the per-cut rows on every reactive model on HiGHS (``"auto"`` with no row
     threshold), MILP-reactive finds the exhaustive optimum on the small graphs, 2x2/2x3 and
     3x3 grids of ``tests/synthesis/test_optimality.py``, and the per-cut model is what it solved."""
-    monkeypatch.setattr(milp, "PER_CUT_MIN_ROWS", 0)
+    monkeypatch.setattr(rules, "PER_CUT_MIN_ROWS", 0)
     built = _spy_builds(monkeypatch)
     assert compare_reactive(graph_instance(500 + seed), backend="highs")
     rows, cols = (2, 2) if seed % 3 == 0 else (2, 3)
@@ -165,7 +166,7 @@ def test_exhaustive_optimum_with_per_cut_rows(seed: int, monkeypatch: pytest.Mon
 def test_comparisons_exercise_per_cut_rows(monkeypatch: pytest.MonkeyPatch) -> None:
     """Most instances of those comparisons are solved per cut column (a guard against a
     vacuous comparison: a model without feasibility flows has no such rows)."""
-    monkeypatch.setattr(milp, "PER_CUT_MIN_ROWS", 0)
+    monkeypatch.setattr(rules, "PER_CUT_MIN_ROWS", 0)
     built = _spy_builds(monkeypatch)
     for seed in range(N):
         compare_reactive(graph_instance(500 + seed), backend="highs")
@@ -188,15 +189,15 @@ def test_where_auto_writes_rows_per_cut(monkeypatch: pytest.MonkeyPatch) -> None
     products, options, edge, _ = built
     assert edge.cols.feasibility
     highs = replace(options, backend="highs")
-    assert not milp.per_cut_flow_rows(edge, highs)  # far below the threshold
-    monkeypatch.setattr(milp, "PER_CUT_MIN_ROWS", edge.model.n_row)
-    assert milp.per_cut_flow_rows(edge, highs)
-    assert not milp.per_cut_flow_rows(edge, replace(options, backend="cpsat"))
-    assert not milp.per_cut_flow_rows(edge, replace(highs, mode="static"))
+    assert not rules.per_cut_flow_rows(edge, highs)  # far below the threshold
+    monkeypatch.setattr(rules, "PER_CUT_MIN_ROWS", edge.model.n_row)
+    assert rules.per_cut_flow_rows(edge, highs)
+    assert not rules.per_cut_flow_rows(edge, replace(options, backend="cpsat"))
+    assert not rules.per_cut_flow_rows(edge, replace(highs, mode="static"))
     mixed = replace(highs, mode="mixed", static_moves=np.zeros(products.ts.n_moves, dtype=bool))
-    assert not milp.per_cut_flow_rows(edge, mixed)
+    assert not rules.per_cut_flow_rows(edge, mixed)
     no_flows = build_model(products, highs, {}, check_consistency(products))
-    assert not milp.per_cut_flow_rows(no_flows, highs)
+    assert not rules.per_cut_flow_rows(no_flows, highs)
     with pytest.raises(ValueError, match="flow_rows"):
-        milp.check_backend(replace(options, flow_rows="rows"))
+        solve.check_backend(replace(options, flow_rows="rows"))
     assert MilpOptions().flow_rows == "auto"

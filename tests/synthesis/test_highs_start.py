@@ -14,7 +14,7 @@ of test_optimality agrees). Options: HiGHS's defaults (presolve on).
   start, not the postsolved optimum. With presolve off, or without the start, it is right.
 
 So a start that is feasible (checked row by row) is not enough; FlowTest's defence
-(:func:`synthesis.routing.milp._run`) checks the returned solution against the model and its
+(:func:`synthesis.routing.backends.highs.run`) checks the returned solution against the model and its
 objective against HiGHS's report and dual bound, and solves again without the start when
 they disagree. ``test_raw_highs_returns_its_proven_solution`` is the reproducer itself: it
 is expected to fail on exactly 1.16.0 (strict: should a 1.16 build return the right
@@ -31,7 +31,7 @@ import highspy
 import numpy as np
 import pytest
 
-from synthesis.routing.milp import _ModelView, _run, _set_solution, _violation
+from synthesis.routing.backends.highs import ModelView, run, set_solution, violation
 from synthesis.routing.options import MilpOptions
 
 DATA = Path(__file__).resolve().parents[1] / "data"
@@ -57,8 +57,8 @@ def _start(h: highspy.Highs) -> None:
 
 def test_the_start_is_feasible_and_not_optimal() -> None:
     """The start satisfies every bound, row and integrality of the model, with 3 cuts."""
-    model = _ModelView.of(_highs())
-    assert _violation(model, START) <= 1e-9
+    model = ModelView.of(_highs())
+    assert violation(model, START) <= 1e-9
     assert float(model.cost @ START) == 3.0
 
 
@@ -76,7 +76,7 @@ def test_raw_highs_returns_its_proven_solution() -> None:
     assert h.getModelStatus() == highspy.HighsModelStatus.kOptimal
     assert h.getInfo().objective_function_value == pytest.approx(OPTIMUM)
     x = np.asarray(h.getSolution().col_value)
-    assert float(_ModelView.of(h).cost @ x) == pytest.approx(OPTIMUM)
+    assert float(ModelView.of(h).cost @ x) == pytest.approx(OPTIMUM)
 
 
 def test_raw_highs_is_right_without_the_start_or_without_presolve() -> None:
@@ -89,7 +89,7 @@ def test_raw_highs_is_right_without_the_start_or_without_presolve() -> None:
             _start(h)
         h.run()
         x = np.asarray(h.getSolution().col_value)
-        assert float(_ModelView.of(h).cost @ x) == pytest.approx(OPTIMUM), (with_start, presolve)
+        assert float(ModelView.of(h).cost @ x) == pytest.approx(OPTIMUM), (with_start, presolve)
 
 
 def test_flowtest_gets_the_proven_optimum_with_the_start() -> None:
@@ -97,12 +97,12 @@ def test_flowtest_gets_the_proven_optimum_with_the_start() -> None:
     supported version, and calls it optimal only because the solution it holds is."""
     h = _highs()
     h.setOptionValue("mip_abs_gap", 1.0 - 1e-6)
-    assert _set_solution(h, START)  # feasible: offered
-    status, gap, x = _run(h, None, MilpOptions(), phase="reproducer")
+    assert set_solution(h, START)  # feasible: offered
+    status, gap, x = run(h, None, MilpOptions(), phase="reproducer")
     assert x is not None
-    assert float(_ModelView.of(h).cost @ x) == pytest.approx(OPTIMUM)
+    assert float(ModelView.of(h).cost @ x) == pytest.approx(OPTIMUM)
     assert (status, gap) == ("optimal", 0.0)
-    assert _violation(_ModelView.of(h), x) <= 1e-6
+    assert violation(ModelView.of(h), x) <= 1e-6
 
 
 def test_an_infeasible_start_is_not_offered() -> None:
@@ -110,7 +110,7 @@ def test_an_infeasible_start_is_not_offered() -> None:
     h = _highs()
     bad = START.copy()
     bad[0] += 0.5  # a flow value off by a half breaks conservation
-    assert not _set_solution(h, bad)
+    assert not set_solution(h, bad)
 
 
 def test_start_on_a_model_without_rows() -> None:

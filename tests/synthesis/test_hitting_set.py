@@ -1,5 +1,5 @@
 """The implicit hitting set of MILP-static's phase 2 (synthesis.routing.backends.hitting_set) and its use by
-``auto`` (synthesis.routing.milp._hitting_set), held to exhaustive enumeration on tiny grids
+``auto`` (synthesis.routing.backends.hitting_set.try_hitting_set), held to exhaustive enumeration on tiny grids
 (tests/synthesis/test_optimality.py's instances and brute force): at the maximum flow its proven answer
 has the fewest cuts of all wall sets, a level above it is proven empty, and through ``auto``
 (forced onto the CP-SAT path, where the hitting set runs) the pipeline's answer is the
@@ -18,7 +18,7 @@ from synthesis.graphs.products import Products
 from synthesis.model.errors import InconsistentProblem
 from synthesis.pipeline import SynthesisOptions, milp_options
 from synthesis.problems.problem import Problem, build_graphs
-from synthesis.routing import milp
+from synthesis.routing import certificates, solve
 from synthesis.routing.backends import cpsat, hitting_set
 from synthesis.routing.backends.separator import CoverSeparator
 from synthesis.routing.model import build_model
@@ -93,8 +93,8 @@ def test_auto_with_the_hitting_set_is_exact(seed: int, walls_bound: bool, monkey
     first) answers the exhaustive optimum, proven, and the answer passes the checks; without
     the walls' cut bound (which settles most of these tiny grids before phase 2's search) the
     hitting set, and the model solution made of its answer, do the work."""
-    monkeypatch.setattr(milp, "auto_backend", lambda rm, options: "cpsat")
+    monkeypatch.setattr(solve, "auto_backend", lambda rm, options: "cpsat")
     if not walls_bound:
-        monkeypatch.setattr(milp, "model_cut_bound", lambda *args: None)
+        monkeypatch.setattr(certificates, "model_cut_bound", lambda *args: None)
     compare_static(grid_instance(100 + seed, 3, 3, "static", True), max_sets=1 << 12, backend="auto")
     compare_static(grid_instance(300 + seed, 2, 3, "static", False), max_sets=1 << 14, backend="auto")

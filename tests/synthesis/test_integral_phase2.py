@@ -24,7 +24,7 @@ import pytest
 from test_optimality import compare_reactive, graph_instance, grid_instance
 
 import synthesis.pipeline as pipeline
-import synthesis.routing.milp as milp
+import synthesis.routing.backends.highs as highs
 import synthesis.routing.model as model
 from synthesis.graphs.consistency import check_consistency
 from synthesis.model.errors import InconsistentProblem
@@ -147,7 +147,7 @@ def test_exhaustive_optimum_with_integral_phase2(seed: int, monkeypatch: pytest.
         declared.append(cols.size)
         return cols
 
-    monkeypatch.setattr(milp, "phase2_integral_columns", spy)
+    monkeypatch.setattr(highs, "phase2_integral_columns", spy)
     assert compare_reactive(graph_instance(500 + seed), backend="highs")
     rows, cols = (2, 2) if seed % 3 == 0 else (2, 3)
     compare_reactive(grid_instance(700 + seed, rows, cols, "reactive", None), backend="highs")

@@ -24,6 +24,7 @@ from __future__ import annotations
 import random
 from collections import deque
 from collections.abc import Callable
+from dataclasses import replace
 from itertools import pairwise
 
 import networkx as nx
@@ -479,14 +480,13 @@ def test_sweep_grid_answers_hold(seed: int, kind: str) -> None:
 def test_feasibility_flows_eager_or_lazy_give_the_same_optimum(seed: int, kind: str) -> None:
     """Adding c6-c8 all at once or only where they bind is the same MILP optimum."""
     from synthesis.pipeline import milp_options
-    from synthesis.routing.milp import solve_routing
+    from synthesis.routing.solve import solve_routing
 
     problem = grid_problem(40_000 + seed, kind)
     _, products = build_graphs(problem)
     answers = []
     for feasibility in ("eager", "lazy"):
-        options = milp_options(problem, SynthesisOptions())
-        options.feasibility = feasibility
+        options = replace(milp_options(problem, SynthesisOptions()), feasibility=feasibility)
         try:
             r = solve_routing(products, options)
         except InconsistentProblem as exc:
@@ -498,8 +498,8 @@ def test_feasibility_flows_eager_or_lazy_give_the_same_optimum(seed: int, kind: 
 
 
 def test_unknown_feasibility_option_is_rejected() -> None:
-    from synthesis.routing.milp import solve_routing
     from synthesis.routing.options import MilpOptions
+    from synthesis.routing.solve import solve_routing
 
     _, products = build_graphs(grid_problem(40_000, "reactive"))
     with pytest.raises(ValueError, match="feasibility"):

@@ -23,8 +23,8 @@ from synthesis.graphs.consistency import check_consistency
 from synthesis.graphs.products import Products
 from synthesis.pipeline import SynthesisOptions, milp_options, synthesize
 from synthesis.problems.problem import Problem, build_graphs
-from synthesis.routing.milp import required_entries
 from synthesis.routing.model import RoutingModel, build_model
+from synthesis.routing.result import required_entries
 
 # routable instances of the exhaustive-optimality generators on which a rule fires, by rule
 # (static3x3 #0 of NEVER_CLOSED is unroutable: the rule must keep that answer too)

@@ -197,11 +197,11 @@ def test_reactive_guess_traps_no_entry_node(size: int, family: str, n: int, seed
     (it starts from a trapping cut set), so the answer comes from the route seed; before,
     the trapping answer was returned, was unusable as a start, and HiGHS found no test in
     600 s."""
-    import synthesis.routing.milp as milp
+    import synthesis.routing.phases as phases
 
     products, me, problem = _instance(size, family, n, seed, kind="reactive")
     groups = cut_groups(products, milp_options(problem, SynthesisOptions()))
-    traps = milp._trap_test(products, groups, products.kept_entries)
+    traps = phases.trap_test(products, groups, products.kept_entries)
     guess = me.guess(products, traps=traps)
     assert guess.flow >= 1
     assert not traps(guess.cut_groups)

@@ -20,7 +20,7 @@ worker, a fixed ``random_seed``, and as a budget CP-SAT's deterministic time
 (``time_limit`` / ``after_first``), and then the answer is reported non-deterministic as
 with HiGHS. Phase 1 may add feasibility solves level by level, with the default search and at
 the top level with another one (:data:`MAX_FLOW_SEARCH`, see
-:func:`synthesis.routing.milp._phase1_cpsat`). Ctrl-C (or a stop request through :class:`SolveControl`) kills the child at
+:func:`synthesis.routing.backends.cpsat_phases.phase1_cpsat`). Ctrl-C (or a stop request through :class:`SolveControl`) kills the child at
 once and is raised as ``KeyboardInterrupt``. Every solution the child returns is checked
 against the model here (bounds, rows, integrality, objective) before it is used.
 """
@@ -47,12 +47,12 @@ FEASIBILITY_TOLERANCE = 1e-6
 PROOF_WORK = 1.0
 """Deterministic seconds of CP-SAT's default search (with its LP relaxation) for the maximum
 flow before phase 1 turns to :data:`MAX_FLOW_SEARCH` (see
-:func:`synthesis.routing.milp._phase1_cpsat`): enough for refueling and the random 5x5 grids,
+:func:`synthesis.routing.backends.cpsat_phases.phase1_cpsat`): enough for refueling and the random 5x5 grids,
 which it proves in 0.01-0.1."""
 
 LEVEL_WORK = 8.0
 """Deterministic seconds of phase 1's one :data:`MAX_FLOW_SEARCH` turn at the top flow level,
-before the default search has what is left (see :func:`synthesis.routing.milp._reach_level`):
+before the default search has what is left (see :func:`synthesis.routing.backends.cpsat_phases.reach_level`):
 mars-exploration's flow-2 test takes it 7.76 from the heuristic's hint (docs/benchmarks.md)."""
 
 MAX_FLOW_SEARCH: dict[str, Any] = {"linearization_level": 0, "search_branching": "PORTFOLIO_WITH_QUICK_RESTART_SEARCH"}

@@ -1,6 +1,7 @@
 """Phase 2 of MILP-static (fewest cuts at a fixed flow ``F``) by an implicit hitting set over the
 cut groups, with CP-SAT as the master: what ``auto`` runs first on static models with few free
-groups (:func:`synthesis.routing.milp._phase2_cpsat`).
+groups (:func:`synthesis.routing.backends.cpsat_phases.phase2`, through :func:`try_hitting_set`,
+which turns its answer into a whole model solution, checked: :func:`model_solution`).
 
 The master is the 0-1 problem ``min sum_g weight_g d_g`` over the binaries of the groups that
 may be cut (:class:`~synthesis.routing.backends.separator.CoverSeparator`'s columns), with only the rows
@@ -27,7 +28,7 @@ search ends (at most ``2^groups`` rounds; in practice hundreds).
 The master lives in one CP-SAT child (:class:`~synthesis.routing.backends.cpsat.CpSatSession`) for the
 whole search: rows are added to the model it holds, each round is a fresh CP-SAT search on it
 (CP-SAT cannot resume one). Measured on the 5x5 reaction |AP|=7 static grid seed 13 (40 groups,
-flow 1): HiGHS as the master (the ``cover`` backend's) took 0.37 s per master solve (163 in 60 s),
+flow 1): HiGHS as the master took 0.37 s per master solve (163 in 60 s),
 CP-SAT 0.07 (docs/benchmarks.md, "Session 11"). No hint is passed: measured, it slowed the
 search. Budgets are deterministic: :attr:`HittingSetBudget.rounds` and the master's deterministic
 seconds (``work``); a wall-clock deadline only when the user set one. A stop request (Ctrl-C)
@@ -37,12 +38,18 @@ kills the child within :data:`~synthesis.routing.solver_control.POLL` seconds.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.sparse.csgraph import breadth_first_order, maximum_flow
 
-from ..solver_control import SolveControl
+from ...graphs.products import Products
+from ..certificates import CutProof, model_arrays, solves_at
+from ..model import RoutingModel
+from ..options import MilpOptions
+from ..phases import phase2_cost
+from ..solver_control import Clock, SolveControl
 from . import cpsat
 from .separator import CoverSeparator, Row
 
@@ -65,7 +72,7 @@ def _key(row: Row) -> tuple[object, ...]:
 
 IHS_MAX_GROUPS = 64
 """Free groups (master columns) up to which ``auto`` runs the hitting set first in phase 2 of
-MILP-static (see :func:`synthesis.routing.milp._phase2_cpsat`)."""
+MILP-static (see :func:`synthesis.routing.backends.cpsat_phases.phase2_cpsat`)."""
 
 IHS_MAX_FLOW = 1
 """The flow levels at which ``auto`` runs the hitting set: at flow 1 its flow rows are no-goods
@@ -225,3 +232,93 @@ def fewest_cuts(
             for kind, _ in rows:
                 out.rows[kind] = out.rows.get(kind, 0) + 1
             session.add_rows([(row.cols, row.vals, row.lo, row.hi) for _, row in rows])
+
+
+@dataclass(frozen=True)
+class HittingSetOutcome:
+    """The hitting set's outcome in phase 2 (:func:`try_hitting_set`): its best answer as a model
+    solution, checked, and the search's figures."""
+
+    x: np.ndarray
+    result: HittingSetResult
+
+
+def try_hitting_set(
+    products: Products, rm: RoutingModel, x: np.ndarray, flow: int, options: MilpOptions, clock: Clock, proof: CutProof | None
+) -> HittingSetOutcome | None:
+    """Phase 2 of MILP-static by the implicit hitting set (:func:`fewest_cuts`)
+    where it applies: MILP-static without exclusions, places objective or closed-loop traps, at
+    most :data:`IHS_MAX_GROUPS` free groups, flow at most
+    :data:`IHS_MAX_FLOW`, and no cut bound proof already in hand.
+    It starts from the cheaper of phase 1's answer and the cut bound's candidate, with the cut bound as its lower bound, and has a deterministic budget
+    (:class:`HittingSetBudget`: rounds and the master's
+    deterministic seconds, at most ``options.work_limit``) and the user's wall clock. Its answer
+    becomes a whole model solution (:func:`model_solution`), checked against the model.
+    ``None`` where it does not apply."""
+    if options.mode != "static" or options.exclusions or options.block_states or options.closed_loop or flow > IHS_MAX_FLOW:
+        return None
+    groups = rm.groups
+    me = replace(rm.edges, has_var=rm.edges.has_var & ~rm.reductions.fixed_open)
+    sep = CoverSeparator(products, options, groups, me, {})
+    if sep.n_col > IHS_MAX_GROUPS:
+        return None
+    cost = phase2_cost(rm, options)
+    if proof is not None:
+        x = proof.start(x, cost)
+        if proof.meets(x, cost):
+            return None  # proven already: phase2_cpsat says so
+    work = IHS_WORK if options.work_limit is None else min(IHS_WORK, options.work_limit)
+    budget = HittingSetBudget(work=work, deadline=clock.deadline)
+    lower = 0.0 if proof is None else float(proof.bound)
+    result = fewest_cuts(
+        sep, flow, rm.cut_of(x), budget, bound=lower, random_seed=options.random_seed, control=options.control,
+    )
+    y = x if result.cut is None or np.array_equal(result.cut, rm.cut_of(x)) else model_solution(products, rm, result.cut, flow)
+    return HittingSetOutcome(y, result)
+
+
+def model_solution(products: Products, rm: RoutingModel, cut: np.ndarray, flow: int) -> np.ndarray:
+    """A whole MILP-static model solution for a cut set (``bool`` per group) that passes the
+    wall-cover checks at flow ``flow``: the cuts, ``flow`` units of flow over the open model
+    edges (a maximum flow from ``Src`` capped at ``flow``), and ``mu`` the reachability from
+    ``Src`` over the open c5 edges. Checked against the model's every row and bound."""
+    cols, me = rm.cols, rm.edges
+    g = products.virtual
+    n = g.n_nodes
+    x = np.zeros(rm.n_col)
+    with_d = np.flatnonzero(cols.cut >= 0)
+    x[cols.cut[with_d]] = cut[with_d].astype(float)
+    open_edge = ~cut[me.grp]
+    e = np.flatnonzero(open_edge)
+    # flow: super source n+1 -> Src with capacity ``flow``, targets -> super sink n
+    t = np.flatnonzero(products.target)
+    big = max(int(e.size), 1)
+    rows_ = np.concatenate([me.eu[e], t, [n + 1]])
+    cols_ = np.concatenate([me.ev[e], np.full(t.size, n), [int(g.initial)]])
+    caps = np.concatenate([np.ones(e.size, dtype=np.int32), np.full(t.size, big, dtype=np.int32), [flow]]).astype(np.int32)
+    cap = sp.csr_matrix((caps, (rows_, cols_)), shape=(n + 2, n + 2))
+    cap.sum_duplicates()
+    res = maximum_flow(cap, n + 1, n)
+    if int(res.flow_value) != flow:
+        raise RuntimeError(f"the hitting set's answer has flow {int(res.flow_value)}, not {flow}: a FlowTest bug")
+    pair_flow = res.flow.tocsr()
+    # spread each pair's flow over its parallel open edges
+    key = me.eu[e].astype(np.int64) * (n + 2) + me.ev[e]
+    order = np.lexsort((e, key))
+    ks = key[order]
+    first = np.searchsorted(ks, ks)
+    rank = np.arange(ks.size) - first
+    amount = np.asarray(pair_flow[me.eu[e[order]], me.ev[e[order]]]).ravel()
+    on = rank < np.maximum(amount, 0)
+    x[cols.flow[e[order[on]]]] = 1.0
+    # mu: reachable from Src over the open c5 edges
+    c5 = np.flatnonzero(open_edge & me.c5)
+    graph = sp.csr_matrix((np.ones(c5.size, dtype=np.int8), (me.eu[c5], me.ev[c5])), shape=(n, n))
+    reach = np.zeros(n, dtype=bool)
+    reach[breadth_first_order(graph, int(g.initial), directed=True, return_predecessors=False)] = True
+    has_mu = cols.reach >= 0
+    x[cols.reach[has_mu]] = reach[has_mu].astype(float)
+    x = rm.with_items(x)
+    if not solves_at(model_arrays(rm), rm, x, flow):
+        raise RuntimeError("the hitting set's answer is no solution of the routing model: a FlowTest bug")
+    return x

@@ -77,7 +77,7 @@ has flow ``F`` (the bound is infinite).
 Candidates. The source side of a minimum cut is a set of states; closing the groups of every
 arc from it to outside it and ``Y - A`` gives a wall set whose cost is at least the cut's.
 It need not be valid or keep flow ``F``, so it is only a candidate: the caller completes it
-into a routing answer and checks it (:mod:`synthesis.routing.milp`), and only a checked
+into a routing answer and checks it (:mod:`synthesis.routing.solve`), and only a checked
 candidate whose cost equals the bound proves phase 2.
 
 Only MILP-static (every cut history-independent), as the flow bound.
