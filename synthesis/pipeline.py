@@ -7,9 +7,8 @@ through :func:`synthesize_agent_test`, which runs the counterexample-guided loop
 
 from __future__ import annotations
 
-import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -21,93 +20,93 @@ from .graphs.automata import SpecificationProduct
 from .graphs.products import Products
 from .model.agent_system import TestAgent
 from .model.errors import CheckFailed, InconsistentProblem, ProblemError
-from .model.strategy import SETTINGS, TestStrategy
+from .model.option_rules import COUNT, SETTING, Rule
+from .model.strategy import TestStrategy
 from .problems.diagnose import check_problem_consistency
 from .problems.limits import MAX_GRAPH_EDGES, check_size
-from .problems.problem import CAP_KEYS, Problem, build_graphs, check_caps
+from .problems.problem import Problem, build_graphs, check_caps
 from .routing.backends import cpsat
 from .routing.backends.rules import AUTO_CPSAT_MODES
 from .routing.caps import CAP_NOUNS, Fewest, caps_text, check_caps_reachable, disjoint_bypasses, fewest_within
-from .routing.options import BACKENDS, MilpOptions
+from .routing.options import RULES, Budgets, MilpOptions, ModelOptions, RunOptions, default_of, values_of
+from .routing.options import check_options as check_routing_options
 from .routing.restrictions import strategy_from_routing
 from .routing.result import RoutingResult
 from .routing.solve import solve_routing
-from .routing.solver_control import SolveControl
 from .test_agent.loop import AgentSynthesis, counterexample_loop
 
 
-@dataclass(frozen=True)
-class SynthesisOptions:
-    """User-facing solver options (``None`` fields fall back to the problem's)."""
+@dataclass(frozen=True, kw_only=True)
+class SynthesisOptions(Budgets, RunOptions):
+    """What a synthesis may spend, how it runs, and what it may choose beyond the problem.
 
-    time_limit: float | None = None
-    # seconds to keep improving once a first test is in hand; `time_limit` then bounds
-    # the time to that first test (the paper's budget: 600 and 60)
-    after_first: float | None = None
-    mip_rel_gap: float = 0.0
-    # HiGHS threads; None: 1, so the answer is the same on every machine (HiGHS's MIP
-    # search is deterministic for a fixed thread count)
-    threads: int | None = None
-    # branch-and-bound nodes per HiGHS run: a deterministic budget (see MilpOptions)
-    node_limit: int | None = None
+    The budgets (``time_limit``, ``after_first``, ``mip_rel_gap``, ``node_limit``,
+    ``work_limit``, ``threads``, ``random_seed``) and the run options (``backend``,
+    ``progress``, ``control``) are the routing model's own groups
+    (:class:`~synthesis.routing.options.Budgets`, :class:`~synthesis.routing.options.RunOptions`:
+    their docstrings say what each does), passed on to it by :func:`milp_options`, with two
+    fallbacks: ``time_limit=None`` is the problem's time limit, ``threads=None`` is one thread
+    (so the answer is the same on every machine). Every field is checked by
+    :func:`check_options` before any work, by the rules the routing options, problem files
+    and the command line share.
+
+    Attributes
+    ----------
+    closed_loop
+        :attr:`~synthesis.routing.options.ModelOptions.closed_loop`: also forbid restrictions that
+        trap the system off entry nodes.
+    setting
+        How reactive obstacles are shown (:data:`~synthesis.model.strategy.SETTINGS`; ``None``:
+        the problem's, else ``"instantaneous"``).
+    agent_iterations
+        Bound on the counterexample-guided loop of an agent problem (``None``: the test
+        agent's ``max_iterations``).
+    max_graph_edges
+        Refuse problems whose product graph may exceed this many edges, before building
+        anything (:mod:`synthesis.problems.limits`; ``None``: no limit).
+    caps
+        Caps on the physical restrictions a test may use (``max_walls``, ``max_doors``,
+        ``max_restrictions``); each key given here replaces the problem's (:func:`caps_of`).
+
+    Example
+    -------
+    >>> from synthesis import load_problem, synthesize
+    >>> test = synthesize(load_problem("small-reactive"), SynthesisOptions(node_limit=10_000, caps={"max_walls": 4}))
+    >>> test.routing.status, test.caps
+    ('optimal', {'max_walls': 4})
+    """
+
+    closed_loop: bool = default_of(ModelOptions, "closed_loop")
     setting: str | None = None
-    progress: Callable[[str], None] | None = None
-    agent_iterations: int | None = None  # bound on the counterexample-guided loop
-    # also forbid restrictions that trap the system off entry nodes (one-way moves);
-    # off by default: docs/method.md §5 exactly (see solve_routing)
-    closed_loop: bool = False
-    # Ctrl-C and the live solver status, shared with the caller (see solver_control)
-    control: SolveControl | None = None
-    # refuse problems whose product graph may exceed this many edges (None: no limit),
-    # before building anything (synthesis.problems.limits)
+    agent_iterations: int | None = None
     max_graph_edges: int | None = MAX_GRAPH_EDGES
-    # the solver of the routing model: "auto", "highs" or "cpsat" ("auto": chosen on the model's size)
-    backend: str = "auto"
-    # CP-SAT's deterministic budget per phase (its max_deterministic_time; see MilpOptions)
-    work_limit: float | None = None
-    # caps on the physical restrictions a test may use (max_walls, max_doors,
-    # max_restrictions); each key given here replaces the problem's
     caps: dict[str, int] | None = None
 
 
-MAX_THREADS = 256
-"""Most solver threads accepted (far above any machine FlowTest runs on)."""
+SYNTHESIS_RULES: Mapping[str, Rule] = {
+    **RULES,
+    "setting": SETTING,
+    "agent_iterations": COUNT,
+    "max_graph_edges": COUNT,
+    "caps": replace(RULES["caps"], optional=True),
+}
+"""The rule of each field of :class:`SynthesisOptions`: the routing options' (:data:`~synthesis.routing.options.RULES`)
+and the synthesis's own."""
 
 
 def check_options(options: SynthesisOptions) -> None:
-    """Refuse bad options before any work (raises :class:`ProblemError` naming the option)."""
-    for name in ("time_limit", "after_first"):
-        v = getattr(options, name)
-        if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0):
-            raise ProblemError(f"option {name} must be a positive finite number of seconds, not {v!r}")
-    gap = options.mip_rel_gap
-    if isinstance(gap, bool) or not isinstance(gap, (int, float)) or not (0.0 <= gap < 1.0):
-        raise ProblemError(f"option mip_rel_gap must be a number in [0, 1), not {gap!r}")
-    t = options.threads
-    if t is not None and (isinstance(t, bool) or not isinstance(t, int) or not 1 <= t <= MAX_THREADS):
-        raise ProblemError(f"option threads must be an integer from 1 to {MAX_THREADS}, not {t!r}")
-    nl = options.node_limit
-    if nl is not None and (isinstance(nl, bool) or not isinstance(nl, int) or nl < 1):
-        raise ProblemError(f"option node_limit must be a positive integer, not {nl!r}")
-    if options.setting is not None and options.setting not in SETTINGS:
-        raise ProblemError(f"unknown obstacle setting {options.setting!r}; expected one of {', '.join(SETTINGS)}")
-    it = options.agent_iterations
-    if it is not None and (isinstance(it, bool) or not isinstance(it, int) or it < 1):
-        raise ProblemError(f"option agent_iterations must be a positive integer, not {it!r}")
-    if options.backend not in BACKENDS:
-        raise ProblemError(f"unknown solver backend {options.backend!r}; expected one of {', '.join(BACKENDS)}")
+    """Refuse bad options before any work: every field by its rule
+    (:func:`synthesis.routing.options.check_options` with :data:`SYNTHESIS_RULES`), and the
+    ``cpsat`` backend without OR-Tools installed.
+
+    Raises
+    ------
+    ProblemError
+        Naming the option (``option time_limit must be a positive finite number of seconds, not -1``).
+    """
+    check_routing_options(options, SYNTHESIS_RULES)
     if options.backend == "cpsat":
         cpsat.require()
-    w = options.work_limit
-    if w is not None and (isinstance(w, bool) or not isinstance(w, (int, float)) or not math.isfinite(w) or w <= 0):
-        raise ProblemError(f"option work_limit must be a positive finite number, not {w!r}")
-    e = options.max_graph_edges
-    if e is not None and (isinstance(e, bool) or not isinstance(e, int) or e < 1):
-        raise ProblemError(f"option max_graph_edges must be a positive integer or None, not {e!r}")
-    if options.caps is not None:
-        if not isinstance(options.caps, dict):
-            raise ProblemError(f"option caps must be a dict of {', '.join(CAP_KEYS)}, not {options.caps!r}")
-        check_caps(options.caps, " (option caps)")
 
 
 def caps_of(problem: Problem, options: SynthesisOptions) -> dict[str, int]:
@@ -156,26 +155,24 @@ def may_use_cpsat(problem: Problem, backend: str) -> bool:
 
 
 def milp_options(problem: Problem, options: SynthesisOptions) -> MilpOptions:
-    """The routing MILP options a problem asks for."""
-    mode = routing_mode(problem)
+    """The routing MILP options a problem asks for: the model from the problem (its mode,
+    static area, cut rules, caps with the options' in their place), and the options' budgets
+    and run options as they are, ``time_limit`` and ``threads`` with their fallbacks (the
+    problem's time limit, one thread)."""
+    budgets = values_of(options, Budgets)
+    budgets["time_limit"] = time_limit_of(problem, options)
+    budgets["threads"] = options.threads if options.threads is not None else 1
     return MilpOptions(
-        mode=mode,
+        mode=routing_mode(problem),
         static_moves=problem.static_moves,
         bidirectional=problem.bidirectional_cuts,
         tie_places=problem.tie_places,
         block_states=problem.kind == "agent",
-        time_limit=options.time_limit if options.time_limit is not None else problem.time_limit,
-        after_first=options.after_first,
-        mip_rel_gap=options.mip_rel_gap,
-        threads=options.threads if options.threads is not None else 1,
-        node_limit=options.node_limit,
-        progress=options.progress,
         closed_loop=options.closed_loop,
-        control=options.control,
-        backend=options.backend,
-        work_limit=options.work_limit,
         caps=caps_of(problem, options),
         one_way_walls=problem.one_way_walls,
+        **budgets,
+        **values_of(options, RunOptions),
     )
 
 

@@ -9,7 +9,10 @@ from __future__ import annotations
 
 import argparse
 import math
-from typing import NoReturn
+from collections.abc import Callable
+from typing import Any, NoReturn
+
+from synthesis.model.option_rules import Rule
 
 from .exits import EXIT_INVALID
 from .exits import error as error_line
@@ -66,3 +69,23 @@ def positive_int(text: str) -> int:
     if v <= 0:
         raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
     return v
+
+
+def option_type(rule: Rule) -> Callable[[str], Any]:
+    """An argparse type for a solver option's flag, by the option's rule
+    (:mod:`synthesis.model.option_rules`): ``--time-limit -1`` is refused with the reason the
+    option ``time_limit=-1`` gets from Python and from a problem file.
+
+    >>> from synthesis.model.option_rules import SECONDS
+    >>> option_type(SECONDS)("2.5")
+    2.5
+    """
+
+    def parse(text: str) -> Any:
+        try:
+            return rule.parse(text)
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+
+    parse.__name__ = f"option_type({rule.what})"
+    return parse

@@ -18,11 +18,12 @@ from typing import TYPE_CHECKING, Any
 
 from synthesis import pipeline
 from synthesis.model.errors import ProblemError
+from synthesis.model.option_rules import GAP, SECONDS, THREADS
 from synthesis.problems.limits import MAX_GRAPH_EDGES
 from synthesis.routing.backends.cpsat_pool import close_idle_workers
 from synthesis.routing.solver_control import SolveControl, status_line, stdout_guard
 
-from .arguments import positive_int, positive_seconds, relative_gap
+from .arguments import option_type, positive_seconds
 from .command import Command
 from .exits import EXIT_OK
 from .human_summary import human_summary
@@ -47,14 +48,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true", help="print the JSON summary of problem-format.md (only it) on stdout")
     p.add_argument("--out", metavar="ARTIFACT", type=Path, help="write the synthesized-test artifact (JSON) here")
     p.add_argument("--plot", metavar="PNG", type=Path, help="draw the test (PNG, SVG or PDF by the file's suffix)")
-    p.add_argument("--time-limit", metavar="S", type=positive_seconds, help="solver time limit in seconds (default: the problem's, else none)")
+    p.add_argument("--time-limit", metavar="S", type=option_type(SECONDS), help="solver time limit in seconds (default: the problem's, else none)")
     p.add_argument(
-        "--after-first", metavar="S", type=positive_seconds,
+        "--after-first", metavar="S", type=option_type(SECONDS),
         help="stop S seconds after the first test is found (--time-limit then bounds the time to it; "
         "the paper's budget: --time-limit 600 --after-first 60)",
     )
-    p.add_argument("--gap", metavar="G", type=relative_gap, default=0.0, help="relative MIP gap at which to stop (default 0: prove optimality)")
-    p.add_argument("--threads", metavar="N", type=positive_int, help="solver threads (default 1: the same answer on every machine; at most the machine's CPUs)")
+    p.add_argument("--gap", metavar="G", type=option_type(GAP), default=0.0, help="relative MIP gap at which to stop (default 0: prove optimality)")
+    p.add_argument(
+        "--threads", metavar="N", type=option_type(THREADS),
+        help="solver threads (default 1: the same answer on every machine; at most the machine's CPUs)",
+    )
     p.add_argument(
         "--backend", choices=BACKENDS, default="auto",
         help="the solver of the routing model: highs, cpsat (OR-Tools CP-SAT) "
