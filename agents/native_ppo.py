@@ -922,6 +922,17 @@ def train(args: NativeArgs, out: str | Path | None = None, heldout: Sequence[Any
     ------
     ValueError
         On settings no run can use (:func:`check_args`) or an env it cannot train on.
+
+    Examples
+    --------
+    A tiny budget on one built-in (a real run: docs/training.md):
+
+    >>> from agents.native_ppo import NativeArgs, train
+    >>> args = NativeArgs(env_id="FlowTest-SmallReactive-v0", num_envs=8, num_steps=8, total_steps=128,
+    ...                   hidden=(16,), device="cpu", eval_every=0)
+    >>> result = train(args, progress_bar=False)
+    >>> result.steps, sorted(result.final["train"])
+    (128, ['met', 'realized', 'restrictions'])
     """
     check_args(args)
     device = resolve_device(args.device)

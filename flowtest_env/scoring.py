@@ -248,6 +248,21 @@ def score_policy(policy: Callable[[np.ndarray, np.ndarray], Any], pool: str | No
     ValueError
         On neither ``pool`` nor ``tests``, a bad pool name, split or count, ``runs < 1``, or
         a policy answering the wrong shape.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from flowtest_env import load_test
+    >>> from flowtest_env.scoring import random_policy, score_policy
+    >>> tests = [load_test("small-reactive")]
+    >>> def first_legal(observations, masks):          # a batched policy: one action per row
+    ...     return np.argmax(masks, axis=1)
+    >>> greedy = score_policy(first_legal, tests=tests)
+    >>> greedy.tests, greedy.runs, len(greedy.per_test_met)
+    (1, 1, 1)
+    >>> floor = score_policy(random_policy(), tests=tests, runs=8, seed=0)
+    >>> floor.runs, 0.0 <= floor.met <= 1.0
+    (8, True)
     """
     if tests is None:
         if pool is None:

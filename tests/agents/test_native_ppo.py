@@ -236,3 +236,76 @@ def test_ctrl_c_while_training_leaves_nothing_half_written(tmp_path: Path) -> No
     assert all(not p.name.startswith(".") for p in (out / "logs").iterdir())
     rows = (out / "logs" / "progress.csv").read_text().splitlines()
     assert rows[0].startswith("step,") and all(r.count(",") == rows[0].count(",") for r in rows)
+
+
+# --------------------------------------------------------------------------- prioritized level replay
+
+
+def test_level_sampler_ranks_scores_weighs_staleness_and_plays_unseen_levels_first() -> None:
+    from agents.native_ppo import LevelSampler
+
+    s = LevelSampler(4, "pvl", temperature=1.0, staleness=0.0, seed=0)
+    assert s.replay_distribution().sum() == 0.0  # nothing seen: nothing to replay
+    first = s.choose(np.arange(3))
+    assert len(set(first.tolist())) <= 3 and (first < 4).all()
+    # two runs scored: env 0 plays level 2 (advantages 1, -1, 3: positive value loss 4/3), env 1 level 0 (all 0),
+    # both starting at step 0; an invalid (autoreset) step of env 1 is ignored
+    levels = np.array([[2, 0], [2, 0], [2, 0]])
+    adv = np.array([[1.0, 0.0], [-1.0, 0.0], [3.0, 9.0]])
+    valid = np.array([[True, True], [True, True], [True, False]])
+    starts = np.array([[True, True], [False, False], [False, False]])
+    s.update(levels, adv, valid, starts)
+    assert s.scores[2] == pytest.approx(4 / 3) and s.scores[0] == 0.0 and s.seen.tolist() == [True, False, True, False]
+    p = s.replay_distribution()  # temperature 1: h = 1/rank, normalized: level 2 rank 1, level 0 rank 2
+    assert p.tolist() == pytest.approx([1 / 3, 0.0, 2 / 3, 0.0])
+    gae = LevelSampler(4, "gae", seed=0)
+    gae.update(levels, adv, valid, starts)
+    assert gae.scores[2] == pytest.approx(5 / 3)  # mean |A|
+    # staleness alone (rho = 1): proportional to the episodes since each level was last chosen
+    t = LevelSampler(3, "pvl", staleness=1.0, seed=0)
+    t.seen[:] = True
+    t.episodes, t.last[:] = 10, [10, 6, 0]
+    assert t.replay_distribution().tolist() == pytest.approx([0.0, 4 / 14, 10 / 14])
+    # every level seen: every choice is a replay, drawn from the distribution
+    t.scores[:] = [0.0, 5.0, 1.0]
+    t.staleness = 0.0
+    picks = t.choose(np.arange(200))
+    assert t.replays == 200 and np.mean(picks == 1) > 0.95  # temperature 0.1: rank 1 dominates
+
+
+def test_plr_training_samples_its_levels_and_is_seeded(tmp_path: Path) -> None:
+    """level_sampling="plr": the env's tests are chosen by the sampler (every level is
+    seen, replays happen, the log has the sampler's numbers), and a seed gives the same run."""
+    args = NativeArgs(env_id="FlowTest-RandomGrid-v0", env_kwargs={"pool": "safety2/4x4", "split": "train", "count": 6},
+                      total_steps=1024, num_envs=8, num_steps=16, num_minibatches=2, hidden=(16,), device="cpu",
+                      eval_every=0, level_sampling="plr")
+    a = train(args, progress_bar=False)
+    b = train(args, progress_bar=False)
+    rows = [r for r in a.rows if "plr/levels_seen" in r]
+    assert rows and rows[-1]["plr/levels_seen"] == 6 and rows[-1]["plr/replay_share"] > 0
+    for k, v in a.agent.state_dict().items():
+        assert torch.equal(v, b.agent.state_dict()[k]), k
+    assert a.settings["training"]["level_sampling"] == "plr"
+    with pytest.raises(ValueError, match="level_sampling"):
+        train(NativeArgs(level_sampling="nope"), progress_bar=False)
+    with pytest.raises(ValueError, match="NumPy env"):
+        train(NativeArgs(level_sampling="plr", env_backend="torch"), progress_bar=False)
+
+
+def test_batch_actor_plays_the_checkpoint_greedy_and_sampled(tmp_path: Path) -> None:
+    """The saved model's batched policy gives the trainer's greedy score, and its sampled
+    runs are seeded."""
+    from agents.native_ppo import load_native
+    from flowtest_env.scoring import play_batch
+
+    args = NativeArgs(env_id="FlowTest-SmallReactive-v0", total_steps=512, num_envs=8, num_steps=16, num_minibatches=2,
+                      hidden=(16,), device="cpu", eval_every=0)
+    result = train(args, out=tmp_path / "m.zip", progress_bar=False)
+    model = load_native(tmp_path / "m.zip")
+    vec: Any = gym.make_vec("FlowTest-SmallReactive-v0", num_envs=1, vectorization_mode="vector_entry_point")
+    games = list(vec.unwrapped.games)
+    greedy = play_batch(model.batch_policy(), games, runs=1)
+    assert float(np.mean(greedy["system_objective"] == "met")) == result.final["train"]["met"]
+    one = play_batch(model.batch_policy(deterministic=False), games, runs=6, seed=3)
+    two = play_batch(model.batch_policy(deterministic=False), games, runs=6, seed=3)
+    assert (one["steps"] == two["steps"]).all() and (one["system_objective"] == two["system_objective"]).all()

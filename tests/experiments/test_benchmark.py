@@ -243,3 +243,34 @@ def test_ctrl_c_during_training(tmp_path: Path) -> None:
     assert time.perf_counter() - t0 < 2.0
     assert out == "" and "Traceback" not in err
     assert err.splitlines()[-1] == "flowtest: interrupted"
+
+
+def test_a_python_policy_is_scored_by_the_protocol(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                   monkeypatch: pytest.MonkeyPatch) -> None:
+    """``--sut python:MODULE:NAME``: an object marked ``batched = True`` plays every test
+    in one batch, a planner function through the single env; both get the protocol's numbers
+    (met, normalized with the split's floor and ceiling)."""
+    (tmp_path / "mine.py").write_text(
+        "import numpy as np\n\n"
+        "def first_legal(observations, masks):\n"
+        "    return np.argmax(masks, axis=1)\n\n"
+        "first_legal.batched = True\n\n"
+        "def planner(observation, mask):\n"
+        "    return int(np.argmax(mask))\n"
+    )
+    monkeypatch.chdir(tmp_path)
+    code, stdout, err = run(["benchmark", "--pool", POOL, "--train-count", "3", "--test-count", "4", "--validation-count", "2",
+                             "--sut", "python:mine:first_legal", "python:mine:planner", "--out", str(tmp_path / "b"),
+                             "--json", "-q", "--bootstrap", "50"], capsys)
+    assert code == 0, err
+    doc = json.loads(stdout)
+    batched, single = _system(doc, "python:mine:first_legal"), _system(doc, "python:mine:planner")
+    assert {e["name"] for e in doc["systems"]} == {"random", "scripted:replanner", "gr1", "python:mine:first_legal",
+                                                   "python:mine:planner"}
+    for split in ("train", "validation", "test"):  # the same deterministic choice, batched or one env at a time
+        assert batched[split]["greedy"]["met"]["mean"] == single[split]["greedy"]["met"]["mean"]
+        assert batched[split]["greedy"]["runs_per_test"] == 1 and batched[split]["sampled"] is None
+        n = batched[split]["greedy"]["normalized"]
+        scale = doc["scale"][split]
+        want = (batched[split]["met"]["mean"] - scale["floor"]) / (scale["ceiling"] - scale["floor"])
+        assert n["iqm"] == pytest.approx(want) and n["low"] <= n["iqm"] <= n["high"]
