@@ -56,6 +56,32 @@ standard input; it should then exit.
 A ``python:`` planner receives exactly these ``step`` messages as ``observation`` (a
 ``dict``; plus ``observation["observation"]``, the Gymnasium environment's observation
 array) and ``mask`` as an ``int8`` array; its answer is an index or a name as above.
+
+Examples
+--------
+A planner process that always takes the last allowed action (``stay`` when it may):
+
+>>> import pathlib, shlex, sys, tempfile
+>>> import gymnasium as gym
+>>> import flowtest_env
+>>> from agents.registry import make_policy
+>>> folder = tempfile.TemporaryDirectory()
+>>> planner = pathlib.Path(folder.name, "planner.py")
+>>> _ = planner.write_text('''
+... import json, sys
+... for line in sys.stdin:
+...     message = json.loads(line)
+...     if message["type"] == "step":
+...         print(json.dumps({"action": message["allowed"][-1]}), flush=True)
+... ''')
+>>> env = gym.make("FlowTest-SmallReactive-v0")
+>>> policy = make_policy(f"cmd:{shlex.quote(sys.executable)} {shlex.quote(str(planner))}", env)
+>>> obs, info = env.reset(seed=0)
+>>> policy.reset(0)
+>>> policy.act(obs, info)        # the index of "stay"
+4
+>>> policy.close()
+>>> folder.cleanup()
 """
 
 from __future__ import annotations
@@ -370,7 +396,22 @@ def make_python(env: Any, arg: str) -> PythonPlanner:
 def planner_policy(obj: Any, env: Any, name: str | None = None) -> PythonPlanner:
     """A planner given as a Python object (a function, a factory, or a planner object with
     ``act(observation, mask)``) as a :class:`~agents.base.Policy` for ``env``; named
-    ``name``, else by :func:`spec_of` where it can be, else by its type."""
+    ``name``, else by :func:`spec_of` where it can be, else by its type.
+
+    Examples
+    --------
+    >>> import gymnasium as gym
+    >>> import flowtest_env
+    >>> from agents.external import planner_policy
+    >>> def first_allowed(observation, mask):
+    ...     return observation["allowed"][0]     # the name of an action the test allows now
+    >>> env = gym.make("FlowTest-SmallReactive-v0")
+    >>> policy = planner_policy(first_allowed, env, name="first-allowed")
+    >>> obs, info = env.reset(seed=0)
+    >>> policy.reset(0)
+    >>> policy.name, policy.act(obs, info)       # "N" is action 0
+    ('first-allowed', 0)
+    """
     label = name or spec_of(obj) or f"python object {getattr(obj, '__qualname__', type(obj).__name__)}"
     if inspect.isclass(obj) or inspect.isfunction(obj) or inspect.ismethod(obj) or not hasattr(obj, "act"):
         return PythonPlanner(label, env, obj)

@@ -68,17 +68,30 @@ def make_policy(name: str | Any, env: Any, step_timeout: float | None = None) ->
     ``name`` may also be a Python object: a :class:`~agents.base.Policy` (returned as it
     is) or a planner (a function ``act(observation, mask)``, a factory or a planner
     object, :func:`agents.external.planner_policy`). ``step_timeout`` bounds each answer
-    of a ``cmd:`` planner (seconds; default :data:`agents.external.DEFAULT_STEP_TIMEOUT`).
-
-    Example::
-
-        policy = make_policy("cmd:python3 planner.py", env, step_timeout=2.0)
+    of a ``cmd:`` planner (seconds; default :data:`agents.external.DEFAULT_STEP_TIMEOUT`):
+    ``make_policy("cmd:python3 planner.py", env, step_timeout=2.0)``.
 
     Raises
     ------
     PolicyError
         On an unknown name, a missing module, attribute or program, or an env the policy
         cannot play.
+
+    Examples
+    --------
+    >>> import gymnasium as gym
+    >>> import flowtest_env
+    >>> from agents.registry import make_policy
+    >>> env = gym.make("FlowTest-SmallReactive-v0")
+    >>> policy = make_policy("scripted:replanner", env)
+    >>> obs, info = env.reset(seed=0)
+    >>> policy.reset(0)
+    >>> done = False
+    >>> while not done:
+    ...     obs, reward, terminated, truncated, info = env.step(policy.act(obs, info))
+    ...     done = terminated or truncated
+    >>> info["verdict"]
+    {'system_objective': 'met', 'test_objective_realized': True, 'restrictions': 1, 'blocked_attempts': 0, 'steps': 5}
     """
     if not isinstance(name, str):
         if isinstance(name, Policy):

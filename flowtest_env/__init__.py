@@ -16,6 +16,19 @@ The options every env takes are one :class:`~flowtest_env.config.EnvConfig`;
 :func:`observation_layout` names the entries of an observation (docs/envs/observations.md).
 The two-player (tester vs. system) PettingZoo environment is
 :mod:`flowtest_env.multiagent`.
+
+Examples
+--------
+>>> import gymnasium as gym
+>>> import flowtest_env
+>>> env = gym.make("FlowTest-SmallReactive-v0")
+>>> obs, info = env.reset(seed=0)
+>>> env.action_space, obs.shape, info["action_mask"].tolist(), info["system_state"]
+(Discrete(5), (78,), [1, 0, 1, 0, 1], [1, 0])
+>>> envs = gym.make_vec("FlowTest-SmallReactive-v0", num_envs=4, vectorization_mode="vector_entry_point")
+>>> obs, infos = envs.reset(seed=0)
+>>> obs.shape, infos["action_mask"].shape
+((4, 78), (4, 5))
 """
 
 from __future__ import annotations
@@ -82,6 +95,15 @@ def make_env(test: TestLike, **options: Any) -> FlowTestEnv:
     arguments (``obs_kind``, ``max_steps``, ``render_mode``, ...). Equivalent to
     ``gymnasium.make("FlowTest-v0", test=test, **options).unwrapped``, without
     Gymnasium's checker wrappers.
+
+    Examples
+    --------
+    >>> import flowtest_env
+    >>> env = flowtest_env.make_env("small-reactive", max_steps=20)
+    >>> obs, info = env.reset(seed=0)
+    >>> obs, reward, terminated, truncated, info = env.step(0)      # action 0 is N
+    >>> info["system_state"], round(reward, 2), terminated, env.config.max_steps
+    ([0, 0], -0.01, False, 20)
     """
     return FlowTestEnv(test, **options)
 

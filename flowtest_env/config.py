@@ -101,6 +101,18 @@ class EnvConfig:
     ValueError
         On any value outside the above (booleans, strings or ``2.7`` for an integer,
         NaN or infinities for a number).
+
+    Examples
+    --------
+    >>> from flowtest_env import EnvConfig, make_env
+    >>> config = EnvConfig(max_steps=20, memory="visited")
+    >>> env = make_env("small-reactive", config=config)      # or make_env("small-reactive", max_steps=20, ...)
+    >>> env.config.max_steps, env.config.memory, env.observation_space.shape
+    (20, 'visited', (84,))
+    >>> EnvConfig(max_steps=0)
+    Traceback (most recent call last):
+    ...
+    ValueError: max_steps must be a positive integer, not 0
     """
 
     setting: str | None = None

@@ -122,7 +122,24 @@ NUMERIC_INFO_KEYS = ("system_state", "system_objective", "test_objective_realize
 
 
 def env(**kwargs: Any) -> AECEnv:
-    """The wrapped AEC environment (order enforcing, bounds checked)."""
+    """The wrapped AEC environment (order enforcing, bounds checked).
+
+    Examples
+    --------
+    The tester (here the synthesized test) and the system take turns:
+
+    >>> from flowtest_env.multiagent import env, synthesized_tester
+    >>> e = env(test="small-reactive")
+    >>> e.reset(seed=0)
+    >>> tester = synthesized_tester(e)
+    >>> turns = []
+    >>> for agent in e.agent_iter(max_iter=4):
+    ...     observation, reward, termination, truncation, info = e.last()
+    ...     turns.append((agent, info["system_state"]))
+    ...     e.step(tester() if agent == "tester_0" else int(observation["action_mask"].argmax()))
+    >>> turns
+    [('tester_0', [1, 0]), ('system_0', [1, 0]), ('tester_0', [0, 0]), ('system_0', [0, 0])]
+    """
     e: AECEnv = raw_env(**kwargs)
     e = wrappers.AssertOutOfBoundsWrapper(e)
     e = wrappers.OrderEnforcingWrapper(e)
@@ -132,7 +149,20 @@ def env(**kwargs: Any) -> AECEnv:
 def parallel_env(**kwargs: Any) -> ParallelFlowTestEnv:
     """The parallel version: one ``step`` plays one round, the agents' actions applied in
     turn order (so the system's action is chosen before it sees this round's tester
-    choice when the tester moves first)."""
+    choice when the tester moves first).
+
+    Examples
+    --------
+    >>> from flowtest_env.multiagent import parallel_env, synthesized_tester
+    >>> env = parallel_env(test="small-reactive")
+    >>> observations, infos = env.reset(seed=0)
+    >>> env.agents, sorted(observations["system_0"])
+    (['tester_0', 'system_0'], ['action_mask', 'observation'])
+    >>> tester = synthesized_tester(env)
+    >>> observations, rewards, terminations, truncations, infos = env.step({"tester_0": tester(), "system_0": 0})
+    >>> rewards, infos["system_0"]["system_state"]
+    ({'tester_0': 0.0, 'system_0': -0.01}, [0, 0])
+    """
     return ParallelFlowTestEnv(**kwargs)
 
 

@@ -123,6 +123,25 @@ class TestRuntime:
     max_steps
         The step budget; default the environment's (:func:`flowtest_env.envs.default_max_steps`).
         The run is ``done`` once it is spent, as an environment truncates it.
+
+    Examples
+    --------
+    Your system moves; the runtime says what the test allows and blocks (here it closes the
+    way east at ``[0, 1]`` until the system has visited ``I2``):
+
+    >>> from flowtest_env.runtime import TestRuntime
+    >>> rt = TestRuntime.load("small-reactive")      # a built-in, an artifact or a problem file
+    >>> status = rt.reset()
+    >>> status["state"], status["allowed"], status["to"]
+    ([1, 0], ['N', 'E', 'stay'], [[0, 0], [1, 1], [1, 0]])
+    >>> status = rt.step(state=[0, 0])               # or rt.step(action="N")
+    >>> status = rt.step(state=[0, 1])
+    >>> status["restricted"], status["allowed"]
+    ([{'action': 'E', 'to': [0, 2], 'by': 'test'}], ['S', 'W', 'stay'])
+    >>> for state in ([1, 1], [1, 2], [0, 2]):
+    ...     status = rt.step(state=state)
+    >>> status["done"], status["verdict"]
+    (True, {'system_objective': 'met', 'test_objective_realized': True, 'restrictions': 1, 'blocked_attempts': 0, 'steps': 5})
     """
 
     __test__ = False

@@ -120,6 +120,13 @@ def load_test(test: TestLike) -> TestArtifact:
         the file is not a valid problem or artifact (the message says what and where).
     synthesis.model.errors.InconsistentProblem, synthesis.model.errors.CheckFailed, TimeoutError
         From synthesizing a problem, as ``flowtest synthesize``.
+
+    Examples
+    --------
+    >>> from flowtest_env import load_test
+    >>> artifact = load_test("maze2")          # a built-in: its shipped, checked artifact
+    >>> artifact.name, artifact.kind, artifact.summary["status"]
+    ('maze2', 'agent', 'optimal')
     """
     if isinstance(test, TestArtifact):
         return test

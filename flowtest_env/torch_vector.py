@@ -876,11 +876,21 @@ def make_vec(env_id: str, num_envs: int, device: str | torch.device = "cpu", *, 
              compact: bool = False, copy: bool = True, check_actions: bool | None = None,
              reward_dtype: torch.dtype = torch.float32, **options: Any) -> TorchVectorEnv:
     """A :class:`TorchVectorEnv` of a registered FlowTest ID with the NumPy vector env's
-    ``options`` (``memory``, ``shaping``, ``max_steps``, ``pool``...), on ``device``.
+    ``options`` (``memory``, ``shaping``, ``max_steps``, ``pool``...), on ``device``; on a
+    GPU, e.g. ``make_vec("FlowTest-RandomGrid-v0", 65536, device="cuda", pool="reachability1/5x5", obs_kind="padded")``.
 
-    Example::
-
-        envs = make_vec("FlowTest-RandomGrid-v0", 65536, device="cuda", pool="reachability1/5x5", obs_kind="padded")
+    Examples
+    --------
+    >>> import torch
+    >>> from flowtest_env.torch_vector import make_vec
+    >>> envs = make_vec("FlowTest-SmallReactive-v0", 16, device="cpu")
+    >>> obs, infos = envs.reset(seed=0)
+    >>> obs.shape, infos["action_mask"].shape
+    (torch.Size([16, 78]), torch.Size([16, 5]))
+    >>> actions = infos["action_mask"].float().multinomial(1, generator=torch.Generator().manual_seed(0)).squeeze(1)
+    >>> obs, rewards, terminated, truncated, infos = envs.step(actions)
+    >>> rewards.shape, terminated.dtype
+    (torch.Size([16]), torch.bool)
     """
     np_env = gym.make_vec(env_id, num_envs=1, vectorization_mode="vector_entry_point", **options)
     return TorchVectorEnv.from_numpy(

@@ -105,6 +105,11 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
 
     Example::
 
+        >>> from flowtest_env.vector import PoolVectorEnv
+        >>> envs = PoolVectorEnv(8, ["small-reactive", "maze1"], assignment="fixed")
+        >>> obs, infos = envs.reset(seed=0)
+        >>> obs.shape, infos["action_mask"].shape, envs.test_index.tolist()
+        ((8, 426), (8, 5), [0, 1, 0, 1, 0, 1, 0, 1])
         >>> from flowtest_env.pools import load_pool
         >>> envs = PoolVectorEnv(64, load_pool("reachability1/5x5", count=4), memory="visited")  # doctest: +SKIP
     """

@@ -224,6 +224,13 @@ def synthesize(problem: Problem, options: SynthesisOptions | None = None) -> Syn
         (``"implied"``); the message names the conjunct or visit to blame.
     CheckFailed
         If the answer fails an independent check (a FlowTest bug).
+
+    Examples
+    --------
+    >>> from synthesis import load_problem, synthesize
+    >>> test = synthesize(load_problem("small-reactive"))
+    >>> test.routing.status, test.routing.flow, len(test.routing.cut_edges), test.checks.bypass_flow
+    ('optimal', 2, 4, 0)
     """
     options = options or SynthesisOptions()
     started = time.perf_counter()

@@ -283,18 +283,22 @@ def evaluate(
     A SUT is a name (``"scripted:replanner"``, ``"python:my_planner:Bfs"``,
     ``"cmd:python3 planner.py"``) or a Python object: a :class:`agents.base.Policy`, or
     a planner (a function ``act(observation, mask)``, a class or factory of planners;
-    :mod:`agents.external`). Example::
-
-        def greedy(observation, mask):
-            return observation["allowed"][0]
-
-        cells = evaluate(["small-reactive"], [greedy, "scripted:replanner"], episodes=3)
+    :mod:`agents.external`).
 
     Raises
     ------
     ProblemError
         Before anything runs, if an env or a SUT name is invalid input (not a test, an
         unknown policy, a missing module or program), or ``episodes < 1``.
+
+    Examples
+    --------
+    >>> from experiments.cli.evaluate import evaluate
+    >>> def greedy(observation, mask):
+    ...     return observation["allowed"][0]
+    >>> cells = evaluate(["small-reactive"], [greedy, "scripted:replanner"], episodes=3)
+    >>> [(cell.sut, cell.record()["system_objective_met_rate"]) for cell in cells]
+    [('python object greedy', 0.0), ('scripted:replanner', 1.0)]
     """
     from agents.base import PolicyError
     from agents.external import spec_of

@@ -266,6 +266,18 @@ class TestArtifact:
         The test agent (its cells, parks and strategy table), agent problems only.
     objectives
         ``{"system": ..., "test": ...}`` formula texts.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> from synthesis import TestArtifact, artifact_of, load_problem, summary_of, synthesize
+    >>> test = synthesize(load_problem("small-reactive"))
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     path = pathlib.Path(folder, "small-reactive.json")
+    ...     artifact_of(test, summary_of(test)).save(path)
+    ...     loaded = TestArtifact.load(path)    # checked against what it claims
+    >>> loaded.name, loaded.kind, loaded.summary["n_cuts"], loaded.edited
+    ('small-reactive', 'reactive', 4, False)
     """
 
     __test__ = False
@@ -449,6 +461,19 @@ def verify_artifact(
     ------
     ProblemError
         Naming the check that fails (the artifact was edited or made for another problem).
+
+    Examples
+    --------
+    >>> from dataclasses import replace
+    >>> from synthesis import artifact_of, load_problem, summary_of, synthesize, verify_artifact
+    >>> test = synthesize(load_problem("small-reactive"))
+    >>> artifact = artifact_of(test, summary_of(test))
+    >>> verify_artifact(artifact)        # passes: returns None
+    >>> edited = replace(artifact, objectives={"system": "F goal", "test": "F I1"})
+    >>> verify_artifact(edited, source="edited.json")
+    Traceback (most recent call last):
+    ...
+    synthesis.model.errors.ProblemError: artifact edited.json: its system, objectives or kind do not match its source hash (the file was edited)
     """
     where = f"artifact {source}"
     own = source_hash(art.system.to_dict(), art.objectives, art.kind)
@@ -538,7 +563,16 @@ def artifact_agent(art: TestArtifact, where: str | None = None) -> tuple[TestAge
 
 def artifact_of(test: SynthesizedTest, summary: dict[str, Any], extras: Mapping[str, Any] | None = None) -> TestArtifact:
     """The artifact of a :class:`~synthesis.pipeline.SynthesizedTest` and its summary, with
-    ``extras`` (e.g. provenance) added to its own."""
+    ``extras`` (e.g. provenance) added to its own.
+
+    Examples
+    --------
+    >>> from synthesis import artifact_of, load_problem, summary_of, synthesize
+    >>> test = synthesize(load_problem("small-reactive"))
+    >>> artifact = artifact_of(test, summary_of(test), extras={"built_by": "example"})
+    >>> artifact.name, artifact.kind, artifact.summary["flow"], artifact.extras["built_by"]
+    ('small-reactive', 'reactive', 2, 'example')
+    """
     p = test.problem
     spec = test.spec
     return TestArtifact(

@@ -72,7 +72,15 @@ def derived_summary(
 
 
 def summary_of(test: SynthesizedTest) -> dict[str, Any]:
-    """The problem-format.md JSON object of a :class:`~synthesis.pipeline.SynthesizedTest`."""
+    """The problem-format.md JSON object of a :class:`~synthesis.pipeline.SynthesizedTest`.
+
+    Examples
+    --------
+    >>> from synthesis import load_problem, summary_of, synthesize
+    >>> summary = summary_of(synthesize(load_problem("small-reactive")))
+    >>> summary["status"], summary["flow"], summary["n_cuts"], summary["n_doors"], summary["bypass_flow"]
+    ('optimal', 2, 4, 3, 0)
+    """
     p, spec, prods, r = test.problem, test.spec, test.products, test.routing
     d = derived_summary(p, spec, prods, r.cut_edges, test.strategy, test.checks.bypass_flow)
     stats = dict(r.stats)

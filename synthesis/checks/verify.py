@@ -162,6 +162,15 @@ def check_test(
 
     Trapped configurations off entry nodes are always counted in the report; they fail
     it only with ``closed_loop=True`` (docs/method.md §5 does not forbid them).
+
+    Examples
+    --------
+    >>> from synthesis import load_problem, synthesize
+    >>> from synthesis.checks.verify import check_test
+    >>> test = synthesize(load_problem("small-reactive"))
+    >>> report = check_test(test.products, test.strategy, expected_flow=test.routing.flow)
+    >>> report.ok, report.bypass_flow, report.flow
+    (True, 0, 2)
     """
     blocked = restricted_edges(products, strategy)
     report = CheckReport(

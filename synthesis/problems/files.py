@@ -358,6 +358,31 @@ def load_problem_file(path: str | Path, max_cells: int | None = MAX_GRID_CELLS) 
     ------
     ProblemError
         If the file cannot be read or parsed, or describes an invalid problem.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> from synthesis import load_problem_file
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     path = pathlib.Path(folder, "corridor.toml")
+    ...     _ = path.write_text('''
+    ... name = "corridor"
+    ... [system]
+    ... grid = "S . A . T"
+    ... start = "S"
+    ... terminal = ["T"]
+    ... [labels]
+    ... goal = ["T"]
+    ... a = ["A"]
+    ... [objectives]
+    ... system = "F goal"
+    ... test = "F a"
+    ... [environment]
+    ... kind = "static"
+    ... ''')
+    ...     problem = load_problem_file(path)
+    >>> problem.name, problem.kind, problem.system.n_states
+    ('corridor', 'static', 5)
     """
     p = Path(path)
     raw = read_limited(p, "problem file")

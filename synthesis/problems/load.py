@@ -12,7 +12,15 @@ from .problem import Problem
 
 
 def load_problem(name_or_path: str, max_cells: int | None = MAX_GRID_CELLS) -> Problem:
-    """A built-in problem by name, or a TOML file by path (grids up to ``max_cells`` cells)."""
+    """A built-in problem by name, or a TOML file by path (grids up to ``max_cells`` cells).
+
+    Examples
+    --------
+    >>> from synthesis import load_problem
+    >>> problem = load_problem("small-reactive")     # a built-in name, or the path of a .toml file
+    >>> problem.kind, problem.system_objective.text, problem.test_objective.text
+    ('reactive', 'F goal', 'F I1 & F I2')
+    """
     if not isinstance(name_or_path, str) or not name_or_path.strip():
         raise ProblemError("empty problem name: give a TOML file or a built-in name")
     if name_or_path in BUILTINS:

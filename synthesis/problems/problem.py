@@ -147,6 +147,22 @@ def make_problem(
     ProblemError
         On an unknown kind or ``tie_places``, a formula outside the fragment, an unknown
         proposition, or a system objective whose goal is not at terminal states.
+
+    Examples
+    --------
+    A fork: the system may reach the goal through ``left`` or ``right``; the test wants it
+    through the door on the left, so it closes the way to the right.
+
+    >>> from synthesis import make_problem, synthesize
+    >>> from synthesis.model.systems import graph_system
+    >>> system = graph_system(
+    ...     ["start", "left", "right", "goal"],
+    ...     [("start", "left"), ("start", "right"), ("left", "goal"), ("right", "goal")],
+    ...     "start", ["goal"], {"left": ["door"], "goal": ["goal"]})
+    >>> problem = make_problem("fork", system, "F goal", "F door", "static")
+    >>> test = synthesize(problem)
+    >>> [(system.states[system.src[m]], system.states[system.dst[m]]) for m in test.strategy.static_obstacles.nonzero()[0]]
+    [('start', 'right')]
     """
     if kind not in KINDS:
         raise ProblemError(f"unknown environment kind {kind!r}; expected one of {', '.join(KINDS)}")
