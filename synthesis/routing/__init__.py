@@ -1,4 +1,4 @@
-"""The routing MILP of method.md §5 (and the MILP-agent options of §7): the least-restrictive
+"""The routing MILP of docs/method.md §5 (and the MILP-agent options of §7): the least-restrictive
 cuts that route every successful run through the test objective without trapping the system.
 
 Layout, by role:
@@ -34,7 +34,7 @@ model solution the backend has checked against the model, its status, gap and wh
 when the package is missing, and extra stats. ``tests/synthesis/test_backend_contract.py`` holds
 every entry of :data:`~.solve.SOLVERS` to the same answers.
 
-Reductions, none of which changes the optimum of method.md §5:
+Reductions, none of which changes the optimum of docs/method.md §5:
 
 * **Pruning.** Nodes of G with no path to ``Tgt`` carry no flow and lie on no
   ``Src -> Tgt`` path, so they (and their edges) are left out of the model; cut

@@ -4,7 +4,7 @@ The caps (``max_walls``, ``max_doors``, ``max_restrictions``; :attr:`MilpOptions
 are rows of the routing model (:class:`~synthesis.routing.model.CapRows`). When the capped
 solve finds no test, :func:`fewest_within` answers the user's next question, *how many
 would do?*: the fewest walls (doors, restrictions) of any cut set that routes flow >= 1,
-the other caps kept, as the routing model's own optimum (every row of method.md §5, all
+the other caps kept, as the routing model's own optimum (every row of docs/method.md §5, all
 feasibility flows up front), so the figure is the one a cap must allow. The solve is
 bounded by a deadline; stopped early it gives HiGHS's proven lower bound.
 """
@@ -137,7 +137,7 @@ def disjoint_bypasses(products: Products, options: MilpOptions, cap: str, stop_a
     ``Src -> Tgt`` walks avoiding I (bypasses) found one after another, each over edges
     whose items no earlier walk used, and which no item the cap leaves out (a wall, for a
     cap on doors) can close. Every test closes each bypass with an item the cap counts
-    (method.md c4-c5), a different one for each (they share none), so it needs at least as
+    (docs/method.md c4-c5), a different one for each (they share none), so it needs at least as
     many. Shortest walks first (fewest edges); stops once ``stop_above`` are found.
 
     Cheap (one breadth-first search of G per walk), so a cap far below what the problem

@@ -1,4 +1,4 @@
-"""The routing MILP as a model (method.md §5, §7): its options, the cut groups and model
+"""The routing MILP as a model (docs/method.md §5, §7): its options, the cut groups and model
 edges it is built on, and the model itself as named column and row blocks.
 
 :func:`build_model` adds the blocks in a fixed order, so the model, and with it HiGHS's
@@ -461,7 +461,7 @@ class RoutingModel:
 def build_model(
     products: Products, options: MilpOptions, entries: dict[int, np.ndarray], keep_node: np.ndarray
 ) -> RoutingModel:
-    """Assemble the routing MILP (method.md §5, §7) as column and row blocks.
+    """Assemble the routing MILP (docs/method.md §5, §7) as column and row blocks.
 
     The blocks go in in a fixed order (columns f, d, mu; rows c2, c3, c4-c5, couplings;
     the feasibility flows; MILP-agent's places; the exclusions), so the model, and with it
@@ -707,7 +707,7 @@ def phase2_integral_columns(rm: RoutingModel, options: MilpOptions) -> np.ndarra
 def _add_blocked_places(
     m: _Model, products: Products, groups: CutGroups, cut: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """MILP-agent (method.md §7): a binary ``d_state`` per place entered by a cut, at least
+    """MILP-agent (docs/method.md §7): a binary ``d_state`` per place entered by a cut, at least
     every cut into it. Returns ``(columns, places, rows)``."""
     g, ts = products.virtual, products.ts
     # every edge of G in a group with a binary enters the place of its head
@@ -764,7 +764,7 @@ def _add_feasibility(
     """Add c6-c8 as one aggregated flow per history; returns where each flow lives.
 
     A flow edge over move ``t`` under history ``q`` is closed by the cut of the G edge
-    of ``Gr(q)`` over ``t`` (method.md c7); where G has no such edge nothing closes it.
+    of ``Gr(q)`` over ``t`` (docs/method.md c7); where G has no such edge nothing closes it.
     One cut column ``d`` closes every flow edge over its move, one per copy of the move in
     ``G_sys`` (the system automaton's states).
 
@@ -779,9 +779,8 @@ def _add_feasibility(
     (the only ones the MILP returns) and have the same optimum. The LP relaxation is weaker
     (a fractional ``d`` leaves room for ``K n_d (1 - d)`` over all its edges together), but
     phase 2's LP bound on the large reactive models is the same with the feasibility flows
-    or without any (docs/benchmarks.md, "Session 11"), and a model with ``n_d`` times fewer
-    closing rows (5x5 reaction |AP| = 7 #1: 23,831 rows instead of 41,035) runs more
-    branch-and-bound nodes per second. Checked by ``tests/synthesis/test_flow_rows.py``.
+    or without any, and a model with ``n_d`` times fewer closing rows runs more
+    branch-and-bound nodes per second (docs/benchmarks/solvers.md, "MILP-reactive's phase 2"). Checked by ``tests/synthesis/test_flow_rows.py``.
     """
     g, gs = products.virtual, products.system
     ts = products.ts

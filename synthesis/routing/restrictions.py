@@ -1,4 +1,4 @@
-"""From a routing answer to a test strategy (method.md §6): the cut edges of G outside
+"""From a routing answer to a test strategy (docs/method.md §6): the cut edges of G outside
 ``E(I)`` become the restrictions ``C(q)`` of their tail's history, the static cuts the
 static obstacles."""
 
@@ -12,7 +12,7 @@ from .result import RoutingResult
 
 
 def strategy_from_routing(products: Products, routing: RoutingResult, setting: str) -> TestStrategy:
-    """``C(q)`` per history and the static obstacles, as a test strategy (method.md §6)."""
+    """``C(q)`` per history and the static obstacles, as a test strategy (docs/method.md §6)."""
     g, ts = products.virtual, products.ts
     e = routing.cut_edges
     e = e[~products.touches_intermediate[e]]

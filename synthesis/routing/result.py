@@ -51,7 +51,7 @@ class RoutingResult:
 def required_entries(products: Products, options: MilpOptions) -> dict[int, np.ndarray]:
     """Per history, the G_sys entry nodes the feasibility flows must serve: none for
     MILP-static (its walls are on the map, see :func:`synthesis.routing.solve.solve_routing`),
-    else the kept entry nodes of method.md §5."""
+    else the kept entry nodes of docs/method.md §5."""
     return {} if options.mode == "static" else products.kept_entries
 
 

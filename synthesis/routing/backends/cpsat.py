@@ -58,12 +58,10 @@ mars-exploration's flow-2 test takes it 7.76 from the heuristic's hint (docs/ben
 MAX_FLOW_SEARCH: dict[str, Any] = {"linearization_level": 0, "search_branching": "PORTFOLIO_WITH_QUICK_RESTART_SEARCH"}
 """CP-SAT's search for phase 1 (maximum flow): no LP relaxation, and quick restarts that
 alternate CP-SAT's branching heuristics. Finding a wall set that lets the flow through is a
-search for a solution, which the weak LP bound (docs/benchmarks.md) does not guide: measured
-on mars-exploration (docs/benchmarks.md, "CP-SAT as a routing backend"), a flow-2 wall set in
-5-35 deterministic seconds (random seeds 0-3; 7.8 from the heuristic's hint with seed 0),
-against none in 100 with CP-SAT's default search. It is bad at proving that no wall set
-reaches a flow (a random 5x5 grid: 1.5 deterministic seconds where the LP bound takes 0.01;
-random 5x5 reaction grids' flow 2: not within 600 s, where the default search takes 1-30), so
+search for a solution, which the weak LP bound does not guide: on mars-exploration it finds a
+flow-2 wall set where CP-SAT's default search finds none in several times the budget
+(docs/benchmarks/solvers.md, "CP-SAT's phase 1"). It is bad at proving that no wall set
+reaches a flow (far slower there than the default search and the LP bound), so
 it only follows the default search, and only at the top flow level, for one turn of
 :data:`LEVEL_WORK` before the default search."""
 

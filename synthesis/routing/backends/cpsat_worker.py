@@ -1,12 +1,12 @@
 """The child process that runs OR-Tools CP-SAT on the routing model (backend ``"cpsat"``).
 
 Why a child process: OR-Tools bundles its own ``libhighs.so.1``, and that build and the one
-of highspy cannot be loaded into one process (with OR-Tools 9.15 and highspy 1.15.1,
-whichever is imported second fails with an undefined symbol). So this module imports
+of highspy cannot be loaded into one process (whichever is imported second fails with an
+undefined symbol). So this module imports
 OR-Tools' compiled CP-SAT helper and the standard library only, never ``synthesis`` (whose
 package imports highspy), nor NumPy, SciPy or OR-Tools' ``cp_model`` (which imports
-pandas): with them a fresh child took about 0.4 CPU s to start, with the helper alone
-about 0.06 (docs/benchmarks.md, "The whole command"). The parent starts it by its file
+pandas): with them a fresh child starts several times slower than with the helper alone
+(docs/benchmarks/solvers.md, "The default command"). The parent starts it by its file
 path (``python -P PATH``), not as
 ``-m synthesis...``, so the package's ``__init__`` never runs here. Importing this module into a process that
 holds highspy fails for the same reason: nothing in FlowTest imports it.

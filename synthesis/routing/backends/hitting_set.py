@@ -27,10 +27,9 @@ search ends (at most ``2^groups`` rounds; in practice hundreds).
 
 The master lives in one CP-SAT child (:class:`~synthesis.routing.backends.cpsat.CpSatSession`) for the
 whole search: rows are added to the model it holds, each round is a fresh CP-SAT search on it
-(CP-SAT cannot resume one). Measured on the 5x5 reaction |AP|=7 static grid seed 13 (40 groups,
-flow 1): HiGHS as the master took 0.37 s per master solve (163 in 60 s),
-CP-SAT 0.07 (docs/benchmarks.md, "Session 11"). No hint is passed: measured, it slowed the
-search. Budgets are deterministic: :attr:`HittingSetBudget.rounds` and the master's deterministic
+(CP-SAT cannot resume one): it solved the masters several times faster than HiGHS on the
+static grids measured, and no hint is passed, which slowed the search there
+(docs/benchmarks/solvers.md, "The hitting set (MILP-static phase 2)"). Budgets are deterministic: :attr:`HittingSetBudget.rounds` and the master's deterministic
 seconds (``work``); a wall-clock deadline only when the user set one. A stop request (Ctrl-C)
 kills the child within :data:`~synthesis.routing.solver_control.POLL` seconds.
 """
@@ -56,8 +55,8 @@ from .separator import CoverSeparator, Row
 KEEP = 64
 """Solutions of each master search (in the order found, the optimum last) whose failures become
 rows: each satisfies every row so far, so its failures are new rows, got without another master
-solve. Measured on the 5x5 reaction |AP|=7 static seed 13: 190 rounds instead of 952
-(docs/benchmarks.md, "Session 11")."""
+solve; on the static grids measured this took a fraction of the rounds
+(docs/benchmarks/solvers.md, "The hitting set (MILP-static phase 2)")."""
 
 
 KEPT_PATHS = 4
@@ -76,14 +75,13 @@ MILP-static (see :func:`synthesis.routing.backends.cpsat_phases.phase2_cpsat`)."
 
 IHS_MAX_FLOW = 1
 """The flow levels at which ``auto`` runs the hitting set: at flow 1 its flow rows are no-goods
-over minimal group sets and it proved the 5x5 reaction |AP|=7 static seed 13 (720 cuts) in 128
-rounds; at flow 2 the rows ``sum min(n_g, 2) (1 - d_g) >= 2`` are weak: refueling (40 groups,
-flow 2) stopped at 40 deterministic seconds, bound 98 against the optimum 101, where CP-SAT on
-the flow model proves it in 0.4 CPU s (docs/benchmarks.md, "Session 11")."""
+over minimal group sets and it proves the static 5x5 grids measured; at flow 2 the rows
+``sum min(n_g, 2) (1 - d_g) >= 2`` are weak: on refueling (flow 2) it ran out of budget below
+the optimum, which CP-SAT on the flow model proves at once (docs/benchmarks/solvers.md, "The hitting set (MILP-static phase 2)")."""
 
 IHS_WORK = 40.0
 """Deterministic seconds of master search that ``auto`` grants the hitting set before it falls
-back to CP-SAT on the whole flow model (docs/benchmarks.md, "Session 11")."""
+back to CP-SAT on the whole flow model (docs/benchmarks/solvers.md, "The hitting set (MILP-static phase 2)")."""
 
 IHS_ROUNDS = 5_000
 """Rounds that ``auto`` grants the hitting set (a deterministic budget far above what the 5x5

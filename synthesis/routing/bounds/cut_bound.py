@@ -1,9 +1,9 @@
 """A combinatorial lower bound on the fewest cuts of MILP-static at a flow level, and the wall
-sets of its minimum cuts (issue 18, 10x10 grids).
+sets of its minimum cuts.
 
 Phase 2 of a routing solve (the fewest cuts at the settled flow ``F``) is where the LP bounds
-are weakest (docs/benchmarks.md, "10x10 (issue 18, session 9)": 9.5-20 against tests of
-24-168 cuts). :func:`static_cut_bound` bounds the cost of the walls from the enclosure that
+are weakest: on the random 10x10 static grids they stay far below the cuts of the tests found
+(docs/benchmarks/solvers.md, "The walls' cut bound"). :func:`static_cut_bound` bounds the cost of the walls from the enclosure that
 :mod:`synthesis.routing.bounds.flow_bound` proves, in one minimum cut per choice of ``A & Y``, and
 returns the wall sets of those minimum cuts: where one of them, completed into a checked
 routing answer, costs what the bound says, phase 2 is proven without a search.
@@ -68,7 +68,7 @@ Lemmas, for a valid ``S`` whose flow is at least ``F``:
   only those of one shortest walk are tried, each by one graph search without its nodes.
 
 So ``cost(S) >= min`` over the kept choices and memberships of their minimum cuts, and since costs are
-integers, its ceiling is a lower bound on the fewest cuts at flow ``F`` (method.md §5's phase 2
+integers, its ceiling is a lower bound on the fewest cuts at flow ``F`` (docs/method.md §5's phase 2
 optimum). Nothing about the model's pruned edges or reductions enters: the groups fixed open
 and the groups without a cut binary keep their finite weight, so the bound holds for the
 model and for every wall set of the unreduced problem. With no kept choice no valid cut set

@@ -1,10 +1,10 @@
-"""A combinatorial upper bound on the maximum flow of MILP-static (issue 18, 10x10 grids).
+"""A combinatorial upper bound on the maximum flow of MILP-static.
 
 The routing heuristic's bound (:func:`synthesis.routing.bounds.heuristic.flow_upper_bound`, the
 maximum flow with every group open) ignores that the walls which route every bypass through I
 are walls in I too. On random grids it is 3-4 where no wall set gives more than 2, and proving
 that the flow level above the optimum is empty was the part of a 10x10 MILP-static solve that
-no backend finished (docs/benchmarks.md, "10x10 (issue 18, session 9)"). :func:`static_flow_bound`
+no backend finished (docs/benchmarks/solvers.md, "The walls' flow bound"). :func:`static_flow_bound`
 is a bound that sees the walls, computed from the product graph alone in a few graph searches.
 
 Terms. In MILP-static every edge of G over the same move of T shares one cut value (c9), so a
@@ -55,7 +55,7 @@ set if ``x`` is in ``A``, and to ``X`` the exits into ``x`` if not (the edges in
 nodes at ``x`` if so). Choosing the other states' membership to maximise ``min(E, X)`` is a
 two-value knapsack over a few states, solved exactly by dynamic programming over ``E``
 (capped at the bound already known). Every step over-estimates ``min(E, X)`` of the true
-``A``, so every valid cut set has flow at most the bound, and the optimum of method.md §5 is
+``A``, so every valid cut set has flow at most the bound, and the optimum of docs/method.md §5 is
 kept: the bound only proves a flow level empty, or tells phase 1 that the heuristic's flow
 is the maximum (``tests/synthesis/test_flow_bound.py`` checks it against brute force).
 
@@ -70,7 +70,7 @@ history changes, I together with every node reachable in G from the nodes entere
 change of history, less ``Tgt``. Why: a test of several cells (``F p1 & F p2``) passes each of
 them, so each test cell is a bottleneck of its own, and the enclosure around one that lies on the
 grid's border (3 moves) allows 1 where the enclosure around I (the last cell visited) allows 2
-(random 10x10 reachability grids with two test cells: docs/benchmarks.md, session 11).
+(random 10x10 reachability grids with two test cells: docs/benchmarks/solvers.md, "The walls' flow bound").
 
 (L5) L0-L3 hold too with every node that reaches no ``Tgt`` node in G (a *dead* node: a
 safety objective already violated) left out of ``R`` and of the eligible states, and with
@@ -82,7 +82,7 @@ node outside I, in ``R``, or an I node, an entry edge, or a dead node, whose sta
 larger ``Y``: its argument uses only L1 and ``Y`` inside ``Z``. Why: on the safety objectives
 (``G !p2``) every state is in ``A`` through the histories where ``p2`` was visited, and the
 bound said nothing; without them the enclosure sees the test cell again (random 10x10 safety
-grids: docs/benchmarks.md, session 11). This variant is the flow bound's only
+grids: docs/benchmarks/solvers.md, "The walls' flow bound"). This variant is the flow bound's only
 (``live=True`` of :func:`entry_choices`); :mod:`synthesis.routing.bounds.cut_bound` keeps L0-L3.
 
 Only MILP-static (every cut history-independent); with ``Src`` in I there is no entry edge

@@ -249,8 +249,8 @@ class RouteSeed:
     work
         Work budget, in edges visited, for finding routes and growing from them
         together (large grids with many orders that fail); deterministic, unlike a
-        time cap: about 2 s of this machine's time when unloaded
-        (docs/benchmarks.md).
+        time cap; the default is seconds of work at most (docs/benchmarks/solvers.md,
+        "The heuristic's first test").
     seed
         Seed of the randomized segments.
     """

@@ -1,4 +1,4 @@
-"""Reductions of the routing model's cut groups before any solver runs (issue 18, point 4).
+"""Reductions of the routing model's cut groups before any solver runs.
 
 :func:`reduce_groups` returns plain data: a ``bool`` mask over the cut groups, *fixed open*
 (``d = 0``), with the rule that fixed each group. :func:`synthesis.routing.model.build_model`
@@ -20,7 +20,7 @@ of ``S``. Facts used below, for a valid ``S`` and a flow of the model under ``S`
 * (F2) the cost of ``S`` (phase 2) is ``sum_{g in S} weight[g]``, every weight >= 1.
 
 The rules, each fixing only groups that some optimum (for rules 1 and 2: every optimum)
-leaves open, so the optimum of method.md §5 is kept (``tests/synthesis/test_reductions.py`` checks
+leaves open, so the optimum of docs/method.md §5 is kept (``tests/synthesis/test_reductions.py`` checks
 each against brute force on tiny instances):
 
 1. **Never needed.** A group with no edge on any bypass walk. For a valid ``S`` holding it,
@@ -65,8 +65,8 @@ from scipy.sparse.csgraph import breadth_first_order
 from ...graphs.products import Products, coreachable, reachable
 
 #: Static models with more cut groups with a binary than this skip the dominance rule: it
-#: costs four graph searches per group (0.4-3 s on the 10x10 grids' 164-180 walls, measured
-#: under load) and fixed none there (docs/benchmarks.md). A count, so the model stays
+#: costs four graph searches per group, seconds on the 10x10 grids' walls, and fixed none there
+#: (docs/benchmarks/solvers.md, "Cut-group reductions"). A count, so the model stays
 #: deterministic.
 DOMINANCE_MAX_GROUPS = 100
 
