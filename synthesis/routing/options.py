@@ -30,16 +30,13 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, fields
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import Any, TypeVar
 
 import numpy as np
 
 from ..model.option_rules import COUNT, FLAG, GAP, SECONDS, SEED, THREADS, WORK, Rule, choice, instance_of
 from ..problems.problem import CAP_KEYS, TIE_PLACES, check_caps
 from .solver_control import SolveControl
-
-if TYPE_CHECKING:
-    from _typeshed import DataclassInstance
 
 MODES = ("static", "reactive", "mixed")
 """The routing model's modes (``MilpOptions.mode``): MILP-static, MILP-reactive, MILP-mixed."""
@@ -277,7 +274,7 @@ def group_of(options: object, group: type[G]) -> G:
     return group(**{f.name: getattr(options, f.name) for f in fields(group)})  # type: ignore[arg-type]
 
 
-def values_of(options: object, group: type[DataclassInstance]) -> dict[str, Any]:
+def values_of(options: object, group: Any) -> dict[str, Any]:
     """The fields of ``group`` that ``options`` holds, by name (to pass on as keywords).
 
     >>> values_of(MilpOptions(backend="highs"), RunOptions)
@@ -286,7 +283,7 @@ def values_of(options: object, group: type[DataclassInstance]) -> dict[str, Any]
     return {f.name: getattr(options, f.name) for f in fields(group)}
 
 
-def default_of(group: type[DataclassInstance], name: str) -> Any:
+def default_of(group: Any, name: str) -> Any:
     """The default of ``group``'s field ``name``: for an options class that offers one field of a
     group without the rest (the synthesis options' ``closed_loop``), so the default is the
     group's, not a copy.
@@ -336,7 +333,7 @@ RULES: Mapping[str, Rule] = {
 :data:`synthesis.pipeline.SYNTHESIS_RULES`)."""
 
 
-def check_options(options: DataclassInstance, rules: Mapping[str, Rule] = RULES) -> None:
+def check_options(options: Any, rules: Mapping[str, Rule] = RULES) -> None:
     """Refuse a bad option before any work: each field of ``options`` (a dataclass:
     :class:`MilpOptions`, :class:`~synthesis.pipeline.SynthesisOptions`) by its rule in
     ``rules``, then the caps' keys and values.
