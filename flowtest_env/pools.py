@@ -128,7 +128,27 @@ def load_pool(
     progress: bool | None = None,
 ) -> list[TestArtifact]:
     """The checked tests of ``count`` seeds of a pool's split, in seed order (built on
-    demand, in process or through Ray with ``parallel="ray"``, and cached)."""
+    demand, in process or through Ray with ``parallel="ray"``, and cached).
+
+    ``name`` may be a standard pool id (``reachability1/5x5-v1``,
+    :mod:`flowtest_env.standard_pools`): its shipped tests are loaded from their records
+    (nothing synthesized), and seeds beyond the shipped ones are built on demand as for the
+    pool it draws from (same seeds, same budget).
+
+    Example::
+
+        held_out = load_pool("reachability1/5x5-v1", "test", 1000)
+    """
+    from .standard_pools import is_standard, load_standard_pool, standard_pool
+
+    if is_standard(name):
+        std = standard_pool(name)
+        split_seeds(split, count, start)  # validates split, start and count
+        shipped = max(0, min(std.shipped(split) - start, count))
+        tests = load_standard_pool(std.id, split, shipped, start) if shipped else []
+        if shipped < count:
+            tests += load_pool(std.pool, split, count - shipped, start + shipped, parallel, workers, progress)
+        return tests
     pool = parse_pool(name)
     seeds = split_seeds(split, count, start)
     return build_pool(

@@ -37,7 +37,8 @@ left behind.
 
 **Built in parallel when asked.** :func:`build_pool` synthesizes the missing seeds in
 process, or as Ray tasks (``parallel="ray"``, each returns a record); the answers do not
-depend on the dispatch. A progress bar (tqdm, on standard error) counts the seeds.
+depend on the dispatch. Every build shows its progress on standard error, on a terminal
+or not (:class:`BuildProgress`: tests done, rate, time left).
 """
 
 from __future__ import annotations
@@ -45,6 +46,8 @@ from __future__ import annotations
 import json
 import os
 import sys
+import time
+from collections import deque
 from collections.abc import Iterable, Iterator
 from dataclasses import asdict
 from pathlib import Path
@@ -72,6 +75,7 @@ __all__ = [
     "POOL_KINDS",
     "POOL_NODE_LIMIT",
     "POOL_WORK_LIMIT",
+    "BuildProgress",
     "SPLITS",
     "SPLIT_SPAN",
     "WORLDS",
@@ -86,6 +90,8 @@ __all__ = [
     "random_pool",
     "random_problem",
     "split_of",
+    "stored_records",
+    "synthesize_records",
     "world_problem",
 ]
 
@@ -302,29 +308,81 @@ def _write_key(folder: Path, params: dict[str, Any]) -> None:
     _write_atomic(path, json.dumps({"params": params, "versions": versions()}, sort_keys=True, separators=(",", ":")))
 
 
-def _progress_bar(total: int, initial: int, desc: str, enabled: bool | None) -> Any:
-    """A tqdm bar on standard error (``enabled=None``: only on a terminal); a plain
-    line counter on standard error if tqdm is not installed."""
-    try:
-        from tqdm import tqdm
-    except ImportError:  # tqdm comes with the rl extra; the core works without it
-        return _LineProgress(total, initial, desc, enabled if enabled is not None else sys.stderr.isatty())
-    return tqdm(total=total, initial=initial, desc=desc, unit="test", file=sys.stderr, disable=None if enabled is None else not enabled)
+def _duration(seconds: float) -> str:
+    """``42s``, ``3m05s``, ``2h14m``."""
+    t = int(round(seconds))
+    if t < 60:
+        return f"{t}s"
+    if t < 3600:
+        return f"{t // 60}m{t % 60:02d}s"
+    return f"{t // 3600}h{t % 3600 // 60:02d}m"
 
 
-class _LineProgress:
-    """The few methods of tqdm this module uses, as one line per finished test."""
+class BuildProgress:
+    """Tests done, rate and time left of a pool build, on standard error, on a terminal
+    or not: a line rewritten in place on a terminal, else one line every ``every`` seconds
+    and one at the end (so a log shows a long build advancing).
 
-    def __init__(self, total: int, initial: int, desc: str, enabled: bool) -> None:
-        self.total, self.n, self.desc, self.enabled = total, initial, desc, enabled
+    Example::
+
+        bar = BuildProgress(total=100, initial=0, desc="pool 7x7 reachability2")
+        bar.update(1)  # pool 7x7 reachability2: 1/100 tests, 1.4 s/test, 2m19s left
+        bar.close()
+    """
+
+    WINDOW = 50
+    """Tests the rate is measured over (a build whose first tests came from a cache, or
+    whose tests slow down, shows the time left at the current pace)."""
+
+    def __init__(
+        self, total: int, initial: int, desc: str, enabled: bool = True, every: float = 10.0, stream: Any = None
+    ) -> None:
+        self.total, self.n, self.desc, self.enabled, self.every = int(total), int(initial), desc, enabled, float(every)
+        self.stream = stream if stream is not None else sys.stderr
+        self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
+        self.start = self.last = time.monotonic()
+        self.first = self.n
+        self.marks: deque[tuple[float, int]] = deque([(self.start, self.n)], maxlen=self.WINDOW)
+        self.shown = False
+        if self.enabled:
+            self._show(force=True)
+
+    def text(self) -> str:
+        """The progress line: done/total, the recent rate (the last :data:`WINDOW` tests)
+        and the time left at that rate."""
+        done = self.n - self.first
+        now = time.monotonic()
+        spent = now - self.start
+        line = f"{self.desc}: {self.n}/{self.total} tests"
+        if done > 0:
+            (t0, n0) = self.marks[0]
+            per = (now - t0) / max(self.n - n0, 1) if self.n > n0 else spent / done
+            line += f", {per:.2f} s/test" if per < 10 else f", {per:.0f} s/test"
+            line += f", {_duration(per * (self.total - self.n))} left" if self.n < self.total else f", {_duration(spent)} in all"
+        return line
+
+    def _show(self, force: bool = False) -> None:
+        now = time.monotonic()
+        if not force and not self.tty and now - self.last < self.every:
+            return
+        self.last = now
+        if self.tty:
+            print("\r" + self.text(), end="", file=self.stream, flush=True)
+        else:
+            print(self.text(), file=self.stream, flush=True)
+        self.shown = True
 
     def update(self, k: int = 1) -> None:
+        """Count ``k`` more tests done."""
         self.n += k
+        self.marks.append((time.monotonic(), self.n))
         if self.enabled:
-            print(f"{self.desc}: {self.n}/{self.total}", file=sys.stderr, flush=True)
+            self._show(force=self.n >= self.total)
 
     def close(self) -> None:
-        pass
+        """End the line (on a terminal)."""
+        if self.enabled and self.tty and self.shown:
+            print(file=self.stream, flush=True)
 
 
 def build_pool(
@@ -350,7 +408,9 @@ def build_pool(
         (a local Ray runtime with ``workers`` CPUs unless one is running). The tests do
         not depend on this choice.
     progress
-        Show a progress bar on standard error (``None``: only on a terminal).
+        Show the build's progress (tests done, rate, time left) on standard error, on a
+        terminal or not (:class:`BuildProgress`); ``False``: silent. Nothing is shown
+        when every test is already stored.
 
     Raises
     ------
@@ -382,7 +442,7 @@ def build_pool(
     if missing:
         _write_key(folder, pool_params(size, family, n, kind, world))
         desc = f"pool {size}x{size} {family}{n} {kind}" + ("" if world == "empty" else f" {world}")
-        bar = _progress_bar(len(found) + len(missing), len(found), desc, progress)
+        bar = BuildProgress(len(found) + len(missing), len(found), desc, enabled=progress is not False)
         touched: set[Path] = set()
         try:
             for seed, rec in _synthesize_seeds(size, family, n, missing, kind, world, parallel, workers):
@@ -421,6 +481,36 @@ def _synthesize_seeds(
     finally:
         if started:
             ray.shutdown()
+
+
+def stored_records(
+    size: int, family: str, n: int, split: str, kind: str = "reactive", world: str = "empty", any_version: bool = False
+) -> dict[int, dict[str, Any]]:
+    """The records of a split stored in the cache under the current versions (with
+    ``any_version``: under any, the current ones winning), by seed. Unchecked:
+    :func:`synthesis.artifacts.pool_records.rebuild_artifact` checks a record before use."""
+    _check_pool(family, n, kind, world)
+    here = pool_dir(size, family, n, kind, world)
+    folders = [here]
+    if any_version and here.parent.is_dir():
+        others = [d for d in here.parent.iterdir() if d.is_dir() and d != here]
+        folders = sorted(others, key=lambda d: d.stat().st_mtime) + folders
+    out: dict[int, dict[str, Any]] = {}
+    for folder in folders:
+        out.update(_read(folder / f"{split}.jsonl", warn=False))
+    return out
+
+
+def synthesize_records(
+    size: int, family: str, n: int, seeds: list[int], kind: str = "reactive", world: str = "empty",
+    parallel: str | None = None, workers: int | None = None,
+) -> Iterator[tuple[int, dict[str, Any]]]:
+    """``(seed, record)`` of every seed, synthesized in process or as Ray tasks
+    (``parallel="ray"``), in the order they finish."""
+    _check_pool(family, n, kind, world)
+    if parallel not in (None, "ray"):
+        raise ValueError(f"unknown parallel backend {parallel!r}; expected None or 'ray'")
+    return _synthesize_seeds(size, family, n, seeds, kind, world, parallel, workers)
 
 
 _POOLS: dict[tuple[str, tuple[int, ...]], list[TestArtifact]] = {}

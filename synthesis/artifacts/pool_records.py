@@ -24,6 +24,19 @@ rewritten by hand) is never served, even where it would still pass the checks.
 
 A record is trusted for which attempt it names (a rebuilt test is a checked test of that
 attempt's problem; whether earlier attempts had none is what its builder found).
+
+**Certified records** (the standard pools shipped with FlowTest) also carry a
+``certificate`` (:func:`certify`, covered by the digest): a SHA-256 of the restrictions the
+full check passed (the product sizes, the history-by-move table of restricted moves, the
+static walls) and the flow it measured. ``rebuild_artifact(..., check="certificate")``
+checks the digest first, rebuilds the problem, products and restrictions from the seed
+and cuts (what an environment needs anyway), and instead of the full check compares the
+restrictions with the certified ones and searches once that no path avoids the test
+objective (bypass flow 0, one breadth-first search). It skips the max-flow and the
+per-history trap searches, which dominate a full check: the certificate says those passed
+on exactly these restrictions, and any change to the restrictions, the products built from
+the seed or the record shows as a mismatch. ``check="full"`` (the default) runs every
+check whatever the record carries.
 """
 
 from __future__ import annotations
@@ -35,10 +48,13 @@ from typing import Any
 
 import numpy as np
 
-from ..checks.verify import check_test
+from ..checks.verify import CheckReport, check_test, restricted_edges
+from ..graphs.automata import SpecificationProduct, specification_product
+from ..graphs.products import Products, build_products, reachable
 from ..model.errors import CheckFailed, InconsistentProblem, ProblemError
+from ..model.strategy import TestStrategy
 from ..pipeline import SynthesizedTest
-from ..problems.problem import build_graphs
+from ..problems.problem import Problem, build_graphs
 from ..problems.random_worlds import world_problem
 from ..routing.restrictions import strategy_from_routing
 from ..routing.result import RoutingResult
@@ -46,10 +62,14 @@ from ..test_agent.loop import AgentSynthesis, realize_agent_strategy
 from .artifact import TestArtifact, artifact_of
 from .summary import DERIVED_KEYS, DERIVED_STATS, derived_summary, without_timings
 
-__all__ = ["RECORD_KEYS", "rebuild_artifact", "record_digest", "record_of"]
+__all__ = ["CHECKS", "RECORD_KEYS", "certificate_of", "certify", "rebuild_artifact", "record_digest", "record_of"]
 
 RECORD_KEYS: tuple[str, ...] = ("seed", "attempt", "cuts", "static", "summary", "digest")
-"""The fields of a record, in the order they are written."""
+"""The fields of a record, in the order they are written (a certified record has
+``certificate`` too)."""
+
+CHECKS: tuple[str, ...] = ("full", "certificate")
+"""How :func:`rebuild_artifact` checks a record: every check, or the certificate."""
 
 
 class EditedRecord(ProblemError):
@@ -81,6 +101,40 @@ def record_of(seed: int, attempt: int, test: SynthesizedTest, summary: dict[str,
     return record
 
 
+def certificate_of(products: Products, strategy: TestStrategy, flow: int) -> dict[str, Any]:
+    """The certificate of a checked test: SHA-256 of its product sizes, flow, static walls
+    and history-by-move restricted table (packed bits), as ``{"sha256": hex}``."""
+    g, gs = products.virtual, products.system
+    head = json.dumps([g.n_nodes, g.n_edges, gs.n_nodes, gs.n_edges, list(strategy.blocked.shape), int(flow)])
+    h = hashlib.sha256(head.encode("ascii"))
+    h.update(np.packbits(np.asarray(strategy.blocked, dtype=bool)).tobytes())
+    h.update(np.packbits(np.asarray(strategy.static_obstacles, dtype=bool)).tobytes())
+    return {"sha256": h.hexdigest()}
+
+
+def certify(record: dict[str, Any], size: int, family: str, n: int, world: str, kind: str) -> dict[str, Any]:
+    """A record with its certificate: the test rebuilt and fully checked
+    (:func:`rebuild_artifact`), then the certificate of what passed, and the digest
+    written again over the whole.
+
+    Raises
+    ------
+    ProblemError
+        If the record fails a check (an uncertifiable record is never certified).
+    """
+    plain = {k: v for k, v in record.items() if k != "certificate"}
+    if "certificate" in record:  # certified before: its digest must hold, then it is written anew
+        try:
+            _check_digest(record)
+        except (EditedRecord, KeyError) as exc:
+            raise ProblemError(f"pool record of seed {record.get('seed')!r}: {exc}") from None
+        plain["digest"] = {"sha256": record_digest(plain)}
+    _, products, strategy = _rebuilt(plain, size, family, n, world, kind, None, "full")
+    out = {**plain, "certificate": certificate_of(products, strategy, int(plain["summary"]["flow"]))}
+    out["digest"] = {"sha256": record_digest(out)}
+    return out
+
+
 def _indices(values: Any, bound: int, what: str) -> np.ndarray:
     """Distinct sorted integer indices below ``bound``."""
     if not isinstance(values, list) or not all(isinstance(v, int) and not isinstance(v, bool) for v in values):
@@ -92,38 +146,101 @@ def _indices(values: Any, bound: int, what: str) -> np.ndarray:
 
 
 def rebuild_artifact(
-    record: dict[str, Any], size: int, family: str, n: int, world: str, kind: str, extras: Mapping[str, Any] | None = None
+    record: dict[str, Any],
+    size: int,
+    family: str,
+    n: int,
+    world: str,
+    kind: str,
+    extras: Mapping[str, Any] | None = None,
+    check: str = "full",
 ) -> TestArtifact:
     """The checked test of a record (see the module docstring), with ``extras`` added to the
     artifact's own.
 
+    ``check="full"`` runs every check of a fresh synthesis; ``check="certificate"`` checks
+    the digest first, then the record's certificate (a record without one is refused).
+
+    Example::
+
+        art = rebuild_artifact(record, 5, "reachability", 1, "empty", "reactive")
+
     Raises
     ------
     ProblemError
-        If the record is malformed or its test fails a check.
+        If the record is malformed, edited, or its test fails a check.
     """
+    return _rebuilt(record, size, family, n, world, kind, extras, check)[0]
+
+
+def _rebuilt(
+    record: dict[str, Any], size: int, family: str, n: int, world: str, kind: str, extras: Mapping[str, Any] | None, check: str
+) -> tuple[TestArtifact, Products, TestStrategy]:
+    """:func:`rebuild_artifact` with the products and strategy it rebuilt."""
+    if check not in CHECKS:
+        raise ValueError(f"unknown check {check!r}; expected one of {', '.join(CHECKS)}")
+    seed = record.get("seed") if isinstance(record, dict) else None
     try:
-        return _rebuild(record, size, family, n, world, kind, extras)
+        return _rebuild(record, size, family, n, world, kind, extras, check)
     except (CheckFailed, InconsistentProblem) as exc:
-        raise ProblemError(f"pool record of seed {record.get('seed')!r} fails its check: {exc}") from None
+        raise ProblemError(f"pool record of seed {seed!r} fails its check: {exc}") from None
     except EditedRecord as exc:
-        raise ProblemError(f"pool record of seed {record.get('seed')!r}: {exc}") from None
+        raise ProblemError(f"pool record of seed {seed!r}: {exc}") from None
     except (KeyError, TypeError, ValueError, AttributeError, IndexError, OverflowError) as exc:
-        raise ProblemError(f"pool record of seed {record.get('seed')!r} is malformed ({type(exc).__name__}: {exc})") from None
+        raise ProblemError(f"pool record of seed {seed!r} is malformed ({type(exc).__name__}: {exc})") from None
+
+
+_SPECS: dict[Any, SpecificationProduct] = {}
+
+
+def _graphs(problem: Problem) -> tuple[SpecificationProduct, Products]:
+    """:func:`synthesis.problems.problem.build_graphs`, with the specification product
+    shared between the problems of one pool that have the same objectives and letters
+    (it depends on nothing else; most tests of a pool share a few)."""
+    ts = problem.system
+    key = (problem.system_objective, problem.test_objective, ts.letters())
+    try:
+        spec = _SPECS.get(key)
+    except TypeError:  # an unhashable objective: build as usual
+        return build_graphs(problem)
+    if spec is None:
+        if len(_SPECS) >= 256:
+            _SPECS.clear()
+        spec = _SPECS[key] = specification_product(problem.system_objective, problem.test_objective, ts.letters())
+    return spec, build_products(ts, spec)
+
+
+def _check_digest(record: dict[str, Any]) -> None:
+    if record["digest"] != {"sha256": record_digest(record)}:
+        raise EditedRecord("the record was changed after FlowTest wrote it (its digest is not that of its content)")
+
+
+def _bypass_free(products: Products, strategy: TestStrategy) -> bool:
+    """Whether no path of G from ``Src`` to ``Tgt`` avoids ``E(I)`` under the restrictions
+    (bypass flow 0, by one breadth-first search instead of a maximum flow)."""
+    g = products.virtual
+    keep = ~products.touches_intermediate & ~restricted_edges(products, strategy)
+    reach = reachable(g.n_nodes, g.src[keep], g.dst[keep], np.arange(g.n_nodes) == g.initial)
+    return not bool(np.any(reach & products.target))
 
 
 def _rebuild(
-    record: dict[str, Any], size: int, family: str, n: int, world: str, kind: str, extras: Mapping[str, Any] | None
-) -> TestArtifact:
-    if not isinstance(record, dict) or sorted(record) != sorted(RECORD_KEYS):
-        raise ProblemError(f"a pool record has the fields {', '.join(RECORD_KEYS)}")
+    record: dict[str, Any], size: int, family: str, n: int, world: str, kind: str, extras: Mapping[str, Any] | None, check: str
+) -> tuple[TestArtifact, Products, TestStrategy]:
+    keys = sorted(RECORD_KEYS)
+    if not isinstance(record, dict) or sorted(k for k in record if k != "certificate") != keys:
+        raise ProblemError(f"a pool record has the fields {', '.join(RECORD_KEYS)} (and certificate, if certified)")
+    if check == "certificate":
+        if not isinstance(record.get("certificate"), dict):
+            raise ProblemError("the record has no certificate (load it with check='full')")
+        _check_digest(record)  # first: an edited record costs nothing more
     seed, attempt, rest = record["seed"], record["attempt"], record["summary"]
     if not all(isinstance(v, int) and not isinstance(v, bool) and v >= 0 for v in (seed, attempt)):
         raise ProblemError("fields seed and attempt must be non-negative integers")
     if not isinstance(rest, dict) or not isinstance(rest.get("stats"), dict):
         raise ProblemError("field summary must be an object with stats")
     problem = world_problem(size, family, n, seed, attempt, world, kind)
-    spec, products = build_graphs(problem)
+    spec, products = _graphs(problem)
     cuts = _indices(record["cuts"], products.virtual.n_edges, "cuts")
     static = np.zeros(products.ts.n_moves, dtype=bool)
     static[_indices(record["static"], products.ts.n_moves, "static")] = True
@@ -137,7 +254,14 @@ def _rebuild(
     strategy = strategy_from_routing(products, routing, problem.extras.get("setting", "instantaneous"))
     if not np.array_equal(strategy.static_obstacles, static):
         raise ProblemError("field static disagrees with the cuts")
-    checks = check_test(products, strategy, flow)  # bypass flow 0, the flow, feasibility
+    if check == "certificate":
+        if record["certificate"] != certificate_of(products, strategy, flow):
+            raise CheckFailed("the restrictions rebuilt from the record are not the ones its certificate says were checked")
+        if not _bypass_free(products, strategy):
+            raise CheckFailed("bypass flow is not 0: some execution avoids the test objective")
+        checks = CheckReport(bypass_flow=0, flow=flow, expected_flow=flow)  # the rest: as certified
+    else:
+        checks = check_test(products, strategy, flow)  # bypass flow 0, the flow, feasibility
     agent = None
     if problem.agent is not None:
         game, controller, report = realize_agent_strategy(products, strategy, problem.agent)
@@ -151,10 +275,11 @@ def _rebuild(
         )
     derived = derived_summary(problem, spec, products, cuts, strategy, checks.bypass_flow)
     summary = {**derived, **{k: v for k, v in rest.items() if k != "stats"}, "stats": {**derived["stats"], **rest["stats"]}}
-    # last, so that a record whose answer fails a check is told so: one that passes them all
-    # but is not the record FlowTest wrote (one more cut, a summary edited) is refused here
-    if record["digest"] != {"sha256": record_digest(record)}:
-        raise EditedRecord("the record was changed after FlowTest wrote it (its digest is not that of its content)")
+    if check == "full":
+        # last, so that a record whose answer fails a check is told so: one that passes
+        # them all but is not the record FlowTest wrote (one more cut, a summary edited)
+        # is refused here (the certificate check did it first)
+        _check_digest(record)
     # graph_seconds: not measured here; a rebuilt test's summary holds no timings
     test = SynthesizedTest(problem, spec, products, routing, strategy, checks, graph_seconds=0.0, agent=agent)
-    return artifact_of(test, summary, extras)
+    return artifact_of(test, summary, extras), products, strategy

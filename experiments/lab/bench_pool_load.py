@@ -1,0 +1,68 @@
+"""Time loading shipped standard-pool tests and compiling them into one vector env.
+
+Usage::
+
+    .venv/bin/python -m experiments.lab.bench_pool_load                           # every shipped test
+    .venv/bin/python -m experiments.lab.bench_pool_load --pools reachability1/5x5-v1 --count 10000
+    .venv/bin/python -m experiments.lab.bench_pool_load --check full --count 200  # the full re-check
+
+It loads the shipped records of the given standard pools (every split, train first, up to
+``--count`` tests in all) with :func:`flowtest_env.standard_pools.load_standard_pool`
+(``--check certificate``, the default, or ``full``), then builds one
+:class:`flowtest_env.vector.PoolVectorEnv` holding every test once (``assignment="fixed"``)
+and resets it. It prints one JSON object: tests, seconds to read and check the records
+(``load_s``), to compile the env (``compile_s``), the total, per test, and the process's
+CPU seconds (on a loaded machine the wall time includes waiting for a core).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from typing import Any
+
+from flowtest_env.standard_pools import STANDARD_POOLS, load_standard_pool, standard_pool
+
+__all__ = ["main"]
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m experiments.lab.bench_pool_load", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--pools", nargs="+", default=list(STANDARD_POOLS), help="standard pool ids (default: all)")
+    ap.add_argument("--count", type=int, default=None, help="at most this many tests in all (default: every shipped one)")
+    ap.add_argument("--check", choices=("certificate", "full"), default="certificate")
+    args = ap.parse_args(argv)
+    from flowtest_env.vector import PoolVectorEnv  # after parsing: --help stays fast
+
+    wall, cpu = time.perf_counter(), time.process_time()
+    tests: list[Any] = []
+    per_pool: dict[str, int] = {}
+    for pid in args.pools:
+        pool = standard_pool(pid)
+        for split in ("train", "validation", "test"):
+            left = None if args.count is None else args.count - len(tests)
+            have = pool.shipped(split)
+            take = have if left is None else min(have, left)
+            if take > 0:
+                tests += load_standard_pool(pool.id, split, take, check=args.check)
+                per_pool[pool.id] = per_pool.get(pool.id, 0) + take
+    load_s = time.perf_counter() - wall
+    if not tests:
+        print(json.dumps({"tests": 0, "note": "no shipped tests in these pools"}))
+        return 1
+    t = time.perf_counter()
+    env = PoolVectorEnv(len(tests), tests, assignment="fixed")
+    env.reset(seed=0)
+    compile_s = time.perf_counter() - t
+    total = time.perf_counter() - wall
+    print(json.dumps({
+        "tests": len(tests), "per_pool": per_pool, "check": args.check, "load_s": round(load_s, 2),
+        "compile_s": round(compile_s, 2), "total_s": round(total, 2), "ms_per_test": round(1000 * total / len(tests), 2),
+        "cpu_s": round(time.process_time() - cpu, 2),
+    }))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

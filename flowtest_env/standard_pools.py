@@ -1,0 +1,337 @@
+"""Standard pools: named, versioned test pools shipped with FlowTest, ready to load.
+
+A standard pool is named like an environment ID: the on-demand pool it draws from
+(:mod:`flowtest_env.pools`) and a version, ``reachability1/5x5-v1``. The version changes
+whenever a test of the pool could change (the family, the world, the kind, the synthesis
+budget, the attempt rules): a result reported on ``reachability1/5x5-v1`` names the same
+tests on every machine and in every later FlowTest that still ships ``-v1``.
+
+Each pool has three fixed splits, ranges of seeds as for every pool: ``train`` (at least
+4,096 tests planned), ``validation`` (for model selection) and ``test`` (the held-out
+tests, at least 1,000 planned; 250 where a family builds slowly). Split ``s`` of a
+standard pool is the first tests of the on-demand pool's split ``s``, so
+``load_standard_pool("reachability1/5x5-v1", "test", 32)`` and
+``load_pool("reachability1/5x5", "test", 32)`` are the same tests.
+
+**Shipped records.** The compact records of each pool
+(:mod:`synthesis.artifacts.pool_records`, a few hundred bytes a test) are stored in the
+package, one gzipped JSON-lines file per split under ``flowtest_env/data/pools/<slug>/``
+with a ``pool.json`` that says what built them. Loading synthesizes nothing: each record's
+digest is checked, the test is rebuilt from its seed and cuts, and the restrictions are
+compared with the record's certificate (what the full check passed when the pool was
+built), with one search for a path that avoids the test objective. A record that fails is
+refused with an error naming the file, line and seed. ``check="full"`` runs every check
+of a fresh synthesis instead (slower; the test suite runs it on a sample).
+
+Building them is a maintainer's job (``python -m experiments.tools.build_pools``); a
+split may ship fewer tests than planned (:meth:`StandardPool.shipped` says how many);
+:func:`flowtest_env.pools.load_pool` serves the shipped ones and builds the rest on
+demand.
+
+Example::
+
+    from flowtest_env.standard_pools import load_standard_pool, standard_pool
+
+    pool = standard_pool("reachability1/5x5-v1")
+    tests = load_standard_pool(pool.id, "test")  # every shipped held-out test, checked
+"""
+
+from __future__ import annotations
+
+import gzip
+import io
+import json
+import os
+import re
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+from synthesis.artifacts.artifact import TestArtifact
+from synthesis.artifacts.pool_records import CHECKS, rebuild_artifact
+from synthesis.artifacts.provenance import versions
+from synthesis.model.errors import ProblemError
+
+from .pools import PoolName, parse_pool, split_seeds
+from .random_grid import SPLIT_SPAN, SPLITS, pool_params
+
+__all__ = [
+    "DATA_DIR",
+    "STANDARD_POOLS",
+    "StandardPool",
+    "changed_params",
+    "is_standard",
+    "load_standard_pool",
+    "read_records",
+    "standard_pool",
+    "write_records",
+]
+
+DATA_DIR = Path(__file__).resolve().parent / "data" / "pools"
+"""Where the shipped records live (package data)."""
+
+_ID = re.compile(r"^(?P<pool>.+)-v(?P<version>[1-9][0-9]*)$")
+
+
+@dataclass(frozen=True)
+class StandardPool:
+    """A standard pool: its id, the on-demand pool it draws from, its version and the
+    number of tests planned per split.
+
+    Attributes
+    ----------
+    id
+        ``<pool>-v<version>``, e.g. ``reachability1/5x5-v1``.
+    pool
+        The on-demand pool name (:func:`flowtest_env.pools.parse_pool`).
+    version
+        Changes whenever a test of the pool can change.
+    splits
+        Tests planned per split (``train``, ``validation``, ``test``).
+    about
+        What the pool exercises, in a few words.
+    """
+
+    id: str
+    pool: str
+    version: int
+    splits: Mapping[str, int] = field(default_factory=lambda: {"train": 4096, "validation": 256, "test": 1000})
+    about: str = ""
+
+    @property
+    def name(self) -> PoolName:
+        """The parsed on-demand pool name."""
+        return parse_pool(self.pool)
+
+    @property
+    def slug(self) -> str:
+        """The folder name of its records: the id with ``/`` as ``-``."""
+        return self.id.replace("/", "-")
+
+    @property
+    def folder(self) -> Path:
+        """The folder of its shipped records."""
+        return DATA_DIR / self.slug
+
+    def path(self, split: str) -> Path:
+        """The shipped records file of a split."""
+        _check_split(split)
+        return self.folder / f"{split}.jsonl.gz"
+
+    def params(self) -> dict[str, Any]:
+        """Everything besides the versions that decides its tests (the on-demand pool's
+        parameters; a change here needs a new version)."""
+        p = self.name
+        return pool_params(p.size, p.family, p.n, p.kind, p.world)
+
+    def shipped(self, split: str) -> int:
+        """The number of tests of ``split`` shipped (0 if none yet)."""
+        path = self.path(split)
+        try:
+            stat = path.stat()
+        except OSError:
+            return 0
+        return _count_lines(str(path), stat.st_mtime_ns, stat.st_size)
+
+    def shipped_counts(self) -> dict[str, int]:
+        """Tests shipped per split."""
+        return {s: self.shipped(s) for s in SPLITS}
+
+
+STANDARD_POOLS: dict[str, StandardPool] = {
+    p.id: p
+    for p in (
+        StandardPool(
+            "reachability1/5x5-v1",
+            "reachability1/5x5",
+            1,
+            about="the paper's empty 5x5 grid with reactive doors; continuity pool (a random policy meets about half)",
+        ),
+        StandardPool(
+            "reachability2/7x7/blocked-v1",
+            "reachability2/7x7/blocked",
+            1,
+            about="7x7 grid, a fifth of the cells blocked, two goals in sequence, reactive doors",
+        ),
+        StandardPool(
+            "safety2/7x7/fuel-v1",
+            "safety2/7x7/fuel",
+            1,
+            about="7x7 fuel grid (capacity 7, refuel cells, never run empty), reactive doors",
+        ),
+        StandardPool(
+            "reachability2/7x7/blocked/static-v1",
+            "reachability2/7x7/blocked/static",
+            1,
+            about="7x7 grid with blocked cells, two goals in sequence, static walls",
+        ),
+        StandardPool(
+            "reachability1/5x5/blocked/agent-v1",
+            "reachability1/5x5/blocked/agent",
+            1,
+            splits={"train": 4096, "validation": 256, "test": 250},
+            about="5x5 grid with blocked cells and a test agent patrolling one column (a GR(1) strategy)",
+        ),
+    )
+}
+"""Every standard pool by id."""
+
+
+def changed_params(recorded: Mapping[str, Any], current: Mapping[str, Any]) -> list[str]:
+    """The parameters (dotted names) recorded with a pool whose value differs now. A
+    parameter on one side only is not a change (a new option left at its default, an old
+    one retired); a changed value is: a test may differ, the pool needs a new version."""
+    out = []
+    for key in sorted(set(recorded) & set(current)):
+        a, b = recorded[key], current[key]
+        if isinstance(a, Mapping) and isinstance(b, Mapping):
+            out += [f"{key}.{k}" for k in changed_params(a, b)]
+        elif a != b:
+            out.append(key)
+    return out
+
+
+def is_standard(name: str) -> bool:
+    """Whether ``name`` is written as a standard pool id (``<pool>-v<N>``)."""
+    return isinstance(name, str) and _ID.match(name) is not None
+
+
+def standard_pool(pool_id: str) -> StandardPool:
+    """The standard pool of an id.
+
+    Raises
+    ------
+    ValueError
+        On an id that is not a standard pool (naming the standard pools, or the versions
+        of that pool that exist).
+    """
+    found = STANDARD_POOLS.get(pool_id)
+    if found is not None:
+        return found
+    m = _ID.match(pool_id) if isinstance(pool_id, str) else None
+    if m is not None:
+        same = sorted(p.id for p in STANDARD_POOLS.values() if p.pool == m.group("pool"))
+        if same:
+            raise ValueError(f"{pool_id!r} is not a standard pool; this FlowTest ships {', '.join(same)}")
+    raise ValueError(f"{pool_id!r} is not a standard pool; expected one of {', '.join(STANDARD_POOLS)}")
+
+
+def _check_split(split: str) -> None:
+    if split not in SPLITS:
+        raise ValueError(f"unknown split {split!r}; expected one of {', '.join(SPLITS)}")
+
+
+@lru_cache(maxsize=64)
+def _count_lines(path: str, mtime_ns: int, size: int) -> int:
+    """Lines of a gzipped file (cached per path, modification time and size)."""
+    with gzip.open(path, "rb") as f:
+        return sum(1 for line in f if line.strip())
+
+
+def read_records(pool: StandardPool, split: str) -> list[dict[str, Any]]:
+    """The shipped records of a split, in seed order (``[]`` if none are shipped).
+
+    Raises
+    ------
+    ProblemError
+        If the file is not gzipped JSON lines, or its records are not the split's first
+        seeds in order (``file, line N: ...``).
+    """
+    path = pool.path(split)
+    if not path.exists():
+        return []
+    try:
+        with gzip.open(path, "rt", encoding="utf-8") as f:
+            lines = [line for line in f if line.strip()]
+    except (OSError, EOFError, UnicodeDecodeError) as exc:
+        raise ProblemError(f"{path}: not a gzipped records file ({exc})") from None
+    base = SPLITS.index(split) * SPLIT_SPAN
+    out: list[dict[str, Any]] = []
+    for k, text in enumerate(lines):
+        try:
+            rec = json.loads(text)
+        except ValueError as exc:
+            raise ProblemError(f"{path}, line {k + 1}: not JSON ({exc})") from None
+        if not isinstance(rec, dict) or rec.get("seed") != base + k:
+            raise ProblemError(f"{path}, line {k + 1}: expected the record of seed {base + k} (the split's seeds in order)")
+        out.append(rec)
+    return out
+
+
+def _line(record: Mapping[str, Any]) -> str:
+    return json.dumps(record, sort_keys=True, separators=(",", ":")) + "\n"
+
+
+def write_records(path: Path, records: Iterable[Mapping[str, Any]]) -> int:
+    """Write records as gzipped JSON lines, atomically (a temporary file, then a rename)
+    and reproducibly (no time or name in the gzip header: the same records give the same
+    bytes). Returns the bytes written."""
+    buf = io.BytesIO()
+    with gzip.GzipFile(filename="", mode="wb", fileobj=buf, compresslevel=9, mtime=0) as gz:
+        for rec in records:
+            gz.write(_line(rec).encode("utf-8"))
+    data = buf.getvalue()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        with open(tmp, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return len(data)
+
+
+def load_standard_pool(
+    pool_id: str, split: str = "test", count: int | None = None, start: int = 0, check: str = "certificate"
+) -> list[TestArtifact]:
+    """The checked tests ``start .. start + count - 1`` of a standard pool's split, from the
+    shipped records (nothing is synthesized).
+
+    Parameters
+    ----------
+    count
+        ``None``: every shipped test from ``start`` on.
+    check
+        ``"certificate"`` (digest, certificate and the bypass search, fast) or ``"full"``
+        (every check of a fresh synthesis).
+
+    Example::
+
+        tests = load_standard_pool("reachability1/5x5-v1", "validation", count=64)
+
+    Raises
+    ------
+    ValueError
+        On an unknown pool, split or check, or more tests than are shipped.
+    ProblemError
+        If a shipped record is refused (edited, or no longer the test its certificate
+        names), naming the file and line.
+    """
+    pool = standard_pool(pool_id)
+    _check_split(split)
+    if check not in CHECKS:
+        raise ValueError(f"unknown check {check!r}; expected one of {', '.join(CHECKS)}")
+    records = read_records(pool, split)
+    if count is None:
+        count = len(records) - start
+    split_seeds(split, max(count, 1), start)  # validates start and count against the split
+    if count < 1 or start + count > len(records):
+        raise ValueError(
+            f"{pool.id} ships {len(records)} tests of its {split!r} split; asked for tests {start}..{start + count - 1} "
+            "(flowtest_env.pools.load_pool builds the ones beyond on demand)"
+        )
+    p = pool.name
+    provenance = {"pool": pool.params(), "standard_pool": pool.id, "versions": versions()}
+    path = pool.path(split)
+    out: list[TestArtifact] = []
+    for k in range(start, start + count):
+        try:
+            out.append(rebuild_artifact(records[k], p.size, p.family, p.n, p.world, p.kind, {"provenance": provenance}, check=check))
+        except ProblemError as exc:
+            raise ProblemError(f"{path}, line {k + 1}: {exc}; the shipped pool {pool.id} is refused") from None
+    return out
