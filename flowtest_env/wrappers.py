@@ -220,6 +220,19 @@ class VisitedPlaces(gym.ObservationWrapper[np.ndarray, np.int64, np.ndarray], gy
     ------
     ValueError
         If the observation is not flat.
+
+    Examples
+    --------
+    >>> import gymnasium as gym
+    >>> import flowtest_env
+    >>> from flowtest_env.wrappers import VisitedPlaces
+    >>> env = VisitedPlaces(gym.make("FlowTest-Maze2-v0"))    # 25 more entries: one per cell of the 5x5 maze
+    >>> obs, info = env.reset(seed=0)
+    >>> obs.shape, env.action_masks().tolist()
+    ((331,), [True, False, True, False, True])
+    >>> visited = flowtest_env.observation_layout(env)["visited"]
+    >>> visited.start, visited.stop, visited.of(obs).nonzero()     # the SUT's start cell, row 4, column 0
+    (306, 331, (array([4]), array([0])))
     """
 
     def __init__(self, env: gym.Env[np.ndarray, np.int64]) -> None:

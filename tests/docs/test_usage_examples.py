@@ -42,11 +42,13 @@ ENTRY_POINTS: tuple[str, ...] = (
     "flowtest_env.load_test",
     "flowtest_env.EnvConfig",
     "flowtest_env.observation_layout",
+    "flowtest_env.wrappers.VisitedPlaces",
     "flowtest_env.vector.PoolVectorEnv",
     # "flowtest_env.pools.load_pool",  (H6 is rewriting its docstring)
     "flowtest_env.runtime.TestRuntime",
     "flowtest_env.multiagent.env",
     "flowtest_env.multiagent.parallel_env",
+    "flowtest_env.scoring.score_policy",
     "flowtest_env.torch_vector.make_vec",
     # agents: the systems under test
     "agents.registry.make_policy",
