@@ -135,9 +135,12 @@ def load_pool(
     (nothing synthesized), and seeds beyond the shipped ones are built on demand as for the
     pool it draws from (same seeds, same budget).
 
-    Example::
-
-        held_out = load_pool("reachability1/5x5-v1", "test", 1000)
+    Examples
+    --------
+    >>> from flowtest_env.pools import load_pool
+    >>> held_out = load_pool("reachability1/5x5-v1", "test", 2)    # a standard pool: shipped, nothing synthesized
+    >>> [(t.name, t.kind) for t in held_out]
+    [('random-5x5-reachability1-reactive-s2000000', 'reactive'), ('random-5x5-reachability1-reactive-s2000001', 'reactive')]
     """
     from .standard_pools import is_standard, load_standard_pool, standard_pool
 

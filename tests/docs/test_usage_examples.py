@@ -44,7 +44,7 @@ ENTRY_POINTS: tuple[str, ...] = (
     "flowtest_env.observation_layout",
     "flowtest_env.wrappers.VisitedPlaces",
     "flowtest_env.vector.PoolVectorEnv",
-    # "flowtest_env.pools.load_pool",  (H6 is rewriting its docstring)
+    "flowtest_env.pools.load_pool",
     "flowtest_env.runtime.TestRuntime",
     "flowtest_env.multiagent.env",
     "flowtest_env.multiagent.parallel_env",
