@@ -34,89 +34,12 @@ a vector env can step many of them in one batch.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 from synthesis.artifacts.artifact import TestArtifact
-from synthesis.problems.random_grid import FAMILIES, family_objectives
-from synthesis.problems.random_worlds import POOL_KINDS, WORLDS
 
-from .random_grid import SPLIT_SPAN, SPLITS, build_pool
+from .random_grid import SPLIT_SPAN, SPLITS, PoolName, build_pool, parse_pool, split_seeds
+from .standard_pools import is_standard, load_standard_pool, standard_pool
 
 __all__ = ["SPLITS", "SPLIT_SPAN", "PoolName", "load_pool", "parse_pool", "random_grid_arguments", "split_seeds"]
-
-FORM = "expected <family><n>/<size>x<size>[/<world>][/<kind>], e.g. reachability1/5x5 or reaction2/7x7/blocked/static"
-
-
-@dataclass(frozen=True)
-class PoolName:
-    """A parsed pool name."""
-
-    family: str
-    n: int
-    size: int
-    kind: str = "reactive"
-    world: str = "empty"
-
-    def __str__(self) -> str:
-        parts = [f"{self.family}{self.n}", f"{self.size}x{self.size}"]
-        if self.world != "empty":
-            parts.append(self.world)
-        if self.kind != "reactive":
-            parts.append(self.kind)
-        return "/".join(parts)
-
-
-def parse_pool(name: str) -> PoolName:
-    """``"reachability1/5x5"`` -> :class:`PoolName` (grammar in the module docstring).
-
-    Raises
-    ------
-    ValueError
-        Naming what is wrong with the name.
-    """
-    if not isinstance(name, str):
-        raise ValueError(f"a pool name is a string such as 'reachability1/5x5', not {name!r}")
-    parts = name.split("/")
-    if not 2 <= len(parts) <= 4:
-        raise ValueError(f"pool name {name!r}: {FORM}")
-    spec, grid, extra = parts[0], parts[1], parts[2:]
-    family = spec.rstrip("0123456789")
-    digits = spec[len(family):]
-    if family not in FAMILIES or not digits:
-        raise ValueError(f"pool name {name!r}: unknown family {spec!r}; expected one of {', '.join(FAMILIES)} with a size n; {FORM}")
-    rows, x, cols = grid.partition("x")
-    if not (x and rows.isdigit() and rows == cols and int(rows) >= 2):
-        raise ValueError(f"pool name {name!r}: grid {grid!r} is not a square size such as 5x5; {FORM}")
-    worlds = [p for p in extra if p in WORLDS]
-    kinds = [p for p in extra if p in POOL_KINDS]
-    unknown = [p for p in extra if p not in WORLDS and p not in POOL_KINDS]
-    if unknown:
-        raise ValueError(
-            f"pool name {name!r}: unknown part {unknown[0]!r}; expected a world ({', '.join(WORLDS)}) "
-            f"and/or a kind ({', '.join(POOL_KINDS)})"
-        )
-    if len(worlds) > 1 or len(kinds) > 1:
-        twice = "world" if len(worlds) > 1 else "kind"
-        raise ValueError(f"pool name {name!r}: more than one {twice} ({', '.join(worlds if twice == 'world' else kinds)}); {FORM}")
-    family_objectives(family, int(digits))  # validates n for the family
-    return PoolName(family, int(digits), int(rows), kinds[0] if kinds else "reactive", worlds[0] if worlds else "empty")
-
-
-def split_seeds(split: str, count: int, start: int = 0) -> range:
-    """The seeds ``start .. start + count - 1`` of a split.
-
-    Raises
-    ------
-    ValueError
-        On an unknown split, or seeds beyond the split's range.
-    """
-    if split not in SPLITS:
-        raise ValueError(f"unknown split {split!r}; expected one of {', '.join(SPLITS)}")
-    if count < 1 or start < 0 or start + count > SPLIT_SPAN:
-        raise ValueError(f"a split holds seeds 0..{SPLIT_SPAN - 1} of its range; got start {start}, count {count}")
-    base = SPLITS.index(split) * SPLIT_SPAN
-    return range(base + start, base + start + count)
-
 
 def load_pool(
     name: str,
@@ -142,8 +65,6 @@ def load_pool(
     >>> [(t.name, t.kind) for t in held_out]
     [('random-5x5-reachability1-reactive-s2000000', 'reactive'), ('random-5x5-reachability1-reactive-s2000001', 'reactive')]
     """
-    from .standard_pools import is_standard, load_standard_pool, standard_pool
-
     if is_standard(name):
         std = standard_pool(name)
         split_seeds(split, count, start)  # validates split, start and count

@@ -49,7 +49,7 @@ import sys
 import time
 from collections import deque
 from collections.abc import Iterable, Iterator
-from dataclasses import asdict
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -76,6 +76,9 @@ __all__ = [
     "POOL_NODE_LIMIT",
     "POOL_WORK_LIMIT",
     "BuildProgress",
+    "PoolName",
+    "parse_pool",
+    "split_seeds",
     "SPLITS",
     "SPLIT_SPAN",
     "WORLDS",
@@ -115,6 +118,80 @@ MAX_POOL_FILE_BYTES = 256 * 1024 * 1024
 SPLITS: tuple[str, ...] = ("train", "validation", "test")
 SPLIT_SPAN = 1_000_000
 """Seeds per split: split ``k`` of :data:`SPLITS` holds seeds ``k * SPLIT_SPAN`` onwards."""
+
+
+FORM = "expected <family><n>/<size>x<size>[/<world>][/<kind>], e.g. reachability1/5x5 or reaction2/7x7/blocked/static"
+
+
+@dataclass(frozen=True)
+class PoolName:
+    """A parsed pool name."""
+
+    family: str
+    n: int
+    size: int
+    kind: str = "reactive"
+    world: str = "empty"
+
+    def __str__(self) -> str:
+        parts = [f"{self.family}{self.n}", f"{self.size}x{self.size}"]
+        if self.world != "empty":
+            parts.append(self.world)
+        if self.kind != "reactive":
+            parts.append(self.kind)
+        return "/".join(parts)
+
+
+def parse_pool(name: str) -> PoolName:
+    """``"reachability1/5x5"`` -> :class:`PoolName` (grammar: :mod:`flowtest_env.pools`).
+
+    Raises
+    ------
+    ValueError
+        Naming what is wrong with the name.
+    """
+    if not isinstance(name, str):
+        raise ValueError(f"a pool name is a string such as 'reachability1/5x5', not {name!r}")
+    parts = name.split("/")
+    if not 2 <= len(parts) <= 4:
+        raise ValueError(f"pool name {name!r}: {FORM}")
+    spec, grid, extra = parts[0], parts[1], parts[2:]
+    family = spec.rstrip("0123456789")
+    digits = spec[len(family):]
+    if family not in FAMILIES or not digits:
+        raise ValueError(f"pool name {name!r}: unknown family {spec!r}; expected one of {', '.join(FAMILIES)} with a size n; {FORM}")
+    rows, x, cols = grid.partition("x")
+    if not (x and rows.isdigit() and rows == cols and int(rows) >= 2):
+        raise ValueError(f"pool name {name!r}: grid {grid!r} is not a square size such as 5x5; {FORM}")
+    worlds = [p for p in extra if p in WORLDS]
+    kinds = [p for p in extra if p in POOL_KINDS]
+    unknown = [p for p in extra if p not in WORLDS and p not in POOL_KINDS]
+    if unknown:
+        raise ValueError(
+            f"pool name {name!r}: unknown part {unknown[0]!r}; expected a world ({', '.join(WORLDS)}) "
+            f"and/or a kind ({', '.join(POOL_KINDS)})"
+        )
+    if len(worlds) > 1 or len(kinds) > 1:
+        twice = "world" if len(worlds) > 1 else "kind"
+        raise ValueError(f"pool name {name!r}: more than one {twice} ({', '.join(worlds if twice == 'world' else kinds)}); {FORM}")
+    family_objectives(family, int(digits))  # validates n for the family
+    return PoolName(family, int(digits), int(rows), kinds[0] if kinds else "reactive", worlds[0] if worlds else "empty")
+
+
+def split_seeds(split: str, count: int, start: int = 0) -> range:
+    """The seeds ``start .. start + count - 1`` of a split.
+
+    Raises
+    ------
+    ValueError
+        On an unknown split, or seeds beyond the split's range.
+    """
+    if split not in SPLITS:
+        raise ValueError(f"unknown split {split!r}; expected one of {', '.join(SPLITS)}")
+    if count < 1 or start < 0 or start + count > SPLIT_SPAN:
+        raise ValueError(f"a split holds seeds 0..{SPLIT_SPAN - 1} of its range; got start {start}, count {count}")
+    base = SPLITS.index(split) * SPLIT_SPAN
+    return range(base + start, base + start + count)
 
 
 def pool_options() -> SynthesisOptions:

@@ -54,8 +54,7 @@ from synthesis.artifacts.pool_records import CHECKS, rebuild_artifact
 from synthesis.artifacts.provenance import versions
 from synthesis.model.errors import ProblemError
 
-from .pools import PoolName, parse_pool, split_seeds
-from .random_grid import SPLIT_SPAN, SPLITS, pool_params
+from .random_grid import SPLIT_SPAN, SPLITS, PoolName, parse_pool, pool_params, split_seeds
 
 __all__ = [
     "DATA_DIR",
