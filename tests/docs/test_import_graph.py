@@ -253,8 +253,8 @@ def test_no_import_circle(graph: list[Edge]) -> None:
 
 
 def test_no_circle_among_sub_packages(graph: list[Edge]) -> None:
-    """Sub-packages are layers (issue 14: ``synthesis/`` by stage, each importing only
-    downward): with each module counted as its sub-package (``synthesis.routing.milp`` as
+    """Sub-packages are layers (``synthesis/`` by stage, each importing only
+    downward): with each module counted as its sub-package (``synthesis.routing.solve`` as
     ``synthesis.routing``; a top-level module such as ``synthesis.pipeline`` as itself),
     no two import each other. Modules without a circle can still make one between their
     sub-packages, so this is a check of its own."""
