@@ -82,7 +82,18 @@ class CheckpointError(ValueError):
 def trust_pickled_models(trust: bool = True) -> None:
     """Allow (or, with ``False``, forbid again) loading stable-baselines3 zips, which
     unpickles them: only for files you made or trust like code. What ``--trust-model``
-    sets for its command."""
+    sets for its command.
+
+    Examples
+    --------
+    >>> from agents.checkpoint import pickled_models_trusted, trust_pickled_models
+    >>> trust_pickled_models(True)      # this process may now load SB3 zips (one warning line each)
+    >>> pickled_models_trusted()
+    True
+    >>> trust_pickled_models(False)     # refused again
+    >>> pickled_models_trusted()
+    False
+    """
     _TRUST["pickled"] = bool(trust)
 
 

@@ -55,6 +55,7 @@ ENTRY_POINTS: tuple[str, ...] = (
     "agents.external",
     "agents.external.planner_policy",
     "agents.native_ppo.train",
+    "agents.checkpoint.trust_pickled_models",
     # the command line's Python API
     "experiments.cli.evaluate.evaluate",
 )
