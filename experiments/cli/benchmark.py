@@ -209,7 +209,8 @@ def check_config(config: BenchmarkConfig) -> None:
     from flowtest_env.pools import parse_pool, split_seeds
 
     try:
-        parse_pool(config.pool)
+        if not is_standard_pool(config.pool):
+            parse_pool(config.pool)
         for split, count in config.counts().items():
             split_seeds(split, count)
     except ValueError as exc:
@@ -250,6 +251,27 @@ def check_config(config: BenchmarkConfig) -> None:
                 check_settings(baseline_settings(algo, "sb3"))
             else:
                 baseline_settings(algo)
+
+
+def is_standard_pool(name: str) -> bool:
+    """Whether ``name`` is a standard pool's id (``reachability1/5x5-v1``:
+    :mod:`flowtest_env.standard_pools`, shipped records), which :func:`flowtest_env.pools.load_pool`
+    loads like an on-demand pool name."""
+    try:
+        from flowtest_env.standard_pools import is_standard
+    except ImportError:  # a FlowTest without standard pools
+        return False
+    return bool(is_standard(name))
+
+
+def on_demand_name(pool: str) -> str:
+    """The on-demand pool name of a standard pool's id (its splits are that pool's first
+    seeds), or ``pool`` itself."""
+    if not is_standard_pool(pool):
+        return pool
+    from flowtest_env.standard_pools import standard_pool
+
+    return str(standard_pool(pool).pool)
 
 
 def baseline_settings(algo: str, trainer: str = "native") -> dict[str, Any]:
@@ -476,7 +498,7 @@ def train_baseline(config: BenchmarkConfig, algo: str, seed: int, splits: dict[s
     if config.trainer == "native":
         return _train_native_baseline(config, algo, seed, splits, path, every, progress_bar, count)
     settings = baseline_settings(algo, "sb3")
-    pool_options = {"pool": config.pool, "split": "train", "count": count}
+    pool_options = {"pool": on_demand_name(config.pool), "split": "train", "count": count}
     env = make_training_vec_env(POOL_ENV_ID, seed, settings, pool_options)
     model = make_model(env, settings, seed)
     shown = {"train": _games_and_budgets(splits["train"]), "validation": _games_and_budgets(splits["validation"])}
@@ -494,20 +516,26 @@ def train_baseline(config: BenchmarkConfig, algo: str, seed: int, splits: dict[s
 
 def _train_native_baseline(config: BenchmarkConfig, algo: str, seed: int, splits: dict[str, Split], path: Path,
                            every: int, progress_bar: bool, count: int) -> TrainedBaseline:
-    """One baseline with the native trainer on the first ``count`` train tests (the env
-    plays exactly them), its greedy curve measured by the trainer on the scored train tests
-    and the validation tests."""
+    """One baseline with the native trainer on the first ``count`` train tests (a
+    :class:`~flowtest_env.vector.PoolVectorEnv` of exactly the loaded tests), its greedy
+    curve measured by the trainer on the scored train tests and the validation tests."""
     from agents.native_ppo import BatchActor, save_policy
     from agents.native_ppo import train as native_train
     from flowtest_env.game import TestGame
+    from flowtest_env.vector import PoolVectorEnv
 
     settings = baseline_settings(algo)
     pool_options = {"pool": config.pool, "split": "train", "count": count}
     args = native_args(settings, POOL_ENV_ID, pool_options, config.steps, seed, eval_every=every)
     if "level_sampling" in settings:
         args = dataclasses.replace(args, level_sampling=settings["level_sampling"])
+    env = PoolVectorEnv(args.num_envs, [TestGame(a) for a in splits["train"].artifacts[:count]], obs_kind=args.obs_kind)
     monitor = [TestGame(a) for a in splits["validation"].scored]
-    result = native_train(args, heldout=monitor, progress_bar=progress_bar, evaluate_train=min(count, config.scored("train")))
+    try:
+        result = native_train(args, heldout=monitor, progress_bar=progress_bar, evaluate_train=min(count, config.scored("train")),
+                              env=env)
+    finally:
+        env.close()
     write_atomically(path, lambda tmp: save_policy(tmp, result.agent, result.settings))
     names = {"train": "train", "heldout": "validation"}
     curve = [(step, {names[k]: v["met"] for k, v in rates.items()}) for step, rates in result.evaluations]
@@ -766,6 +794,31 @@ def system_entry(s: SystemRuns, scale: dict[str, dict[str, Any]], reps: int) -> 
     return entry
 
 
+def command_of(config: BenchmarkConfig, out: str = "OUT") -> str:
+    """The ``flowtest benchmark`` command that runs ``config`` (every setting that is not
+    the default spelled out), for the results file and the leaderboard."""
+    import shlex
+
+    d = BenchmarkConfig(config.pool)
+    words = ["flowtest", "benchmark", "--pool", config.pool]
+    if config.suts != d.suts:
+        words += ["--sut", *config.suts]
+    if config.algos != d.algos:
+        words += ["--algo", *config.algos]
+    for name in ("train_count", "validation_count", "test_count", "train_eval_count", "steps", "runs", "curve_seeds",
+                 "curve_points", "report_tests", "bootstrap"):
+        if getattr(config, name) != getattr(d, name):
+            words += [f"--{name.replace('_', '-')}", str(getattr(config, name))]
+    if config.seeds != d.seeds:
+        words += ["--seeds", *map(str, config.seeds)]
+    if config.curve_sizes != d.curve_sizes:
+        words += ["--curve-sizes", *map(str, config.curve_sizes)]
+    if config.trainer != d.trainer:
+        words += ["--trainer", config.trainer]
+    words += ["--out", out]
+    return " ".join(shlex.quote(w) for w in words)
+
+
 def _commit() -> str | None:
     try:
         root = Path(__file__).resolve().parents[2]
@@ -809,6 +862,7 @@ def benchmark_table(config: BenchmarkConfig, splits: dict[str, Split], systems: 
     return {
         "format": RESULTS_FORMAT, "version": RESULTS_VERSION,
         "pool": config.pool,
+        "command": command_of(config),
         "splits": {s: {"count": len(sp.artifacts), "scored": len(sp.files), "seeds": [sp.seeds[0], sp.seeds[-1]]}
                    for s, sp in splits.items()},
         "config": {"steps": config.steps, "seeds": list(config.seeds), "algos": config.baselines(), "trainer": config.trainer,
