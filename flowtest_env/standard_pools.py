@@ -91,6 +91,9 @@ class StandardPool:
         Tests planned per split (``train``, ``validation``, ``test``).
     about
         What the pool exercises, in a few words.
+    slow
+        Builds slowly (seconds a test): its held-out split is planned at 250 tests, not
+        1,000.
     """
 
     id: str
@@ -98,6 +101,7 @@ class StandardPool:
     version: int
     splits: Mapping[str, int] = field(default_factory=lambda: {"train": 4096, "validation": 256, "test": 1000})
     about: str = ""
+    slow: bool = False
 
     @property
     def name(self) -> PoolName:
@@ -146,32 +150,35 @@ STANDARD_POOLS: dict[str, StandardPool] = {
             "reachability1/5x5-v1",
             "reachability1/5x5",
             1,
-            about="the paper's empty 5x5 grid with reactive doors; continuity pool (a random policy meets about half)",
+            about="the paper's empty 5x5 grid, one hidden goal, reactive doors; the continuity pool (a random policy meets about half)",
         ),
         StandardPool(
-            "reachability2/7x7/blocked-v1",
-            "reachability2/7x7/blocked",
+            "safety2/5x5/fuel-v1",
+            "safety2/5x5/fuel",
             1,
-            about="7x7 grid, a fifth of the cells blocked, two goals in sequence, reactive doors",
+            about="5x5 fuel grid (capacity 5, refuel cells, never run empty), a goal and a cell to avoid, reactive doors",
         ),
         StandardPool(
-            "safety2/7x7/fuel-v1",
-            "safety2/7x7/fuel",
+            "safety2/5x5/fuel/static-v1",
+            "safety2/5x5/fuel/static",
             1,
-            about="7x7 fuel grid (capacity 7, refuel cells, never run empty), reactive doors",
-        ),
-        StandardPool(
-            "reachability2/7x7/blocked/static-v1",
-            "reachability2/7x7/blocked/static",
-            1,
-            about="7x7 grid with blocked cells, two goals in sequence, static walls",
+            splits={"train": 4096, "validation": 256, "test": 250},
+            about="the same fuel grids with static walls (the whole test) instead of doors",
+            slow=True,
         ),
         StandardPool(
             "reachability1/5x5/blocked/agent-v1",
             "reachability1/5x5/blocked/agent",
             1,
             splits={"train": 4096, "validation": 256, "test": 250},
-            about="5x5 grid with blocked cells and a test agent patrolling one column (a GR(1) strategy)",
+            about="5x5 grid, a fifth of the cells blocked, a test agent patrolling one column (a GR(1) strategy)",
+            slow=True,
+        ),
+        StandardPool(
+            "reachability2/7x7/blocked-v1",
+            "reachability2/7x7/blocked",
+            1,
+            about="7x7 grid, a fifth of the cells blocked, two hidden goals, reactive doors",
         ),
     )
 }

@@ -18,7 +18,7 @@ Each split's records go to ``flowtest_env/data/pools/<slug>/<split>.jsonl.gz``
 * **writes atomically**: the file is rewritten through a temporary file and a rename every
   ``--flush-every`` seconds and at the end, so a crash or Ctrl-C leaves the file as it was
   or with more complete records, never a torn one (Ctrl-C writes what is done, then exits
-  with status 130);
+  with status 130; a plain ``kill``, SIGTERM, does the same);
 * **shows progress** on standard error (tests done, rate, time left), on a terminal or not;
 * **reuses the cache**: records of the same seeds already built on demand (``load_pool``'s
   cache, under any version) are fully checked and certified instead of synthesized again
@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import signal
 import sys
 import time
 from collections.abc import Sequence
@@ -142,6 +143,18 @@ def listing() -> str:
     return "\n".join(rows)
 
 
+def _interrupt(signum: int, frame: Any) -> None:
+    raise KeyboardInterrupt
+
+
+def stop_on_signals() -> None:
+    """Ctrl-C, and a plain ``kill`` (SIGTERM), stop a build the same safe way: what is done
+    is written, then the process exits (also when started in the background, where a
+    shell leaves SIGINT ignored)."""
+    signal.signal(signal.SIGINT, _interrupt)
+    signal.signal(signal.SIGTERM, _interrupt)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m experiments.tools.build_pools", description=__doc__.split("\n\n")[0])
     ap.add_argument("pools", nargs="*", help="standard pool ids (default with --list: all)")
@@ -165,6 +178,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print("error: --count must be a positive number of tests", file=sys.stderr)
         return 2
     splits = [s for s in ORDER if s in (args.split or ORDER)]
+    stop_on_signals()
     try:
         for pool in pools:
             for split in splits:
@@ -179,7 +193,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     return 0
 
 
-__all__ = ["ORDER", "build_split", "check_meta", "listing", "main"]
+__all__ = ["ORDER", "build_split", "check_meta", "listing", "main", "stop_on_signals"]
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -66,7 +66,7 @@ def test_registry_names_versions_and_planned_splits() -> None:
         assert sp.is_standard(pid) and not sp.is_standard(pool.pool)
         pool.name  # parses  # noqa: B018
         assert pool.splits["train"] >= 4096 and pool.splits["validation"] >= 1
-        assert pool.splits["test"] >= (250 if pool.name.kind == "agent" else 1000)
+        assert pool.splits["test"] >= (250 if pool.slow else 1000)
 
 
 def test_unknown_ids_are_refused_with_the_choices() -> None:
