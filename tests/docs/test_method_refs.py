@@ -203,7 +203,7 @@ def test_every_method_reference_in_product_code_resolves() -> None:
 def test_product_code_cites_the_method() -> None:
     """The citations exist at all (a scanner that reads nothing would pass the test above)."""
     cites = sum(p.read_text().count("docs/method.md") for p in product_modules())
-    assert cites >= 50, f"only {cites} citations of docs/method.md in product code"
+    assert cites >= 30, f"only {cites} citations of docs/method.md in product code"
 
 
 def test_no_development_history_tag_in_product_code() -> None:
