@@ -34,6 +34,20 @@ if TYPE_CHECKING:
     from synthesis.problems.problem import Problem
 
 
+def machine_threads(text: str) -> int:
+    """The type of ``--threads``: at most this machine's CPUs, then the ``threads`` option's rule
+    (:data:`synthesis.model.option_rules.THREADS`)."""
+    cpus = os.cpu_count() or 1
+    try:
+        too_many = int(text) > cpus
+    except ValueError:
+        too_many = False
+    if too_many:
+        raise argparse.ArgumentTypeError(f"{text} is more than the {cpus} CPUs of this machine")
+    threads: int = option_type(THREADS)(text)
+    return threads
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Declare ``flowtest synthesize``'s arguments."""
     from synthesis.model.strategy import SETTINGS
@@ -56,7 +70,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--gap", metavar="G", type=option_type(GAP), default=0.0, help="relative MIP gap at which to stop (default 0: prove optimality)")
     p.add_argument(
-        "--threads", metavar="N", type=option_type(THREADS),
+        "--threads", metavar="N", type=machine_threads,
         help="solver threads (default 1: the same answer on every machine; at most the machine's CPUs)",
     )
     p.add_argument(
@@ -126,9 +140,6 @@ def run(args: argparse.Namespace) -> int:
 
         check_plot_format(args.plot)
 
-    cpus = os.cpu_count() or 1
-    if args.threads is not None and args.threads > cpus:
-        raise ProblemError(f"--threads {args.threads} is more than the {cpus} CPUs of this machine")
     if args.backend == "cpsat":  # refused before any work when the extra is missing
         from synthesis.routing.backends.cpsat import require
 

@@ -242,7 +242,6 @@ FLAGS = [
     ("--after-first", "-2", SECONDS, -2.0),
     ("--gap", "1.5", GAP, 1.5),
     ("--threads", "0", THREADS, 0),
-    ("--threads", "300", THREADS, 300),
 ]
 
 
