@@ -12,20 +12,25 @@ bounded by a deadline; stopped early it gives HiGHS's proven lower bound.
 from __future__ import annotations
 
 import time
+from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import highspy
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import breadth_first_order
+from scipy.sparse.csgraph import breadth_first_order, maximum_flow
 
 from ..graphs.consistency import check_consistency
 from ..graphs.products import Products
 from ..model.errors import InconsistentProblem
-from .model import build_model, cut_groups, model_edges, physical_items
+from .bounds.heuristic import RoutingGuess, guess_routing, usable_edges
+from .model import CutGroups, RoutingModel, build_model, cut_groups, model_edges, physical_items
 from .options import MilpOptions
-from .result import required_entries
+from .phases import guess_solution
+from .result import blocked_of_edges, required_entries
 from .solver_control import quiet_highs, run_highs
+from .traps import trapped_entries
 
 CAP_NOUNS = {"max_walls": "walls", "max_doors": "doors", "max_restrictions": "restrictions (walls and doors)"}
 """What each cap counts, for messages."""
@@ -179,3 +184,266 @@ def disjoint_bypasses(products: Products, options: MilpOptions, cap: str, stop_a
         found += 1
         usable &= ~np.isin(item, used)
     return found
+
+
+# --------------------------------------------------------------------------- a first test within the caps
+
+CAPPED_ROUNDS = 400
+"""The most minimum cuts :func:`capped_guess` tries (each keeps open the moves the last one
+closed on the cheapest route): a deterministic budget, never a clock, so the same model gives
+the same start on every machine."""
+
+CAPPED_ATTEMPTS = 8
+"""How many times :func:`capped_guess` starts over (each breaking ties its own way) within
+:data:`CAPPED_ROUNDS` rounds in all."""
+
+_INF = 1 << 26  # the capacity of an edge no cut may close (far above any finite cut)
+_COUNTED = 64  # the capacity of an edge whose cut uses an item a cap counts
+_FREE = 1  # ... of one whose item no cap counts (a wall under a cap on doors): cheap, not free
+
+
+def capped_guess(
+    products: Products,
+    rm: RoutingModel,
+    options: MilpOptions,
+    entries: dict[int, np.ndarray] | None = None,
+    deadline: float | None = None,
+) -> RoutingGuess | None:
+    """A test within the caps to start a capped solve from, where the routing heuristic's test
+    (:meth:`RoutingModel.guess`) uses more walls or doors than a cap allows; ``None`` where
+    none is found.
+
+    The heuristic keeps the flow high and cuts whatever that needs; under a tight cap the
+    solver then starts from nothing, and on a large floor may find no test at all within its
+    time limit. This search goes the other way, from few restrictions to a route:
+
+    1. a minimum cut of the bypasses (every ``Src -> Tgt`` walk outside I, docs/method.md c4-c5),
+       each edge costing what its cut group uses of the caps, the groups kept open uncut;
+    2. the heuristic's own growth (:func:`~synthesis.routing.bounds.heuristic.guess_routing`)
+       on that cut set alone: the largest flow it lets through while every bypass stays
+       closed (and no entry node of ``entries`` trapped: the feasibility flows the solve
+       holds), cutting only the border of
+       what ``Src`` reaches;
+    3. if no route is left open (the cut walls in ``Src`` or the goal), the cheapest route
+       from ``Src`` through I to ``Tgt`` (fewest groups of the cut on it) keeps those groups
+       open from now on, and the next round cuts around them (a trapped history keeps open
+       the groups that close its way out).
+
+    It stops at the first test within every cap. A test over a cap ends an attempt (keeping
+    more open only adds cuts), and the search starts over with the route search's ties broken
+    another way, up to :data:`CAPPED_ATTEMPTS` attempts and :data:`CAPPED_ROUNDS` rounds in
+    all, and never past ``deadline`` (a ``perf_counter`` time: the solve's time limit holds). A start,
+    not an answer: the solver checks it as a whole solution and improves on it.
+
+    Example::
+
+        guess = capped_guess(products, rm, options)
+        if guess is not None:
+            x = guess_solution(products, rm, guess, options)  # within every cap
+    """
+    caps = rm.caps
+    if caps is None or not options.caps:
+        return None
+    traps = _trap_test(products, rm.groups, entries or {})
+    g = products.virtual
+    me, groups = rm.edges, rm.groups
+    n, src, target = g.n_nodes, int(g.initial), products.target
+    cuttable = me.has_var & ~rm.reductions.fixed_open
+    counted = np.zeros(cuttable.size, dtype=bool)
+    item = caps.items.of_group
+    for cap in options.caps:
+        counted |= caps.items.kinds(cap)[item]
+    cost = np.where(counted, _COUNTED, _FREE)
+    c5 = np.flatnonzero(me.c5)
+    eu5, ev5, grp5 = me.eu[c5], me.ev[c5], me.grp[c5]
+    usable = usable_edges(me.c5, me.ev, target)
+    rounds = 0
+    for attempt in range(CAPPED_ATTEMPTS):
+        # each attempt breaks the route search's ties its own way (a fixed seed: the same
+        # start on every machine); the first keeps the edges' own order
+        rng = np.random.default_rng(attempt)
+        order = np.arange(me.eu.size) if attempt == 0 else rng.permutation(me.eu.size)
+        keep_open = np.zeros(cuttable.size, dtype=bool)
+        while rounds < CAPPED_ROUNDS:
+            rounds += 1
+            if deadline is not None and time.perf_counter() >= deadline:
+                return None
+            cut = _min_bypass_cut(n, src, eu5, ev5, grp5, cuttable & ~keep_open, cost, target)
+            if cut is None:
+                break  # a bypass nothing left may close: try again otherwise
+            crossed = _cheapest_route(n, src, me.eu[order], me.ev[order], me.grp[order], usable[order], cut, target)
+            if crossed is None:
+                return None  # no route at all, whatever is open
+            if crossed.size == 0:
+                guess = guess_routing(n, src, me.eu, me.ev, me.grp, me.c5, me.has_var & cut, target, traps=traps)
+                if guess.flow >= 1 and not (traps is not None and traps(guess.cut_groups)):
+                    if caps.items.over_cap(guess.cut_groups, options.caps):
+                        break  # a test, over a cap: keeping more open only adds cuts; try again otherwise
+                    if rm.flow_bound is not None and rm.flow_bound < guess.upper_bound:
+                        guess = replace(guess, upper_bound=rm.flow_bound)  # as RoutingModel.guess lowers it
+                    return guess
+                if traps is None:
+                    break
+                # a trapped history (the growth reports flow 0 then): keep its way out open
+                crossed = _way_out(products, groups, guess.cut_groups if guess.flow >= 1 else cut, entries or {})
+                if crossed.size == 0:
+                    break
+            keep_open[crossed] = True
+    return None
+
+
+def start_within_caps(
+    products: Products,
+    rm: RoutingModel,
+    options: MilpOptions,
+    entries: dict[int, np.ndarray],
+    guess: RoutingGuess,
+    x_guess: np.ndarray | None,
+    deadline: float | None,
+) -> tuple[RoutingGuess, np.ndarray | None]:
+    """Phase 1's start under caps: ``(guess, x_guess)`` as they are, unless the heuristic's
+    test was dropped for using more than a cap allows (``x_guess`` is ``None``, the model has
+    caps); then :func:`capped_guess`'s test within them, as a whole model solution
+    (:func:`~synthesis.routing.phases.guess_solution`), where it finds one by ``deadline``.
+    Its ``upper_bound`` is the heuristic's (so phase 1 is proven at once where it attains it).
+
+    Example (in a backend's phase 1)::
+
+        x_guess = guess_solution(products, rm, guess, options)
+        guess, x_guess = start_within_caps(products, rm, options, entries, guess, x_guess, clock.deadline)
+    """
+    if x_guess is not None or rm.caps is None or not options.caps:
+        return guess, x_guess
+    capped = capped_guess(products, rm, options, entries, deadline)
+    if capped is None:
+        return guess, x_guess
+    capped = replace(capped, upper_bound=min(capped.upper_bound, guess.upper_bound))
+    x = guess_solution(products, rm, capped, options)
+    return (capped, x) if x is not None else (guess, x_guess)
+
+
+def _trap_test(products: Products, groups: CutGroups, entries: dict[int, np.ndarray]) -> Callable[[np.ndarray], bool] | None:
+    """Whether a cut set (``bool`` per group) traps an entry node of ``entries``."""
+    if not entries:
+        return None
+
+    def traps(cut: np.ndarray) -> bool:
+        return bool(trapped_entries(products, blocked_of_edges(products, np.flatnonzero(cut[groups.of_edge])), entries))
+
+    return traps
+
+
+def _min_bypass_cut(
+    n: int, src: int, eu: np.ndarray, ev: np.ndarray, grp: np.ndarray, cuttable: np.ndarray, cost: np.ndarray,
+    target: np.ndarray,
+) -> np.ndarray | None:
+    """The cut groups (``bool`` per group) of a minimum ``Src -> Tgt`` cut over the bypass
+    edges ``eu -> ev`` (the c5 edges), an edge of a ``cuttable`` group costing ``cost`` of its
+    group, any other never cut; ``None`` when every cut is infinite (a bypass nothing may close)."""
+    cap = np.where(cuttable[grp], cost[grp], _INF).astype(np.int64)
+    t = np.flatnonzero(target)
+    rows = np.concatenate([eu, t])
+    cols = np.concatenate([ev, np.full(t.size, n)])
+    caps = np.concatenate([cap, np.full(t.size, _INF, dtype=np.int64)])
+    # parallel edges add up (scipy sums duplicates); capped below int32
+    mat = sp.csr_matrix((caps, (rows, cols)), shape=(n + 1, n + 1))
+    mat.data = np.minimum(mat.data, _INF).astype(np.int32)
+    mat.indices = mat.indices.astype(np.int32)
+    mat.indptr = mat.indptr.astype(np.int32)
+    res = maximum_flow(mat, src, n)
+    if res.flow_value >= _INF:
+        return None
+    residual = (mat - res.flow).tocsr()
+    residual.data = (residual.data > 0).astype(np.int8)
+    residual.eliminate_zeros()
+    side = np.zeros(n + 1, dtype=bool)
+    side[breadth_first_order(residual, src, directed=True, return_predecessors=False)] = True
+    cut = np.zeros(cuttable.size, dtype=bool)
+    crossing = side[eu] & ~side[ev]
+    cut[grp[crossing]] = True
+    closed: np.ndarray = cut & cuttable
+    return closed
+
+
+def _cheapest_route(
+    n: int, src: int, eu: np.ndarray, ev: np.ndarray, grp: np.ndarray, usable: np.ndarray, cut: np.ndarray,
+    target: np.ndarray,
+) -> np.ndarray | None:
+    """The cut groups on a ``Src -> Tgt`` route over the ``usable`` edges (every route to
+    ``Tgt`` passes I) that crosses the fewest edges of ``cut`` (0-1 breadth-first search);
+    empty when a route is open, ``None`` when there is no route at all."""
+    e_ok = np.flatnonzero(usable)
+    path = _zero_one_path(n, eu[e_ok], ev[e_ok], cut[grp[e_ok]], np.arange(n) == src, target)
+    if path is None:
+        return None
+    on = e_ok[path]
+    crossed: np.ndarray = np.unique(grp[on][cut[grp[on]]])
+    return crossed
+
+
+def _way_out(products: Products, groups: CutGroups, cut: np.ndarray, entries: dict[int, np.ndarray]) -> np.ndarray:
+    """For the first history whose entry node ``cut`` traps: the cut groups that close the
+    cheapest way out of it (fewest moves restricted under that history) in ``G_sys``."""
+    blocked = blocked_of_edges(products, np.flatnonzero(cut[groups.of_edge]))
+    trapped = trapped_entries(products, blocked, entries)
+    if not trapped:
+        return np.zeros(0, dtype=np.int64)
+    q, nodes = next(iter(trapped.items()))
+    gs = products.system
+    start = np.zeros(gs.n_nodes, dtype=bool)
+    start[int(nodes[0])] = True
+    path = _zero_one_path(gs.n_nodes, gs.src, gs.dst, blocked[q, gs.move], start, products.system_target)
+    if path is None:
+        return np.zeros(0, dtype=np.int64)
+    moves = np.unique(gs.move[path][blocked[q, gs.move[path]]])
+    g = products.virtual
+    edges = np.flatnonzero((g.hist[g.src] == q) & np.isin(g.move, moves))
+    out: np.ndarray = np.unique(groups.of_edge[edges])
+    closing: np.ndarray = out[cut[out]]
+    return closing
+
+
+def _zero_one_path(
+    n: int, eu: np.ndarray, ev: np.ndarray, costly: np.ndarray, start: np.ndarray, target: np.ndarray
+) -> np.ndarray | None:
+    """Indices of the edges of a path from a ``start`` node to a ``target`` node over the edges
+    ``eu -> ev`` with the fewest ``costly`` edges (0-1 breadth-first search); ``None`` if none."""
+    order = np.argsort(eu, kind="stable")
+    ptr = np.zeros(n + 1, dtype=np.int64)
+    np.add.at(ptr, eu + 1, 1)
+    ptr = np.cumsum(ptr)
+    inf = np.iinfo(np.int64).max
+    dist = np.full(n, inf, dtype=np.int64)
+    via = np.full(n, -1, dtype=np.int64)
+    dq: deque[int] = deque()
+    for s in np.flatnonzero(start):
+        dist[s] = 0
+        dq.append(int(s))
+    weight = costly.astype(np.int64)
+    done = np.zeros(n, dtype=bool)
+    end = -1
+    while dq:
+        u = dq.popleft()
+        if done[u]:
+            continue
+        done[u] = True
+        if target[u]:
+            end = u
+            break
+        for k in range(ptr[u], ptr[u + 1]):
+            e = int(order[k])
+            v = int(ev[e])
+            nd = dist[u] + weight[e]
+            if nd < dist[v]:
+                dist[v], via[v] = nd, e
+                (dq.append if weight[e] else dq.appendleft)(v)
+    if end < 0:
+        return None
+    edges = []
+    v = end
+    while via[v] >= 0:
+        e = int(via[v])
+        edges.append(e)
+        v = int(eu[e])
+    return np.array(edges[::-1], dtype=np.int64)
+
