@@ -70,7 +70,7 @@ class SynthesisOptions(Budgets, RunOptions):
 
     Example
     -------
-    >>> from synthesis import load_problem, synthesize
+    >>> from synthesis import SynthesisOptions, load_problem, synthesize
     >>> test = synthesize(load_problem("small-reactive"), SynthesisOptions(node_limit=10_000, caps={"max_walls": 4}))
     >>> test.routing.status, test.caps
     ('optimal', {'max_walls': 4})
