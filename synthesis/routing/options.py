@@ -54,7 +54,7 @@ FEASIBILITY = ("auto", "eager", "lazy")
 @dataclass(frozen=True)
 class Exclusion:
     """Cut sets the routing MILP must not return: every cut set that cuts all of
-    :attr:`cut` and none of :attr:`open` (cut-group keys, see :func:`cut_groups`).
+    :attr:`cut` and none of :attr:`open` (cut-group keys, see :func:`~synthesis.routing.model.cut_groups`).
 
     A rejected cut set ``C`` alone is ``Exclusion(C)``; the counterexample loop of
     :mod:`synthesis.test_agent.loop` excludes, with the reason the agent lost
@@ -97,7 +97,7 @@ class ModelOptions:
         ``sum_{cut} d - sum_{open} d <= |cut| - 1``.
     closed_loop
         Also forbid traps at configurations that are not entry nodes (see
-        :func:`~synthesis.routing.milp.solve_routing`); ``False`` (the default) gives
+        :func:`~synthesis.routing.solve.solve_routing`); ``False`` (the default) gives
         docs/method.md §5 exactly.
     caps
         Caps on the physical restrictions a test may use (``max_walls``, ``max_doors``,
@@ -199,11 +199,11 @@ class MeasurementSwitches:
         How the feasibility flows' closing rows (c7) are written: ``"edge"`` (docs/method.md's,
         one row ``x + K d <= K`` per flow edge), ``"cut"`` (one row per history and closing cut
         column over all the flow edges it closes: the same answers) or ``"auto"`` (``"cut"``
-        where :func:`synthesis.routing.milp.per_cut_flow_rows` says it was measured to pay,
+        where :func:`synthesis.routing.backends.rules.per_cut_flow_rows` says it was measured to pay,
         else ``"edge"``).
     feasibility
         When the feasibility flows (c6-c8) enter the model: ``"auto"`` (see
-        :func:`~synthesis.routing.milp.solve_routing`), ``"eager"`` (all at once: one round, and
+        :func:`~synthesis.routing.solve.solve_routing`), ``"eager"`` (all at once: one round, and
         every incumbent of a time-limited solve is trap-free) or ``"lazy"`` (where they bind).
     """
 
@@ -225,7 +225,7 @@ class RunOptions:
     backend
         The solver of the model (:data:`BACKENDS`): ``"highs"`` (HiGHS's branch and cut),
         ``"cpsat"`` (OR-Tools CP-SAT in a child process: :mod:`synthesis.routing.backends.cpsat`),
-        or ``"auto"`` (the default: :func:`synthesis.routing.milp.auto_backend` decides on the
+        or ``"auto"`` (the default: :func:`synthesis.routing.backends.rules.auto_backend` decides on the
         built model).
     progress
         Called with a line of text at each stage of the solve (``None``: silent).
