@@ -1,7 +1,8 @@
 """The CP-SAT solver backend (``backend="cpsat"``, OR-Tools CP-SAT, a core dependency; issue 18 pt 2).
 
 Its exhaustive optimality is ``tests/synthesis/test_optimality.py`` (parametrized over the installed
-backends). Here: the same answers as HiGHS on built-ins both prove, determinism under a
+backends); the same answers as HiGHS on the built-ins, and the solver named with its version, are
+``tests/synthesis/test_backend_contract.py`` (every backend). Here: determinism under a
 deterministic budget, Ctrl-C and stop requests, the child process's output kept off our
 stdout, and the one-line error when the extra is missing.
 """
@@ -37,25 +38,6 @@ from synthesis.routing.solver_control import SolveControl
 FLOWTEST = Path(sys.executable).parent / "flowtest"
 
 needs_ortools = pytest.mark.skipif(not cpsat.available(), reason="OR-Tools is not installed (a core dependency, missing here)")
-
-
-def _answer(name: str, backend: str) -> tuple[str, int, int, list[int]]:
-    test = synthesize(load_problem(name), SynthesisOptions(backend=backend))
-    assert test.checks.bypass_flow == 0
-    assert test.routing.stats["backend"] == backend
-    return test.routing.status, test.routing.flow, int(test.routing.cut_edges.size), sorted(test.routing.cut_group_keys)
-
-
-@needs_ortools
-@pytest.mark.parametrize(
-    "name", ["small-reactive", "example1", "beaver-rescue", "motion-primitives", "maze2", pytest.param("refueling", marks=pytest.mark.slow)]
-)
-def test_same_answers_as_highs_on_builtins(name: str) -> None:
-    """Built-ins both backends prove: the same status, flow and number of cuts (which cuts
-    may differ where several optima tie; both answers are checked)."""
-    highs, cp = _answer(name, "highs"), _answer(name, "cpsat")
-    assert highs[0] == cp[0] == "optimal"
-    assert highs[1:3] == cp[1:3], f"{name}: HiGHS {highs[1:3]}, CP-SAT {cp[1:3]}"
 
 
 @needs_ortools
@@ -228,15 +210,6 @@ def test_unknown_backend_is_refused() -> None:
         synthesize(load_problem("small-reactive"), SynthesisOptions(backend="gurobi"))
     with pytest.raises(ProblemError, match="work_limit"):
         synthesize(load_problem("small-reactive"), replace(SynthesisOptions(), work_limit=-1.0))
-
-
-def test_highs_names_itself() -> None:
-    """The summary says which solver made the answer, with its version."""
-    from importlib.metadata import version
-
-    test = synthesize(load_problem("small-reactive"), SynthesisOptions(backend="highs"))
-    assert test.routing.stats["backend"] == "highs"
-    assert test.routing.stats["solver_version"] == version("highspy")
 
 
 @needs_ortools
