@@ -17,12 +17,15 @@ import pytest
 from experiments.cli.cli import main
 from synthesis import pipeline
 from synthesis.checks.physical import physical_counts
+from synthesis.graphs.products import Products
 from synthesis.model.errors import InconsistentProblem, ProblemError
 from synthesis.model.systems import grid_world
 from synthesis.problems.files import load_problem_file
 from synthesis.problems.load import load_problem
-from synthesis.problems.problem import build_graphs, make_problem
+from synthesis.problems.problem import Problem, build_graphs, make_problem
+from synthesis.routing.bounds.heuristic import RoutingGuess
 from synthesis.routing.caps import disjoint_bypasses
+from synthesis.routing.model import RoutingModel
 from synthesis.routing.solve import solve_routing
 
 FLOOR = """
@@ -393,6 +396,84 @@ def test_30x30_floor_cap_gives_a_test_within_it_or_exit_3(
         assert code == 3, err
         line = error_line(err)
         assert f"no test with at most {n} {cap[:-1] if n == 1 else cap}" in line and "needed" in line
+
+
+# --------------------------------------------------------------------------- a first test within the caps
+
+
+def rack_floor(tmp_path: Path, n: int, kind: str) -> Path:
+    """An ``n`` x ``n`` warehouse floor like :func:`floor30`: racks every fourth row with gaps at
+    the sides and at the aisle down the middle, a spill zone, start S, bay B and dock D in
+    three corners (the test: the bay and the aisle before the dock)."""
+    rows = [["." for _ in range(n)] for _ in range(n)]
+    mid = n // 2
+    racks = list(range(3, n - 2, 4))
+    for r in racks:
+        for c in range(2, n - 2):
+            if c not in (mid - 1, mid):
+                rows[r][c] = "#"
+    for r in range(2, racks[-1] + 1):
+        rows[r][mid - 1] = rows[r][mid] = "A"
+    rows[n // 2][n - 4] = rows[n // 2][n - 3] = "X"
+    rows[0][0], rows[n - 1][n - 1], rows[n - 1][0] = "S", "D", "B"
+    grid = "\n".join("  ".join(row) for row in rows)
+    return warehouse(tmp_path, grid="\n" + grid + "\n", kind=kind)
+
+
+def _capped_start(
+    path: Path, cap: str, limit: int
+) -> tuple[Problem, Products, tuple[RoutingModel, RoutingGuess, np.ndarray | None], tuple[RoutingGuess, np.ndarray | None]]:
+    """The routing model of a capped solve of ``path`` (as the solver builds it, every
+    feasibility flow up front), the heuristic's test and the capped start."""
+    from synthesis.graphs.consistency import check_consistency
+    from synthesis.routing.caps import start_within_caps
+    from synthesis.routing.model import build_model
+    from synthesis.routing.phases import guess_solution
+    from synthesis.routing.result import required_entries
+
+    problem = load_problem_file(path)
+    _, products = build_graphs(problem)
+    milp = pipeline.milp_options(problem, pipeline.SynthesisOptions(caps={cap: limit}))
+    entries = dict(required_entries(products, milp))
+    rm = build_model(products, milp, entries, check_consistency(products))
+    guess = rm.guess(products)
+    x_guess = guess_solution(products, rm, guess, milp)
+    return problem, products, (rm, guess, x_guess), start_within_caps(products, rm, milp, entries, guess, x_guess, None)
+
+
+@pytest.mark.parametrize(("kind", "cap", "limit"), [("static", "walls", 14), ("reactive", "doors", 20)])
+def test_a_capped_solve_starts_from_a_test_within_the_cap(tmp_path: Path, kind: str, cap: str, limit: int) -> None:
+    """On a 12x12 rack floor the routing heuristic's test uses 20 walls (35 doors), over the
+    cap, so phase 1 used to start from nothing (and on larger floors found nothing in its
+    time limit). The capped start is a test within the cap, checked here independently:
+    no bypass, a route through the test objective, no history trapped, and the walls or
+    doors counted from the restrictions within the cap."""
+    from synthesis.checks.verify import bypass_flow, routed_flow
+    from synthesis.model.strategy import TestStrategy
+    from synthesis.routing.result import blocked_of_edges, required_entries
+    from synthesis.routing.traps import trapped_entries
+
+    problem, products, (rm, guess, x_guess), (capped, x) = _capped_start(rack_floor(tmp_path, 12, kind), f"max_{cap}", limit)
+    assert rm.caps is not None
+    counts = rm.caps.items.counts(guess.cut_groups)
+    assert x_guess is None and counts[cap] > limit  # the heuristic's test is over the cap
+    assert x is not None and capped is not guess and capped.flow >= 1
+    g = products.virtual
+    cut_edges = np.flatnonzero(capped.cut_groups[rm.groups.of_edge])
+    blocked = blocked_of_edges(products, cut_edges)
+    on_edge = blocked[g.hist[g.src], g.move]
+    assert bypass_flow(products, on_edge) == 0 and routed_flow(products, on_edge) >= 1
+    milp = pipeline.milp_options(problem, pipeline.SynthesisOptions())
+    assert not trapped_entries(products, blocked, required_entries(products, milp))
+    static: np.ndarray = np.asarray(blocked.all(axis=0)) if kind == "static" else np.zeros(blocked.shape[1], dtype=bool)
+    strategy = TestStrategy(static, blocked & ~static[None, :])
+    assert physical_counts(problem.system, strategy).as_dict()[cap] <= limit
+
+
+def test_no_capped_start_without_caps_or_where_the_heuristic_fits(tmp_path: Path) -> None:
+    """The start is the heuristic's own wherever it fits the caps (or there are none)."""
+    _, _, (_, guess, x_guess), (same, x) = _capped_start(rack_floor(tmp_path, 12, "static"), "max_walls", 40)
+    assert x_guess is not None and same is guess and x is x_guess
 
 
 # --------------------------------------------------------------------------- one-way walls
