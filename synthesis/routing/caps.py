@@ -12,14 +12,13 @@ bounded by a deadline; stopped early it gives HiGHS's proven lower bound.
 from __future__ import annotations
 
 import time
-from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import highspy
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import breadth_first_order, maximum_flow
+from scipy.sparse.csgraph import breadth_first_order, dijkstra, maximum_flow
 
 from ..graphs.consistency import check_consistency
 from ..graphs.products import Products
@@ -259,10 +258,9 @@ def capped_guess(
     usable = usable_edges(me.c5, me.ev, target)
     rounds = 0
     for attempt in range(CAPPED_ATTEMPTS):
-        # each attempt breaks the route search's ties its own way (a fixed seed: the same
-        # start on every machine); the first keeps the edges' own order
-        rng = np.random.default_rng(attempt)
-        order = np.arange(me.eu.size) if attempt == 0 else rng.permutation(me.eu.size)
+        # each attempt breaks the route search's ties its own way (random edge lengths from a
+        # fixed seed: the same start on every machine); the first takes the shortest routes
+        jitter = None if attempt == 0 else np.random.default_rng(attempt).integers(1, 8, size=me.eu.size)
         keep_open = np.zeros(cuttable.size, dtype=bool)
         while rounds < CAPPED_ROUNDS:
             rounds += 1
@@ -271,7 +269,7 @@ def capped_guess(
             cut = _min_bypass_cut(n, src, eu5, ev5, grp5, cuttable & ~keep_open, cost, target)
             if cut is None:
                 break  # a bypass nothing left may close: try again otherwise
-            crossed = _cheapest_route(n, src, me.eu[order], me.ev[order], me.grp[order], usable[order], cut, target)
+            crossed = _cheapest_route(n, src, me.eu, me.ev, me.grp, usable, cut, target, jitter)
             if crossed is None:
                 return None  # no route at all, whatever is open
             if crossed.size == 0:
@@ -367,13 +365,15 @@ def _min_bypass_cut(
 
 def _cheapest_route(
     n: int, src: int, eu: np.ndarray, ev: np.ndarray, grp: np.ndarray, usable: np.ndarray, cut: np.ndarray,
-    target: np.ndarray,
+    target: np.ndarray, jitter: np.ndarray | None = None,
 ) -> np.ndarray | None:
     """The cut groups on a ``Src -> Tgt`` route over the ``usable`` edges (every route to
-    ``Tgt`` passes I) that crosses the fewest edges of ``cut`` (0-1 breadth-first search);
-    empty when a route is open, ``None`` when there is no route at all."""
+    ``Tgt`` passes I) that crosses the fewest edges of ``cut``, the shortest of those (each
+    edge ``jitter`` long, default 1); empty when a route is open, ``None`` when there is no
+    route at all."""
     e_ok = np.flatnonzero(usable)
-    path = _zero_one_path(n, eu[e_ok], ev[e_ok], cut[grp[e_ok]], np.arange(n) == src, target)
+    path = _zero_one_path(n, eu[e_ok], ev[e_ok], cut[grp[e_ok]], np.arange(n) == src, target,
+                          None if jitter is None else jitter[e_ok])
     if path is None:
         return None
     on = e_ok[path]
@@ -404,46 +404,40 @@ def _way_out(products: Products, groups: CutGroups, cut: np.ndarray, entries: di
 
 
 def _zero_one_path(
-    n: int, eu: np.ndarray, ev: np.ndarray, costly: np.ndarray, start: np.ndarray, target: np.ndarray
+    n: int,
+    eu: np.ndarray,
+    ev: np.ndarray,
+    costly: np.ndarray,
+    start: np.ndarray,
+    target: np.ndarray,
+    jitter: np.ndarray | None = None,
 ) -> np.ndarray | None:
     """Indices of the edges of a path from a ``start`` node to a ``target`` node over the edges
-    ``eu -> ev`` with the fewest ``costly`` edges (0-1 breadth-first search); ``None`` if none."""
-    order = np.argsort(eu, kind="stable")
-    ptr = np.zeros(n + 1, dtype=np.int64)
-    np.add.at(ptr, eu + 1, 1)
-    ptr = np.cumsum(ptr)
-    inf = np.iinfo(np.int64).max
-    dist = np.full(n, inf, dtype=np.int64)
-    via = np.full(n, -1, dtype=np.int64)
-    dq: deque[int] = deque()
-    for s in np.flatnonzero(start):
-        dist[s] = 0
-        dq.append(int(s))
-    weight = costly.astype(np.int64)
-    done = np.zeros(n, dtype=bool)
-    end = -1
-    while dq:
-        u = dq.popleft()
-        if done[u]:
-            continue
-        done[u] = True
-        if target[u]:
-            end = u
-            break
-        for k in range(ptr[u], ptr[u + 1]):
-            e = int(order[k])
-            v = int(ev[e])
-            nd = dist[u] + weight[e]
-            if nd < dist[v]:
-                dist[v], via[v] = nd, e
-                (dq.append if weight[e] else dq.appendleft)(v)
-    if end < 0:
+    ``eu -> ev`` with the fewest ``costly`` edges, and among those the shortest (each edge
+    counting ``jitter`` of it, default 1: a tie-break); ``None`` if there is none."""
+    step = np.ones(eu.size, dtype=np.float64) if jitter is None else jitter.astype(np.float64)
+    cross = float(n + 1) * float(step.max(initial=1.0))  # one costly edge outweighs any path of cheap ones
+    w = np.where(costly, cross, 0.0) + step
+    key = eu.astype(np.int64) * n + ev.astype(np.int64)
+    order = np.lexsort((w, key))
+    first = np.ones(order.size, dtype=bool)
+    first[1:] = key[order][1:] != key[order][:-1]
+    keep = order[first]  # the cheapest of each pair of nodes, in key order
+    mat = sp.csr_matrix((w[keep], (eu[keep], ev[keep])), shape=(n, n))
+    starts = np.flatnonzero(start)
+    if starts.size == 0:
         return None
-    edges = []
-    v = end
-    while via[v] >= 0:
-        e = int(via[v])
-        edges.append(e)
-        v = int(eu[e])
-    return np.array(edges[::-1], dtype=np.int64)
+    dist, pred, _ = dijkstra(mat, directed=True, indices=starts, return_predecessors=True, min_only=True)
+    ends = np.flatnonzero(target & np.isfinite(dist))
+    if ends.size == 0:
+        return None
+    v = int(ends[np.argmin(dist[ends])])
+    nodes = [v]
+    while not start[v]:
+        v = int(pred[v])
+        nodes.append(v)
+    nodes.reverse()
+    pairs = np.array(nodes[:-1], dtype=np.int64) * n + np.array(nodes[1:], dtype=np.int64)
+    out: np.ndarray = keep[np.searchsorted(key[keep], pairs)]
+    return out
 

@@ -470,6 +470,19 @@ def test_a_capped_solve_starts_from_a_test_within_the_cap(tmp_path: Path, kind: 
     assert physical_counts(problem.system, strategy).as_dict()[cap] <= limit
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize(("kind", "cap", "limit", "seconds"), [("static", "walls", 15, 20.0), ("reactive", "doors", 35, 90.0)])
+def test_30x30_floor_capped_start_within_the_cap(tmp_path: Path, kind: str, cap: str, limit: int, seconds: float) -> None:
+    """The issue's 30x30 floor: the heuristic's test uses far more walls (doors) than the cap;
+    the capped start fits it (13 walls, 31 doors measured), within seconds where phase 1 alone
+    found no test in 120 s."""
+    t0 = time.perf_counter()
+    problem, _, (_, _, x_guess), (capped, x) = _capped_start(floor30(tmp_path, kind), f"max_{cap}", limit)
+    took = time.perf_counter() - t0
+    assert x_guess is None and x is not None and capped.flow >= 1
+    assert took < seconds, took
+
+
 def test_no_capped_start_without_caps_or_where_the_heuristic_fits(tmp_path: Path) -> None:
     """The start is the heuristic's own wherever it fits the caps (or there are none)."""
     _, _, (_, guess, x_guess), (same, x) = _capped_start(rack_floor(tmp_path, 12, "static"), "max_walls", 40)
