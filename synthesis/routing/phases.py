@@ -193,3 +193,4 @@ FEASIBILITY_TOLERANCE = 1e-5
 
 
 LIMIT_TEXT = {"time_limit": "time limit", "node_limit": "node limit", "work_limit": "work limit"}
+"""How an error message names the budget that stopped a solve (``stopped_by``)."""
