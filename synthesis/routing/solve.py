@@ -74,6 +74,20 @@ def solve_routing(products: Products, options: MilpOptions | None = None) -> Rou
     InconsistentProblem
         ``unreachable`` or ``unroutable`` (including a MILP without solution, or
         maximum flow 0: every routing cut set would trap the system).
+
+    Examples
+    --------
+    The routing step alone, on the product graphs of a problem (:func:`synthesis.synthesize`
+    runs it, then builds and checks the test):
+
+    >>> from synthesis import load_problem
+    >>> from synthesis.problems.problem import build_graphs
+    >>> from synthesis.routing.options import MilpOptions
+    >>> from synthesis.routing.solve import solve_routing
+    >>> _, products = build_graphs(load_problem("small-reactive"))
+    >>> result = solve_routing(products, MilpOptions(backend="highs", threads=1))
+    >>> result.status, result.flow, int(result.cut_edges.size)
+    ('optimal', 2, 4)
     """
     options = options or MilpOptions()
     check_backend(options)

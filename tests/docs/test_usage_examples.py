@@ -2,7 +2,7 @@
 
 :data:`ENTRY_POINTS` is the one list of what a user imports: the synthesis front
 (:mod:`synthesis`: loading problems, :func:`~synthesis.synthesize` and its options, the
-summary, the artifact, the independent checks), the environments (the registered IDs
+summary, the artifact, the independent checks, the routing step alone), the environments (the registered IDs
 through ``gymnasium.make``/``make_vec``, the vector env and pools, the options, the
 observation layout, the step-by-step runtime, the PettingZoo envs, the torch vector env),
 the systems under test (policies by name, your own planner, the native trainer) and the
@@ -36,6 +36,7 @@ ENTRY_POINTS: tuple[str, ...] = (
     "synthesis.TestArtifact",
     "synthesis.verify_artifact",
     "synthesis.checks.verify.check_test",
+    "synthesis.routing.solve.solve_routing",
     # flowtest_env: a test as an environment
     "flowtest_env",
     "flowtest_env.make_env",
