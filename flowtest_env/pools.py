@@ -69,7 +69,7 @@ def load_pool(
         std = standard_pool(name)
         split_seeds(split, count, start)  # validates split, start and count
         shipped = max(0, min(std.shipped(split) - start, count))
-        tests = load_standard_pool(std.id, split, shipped, start) if shipped else []
+        tests = load_standard_pool(std.id, split, shipped, start, progress=progress) if shipped else []
         if shipped < count:
             tests += load_pool(std.pool, split, count - shipped, start + shipped, parallel, workers, progress)
         return tests

@@ -107,9 +107,9 @@ with a checked, feasible test)."""
 POOL_WORK_LIMIT = 10.0
 """CP-SAT's deterministic seconds per phase for pool tests (``SynthesisOptions.work_limit``):
 ``auto`` runs CP-SAT on static models of 200-15,000 rows and reactive ones of 200-2,500
-(:data:`synthesis.routing.milp.AUTO_CPSAT_ROWS`), where the node limit does not apply, so this
+(:data:`synthesis.routing.backends.rules.AUTO_CPSAT_ROWS`), where the node limit does not apply, so this
 bounds their work the same way. 10 leaves a wide margin over what the 5x5 study instances
-CP-SAT proves need (docs/benchmarks.md, "auto's backend rule per model kind") and is a few CPU
+CP-SAT proves need (docs/benchmarks/solvers.md, "Where each backend wins") and is a few CPU
 seconds per phase."""
 
 MAX_POOL_FILE_BYTES = 256 * 1024 * 1024

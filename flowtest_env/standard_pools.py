@@ -54,10 +54,11 @@ from synthesis.artifacts.pool_records import CHECKS, rebuild_artifact
 from synthesis.artifacts.provenance import versions
 from synthesis.model.errors import ProblemError
 
-from .random_grid import SPLIT_SPAN, SPLITS, PoolName, parse_pool, pool_params, split_seeds
+from .random_grid import SPLIT_SPAN, SPLITS, BuildProgress, PoolName, parse_pool, pool_params, split_seeds
 
 __all__ = [
     "DATA_DIR",
+    "PROGRESS_FROM",
     "STANDARD_POOLS",
     "StandardPool",
     "changed_params",
@@ -70,6 +71,9 @@ __all__ = [
 
 DATA_DIR = Path(__file__).resolve().parent / "data" / "pools"
 """Where the shipped records live (package data)."""
+
+PROGRESS_FROM = 1000
+"""Loads of this many tests or more show their progress unless told not to."""
 
 _ID = re.compile(r"^(?P<pool>.+)-v(?P<version>[1-9][0-9]*)$")
 
@@ -293,7 +297,12 @@ def write_records(path: Path, records: Iterable[Mapping[str, Any]]) -> int:
 
 
 def load_standard_pool(
-    pool_id: str, split: str = "test", count: int | None = None, start: int = 0, check: str = "certificate"
+    pool_id: str,
+    split: str = "test",
+    count: int | None = None,
+    start: int = 0,
+    check: str = "certificate",
+    progress: bool | None = None,
 ) -> list[TestArtifact]:
     """The checked tests ``start .. start + count - 1`` of a standard pool's split, from the
     shipped records (nothing is synthesized).
@@ -305,6 +314,9 @@ def load_standard_pool(
     check
         ``"certificate"`` (digest, certificate and the bypass search, fast) or ``"full"``
         (every check of a fresh synthesis).
+    progress
+        Show tests loaded, rate and time left on standard error (``None``: for loads of
+        :data:`PROGRESS_FROM` tests or more).
 
     Example::
 
@@ -335,9 +347,16 @@ def load_standard_pool(
     provenance = {"pool": pool.params(), "standard_pool": pool.id, "versions": versions()}
     path = pool.path(split)
     out: list[TestArtifact] = []
-    for k in range(start, start + count):
-        try:
-            out.append(rebuild_artifact(records[k], p.size, p.family, p.n, p.world, p.kind, {"provenance": provenance}, check=check))
-        except ProblemError as exc:
-            raise ProblemError(f"{path}, line {k + 1}: {exc}; the shipped pool {pool.id} is refused") from None
+    show = progress if progress is not None else count >= PROGRESS_FROM
+    bar = BuildProgress(count, 0, f"loading {pool.id} {split}", enabled=show)
+    try:
+        for k in range(start, start + count):
+            try:
+                art = rebuild_artifact(records[k], p.size, p.family, p.n, p.world, p.kind, {"provenance": provenance}, check=check)
+            except ProblemError as exc:
+                raise ProblemError(f"{path}, line {k + 1}: {exc}; the shipped pool {pool.id} is refused") from None
+            out.append(art)
+            bar.update(1)
+    finally:
+        bar.close()
     return out

@@ -311,3 +311,10 @@ def test_progress_off_a_terminal_is_throttled() -> None:
     assert len(out.getvalue().splitlines()) == 1  # the opening line only
     bar.update(1)
     assert "100/100" in out.getvalue().splitlines()[-1]  # the end is always shown
+
+
+def test_a_load_shows_its_progress_when_asked_or_large(capsys: pytest.CaptureFixture[str]) -> None:
+    sp.load_standard_pool(R1, "test", 2, progress=True)
+    assert "loading reachability1/5x5-v1 test: 2/2 tests" in capsys.readouterr().err
+    sp.load_standard_pool(R1, "test", 2)  # small: quiet unless asked
+    assert capsys.readouterr().err == ""
