@@ -104,6 +104,31 @@ def fewest_within(products: Products, options: MilpOptions, cap: str, deadline: 
     return Fewest(max(int(np.ceil(bound - 1e-6)), 0) if np.isfinite(bound) else 0, False, timed_out=True)
 
 
+def found_with(products: Products, options: MilpOptions, cap: str, deadline: float | None = None) -> int | None:
+    """How many items ``cap`` counts a test that :func:`capped_guess` finds uses, with ``cap``
+    lifted and the other caps of ``options.caps`` kept (every feasibility flow up front, as
+    :func:`fewest_within`): a cap the user can ask for and get a test, for the message of a
+    capped solve that the time limit ended with neither a test nor a proof. ``None`` where
+    the search finds none (by ``deadline``, a ``perf_counter`` time). Not the fewest: an
+    upper bound on it, next to the proven lower bound.
+
+    Example::
+
+        n = found_with(products, milp, "max_walls")  # e.g. 13: --max-walls 13 gives a test
+    """
+    caps = {k: v for k, v in options.caps.items() if k != cap}
+    caps[cap] = 10**9  # present, so its items are counted; never binding
+    opts = replace(options, caps=caps, exclusions=list(options.exclusions))
+    entries = dict(required_entries(products, opts))
+    rm = build_model(products, opts, entries, check_consistency(products))
+    guess = capped_guess(products, rm, opts, entries, deadline)
+    if guess is None or rm.caps is None:
+        return None
+    used = np.zeros(rm.caps.items.is_wall.size, dtype=bool)
+    used[rm.caps.items.of_group[guess.cut_groups]] = True
+    return int((used & rm.caps.items.kinds(cap)).sum())
+
+
 def check_caps_reachable(products: Products, options: MilpOptions) -> None:
     """Refuse caps far below what the problem needs before any solve: a cap ``N`` below
     :func:`disjoint_bypasses` (``N + 1`` walks around the test objective that share no item

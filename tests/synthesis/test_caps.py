@@ -470,6 +470,22 @@ def test_a_capped_solve_starts_from_a_test_within_the_cap(tmp_path: Path, kind: 
     assert physical_counts(problem.system, strategy).as_dict()[cap] <= limit
 
 
+def test_a_cap_that_gives_a_test_is_found_for_the_message(tmp_path: Path) -> None:
+    """For a capped solve the time limit ends with neither a test nor a proof: a cap that does
+    give one (found_with: the capped search with the cap lifted), above the proven bound, and
+    a test with that many walls exists (the capped start under that cap finds it)."""
+    from synthesis.routing.caps import found_with
+
+    path = rack_floor(tmp_path, 12, "static")
+    problem = load_problem_file(path)
+    _, products = build_graphs(problem)
+    milp = pipeline.milp_options(problem, pipeline.SynthesisOptions(caps={"max_walls": 4}))
+    n = found_with(products, milp, "max_walls")
+    assert n is not None and disjoint_bypasses(products, milp, "max_walls", stop_above=n) <= n < 20
+    _, _, (_, _, x_guess), (_, x) = _capped_start(path, "max_walls", n)
+    assert x is not None and x_guess is None
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize(("kind", "cap", "limit", "seconds"), [("static", "walls", 15, 20.0), ("reactive", "doors", 35, 90.0)])
 def test_30x30_floor_capped_start_within_the_cap(tmp_path: Path, kind: str, cap: str, limit: int, seconds: float) -> None:
