@@ -48,7 +48,7 @@ import os
 import sys
 import time
 from collections import deque
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -83,6 +83,7 @@ __all__ = [
     "SPLIT_SPAN",
     "WORLDS",
     "build_pool",
+    "changed_params",
     "family_objectives",
     "pool_dir",
     "pool_key",
@@ -560,17 +561,42 @@ def _synthesize_seeds(
             ray.shutdown()
 
 
+def changed_params(recorded: Mapping[str, Any], current: Mapping[str, Any]) -> list[str]:
+    """The parameters (dotted names) recorded with a pool whose value differs now. A
+    parameter on one side only is not a change (a new option left at its default, an old
+    one retired); a changed value is: a test may differ, the pool needs a new version."""
+    out = []
+    for key in sorted(set(recorded) & set(current)):
+        a, b = recorded[key], current[key]
+        if isinstance(a, Mapping) and isinstance(b, Mapping):
+            out += [f"{key}.{k}" for k in changed_params(a, b)]
+        elif a != b:
+            out.append(key)
+    return out
+
+
+def _same_params(key_file: Path, params: dict[str, Any]) -> bool:
+    """Whether a cache folder's ``key.json`` records the same pool parameter values."""
+    try:
+        recorded = json.loads(key_file.read_text(encoding="utf-8"))["params"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return False
+    return isinstance(recorded, dict) and not changed_params(recorded, params)
+
+
 def stored_records(
     size: int, family: str, n: int, split: str, kind: str = "reactive", world: str = "empty", any_version: bool = False
 ) -> dict[int, dict[str, Any]]:
     """The records of a split stored in the cache under the current versions (with
-    ``any_version``: under any, the current ones winning), by seed. Unchecked:
+    ``any_version``: under any version whose pool parameters have the same values,
+    :func:`changed_params`; the current ones winning), by seed. Unchecked:
     :func:`synthesis.artifacts.pool_records.rebuild_artifact` checks a record before use."""
     _check_pool(family, n, kind, world)
     here = pool_dir(size, family, n, kind, world)
     folders = [here]
     if any_version and here.parent.is_dir():
-        others = [d for d in here.parent.iterdir() if d.is_dir() and d != here]
+        params = pool_params(size, family, n, kind, world)
+        others = [d for d in here.parent.iterdir() if d.is_dir() and d != here and _same_params(d / "key.json", params)]
         folders = sorted(others, key=lambda d: d.stat().st_mtime) + folders
     out: dict[int, dict[str, Any]] = {}
     for folder in folders:

@@ -54,7 +54,7 @@ from synthesis.artifacts.pool_records import CHECKS, rebuild_artifact
 from synthesis.artifacts.provenance import versions
 from synthesis.model.errors import ProblemError
 
-from .random_grid import SPLIT_SPAN, SPLITS, BuildProgress, PoolName, parse_pool, pool_params, split_seeds
+from .random_grid import SPLIT_SPAN, SPLITS, BuildProgress, PoolName, changed_params, parse_pool, pool_params, split_seeds
 
 __all__ = [
     "DATA_DIR",
@@ -187,20 +187,6 @@ STANDARD_POOLS: dict[str, StandardPool] = {
     )
 }
 """Every standard pool by id."""
-
-
-def changed_params(recorded: Mapping[str, Any], current: Mapping[str, Any]) -> list[str]:
-    """The parameters (dotted names) recorded with a pool whose value differs now. A
-    parameter on one side only is not a change (a new option left at its default, an old
-    one retired); a changed value is: a test may differ, the pool needs a new version."""
-    out = []
-    for key in sorted(set(recorded) & set(current)):
-        a, b = recorded[key], current[key]
-        if isinstance(a, Mapping) and isinstance(b, Mapping):
-            out += [f"{key}.{k}" for k in changed_params(a, b)]
-        elif a != b:
-            out.append(key)
-    return out
 
 
 def is_standard(name: str) -> bool:

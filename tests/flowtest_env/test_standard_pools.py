@@ -318,3 +318,20 @@ def test_a_load_shows_its_progress_when_asked_or_large(capsys: pytest.CaptureFix
     assert "loading reachability1/5x5-v1 test: 2/2 tests" in capsys.readouterr().err
     sp.load_standard_pool(R1, "test", 2)  # small: quiet unless asked
     assert capsys.readouterr().err == ""
+
+
+def test_the_builder_reuses_cached_records_of_the_same_parameters_only(cache: Path) -> None:
+    """Records cached under another version are reused (and checked) only where that
+    version's pool parameters have today's values: another budget may give other tests."""
+    here = rg.pool_dir(5, "reachability", 1, "reactive")
+    record = {"seed": 1_000_000, "attempt": 0}
+    for name, change in (("same", {}), ("other-budget", {"node_limit": 7})):
+        folder = here.parent / name
+        folder.mkdir(parents=True)
+        params = rg.pool_params(5, "reachability", 1, "reactive")
+        params["options"].update(change)
+        (folder / "key.json").write_text(json.dumps({"params": params}), encoding="utf-8")
+        (folder / "validation.jsonl").write_text(json.dumps({**record, "from": name}) + "\n", encoding="utf-8")
+    found = rg.stored_records(5, "reachability", 1, "validation", any_version=True)
+    assert [r["from"] for r in found.values()] == ["same"]
+    assert rg.stored_records(5, "reachability", 1, "validation") == {}  # the current version's folder only
