@@ -47,9 +47,9 @@ EAGER_FLOW_LIMIT = 200_000  # histories x G_sys edges up to which all feasibilit
 
 
 def solve_routing(products: Products, options: MilpOptions | None = None) -> RoutingResult:
-    """Solve the routing MILP for least-restrictive cuts (method.md §5, §7).
+    """Solve the routing MILP for least-restrictive cuts (docs/method.md §5, §7).
 
-    MILP-static has no feasibility flows (c6-c8), as method.md §5 says: static walls
+    MILP-static has no feasibility flows (c6-c8), as docs/method.md §5 says: static walls
     are part of the map the system sees from its first step, so a correct system
     plans around them, and the test is feasible iff a successful run exists under
     them (``F >= 1``). An entry node that the walls alone doom is one no correct
@@ -59,12 +59,12 @@ def solve_routing(products: Products, options: MilpOptions | None = None) -> Rou
     checked by graph search, and the flows of the histories whose entry nodes it
     traps are added, until no entry node is trapped. A relaxation's optimum that
     satisfies every omitted constraint is optimal for the full model, so the answer
-    is the optimum of method.md §5, reached with the flows only where they bind.
+    is the optimum of docs/method.md §5, reached with the flows only where they bind.
 
-    Beyond the method (with ``options.closed_loop``), closed-loop configurations that
+    Beyond the method (with ``options.closed_loop``: c13), closed-loop configurations that
     the restrictions trap although they are not entry nodes are added as entry nodes
     of their history, so no test returned traps the system anywhere. This matters
-    with one-way moves (outside method.md §2's bidirectional assumption), where the
+    with one-way moves (outside docs/method.md §2's bidirectional assumption), where the
     method's optimum can lead the system into a dead end; it is off by default
     because on irreversible systems such as fuel grids it also forbids configurations
     that only a wasteful system reaches, and can make a routable test unroutable.

@@ -65,8 +65,8 @@ def phase1(h: highspy.Highs, r: Round) -> Phase:
         out = rm.cols.flow[rm.out_src].astype(np.int32)
         h.addRow(-highspy.kHighsInf, rm.flow_bound + 0.5, out.size, out, np.ones(out.size))
     # a route-seeded start is kept as the fallback but not handed to HiGHS: from
-    # it, HiGHS's neighbourhood heuristics stay near the lone route (mars-exploration:
-    # no flow 2 in 300 s, against 170 s from scratch)
+    # it, HiGHS's neighbourhood heuristics stay near the lone route (on mars-exploration
+    # they found no flow 2 in the time HiGHS from scratch needs to find one)
     if x_guess is not None and not guess.from_route and options.offer_starts:
         set_solution(h, x_guess)
     watch = clock.watching_first()
@@ -307,7 +307,7 @@ def run(
     The solution HiGHS returns is checked against the model it holds, by us: every bound,
     row and integrality, and its objective, recomputed. ``"optimal"`` needs that objective
     within less than 1 of HiGHS's dual bound (both objectives are integral, so this is a
-    proof), not only HiGHS's word. HiGHS 1.16.0 with a start and presolve can return the
+    proof), not only HiGHS's word. HiGHS with a start and presolve can return the
     start itself while it reports (and proves) a better objective: the proven optimum of
     the reduced model, not postsolved (``tests/synthesis/test_highs_start.py``). When the returned
     solution does not have the objective HiGHS reports, or violates the model, the solve
