@@ -48,12 +48,12 @@ PROOF_WORK = 1.0
 """Deterministic seconds of CP-SAT's default search (with its LP relaxation) for the maximum
 flow before phase 1 turns to :data:`MAX_FLOW_SEARCH` (see
 :func:`synthesis.routing.backends.cpsat_phases.phase1_cpsat`): enough for refueling and the random 5x5 grids,
-which it proves in 0.01-0.1."""
+which it proves in a small fraction of it (docs/benchmarks/solvers.md, "CP-SAT's phase 1")."""
 
 LEVEL_WORK = 8.0
 """Deterministic seconds of phase 1's one :data:`MAX_FLOW_SEARCH` turn at the top flow level,
 before the default search has what is left (see :func:`synthesis.routing.backends.cpsat_phases.reach_level`):
-mars-exploration's flow-2 test takes it 7.76 from the heuristic's hint (docs/benchmarks.md)."""
+just enough for mars-exploration's flow-2 test from the heuristic's hint (docs/benchmarks/solvers.md, "CP-SAT's phase 1")."""
 
 MAX_FLOW_SEARCH: dict[str, Any] = {"linearization_level": 0, "search_branching": "PORTFOLIO_WITH_QUICK_RESTART_SEARCH"}
 """CP-SAT's search for phase 1 (maximum flow): no LP relaxation, and quick restarts that

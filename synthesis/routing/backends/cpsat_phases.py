@@ -116,8 +116,8 @@ def reach_level(
     the heuristic's test, which ``best`` lacks when starts are not offered). Below the top
     (``level < cap``), CP-SAT's default search gets what is left of the budget: its LP
     relaxation and clause learning prove a level empty where the search at the bound does
-    not (random 5x5 reaction grids' flow 2 in 1-30 deterministic seconds, and level 1 of
-    the grids without a test, docs/benchmarks.md), and it finds tests there too. At the top
+    not (random 5x5 reaction grids' flow 2, and level 1 of the grids without a test:
+    docs/benchmarks/solvers.md, "CP-SAT's phase 1"), and it finds tests there too. At the top
     (``level == cap``: a test there is the maximum),
     :data:`~synthesis.routing.backends.cpsat.MAX_FLOW_SEARCH` (no LP, quick restarts, from ``best`` as a
     hint: finds mars-exploration's flow 2, where the default search does not) gets one turn
