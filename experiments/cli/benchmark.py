@@ -34,6 +34,8 @@ The protocol (docs/benchmark-protocol.md has the reasons for each choice):
 5. **The generalization curve** (:func:`generalization_curve`): the held-out normalized
    score of the first baseline trained on the first 16, 64, 256, 1,024 train tests
    (``curve_seeds`` seeds each, the same steps) and on all ``train_count`` (the main runs).
+   Every training run (main and curve) is trained first, ``workers`` at a time in their own
+   processes (:func:`train_all`; the models do not depend on it).
 6. **The outputs** in ``OUT``: ``table.md`` and ``table.json`` (the results file,
    docs/benchmark-protocol.md), ``learning-curves.png``, ``generalization.png``, the
    evaluation report of :mod:`experiments.cli.evaluate` on a sample of each split's tests
@@ -161,15 +163,16 @@ class BenchmarkConfig:
     validation_count: int = 256
     test_count: int = 1000
     train_eval_count: int = 1000
-    steps: int = 400_000
+    steps: int = 1_000_000
     seeds: tuple[int, ...] = tuple(range(10))
     runs: int = 8
     curve_sizes: tuple[int, ...] = (16, 64, 256, 1024)
-    curve_seeds: int = 3
+    curve_seeds: int = 2
     curve_points: int = 5
     trainer: str = "native"
     report_tests: int = 20
     bootstrap: int = 2000
+    workers: int = field(default_factory=lambda: default_workers())
 
     def baselines(self) -> list[str]:
         """The algorithms to train: ``--sut ppo`` stands for every ``--algo``; an
@@ -196,6 +199,11 @@ class BenchmarkConfig:
         """The generalization curve's training-set sizes: ``curve_sizes`` below
         ``train_count``, then ``train_count`` (the main runs)."""
         return sorted({n for n in self.curve_sizes if 0 < n < self.train_count} | {self.train_count})
+
+
+def default_workers() -> int:
+    """Training processes by default: one per CPU, at most 2 (each run uses one thread)."""
+    return max(1, min(2, os.cpu_count() or 1))
 
 
 def check_config(config: BenchmarkConfig) -> None:
@@ -230,7 +238,7 @@ def check_config(config: BenchmarkConfig) -> None:
             raise ProblemError(f"unknown --algo {algo!r}; expected one of {', '.join(BENCH_ALGOS)}")
     if config.trainer not in TRAINERS:
         raise ProblemError(f"unknown --trainer {config.trainer!r}; expected one of {', '.join(TRAINERS)}")
-    for name in ("runs", "train_eval_count", "report_tests", "bootstrap", "curve_points"):
+    for name in ("runs", "train_eval_count", "report_tests", "bootstrap", "curve_points", "workers"):
         if int(getattr(config, name)) < 1:
             raise ProblemError(f"--{name.replace('_', '-')} must be at least 1")
     if config.baselines():
@@ -512,6 +520,83 @@ def train_baseline(config: BenchmarkConfig, algo: str, seed: int, splits: dict[s
     policies = {"greedy": ModelBatchPolicy(model, where, True), "sampled": ModelBatchPolicy(model, where, False)}
     return TrainedBaseline(algo, seed, path, int(model.num_timesteps), seconds, recorder.seconds, recorder.points, count,
                            policies)
+
+
+@dataclass(frozen=True)
+class TrainingJob:
+    """One training run of the benchmark: algorithm, seed, training tests, model name."""
+
+    algo: str
+    seed: int
+    train_tests: int
+    name: str
+
+
+_JOB_STATE: dict[str, Any] = {}
+"""What a forked training worker reads (the config, the splits, the folder), set before the fork."""
+
+
+def _run_job(job: TrainingJob) -> TrainedBaseline:
+    """A training worker: train one job and return it without its policies (the parent
+    loads them from the saved checkpoint)."""
+    b = train_baseline(_JOB_STATE["config"], job.algo, job.seed, _JOB_STATE["splits"], _JOB_STATE["out"], False,
+                       train_tests=job.train_tests, name=job.name)
+    b.policies = {}
+    return b
+
+
+def train_all(config: BenchmarkConfig, jobs: Sequence[TrainingJob], splits: dict[str, Split], out: Path,
+              say: Callable[[str], None], progress_bar: bool = False) -> list[TrainedBaseline]:
+    """Train every job, in ``config.workers`` processes at once (native trainer; each run
+    is seeded and single-threaded, so the models are the same however many run at once),
+    in order otherwise; the results in the jobs' order, each with its batched policies."""
+    if config.workers <= 1 or config.trainer != "native" or len(jobs) <= 1:
+        done = []
+        for job in jobs:
+            say(f"training {job.algo} seed {job.seed} on {job.train_tests} train tests ({config.steps:,} steps)")
+            b = train_baseline(config, job.algo, job.seed, splits, out, progress_bar, train_tests=job.train_tests,
+                               name=job.name)
+            _say_trained(b, say)
+            done.append(b)
+        return done
+    import multiprocessing
+
+    from agents.native_ppo import load_native
+
+    _JOB_STATE.update(config=config, splits=splits, out=out)
+    algos = ", ".join(dict.fromkeys(j.algo for j in jobs))
+    say(f"training {algos}: {len(jobs)} runs ({config.steps:,} steps each) in {config.workers} processes")
+    results: list[TrainedBaseline] = []
+    pool = multiprocessing.get_context("fork").Pool(config.workers, initializer=_worker_signals)
+    try:
+        for b in pool.imap(_run_job, jobs):
+            model = load_native(b.path)
+            b.policies = {"greedy": model.batch_policy(True), "sampled": model.batch_policy(False)}
+            _say_trained(b, say)
+            results.append(b)
+    except BaseException:
+        pool.terminate()  # stop the runs under way now, not at their end
+        raise
+    else:
+        pool.close()
+    finally:
+        _JOB_STATE.clear()
+    pool.join()
+    return results
+
+
+def _worker_signals() -> None:
+    """A training worker leaves Ctrl-C and SIGTERM to the command, which stops it."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
+def _say_trained(b: TrainedBaseline, say: Callable[[str], None]) -> None:
+    final = b.curve[-1][1]
+    say(f"  {b.algo} seed {b.seed} on {b.train_tests} tests: {b.seconds:.0f} s; greedy: met "
+        f"{100 * final['train']:.0f} % of train, {100 * final['validation']:.0f} % of validation tests")
 
 
 def _train_native_baseline(config: BenchmarkConfig, algo: str, seed: int, splits: dict[str, Split], path: Path,
@@ -1147,11 +1232,10 @@ def _report_models(config: BenchmarkConfig, trained: Sequence[TrainedBaseline]) 
 
 
 def generalization_curve(config: BenchmarkConfig, splits: dict[str, Split], trained: list[TrainedBaseline],
-                         main: SystemRuns | None, scale: dict[str, Any], out: Path, say: Callable[[str], None],
-                         progress_bar: bool) -> list[dict[str, Any]]:
+                         main: SystemRuns | None, scale: dict[str, Any], say: Callable[[str], None]) -> list[dict[str, Any]]:
     """The generalization curve (module docstring, step 5): per training-set size, the
-    held-out normalized score (greedy and sampled) of the first baseline, and its greedy
-    met on its own training tests."""
+    held-out normalized score (greedy and sampled) of the first baseline's runs on that
+    many train tests (already trained), and its greedy met on its own training tests."""
     from flowtest_env.game import TestGame
     from flowtest_env.scoring import play_batch
 
@@ -1166,12 +1250,13 @@ def generalization_curve(config: BenchmarkConfig, splits: dict[str, Split], trai
                     for r in main.runs]
             seeds = [int(r["seed"]) for r in main.runs]
         else:
-            rows, seeds = [], list(config.seeds[:config.curve_seeds])
+            rows = []
+            runs = [b for b in trained if b.algo == algo and b.train_tests == n]
+            seeds = [b.seed for b in runs]
             own = [TestGame(a) for a in splits["train"].artifacts[:min(n, config.scored("train"))]]
-            for seed in seeds:
-                say(f"generalization curve: training {algo} seed {seed} on {n} train tests ({config.steps:,} steps)")
-                b = train_baseline(config, algo, seed, splits, out, progress_bar, train_tests=n, name=f"curve-{algo}-{n}-seed{seed}")
-                trained.append(b)
+            if runs:
+                say(f"generalization curve: scoring {len(runs)} runs of {algo} on {n} train tests")
+            for b in runs:
                 g = play_batch(b.policies["greedy"], held, 1, RUN_SEED)
                 s = play_batch(b.policies["sampled"], held, config.runs, RUN_SEED)
                 tr = play_batch(b.policies["greedy"], own, 1, RUN_SEED)
@@ -1201,23 +1286,22 @@ def run_benchmark(config: BenchmarkConfig, out: Path, say: Callable[[str], None]
     t0 = time.perf_counter()
     splits = load_splits(config, out, progress=progress_bar, source=source)
     pool_seconds = time.perf_counter() - t0
-    trained: list[TrainedBaseline] = []
-    for algo in config.baselines():
-        for seed in config.seeds:
-            say(f"training {algo} seed {seed} on the train split ({config.steps:,} steps)")
-            b = train_baseline(config, algo, seed, splits, out, progress_bar)
-            final = b.curve[-1][1]
-            say(f"  {b.seconds:.0f} s; greedy: met {100 * final['train']:.0f} % of train, "
-                f"{100 * final['validation']:.0f} % of validation tests")
-            trained.append(b)
-    train_seconds = sum(b.seconds for b in trained)
+    jobs = [TrainingJob(algo, seed, config.train_count, f"{algo}-seed{seed}")
+            for algo in config.baselines() for seed in config.seeds]
+    if config.baselines():
+        first = config.baselines()[0]
+        jobs += [TrainingJob(first, seed, n, f"curve-{first}-{n}-seed{seed}")
+                 for n in config.curve() if n != config.train_count for seed in config.seeds[:config.curve_seeds]]
+    t0 = time.perf_counter()
+    trained = train_all(config, jobs, splits, out, say, progress_bar)
+    train_seconds = time.perf_counter() - t0
     t0 = time.perf_counter()
     systems, traces = score_all(config, splits, trained, say)
     score_seconds = time.perf_counter() - t0
     scale = scale_of(systems)
     main = next((s for s in systems if s.kind == "baseline"), None)
     t0 = time.perf_counter()
-    curve = generalization_curve(config, splits, trained, main, scale["test"], out, say, progress_bar)
+    curve = generalization_curve(config, splits, trained, main, scale["test"], say)
     curve_seconds = time.perf_counter() - t0
     doc = benchmark_table(config, splits, systems, trained, curve)
     say("writing the table, the curves and the report")
@@ -1229,6 +1313,7 @@ def run_benchmark(config: BenchmarkConfig, out: Path, say: Callable[[str], None]
     cells.sort(key=lambda c: c.sut)
     write_report(cells, out, _split_infos(splits, out, config.report_tests))
     doc["seconds"] = {"pool": round(pool_seconds, 1), "training": round(train_seconds, 1),
+                      "training_cpu": round(sum(b.seconds for b in trained), 1),
                       "scoring": round(score_seconds, 1), "generalization": round(curve_seconds, 1),
                       "total": round(time.perf_counter() - t_start, 1)}
     doc["outputs"] = {k: str((out / v).resolve()) for k, v in OUTPUTS.items()}
@@ -1299,6 +1384,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help=f"tests of each split the HTML report shows (default {d.report_tests})")
     p.add_argument("--bootstrap", type=positive_int, default=d.bootstrap,
                    help=f"bootstrap replicates of the intervals (default {d.bootstrap})")
+    p.add_argument("--workers", type=positive_int, default=d.workers,
+                   help=f"training runs at once, one process each (native trainer; default {d.workers}: one per CPU, "
+                        "at most 2); the models do not depend on it")
     p.add_argument("--trainer", choices=TRAINERS, default=d.trainer,
                    help="who trains the baselines: native (FlowTest's batched PPO, default) or sb3 (stable-baselines3)")
     p.add_argument("--trust-model", action="store_true",
@@ -1335,7 +1423,7 @@ def run(args: argparse.Namespace) -> int:
         train_count=args.train_count, validation_count=args.validation_count, test_count=args.test_count,
         train_eval_count=args.train_eval_count, steps=args.steps, seeds=tuple(dict.fromkeys(args.seeds)), runs=args.runs,
         curve_sizes=tuple(args.curve_sizes), curve_seeds=args.curve_seeds, curve_points=args.curve_points,
-        trainer=args.trainer, report_tests=args.report_tests, bootstrap=args.bootstrap,
+        trainer=args.trainer, report_tests=args.report_tests, bootstrap=args.bootstrap, workers=args.workers,
     )
     if args.trust_model:
         from agents.checkpoint import trust_pickled_models

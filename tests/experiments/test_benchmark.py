@@ -210,12 +210,13 @@ def test_baselines_train_and_are_scored(tmp_path: Path, capsys: pytest.CaptureFi
 @pytest.mark.slow
 def test_same_seeds_same_table(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """Deterministic given seeds: two runs give the same numbers and curves (only the
-    times and paths differ)."""
+    times and paths differ), whether the training runs go one at a time or in two processes."""
     docs = []
-    for name in ("a", "b"):
+    for name, workers in (("a", "2"), ("b", "1")):
         code, stdout, err = run(["benchmark", "--pool", POOL, "--train-count", "3", "--test-count", "3", "--validation-count", "2",
                                  "--sut", "ppo", "scripted:replanner", "--steps", "1024", "--seeds", "0", "1",
-                                 "--curve-points", "2", "--out", str(tmp_path / name), "--json", "-q"], capsys)
+                                 "--curve-points", "2", "--curve-sizes", "2", "--curve-seeds", "1", "--workers", workers,
+                                 "--out", str(tmp_path / name), "--json", "-q"], capsys)
         assert code == 0, err
         docs.append(json.loads(stdout))
     for doc in docs:
@@ -225,6 +226,7 @@ def test_same_seeds_same_table(tmp_path: Path, capsys: pytest.CaptureFixture[str
             for t in e.get("training", []):
                 t.pop("seconds"), t.pop("curve_seconds"), t.pop("model")
     assert docs[0]["systems"] == docs[1]["systems"]
+    assert docs[0]["generalization"] == docs[1]["generalization"]
 
 
 def test_ctrl_c_during_training(tmp_path: Path) -> None:
