@@ -335,3 +335,18 @@ def test_the_builder_reuses_cached_records_of_the_same_parameters_only(cache: Pa
     found = rg.stored_records(5, "reachability", 1, "validation", any_version=True)
     assert [r["from"] for r in found.values()] == ["same"]
     assert rg.stored_records(5, "reachability", 1, "validation") == {}  # the current version's folder only
+
+
+def test_builder_appends_in_seed_order_whatever_order_records_finish(
+    data: Path, cache: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Through Ray records finish in any order; the file still holds the split's seeds in order."""
+    real = rg.synthesize_records
+
+    def shuffled(*args: Any) -> Any:
+        return reversed(list(real(*args)))
+
+    monkeypatch.setattr(build_pools, "synthesize_records", shuffled)
+    pool = sp.standard_pool(R1)
+    assert build_pools.build_split(pool, "validation", 3, reuse_cache=False) == 3
+    assert [r["seed"] for r in sp.read_records(pool, "validation")] == [1_000_000, 1_000_001, 1_000_002]
