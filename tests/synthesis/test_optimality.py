@@ -27,6 +27,7 @@ from __future__ import annotations
 import itertools
 import random
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import networkx as nx
@@ -728,12 +729,13 @@ def test_reactive_3x3_grids(seed: int, backend: str) -> None:
 
 def test_instance_mix_is_meaningful() -> None:
     """Most generated instances can route the test (a guard against vacuous comparisons)."""
-    for make in (
+    makers: tuple[Callable[[int], Problem], ...] = (
         lambda s: grid_instance(100 + s, 3, 3, "static", True),
         lambda s: grid_instance(300 + s, 2, 3, "static", False),
         lambda s: graph_instance(500 + s),
         lambda s: grid_instance(700 + s, 2, 2 if s % 3 == 0 else 3, "reactive", None),
-    ):
+    )
+    for make in makers:
         routable = 0
         for s in range(N):
             _, products = build_graphs(make(s))
