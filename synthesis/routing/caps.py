@@ -21,7 +21,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order, dijkstra, maximum_flow
 
 from ..graphs.consistency import check_consistency
-from ..graphs.products import Products
+from ..graphs.products import Products, reachable
 from ..model.errors import InconsistentProblem
 from .bounds.heuristic import RoutingGuess, guess_routing, usable_edges
 from .model import CutGroups, RoutingModel, build_model, cut_groups, model_edges, physical_items
@@ -298,19 +298,25 @@ def capped_guess(
             if crossed is None:
                 return None  # no route at all, whatever is open
             if crossed.size == 0:
-                guess = guess_routing(n, src, me.eu, me.ev, me.grp, me.c5, me.has_var & cut, target, traps=traps)
-                if guess.flow >= 1 and not (traps is not None and traps(guess.cut_groups)):
+                # only the border of what Src reaches outside I needs closing; a trapped history
+                # there keeps its way out open (the growth below would report flow 0)
+                reach = reachable(n, eu5[~cut[grp5]], ev5[~cut[grp5]], np.arange(n) == src)
+                border = np.zeros(cut.size, dtype=bool)
+                border[grp5[reach[eu5] & ~reach[ev5]]] = True
+                border &= cut
+                if traps is not None and traps(border):
+                    crossed = _way_out(products, groups, border, entries or {})
+                    if crossed.size == 0:
+                        break
+                else:
+                    guess = guess_routing(n, src, me.eu, me.ev, me.grp, me.c5, me.has_var & cut, target, traps=traps)
+                    if guess.flow < 1 or (traps is not None and traps(guess.cut_groups)):
+                        break  # cannot happen: the border routes and traps nothing; try again otherwise
                     if caps.items.over_cap(guess.cut_groups, options.caps):
                         break  # a test, over a cap: keeping more open only adds cuts; try again otherwise
                     if rm.flow_bound is not None and rm.flow_bound < guess.upper_bound:
                         guess = replace(guess, upper_bound=rm.flow_bound)  # as RoutingModel.guess lowers it
                     return guess
-                if traps is None:
-                    break
-                # a trapped history (the growth reports flow 0 then): keep its way out open
-                crossed = _way_out(products, groups, guess.cut_groups if guess.flow >= 1 else cut, entries or {})
-                if crossed.size == 0:
-                    break
             keep_open[crossed] = True
     return None
 

@@ -487,10 +487,10 @@ def test_a_cap_that_gives_a_test_is_found_for_the_message(tmp_path: Path) -> Non
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize(("kind", "cap", "limit", "seconds"), [("static", "walls", 15, 20.0), ("reactive", "doors", 35, 90.0)])
+@pytest.mark.parametrize(("kind", "cap", "limit", "seconds"), [("static", "walls", 15, 20.0), ("reactive", "doors", 30, 30.0)])
 def test_30x30_floor_capped_start_within_the_cap(tmp_path: Path, kind: str, cap: str, limit: int, seconds: float) -> None:
     """The issue's 30x30 floor: the heuristic's test uses far more walls (doors) than the cap;
-    the capped start fits it (13 walls, 31 doors measured), within seconds where phase 1 alone
+    the capped start fits it (13 walls, 30 doors measured, in about 2 s each) where phase 1 alone
     found no test in 120 s."""
     t0 = time.perf_counter()
     problem, _, (_, _, x_guess), (capped, x) = _capped_start(floor30(tmp_path, kind), f"max_{cap}", limit)
