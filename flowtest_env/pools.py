@@ -93,9 +93,11 @@ def random_grid_arguments(
 ) -> tuple[int, str, int, tuple[int, ...], str, str]:
     """``(size, family, n, seeds, kind, world)`` of a random-grid env: from the named
     ``pool``'s ``split`` (its first ``count`` seeds) when one is given, else the explicit
-    arguments (``n`` defaults to 1 for reachability, 2 otherwise)."""
+    arguments (``n`` defaults to 1 for reachability, 2 otherwise). A standard pool id
+    names the same seeds as the pool it draws from (the env builds and caches them;
+    :func:`load_pool` serves the shipped ones without building)."""
     if pool is not None:
-        named = parse_pool(pool)
+        named = parse_pool(standard_pool(pool).pool if is_standard(pool) else pool)
         return named.size, named.family, named.n, tuple(split_seeds(split, count)), named.kind, named.world
     n = n if n is not None else (1 if family == "reachability" else 2)
     return int(size), family, int(n), tuple(int(s) for s in seeds), kind, world

@@ -350,3 +350,12 @@ def test_builder_appends_in_seed_order_whatever_order_records_finish(
     pool = sp.standard_pool(R1)
     assert build_pools.build_split(pool, "validation", 3, reuse_cache=False) == 3
     assert [r["seed"] for r in sp.read_records(pool, "validation")] == [1_000_000, 1_000_001, 1_000_002]
+
+
+def test_a_random_grid_env_takes_a_standard_id_as_the_same_seeds() -> None:
+    from flowtest_env.pools import random_grid_arguments
+
+    std = random_grid_arguments(R1, "test", 4, 5, "reachability", None, (), "reactive")
+    assert std == random_grid_arguments("reachability1/5x5", "test", 4, 5, "reachability", None, (), "reactive")
+    with pytest.raises(ValueError, match="not a standard pool"):
+        random_grid_arguments("reachability1/5x5-v9", "test", 4, 5, "reachability", None, (), "reactive")
