@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from ...graphs.products import Products
+from ..caps import start_within_caps
 from ..certificates import CutProof, test_at_bound, with_cut_proof
 from ..model import RoutingModel
 from ..options import MilpOptions
@@ -48,6 +49,7 @@ def phase1_cpsat(
     set exists. ``work_limit`` bounds the whole phase."""
     guess = rm.guess(products, traps=trap_test(products, rm.groups, entries))
     x_guess = guess_solution(products, rm, guess, options)
+    guess, x_guess = start_within_caps(products, rm, options, entries, guess, x_guess, clock.deadline)
     if x_guess is not None:
         clock.first_test()
     if x_guess is not None and guess.flow == guess.upper_bound:

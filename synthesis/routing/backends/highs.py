@@ -23,6 +23,7 @@ import highspy
 import numpy as np
 import scipy.sparse as sp
 
+from ..caps import start_within_caps
 from ..certificates import CutProof, test_at_bound, with_cut_proof
 from ..model import RoutingModel, phase2_integral_columns
 from ..options import MilpOptions
@@ -48,6 +49,7 @@ def phase1(h: highspy.Highs, r: Round) -> Phase:
     rm, products, options, entries, clock = r.rm, r.products, r.options, r.entries, r.clock
     guess = rm.guess(products, traps=trap_test(products, rm.groups, entries))
     x_guess = guess_solution(products, rm, guess, options)
+    guess, x_guess = start_within_caps(products, rm, options, entries, guess, x_guess, clock.deadline)
     if x_guess is not None:
         clock.first_test()
     if x_guess is not None and guess.flow == guess.upper_bound:
