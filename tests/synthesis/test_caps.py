@@ -398,6 +398,25 @@ def test_30x30_floor_cap_gives_a_test_within_it_or_exit_3(
         assert f"no test with at most {n} {cap[:-1] if n == 1 else cap}" in line and "needed" in line
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize(("kind", "cap", "n"), [("static", "walls", 15), ("reactive", "doors", 30)])
+def test_30x30_floor_tight_cap_gives_a_test_well_within_the_time_limit(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], kind: str, cap: str, n: int
+) -> None:
+    """The issue's tight caps on its 30x30 floor ended at the time limit with no test (exit 5):
+    phase 1 starts from the capped start now, a test within the cap, and ``--after-first``
+    ends the solve soon after it (measured: 13 walls and 30 doors, in about 14 s each)."""
+    path = floor30(tmp_path, kind)
+    t0 = time.perf_counter()
+    code, out, err = run(["synthesize", str(path), "--json", "-q", "--time-limit", "120", "--after-first", "10",
+                          f"--max-{cap}", str(n)], capsys)
+    took = time.perf_counter() - t0
+    assert code == 0, err
+    summary = json.loads(out)
+    assert summary[f"n_{cap}"] <= n and summary["flow"] >= 1
+    assert took < 90, took
+
+
 # --------------------------------------------------------------------------- a first test within the caps
 
 
