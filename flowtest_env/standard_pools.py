@@ -166,9 +166,7 @@ STANDARD_POOLS: dict[str, StandardPool] = {
             "safety2/5x5/fuel/static-v1",
             "safety2/5x5/fuel/static",
             1,
-            splits={"train": 4096, "validation": 256, "test": 250},
             about="the same fuel grids with static walls (the whole test) instead of doors",
-            slow=True,
         ),
         StandardPool(
             "reachability1/5x5/blocked/agent-v1",
