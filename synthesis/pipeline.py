@@ -27,7 +27,7 @@ from .problems.limits import MAX_GRAPH_EDGES, check_size
 from .problems.problem import Problem, build_graphs, check_caps
 from .routing.backends import cpsat
 from .routing.backends.rules import AUTO_CPSAT_MODES
-from .routing.caps import CAP_NOUNS, Fewest, caps_text, check_caps_reachable, disjoint_bypasses, fewest_within
+from .routing.caps import CAP_NOUNS, CapsTimeout, Fewest, caps_text, check_caps_reachable, disjoint_bypasses, fewest_within
 from .routing.options import RULES, Budgets, MilpOptions, ModelOptions, RunOptions, default_of, values_of
 from .routing.options import check_options as check_routing_options
 from .routing.restrictions import strategy_from_routing
@@ -291,7 +291,9 @@ def check_caps_held(problem: Problem, strategy: TestStrategy, caps: dict[str, in
 def capped_timeout(products: Products, milp: MilpOptions, exc: TimeoutError) -> TimeoutError:
     """A time limit that ended a capped solve before any test: ``exc`` with what is known of
     the caps (the bypass bound of :func:`synthesis.routing.caps.disjoint_bypasses`, proven),
-    so the user can tell a cap too tight from a time limit too short."""
+    so the user can tell a cap too tight from a time limit too short; a
+    :class:`~synthesis.routing.caps.CapsTimeout` whose advice is a higher cap or time limit
+    (a gap cannot help: no test was found)."""
     if not milp.caps:
         return exc
     known = []
@@ -299,7 +301,7 @@ def capped_timeout(products: Products, milp: MilpOptions, exc: TimeoutError) -> 
         walks = disjoint_bypasses(products, milp, cap, stop_above=limit)
         noun = CAP_NOUNS[cap].split(" (")[0]
         known.append(f"at least {walks} {noun} are needed (proven), at most {limit} allowed")
-    return TimeoutError(f"{exc}; no test with {caps_text(milp.caps)} was found, nor proven impossible: {'; '.join(known)}")
+    return CapsTimeout(f"{exc}; no test with {caps_text(milp.caps)} was found, nor proven impossible: {'; '.join(known)}")
 
 
 def over_caps(

@@ -21,6 +21,7 @@ from synthesis.model.errors import ProblemError
 from synthesis.model.option_rules import GAP, SECONDS, THREADS
 from synthesis.problems.limits import MAX_GRAPH_EDGES
 from synthesis.routing.backends.cpsat_pool import close_idle_workers
+from synthesis.routing.backends.rules import AUTO_CPSAT_ROWS
 from synthesis.routing.solver_control import SolveControl, status_line, stdout_guard
 
 from .arguments import option_type, positive_seconds
@@ -32,6 +33,17 @@ from .progress import PROGRESS_EVERY, StageProgress
 
 if TYPE_CHECKING:
     from synthesis.problems.problem import Problem
+
+
+def auto_rule() -> str:
+    """What ``--backend auto`` runs, written from the rule itself
+    (:data:`synthesis.routing.backends.rules.AUTO_CPSAT_ROWS`), so the help cannot drift from it.
+
+    >>> auto_rule().startswith("CP-SAT for static models of ")
+    True
+    """
+    bands = [f"{mode} models of {lo:,}-{hi:,} rows" for mode, (lo, hi) in AUTO_CPSAT_ROWS.items()]
+    return f"CP-SAT for {' and '.join(bands)}, else HiGHS"
 
 
 def machine_threads(text: str) -> int:
@@ -75,8 +87,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--backend", choices=BACKENDS, default="auto",
-        help="the solver of the routing model: highs, cpsat (OR-Tools CP-SAT) "
-        "or auto (default: CP-SAT for static and reactive models of 900-3,000 rows, else HiGHS)",
+        help=f"the solver of the routing model: highs, cpsat (OR-Tools CP-SAT) or auto (default: {auto_rule()})",
     )
     p.add_argument("--setting", choices=SETTINGS, help="how reactive obstacles are shown (default: the problem's, else instantaneous)")
     p.add_argument("--force", action="store_true", help="overwrite existing --out/--plot files")

@@ -38,6 +38,17 @@ FEWEST_SECONDS = 30.0
 """The most seconds :func:`fewest_within` spends when the caller gives no deadline."""
 
 
+class CapsTimeout(TimeoutError):
+    """A time limit that ended a capped solve with neither a test nor a proof that none fits.
+
+    ``advice`` is what to try next: a gap (``--gap``) cannot help where no test was found, a
+    higher cap or time limit can."""
+
+    def __init__(self, message: str, advice: str = "raise the cap or --time-limit") -> None:
+        super().__init__(message)
+        self.advice = advice
+
+
 @dataclass(frozen=True)
 class Fewest:
     """The fewest items a cap counts that a test needs: ``value`` exactly when ``exact``,

@@ -518,6 +518,28 @@ def test_30x30_floor_capped_start_within_the_cap(tmp_path: Path, kind: str, cap:
     assert took < seconds, took
 
 
+def test_a_capped_solve_the_time_limit_ends_says_neither_a_test_nor_a_proof(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """At most 3 walls on the 12x12 rack floor: no test fits (the rack's four side gaps alone
+    need 4 walls to send the system through the aisle), but nothing proves it within 1.5 s.
+    The answer says exactly that (found nor proven, the proven bound, the cap), with exit 5
+    and advice that can help (a higher cap or time limit, not a gap: no test was found), never
+    "no test fits"."""
+    from synthesis.routing.caps import CapsTimeout
+
+    path = rack_floor(tmp_path, 12, "static")
+    with pytest.raises(CapsTimeout) as err:
+        pipeline.synthesize(load_problem_file(path), pipeline.SynthesisOptions(caps={"max_walls": 3}, time_limit=1.5))
+    said = str(err.value)
+    assert "no test with at most 3 walls was found, nor proven impossible" in said and "at most 3 allowed" in said
+    assert "raise the cap" in err.value.advice and "gap" not in err.value.advice
+    code, out, errs = run(["synthesize", str(path), "-q", "--time-limit", "1.5", "--max-walls", "3"], capsys)
+    assert code == 5 and out == ""
+    line = error_line(errs)
+    assert "nor proven impossible" in line and "no test fits" not in line
+
+
 def test_no_capped_start_without_caps_or_where_the_heuristic_fits(tmp_path: Path) -> None:
     """The start is the heuristic's own wherever it fits the caps (or there are none)."""
     _, _, (_, guess, x_guess), (same, x) = _capped_start(rack_floor(tmp_path, 12, "static"), "max_walls", 40)
