@@ -1,12 +1,21 @@
-"""When no test fits the caps: how few physical restrictions a test needs.
+"""The caps on what a test may use: a first test within them, and what to say when none fits.
 
 The caps (``max_walls``, ``max_doors``, ``max_restrictions``; :attr:`MilpOptions.caps`)
-are rows of the routing model (:class:`~synthesis.routing.model.CapRows`). When the capped
-solve finds no test, :func:`fewest_within` answers the user's next question, *how many
-would do?*: the fewest walls (doors, restrictions) of any cut set that routes flow >= 1,
-the other caps kept, as the routing model's own optimum (every row of docs/method.md §5, all
-feasibility flows up front), so the figure is the one a cap must allow. The solve is
-bounded by a deadline; stopped early it gives HiGHS's proven lower bound.
+are rows of the routing model (:class:`~synthesis.routing.model.CapRows`). Around them:
+
+* **A first test within the caps** (:func:`capped_guess`, handed to phase 1 by
+  :func:`start_within_caps`): the routing heuristic keeps the flow high and may use more
+  walls or doors than a cap allows; then this search, from few restrictions to a route
+  (minimum cuts of the bypasses, cut again around what a route and a trapped history need
+  open), gives the solver a test within the caps to start from and fall back on.
+* **A cap below what any test needs** is refused before the solve
+  (:func:`check_caps_reachable`, by :func:`disjoint_bypasses`), and a solve that finds no
+  test within the caps is answered with *how many would do*: :func:`fewest_within`, the
+  fewest walls (doors, restrictions) of any cut set that routes flow >= 1, the other caps
+  kept, as the routing model's own optimum (every row of docs/method.md §5, all feasibility
+  flows up front), bounded by a deadline (stopped early: HiGHS's proven lower bound).
+* **A time limit that ends a capped solve with neither** raises :class:`CapsTimeout`, whose
+  advice is a higher cap or time limit; :func:`found_with` tells a cap that gives a test.
 """
 
 from __future__ import annotations
