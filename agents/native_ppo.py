@@ -713,11 +713,11 @@ def batch_verdicts(act: BatchAct, games: Sequence[Any], budgets: Sequence[int], 
     single env ends it: at its outcome or at its own step budget ``budgets[i]``.
     ``where``: the SUT's place in the observation, for the visited memory (``None``: none).
     """
-    from flowtest_env.vector import PoolVectorEnv
+    from flowtest_env.scoring import batch_env
 
     n = len(games)
     limit = np.asarray(budgets, dtype=np.int64)
-    env = PoolVectorEnv(n, games, assignment="fixed", max_steps=int(limit.max()), obs_kind=obs_kind)
+    env = batch_env(games, n, obs_kind)  # compiled once, reused by the next evaluation of these tests
     obs, infos = env.reset(seed=seed)
     seen = obs[:, where].astype(np.float32) if where is not None else None
     starts = np.ones(n, dtype=bool)
@@ -740,7 +740,6 @@ def batch_verdicts(act: BatchAct, games: Sequence[Any], budgets: Sequence[int], 
         done |= ended
         if seen is not None:
             seen = np.maximum(seen, obs[:, where])
-    env.close()
     return result
 
 

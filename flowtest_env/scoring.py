@@ -101,8 +101,6 @@ def play_batch(policy: Callable[[np.ndarray, np.ndarray], Any], games: Sequence[
     ValueError
         If ``runs < 1``, there is no test, or the policy answers a batch of the wrong shape.
     """
-    from .vector import PoolVectorEnv
-
     if runs < 1:
         raise ValueError(f"runs must be at least 1, not {runs}")
     if not games:
@@ -111,32 +109,55 @@ def play_batch(policy: Callable[[np.ndarray, np.ndarray], Any], games: Sequence[
     n = runs * t
     budgets = np.array([default_max_steps(g) for g in games], dtype=np.int64)
     limit = np.tile(budgets, runs)
-    env = PoolVectorEnv(n, list(games), assignment="fixed", max_steps=int(budgets.max()), obs_kind=obs_kind)
-    try:
-        reset = getattr(policy, "reset", None)
-        if callable(reset):
-            reset(n, seed)
-        obs, infos = env.reset(seed=seed)
-        done = np.zeros(n, dtype=bool)
-        result: dict[str, np.ndarray] = {
-            "system_objective": np.full(n, "open", dtype=object),
-            "test_objective_realized": np.zeros(n, dtype=bool),
-            "restrictions": np.zeros(n, dtype=np.int64),
-            "steps": np.zeros(n, dtype=np.int64),
-        }
-        while not done.all():
-            actions = np.asarray(policy(obs, infos["action_mask"].astype(bool)))
-            if actions.shape != (n,):
-                raise ValueError(f"the policy answered actions of shape {actions.shape} for a batch of {n}")
-            obs, _, terminated, _, infos = env.step(actions.astype(np.int64))
-            now = env.verdicts()
-            ended = ~done & (terminated | (now["steps"] >= limit))
-            for key, values in result.items():
-                values[ended] = now[key][ended]
-            done |= ended
-    finally:
-        env.close()
+    env = batch_env(games, n, obs_kind)  # kept for the next batch of the same tests
+    reset = getattr(policy, "reset", None)
+    if callable(reset):
+        reset(n, seed)
+    obs, infos = env.reset(seed=seed)
+    done = np.zeros(n, dtype=bool)
+    result: dict[str, np.ndarray] = {
+        "system_objective": np.full(n, "open", dtype=object),
+        "test_objective_realized": np.zeros(n, dtype=bool),
+        "restrictions": np.zeros(n, dtype=np.int64),
+        "steps": np.zeros(n, dtype=np.int64),
+    }
+    while not done.all():
+        actions = np.asarray(policy(obs, infos["action_mask"].astype(bool)))
+        if actions.shape != (n,):
+            raise ValueError(f"the policy answered actions of shape {actions.shape} for a batch of {n}")
+        obs, _, terminated, _, infos = env.step(actions.astype(np.int64))
+        now = env.verdicts()
+        ended = ~done & (terminated | (now["steps"] >= limit))
+        for key, values in result.items():
+            values[ended] = now[key][ended]
+        done |= ended
     return {k: v.reshape(runs, t) for k, v in result.items()}
+
+
+_ENVS: dict[tuple[Any, ...], tuple[Sequence[TestGame], Any]] = {}
+ENV_CACHE_SIZE = 8
+"""How many batch envs :func:`batch_env` keeps (compiling 1,000 tests takes seconds; a
+benchmark plays the same tests with many policies)."""
+
+
+def batch_env(games: Sequence[TestGame], num_envs: int, obs_kind: str = "flat") -> Any:
+    """A :class:`~flowtest_env.vector.PoolVectorEnv` of ``num_envs`` rows playing ``games``
+    with ``assignment="fixed"`` (row ``i`` plays test ``i % len(games)``), each row's step
+    budget the largest test's (:func:`play_batch` ends each run at its own). The env is kept
+    (the last :data:`ENV_CACHE_SIZE`, keyed by the very game objects, which the cache keeps
+    alive) and reused: every batch starts with ``reset(seed=...)``, which restarts every row."""
+    from .vector import PoolVectorEnv
+
+    key = (tuple(id(g) for g in games), int(num_envs), obs_kind)
+    hit = _ENVS.pop(key, None)
+    if hit is None:
+        budget = max(default_max_steps(g) for g in games)
+        hit = (list(games), PoolVectorEnv(num_envs, list(games), assignment="fixed", max_steps=budget, obs_kind=obs_kind))
+    _ENVS[key] = hit  # the most recent last
+    while len(_ENVS) > ENV_CACHE_SIZE:
+        _, old = _ENVS.pop(next(iter(_ENVS)))  # the least recently used
+        old.close()
+    return hit[1]
 
 
 class random_policy:  # noqa: N801 - used like a function: random_policy(seed)

@@ -142,6 +142,10 @@ RUN_SEED = 0
 """The seed of every scoring batch and single-env run (it matters to a sampled or random
 policy; it is the ``--seed`` of the replay commands)."""
 
+CURVE_TRAIN_TESTS = 256
+"""The learning curves watch at most this many train tests (the first; the final score
+uses ``train_eval_count``): each curve point plays them, inside the training time."""
+
 WORST_SHARE = 0.1
 """The worst share of the held-out tests whose mean score the table shows (CVaR-style)."""
 
@@ -498,7 +502,7 @@ def train_baseline(config: BenchmarkConfig, algo: str, seed: int, splits: dict[s
                    progress_bar: bool = False, train_tests: int | None = None, name: str | None = None) -> TrainedBaseline:
     """Train one baseline on the first ``train_tests`` (default: all ``train_count``) tests
     of the train split (``config.steps`` time steps, rounded up to whole rollouts),
-    recording its greedy learning curve on the scored train tests and the validation tests;
+    recording its greedy learning curve on the first train tests (at most :data:`CURVE_TRAIN_TESTS`) and the validation tests;
     save it to ``out/models/<name or algo-seedN>.zip``."""
     count = int(train_tests or config.train_count)
     every = max(1, math.ceil(config.steps / config.curve_points))
@@ -510,7 +514,8 @@ def train_baseline(config: BenchmarkConfig, algo: str, seed: int, splits: dict[s
     env = make_training_vec_env(POOL_ENV_ID, seed, settings, pool_options)
     model = make_model(env, settings, seed)
     shown = {"train": _games_and_budgets(splits["train"]), "validation": _games_and_budgets(splits["validation"])}
-    shown["train"] = (shown["train"][0][:count], shown["train"][1][:count])
+    keep = min(count, CURVE_TRAIN_TESTS)
+    shown["train"] = (shown["train"][0][:keep], shown["train"][1][:keep])
     recorder = CurveRecorder(every, settings["memory"], shown)
     seconds = learn(model, config.steps, recorder, progress_bar)
     write_atomically(path, lambda tmp: model.save(str(tmp)))
@@ -617,8 +622,8 @@ def _train_native_baseline(config: BenchmarkConfig, algo: str, seed: int, splits
     env = PoolVectorEnv(args.num_envs, [TestGame(a) for a in splits["train"].artifacts[:count]], obs_kind=args.obs_kind)
     monitor = [TestGame(a) for a in splits["validation"].scored]
     try:
-        result = native_train(args, heldout=monitor, progress_bar=progress_bar, evaluate_train=min(count, config.scored("train")),
-                              env=env)
+        result = native_train(args, heldout=monitor, progress_bar=progress_bar,
+                              evaluate_train=min(count, config.scored("train"), CURVE_TRAIN_TESTS), env=env)
     finally:
         env.close()
     write_atomically(path, lambda tmp: save_policy(tmp, result.agent, result.settings))
