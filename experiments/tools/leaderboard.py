@@ -186,10 +186,23 @@ machine) in docs/leaderboard/ and regenerates this page from all of them.
 """
 
 
-def page(entries: Sequence[dict[str, Any]]) -> str:
-    """docs/leaderboard.md from the summaries: per pool, each result."""
+def standard_ids() -> list[str]:
+    """The standard pools' ids (:mod:`flowtest_env.standard_pools`), or none where FlowTest has none."""
+    try:
+        from flowtest_env.standard_pools import STANDARD_POOLS
+    except ImportError:
+        return []
+    return sorted(STANDARD_POOLS)
+
+
+def page(entries: Sequence[dict[str, Any]], standard: Sequence[str] = ()) -> str:
+    """docs/leaderboard.md from the summaries: per pool, each result; then the standard
+    pools (``standard``) that have no result yet."""
     lines = [HEADER]
     pools = sorted({e["pool"] for e in entries})
+    missing = [p for p in standard if p not in pools]
+    if missing:
+        lines += ["Standard pools without a result here yet: " + ", ".join(f"`{p}`" for p in missing) + ".", ""]
     if not pools:
         lines += ["No result yet."]
     for pool in pools:
@@ -212,7 +225,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         for path in args.add:
             print(f"added {add(path, args.label, args.results)}", file=sys.stderr)
-        text = page(load_entries(args.results) if args.results.is_dir() else [])
+        text = page(load_entries(args.results) if args.results.is_dir() else [], standard_ids())
     except LeaderboardError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
