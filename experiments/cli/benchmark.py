@@ -221,7 +221,11 @@ def check_config(config: BenchmarkConfig) -> None:
     from flowtest_env.pools import parse_pool, split_seeds
 
     try:
-        if not is_standard_pool(config.pool):
+        if is_standard_pool(config.pool):
+            from flowtest_env.standard_pools import standard_pool
+
+            standard_pool(config.pool)  # a known id and version
+        else:
             parse_pool(config.pool)
         for split, count in config.counts().items():
             split_seeds(split, count)
@@ -266,7 +270,7 @@ def check_config(config: BenchmarkConfig) -> None:
 
 
 def is_standard_pool(name: str) -> bool:
-    """Whether ``name`` is a standard pool's id (``reachability1/5x5-v1``:
+    """Whether ``name`` is written as a standard pool's id (``reachability1/5x5-v1``:
     :mod:`flowtest_env.standard_pools`, shipped records), which :func:`flowtest_env.pools.load_pool`
     loads like an on-demand pool name."""
     try:

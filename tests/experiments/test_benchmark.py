@@ -276,3 +276,19 @@ def test_a_python_policy_is_scored_by_the_protocol(tmp_path: Path, capsys: pytes
         scale = doc["scale"][split]
         want = (batched[split]["met"]["mean"] - scale["floor"]) / (scale["ceiling"] - scale["floor"])
         assert n["iqm"] == pytest.approx(want) and n["low"] <= n["iqm"] <= n["high"]
+
+
+def test_a_standard_pool_id_is_accepted_and_the_command_reruns_the_config() -> None:
+    """``--pool reachability1/5x5-v1`` (a standard pool, shipped records) passes the checks
+    like an on-demand name; the results file's command spells out every setting that is not
+    the default."""
+    config = bench.BenchmarkConfig("reachability1/5x5-v1", suts=("scripted:replanner",))
+    bench.check_config(config)  # no error
+    assert bench.on_demand_name("reachability1/5x5-v1") == "reachability1/5x5"
+    assert bench.on_demand_name(POOL) == POOL
+    with pytest.raises(bench.ProblemError, match="not a standard pool"):
+        bench.check_config(bench.BenchmarkConfig("nosuch1/5x5-v1"))
+    assert bench.command_of(bench.BenchmarkConfig(POOL)) == f"flowtest benchmark --pool {POOL} --out OUT"
+    small = bench.BenchmarkConfig(POOL, seeds=(0, 1), steps=5000, curve_sizes=(), algos=("plr-ppo",))
+    assert bench.command_of(small) == (f"flowtest benchmark --pool {POOL} --algo plr-ppo --steps 5000 --seeds 0 1 "
+                                       "--curve-sizes --out OUT")
