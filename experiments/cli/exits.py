@@ -87,7 +87,8 @@ def exit_code_for(exc: Exception) -> int:
         return EXIT_CHECK_FAILED
     if isinstance(exc, TimeoutError):
         detail = str(exc) or "no solution was found"
-        error(f"time limit reached: {detail}; raise --time-limit or accept a gap with --gap")
+        advice = getattr(exc, "advice", None) or "raise --time-limit or accept a gap with --gap"
+        error(f"time limit reached: {detail}; {advice}")
         return EXIT_TIMEOUT
     # a bug: keep the traceback, it is what a maintainer needs
     traceback.print_exception(exc)

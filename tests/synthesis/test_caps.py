@@ -538,6 +538,7 @@ def test_a_capped_solve_the_time_limit_ends_says_neither_a_test_nor_a_proof(
     assert code == 5 and out == ""
     line = error_line(errs)
     assert "nor proven impossible" in line and "no test fits" not in line
+    assert "raise the cap or --time-limit" in line and "--gap" not in line
 
 
 def test_no_capped_start_without_caps_or_where_the_heuristic_fits(tmp_path: Path) -> None:
