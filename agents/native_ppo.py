@@ -803,7 +803,10 @@ class BatchActor:
             x = self.memory(obs, start)
             if self.h is None or self.h.shape[0] != n:
                 self.h = self.agent.initial_state(n, self.device)
-            logits, _, self.h = self.agent.step(x, self.h, start)
+            if self.agent.kind == "mlp":  # acting needs no value
+                logits = self.agent.actor(x)
+            else:
+                logits, _, self.h = self.agent.step(x, self.h, start)
             logits = masked_logits(logits, torch.as_tensor(np.asarray(masks, dtype=bool), device=self.device))
             if self.deterministic:
                 a = torch.argmax(logits, dim=-1)

@@ -19,7 +19,7 @@ The protocol (docs/benchmark-protocol.md has the reasons for each choice):
    and RecurrentPPO. Only ``maskable-ppo`` trains by default (the time budget); the others
    on request (``--algo``).
 3. **The scores.** Every system on every split: the learned policies greedily (each test
-   once) **and** sampled (``runs`` seeded runs per test), every test x run of a split in
+   once) **and**, on the held-out tests, sampled (``runs`` seeded runs per test), every test x run of a split in
    one :class:`~flowtest_env.vector.PoolVectorEnv` batch (:mod:`flowtest_env.scoring`);
    ``random`` (the **floor**, ``runs`` runs per test, batched too); the **references**
    (the scripted replanner and the GR(1) system, correct by construction: the
@@ -1194,6 +1194,8 @@ def score_all(config: BenchmarkConfig, splits: dict[str, Split], trained: Sequen
         for split in SPLIT_NAMES:
             row[split] = {"greedy": None, "sampled": None}
             for mode, policy in policies.items():
+                if mode == "sampled" and "greedy" in policies and split != "test":
+                    continue  # a policy with a greedy mode is sampled on the held-out tests only (the time budget)
                 v = play_batch(policy, games[split], 1 if mode == "greedy" else config.runs, RUN_SEED)
                 row[split][mode] = verdict_metrics(v)
         return row
@@ -1304,6 +1306,10 @@ def run_benchmark(config: BenchmarkConfig, out: Path, say: Callable[[str], None]
     t0 = time.perf_counter()
     trained = train_all(config, jobs, splits, out, say, progress_bar)
     train_seconds = time.perf_counter() - t0
+    if trained and config.trainer == "native":
+        import torch
+
+        torch.set_num_threads(1)  # as the trainer: on shared cores one thread plays the batches fastest
     t0 = time.perf_counter()
     systems, traces = score_all(config, splits, trained, say)
     score_seconds = time.perf_counter() - t0
