@@ -1291,6 +1291,7 @@ def run_benchmark(config: BenchmarkConfig, out: Path, say: Callable[[str], None]
     ``source`` loads the pool's tests (default :func:`flowtest_env.pools.load_pool`)."""
     t_start = time.perf_counter()
     check_config(config)
+    commit = _commit()  # the code this run uses (the tree may move on while it runs)
     out.mkdir(parents=True, exist_ok=True)
     say(f"loading the pool {config.pool}: {config.train_count} train, {config.validation_count} validation and "
         f"{config.test_count} held-out tests")
@@ -1319,6 +1320,7 @@ def run_benchmark(config: BenchmarkConfig, out: Path, say: Callable[[str], None]
     curve = generalization_curve(config, splits, trained, main, scale["test"], say)
     curve_seconds = time.perf_counter() - t0
     doc = benchmark_table(config, splits, systems, trained, curve)
+    doc["commit"] = commit
     say("writing the table, the curves and the report")
     cells = []
     for name in REPORT_SPLITS:

@@ -77,13 +77,16 @@ def slug(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9.-]+", "-", text).strip("-")
 
 
-def add(path: Path, label: str = "", results: Path = RESULTS_DIR) -> Path:
-    """Store the summary of the result file ``path`` in ``results``; return where."""
+def add(path: Path, label: str = "", results: Path = RESULTS_DIR, commit: str | None = None) -> Path:
+    """Store the summary of the result file ``path`` in ``results`` (``commit``: the commit
+    the run used, where the file recorded another); return where."""
     try:
         doc = json.loads(Path(path).read_text())
     except (OSError, ValueError) as exc:
         raise LeaderboardError(f"cannot read {str(path)!r}: {exc}") from None
     entry = summarize(doc, label)
+    if commit:
+        entry["commit"] = commit
     results.mkdir(parents=True, exist_ok=True)
     commit = (entry["commit"] or "nocommit")[:8]
     base = f"{slug(entry['pool'])}--{commit}--{slug(label) or 'run'}"
@@ -219,12 +222,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--add", type=Path, action="append", default=[], metavar="TABLE_JSON",
                    help="a benchmark's table.json to add (repeatable)")
     p.add_argument("--label", default="", help="what the added run is (e.g. 'defaults', 'small: 3 seeds, 100k steps')")
+    p.add_argument("--commit", default=None, help="the commit the added run used (where its file recorded a later one)")
     p.add_argument("--results", type=Path, default=RESULTS_DIR, help="the folder of summaries (default docs/leaderboard/)")
     p.add_argument("--page", type=Path, default=PAGE, help="the page to write (default docs/leaderboard.md)")
     args = p.parse_args(argv)
     try:
         for path in args.add:
-            print(f"added {add(path, args.label, args.results)}", file=sys.stderr)
+            print(f"added {add(path, args.label, args.results, args.commit)}", file=sys.stderr)
         text = page(load_entries(args.results) if args.results.is_dir() else [], standard_ids())
     except LeaderboardError as exc:
         print(f"error: {exc}", file=sys.stderr)
