@@ -713,34 +713,35 @@ def batch_verdicts(act: BatchAct, games: Sequence[Any], budgets: Sequence[int], 
     single env ends it: at its outcome or at its own step budget ``budgets[i]``.
     ``where``: the SUT's place in the observation, for the visited memory (``None``: none).
     """
-    from flowtest_env.scoring import batch_env
+    from flowtest_env.scoring import play_batch
 
-    n = len(games)
-    limit = np.asarray(budgets, dtype=np.int64)
-    env = batch_env(games, n, obs_kind)  # compiled once, reused by the next evaluation of these tests
-    obs, infos = env.reset(seed=seed)
-    seen = obs[:, where].astype(np.float32) if where is not None else None
-    starts = np.ones(n, dtype=bool)
-    done = np.zeros(n, dtype=bool)
-    result: dict[str, np.ndarray] = {
-        "system_objective": np.full(n, "open", dtype=object),
-        "test_objective_realized": np.zeros(n, dtype=bool),
-        "restrictions": np.zeros(n, dtype=np.int64),
-        "steps": np.zeros(n, dtype=np.int64),
-    }
-    while not done.all():
-        x = np.concatenate([obs.astype(np.float32), seen], axis=1) if seen is not None else obs
-        actions = act(x, infos["action_mask"].astype(bool), starts)
-        starts = np.zeros(n, dtype=bool)
-        obs, _, terminated, _, infos = env.step(np.asarray(actions))
-        now = env.verdicts()  # the runs as they stand after this step (ended ones reset at the next)
-        ended = ~done & (terminated | (now["steps"] >= limit))
-        for key, values in result.items():
-            values[ended] = now[key][ended]
-        done |= ended
-        if seen is not None:
-            seen = np.maximum(seen, obs[:, where])
-    return result
+    played = play_batch(WithVisited(act, where), games, runs=1, seed=seed, obs_kind=obs_kind, budgets=budgets)
+    return {key: values[0] for key, values in played.items()}
+
+
+class WithVisited:
+    """A :data:`BatchAct` as a batched policy (``policy(obs, masks)`` with ``reset``) of
+    :func:`flowtest_env.scoring.play_batch`: it feeds the policy the observation with the
+    visited-places memory appended (the SUT's places seen so far, ``where`` in the
+    observation; ``None``: no memory) and the episode-start flags of its first step."""
+
+    def __init__(self, act: BatchAct, where: slice | None) -> None:
+        self.act, self.where = act, where
+        self.seen: np.ndarray | None = None
+        self.starts = np.ones(0, dtype=bool)
+
+    def reset(self, n: int, seed: int) -> None:
+        self.seen, self.starts = None, np.ones(n, dtype=bool)
+
+    def __call__(self, obs: np.ndarray, masks: np.ndarray) -> np.ndarray:
+        x = obs
+        if self.where is not None:
+            now = obs[:, self.where].astype(np.float32)
+            self.seen = now if self.seen is None else np.maximum(self.seen, now)
+            x = np.concatenate([obs.astype(np.float32), self.seen], axis=1)
+        actions = np.asarray(self.act(x, masks, self.starts))
+        self.starts = np.zeros(len(obs), dtype=bool)
+        return actions
 
 
 class GreedyActor:

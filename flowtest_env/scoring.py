@@ -85,14 +85,15 @@ def load_tests(pool: str, split: str, count: int, source: PoolSource | None = No
 
 
 def play_batch(policy: Callable[[np.ndarray, np.ndarray], Any], games: Sequence[TestGame], runs: int = 1, seed: int = 0,
-               obs_kind: str = "flat") -> dict[str, np.ndarray]:
+               obs_kind: str = "flat", budgets: Sequence[int] | None = None) -> dict[str, np.ndarray]:
     """Play ``runs`` runs of every test of ``games`` with ``policy``, all at once in one
     :class:`~flowtest_env.vector.PoolVectorEnv`, and return the verdict arrays, each of
     shape ``[runs, n_tests]``: ``system_objective`` (``"met"``, ``"violated"``,
     ``"open"``), ``test_objective_realized``, ``restrictions``, ``steps``.
 
     Each run ends where the single env ends it: at its outcome, or at its test's own step
-    budget (:func:`flowtest_env.envs.default_max_steps`, ``"open"``). ``policy.reset(n,
+    budget (``budgets[i]``; by default :func:`flowtest_env.envs.default_max_steps`,
+    ``"open"``). ``policy.reset(n,
     seed)`` is called first when the policy has it; rows keep stepping after their run ended
     (their actions no longer matter) until every run has ended.
 
@@ -107,8 +108,10 @@ def play_batch(policy: Callable[[np.ndarray, np.ndarray], Any], games: Sequence[
         raise ValueError("no test to play")
     t = len(games)
     n = runs * t
-    budgets = np.array([default_max_steps(g) for g in games], dtype=np.int64)
-    limit = np.tile(budgets, runs)
+    steps = [default_max_steps(g) for g in games] if budgets is None else list(budgets)
+    if len(steps) != t:
+        raise ValueError(f"{len(steps)} step budgets for {t} tests")
+    limit = np.tile(np.asarray(steps, dtype=np.int64), runs)
     env = batch_env(games, n, obs_kind)  # kept for the next batch of the same tests
     reset = getattr(policy, "reset", None)
     if callable(reset):
