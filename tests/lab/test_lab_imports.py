@@ -75,3 +75,28 @@ def test_the_wheel_leaves_the_lab_out() -> None:
     packages = set(find_packages(where=str(ROOT), include=find["include"], exclude=find.get("exclude", [])))
     assert {"experiments", "experiments.cli", "experiments.tools", "synthesis", "flowtest_env", "agents"} <= packages
     assert not [p for p in packages if p.startswith("experiments.lab")], packages
+
+
+@pytest.mark.parametrize("name", LAB_MODULES)
+def test_every_import_of_a_lab_script_resolves(name: str) -> None:
+    """Imports inside functions too (a lab script often imports what one measurement needs
+    where it runs): each product module and name it asks for exists."""
+    missing = []
+    for module, names in _imports(LAB / f"{name}.py"):
+        if module.split(".")[0] not in PRODUCT:
+            continue
+        try:
+            imported = importlib.import_module(module)
+        except ImportError:
+            missing.append(module)
+            continue
+        missing += [f"{module}.{n}" for n in names if n != "*" and not hasattr(imported, n) and not _is_module(f"{module}.{n}")]
+    assert not missing, f"experiments/lab/{name}.py imports what does not exist: {missing}"
+
+
+def _is_module(dotted: str) -> bool:
+    try:
+        importlib.import_module(dotted)
+    except ImportError:
+        return False
+    return True
