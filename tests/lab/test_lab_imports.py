@@ -69,7 +69,7 @@ def test_the_wheel_leaves_the_lab_out() -> None:
     and the maintainer tools, never the lab."""
     import tomllib
 
-    from setuptools import find_packages
+    from setuptools import find_packages  # type: ignore[import-untyped]
 
     find = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["tool"]["setuptools"]["packages"]["find"]
     packages = set(find_packages(where=str(ROOT), include=find["include"], exclude=find.get("exclude", [])))
