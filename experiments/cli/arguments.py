@@ -38,17 +38,6 @@ def positive_seconds(text: str) -> float:
     return v
 
 
-def relative_gap(text: str) -> float:
-    """An argparse type: a relative MIP gap in ``[0, 1)``."""
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a relative gap such as 0.01, got {text!r}") from None
-    if not (0.0 <= v < 1.0):
-        raise argparse.ArgumentTypeError(f"the relative gap must be in [0, 1), got {text!r}")
-    return v
-
-
 def nonnegative_int(text: str) -> int:
     """An argparse type: an integer >= 0 (seeds)."""
     try:
