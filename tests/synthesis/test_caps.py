@@ -20,6 +20,7 @@ from synthesis.checks.physical import physical_counts
 from synthesis.graphs.products import Products
 from synthesis.model.errors import InconsistentProblem, ProblemError
 from synthesis.model.systems import grid_world
+from synthesis.problems.diagnose import check_problem_consistency
 from synthesis.problems.files import load_problem_file
 from synthesis.problems.load import load_problem
 from synthesis.problems.problem import Problem, build_graphs, make_problem
@@ -521,8 +522,8 @@ def test_30x30_floor_capped_start_within_the_cap(tmp_path: Path, kind: str, cap:
 def test_a_capped_solve_the_time_limit_ends_says_neither_a_test_nor_a_proof(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    """At most 3 walls on the 12x12 rack floor: no test fits (the rack's four side gaps alone
-    need 4 walls to send the system through the aisle), but nothing proves it within 1.5 s.
+    """At most 5 walls on the 12x12 rack floor: no test fits (the solve proves it in about a
+    minute; the bypass bounds stop at 5), but nothing proves it within 1.5 s.
     The answer says exactly that (found nor proven, the proven bound, the cap), with exit 5
     and advice that can help (a higher cap or time limit, not a gap: no test was found), never
     "no test fits"."""
@@ -530,11 +531,11 @@ def test_a_capped_solve_the_time_limit_ends_says_neither_a_test_nor_a_proof(
 
     path = rack_floor(tmp_path, 12, "static")
     with pytest.raises(CapsTimeout) as err:
-        pipeline.synthesize(load_problem_file(path), pipeline.SynthesisOptions(caps={"max_walls": 3}, time_limit=1.5))
+        pipeline.synthesize(load_problem_file(path), pipeline.SynthesisOptions(caps={"max_walls": 5}, time_limit=1.5))
     said = str(err.value)
-    assert "no test with at most 3 walls was found, nor proven impossible" in said and "at most 3 allowed" in said
+    assert "no test with at most 5 walls was found, nor proven impossible" in said and "at most 5 allowed" in said
     assert "raise the cap" in err.value.advice and "gap" not in err.value.advice
-    code, out, errs = run(["synthesize", str(path), "-q", "--time-limit", "1.5", "--max-walls", "3"], capsys)
+    code, out, errs = run(["synthesize", str(path), "-q", "--time-limit", "1.5", "--max-walls", "5"], capsys)
     assert code == 5 and out == ""
     line = error_line(errs)
     assert "nor proven impossible" in line and "no test fits" not in line
@@ -591,3 +592,80 @@ def test_problem_files_default_to_two_way_walls(tmp_path: Path) -> None:
     with pytest.raises(ProblemError, match="one_way_walls"):
         load_problem_file(warehouse(tmp_path, extra="one_way_walls = 1\n"))
     assert load_problem("maze2").one_way_walls  # the built-ins keep their published answers
+
+
+# --------------------------------------------------------------------------- the route-spared bound
+
+
+def _relaxed_fewest_walls(problem: Problem, products: Products, most: int) -> int | None:
+    """The fewest walls (unordered pairs of cells, both ways) that close every bypass and leave
+    a route through the test objective, by trying every wall set of up to ``most`` walls (no
+    trap check: the conditions the bypass bounds rely on); ``None`` above ``most``."""
+    from synthesis.checks.verify import bypass_flow, routed_flow
+
+    ts, g = problem.system, products.virtual
+    ends = np.stack([np.minimum(ts.place[ts.src], ts.place[ts.dst]), np.maximum(ts.place[ts.src], ts.place[ts.dst])], axis=1)
+    pairs = sorted({(int(a), int(b)) for a, b in ends if a != b})
+    for k in range(most + 1):
+        for walls in itertools.combinations(pairs, k):
+            static = np.zeros(ts.n_moves, dtype=bool)
+            for a, b in walls:
+                static |= (ends[:, 0] == a) & (ends[:, 1] == b)
+            blocked = static[g.move]
+            if bypass_flow(products, blocked) == 0 and routed_flow(products, blocked) >= 1:
+                return k
+    return None
+
+
+def _random_floor(rng: np.random.Generator, rows: int, cols: int) -> str:
+    cells = ["S", "D", "B", "A", "X"] + ["#" if rng.random() < 0.15 else "." for _ in range(rows * cols - 5)]
+    rng.shuffle(cells)
+    return "\n" + "\n".join("  ".join(cells[r * cols:(r + 1) * cols]) for r in range(rows)) + "\n"
+
+
+@pytest.mark.parametrize("floors", [pytest.param(12, id="12-floors"), pytest.param(60, id="60-floors", marks=pytest.mark.slow)])
+def test_route_spared_bound_never_refuses_a_cap_a_test_fits(tmp_path: Path, floors: int) -> None:
+    """Brute force on random 3x4 static floors: wherever :func:`routed_bypasses` (or the plain
+    :func:`disjoint_bypasses`) says a cap of ``c`` walls admits no test, no set of ``c`` walls
+    closes every bypass and leaves a route; and the route-spared bound proves more than the
+    plain one on some of them (it is not the plain bound under another name)."""
+    from synthesis.routing.caps import routed_bypasses
+
+    rng = np.random.default_rng(20261127)
+    checked = stronger = 0
+    for i in range(10 * floors):
+        if checked == floors:
+            break
+        path = warehouse(tmp_path, grid=_random_floor(rng, 3, 4), test="F bay & F aisle", kind="static")
+        path = path.rename(tmp_path / f"floor{i}.toml")
+        try:
+            problem = load_problem_file(path)
+            _, products = build_graphs(problem)
+            check_problem_consistency(problem, products)
+        except (ProblemError, InconsistentProblem):
+            continue
+        checked += 1
+        for cap in range(5):
+            milp = pipeline.milp_options(problem, pipeline.SynthesisOptions(caps={"max_walls": cap}))
+            plain = disjoint_bypasses(products, milp, "max_walls", stop_above=cap)
+            routed = routed_bypasses(products, milp, "max_walls", stop_above=cap)
+            assert routed >= min(plain, cap + 1)
+            if routed > cap or plain > cap:
+                assert _relaxed_fewest_walls(problem, products, cap) is None, (i, cap, plain, routed)
+            stronger += int(routed > cap >= plain)
+    assert checked == floors and stronger >= floors // 6, (checked, stronger)
+
+
+@pytest.mark.slow
+def test_30x30_floor_four_walls_are_refused_before_the_solve(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The issue's floor with at most 4 walls ran to the time limit (exit 5, 120 s): two ways
+    into the dock and two out of the start are all a plain count of bypasses sees. Sparing
+    the route a test leaves open proves 5 walls are needed: exit 3 before any solve."""
+    path = floor30(tmp_path, "static")
+    t0 = time.perf_counter()
+    code, out, err = run(["synthesize", str(path), "--json", "-q", "--time-limit", "120", "--max-walls", "4"], capsys)
+    took = time.perf_counter() - t0
+    assert code == 3, err
+    line = error_line(err)
+    assert "no test with at most 4 walls" in line and "at least 5 walls are needed" in line
+    assert took < 60, took
