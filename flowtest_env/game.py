@@ -39,6 +39,7 @@ from __future__ import annotations
 
 from collections.abc import Hashable
 from dataclasses import dataclass, field
+from functools import cached_property, lru_cache
 from typing import Any
 
 import numpy as np
@@ -148,15 +149,14 @@ class StepOutcome:
     invalid: bool
 
 
-def _coreachable_to_acceptance(artifact: TestArtifact, enforced: np.ndarray) -> np.ndarray:
+def _coreachable_to_acceptance(artifact: TestArtifact, enforced: np.ndarray, nxt: np.ndarray) -> np.ndarray:
     """``bool[n_hist, n_states]``: from ``(s, h)`` some run of T that respects the
     enforced restrictions (``enforced[h, move]``) reaches a history whose system part
-    accepts (backward reachability, vectorised over the edges of ``T x B_pi``)."""
+    accepts (backward reachability, vectorised over the edges of ``T x B_pi``; ``nxt[h, s]``:
+    the history after entering ``s``)."""
     ts = artifact.system
     dba = artifact.histories
     nh, n = dba.n_states, ts.n_states
-    letter = ts.letter_of_state(artifact.letters)
-    nxt = dba.delta[:, letter]  # [h, s]: history after entering s
     hm, mm = np.nonzero(~enforced)
     st = np.flatnonzero(ts.stay)
     h = np.arange(nh)
@@ -183,6 +183,8 @@ def _permanent_walls(artifact: TestArtifact) -> np.ndarray:
     """
     ts = artifact.system
     static = artifact.strategy.static_obstacles
+    if not static.any():  # no static obstacle, no wall (most reactive tests)
+        return np.zeros(ts.n_moves, dtype=bool)
     src, dst = ts.src[~static], ts.dst[~static]
     reach = np.zeros(ts.n_states, dtype=bool)
     reach[int(ts.initial)] = True
@@ -197,6 +199,50 @@ def _permanent_walls(artifact: TestArtifact) -> np.ndarray:
     open_keys = np.unique(key[reach[ts.src] & ~static])  # sparse: no n_places^2 table
     permanent: np.ndarray = static & ~np.isin(key, open_keys)
     return permanent
+
+
+@lru_cache(maxsize=16)
+def _masks_of_bits(n_actions: int) -> np.ndarray:
+    """``int8[2**n_actions, n_actions]``: the mask of every action bitmask (read-only,
+    shared by the games with this many actions)."""
+    table = ((np.arange(1 << n_actions)[:, None] >> np.arange(n_actions)[None, :]) & 1).astype(np.int8)
+    table.flags.writeable = False
+    return table
+
+
+def _slot_moves(src: np.ndarray, action: list[str], n_states: int, n_slots: int | None) -> np.ndarray:
+    """``int64[n_states, n_slots]``: the move of each action slot of each state, -1 if none.
+
+    Grids (``n_slots`` given): slot ``k`` of a state is its move of action
+    ``GRID_ACTIONS[k]`` (a later move of the same state and action wins). Graphs
+    (``n_slots=None``): slot ``k`` is the state's ``k``-th outgoing move in move order,
+    and there are as many slots as the most moves out of one state (at least one).
+
+    Raises
+    ------
+    GameError
+        On a grid move whose action is not one of :data:`GRID_ACTIONS`.
+    """
+    src = np.asarray(src, dtype=np.int64)
+    n_moves = int(src.size)
+    moves = np.arange(n_moves, dtype=np.int64)
+    if n_slots is not None:
+        index = {a: k for k, a in enumerate(GRID_ACTIONS)}
+        try:
+            col = np.fromiter((index[a] for a in action), dtype=np.int64, count=n_moves)
+        except KeyError as exc:
+            raise GameError(f"grid move with action {exc.args[0]!r}; expected one of {', '.join(GRID_ACTIONS)}") from None
+        out = np.full((n_states, n_slots), -1, dtype=np.int64)
+        out[src, col] = moves  # in move order: the last of duplicates wins, as assignment in a loop
+        return out
+    counts = np.bincount(src, minlength=n_states)
+    width = max(1, int(counts.max()) if n_moves else 1)
+    order = np.argsort(src, kind="stable")  # by state, move order kept within a state
+    first = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    rank = np.arange(n_moves, dtype=np.int64) - first[src[order]]
+    out = np.full((n_states, width), -1, dtype=np.int64)
+    out[src[order], rank] = order
+    return out
 
 
 class TestGame:
@@ -233,23 +279,13 @@ class TestGame:
         """``cells[p]``: the ``(row, col)`` of place ``p`` (grids; empty on graphs)."""
         self.fuel: list[int] = [fuel_level(k) for k in ts.states] if ts.kind == "fuel" else [0] * ts.n_states
         """``fuel[s]``: the fuel of state ``s`` (fuel grids; 0 elsewhere)."""
-        n, n_moves = ts.n_states, ts.n_moves
+        n = ts.n_states
         # ---- action slots
-        out: list[list[int]] = [[] for _ in range(n)]
-        for m in range(n_moves):
-            out[int(ts.src[m])].append(m)
-        if self.is_grid:
-            self.n_slots = len(GRID_ACTIONS)
-            slots = [[-1] * self.n_slots for _ in range(n)]
-            for s in range(n):
-                for m in out[s]:
-                    slots[s][GRID_ACTIONS.index(ts.action[m])] = m
-        else:
-            self.n_slots = max(1, max((len(o) for o in out), default=1))
-            slots = [o + [-1] * (self.n_slots - len(o)) for o in out]
+        slot_move = _slot_moves(ts.src, ts.action, n, len(GRID_ACTIONS) if self.is_grid else None)
+        self.n_slots = int(slot_move.shape[1])
         self.n_actions = self.n_slots + 1
         self.stay_action = self.n_slots
-        self.slot_move = np.asarray(slots, dtype=np.int64).reshape(n, self.n_slots)
+        self.slot_move = slot_move
         """``int64[n_states, n_slots]``: the move of each action slot, -1 if none."""
         exists = self.slot_move >= 0
         self.successor = np.where(exists, ts.dst[np.maximum(self.slot_move, 0)], np.arange(n)[:, None]).astype(np.int64)
@@ -272,37 +308,30 @@ class TestGame:
         encoded at all times; the other static obstacles hold only at some states of
         their cell (a fuel grid with walls per fuel level) and are shown, like reactive
         restrictions, while the system is at such a state."""
-        pad = np.concatenate([self.enforced, np.zeros((self.enforced.shape[0], 1), dtype=bool)], axis=1)
-        restricted = pad[:, self.slot_move]  # [h, s, slot]; -1 picks the padding column
-        weights = 1 << np.arange(self.n_slots + 1, dtype=np.int64)
-        self.restricted_bits: list[list[int]] = (restricted.astype(np.int64) @ weights[: self.n_slots]).tolist()
-        stay_bit = 1 << self.stay_action
-        self.exists_bits: list[int] = ((exists.astype(np.int64) @ weights[: self.n_slots]) + np.where(ts.stay, stay_bit, 0)).tolist()
-        self.static_bits: list[int] = (
-            np.concatenate([strat.static_obstacles, [False]])[self.slot_move].astype(np.int64) @ weights[: self.n_slots]
-        ).tolist()
-        self.choosable_bits: list[int] = (
-            np.concatenate([ts.restrictable & ~strat.static_obstacles, [False]])[self.slot_move].astype(np.int64)
-            @ weights[: self.n_slots]
-        ).tolist()
+        # slot bitmasks: bit k of a state's mask is slot k (column -1 of the padded
+        # per-move tables is False, so a slot without a move has no bit)
+        weights = np.int64(1) << np.arange(self.n_slots, dtype=np.int64)
+        pad = np.zeros((self.enforced.shape[0], self.enforced.shape[1] + 1), dtype=bool)
+        pad[:, :-1] = self.enforced
+        self.restricted_array: np.ndarray = pad[:, self.slot_move].astype(np.int64) @ weights
+        """``int64[n_hist, n_states]``: :attr:`restricted_bits` as an array."""
+        self.restricted_bits: list[list[int]] = self.restricted_array.tolist()
+        stay_bit = np.int64(1) << self.stay_action
+        self.exists_array: np.ndarray = exists.astype(np.int64) @ weights + np.where(ts.stay, stay_bit, np.int64(0))
+        """``int64[n_states]``: :attr:`exists_bits` as an array."""
+        self.exists_bits: list[int] = self.exists_array.tolist()
+        per_move = np.zeros(ts.n_moves + 1, dtype=bool)
+        per_move[:-1] = strat.static_obstacles
+        self.static_bits: list[int] = (per_move[self.slot_move].astype(np.int64) @ weights).tolist()
+        per_move[:-1] = ts.restrictable & ~strat.static_obstacles
+        self.choosable_bits: list[int] = (per_move[self.slot_move].astype(np.int64) @ weights).tolist()
         """Slots a tester may restrict per state: existing, in the harness, not a static wall."""
-        # slots of s leading into place p: for the test agent
-        self.into_bits: list[dict[int, int]] = []
-        for s in range(n):
-            d: dict[int, int] = {}
-            for k in range(self.n_slots):
-                p = int(self.dst_place[s, k])
-                if p >= 0:
-                    d[p] = d.get(p, 0) | (1 << k)
-            self.into_bits.append(d)
-        if self.n_actions <= 12:
-            table = (np.arange(1 << self.n_actions)[:, None] >> np.arange(self.n_actions)[None, :]) & 1
-            self._mask_table: np.ndarray | None = table.astype(np.int8)
-        else:
-            self._mask_table = None
+        self._mask_table: np.ndarray | None = _masks_of_bits(self.n_actions) if self.n_actions <= 12 else None
         # ---- histories and objectives
         letter = ts.letter_of_state(artifact.letters)
-        self.next_history: list[list[int]] = artifact.histories.delta[:, letter].tolist()
+        self.next_history_array: np.ndarray = artifact.histories.delta[:, letter]
+        """``int[n_hist, n_states]``: :attr:`next_history` as an array."""
+        self.next_history: list[list[int]] = self.next_history_array.tolist()
         """``next_history[h][s]``: the history after entering ``s``."""
         comps = artifact.histories.components
         self.q_sys = comps[:, 0].astype(np.int64) if comps is not None else np.zeros(artifact.histories.n_states, np.int64)
@@ -310,9 +339,11 @@ class TestGame:
         self.test_accepting: list[bool] = artifact.histories.accepting[:, 1].tolist()
         self.external_tester = external_tester
         walls = np.broadcast_to(strat.static_obstacles[None, :], strat.blocked.shape)
-        self.doomed: list[list[bool]] = (
-            ~_coreachable_to_acceptance(artifact, walls if external_tester else self.enforced)
-        ).tolist()
+        self.doomed_array: np.ndarray = ~_coreachable_to_acceptance(
+            artifact, walls if external_tester else self.enforced, self.next_history_array
+        )
+        """``bool[n_hist, n_states]``: :attr:`doomed` as an array."""
+        self.doomed: list[list[bool]] = self.doomed_array.tolist()
         """``doomed[h][s]``: no run from ``s`` with history ``h`` that respects the enforced
         restrictions can meet the system objective any more."""
         self.succ_list: list[list[int]] = self.successor.tolist()
@@ -332,6 +363,19 @@ class TestGame:
             self.agent_place = []
             self.agent_first = False
             self.agent_moves = np.zeros((0, 0), dtype=bool)
+
+    @cached_property
+    def into_bits(self) -> list[dict[int, int]]:
+        """``into_bits[s]``: the slots of state ``s`` leading into each place (a slot
+        bitmask per place), for the test agent's blocks; built on first use."""
+        out: list[dict[int, int]] = []
+        for row in self.dst_place.tolist():
+            d: dict[int, int] = {}
+            for k, p in enumerate(row):
+                if p >= 0:
+                    d[p] = d.get(p, 0) | (1 << k)
+            out.append(d)
+        return out
 
     # ------------------------------------------------------------------ queries
 
