@@ -689,10 +689,10 @@ def level_sampler(args: NativeArgs, env: Any, n_levels: int) -> LevelSampler | N
     """
     if args.level_sampling != "plr":
         return None
-    if n_levels < 1 or not hasattr(env, "_choose_tests") or not hasattr(env, "test_index"):
+    if n_levels < 1 or not hasattr(env, "set_test_chooser") or not hasattr(env, "test_index"):
         raise ValueError(f"level_sampling 'plr' needs a pool vector env of the NumPy backend, not {type(env).__name__}")
     sampler = LevelSampler(n_levels, args.plr_score, args.plr_temperature, args.plr_staleness, args.seed)
-    setattr(env, "_choose_tests", sampler.choose)  # noqa: B010 - the env's chooser of each episode's test
+    env.set_test_chooser(sampler.choose)
     return sampler
 
 

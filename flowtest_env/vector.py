@@ -57,7 +57,7 @@ smaller observations than the pool's largest are padded: extra actions are inval
 from __future__ import annotations
 
 import os
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
 import gymnasium as gym
@@ -188,12 +188,47 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         self._keyed = False
         self._started = False
         self._renderers: dict[int, Renderer] = {}
+        self._chooser: Callable[[np.ndarray], np.ndarray] | None = None
 
     # ------------------------------------------------------------------ episodes
 
+    def set_test_chooser(self, chooser: Callable[[np.ndarray], np.ndarray] | None) -> None:
+        """Let ``chooser`` pick the test of every episode that starts from now on, in place of
+        the env's own draw (``assignment``): ``chooser(envs)`` gets the indices of the envs
+        whose episodes start (``int64[k]``) and returns one pool test index for each
+        (``0 <= i < len(env.games)``); ``None`` gives the choice back to the env. This is how
+        a curriculum or a level-replay trainer (``agents.native_ppo``'s ``plr``) chooses
+        levels; ``env.test_index`` tells which test each env plays.
+
+        Raises
+        ------
+        ValueError
+            Later, at the reset or step that starts an episode, if the chooser returns
+            anything but one valid test index per env.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from flowtest_env.vector import PoolVectorEnv
+        >>> env = PoolVectorEnv(3, ["small-reactive", "maze1"])
+        >>> env.set_test_chooser(lambda envs: np.ones(envs.size, dtype=np.int64))
+        >>> _ = env.reset(seed=0)
+        >>> env.test_index.tolist()
+        [1, 1, 1]
+        """
+        self._chooser = chooser
+
     def _choose_tests(self, envs: np.ndarray) -> np.ndarray:
-        """The tests of the current episodes of ``envs`` (their keys and episode counters:
-        :func:`flowtest_env.draws.draw_tests`)."""
+        """The tests of the current episodes of ``envs``: the chooser's
+        (:meth:`set_test_chooser`), else by the keys and episode counters of ``envs``
+        (:func:`flowtest_env.draws.draw_tests`)."""
+        if self._chooser is not None:
+            tests = np.asarray(self._chooser(envs))
+            if tests.shape != envs.shape or tests.dtype.kind not in "iu" or (
+                    tests.size and (int(tests.min()) < 0 or int(tests.max()) >= len(self.games))):
+                raise ValueError(f"the test chooser must return one test index in [0, {len(self.games)}) for each of the "
+                                 f"{envs.size} envs starting an episode, not {tests!r}")
+            return tests.astype(np.int64)
         if self.assignment == "fixed":
             return envs % len(self.games)
         return draw_tests(self._keys[envs], self._episode[envs], len(self.games))

@@ -45,6 +45,7 @@ ENTRY_POINTS: tuple[str, ...] = (
     "flowtest_env.observation_layout",
     "flowtest_env.wrappers.VisitedPlaces",
     "flowtest_env.vector.PoolVectorEnv",
+    "flowtest_env.vector.PoolVectorEnv.set_test_chooser",
     "flowtest_env.pools.load_pool",
     "flowtest_env.runtime.TestRuntime",
     "flowtest_env.multiagent.env",

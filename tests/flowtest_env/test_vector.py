@@ -251,3 +251,33 @@ def test_mask_in_the_observation_like_the_single_env_wrapper() -> None:
         o1, r1, te1, tr1, _ = vec.step(a)
         o2, r2, te2, tr2, _ = ref.step(a)
         assert data_equivalence((o1, r1, te1, tr1), (o2, r2, te2, tr2), exact=True)
+
+
+def test_a_test_chooser_picks_each_new_episodes_test() -> None:
+    """A trainer's chooser (``set_test_chooser``) decides the test of every episode that starts,
+    at reset and at the autoreset after an episode ends; ``None`` gives the choice back; a
+    chooser that returns no valid test index is refused with a clear error."""
+    env = PoolVectorEnv(4, ["small-reactive", "maze1"], assignment="fixed")
+    asked: list[list[int]] = []
+
+    def chooser(envs: np.ndarray) -> np.ndarray:
+        asked.append(envs.tolist())
+        return np.ones(envs.size, dtype=np.int64)
+
+    env.set_test_chooser(chooser)
+    _, infos = env.reset(seed=0)
+    assert env.test_index.tolist() == [1, 1, 1, 1] and asked == [[0, 1, 2, 3]]
+    rng = np.random.default_rng(0)
+    for _ in range(200):  # until some episode ends and the next one starts
+        actions = np.array([rng.choice(np.flatnonzero(m)) for m in infos["action_mask"]])
+        _, _, term, trunc, infos = env.step(actions)
+        if len(asked) > 1:
+            break
+    assert len(asked) > 1 and env.test_index.tolist() == [1, 1, 1, 1]
+    env.set_test_chooser(None)
+    env.reset(seed=0)
+    assert env.test_index.tolist() == [0, 1, 0, 1]  # the fixed assignment again
+    for bad in (lambda e: np.full(e.size, 2), lambda e: np.zeros(1, dtype=np.int64), lambda e: np.full(e.size, 0.5)):
+        env.set_test_chooser(bad)
+        with pytest.raises(ValueError, match="test chooser must return one test index"):
+            env.reset(seed=0)
