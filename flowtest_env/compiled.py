@@ -193,14 +193,129 @@ def _transitions(game: TestGame, n_actions: int) -> dict[str, np.ndarray]:
 
 def _reachable(next_z: np.ndarray, start: int) -> np.ndarray:
     """Sorted configurations reachable from ``start`` along ``next_z`` (breadth-first)."""
+    return _reachable_from(next_z, np.array([start], dtype=np.int64))
+
+
+def _reachable_from(next_z: np.ndarray, starts: np.ndarray) -> np.ndarray:
+    """Sorted configurations reachable from any of ``starts`` along ``next_z`` (breadth-first)."""
     seen = np.zeros(next_z.shape[0], dtype=bool)
-    seen[start] = True
-    frontier = np.array([start], dtype=np.int64)
+    seen[starts] = True
+    frontier = np.unique(starts)
     while frontier.size:
-        succ = np.unique(next_z[frontier].ravel())
-        frontier = succ[~seen[succ]]
+        succ = next_z[frontier].ravel()
+        frontier = np.unique(succ[~seen[succ]])
         seen[frontier] = True
     return np.flatnonzero(seen)
+
+
+def _check_setting(game: TestGame, accumulative: bool) -> None:
+    if game.setting != "instantaneous" and not accumulative:
+        raise ValueError(
+            f"the vectorized env supports setting='instantaneous' only, not {game.setting!r} "
+            "(the accumulative observation depends on the states visited under the history)"
+        )
+
+
+BATCH = 512
+"""Tests without a test agent compiled together by :func:`compile_pool` (the array
+operations of one batch run over all its configurations at once)."""
+
+
+def _compile_batch(games: list[TestGame], encoders: list[Encoder], n_actions: int) -> list[CompiledTest]:
+    """:func:`compile_test` of several games without a test agent at once: the rules of
+    :func:`_transitions` over the configurations of every game, numbered one game after
+    the other (a configuration is ``(s, h)``, ``z = s * n_hist + h`` within its game), one
+    breadth-first search from every game's reset configuration, then each game's tables
+    cut out. The same tables as :func:`compile_test`, game by game."""
+    k_games = len(games)
+    n = np.array([g.ts.n_states for g in games], dtype=np.int64)
+    nh = np.array([g.artifact.histories.n_states for g in games], dtype=np.int64)
+    size = n * nh
+    zoff = np.concatenate([[0], np.cumsum(size)[:-1]]).astype(np.int64)  # first configuration (and [h, s] entry) of a game
+    soff = np.concatenate([[0], np.cumsum(n)[:-1]]).astype(np.int64)  # first state of a game
+    hoff = np.concatenate([[0], np.cumsum(nh)[:-1]]).astype(np.int64)  # first history of a game
+    total = int(size.sum())
+    game_of = np.repeat(np.arange(k_games, dtype=np.int64), size)
+    local = np.arange(total, dtype=np.int64) - zoff[game_of]
+    nh_z, n_z = nh[game_of], n[game_of]
+    S, H = local // nh_z, local % nh_z
+    at_hs = zoff[game_of] + H * n_z + S  # entry [h, s] of the game's tables
+    at_s = soff[game_of] + S
+    at_h = hoff[game_of] + H
+    rbits = np.concatenate([g.restricted_array.ravel() for g in games])[at_hs]
+    exists = np.concatenate([g.exists_array for g in games])[at_s]
+    nxt_hist = np.concatenate([np.asarray(g.next_history_array, dtype=np.int64).ravel() for g in games])
+    doomed = np.concatenate([g.doomed_array.ravel() for g in games])
+    sys_acc = np.concatenate([g.artifact.histories.accepting[:, 0] for g in games]).astype(bool)
+    test_acc = np.concatenate([g.artifact.histories.accepting[:, 1] for g in games]).astype(bool)
+    succ = np.empty((int(n.sum()), n_actions), dtype=np.int64)  # per action column: the slot's move, itself beyond
+    for g, o in zip(games, soff.tolist(), strict=True):
+        succ[o : o + g.ts.n_states, : g.n_slots] = g.successor
+        succ[o : o + g.ts.n_states, g.n_slots :] = np.arange(g.ts.n_states, dtype=np.int64)[:, None]
+    stay = np.array([g.stay_action for g in games], dtype=np.int64)[game_of][:, None]
+    # the rules of TestGame.step, for every configuration and action (no test agent)
+    X = np.arange(n_actions, dtype=np.int64)[None, :]
+    r, ex = rbits[:, None], exists[:, None]
+    legal = ex & ~r
+    bit = np.int64(1) << X
+    is_stay = X == stay
+    invalid = ((ex & bit) == 0) & ~((legal == 0) & is_stay)
+    refused = ((r & bit) != 0) & ~invalid
+    moves = ~is_stay & ~invalid & ~refused
+    nxt = np.where(moves, succ[at_s[:, None], X], S[:, None])
+    h2 = nxt_hist[(zoff[game_of] + H * n_z)[:, None] + nxt]
+    next_z = zoff[game_of][:, None] + nxt * nh_z[:, None] + h2  # global numbering
+    # per configuration
+    met = sys_acc[at_h]
+    outcome = np.where(met, 1, np.where(~met & doomed[at_hs], 2, 0)).astype(np.int8)
+    legal_z = np.where(legal[:, 0] == 0, np.int64(1) << stay[:, 0], legal[:, 0])
+    mask = ((legal_z[:, None] >> X) & 1).astype(np.int8)
+    mask[outcome != 0] = 0
+    ended = outcome != 0
+    next_z[ended] = np.nonzero(ended)[0][:, None]  # an ended run stays where it is
+    # the reachable configurations from every game's reset configuration
+    starts = np.empty(k_games, dtype=np.int64)
+    for i, g in enumerate(games):
+        run0 = g.reset()
+        starts[i] = zoff[i] + run0.system * nh[i] + run0.history
+    keep = _reachable_from(next_z, starts)
+    kept_game = game_of[keep]
+    counts = np.bincount(kept_game, minlength=k_games)
+    koff = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
+    renum = np.full(total, -1, dtype=np.int64)
+    renum[keep] = np.arange(keep.size, dtype=np.int64) - koff[kept_game]  # each game's own numbering
+    k_next = renum[next_z[keep]]
+    k_refused = (refused | invalid)[keep]
+    k_restricted = (rbits & exists)[keep] != 0
+    k_outcome = outcome[keep]
+    k_test = test_acc[at_h][keep]
+    k_mask = mask[keep]
+    k_sys, k_hist = S[keep], H[keep]
+    # observations: without a test agent every configuration is its own (s, h) row
+    sys_list, hist_list, out_list = k_sys.tolist(), k_hist.tolist(), k_outcome.tolist()
+    out: list[CompiledTest] = []
+    for i, (enc, lo, c) in enumerate(zip(encoders, koff.tolist(), counts.tolist(), strict=True)):
+        hi = lo + c
+        rows = [
+            enc.encode(RunState(system=sv, history=hv, visited={sv}, outcome=OUTCOMES[ov]))
+            for sv, hv, ov in zip(sys_list[lo:hi], hist_list[lo:hi], out_list[lo:hi], strict=True)
+        ]
+        out.append(CompiledTest(
+            next_z=k_next[lo:hi],
+            refused=k_refused[lo:hi],
+            restricted=k_restricted[lo:hi],
+            outcome=k_outcome[lo:hi],
+            test_realized=k_test[lo:hi],
+            mask=k_mask[lo:hi],
+            obs_row=np.arange(c, dtype=np.int64),
+            obs=np.stack(rows),
+            system=k_sys[lo:hi],
+            history=k_hist[lo:hi],
+            agent=np.full(c, -1, dtype=np.int64),
+            memory=np.full(c, -1, dtype=np.int64),
+            initial=int(renum[starts[i]]),
+        ))
+    return out
 
 
 def compile_test(game: TestGame, encoder: Encoder, n_actions: int | None = None, accumulative: bool = False) -> CompiledTest:
@@ -219,11 +334,7 @@ def compile_test(game: TestGame, encoder: Encoder, n_actions: int | None = None,
         On the accumulative setting without ``accumulative=True``, or fewer action
         columns than the game has.
     """
-    if game.setting != "instantaneous" and not accumulative:
-        raise ValueError(
-            f"the vectorized env supports setting='instantaneous' only, not {game.setting!r} "
-            "(the accumulative observation depends on the states visited under the history)"
-        )
+    _check_setting(game, accumulative)
     n_actions = game.n_actions if n_actions is None else int(n_actions)
     if n_actions < game.n_actions:
         raise ValueError(f"{n_actions} action columns for a test with {game.n_actions} actions")
@@ -266,10 +377,14 @@ def compile_test(game: TestGame, encoder: Encoder, n_actions: int | None = None,
     )
 
 
-def _pad_to(a: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
-    """``a`` (rows first) zero-padded at the end of every observation axis to ``shape``."""
-    out = np.zeros((a.shape[0], *shape), dtype=a.dtype)
-    out[(slice(None), *(slice(0, k) for k in a.shape[1:]))] = a
+def _stack_padded(parts: list[np.ndarray], shape: tuple[int, ...], offset: np.ndarray) -> np.ndarray:
+    """The arrays of ``parts`` (rows first) one after the other, each zero-padded at the
+    end of every observation axis to ``shape``: :func:`_pad_to` of each, concatenated,
+    written straight into the result."""
+    rows = int(offset[-1]) + parts[-1].shape[0]
+    out = np.zeros((rows, *shape), dtype=parts[0].dtype)
+    for a, o in zip(parts, offset.tolist(), strict=True):
+        out[(slice(o, o + a.shape[0]), *(slice(0, k) for k in a.shape[1:]))] = a
     return out
 
 
@@ -358,7 +473,18 @@ def compile_pool(games: list[TestGame], encoders: list[Encoder], accumulative: b
     if not games or len(games) != len(encoders):
         raise ValueError("a pool needs at least one test and one encoder per test")
     n_actions = max(g.n_actions for g in games)
-    tests = tuple(compile_test(g, e, n_actions, accumulative) for g, e in zip(games, encoders, strict=True))
+    for g in games:
+        _check_setting(g, accumulative)
+    compiled: list[CompiledTest | None] = [None] * len(games)
+    plain = [k for k, g in enumerate(games) if not g.has_agent]  # compiled in batches
+    for lo in range(0, len(plain), BATCH):
+        part = plain[lo : lo + BATCH]
+        for k, ct in zip(part, _compile_batch([games[k] for k in part], [encoders[k] for k in part], n_actions), strict=True):
+            compiled[k] = ct
+    tests = tuple(
+        ct if ct is not None else compile_test(g, e, n_actions, accumulative)
+        for ct, g, e in zip(compiled, games, encoders, strict=True)
+    )
     ndim = {t.obs.ndim for t in tests}
     if len(ndim) != 1:
         raise ValueError("the pool's tests have observations of different ranks (mix of 'grid' and 'flat'?)")
@@ -372,8 +498,9 @@ def compile_pool(games: list[TestGame], encoders: list[Encoder], accumulative: b
     row_offset = np.concatenate([[0], np.cumsum(row_sizes)[:-1]]).astype(np.int64)
     states: list[Any] = []
     for g, t in zip(games, tests, strict=True):
-        names = [g.state_json(s) for s in range(g.ts.n_states)]
-        states.extend(names[s] for s in t.system.tolist())
+        used, where = np.unique(t.system, return_inverse=True)  # name only the states the test reaches
+        names = [g.state_json(s) for s in used.tolist()]
+        states.extend([names[i] for i in where.reshape(-1).tolist()])
     system_state = np.empty(len(states), dtype=object)
     system_state[:] = states
     return CompiledPool(
@@ -390,6 +517,6 @@ def compile_pool(games: list[TestGame], encoders: list[Encoder], accumulative: b
         test_realized=np.concatenate([t.test_realized for t in tests]),
         mask=np.concatenate([t.mask for t in tests]),
         obs_row=np.concatenate([t.obs_row + o for t, o in zip(tests, row_offset, strict=True)]),
-        obs=np.concatenate([_pad_to(t.obs, obs_shape) for t in tests]),
+        obs=_stack_padded([t.obs for t in tests], obs_shape, row_offset),
         system_state=system_state,
     )
