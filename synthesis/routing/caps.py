@@ -417,6 +417,10 @@ def capped_guess(
        open from now on, and the next round cuts around them (a trapped history keeps open
        the groups that close its way out).
 
+    A door counts once however many histories it is closed under, so where a door stands for
+    several cut groups every other attempt is *tied*: each group costs its share of the door,
+    and a cut closes the whole door (every group of it still allowed to close).
+
     It stops at the first test within every cap. A test over a cap ends an attempt (keeping
     more open only adds cuts), and the search starts over with the route search's ties broken
     another way, up to :data:`CAPPED_ATTEMPTS` attempts and :data:`CAPPED_ROUNDS` rounds in
@@ -442,6 +446,11 @@ def capped_guess(
     for cap in options.caps:
         counted |= caps.items.kinds(cap)[item]
     cost = np.where(counted, _COUNTED, _FREE)
+    # a door closed under several histories counts once: tied attempts price each of its
+    # groups a share of the door and close the door under every history at once
+    per_item = np.bincount(item, minlength=int(item.max(initial=-1)) + 1)
+    tied_cost = np.where(counted, np.maximum(1, _COUNTED // per_item[item]), _FREE)
+    tie = bool((per_item > 1).any())
     c5 = np.flatnonzero(me.c5)
     eu5, ev5, grp5 = me.eu[c5], me.ev[c5], me.grp[c5]
     usable = usable_edges(me.c5, me.ev, target)
@@ -449,15 +458,21 @@ def capped_guess(
     for attempt in range(CAPPED_ATTEMPTS):
         # each attempt breaks the route search's ties its own way (random edge lengths from a
         # fixed seed: the same start on every machine); the first takes the shortest routes
-        jitter = None if attempt == 0 else np.random.default_rng(attempt).integers(1, 8, size=me.eu.size)
+        jitter = None if attempt // (1 + tie) == 0 else np.random.default_rng(attempt).integers(1, 8, size=me.eu.size)
+        tied = tie and attempt % 2 == 0
         keep_open = np.zeros(cuttable.size, dtype=bool)
         while rounds < CAPPED_ROUNDS:
             rounds += 1
             if deadline is not None and time.perf_counter() >= deadline:
                 return None
-            cut = _min_bypass_cut(n, src, eu5, ev5, grp5, cuttable & ~keep_open, cost, target)
+            open_now = cuttable & ~keep_open
+            cut = _min_bypass_cut(n, src, eu5, ev5, grp5, open_now, tied_cost if tied else cost, target)
             if cut is None:
                 break  # a bypass nothing left may close: try again otherwise
+            if tied:
+                closed_items = np.zeros(per_item.size, dtype=bool)
+                closed_items[item[cut]] = True
+                cut = open_now & closed_items[item]
             crossed = _cheapest_route(n, src, me.eu, me.ev, me.grp, usable, cut, target, jitter)
             if crossed is None:
                 return None  # no route at all, whatever is open
