@@ -41,11 +41,14 @@ from __future__ import annotations
 import gzip
 import io
 import json
+import multiprocessing
 import os
 import re
+import threading
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from functools import lru_cache
+from multiprocessing.connection import wait as mp_wait
 from pathlib import Path
 from typing import Any
 
@@ -287,6 +290,7 @@ def load_standard_pool(
     start: int = 0,
     check: str = "certificate",
     progress: bool | None = None,
+    workers: int | None = None,
 ) -> list[TestArtifact]:
     """The checked tests ``start .. start + count - 1`` of a standard pool's split, from the
     shipped records (nothing is synthesized).
@@ -301,6 +305,13 @@ def load_standard_pool(
     progress
         Show tests loaded, rate and time left on standard error (``None``: for loads of
         :data:`PROGRESS_FROM` tests or more).
+    workers
+        Processes that rebuild and check the records, this one included: ``1`` loads in
+        this process; more fork helpers that take chunks of :data:`CHUNK` tests as they
+        go (the same tests, in the same order, with the same checks; the first record
+        refused is the one a load in one process refuses). ``None``: two where
+        :func:`auto_workers` finds two cores for a load of :data:`PARALLEL_FROM` tests or
+        more, else one.
 
     Example::
 
@@ -309,7 +320,8 @@ def load_standard_pool(
     Raises
     ------
     ValueError
-        On an unknown pool, split or check, or more tests than are shipped.
+        On an unknown pool, split or check, more tests than are shipped, or fewer than
+        one worker.
     ProblemError
         If a shipped record is refused (edited, or no longer the test its certificate
         names), naming the file and line.
@@ -327,20 +339,207 @@ def load_standard_pool(
             f"{pool.id} ships {len(records)} tests of its {split!r} split; asked for tests {start}..{start + count - 1} "
             "(flowtest_env.pools.load_pool builds the ones beyond on demand)"
         )
-    p = pool.name
-    provenance = {"pool": pool.params(), "standard_pool": pool.id, "versions": versions()}
-    path = pool.path(split)
-    out: list[TestArtifact] = []
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
+        raise ValueError(f"workers must be a positive integer or None, got {workers!r}")
+    n_proc = auto_workers(count) if workers is None else min(workers, max(1, -(-count // CHUNK)))
     show = progress if progress is not None else count >= PROGRESS_FROM
     bar = BuildProgress(count, 0, f"loading {pool.id} {split}", enabled=show)
+    job = _Job(pool, split, check, records[start : start + count], start)
     try:
-        for k in range(start, start + count):
-            try:
-                art = rebuild_artifact(records[k], p.size, p.family, p.n, p.world, p.kind, {"provenance": provenance}, check=check)
-            except ProblemError as exc:
-                raise ProblemError(f"{path}, line {k + 1}: {exc}; the shipped pool {pool.id} is refused") from None
-            out.append(art)
+        if n_proc > 1 and _can_fork():
+            return _load_forked(job, n_proc, bar)
+        out: list[TestArtifact] = []
+        for k in range(count):
+            out.append(job.load(k))
             bar.update(1)
+        return out
     finally:
         bar.close()
-    return out
+
+
+CHUNK = 64
+"""Tests a helper process of :func:`load_standard_pool` takes at a time."""
+
+PARALLEL_FROM = 1000
+"""Loads of this many tests or more use two processes where two cores are free to this
+one (:func:`auto_workers`)."""
+
+
+def auto_workers(count: int) -> int:
+    """The processes :func:`load_standard_pool` uses by default for ``count`` tests: two for
+    :data:`PARALLEL_FROM` tests or more where this process may run on two cores or more
+    and can fork, else one (each process rebuilds whole tests; beyond two, this
+    process's share of receiving the others' tests grows)."""
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        cores = os.cpu_count() or 1
+    return 2 if count >= PARALLEL_FROM and cores >= 2 and _can_fork() else 1
+
+
+def _can_fork() -> bool:
+    """Whether helpers can be forked safely: the platform forks and this process runs no
+    other Python thread (a fork copies no thread, and a lock one of them held would stay
+    held in the helper)."""
+    return "fork" in multiprocessing.get_all_start_methods() and threading.active_count() == 1
+
+
+class _Job:
+    """What a load rebuilds: records ``start ..`` of a split (``records[k]`` is line
+    ``start + k + 1``), and the provenance every test of it carries."""
+
+    def __init__(self, pool: StandardPool, split: str, check: str, records: list[dict[str, Any]], start: int) -> None:
+        self.pool, self.split, self.check, self.records, self.start = pool, split, check, records, start
+        self.provenance = {"pool": pool.params(), "standard_pool": pool.id, "versions": versions()}
+
+    def load(self, k: int) -> TestArtifact:
+        """The checked test of ``records[k]``.
+
+        Raises
+        ------
+        ProblemError
+            If it is refused, naming the file, line and pool.
+        """
+        p = self.pool.name
+        try:
+            return rebuild_artifact(
+                self.records[k], p.size, p.family, p.n, p.world, p.kind, {"provenance": self.provenance}, check=self.check
+            )
+        except ProblemError as exc:
+            raise ProblemError(
+                f"{self.pool.path(self.split)}, line {self.start + k + 1}: {exc}; the shipped pool {self.pool.id} is refused"
+            ) from None
+
+
+def _chunk_tests(job: _Job, c: int) -> tuple[list[TestArtifact], str | None]:
+    """The tests of chunk ``c`` up to the first one refused, and the refusal (or None)."""
+    out: list[TestArtifact] = []
+    for k in range(c * CHUNK, min((c + 1) * CHUNK, len(job.records))):
+        try:
+            out.append(job.load(k))
+        except ProblemError as exc:
+            return out, str(exc)
+    return out, None
+
+
+def _next_chunk(counter: Any, n_chunks: int) -> int:
+    """Take the next chunk (``n_chunks``: none left)."""
+    with counter.get_lock():
+        c = int(counter.value)
+        if c < n_chunks:
+            counter.value = c + 1
+        return min(c, n_chunks)
+
+
+def _helper(job: _Job, counter: Any, n_chunks: int, conn: Any) -> None:
+    """A forked helper: chunks taken in turn, each sent back as ``(chunk, tests, refusal)``
+    until none is left or one is refused; Ctrl-C (sent to the whole process group) ends
+    it quietly, the loader stops it."""
+    code = 0
+    try:
+        while (c := _next_chunk(counter, n_chunks)) < n_chunks:
+            tests, refusal = _chunk_tests(job, c)
+            conn.send((c, tests, refusal))
+            if refusal is not None:
+                break
+    except KeyboardInterrupt:
+        code = 130
+    except BaseException as exc:  # a broken helper: said to the loader, which stops
+        try:
+            conn.send((-1, [], f"a loading process failed: {type(exc).__name__}: {exc}"))
+        except (OSError, ValueError):
+            pass
+        code = 1
+    finally:
+        conn.close()
+    os._exit(code)  # no exit handlers of the parent (they are its own)
+
+
+def _load_forked(job: _Job, n_proc: int, bar: BuildProgress) -> list[TestArtifact]:
+    """:func:`load_standard_pool` over ``n_proc`` processes: this one and forked helpers
+    take chunks of :data:`CHUNK` tests from a shared counter, this one collects them in
+    chunk order. On a refusal no chunk is taken any more; the chunks taken before finish,
+    and the refusal of the lowest line is raised (the one a single process meets first)."""
+    ctx = multiprocessing.get_context("fork")
+    n_chunks = -(-len(job.records) // CHUNK)
+    counter = ctx.Value("q", 0)
+    results: dict[int, list[TestArtifact]] = {}
+    refusals: dict[int, str] = {}
+    procs: list[Any] = []
+    conns: list[Any] = []
+    try:
+        for _ in range(n_proc - 1):
+            recv, send = ctx.Pipe(duplex=False)
+            proc = ctx.Process(target=_helper, args=(job, counter, n_chunks, send), daemon=True)
+            proc.start()
+            send.close()
+            procs.append(proc)
+            conns.append(recv)
+
+        def take(msg: tuple[int, list[TestArtifact], str | None]) -> None:
+            c, tests, refusal = msg
+            results[c] = tests
+            bar.update(len(tests))
+            if refusal is not None:
+                refusals[c] = refusal
+                _stop(counter, n_chunks)
+
+        while (c := _next_chunk(counter, n_chunks)) < n_chunks:  # this process takes chunks too
+            tests: list[TestArtifact] = []
+            results[c] = tests
+            for k in range(c * CHUNK, min((c + 1) * CHUNK, len(job.records))):
+                try:
+                    tests.append(job.load(k))
+                except ProblemError as exc:
+                    refusals[c] = str(exc)
+                    _stop(counter, n_chunks)
+                    break
+                bar.update(1)
+                for conn in list(conns):  # what the helpers sent meanwhile
+                    while conn in conns and conn.poll():
+                        _receive(conn, conns, take)
+        while conns:
+            for conn in mp_wait(conns, timeout=0.5):
+                _receive(conn, conns, take)
+        if refusals:
+            raise ProblemError(refusals[min(refusals)])
+        missing = [c for c in range(n_chunks) if c not in results]
+        if missing:
+            raise ProblemError(f"a loading process stopped before chunk {missing[0]} of {job.pool.id} {job.split} was loaded")
+        return [t for c in range(n_chunks) for t in results[c]]
+    finally:
+        for proc in procs:
+            if proc.is_alive():
+                proc.terminate()
+        for proc in procs:
+            proc.join(timeout=1.0)
+            if proc.is_alive():
+                proc.kill()
+                proc.join(timeout=1.0)
+        for conn in conns:
+            conn.close()
+
+
+def _stop(counter: Any, n_chunks: int) -> None:
+    """No chunk is taken any more."""
+    with counter.get_lock():
+        counter.value = n_chunks
+
+
+def _receive(conn: Any, conns: list[Any], take: Any) -> None:
+    """One message of a helper (``take`` it), or its end (its pipe leaves ``conns``).
+
+    Raises
+    ------
+    ProblemError
+        If the helper failed other than by refusing a record (it says so, chunk -1).
+    """
+    try:
+        msg = conn.recv()
+    except (EOFError, OSError):
+        conns.remove(conn)
+        conn.close()
+        return
+    if msg[0] < 0:
+        raise ProblemError(msg[2])
+    take(msg)

@@ -215,13 +215,37 @@ def _check_digest(record: dict[str, Any]) -> None:
         raise EditedRecord("the record was changed after FlowTest wrote it (its digest is not that of its content)")
 
 
+SMALL_GRAPH = 20_000
+"""Edges up to which :func:`_bypass_free` searches in plain Python (a pool test's product
+has a few hundred: faster than building a sparse matrix for the search)."""
+
+
 def _bypass_free(products: Products, strategy: TestStrategy) -> bool:
     """Whether no path of G from ``Src`` to ``Tgt`` avoids ``E(I)`` under the restrictions
-    (bypass flow 0, by one breadth-first search instead of a maximum flow)."""
+    (bypass flow 0, by one graph search instead of a maximum flow: depth first over
+    adjacency lists on a small G, breadth first over a sparse matrix on a large one)."""
     g = products.virtual
     keep = ~products.touches_intermediate & ~restricted_edges(products, strategy)
-    reach = reachable(g.n_nodes, g.src[keep], g.dst[keep], np.arange(g.n_nodes) == g.initial)
-    return not bool(np.any(reach & products.target))
+    src, dst = g.src[keep], g.dst[keep]
+    if src.size > SMALL_GRAPH:
+        reach = reachable(g.n_nodes, src, dst, np.arange(g.n_nodes) == g.initial)
+        return not bool(np.any(reach & products.target))
+    order = np.argsort(src, kind="stable")
+    start = np.searchsorted(src[order], np.arange(g.n_nodes + 1)).tolist()
+    heads = dst[order].tolist()
+    target = products.target.tolist()
+    seen = [False] * g.n_nodes
+    seen[g.initial] = True
+    todo = [int(g.initial)]
+    while todo:
+        u = todo.pop()
+        if target[u]:
+            return False
+        for v in heads[start[u] : start[u + 1]]:
+            if not seen[v]:
+                seen[v] = True
+                todo.append(v)
+    return True
 
 
 def _rebuild(

@@ -201,6 +201,21 @@ def test_a_forged_certificate_still_meets_the_bypass_search(data: Path) -> None:
         sp.load_standard_pool(R1, "test", 1, check="full")
 
 
+@pytest.mark.parametrize("small_graph", [True, False], ids=["depth-first", "sparse-matrix"])
+def test_both_bypass_searches_find_the_bypass_of_a_forged_record(data: Path, monkeypatch: pytest.MonkeyPatch, small_graph: bool) -> None:
+    """The search over adjacency lists (a pool test's small G) and the one over a sparse
+    matrix (a large G) pass the shipped records and find the bypass of a forged one."""
+    import synthesis.artifacts.pool_records as records
+
+    if not small_graph:
+        monkeypatch.setattr(records, "SMALL_GRAPH", -1)
+    pool = sp.standard_pool(R1)
+    copy_split(pool, "test", data, 2, edit=lambda rs: _without_cuts_resealed(pool, rs[1]))
+    assert len(sp.load_standard_pool(R1, "test", 1, workers=1)) == 1  # the record before it passes
+    with pytest.raises(ProblemError, match="line 2: .*bypass flow is not 0"):
+        sp.load_standard_pool(R1, "test", 2, workers=1)
+
+
 def test_a_damaged_file_is_refused(data: Path) -> None:
     pool = sp.standard_pool(R1)
     path = data / pool.slug / "test.jsonl.gz"
@@ -359,3 +374,71 @@ def test_a_random_grid_env_takes_a_standard_id_as_the_same_seeds() -> None:
     assert std == random_grid_arguments("reachability1/5x5", "test", 4, 5, "reachability", None, (), "reactive")
     with pytest.raises(ValueError, match="not a standard pool"):
         random_grid_arguments("reachability1/5x5-v9", "test", 4, 5, "reachability", None, (), "reactive")
+
+
+# ---------------------------------------------------------------- loading in two processes
+
+
+def test_two_processes_load_the_same_tests_in_the_same_order(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    monkeypatch.setattr(sp, "CHUNK", 16)
+    one = sp.load_standard_pool(R1, "test", 72, 5, workers=1)
+    two = sp.load_standard_pool(R1, "test", 72, 5, workers=2, progress=True)
+    assert [a.to_dict() for a in two] == [a.to_dict() for a in one]
+    assert "loading reachability1/5x5-v1 test: 72/72 tests" in capsys.readouterr().err
+    assert sp.auto_workers(sp.PARALLEL_FROM - 1) == 1  # a small load stays in this process
+    with pytest.raises(ValueError, match="workers must be a positive integer"):
+        sp.load_standard_pool(R1, "test", 2, workers=0)
+
+
+def test_two_processes_refuse_the_record_one_process_refuses_first(data: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Two tampered records in chunks of several processes: the refusal names the first
+    line, as a load in one process does, whichever process met its record first."""
+    monkeypatch.setattr(sp, "CHUNK", 4)
+
+    def two_edits(records: list[dict[str, Any]]) -> None:
+        records[22]["summary"]["status"] = "feasible"
+        records[9]["summary"]["status"] = "feasible"
+
+    copy_split(sp.standard_pool(R1), "test", data, 24, edit=two_edits)
+    with pytest.raises(ProblemError) as one:
+        sp.load_standard_pool(R1, "test", 24, workers=1)
+    assert "line 10: pool record of seed 2000009: the record was changed" in str(one.value)
+    for workers in (2, 3):
+        with pytest.raises(ProblemError) as many:
+            sp.load_standard_pool(R1, "test", 24, workers=workers)
+        assert str(many.value) == str(one.value)
+
+
+def test_ctrl_c_stops_a_load_in_two_processes_within_a_second(tmp_path: Path) -> None:
+    """Ctrl-C on a terminal reaches the whole process group: the load stops, its helper
+    with it, and nothing of the group is left."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    script = (
+        "import multiprocessing, sys\n"
+        "from flowtest_env.standard_pools import load_standard_pool\n"
+        "try:\n"
+        "    load_standard_pool('reachability1/5x5-v1', 'train', 4096, progress=True, workers=2)\n"
+        "except KeyboardInterrupt:\n"
+        "    print('interrupted', len(multiprocessing.active_children()), file=sys.stderr, flush=True)\n"
+        "    sys.exit(130)\n"
+    )
+    proc = subprocess.Popen([sys.executable, "-c", script], stderr=subprocess.PIPE, text=True, start_new_session=True)
+    assert proc.stderr is not None
+    line = proc.stderr.readline()
+    assert "loading reachability1/5x5-v1 train" in line, line
+    time.sleep(1.0)  # the helper is at work
+    sent = time.monotonic()
+    os.killpg(proc.pid, signal.SIGINT)
+    err = proc.stderr.read()
+    assert proc.wait(timeout=10) == 130, err
+    took = time.monotonic() - sent
+    assert took < 1.0, f"stopped {took:.2f} s after Ctrl-C"
+    assert "interrupted 0" in err and "Traceback" not in err, err
+    time.sleep(0.2)
+    with pytest.raises(ProcessLookupError):
+        os.killpg(proc.pid, 0)  # no process of the group is left
