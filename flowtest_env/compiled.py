@@ -23,7 +23,13 @@ tests with the same array indexing.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import gc
+import mmap
+import multiprocessing
+import os
+import threading
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
 
@@ -221,12 +227,23 @@ BATCH = 512
 operations of one batch run over all its configurations at once)."""
 
 
-def _compile_batch(games: list[TestGame], encoders: list[Encoder], n_actions: int) -> list[CompiledTest]:
-    """:func:`compile_test` of several games without a test agent at once: the rules of
-    :func:`_transitions` over the configurations of every game, numbered one game after
-    the other (a configuration is ``(s, h)``, ``z = s * n_hist + h`` within its game), one
-    breadth-first search from every game's reset configuration, then each game's tables
-    cut out. The same tables as :func:`compile_test`, game by game."""
+@dataclass(frozen=True)
+class _Unencoded:
+    """A compiled test without its observations yet: the fields of :class:`CompiledTest`
+    but ``obs``, and the runs whose observations are its rows, in row order."""
+
+    fields: dict[str, Any]
+    rows: list[RunState]
+
+
+def _batch_tables(games: list[TestGame], n_actions: int) -> list[_Unencoded]:
+    """:func:`compile_test` of several games without a test agent at once, but for the
+    observations: the rules of :func:`_transitions` over the configurations of every
+    game, numbered one game after the other (a configuration is ``(s, h)``,
+    ``z = s * n_hist + h`` within its game), one breadth-first search from every game's
+    reset configuration, then each game's tables cut out. The same tables as
+    :func:`compile_test`, game by game; without a test agent every configuration is its
+    own observation row."""
     k_games = len(games)
     n = np.array([g.ts.n_states for g in games], dtype=np.int64)
     nh = np.array([g.artifact.histories.n_states for g in games], dtype=np.int64)
@@ -275,9 +292,8 @@ def _compile_batch(games: list[TestGame], encoders: list[Encoder], n_actions: in
     next_z[ended] = np.nonzero(ended)[0][:, None]  # an ended run stays where it is
     # the reachable configurations from every game's reset configuration
     starts = np.empty(k_games, dtype=np.int64)
-    for i, g in enumerate(games):
-        run0 = g.reset()
-        starts[i] = zoff[i] + run0.system * nh[i] + run0.history
+    for i, g in enumerate(games):  # TestGame.reset without a test agent
+        starts[i] = zoff[i] + int(g.ts.initial) * nh[i] + g.artifact.initial_history()
     keep = _reachable_from(next_z, starts)
     kept_game = game_of[keep]
     counts = np.bincount(kept_game, minlength=k_games)
@@ -291,30 +307,21 @@ def _compile_batch(games: list[TestGame], encoders: list[Encoder], n_actions: in
     k_test = test_acc[at_h][keep]
     k_mask = mask[keep]
     k_sys, k_hist = S[keep], H[keep]
-    # observations: without a test agent every configuration is its own (s, h) row
-    sys_list, hist_list, out_list = k_sys.tolist(), k_hist.tolist(), k_outcome.tolist()
-    out: list[CompiledTest] = []
-    for i, (enc, lo, c) in enumerate(zip(encoders, koff.tolist(), counts.tolist(), strict=True)):
+    runs = [
+        RunState(system=sv, history=hv, visited={sv}, outcome=OUTCOMES[ov])
+        for sv, hv, ov in zip(k_sys.tolist(), k_hist.tolist(), k_outcome.tolist(), strict=True)
+    ]
+    out: list[_Unencoded] = []
+    for i, (lo, c) in enumerate(zip(koff.tolist(), counts.tolist(), strict=True)):
         hi = lo + c
-        rows = [
-            enc.encode(RunState(system=sv, history=hv, visited={sv}, outcome=OUTCOMES[ov]))
-            for sv, hv, ov in zip(sys_list[lo:hi], hist_list[lo:hi], out_list[lo:hi], strict=True)
-        ]
-        out.append(CompiledTest(
-            next_z=k_next[lo:hi],
-            refused=k_refused[lo:hi],
-            restricted=k_restricted[lo:hi],
-            outcome=k_outcome[lo:hi],
-            test_realized=k_test[lo:hi],
-            mask=k_mask[lo:hi],
-            obs_row=np.arange(c, dtype=np.int64),
-            obs=np.stack(rows),
-            system=k_sys[lo:hi],
-            history=k_hist[lo:hi],
-            agent=np.full(c, -1, dtype=np.int64),
-            memory=np.full(c, -1, dtype=np.int64),
-            initial=int(renum[starts[i]]),
-        ))
+        fields = {
+            "next_z": k_next[lo:hi], "refused": k_refused[lo:hi], "restricted": k_restricted[lo:hi],
+            "outcome": k_outcome[lo:hi], "test_realized": k_test[lo:hi], "mask": k_mask[lo:hi],
+            "obs_row": np.arange(c, dtype=np.int64), "system": k_sys[lo:hi], "history": k_hist[lo:hi],
+            "agent": np.full(c, -1, dtype=np.int64), "memory": np.full(c, -1, dtype=np.int64),
+            "initial": int(renum[starts[i]]),
+        }
+        out.append(_Unencoded(fields, runs[lo:hi]))
     return out
 
 
@@ -377,15 +384,78 @@ def compile_test(game: TestGame, encoder: Encoder, n_actions: int | None = None,
     )
 
 
-def _stack_padded(parts: list[np.ndarray], shape: tuple[int, ...], offset: np.ndarray) -> np.ndarray:
-    """The arrays of ``parts`` (rows first) one after the other, each zero-padded at the
-    end of every observation axis to ``shape``: :func:`_pad_to` of each, concatenated,
-    written straight into the result."""
-    rows = int(offset[-1]) + parts[-1].shape[0]
-    out = np.zeros((rows, *shape), dtype=parts[0].dtype)
-    for a, o in zip(parts, offset.tolist(), strict=True):
-        out[(slice(o, o + a.shape[0]), *(slice(0, k) for k in a.shape[1:]))] = a
-    return out
+PARALLEL_FROM = 1000
+"""Tests without a test agent from which :func:`compile_pool` writes observations in two
+processes (where :func:`helpers` finds two cores)."""
+
+
+def helpers(count: int) -> int:
+    """Forked helpers (0 or 1) for work on ``count`` tests: one from
+    :data:`PARALLEL_FROM` tests on, where this process may run on two cores or more and
+    can fork safely (the platform forks and no other Python thread runs: a fork copies no
+    thread, and a lock one of them held would stay held in the helper)."""
+    if count < PARALLEL_FROM or "fork" not in multiprocessing.get_all_start_methods() or threading.active_count() != 1:
+        return 0
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        cores = os.cpu_count() or 1
+    return 1 if cores >= 2 else 0
+
+
+def _obs_table(rows: int, shape: tuple[int, ...], dtype: np.dtype[Any], shared: bool) -> np.ndarray:
+    """A zero table of observation rows; ``shared``: in memory a forked helper writes to
+    (an anonymous shared mapping) rather than this process's own."""
+    if not shared:
+        return np.zeros((rows, *shape), dtype=dtype)
+    size = max(1, rows * int(np.prod(shape, dtype=np.int64)) * dtype.itemsize)
+    buf = mmap.mmap(-1, size)  # MAP_SHARED | MAP_ANONYMOUS: zero-filled, seen by forked children
+    return np.frombuffer(buf, dtype=dtype, count=rows * int(np.prod(shape, dtype=np.int64))).reshape(rows, *shape)
+
+
+def _write_rows(todo: list[tuple[Encoder, list[RunState], np.ndarray]]) -> None:
+    """Row ``j >= 1`` of each ``(encoder, runs, rows)``: the encoder's observation of ``runs[j]``."""
+    for encoder, runs, rows in todo:
+        for j in range(1, len(runs)):
+            rows[j] = encoder.encode(runs[j])
+
+
+def _encode_rows(todo: list[tuple[Encoder, list[RunState], np.ndarray]], n_helpers: int) -> None:
+    """:func:`_write_rows`, the later half (by rows) in a forked helper when ``n_helpers``.
+    A helper that fails leaves its half to this process; Ctrl-C stops both."""
+    if n_helpers < 1 or len(todo) < 2:
+        _write_rows(todo)
+        return
+    sizes = np.cumsum([len(runs) for _, runs, _ in todo])
+    cut = int(np.searchsorted(sizes, sizes[-1] / 2)) + 1
+    mine, theirs = todo[:cut], todo[cut:]
+    ctx = multiprocessing.get_context("fork")
+    proc = ctx.Process(target=_helper, args=(theirs,), daemon=True)
+    proc.start()
+    try:
+        _write_rows(mine)
+        proc.join()
+        if proc.exitcode != 0:  # interrupted or broken: this process writes its rows
+            _write_rows(theirs)
+    finally:
+        if proc.is_alive():
+            proc.terminate()
+            proc.join(timeout=1.0)
+            if proc.is_alive():
+                proc.kill()
+                proc.join(timeout=1.0)
+
+
+def _helper(todo: list[tuple[Encoder, list[RunState], np.ndarray]]) -> None:
+    """A forked helper: its rows written into the shared table, then gone (no exit
+    handler of the parent runs; Ctrl-C, sent to the whole process group, ends it quietly)."""
+    code = 1
+    try:
+        _write_rows(todo)
+        code = 0
+    except BaseException:  # the parent writes these rows itself
+        pass
+    os._exit(code)
 
 
 @dataclass(frozen=True)
@@ -467,40 +537,83 @@ def potentials(pool: CompiledPool, games: list[TestGame], potential: Callable[[T
     return out
 
 
+@contextmanager
+def _gc_paused() -> Iterator[None]:
+    """The cyclic garbage collector paused (as it was before, after): a bulk build of
+    many small objects that stay alive otherwise triggers collection after collection,
+    each walking every object built so far (about a third of the time of a large pool)."""
+    was = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if was:
+            gc.enable()
+
+
 def compile_pool(games: list[TestGame], encoders: list[Encoder], accumulative: bool = False) -> CompiledPool:
     """Compile every test of a pool into one numbering (action columns and observation
-    axes padded to the largest; ``accumulative``: as for :func:`compile_test`)."""
+    axes padded to the largest; ``accumulative``: as for :func:`compile_test`).
+
+    The tests without a test agent are compiled in batches of :data:`BATCH`; with
+    :data:`PARALLEL_FROM` of them or more and two cores free (:func:`helpers`), a forked
+    helper writes half of their observation rows (the single env's encoder, row by row:
+    most of the time) straight into the pool's table while this process writes the other
+    half. The tables are the same either way."""
     if not games or len(games) != len(encoders):
         raise ValueError("a pool needs at least one test and one encoder per test")
+    with _gc_paused():
+        return _compile_pool(games, encoders, accumulative)
+
+
+def _compile_pool(games: list[TestGame], encoders: list[Encoder], accumulative: bool) -> CompiledPool:
     n_actions = max(g.n_actions for g in games)
     for g in games:
         _check_setting(g, accumulative)
-    compiled: list[CompiledTest | None] = [None] * len(games)
+    done: dict[int, CompiledTest] = {}
+    pending: dict[int, _Unencoded] = {}
     plain = [k for k, g in enumerate(games) if not g.has_agent]  # compiled in batches
     for lo in range(0, len(plain), BATCH):
         part = plain[lo : lo + BATCH]
-        for k, ct in zip(part, _compile_batch([games[k] for k in part], [encoders[k] for k in part], n_actions), strict=True):
-            compiled[k] = ct
-    tests = tuple(
-        ct if ct is not None else compile_test(g, e, n_actions, accumulative)
-        for ct, g, e in zip(compiled, games, encoders, strict=True)
-    )
-    ndim = {t.obs.ndim for t in tests}
+        pending.update(zip(part, _batch_tables([games[k] for k in part], n_actions), strict=True))
+    for k, g in enumerate(games):
+        if g.has_agent:
+            done[k] = compile_test(g, encoders[k], n_actions, accumulative)
+    # each test's observation shape (the first row of a test not encoded yet)
+    first = {k: encoders[k].encode(u.rows[0]) for k, u in pending.items()}
+    shapes = [(done[k].obs if k in done else first[k][None]).shape[1:] for k in range(len(games))]
+    ndim = {len(sh) for sh in shapes}
     if len(ndim) != 1:
         raise ValueError("the pool's tests have observations of different ranks (mix of 'grid' and 'flat'?)")
-    obs_shape = tuple(int(max(t.obs.shape[1 + i] for t in tests)) for i in range(tests[0].obs.ndim - 1))
-    dtypes = {t.obs.dtype for t in tests}
+    obs_shape = tuple(int(max(sh[i] for sh in shapes)) for i in range(len(shapes[0])))
+    dtypes = {(done[k].obs if k in done else first[k]).dtype for k in range(len(games))}
     if len(dtypes) != 1:
         raise ValueError(f"the pool's observations have different dtypes: {sorted(map(str, dtypes))}")
+    row_sizes = np.array([done[k].obs.shape[0] if k in done else len(pending[k].rows) for k in range(len(games))], dtype=np.int64)
+    row_offset = np.concatenate([[0], np.cumsum(row_sizes)[:-1]]).astype(np.int64)
+    n_helpers = helpers(len(pending))
+    obs = _obs_table(int(row_sizes.sum()), obs_shape, dtypes.pop(), shared=n_helpers > 0)
+    view = {k: obs[(slice(int(row_offset[k]), int(row_offset[k] + row_sizes[k])), *(slice(0, w) for w in shapes[k]))]
+            for k in range(len(games))}
+    for k, ct in done.items():
+        view[k][...] = ct.obs
+    for k, row in first.items():
+        view[k][0] = row
+    todo = [(encoders[k], pending[k].rows, view[k]) for k in sorted(pending)]
+    _encode_rows(todo, n_helpers)
+    tests = tuple(done[k] if k in done else CompiledTest(obs=view[k], **pending[k].fields) for k in range(len(games)))
     sizes = np.array([t.n_z for t in tests], dtype=np.int64)
     offset = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
     row_sizes = np.array([t.obs.shape[0] for t in tests], dtype=np.int64)
     row_offset = np.concatenate([[0], np.cumsum(row_sizes)[:-1]]).astype(np.int64)
     states: list[Any] = []
     for g, t in zip(games, tests, strict=True):
-        used, where = np.unique(t.system, return_inverse=True)  # name only the states the test reaches
-        names = [g.state_json(s) for s in used.tolist()]
-        states.extend([names[i] for i in where.reshape(-1).tolist()])
+        names: dict[int, Any] = {}  # name only the states the test reaches, each once
+        for s in t.system.tolist():
+            name = names.get(s)
+            if name is None:
+                name = names[s] = g.state_json(s)
+            states.append(name)
     system_state = np.empty(len(states), dtype=object)
     system_state[:] = states
     return CompiledPool(
@@ -517,6 +630,6 @@ def compile_pool(games: list[TestGame], encoders: list[Encoder], accumulative: b
         test_realized=np.concatenate([t.test_realized for t in tests]),
         mask=np.concatenate([t.mask for t in tests]),
         obs_row=np.concatenate([t.obs_row + o for t, o in zip(tests, row_offset, strict=True)]),
-        obs=_stack_padded([t.obs for t in tests], obs_shape, row_offset),
+        obs=obs,
         system_state=system_state,
     )

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+import flowtest_env.compiled as compiled
 from flowtest_env.artifacts import builtin_game
 from flowtest_env.compiled import OUTCOMES, CompiledPool, CompiledTest, compile_pool, compile_test
 from flowtest_env.encoding import Encoder, make_encoder
@@ -240,11 +241,17 @@ def test_compiled_tables_are_the_reference(art: TestArtifact) -> None:
                 assert same(getattr(got, name), getattr(want, name)), (kind, extra, name)
 
 
-def test_pool_of_many_tests_is_its_tests_one_by_one() -> None:
+@pytest.mark.parametrize("helper", [False, True], ids=["one-process", "forked-helper"])
+def test_pool_of_many_tests_is_its_tests_one_by_one(helper: bool, monkeypatch: pytest.MonkeyPatch) -> None:
     """The pool compiled at once (grids of several pools and sizes, a test agent among
-    them) holds each test's own tables, offset."""
+    them) holds each test's own tables, offset; the same with a forked helper writing
+    half of the observation rows."""
     games = [TestGame(a) for a in SAMPLE if a.system.layout is not None]
     encoders = [make_encoder(g, "padded", 8) for g in games]
+    if helper:
+        monkeypatch.setattr(compiled, "PARALLEL_FROM", 2)
+        if compiled.helpers(len(games)) != 1:
+            pytest.skip("no second core, or this process cannot fork")
     pool: CompiledPool = compile_pool(games, encoders)
     width = pool.n_actions
     for t, (g, e) in enumerate(zip(games, encoders, strict=True)):
