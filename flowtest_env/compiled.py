@@ -538,10 +538,16 @@ def potentials(pool: CompiledPool, games: list[TestGame], potential: Callable[[T
 
 
 @contextmanager
-def _gc_paused() -> Iterator[None]:
+def gc_paused() -> Iterator[None]:
     """The cyclic garbage collector paused (as it was before, after): a bulk build of
     many small objects that stay alive otherwise triggers collection after collection,
-    each walking every object built so far (about a third of the time of a large pool)."""
+    each walking every object built so far (about a third of the time of a large pool).
+
+    Example::
+
+        with gc_paused():
+            games = [TestGame(a) for a in artifacts]
+    """
     was = gc.isenabled()
     gc.disable()
     try:
@@ -562,7 +568,7 @@ def compile_pool(games: list[TestGame], encoders: list[Encoder], accumulative: b
     half. The tables are the same either way."""
     if not games or len(games) != len(encoders):
         raise ValueError("a pool needs at least one test and one encoder per test")
-    with _gc_paused():
+    with gc_paused():
         return _compile_pool(games, encoders, accumulative)
 
 

@@ -6,23 +6,27 @@ Usage::
     .venv/bin/python -m experiments.lab.bench_pool_load --pools reachability1/5x5-v1 --count 10000
     .venv/bin/python -m experiments.lab.bench_pool_load --check full --count 200  # the full re-check
     .venv/bin/python -m experiments.lab.bench_pool_load --pools reachability1/5x5-v1 safety2/5x5/fuel-v1 --count 10000 --cycle
+    .venv/bin/python -m experiments.lab.bench_pool_load --count 2000 --workers 1                # the load in this process only
 
 It loads the shipped records of the given standard pools (every split, train first, up to
 ``--count`` tests in all) with :func:`flowtest_env.standard_pools.load_standard_pool`
-(``--check certificate``, the default, or ``full``), then builds one
+(``--check certificate``, the default, or ``full``; ``--workers``: processes that load, by
+default two for a split of 1,000 tests or more where two cores are free), then builds one
 :class:`flowtest_env.vector.PoolVectorEnv` holding every test once (``assignment="fixed"``)
 and resets it (``--cycle``: where fewer tests are shipped than ``--count``, the shipped ones
 are loaded again, each time checked again, until ``--count``; ``rounds`` says how many
 times). It prints one JSON object: tests, seconds to read and check the records
 (``load_s``), to compile the env (``compile_s``), the total, per test, and the process's
-CPU seconds, in all and per phase (on a loaded machine the wall time includes waiting
-for a core).
+CPU seconds, in all and per phase (this process's: a forked helper's are not counted;
+on a loaded machine the wall time includes waiting for a core), and the machine's
+one-minute load average before and after (``load_average``).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import time
 from typing import Any
 
@@ -37,9 +41,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--count", type=int, default=None, help="at most this many tests in all (default: every shipped one)")
     ap.add_argument("--check", choices=("certificate", "full"), default="certificate")
     ap.add_argument("--cycle", action="store_true", help="fewer shipped than --count: load them again until --count (each load checks again)")
+    ap.add_argument("--workers", type=int, default=None, help="processes that load a split (default: two from 1,000 tests where two cores are free)")
     args = ap.parse_args(argv)
     from flowtest_env.vector import PoolVectorEnv  # after parsing: --help stays fast
 
+    load_before = os.getloadavg()[0]
     wall, cpu = time.perf_counter(), time.process_time()
     tests: list[Any] = []
     per_pool: dict[str, int] = {}
@@ -53,7 +59,7 @@ def main(argv: list[str] | None = None) -> int:
                 have = pool.shipped(split)
                 take = have if left is None else min(have, left)
                 if take > 0:
-                    tests += load_standard_pool(pool.id, split, take, check=args.check, progress=False)
+                    tests += load_standard_pool(pool.id, split, take, check=args.check, progress=False, workers=args.workers)
                     per_pool[pool.id] = per_pool.get(pool.id, 0) + take
     load_s, load_cpu = time.perf_counter() - wall, time.process_time() - cpu
     if not tests:
@@ -68,6 +74,7 @@ def main(argv: list[str] | None = None) -> int:
         "tests": len(tests), "rounds": rounds, "per_pool": per_pool, "check": args.check, "load_s": round(load_s, 2),
         "compile_s": round(compile_s, 2), "total_s": round(total, 2), "ms_per_test": round(1000 * total / len(tests), 2),
         "cpu_s": round(time.process_time() - cpu, 2), "load_cpu_s": round(load_cpu, 2), "compile_cpu_s": round(compile_cpu, 2),
+        "load_average": [round(load_before, 2), round(os.getloadavg()[0], 2)],
     }))
     return 0
 
