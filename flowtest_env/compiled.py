@@ -396,6 +396,8 @@ def helpers(count: int) -> int:
     thread, and a lock one of them held would stay held in the helper)."""
     if count < PARALLEL_FROM or "fork" not in multiprocessing.get_all_start_methods() or threading.active_count() != 1:
         return 0
+    if multiprocessing.current_process().daemon:  # a pool's worker (one of a trainer's runs) may have no children
+        return 0
     try:
         cores = len(os.sched_getaffinity(0))
     except (AttributeError, OSError):

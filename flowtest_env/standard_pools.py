@@ -398,7 +398,8 @@ def _can_fork() -> bool:
     """Whether helpers can be forked safely: the platform forks and this process runs no
     other Python thread (a fork copies no thread, and a lock one of them held would stay
     held in the helper)."""
-    return "fork" in multiprocessing.get_all_start_methods() and threading.active_count() == 1
+    return ("fork" in multiprocessing.get_all_start_methods() and threading.active_count() == 1
+            and not multiprocessing.current_process().daemon)  # a pool's worker may have no children
 
 
 class _Job:
