@@ -331,8 +331,6 @@ class TestGame:
         letter = ts.letter_of_state(artifact.letters)
         self.next_history_array: np.ndarray = artifact.histories.delta[:, letter]
         """``int[n_hist, n_states]``: :attr:`next_history` as an array."""
-        self.next_history: list[list[int]] = self.next_history_array.tolist()
-        """``next_history[h][s]``: the history after entering ``s``."""
         comps = artifact.histories.components
         self.q_sys = comps[:, 0].astype(np.int64) if comps is not None else np.zeros(artifact.histories.n_states, np.int64)
         self.sys_accepting: list[bool] = artifact.histories.accepting[:, 0].tolist()
@@ -343,10 +341,6 @@ class TestGame:
             artifact, walls if external_tester else self.enforced, self.next_history_array
         )
         """``bool[n_hist, n_states]``: :attr:`doomed` as an array."""
-        self.doomed: list[list[bool]] = self.doomed_array.tolist()
-        """``doomed[h][s]``: no run from ``s`` with history ``h`` that respects the enforced
-        restrictions can meet the system objective any more."""
-        self.succ_list: list[list[int]] = self.successor.tolist()
         self.slot_list: list[list[int]] = self.slot_move.tolist()
         self.place_list: list[int] = ts.place.tolist()
         # ---- the test agent
@@ -363,6 +357,28 @@ class TestGame:
             self.agent_place = []
             self.agent_first = False
             self.agent_moves = np.zeros((0, 0), dtype=bool)
+
+    # the tables of a step as nested lists (faster to index one entry at a time than
+    # arrays), built on first use: the vector env compiles from the arrays instead
+
+    @cached_property
+    def next_history(self) -> list[list[int]]:
+        """``next_history[h][s]``: the history after entering ``s``."""
+        out: list[list[int]] = self.next_history_array.tolist()
+        return out
+
+    @cached_property
+    def doomed(self) -> list[list[bool]]:
+        """``doomed[h][s]``: no run from ``s`` with history ``h`` that respects the enforced
+        restrictions can meet the system objective any more."""
+        out: list[list[bool]] = self.doomed_array.tolist()
+        return out
+
+    @cached_property
+    def succ_list(self) -> list[list[int]]:
+        """``succ_list[s][slot]``: :attr:`successor` as nested lists."""
+        out: list[list[int]] = self.successor.tolist()
+        return out
 
     @cached_property
     def into_bits(self) -> list[dict[int, int]]:
