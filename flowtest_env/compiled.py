@@ -27,6 +27,7 @@ import gc
 import mmap
 import multiprocessing
 import os
+import sys
 import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -392,11 +393,13 @@ processes (where :func:`helpers` finds two cores)."""
 def helpers(count: int) -> int:
     """Forked helpers (0 or 1) for work on ``count`` tests: one from
     :data:`PARALLEL_FROM` tests on, where this process may run on two cores or more and
-    can fork safely (the platform forks and no other Python thread runs: a fork copies no
-    thread, and a lock one of them held would stay held in the helper)."""
-    if count < PARALLEL_FROM or "fork" not in multiprocessing.get_all_start_methods() or threading.active_count() != 1:
+    can fork safely: on Linux (macOS's system libraries are not safe to fork), where no
+    other Python thread runs (a fork copies no thread, and a lock one of them held would
+    stay held in the helper) and this process may have children (a multiprocessing
+    pool's worker, one of a trainer's runs, is daemonic and may not)."""
+    if count < PARALLEL_FROM or not sys.platform.startswith("linux") or threading.active_count() != 1:
         return 0
-    if multiprocessing.current_process().daemon:  # a pool's worker (one of a trainer's runs) may have no children
+    if multiprocessing.current_process().daemon:
         return 0
     try:
         cores = len(os.sched_getaffinity(0))

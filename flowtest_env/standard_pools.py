@@ -45,6 +45,7 @@ import json
 import multiprocessing
 import os
 import re
+import sys
 import threading
 from collections.abc import Iterable, Iterator, Mapping
 from contextlib import contextmanager
@@ -395,11 +396,12 @@ def auto_workers(count: int) -> int:
 
 
 def _can_fork() -> bool:
-    """Whether helpers can be forked safely: the platform forks and this process runs no
-    other Python thread (a fork copies no thread, and a lock one of them held would stay
-    held in the helper)."""
-    return ("fork" in multiprocessing.get_all_start_methods() and threading.active_count() == 1
-            and not multiprocessing.current_process().daemon)  # a pool's worker may have no children
+    """Whether helpers can be forked safely: on Linux (macOS's system libraries are not
+    safe to fork), where this process runs no other Python thread (a fork copies no
+    thread, and a lock one of them held would stay held in the helper) and may have
+    children (a multiprocessing pool's worker, daemonic, may not)."""
+    return (sys.platform.startswith("linux") and threading.active_count() == 1
+            and not multiprocessing.current_process().daemon)
 
 
 class _Job:
