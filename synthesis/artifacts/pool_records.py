@@ -32,7 +32,7 @@ static walls) and the flow it measured. ``rebuild_artifact(..., check="certifica
 checks the digest first, rebuilds the problem, products and restrictions from the seed
 and cuts (what an environment needs anyway), and instead of the full check compares the
 restrictions with the certified ones and searches once that no path avoids the test
-objective (bypass flow 0, one breadth-first search). It skips the max-flow and the
+objective (bypass flow 0, one graph search). It skips the max-flow and the
 per-history trap searches, which dominate a full check: the certificate says those passed
 on exactly these restrictions, and any change to the restrictions, the products built from
 the seed or the record shows as a mismatch. ``check="full"`` (the default) runs every

@@ -191,7 +191,7 @@ def _without_cuts_resealed(pool: sp.StandardPool, rec: dict[str, Any]) -> None:
 
 def test_a_forged_certificate_still_meets_the_bypass_search(data: Path) -> None:
     """A record without its cuts, certificate and digest forged to match: the fast load's
-    breadth-first search still finds the execution that avoids the test objective (the
+    bypass search still finds the execution that avoids the test objective (the
     full check too)."""
     pool = sp.standard_pool(R1)
     copy_split(pool, "test", data, 1, edit=lambda rs: _without_cuts_resealed(pool, rs[0]))
