@@ -408,14 +408,19 @@ def helpers(count: int) -> int:
     return 1 if cores >= 2 else 0
 
 
-def _obs_table(rows: int, shape: tuple[int, ...], dtype: np.dtype[Any], shared: bool) -> np.ndarray:
-    """A zero table of observation rows; ``shared``: in memory a forked helper writes to
-    (an anonymous shared mapping) rather than this process's own."""
-    if not shared:
-        return np.zeros((rows, *shape), dtype=dtype)
-    size = max(1, rows * int(np.prod(shape, dtype=np.int64)) * dtype.itemsize)
-    buf = mmap.mmap(-1, size)  # MAP_SHARED | MAP_ANONYMOUS: zero-filled, seen by forked children
-    return np.frombuffer(buf, dtype=dtype, count=rows * int(np.prod(shape, dtype=np.int64))).reshape(rows, *shape)
+def _obs_table(rows: int, shape: tuple[int, ...], dtype: np.dtype[Any], shared: bool) -> tuple[np.ndarray, bool]:
+    """A zero table of observation rows, and whether it is shared: with ``shared``, in
+    memory a forked helper writes to (an anonymous shared mapping) rather than this
+    process's own, where the system gives one."""
+    if shared:
+        count = rows * int(np.prod(shape, dtype=np.int64))
+        try:
+            buf = mmap.mmap(-1, max(1, count * dtype.itemsize))  # MAP_SHARED | MAP_ANONYMOUS: zero-filled
+        except OSError:
+            pass
+        else:
+            return np.frombuffer(buf, dtype=dtype, count=count).reshape(rows, *shape), True
+    return np.zeros((rows, *shape), dtype=dtype), False
 
 
 def _write_rows(todo: list[tuple[Encoder, list[RunState], np.ndarray]]) -> None:
@@ -426,8 +431,9 @@ def _write_rows(todo: list[tuple[Encoder, list[RunState], np.ndarray]]) -> None:
 
 
 def _encode_rows(todo: list[tuple[Encoder, list[RunState], np.ndarray]], n_helpers: int) -> None:
-    """:func:`_write_rows`, the later half (by rows) in a forked helper when ``n_helpers``.
-    A helper that fails leaves its half to this process; Ctrl-C stops both."""
+    """:func:`_write_rows`, the later half (by rows) in a forked helper when ``n_helpers``
+    (the rows in memory shared with it). A helper that cannot start or fails leaves its
+    half to this process; Ctrl-C stops both."""
     if n_helpers < 1 or len(todo) < 2:
         _write_rows(todo)
         return
@@ -436,7 +442,11 @@ def _encode_rows(todo: list[tuple[Encoder, list[RunState], np.ndarray]], n_helpe
     mine, theirs = todo[:cut], todo[cut:]
     ctx = multiprocessing.get_context("fork")
     proc = ctx.Process(target=_helper, args=(theirs,), daemon=True)
-    proc.start()
+    try:
+        proc.start()
+    except OSError:  # out of processes or memory
+        _write_rows(todo)
+        return
     try:
         _write_rows(mine)
         proc.join()
@@ -602,8 +612,7 @@ def _compile_pool(games: list[TestGame], encoders: list[Encoder], accumulative: 
         raise ValueError(f"the pool's observations have different dtypes: {sorted(map(str, dtypes))}")
     row_sizes = np.array([done[k].obs.shape[0] if k in done else len(pending[k].rows) for k in range(len(games))], dtype=np.int64)
     row_offset = np.concatenate([[0], np.cumsum(row_sizes)[:-1]]).astype(np.int64)
-    n_helpers = helpers(len(pending))
-    obs = _obs_table(int(row_sizes.sum()), obs_shape, dtypes.pop(), shared=n_helpers > 0)
+    obs, shared = _obs_table(int(row_sizes.sum()), obs_shape, dtypes.pop(), shared=helpers(len(pending)) > 0)
     view = {k: obs[(slice(int(row_offset[k]), int(row_offset[k] + row_sizes[k])), *(slice(0, w) for w in shapes[k]))]
             for k in range(len(games))}
     for k, ct in done.items():
@@ -611,7 +620,7 @@ def _compile_pool(games: list[TestGame], encoders: list[Encoder], accumulative: 
     for k, row in first.items():
         view[k][0] = row
     todo = [(encoders[k], pending[k].rows, view[k]) for k in sorted(pending)]
-    _encode_rows(todo, n_helpers)
+    _encode_rows(todo, 1 if shared else 0)
     tests = tuple(done[k] if k in done else CompiledTest(obs=view[k], **pending[k].fields) for k in range(len(games)))
     sizes = np.array([t.n_z for t in tests], dtype=np.int64)
     offset = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)

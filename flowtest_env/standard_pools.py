@@ -365,7 +365,9 @@ def load_standard_pool(
     try:
         with _gc_paused():
             if n_proc > 1 and _can_fork():
-                return _load_forked(job, n_proc, bar)
+                tests = _load_forked(job, n_proc, bar)
+                if tests is not None:
+                    return tests
             out: list[TestArtifact] = []
             for k in range(count):
                 out.append(job.load(k))
@@ -475,24 +477,37 @@ def _helper(job: _Job, counter: Any, n_chunks: int, conn: Any) -> None:
     os._exit(code)  # no exit handlers of the parent (they are its own)
 
 
-def _load_forked(job: _Job, n_proc: int, bar: BuildProgress) -> list[TestArtifact]:
+def _load_forked(job: _Job, n_proc: int, bar: BuildProgress) -> list[TestArtifact] | None:
     """:func:`load_standard_pool` over ``n_proc`` processes: this one and forked helpers
     take chunks of :data:`CHUNK` tests from a shared counter, this one collects them in
     chunk order. On a refusal no chunk is taken any more; the chunks taken before finish,
-    and the refusal of the lowest line is raised (the one a single process meets first)."""
+    and the refusal of the lowest line is raised (the one a single process meets first).
+    ``None`` where the system gives no shared counter (no ``/dev/shm``...); a helper that
+    cannot start leaves its chunks to the others."""
     ctx = multiprocessing.get_context("fork")
     n_chunks = -(-len(job.records) // CHUNK)
-    counter = ctx.Value("q", 0)
+    try:
+        counter = ctx.Value("q", 0)
+    except OSError:
+        return None
     results: dict[int, list[TestArtifact]] = {}
     refusals: dict[int, str] = {}
     procs: list[Any] = []
     conns: list[Any] = []
     try:
         for _ in range(n_proc - 1):
-            recv, send = ctx.Pipe(duplex=False)
-            proc = ctx.Process(target=_helper, args=(job, counter, n_chunks, send), daemon=True)
-            proc.start()
-            send.close()
+            try:
+                recv, send = ctx.Pipe(duplex=False)
+            except OSError:
+                break
+            try:
+                proc = ctx.Process(target=_helper, args=(job, counter, n_chunks, send), daemon=True)
+                proc.start()
+            except OSError:  # out of processes or memory: the others take its chunks
+                recv.close()
+                break
+            finally:
+                send.close()
             procs.append(proc)
             conns.append(recv)
 

@@ -11,6 +11,7 @@ standard pool, in every observation kind and setting the vector env compiles.
 
 from __future__ import annotations
 
+import mmap
 from typing import Any
 
 import numpy as np
@@ -241,17 +242,23 @@ def test_compiled_tables_are_the_reference(art: TestArtifact) -> None:
                 assert same(getattr(got, name), getattr(want, name)), (kind, extra, name)
 
 
-@pytest.mark.parametrize("helper", [False, True], ids=["one-process", "forked-helper"])
-def test_pool_of_many_tests_is_its_tests_one_by_one(helper: bool, monkeypatch: pytest.MonkeyPatch) -> None:
+def _no_shared_memory(*args: Any) -> Any:
+    raise OSError("no shared memory here")
+
+
+@pytest.mark.parametrize("helper", ["one-process", "forked-helper", "no-shared-memory"])
+def test_pool_of_many_tests_is_its_tests_one_by_one(helper: str, monkeypatch: pytest.MonkeyPatch) -> None:
     """The pool compiled at once (grids of several pools and sizes, a test agent among
     them) holds each test's own tables, offset; the same with a forked helper writing
-    half of the observation rows."""
+    half of the observation rows, and where the system has no shared memory for one."""
     games = [TestGame(a) for a in SAMPLE if a.system.layout is not None]
     encoders = [make_encoder(g, "padded", 8) for g in games]
-    if helper:
+    if helper != "one-process":
         monkeypatch.setattr(compiled, "PARALLEL_FROM", 2)
         if compiled.helpers(len(games)) != 1:
             pytest.skip("no second core, or this process cannot fork")
+    if helper == "no-shared-memory":
+        monkeypatch.setattr(mmap, "mmap", _no_shared_memory)
     pool: CompiledPool = compile_pool(games, encoders)
     width = pool.n_actions
     for t, (g, e) in enumerate(zip(games, encoders, strict=True)):

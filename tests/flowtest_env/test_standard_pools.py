@@ -390,6 +390,17 @@ def test_two_processes_load_the_same_tests_in_the_same_order(monkeypatch: pytest
         sp.load_standard_pool(R1, "test", 2, workers=0)
 
 
+def test_a_load_without_shared_memory_runs_in_this_process(monkeypatch: pytest.MonkeyPatch) -> None:
+    import multiprocessing.context
+
+    def no_counter(*args: Any, **kwargs: Any) -> Any:
+        raise OSError("no /dev/shm here")
+
+    monkeypatch.setattr(multiprocessing.context.BaseContext, "Value", no_counter)
+    monkeypatch.setattr(sp, "CHUNK", 4)
+    assert [a.name for a in sp.load_standard_pool(R1, "test", 9, workers=2)] == [a.name for a in sp.load_standard_pool(R1, "test", 9, workers=1)]
+
+
 def test_two_processes_refuse_the_record_one_process_refuses_first(data: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """Two tampered records in chunks of several processes: the refusal names the first
     line, as a load in one process does, whichever process met its record first."""
