@@ -430,35 +430,57 @@ def _write_rows(todo: list[tuple[Encoder, list[RunState], np.ndarray]]) -> None:
             rows[j] = encoder.encode(runs[j])
 
 
-def _encode_rows(todo: list[tuple[Encoder, list[RunState], np.ndarray]], n_helpers: int) -> None:
-    """:func:`_write_rows`, the later half (by rows) in a forked helper when ``n_helpers``
-    (the rows in memory shared with it). A helper that cannot start or fails leaves its
-    half to this process; Ctrl-C stops both."""
-    if n_helpers < 1 or len(todo) < 2:
-        _write_rows(todo)
-        return
-    sizes = np.cumsum([len(runs) for _, runs, _ in todo])
-    cut = int(np.searchsorted(sizes, sizes[-1] / 2)) + 1
-    mine, theirs = todo[:cut], todo[cut:]
-    ctx = multiprocessing.get_context("fork")
-    proc = ctx.Process(target=_helper, args=(theirs,), daemon=True)
-    try:
-        proc.start()
-    except OSError:  # out of processes or memory
-        _write_rows(todo)
-        return
-    try:
-        _write_rows(mine)
-        proc.join()
-        if proc.exitcode != 0:  # interrupted or broken: this process writes its rows
-            _write_rows(theirs)
-    finally:
-        if proc.is_alive():
-            proc.terminate()
-            proc.join(timeout=1.0)
+HELPER_SHARE = 0.6
+"""The share of the observation rows :func:`compile_pool`'s helper writes (this process
+also assembles the pool meanwhile)."""
+
+
+class _RowWriter:
+    """:func:`_write_rows` of ``todo``, the later :data:`HELPER_SHARE` of the rows in a
+    forked helper when ``helper`` (the rows in memory shared with it): started on entry,
+    this process's part written by :meth:`write_own`, the helper waited for on exit. A
+    helper that cannot start or fails leaves its rows to this process; an exception
+    (Ctrl-C) stops it."""
+
+    def __init__(self, todo: list[tuple[Encoder, list[RunState], np.ndarray]], helper: bool) -> None:
+        self.mine, self.theirs = todo, todo[len(todo):]
+        self.proc: Any = None
+        if helper and len(todo) >= 2:
+            sizes = np.cumsum([len(runs) for _, runs, _ in todo])
+            cut = min(int(np.searchsorted(sizes, sizes[-1] * (1.0 - HELPER_SHARE))) + 1, len(todo))
+            self.mine, self.theirs = todo[:cut], todo[cut:]
+
+    def __enter__(self) -> _RowWriter:
+        if self.theirs:
+            proc = multiprocessing.get_context("fork").Process(target=_helper, args=(self.theirs,), daemon=True)
+            try:
+                proc.start()
+            except OSError:  # out of processes or memory: this process writes them
+                self.mine, self.theirs = self.mine + self.theirs, []
+            else:
+                self.proc = proc
+        return self
+
+    def write_own(self) -> None:
+        """This process's rows."""
+        _write_rows(self.mine)
+
+    def __exit__(self, kind: object, error: object, trace: object) -> None:
+        proc = self.proc
+        if proc is None:
+            return
+        try:
+            if kind is None:
+                proc.join()
+                if proc.exitcode != 0:  # interrupted or broken: this process writes its rows
+                    _write_rows(self.theirs)
+        finally:
             if proc.is_alive():
-                proc.kill()
+                proc.terminate()
                 proc.join(timeout=1.0)
+                if proc.is_alive():
+                    proc.kill()
+                    proc.join(timeout=1.0)
 
 
 def _helper(todo: list[tuple[Encoder, list[RunState], np.ndarray]]) -> None:
@@ -620,7 +642,17 @@ def _compile_pool(games: list[TestGame], encoders: list[Encoder], accumulative: 
     for k, row in first.items():
         view[k][0] = row
     todo = [(encoders[k], pending[k].rows, view[k]) for k in sorted(pending)]
-    _encode_rows(todo, 1 if shared else 0)
+    with _RowWriter(todo, helper=shared) as writer:  # the helper's rows are written meanwhile
+        writer.write_own()
+        return _assemble(games, done, pending, view, n_actions, obs_shape, obs)
+
+
+def _assemble(
+    games: list[TestGame], done: dict[int, CompiledTest], pending: dict[int, _Unencoded], view: dict[int, np.ndarray],
+    n_actions: int, obs_shape: tuple[int, ...], obs: np.ndarray,
+) -> CompiledPool:
+    """The pool of the compiled tests (``done``) and of those compiled but for their rows
+    (``pending``, rows in ``view``, which may still be being written)."""
     tests = tuple(done[k] if k in done else CompiledTest(obs=view[k], **pending[k].fields) for k in range(len(games)))
     sizes = np.array([t.n_z for t in tests], dtype=np.int64)
     offset = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
