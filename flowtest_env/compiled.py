@@ -239,12 +239,13 @@ class _Unencoded:
 
 def _batch_tables(games: list[TestGame], n_actions: int) -> list[_Unencoded]:
     """:func:`compile_test` of several games without a test agent at once, but for the
-    observations: the rules of :func:`_transitions` over the configurations of every
-    game, numbered one game after the other (a configuration is ``(s, h)``,
-    ``z = s * n_hist + h`` within its game), one breadth-first search from every game's
-    reset configuration, then each game's tables cut out. The same tables as
-    :func:`compile_test`, game by game; without a test agent every configuration is its
-    own observation row."""
+    observations: the rules of :func:`_transitions` as array operations over
+    configurations of every game, numbered one game after the other (a configuration is
+    ``(s, h)``, ``z = s * n_hist + h`` within its game), a breadth-first search from every
+    game's reset configuration that applies them to each layer only (most configurations
+    are never reached), then the tables of the configurations reached, cut out game by
+    game. The same tables as :func:`compile_test`, game by game; without a test agent
+    every configuration is its own observation row."""
     k_games = len(games)
     n = np.array([g.ts.n_states for g in games], dtype=np.int64)
     nh = np.array([g.artifact.histories.n_states for g in games], dtype=np.int64)
@@ -253,15 +254,8 @@ def _batch_tables(games: list[TestGame], n_actions: int) -> list[_Unencoded]:
     soff = np.concatenate([[0], np.cumsum(n)[:-1]]).astype(np.int64)  # first state of a game
     hoff = np.concatenate([[0], np.cumsum(nh)[:-1]]).astype(np.int64)  # first history of a game
     total = int(size.sum())
-    game_of = np.repeat(np.arange(k_games, dtype=np.int64), size)
-    local = np.arange(total, dtype=np.int64) - zoff[game_of]
-    nh_z, n_z = nh[game_of], n[game_of]
-    S, H = local // nh_z, local % nh_z
-    at_hs = zoff[game_of] + H * n_z + S  # entry [h, s] of the game's tables
-    at_s = soff[game_of] + S
-    at_h = hoff[game_of] + H
-    rbits = np.concatenate([g.restricted_array.ravel() for g in games])[at_hs]
-    exists = np.concatenate([g.exists_array for g in games])[at_s]
+    rbits_hs = np.concatenate([g.restricted_array.ravel() for g in games])
+    exists_s = np.concatenate([g.exists_array for g in games])
     nxt_hist = np.concatenate([np.asarray(g.next_history_array, dtype=np.int64).ravel() for g in games])
     doomed = np.concatenate([g.doomed_array.ravel() for g in games])
     sys_acc = np.concatenate([g.artifact.histories.accepting[:, 0] for g in games]).astype(bool)
@@ -270,44 +264,64 @@ def _batch_tables(games: list[TestGame], n_actions: int) -> list[_Unencoded]:
     for g, o in zip(games, soff.tolist(), strict=True):
         succ[o : o + g.ts.n_states, : g.n_slots] = g.successor
         succ[o : o + g.ts.n_states, g.n_slots :] = np.arange(g.ts.n_states, dtype=np.int64)[:, None]
-    stay = np.array([g.stay_action for g in games], dtype=np.int64)[game_of][:, None]
-    # the rules of TestGame.step, for every configuration and action (no test agent)
+    stay_g = np.array([g.stay_action for g in games], dtype=np.int64)
     X = np.arange(n_actions, dtype=np.int64)[None, :]
-    r, ex = rbits[:, None], exists[:, None]
-    legal = ex & ~r
     bit = np.int64(1) << X
-    is_stay = X == stay
-    invalid = ((ex & bit) == 0) & ~((legal == 0) & is_stay)
-    refused = ((r & bit) != 0) & ~invalid
-    moves = ~is_stay & ~invalid & ~refused
-    nxt = np.where(moves, succ[at_s[:, None], X], S[:, None])
-    h2 = nxt_hist[(zoff[game_of] + H * n_z)[:, None] + nxt]
-    next_z = zoff[game_of][:, None] + nxt * nh_z[:, None] + h2  # global numbering
-    # per configuration
-    met = sys_acc[at_h]
-    outcome = np.where(met, 1, np.where(~met & doomed[at_hs], 2, 0)).astype(np.int8)
-    legal_z = np.where(legal[:, 0] == 0, np.int64(1) << stay[:, 0], legal[:, 0])
-    mask = ((legal_z[:, None] >> X) & 1).astype(np.int8)
-    mask[outcome != 0] = 0
-    ended = outcome != 0
-    next_z[ended] = np.nonzero(ended)[0][:, None]  # an ended run stays where it is
-    # the reachable configurations from every game's reset configuration
+
+    def rules(z: np.ndarray) -> dict[str, np.ndarray]:
+        """The rules of TestGame.step (no test agent) at configurations ``z`` (global),
+        for every action; ``next_z`` global, an ended run staying where it is."""
+        gi = np.searchsorted(zoff, z, side="right") - 1
+        local = z - zoff[gi]
+        nh_z, n_z = nh[gi], n[gi]
+        S, H = local // nh_z, local % nh_z
+        at_hs = zoff[gi] + H * n_z + S  # entry [h, s] of the game's tables
+        at_s = soff[gi] + S
+        at_h = hoff[gi] + H
+        rb, ex = rbits_hs[at_hs], exists_s[at_s]
+        r, e = rb[:, None], ex[:, None]
+        legal = e & ~r
+        stay = stay_g[gi][:, None]
+        is_stay = X == stay
+        invalid = ((e & bit) == 0) & ~((legal == 0) & is_stay)
+        refused = ((r & bit) != 0) & ~invalid
+        moves = ~is_stay & ~invalid & ~refused
+        nxt = np.where(moves, succ[at_s[:, None], X], S[:, None])
+        h2 = nxt_hist[(zoff[gi] + H * n_z)[:, None] + nxt]
+        next_z = zoff[gi][:, None] + nxt * nh_z[:, None] + h2
+        met = sys_acc[at_h]
+        outcome = np.where(met, 1, np.where(~met & doomed[at_hs], 2, 0)).astype(np.int8)
+        ended = outcome != 0
+        next_z[ended] = z[ended][:, None]
+        legal_z = np.where(legal[:, 0] == 0, np.int64(1) << stay[:, 0], legal[:, 0])
+        mask = ((legal_z[:, None] >> X) & 1).astype(np.int8)
+        mask[ended] = 0
+        return {
+            "next_z": next_z, "refused": refused | invalid, "restricted": (rb & ex) != 0, "outcome": outcome,
+            "test_realized": test_acc[at_h], "mask": mask, "system": S, "history": H, "game": gi,
+        }
+
+    # the configurations reached from every game's reset configuration, layer by layer
     starts = np.empty(k_games, dtype=np.int64)
     for i, g in enumerate(games):  # TestGame.reset without a test agent
         starts[i] = zoff[i] + int(g.ts.initial) * nh[i] + g.artifact.initial_history()
-    keep = _reachable_from(next_z, starts)
-    kept_game = game_of[keep]
+    seen = np.zeros(total, dtype=bool)
+    seen[starts] = True
+    frontier = np.unique(starts)
+    while frontier.size:
+        succ_z = rules(frontier)["next_z"].ravel()
+        frontier = np.unique(succ_z[~seen[succ_z]])
+        seen[frontier] = True
+    keep = np.flatnonzero(seen)
+    t = rules(keep)
+    kept_game = t["game"]
     counts = np.bincount(kept_game, minlength=k_games)
     koff = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
     renum = np.full(total, -1, dtype=np.int64)
     renum[keep] = np.arange(keep.size, dtype=np.int64) - koff[kept_game]  # each game's own numbering
-    k_next = renum[next_z[keep]]
-    k_refused = (refused | invalid)[keep]
-    k_restricted = (rbits & exists)[keep] != 0
-    k_outcome = outcome[keep]
-    k_test = test_acc[at_h][keep]
-    k_mask = mask[keep]
-    k_sys, k_hist = S[keep], H[keep]
+    k_next = renum[t["next_z"]]
+    k_refused, k_restricted, k_outcome = t["refused"], t["restricted"], t["outcome"]
+    k_test, k_mask, k_sys, k_hist = t["test_realized"], t["mask"], t["system"], t["history"]
     runs = [
         RunState(system=sv, history=hv, visited={sv}, outcome=OUTCOMES[ov])
         for sv, hv, ov in zip(k_sys.tolist(), k_hist.tolist(), k_outcome.tolist(), strict=True)
