@@ -377,7 +377,7 @@ def load_standard_pool(
         bar.close()
 
 
-CHUNK = 64
+CHUNK = 32
 """Tests a helper process of :func:`load_standard_pool` takes at a time."""
 
 PARALLEL_FROM = 1000
