@@ -23,8 +23,8 @@ The protocol (docs/benchmark-protocol.md has the reasons for each choice):
    one :class:`~flowtest_env.vector.PoolVectorEnv` batch (:mod:`flowtest_env.scoring`);
    ``random`` (the **floor**, ``runs`` runs per test, batched too); the **references**
    (the scripted replanner and the GR(1) system, correct systems that do not know the
-   test: the **ceiling**; on fuel pools a door can close after the fuel to go round it is
-   spent, so they meet fewer than all tests there: docs/benchmark-protocol.md) and any system that is not batched through the single env, once per test.
+   test: the **ceiling**; on fuel grids with doors a door can close after the fuel to go
+   round it is spent, so they meet fewer than all tests there: docs/benchmark-protocol.md) and any system that is not batched through the single env, once per test.
    The floor and the ceiling are always scored: they define the scale.
 4. **The statistics**: per split, the **normalized score** ``(met - floor) / (ceiling -
    floor)`` (0 = random, 1 = reference; floor and ceiling are the split's own), its
