@@ -27,7 +27,7 @@ from .problems.limits import MAX_GRAPH_EDGES, check_size
 from .problems.problem import Problem, build_graphs, check_caps
 from .routing.backends import cpsat
 from .routing.backends.rules import AUTO_CPSAT_MODES
-from .routing.caps import CAP_NOUNS, CapsTimeout, Fewest, caps_text, check_caps_reachable, disjoint_bypasses, fewest_within
+from .routing.caps import CAP_NOUNS, CapsTimeout, Fewest, caps_text, check_caps_reachable, fewest_within
 from .routing.options import RULES, Budgets, MilpOptions, ModelOptions, RunOptions, default_of, values_of
 from .routing.options import check_options as check_routing_options
 from .routing.restrictions import strategy_from_routing
@@ -250,13 +250,14 @@ def synthesize(problem: Problem, options: SynthesisOptions | None = None) -> Syn
     milp = milp_options(
         problem, remaining_time(problem, options, time.perf_counter() - started, int(products.virtual.n_edges))
     )
+    bounds: dict[str, int] = {}
     try:
-        check_caps_reachable(products, milp)
+        bounds, milp = caps_checked(products, milp)
         routing = solve_routing(products, milp)
     except InconsistentProblem as exc:
         raise over_caps(products, milp, exc, note, None if limit is None else started + limit) from None
     except TimeoutError as exc:
-        raise capped_timeout(products, milp, exc) from None
+        raise capped_timeout(milp, exc, bounds) from None
     setting = options.setting or problem.extras.get("setting", "instantaneous")
     strategy = strategy_from_routing(products, routing, setting)
     if routing.status != "optimal":
@@ -288,20 +289,41 @@ def check_caps_held(problem: Problem, strategy: TestStrategy, caps: dict[str, in
             raise CheckFailed(f"the test uses {used} {CAP_NOUNS[cap]}, above its cap {cap} = {limit}")
 
 
-def capped_timeout(products: Products, milp: MilpOptions, exc: TimeoutError) -> TimeoutError:
+def caps_checked(products: Products, milp: MilpOptions) -> tuple[dict[str, int], MilpOptions]:
+    """:func:`~synthesis.routing.caps.check_caps_reachable` (refuse a cap no test fits, and
+    the lower bounds it proves), and ``milp`` with the time it took taken off its time limit,
+    so the limit holds for the check and the solve together.
+
+    Raises
+    ------
+    InconsistentProblem
+        A cap no test fits.
+    """
+    if not milp.caps:
+        return {}, milp
+    t0 = time.perf_counter()
+    bounds = check_caps_reachable(products, milp)
+    if milp.time_limit is None:
+        return bounds, milp
+    left = milp.time_limit - (time.perf_counter() - t0)  # the check takes at most a share of it
+    return bounds, replace(milp, time_limit=max(left, 0.05))
+
+
+def capped_timeout(milp: MilpOptions, exc: TimeoutError, bounds: dict[str, int]) -> TimeoutError:
     """A time limit that ended a capped solve before any test: ``exc`` with what is known of
-    the caps (the bypass bound of :func:`synthesis.routing.caps.disjoint_bypasses`, proven),
-    so the user can tell a cap too tight from a time limit too short; a
-    :class:`~synthesis.routing.caps.CapsTimeout` whose advice is a higher cap or time limit
-    (a gap cannot help: no test was found)."""
+    the caps (``bounds``: the lower bounds :func:`synthesis.routing.caps.check_caps_reachable`
+    proved before the solve), so the user can tell a cap too tight from a time limit too
+    short; a :class:`~synthesis.routing.caps.CapsTimeout` whose advice is a higher cap or
+    time limit (a gap cannot help: no test was found)."""
     if not milp.caps:
         return exc
     known = []
     for cap, limit in milp.caps.items():
-        walks = disjoint_bypasses(products, milp, cap, stop_above=limit)
         noun = CAP_NOUNS[cap].split(" (")[0]
-        known.append(f"at least {walks} {noun} are needed (proven), at most {limit} allowed")
-    return CapsTimeout(f"{exc}; no test with {caps_text(milp.caps)} was found, nor proven impossible: {'; '.join(known)}")
+        if cap in bounds:
+            known.append(f"at least {bounds[cap]} {noun} are needed (proven), at most {limit} allowed")
+    said = f": {'; '.join(known)}" if known else ""
+    return CapsTimeout(f"{exc}; no test with {caps_text(milp.caps)} was found, nor proven impossible{said}")
 
 
 def over_caps(
@@ -410,7 +432,7 @@ def synthesize_agent_test(
         problem, remaining_time(problem, options, time.perf_counter() - started, int(products.virtual.n_edges))
     )
     try:
-        check_caps_reachable(products, milp)
+        _, milp = caps_checked(products, milp)
         outcome = counterexample_loop(
             products,
             agent,

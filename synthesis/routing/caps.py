@@ -150,17 +150,21 @@ def found_with(products: Products, options: MilpOptions, cap: str, deadline: flo
     return int((used & rm.caps.items.kinds(cap)).sum())
 
 
-def check_caps_reachable(products: Products, options: MilpOptions) -> None:
+def check_caps_reachable(products: Products, options: MilpOptions) -> dict[str, int]:
     """Refuse caps below what the problem needs before any solve: a cap ``N`` below
     :func:`disjoint_bypasses` (``N + 1`` walks around the test objective that share no item
     it counts) admits no test, nor does one below :func:`routed_bypasses` (the same count with
     the route every test leaves open spared, branched over its first and last moves).
+
+    Returns the proven lower bound of each cap (:func:`proven_bound`), for the message of a
+    solve the time limit ends with neither a test nor a proof.
 
     Raises
     ------
     InconsistentProblem
         ``"unroutable"``, naming the cap and the walks that prove it.
     """
+    bounds: dict[str, int] = {}
     for cap, limit in options.caps.items():
         noun = CAP_NOUNS[cap].split(" (")[0]
         walks = disjoint_bypasses(products, options, cap, stop_above=limit)
@@ -172,7 +176,8 @@ def check_caps_reachable(products: Products, options: MilpOptions) -> None:
                 f"share no {noun[:-1]} this cap counts, and a test must close each); raise the cap or drop it",
             )
         deadline = None if options.time_limit is None else time.perf_counter() + ROUTED_SHARE * options.time_limit
-        if routed_bypasses(products, options, cap, stop_above=limit, deadline=deadline) > limit:
+        bounds[cap] = proven_bound(products, options, cap, limit, walks, deadline)
+        if bounds[cap] > limit:
             raise InconsistentProblem(
                 "unroutable",
                 f"no test with {caps_text({cap: limit})} routes every successful execution through the test objective: "
@@ -180,6 +185,23 @@ def check_caps_reachable(products: Products, options: MilpOptions) -> None:
                 f"{limit + 1} ways from the start to the goal around the test objective share no {noun[:-1]} off that way, "
                 f"and a test must close each); raise the cap or drop it",
             )
+    return bounds
+
+
+def proven_bound(
+    products: Products, options: MilpOptions, cap: str, limit: int, plain: int, deadline: float | None = None
+) -> int:
+    """The largest ``k <= limit + 1`` proven by :func:`routed_bypasses` to be needed (``plain``,
+    :func:`disjoint_bypasses`'s count, where it proves nothing more): ``limit + 1`` where no
+    test fits the cap. Proves ``k + 1`` for ``k = plain, plain + 1, ...`` and stops at the
+    first it cannot prove (a search that cannot prove ``k + 1`` cannot prove more, so this
+    costs little more than the one search for ``limit + 1``), by ``deadline``."""
+    best = max(plain, 0)
+    while best <= limit:
+        if routed_bypasses(products, options, cap, stop_above=best, deadline=deadline) <= best:
+            break
+        best += 1
+    return best
 
 
 def caps_text(caps: dict[str, int]) -> str:

@@ -670,3 +670,19 @@ def test_30x30_floor_four_walls_are_refused_before_the_solve(tmp_path: Path, cap
     line = error_line(err)
     assert "no test with at most 4 walls" in line and "at least 5 walls are needed" in line
     assert took < 60, took
+
+
+def test_the_timeout_message_names_the_best_proven_bound(tmp_path: Path) -> None:
+    """On the 12x12 rack floor the plain count proves 2 walls; sparing the route proves 3, 4
+    and 5, and no more within its budget: a solve the time limit ends says "at least 5"
+    (the bounds the check proved before the solve), the cap and no false "no test fits"."""
+    from synthesis.routing.caps import check_caps_reachable
+
+    problem = load_problem_file(rack_floor(tmp_path, 12, "static"))
+    _, products = build_graphs(problem)
+    milp = pipeline.milp_options(problem, pipeline.SynthesisOptions(caps={"max_walls": 5}))
+    assert disjoint_bypasses(products, milp, "max_walls", stop_above=5) == 2
+    bounds = check_caps_reachable(products, milp)
+    assert bounds == {"max_walls": 5}
+    said = str(pipeline.capped_timeout(milp, TimeoutError("time limit reached"), bounds))
+    assert "at least 5 walls are needed (proven), at most 5 allowed" in said and "nor proven impossible" in said
