@@ -24,7 +24,8 @@ The protocol (docs/benchmark-protocol.md has the reasons for each choice):
    ``random`` (the **floor**, ``runs`` runs per test, batched too); the **references**
    (the scripted replanner and the GR(1) system, correct systems that do not know the
    test: the **ceiling**; on fuel grids with doors a door can close after the fuel to go
-   round it is spent, so they meet fewer than all tests there: docs/benchmark-protocol.md) and any system that is not batched through the single env, once per test.
+   round it is spent, so they meet fewer than all tests there: docs/benchmark-protocol.md)
+   and any system that is not batched through the single env, once per test.
    The floor and the ceiling are always scored: they define the scale.
 4. **The statistics**: per split, the **normalized score** ``(met - floor) / (ceiling -
    floor)`` (0 = random, 1 = reference; floor and ceiling are the split's own), its
@@ -281,16 +282,6 @@ def is_standard_pool(name: str) -> bool:
     return bool(is_standard(name))
 
 
-def on_demand_name(pool: str) -> str:
-    """The on-demand pool name of a standard pool's id (its splits are that pool's first
-    seeds), or ``pool`` itself."""
-    if not is_standard_pool(pool):
-        return pool
-    from flowtest_env.standard_pools import standard_pool
-
-    return str(standard_pool(pool).pool)
-
-
 def baseline_settings(algo: str, trainer: str = "native") -> dict[str, Any]:
     """The full training settings of a baseline: :data:`NATIVE_BASELINES` over
     ``NATIVE_DEFAULTS``, or with ``trainer="sb3"`` :data:`BASELINES` over ``DEFAULTS``."""
@@ -515,7 +506,7 @@ def train_baseline(config: BenchmarkConfig, algo: str, seed: int, splits: dict[s
     if config.trainer == "native":
         return _train_native_baseline(config, algo, seed, splits, path, every, progress_bar, count)
     settings = baseline_settings(algo, "sb3")
-    pool_options = {"pool": on_demand_name(config.pool), "split": "train", "count": count}
+    pool_options = {"pool": config.pool, "split": "train", "count": count}  # a standard pool: its shipped records
     env = make_training_vec_env(POOL_ENV_ID, seed, settings, pool_options)
     model = make_model(env, settings, seed)
     shown = {"train": _games_and_budgets(splits["train"]), "validation": _games_and_budgets(splits["validation"])}

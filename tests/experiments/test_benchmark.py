@@ -284,11 +284,29 @@ def test_a_standard_pool_id_is_accepted_and_the_command_reruns_the_config() -> N
     the default."""
     config = bench.BenchmarkConfig("reachability1/5x5-v1", suts=("scripted:replanner",))
     bench.check_config(config)  # no error
-    assert bench.on_demand_name("reachability1/5x5-v1") == "reachability1/5x5"
-    assert bench.on_demand_name(POOL) == POOL
     with pytest.raises(bench.ProblemError, match="not a standard pool"):
         bench.check_config(bench.BenchmarkConfig("nosuch1/5x5-v1"))
     assert bench.command_of(bench.BenchmarkConfig(POOL)) == f"flowtest benchmark --pool {POOL} --out OUT"
     small = bench.BenchmarkConfig(POOL, seeds=(0, 1), steps=5000, curve_sizes=(), algos=("plr-ppo",))
     assert bench.command_of(small) == (f"flowtest benchmark --pool {POOL} --algo plr-ppo --steps 5000 --seeds 0 1 "
                                        "--curve-sizes --out OUT")
+
+
+def test_sb3_trains_on_the_standard_pools_shipped_records(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    """With ``--trainer sb3`` on a standard pool the training envs load its shipped records
+    (the id itself), not the on-demand pool of the same seeds, which synthesized every test
+    again (2 min 20 s for 1,024 tests where the records load in seconds)."""
+    asked: dict[str, Any] = {}
+
+    class Stop(Exception):
+        pass
+
+    def capture(env_id: str, seed: int, settings: dict[str, Any], pool_options: dict[str, Any]) -> None:
+        asked.update(pool_options)
+        raise Stop
+
+    monkeypatch.setattr(bench, "make_training_vec_env", capture)
+    config = bench.BenchmarkConfig("reachability1/5x5-v1", trainer="sb3", train_count=16)
+    with pytest.raises(Stop):
+        bench.train_baseline(config, "maskable-ppo", 0, {}, tmp_path, train_tests=16)
+    assert asked == {"pool": "reachability1/5x5-v1", "split": "train", "count": 16}
