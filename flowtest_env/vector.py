@@ -66,7 +66,7 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from .compiled import OUTCOMES, CompiledPool, compile_pool, potentials
+from .compiled import OUTCOMES, CompiledPool, compile_pool, gc_paused, potentials
 from .config import EnvConfig, config_from, with_option_signature
 from .draws import draw_tests, key_of_seed
 from .encoding import Encoder, ObservationLayout, Segment, make_encoder
@@ -130,14 +130,16 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         self.autoreset_mode = autoreset_mode_of(autoreset_mode)
         config = config_from(type(self).__name__, config, options)
         one_of("render_mode", config.render_mode, (None, *self.metadata["render_modes"]))
-        self.games: list[TestGame] = pool_games(games, config.setting)
+        with gc_paused():  # many small objects that stay alive: collections would walk them again and again
+            self.games: list[TestGame] = pool_games(games, config.setting)
         settings = {g.setting for g in self.games}
         if len(settings) > 1:
             raise ValueError("the pool mixes tests of the instantaneous and the accumulative setting; pass setting= to choose one")
         config = config.with_max_steps(max(default_max_steps(g) for g in self.games))
         assert config.max_steps is not None
         self.config = config
-        self.encoders: list[Encoder] = [make_encoder(g, config.obs_kind, config.pad_to) for g in self.games]
+        with gc_paused():
+            self.encoders: list[Encoder] = [make_encoder(g, config.obs_kind, config.pad_to) for g in self.games]
         self._mem: slice | None = shared_position_slice(self.encoders) if config.memory == "visited" else None
         accumulative = settings == {"accumulative"}
         self.pool: CompiledPool = compile_pool(self.games, self.encoders, accumulative)

@@ -82,8 +82,7 @@ def build_product(ts: TransitionSystem, dba: DBA) -> ProductGraph:
     move = np.repeat(np.arange(ts.n_moves, dtype=np.int32), nq)
     n_full = ts.n_states * nq
     init = ts.initial * nq + int(dba.delta[dba.initial, letter[ts.initial]])
-    adj = sp.csr_matrix((np.ones(tail.size, dtype=np.int8), (tail, head)), shape=(n_full, n_full))
-    order = breadth_first_order(adj, init, directed=True, return_predecessors=False)
+    order = _bfs_order(n_full, tail, head, init)
     renum = np.full(n_full, -1, dtype=np.int64)
     renum[order] = np.arange(order.size)
     keep = renum[tail] >= 0
@@ -100,6 +99,36 @@ def build_product(ts: TransitionSystem, dba: DBA) -> ProductGraph:
         initial=0,
         n_hist=nq,
     )
+
+
+SMALL_PRODUCT = 50_000
+"""Pairs up to which :func:`build_product` searches in plain Python (a random-grid test's
+product has a few hundred: faster than building a sparse matrix for the search)."""
+
+
+def _bfs_order(n: int, tail: np.ndarray, head: np.ndarray, start: int) -> np.ndarray:
+    """Nodes reachable from ``start`` along ``tail -> head`` in breadth-first order, each
+    node's successors in increasing order (the order of scipy's ``breadth_first_order`` on
+    the canonical CSR matrix of these edges, which large graphs still use)."""
+    if tail.size > SMALL_PRODUCT:
+        adj = sp.csr_matrix((np.ones(tail.size, dtype=np.int8), (tail, head)), shape=(n, n))
+        order: np.ndarray = breadth_first_order(adj, start, directed=True, return_predecessors=False)
+        return order
+    key = np.unique(tail.astype(np.int64) * n + head)  # sorted by tail, then head; duplicates once
+    first = np.searchsorted(key // n, np.arange(n + 1)).tolist()
+    heads = (key % n).tolist()
+    seen = bytearray(n)
+    seen[start] = 1
+    out = [int(start)]
+    i = 0
+    while i < len(out):
+        u = out[i]
+        i += 1
+        for v in heads[first[u] : first[u + 1]]:
+            if not seen[v]:
+                seen[v] = 1
+                out.append(v)
+    return np.asarray(out, dtype=np.int32)
 
 
 def coreachable(n: int, src: np.ndarray, dst: np.ndarray, targets: np.ndarray) -> np.ndarray:

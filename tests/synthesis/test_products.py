@@ -274,3 +274,23 @@ def test_reachable_and_coreachable_helpers(seed: int) -> None:
     starts = [v for v in range(n) if mask[v]]
     assert set(np.flatnonzero(reachable(n, src, dst, mask)).tolist()) == bfs(adj, starts)
     assert set(np.flatnonzero(coreachable(n, src, dst, mask)).tolist()) == bfs(radj, starts)
+
+
+def test_small_product_search_orders_nodes_as_scipy_does() -> None:
+    """The plain search :func:`build_product` uses on small products numbers the nodes exactly
+    as scipy's breadth-first order on the sparse matrix did (shipped pool records name nodes
+    by that numbering): random graphs with duplicate edges and self-loops."""
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import breadth_first_order
+
+    from synthesis.graphs.products import _bfs_order
+
+    rng = np.random.default_rng(7)
+    for _ in range(200):
+        n = int(rng.integers(1, 40))
+        m = int(rng.integers(0, 4 * n))
+        tail, head = rng.integers(0, n, m), rng.integers(0, n, m)
+        start = int(rng.integers(0, n))
+        adj = sp.csr_matrix((np.ones(m, dtype=np.int8), (tail, head)), shape=(n, n))
+        want = breadth_first_order(adj, start, directed=True, return_predecessors=False)
+        assert _bfs_order(n, tail, head, start).tolist() == want.tolist()
