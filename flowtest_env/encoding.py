@@ -40,6 +40,8 @@ test-objective part of the history, the agent's strategy memory.
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -56,18 +58,34 @@ class EncodingError(ValueError):
     """An observation kind the problem does not support."""
 
 
+@functools.lru_cache(maxsize=256)
+def _objective_propositions(text: str) -> tuple[str, ...]:
+    """The propositions of an objective, sorted (a pool's tests share a few objectives)."""
+    return tuple(sorted(propositions(parse_formula(text))))
+
+
+def _holds(game: TestGame, props: Sequence[str]) -> np.ndarray:
+    """``bool[n_states, len(props)]``: which of ``props`` hold at each state."""
+    ts = game.ts
+    out = np.zeros((ts.n_states, len(props)), dtype=bool)
+    if props:
+        col = {p: i for i, p in enumerate(props)}
+        for s, label in enumerate(ts.labels):
+            for p in label:
+                i = col.get(p)
+                if i is not None:
+                    out[s, i] = True
+    return out
+
+
 def system_propositions(game: TestGame) -> list[str]:
     """Propositions of the system objective worth showing: all but those that hold only at
     terminal (goal) states, sorted."""
-    ts = game.ts
-    props = propositions(parse_formula(game.artifact.objectives["system"]))
-    out = []
-    for p in sorted(props):
-        where = [s for s in range(ts.n_states) if p in ts.labels[s]]
-        if where and all(ts.terminal[s] for s in where):
-            continue
-        out.append(p)
-    return out
+    props = _objective_propositions(game.artifact.objectives["system"])
+    holds = _holds(game, props)
+    somewhere = [bool(v) for v in np.any(holds, axis=0)]
+    elsewhere = [bool(v) for v in np.any(holds & ~np.asarray(game.ts.terminal, dtype=bool)[:, None], axis=0)]
+    return [p for i, p in enumerate(props) if elsewhere[i] or not somewhere[i]]
 
 
 @dataclass(frozen=True)
@@ -237,11 +255,9 @@ class GridEncoder(Encoder):
         # proposition planes per fuel level
         levels = self.max_fuel + 1
         prop_planes = np.zeros((levels, len(self.sys_props), H, W), dtype=np.uint8)
-        for s in range(ts.n_states):
-            p = int(ts.place[s])
-            for i, name in enumerate(self.sys_props):
-                if name in ts.labels[s]:
-                    prop_planes[self.fuel[s], i, self.cell_r[p], self.cell_c[p]] = 255
+        s_at, i_at = np.nonzero(_holds(game, self.sys_props))
+        place_at = ts.place[s_at]
+        prop_planes[self.fuel[s_at], i_at, self.cell_r[place_at], self.cell_c[place_at]] = 255
         self.prop_planes = prop_planes
         self.prop_start = ch["goal"] + 1
         self.door_start = ch["door_N"]
