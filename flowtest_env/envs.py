@@ -28,8 +28,7 @@ from .config import EnvConfig, config_from, with_option_signature
 from .draws import draw_test
 from .encoding import Encoder, ObservationLayout, make_encoder
 from .game import GRID_ACTIONS, MET, VIOLATED, GameError, RunState, TestGame
-from .pools import random_grid_arguments
-from .random_grid import random_pool
+from .pools import random_grid_arguments, random_grid_tests
 from .render import Renderer, ansi, make_renderer
 from .sources import TestLike, game_for
 from .validation import action_index, one_of, positive_int
@@ -775,7 +774,7 @@ class RandomGridEnv(FlowTestEnv):
     ) -> None:
         config = config_from(type(self).__name__, config, options)
         size, family, n, seeds, kind, world = random_grid_pool(size, family, n, seeds, kind, pool, split, count, world)
-        tests = random_pool(size, family, n, seeds, kind, world=world)
+        tests = random_grid_tests(pool, split, count, size, family, n, seeds, kind, world)
         games = [TestGame(a, config.setting) for a in tests]
         self._configure(games, config.with_max_steps(4 * size * size))
         self.problem = f"random-{size}x{size}-{family}{n}" + ("" if world == "empty" else f"-{world}")

@@ -36,10 +36,10 @@ from __future__ import annotations
 
 from synthesis.artifacts.artifact import TestArtifact
 
-from .random_grid import SPLIT_SPAN, SPLITS, PoolName, build_pool, parse_pool, split_seeds
+from .random_grid import SPLIT_SPAN, SPLITS, PoolName, build_pool, parse_pool, random_pool, split_seeds
 from .standard_pools import is_standard, load_standard_pool, standard_pool
 
-__all__ = ["SPLITS", "SPLIT_SPAN", "PoolName", "load_pool", "parse_pool", "random_grid_arguments", "split_seeds"]
+__all__ = ["SPLITS", "SPLIT_SPAN", "PoolName", "load_pool", "parse_pool", "random_grid_arguments", "random_grid_tests", "split_seeds"]
 
 def load_pool(
     name: str,
@@ -80,6 +80,18 @@ def load_pool(
     )
 
 
+def random_grid_tests(
+    pool: str | None, split: str, count: int, size: int, family: str, n: int, seeds: tuple[int, ...], kind: str, world: str
+) -> list[TestArtifact]:
+    """The tests of a random-grid env, from :func:`random_grid_arguments`'s values: a
+    standard pool's shipped records where ``pool`` is a standard pool id (nothing
+    synthesized; the same tests as its on-demand pool), else built on demand and cached
+    (:func:`flowtest_env.random_grid.random_pool`)."""
+    if pool is not None and is_standard(pool):
+        return load_pool(pool, split, count)
+    return random_pool(size, family, n, seeds, kind, world=world)
+
+
 def random_grid_arguments(
     pool: str | None,
     split: str,
@@ -94,8 +106,8 @@ def random_grid_arguments(
     """``(size, family, n, seeds, kind, world)`` of a random-grid env: from the named
     ``pool``'s ``split`` (its first ``count`` seeds) when one is given, else the explicit
     arguments (``n`` defaults to 1 for reachability, 2 otherwise). A standard pool id
-    names the same seeds as the pool it draws from (the env builds and caches them;
-    :func:`load_pool` serves the shipped ones without building)."""
+    names the same seeds as the pool it draws from (:func:`random_grid_tests` serves the
+    shipped ones without building)."""
     if pool is not None:
         named = parse_pool(standard_pool(pool).pool if is_standard(pool) else pool)
         return named.size, named.family, named.n, tuple(split_seeds(split, count)), named.kind, named.world

@@ -72,7 +72,7 @@ from .draws import draw_tests, key_of_seed
 from .encoding import Encoder, ObservationLayout, Segment, make_encoder
 from .envs import default_max_steps, random_grid_pool
 from .game import RunState, TestGame
-from .random_grid import random_pool
+from .pools import random_grid_tests
 from .render import Renderer, make_renderer
 from .sources import game_for
 from .validation import one_of, positive_int
@@ -600,7 +600,7 @@ class RandomGridVectorEnv(PoolVectorEnv):
         config = config_from(type(self).__name__, config, options)
         positive_int("num_envs", num_envs)
         size, family, n, seeds, kind, world = random_grid_pool(size, family, n, seeds, kind, pool, split, count, world)
-        tests = random_pool(size, family, n, seeds, kind, world=world)
+        tests = random_grid_tests(pool, split, count, size, family, n, seeds, kind, world)
         games = [TestGame(a, config.setting) for a in tests]
         super().__init__(num_envs, games, autoreset_mode=autoreset_mode, config=config.with_max_steps(4 * size * size))
         self.problem = f"random-{size}x{size}-{family}{n}" + ("" if world == "empty" else f"-{world}")

@@ -453,3 +453,25 @@ def test_ctrl_c_stops_a_load_in_two_processes_within_a_second(tmp_path: Path) ->
     time.sleep(0.2)
     with pytest.raises(ProcessLookupError):
         os.killpg(proc.pid, 0)  # no process of the group is left
+
+
+def test_random_grid_envs_take_a_standard_pools_shipped_records(monkeypatch: pytest.MonkeyPatch) -> None:
+    """``gymnasium.make("FlowTest-RandomGrid-v0", pool=<standard id>)`` and its vector env
+    load the shipped records (what SB3 training on a standard pool uses): nothing is built,
+    and the tests are those ``load_pool`` gives."""
+    import gymnasium as gym
+
+    import flowtest_env.random_grid as random_grid
+    from flowtest_env.vector import RandomGridVectorEnv
+
+    want = [t.to_dict() for t in load_pool(R1, "train", 5)]
+
+    def no_build(*args: object, **kwargs: object) -> None:
+        raise AssertionError("a standard pool's shipped tests were built again")
+
+    monkeypatch.setattr(random_grid, "build_pool", no_build)
+    monkeypatch.setattr(random_grid, "_POOLS", {})  # nothing built earlier in this process either
+    env = gym.make("FlowTest-RandomGrid-v0", pool=R1, split="train", count=5)
+    assert [g.artifact.to_dict() for g in env.unwrapped.games] == want
+    venv = RandomGridVectorEnv(2, pool=R1, split="train", count=5)
+    assert [g.artifact.to_dict() for g in venv.games] == want
