@@ -23,19 +23,16 @@ tests with the same array indexing.
 
 from __future__ import annotations
 
-import gc
 import mmap
 import multiprocessing
 import os
-import sys
-import threading
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from .bulk import can_fork, free_cores, gc_paused
 from .encoding import Encoder
 from .game import MET, OPEN, VIOLATED, RunState, TestGame
 
@@ -411,15 +408,7 @@ def helpers(count: int) -> int:
     other Python thread runs (a fork copies no thread, and a lock one of them held would
     stay held in the helper) and this process may have children (a multiprocessing
     pool's worker, one of a trainer's runs, is daemonic and may not)."""
-    if count < PARALLEL_FROM or not sys.platform.startswith("linux") or threading.active_count() != 1:
-        return 0
-    if multiprocessing.current_process().daemon:
-        return 0
-    try:
-        cores = len(os.sched_getaffinity(0))
-    except (AttributeError, OSError):
-        cores = os.cpu_count() or 1
-    return 1 if cores >= 2 else 0
+    return 1 if count >= PARALLEL_FROM and can_fork() and free_cores() >= 2 else 0
 
 
 def _obs_table(rows: int, shape: tuple[int, ...], dtype: np.dtype[Any], shared: bool) -> tuple[np.ndarray, bool]:
@@ -586,26 +575,6 @@ def potentials(pool: CompiledPool, games: list[TestGame], potential: Callable[[T
         o = int(pool.offset[t])
         out[o : o + ct.n_z] = values[inverse.reshape(-1)]
     return out
-
-
-@contextmanager
-def gc_paused() -> Iterator[None]:
-    """The cyclic garbage collector paused (as it was before, after): a bulk build of
-    many small objects that stay alive otherwise triggers collection after collection,
-    each walking every object built so far (about a third of the time of a large pool).
-
-    Example::
-
-        with gc_paused():
-            games = [TestGame(a) for a in artifacts]
-    """
-    was = gc.isenabled()
-    gc.disable()
-    try:
-        yield
-    finally:
-        if was:
-            gc.enable()
 
 
 def compile_pool(games: list[TestGame], encoders: list[Encoder], accumulative: bool = False) -> CompiledPool:

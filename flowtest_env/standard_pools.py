@@ -38,17 +38,13 @@ Example::
 
 from __future__ import annotations
 
-import gc
 import gzip
 import io
 import json
 import multiprocessing
 import os
 import re
-import sys
-import threading
-from collections.abc import Iterable, Iterator, Mapping
-from contextlib import contextmanager
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from functools import lru_cache
 from multiprocessing.connection import wait as mp_wait
@@ -60,6 +56,7 @@ from synthesis.artifacts.pool_records import CHECKS, rebuild_artifact
 from synthesis.artifacts.provenance import versions
 from synthesis.model.errors import ProblemError
 
+from .bulk import can_fork, free_cores, gc_paused
 from .random_grid import SPLIT_SPAN, SPLITS, BuildProgress, PoolName, changed_params, parse_pool, pool_params, split_seeds
 
 __all__ = [
@@ -286,20 +283,6 @@ def write_records(path: Path, records: Iterable[Mapping[str, Any]]) -> int:
     return len(data)
 
 
-@contextmanager
-def _gc_paused() -> Iterator[None]:
-    """The cyclic garbage collector paused (as it was before, after): a bulk build of
-    many small objects that stay alive otherwise triggers collection after collection,
-    each walking every object built so far (about a third of the time of a large pool)."""
-    was = gc.isenabled()
-    gc.disable()
-    try:
-        yield
-    finally:
-        if was:
-            gc.enable()
-
-
 def load_standard_pool(
     pool_id: str,
     split: str = "test",
@@ -363,8 +346,8 @@ def load_standard_pool(
     bar = BuildProgress(count, 0, f"loading {pool.id} {split}", enabled=show)
     job = _Job(pool, split, check, records[start : start + count], start)
     try:
-        with _gc_paused():
-            if n_proc > 1 and _can_fork():
+        with gc_paused():
+            if n_proc > 1 and can_fork():
                 tests = _load_forked(job, n_proc, bar)
                 if tests is not None:
                     return tests
@@ -390,20 +373,7 @@ def auto_workers(count: int) -> int:
     :data:`PARALLEL_FROM` tests or more where this process may run on two cores or more
     and can fork, else one (each process rebuilds whole tests; beyond two, this
     process's share of receiving the others' tests grows)."""
-    try:
-        cores = len(os.sched_getaffinity(0))
-    except (AttributeError, OSError):
-        cores = os.cpu_count() or 1
-    return 2 if count >= PARALLEL_FROM and cores >= 2 and _can_fork() else 1
-
-
-def _can_fork() -> bool:
-    """Whether helpers can be forked safely: on Linux (macOS's system libraries are not
-    safe to fork), where this process runs no other Python thread (a fork copies no
-    thread, and a lock one of them held would stay held in the helper) and may have
-    children (a multiprocessing pool's worker, daemonic, may not)."""
-    return (sys.platform.startswith("linux") and threading.active_count() == 1
-            and not multiprocessing.current_process().daemon)
+    return 2 if count >= PARALLEL_FROM and free_cores() >= 2 and can_fork() else 1
 
 
 class _Job:

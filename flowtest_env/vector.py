@@ -66,7 +66,8 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from .compiled import OUTCOMES, CompiledPool, compile_pool, gc_paused, potentials
+from .bulk import gc_paused
+from .compiled import OUTCOMES, CompiledPool, compile_pool, potentials
 from .config import EnvConfig, config_from, with_option_signature
 from .draws import draw_tests, key_of_seed
 from .encoding import Encoder, ObservationLayout, Segment, make_encoder

@@ -7,12 +7,12 @@ import multiprocessing
 
 import pytest
 
-from flowtest_env import standard_pools
+from flowtest_env.bulk import can_fork
 from flowtest_env.compiled import PARALLEL_FROM, helpers
 
 
 def _in_worker(_: int) -> tuple[int, bool]:
-    return helpers(10 * PARALLEL_FROM), standard_pools._can_fork()
+    return helpers(10 * PARALLEL_FROM), can_fork()
 
 
 @pytest.mark.skipif("fork" not in multiprocessing.get_all_start_methods(), reason="the platform does not fork")
