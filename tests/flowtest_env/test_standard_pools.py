@@ -430,7 +430,8 @@ def test_ctrl_c_stops_a_load_in_two_processes_within_a_second(tmp_path: Path) ->
     import time
 
     script = (
-        "import multiprocessing, sys\n"
+        "import multiprocessing, signal, sys\n"
+        "signal.signal(signal.SIGINT, signal.default_int_handler)\n"  # as on a terminal: a job started in the background inherits SIGINT ignored
         "from flowtest_env.standard_pools import load_standard_pool\n"
         "try:\n"
         "    load_standard_pool('reachability1/5x5-v1', 'train', 4096, progress=True, workers=2)\n"
