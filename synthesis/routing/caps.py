@@ -197,8 +197,9 @@ def proven_bound(
     first it cannot prove (a search that cannot prove ``k + 1`` cannot prove more, so this
     costs little more than the one search for ``limit + 1``), by ``deadline``."""
     best = max(plain, 0)
+    bg = bypass_graph(products, options, cap)  # built once for every k
     while best <= limit:
-        if routed_bypasses(products, options, cap, stop_above=best, deadline=deadline) <= best:
+        if routed_bypasses(products, options, cap, stop_above=best, deadline=deadline, bg=bg) <= best:
             break
         best += 1
     return best
@@ -321,7 +322,7 @@ ROUTED_SHARE = 0.25
 
 def routed_bypasses(
     products: Products, options: MilpOptions, cap: str, stop_above: int,
-    searches: int = ROUTED_SEARCHES, deadline: float | None = None,
+    searches: int = ROUTED_SEARCHES, deadline: float | None = None, bg: BypassGraph | None = None,
 ) -> int:
     """``stop_above + 1`` where it is proven that every test needs more than ``stop_above``
     items the cap ``cap`` counts; else :func:`disjoint_bypasses`'s bound.
@@ -342,12 +343,15 @@ def routed_bypasses(
 
     ``searches`` bounds the shortest-path searches made (:data:`ROUTED_SEARCHES`); ``deadline``
     (``perf_counter`` time) ends the search early. A search that runs out proves nothing.
+    ``bg``: the :func:`bypass_graph` of ``products``, ``options`` and ``cap``, where the caller
+    has it already.
 
     Example::
 
         routed_bypasses(products, milp, "max_walls", stop_above=4)  # 5: no test has 4 walls
     """
-    bg = bypass_graph(products, options, cap)
+    if bg is None:
+        bg = bypass_graph(products, options, cap)
     plain = count_disjoint_bypasses(bg, stop_above)
     if plain > stop_above or plain == 0 or bg.route_ends.size == 0:
         return plain
