@@ -555,10 +555,12 @@ def fewer_items(
 
     The routing heuristic and :func:`capped_guess` close the bypasses around whatever route
     they keep open, and may close a corridor with four walls where two across its mouth
-    would do. This search takes one or two of the test's items off and closes the bypasses
-    that opens again with a minimum cut (:func:`_min_bypass_cut`) in which the rest of the
-    test costs nothing and the groups of one route ``Src -> I -> Tgt`` the test leaves open
-    are never cut. The new cut set keeps only what separation needs (the rest of the test
+    would do. This search takes all, one or two of the test's items off and closes the
+    bypasses that opens again with a minimum cut (:func:`_min_bypass_cut`) in which the rest
+    of the test costs nothing and the groups of one route ``Src -> I -> Tgt`` the test leaves open
+    are never cut (where a door stands for several cut groups, the new cut closes each of
+    its doors under every history the route leaves it to). The new cut set keeps only what
+    separation needs (the rest of the test
     off its border is dropped with it), closes every bypass (the cut is finite), leaves that
     route open (flow >= 1) and is kept when it traps no entry node of ``entries`` and counts
     fewer items; the search then starts again from it, until no removal helps under any of
