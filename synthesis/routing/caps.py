@@ -167,7 +167,8 @@ def check_caps_reachable(products: Products, options: MilpOptions) -> dict[str, 
     bounds: dict[str, int] = {}
     for cap, limit in options.caps.items():
         noun = CAP_NOUNS[cap].split(" (")[0]
-        walks = disjoint_bypasses(products, options, cap, stop_above=limit)
+        bg = bypass_graph(products, options, cap)  # built once for both bounds
+        walks = count_disjoint_bypasses(bg, stop_above=limit)
         if walks > limit:
             raise InconsistentProblem(
                 "unroutable",
@@ -176,7 +177,7 @@ def check_caps_reachable(products: Products, options: MilpOptions) -> dict[str, 
                 f"share no {noun[:-1]} this cap counts, and a test must close each); raise the cap or drop it",
             )
         deadline = None if options.time_limit is None else time.perf_counter() + ROUTED_SHARE * options.time_limit
-        bounds[cap] = proven_bound(products, options, cap, limit, walks, deadline)
+        bounds[cap] = proven_bound(products, options, cap, limit, walks, deadline, bg)
         if bounds[cap] > limit:
             raise InconsistentProblem(
                 "unroutable",
@@ -189,15 +190,18 @@ def check_caps_reachable(products: Products, options: MilpOptions) -> dict[str, 
 
 
 def proven_bound(
-    products: Products, options: MilpOptions, cap: str, limit: int, plain: int, deadline: float | None = None
+    products: Products, options: MilpOptions, cap: str, limit: int, plain: int, deadline: float | None = None,
+    bg: BypassGraph | None = None,
 ) -> int:
     """The largest ``k <= limit + 1`` proven by :func:`routed_bypasses` to be needed (``plain``,
     :func:`disjoint_bypasses`'s count, where it proves nothing more): ``limit + 1`` where no
     test fits the cap. Proves ``k + 1`` for ``k = plain, plain + 1, ...`` and stops at the
     first it cannot prove (a search that cannot prove ``k + 1`` cannot prove more, so this
-    costs little more than the one search for ``limit + 1``), by ``deadline``."""
+    costs little more than the one search for ``limit + 1``), by ``deadline``. ``bg``: the
+    :func:`bypass_graph`, where the caller has it already."""
     best = max(plain, 0)
-    bg = bypass_graph(products, options, cap)  # built once for every k
+    if bg is None:
+        bg = bypass_graph(products, options, cap)  # built once for every k
     while best <= limit:
         if routed_bypasses(products, options, cap, stop_above=best, deadline=deadline, bg=bg) <= best:
             break
