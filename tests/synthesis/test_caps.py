@@ -9,6 +9,7 @@ from __future__ import annotations
 import itertools
 import json
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -546,19 +547,10 @@ def test_fewer_items_gives_a_test_on_random_floors(tmp_path: Path, kind: str) ->
     from synthesis.routing.result import required_entries
 
     cap = "walls" if kind == "static" else "doors"
-    rng = np.random.default_rng(20261129)
     checked = fewest = 0
-    for i in range(200):
+    for i, problem, products in _random_floors(tmp_path, np.random.default_rng(20261129), kind, 200):
         if checked == 12:
             break
-        path = warehouse(tmp_path, grid=_random_floor(rng, 3, 4), test="F bay & F aisle", kind=kind)
-        path = path.rename(tmp_path / f"floor{i}.toml")
-        try:
-            problem = load_problem_file(path)
-            _, products = build_graphs(problem)
-            check_problem_consistency(problem, products)
-        except (ProblemError, InconsistentProblem):
-            continue
         milp = pipeline.milp_options(problem, pipeline.SynthesisOptions(caps={f"max_{cap}": 99}))
         entries = dict(required_entries(products, milp))
         rm = build_model(products, milp, entries, check_consistency(products))
@@ -697,6 +689,22 @@ def _random_floor(rng: np.random.Generator, rows: int, cols: int) -> str:
     return "\n" + "\n".join("  ".join(cells[r * cols:(r + 1) * cols]) for r in range(rows)) + "\n"
 
 
+def _random_floors(
+    tmp_path: Path, rng: np.random.Generator, kind: str, tries: int
+) -> Iterator[tuple[int, Problem, Products]]:
+    """Random 3x4 warehouse floors (``F bay & F aisle``), the consistent ones of ``tries``."""
+    for i in range(tries):
+        path = warehouse(tmp_path, grid=_random_floor(rng, 3, 4), test="F bay & F aisle", kind=kind)
+        path = path.rename(tmp_path / f"floor{i}.toml")
+        try:
+            problem = load_problem_file(path)
+            _, products = build_graphs(problem)
+            check_problem_consistency(problem, products)
+        except (ProblemError, InconsistentProblem):
+            continue
+        yield i, problem, products
+
+
 @pytest.mark.parametrize("floors", [pytest.param(12, id="12-floors"), pytest.param(60, id="60-floors", marks=pytest.mark.slow)])
 def test_route_spared_bound_never_refuses_a_cap_a_test_fits(tmp_path: Path, floors: int) -> None:
     """Brute force on random 3x4 static floors: wherever :func:`routed_bypasses` (or the plain
@@ -705,19 +713,10 @@ def test_route_spared_bound_never_refuses_a_cap_a_test_fits(tmp_path: Path, floo
     plain one on some of them (it is not the plain bound under another name)."""
     from synthesis.routing.caps import routed_bypasses
 
-    rng = np.random.default_rng(20261127)
     checked = stronger = 0
-    for i in range(10 * floors):
+    for i, problem, products in _random_floors(tmp_path, np.random.default_rng(20261127), "static", 10 * floors):
         if checked == floors:
             break
-        path = warehouse(tmp_path, grid=_random_floor(rng, 3, 4), test="F bay & F aisle", kind="static")
-        path = path.rename(tmp_path / f"floor{i}.toml")
-        try:
-            problem = load_problem_file(path)
-            _, products = build_graphs(problem)
-            check_problem_consistency(problem, products)
-        except (ProblemError, InconsistentProblem):
-            continue
         checked += 1
         for cap in range(5):
             milp = pipeline.milp_options(problem, pipeline.SynthesisOptions(caps={"max_walls": cap}))
