@@ -271,6 +271,27 @@ def check_config(config: BenchmarkConfig) -> None:
                 baseline_settings(algo)
 
 
+def default_counts(pool: str) -> dict[str, int]:
+    """Tests per split when none is given: the protocol's (:class:`BenchmarkConfig`), or a
+    standard pool's whole split where it plans fewer (its held-out split of 250 tests for a
+    family that builds slowly), so the defaults load shipped records only and build nothing.
+
+    Example::
+
+        default_counts("reachability1/5x5/blocked/agent-v1")  # {'train': 4096, 'validation': 256, 'test': 250}
+    """
+    counts = BenchmarkConfig(pool).counts()
+    if is_standard_pool(pool):
+        from flowtest_env.standard_pools import standard_pool
+
+        try:
+            planned = standard_pool(pool).splits
+        except ValueError:
+            return counts  # an unknown id or version: check_config says so
+        counts = {split: min(n, int(planned.get(split, n))) for split, n in counts.items()}
+    return counts
+
+
 def is_standard_pool(name: str) -> bool:
     """Whether ``name`` is written as a standard pool's id (``reachability1/5x5-v1``:
     :mod:`flowtest_env.standard_pools`, shipped records), which :func:`flowtest_env.pools.load_pool`
@@ -1368,12 +1389,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         f"(default: {' '.join(DEFAULT_SUTS)})")
     p.add_argument("--algo", nargs="+", choices=BENCH_ALGOS, default=list(d.algos),
                    help=f"the baselines --sut ppo trains (default: {' '.join(d.algos)}; plr-ppo: native trainer only)")
-    p.add_argument("--train-count", type=positive_int, default=d.train_count,
+    p.add_argument("--train-count", type=positive_int, default=None,
                    help=f"tests of the train split to train on (default {d.train_count})")
-    p.add_argument("--validation-count", type=positive_int, default=d.validation_count,
+    p.add_argument("--validation-count", type=positive_int, default=None,
                    help=f"tests of the validation split, for the learning curves (default {d.validation_count})")
-    p.add_argument("--test-count", type=positive_int, default=d.test_count,
-                   help=f"held-out tests of the test split to score on (default {d.test_count})")
+    p.add_argument("--test-count", type=positive_int, default=None,
+                   help=f"held-out tests of the test split to score on (default {d.test_count}, or all of a standard "
+                        "pool's where it ships fewer: 250 for reachability1/5x5/blocked/agent-v1)")
     p.add_argument("--train-eval-count", type=positive_int, default=d.train_eval_count,
                    help=f"train tests scored (the first N; default {d.train_eval_count})")
     p.add_argument("--steps", type=positive_int, default=d.steps,
@@ -1427,9 +1449,11 @@ def run(args: argparse.Namespace) -> int:
     """``flowtest benchmark``: check everything, run, print the table (or the JSON)."""
     from synthesis.routing.solver_control import stdout_guard
 
+    counts = default_counts(args.pool)
     config = BenchmarkConfig(
         pool=args.pool, suts=tuple(args.sut or DEFAULT_SUTS), algos=tuple(dict.fromkeys(args.algo)),
-        train_count=args.train_count, validation_count=args.validation_count, test_count=args.test_count,
+        train_count=args.train_count or counts["train"], validation_count=args.validation_count or counts["validation"],
+        test_count=args.test_count or counts["test"],
         train_eval_count=args.train_eval_count, steps=args.steps, seeds=tuple(dict.fromkeys(args.seeds)), runs=args.runs,
         curve_sizes=tuple(args.curve_sizes), curve_seeds=args.curve_seeds, curve_points=args.curve_points,
         trainer=args.trainer, report_tests=args.report_tests, bootstrap=args.bootstrap, workers=args.workers,

@@ -292,6 +292,28 @@ def test_a_standard_pool_id_is_accepted_and_the_command_reruns_the_config() -> N
                                        "--curve-sizes --out OUT")
 
 
+def test_the_defaults_take_a_standard_pools_whole_smaller_split(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    """The test-agent pool ships 250 held-out tests (a family that builds slowly); with the
+    default counts the benchmark scores all 250 of them instead of asking for 1,000 (the other
+    750 would be synthesized on demand, for hours); a count given is kept, and the command in
+    the results file spells the count out."""
+    agent = "reachability1/5x5/blocked/agent-v1"
+    assert bench.default_counts(agent) == {"train": 4096, "validation": 256, "test": 250}
+    assert bench.default_counts(POOL) == bench.BenchmarkConfig(POOL).counts()
+    seen: list[bench.BenchmarkConfig] = []
+
+    def stop(config: bench.BenchmarkConfig) -> None:
+        seen.append(config)
+        raise bench.ProblemError("stopped here")
+
+    monkeypatch.setattr(bench, "check_config", stop)
+    assert main(["benchmark", "--pool", agent, "--out", str(tmp_path / "a")]) == 2
+    assert main(["benchmark", "--pool", agent, "--test-count", "100", "--out", str(tmp_path / "b")]) == 2
+    assert [c.counts() for c in seen] == [{"train": 4096, "validation": 256, "test": 250},
+                                          {"train": 4096, "validation": 256, "test": 100}]
+    assert "--test-count 250" in bench.command_of(seen[0])
+
+
 def test_sb3_trains_on_the_standard_pools_shipped_records(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
     """With ``--trainer sb3`` on a standard pool the training envs load its shipped records
     (the id itself), not the on-demand pool of the same seeds, which synthesized every test
