@@ -34,7 +34,7 @@ from ..graphs.consistency import check_consistency
 from ..graphs.products import Products, reachable
 from ..model.errors import InconsistentProblem
 from .bounds.heuristic import RoutingGuess, guess_routing, usable_edges
-from .model import CutGroups, RoutingModel, build_model, cut_groups, model_edges, physical_items
+from .model import CutGroups, PhysicalItems, RoutingModel, build_model, cut_groups, model_edges, physical_items
 from .options import MilpOptions
 from .phases import guess_solution
 from .result import blocked_of_edges, required_entries
@@ -473,16 +473,9 @@ def capped_guess(
     me, groups = rm.edges, rm.groups
     n, src, target = g.n_nodes, int(g.initial), products.target
     cuttable = me.has_var & ~rm.reductions.fixed_open
-    counted = np.zeros(cuttable.size, dtype=bool)
     item = caps.items.of_group
-    for cap in options.caps:
-        counted |= caps.items.kinds(cap)[item]
-    cost = np.where(counted, _COUNTED, _FREE)
-    # a door closed under several histories counts once: tied attempts price each of its
-    # groups a share of the door and close the door under every history at once
-    per_item = np.bincount(item, minlength=int(item.max(initial=-1)) + 1)
-    tied_cost = np.where(counted, np.maximum(1, _COUNTED // per_item[item]), _FREE)
-    tie = bool((per_item > 1).any())
+    prices = _group_prices(caps.items, options)
+    cost, tied_cost, tie = prices.cost, prices.tied_cost, prices.tie
     c5 = np.flatnonzero(me.c5)
     eu5, ev5, grp5 = me.eu[c5], me.ev[c5], me.grp[c5]
     usable = usable_edges(me.c5, me.ev, target)
@@ -502,9 +495,7 @@ def capped_guess(
             if cut is None:
                 break  # a bypass nothing left may close: try again otherwise
             if tied:
-                closed_items = np.zeros(per_item.size, dtype=bool)
-                closed_items[item[cut]] = True
-                cut = open_now & closed_items[item]
+                cut = open_now & np.isin(item, item[cut])  # every group of each door the cut closes
             crossed = _cheapest_route(n, src, me.eu, me.ev, me.grp, usable, cut, target, jitter)
             if crossed is None:
                 return None  # no route at all, whatever is open
@@ -581,12 +572,8 @@ def fewer_items(
     me = rm.edges
     n, src, target = g.n_nodes, int(g.initial), products.target
     item = rm.caps.items.of_group
-    counted = np.zeros(item.size, dtype=bool)
-    for cap in options.caps or {"max_restrictions": 0}:
-        counted |= rm.caps.items.kinds(cap)[item]
-    per_item = np.bincount(item, minlength=int(item.max(initial=-1)) + 1)
-    cost = np.where(counted, np.maximum(1, _COUNTED // per_item[item]), _FREE)
-    tie = bool((per_item > 1).any())
+    prices = _group_prices(rm.caps.items, options)
+    counted, cost, tie = prices.counted, prices.tied_cost, prices.tie
     cuttable = me.has_var & ~rm.reductions.fixed_open
     c5 = np.flatnonzero(me.c5)
     eu5, ev5, grp5 = me.eu[c5], me.ev[c5], me.grp[c5]
@@ -616,12 +603,12 @@ def fewer_items(
                     best = whole
             used = np.unique(item[best & counted]).tolist()
             removals = [tuple(used)] + [(i,) for i in used] + [(i, j) for k, i in enumerate(used) for j in used[k + 1 :]]
+            allowed = cuttable & ~on_route
             for off in removals:
                 if spent >= FEWER_CUTS or (deadline is not None and time.perf_counter() >= deadline):
                     return best
                 spent += 1
                 base = best & ~np.isin(item, off)
-                allowed = cuttable & ~on_route
                 new = _min_bypass_cut(n, src, eu5, ev5, grp5, allowed, np.where(base, 0, cost), target)
                 if new is not None and tie:  # a door counts once: close it under every history it may be
                     new = allowed & np.isin(item, item[new])
@@ -632,6 +619,35 @@ def fewer_items(
             if improved:
                 break
     return best
+
+
+@dataclass(frozen=True)
+class _GroupPrices:
+    """What closing each cut group costs the searches for a test within the caps:
+    ``counted`` whether its item is one a cap counts (every item without caps), ``cost`` the
+    capacity of its edges in a minimum cut, ``tied_cost`` the same where a door closed under
+    several histories counts once (each of its groups a share of the door), ``tie`` whether
+    any item stands for several groups."""
+
+    counted: np.ndarray
+    cost: np.ndarray
+    tied_cost: np.ndarray
+    tie: bool
+
+
+def _group_prices(items: PhysicalItems, options: MilpOptions) -> _GroupPrices:
+    """The :class:`_GroupPrices` of the cut groups under ``options.caps``."""
+    item = items.of_group
+    counted = np.zeros(item.size, dtype=bool)
+    for cap in options.caps or {"max_restrictions": 0}:
+        counted |= items.kinds(cap)[item]
+    per_item = np.bincount(item, minlength=int(item.max(initial=-1)) + 1)
+    return _GroupPrices(
+        counted=counted,
+        cost=np.where(counted, _COUNTED, _FREE),
+        tied_cost=np.where(counted, np.maximum(1, _COUNTED // per_item[item]), _FREE),
+        tie=bool((per_item > 1).any()),
+    )
 
 
 def start_within_caps(
