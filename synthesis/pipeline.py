@@ -27,7 +27,17 @@ from .problems.limits import MAX_GRAPH_EDGES, check_size
 from .problems.problem import Problem, build_graphs, check_caps
 from .routing.backends import cpsat
 from .routing.backends.rules import AUTO_CPSAT_MODES
-from .routing.caps import CAP_NOUNS, CapsTimeout, Fewest, caps_text, check_caps_reachable, fewest_within
+from .routing.caps import (
+    CAP_NOUNS,
+    FOUND_SECONDS,
+    FOUND_SHARE,
+    CapsTimeout,
+    Fewest,
+    caps_text,
+    check_caps_reachable,
+    fewest_within,
+    found_with,
+)
 from .routing.options import RULES, Budgets, MilpOptions, ModelOptions, RunOptions, default_of, values_of
 from .routing.options import check_options as check_routing_options
 from .routing.restrictions import strategy_from_routing
@@ -257,7 +267,7 @@ def synthesize(problem: Problem, options: SynthesisOptions | None = None) -> Syn
     except InconsistentProblem as exc:
         raise over_caps(products, milp, exc, note, None if limit is None else started + limit) from None
     except TimeoutError as exc:
-        raise capped_timeout(milp, exc, bounds) from None
+        raise capped_timeout(milp, exc, bounds, products, None if limit is None else started + limit) from None
     setting = options.setting or problem.extras.get("setting", "instantaneous")
     strategy = strategy_from_routing(products, routing, setting)
     if routing.status != "optimal":
@@ -306,22 +316,46 @@ def caps_checked(products: Products, milp: MilpOptions) -> tuple[dict[str, int],
     if milp.time_limit is None:
         return bounds, milp
     left = milp.time_limit - (time.perf_counter() - t0)  # the check takes at most a share of it
+    left -= found_reserve(milp.time_limit)
     return bounds, replace(milp, time_limit=max(left, 0.05))
 
 
-def capped_timeout(milp: MilpOptions, exc: TimeoutError, bounds: dict[str, int]) -> TimeoutError:
+def found_reserve(time_limit: float | None) -> float:
+    """The seconds of a capped synthesis's time limit kept for
+    :func:`~synthesis.routing.caps.found_with` (``FOUND_SECONDS`` without a limit)."""
+    return FOUND_SECONDS if time_limit is None else min(FOUND_SECONDS, FOUND_SHARE * time_limit)
+
+
+def capped_timeout(
+    milp: MilpOptions, exc: TimeoutError, bounds: dict[str, int], products: Products | None = None,
+    deadline: float | None = None,
+) -> TimeoutError:
     """A time limit that ended a capped solve before any test: ``exc`` with what is known of
     the caps (``bounds``: the lower bounds :func:`synthesis.routing.caps.check_caps_reachable`
-    proved before the solve), so the user can tell a cap too tight from a time limit too
-    short; a :class:`~synthesis.routing.caps.CapsTimeout` whose advice is a higher cap or
-    time limit (a gap cannot help: no test was found)."""
+    proved before the solve; with ``products``, the items of a test found with each cap
+    lifted, :func:`synthesis.routing.caps.found_with`, by ``deadline``: the synthesis's, a
+    ``perf_counter`` time, whose last share :func:`caps_checked` kept for it; ``None``:
+    :data:`~synthesis.routing.caps.FOUND_SECONDS` from now), so the user can tell a cap too tight
+    from a time limit too short and sees the band the fewest lies in; a
+    :class:`~synthesis.routing.caps.CapsTimeout` whose advice is a higher cap or time limit
+    (a gap cannot help: no test was found).
+
+    Example of the message: ``... no test with at most 7 walls was found, nor proven
+    impossible: at least 5 walls are needed (proven), at most 7 allowed, and a test with 9
+    walls was found (a cap of 9 allows it)``."""
     if not milp.caps:
         return exc
     known = []
+    if deadline is None:
+        deadline = time.perf_counter() + FOUND_SECONDS
     for cap, limit in milp.caps.items():
         noun = CAP_NOUNS[cap].split(" (")[0]
-        if cap in bounds:
-            known.append(f"at least {bounds[cap]} {noun} are needed (proven), at most {limit} allowed")
+        said = f"at least {bounds[cap]} {noun} are needed (proven), at most {limit} allowed" if cap in bounds else ""
+        found = None if products is None else found_with(products, milp, cap, deadline)
+        if found is not None and found > limit:
+            said += f"{', and ' if said else ''}a test with {found} {noun} was found (a cap of {found} allows it)"
+        if said:
+            known.append(said)
     said = f": {'; '.join(known)}" if known else ""
     return CapsTimeout(f"{exc}; no test with {caps_text(milp.caps)} was found, nor proven impossible{said}")
 

@@ -47,6 +47,15 @@ CAP_NOUNS = {"max_walls": "walls", "max_doors": "doors", "max_restrictions": "re
 FEWEST_SECONDS = 30.0
 """The most seconds :func:`fewest_within` spends when the caller gives no deadline."""
 
+FOUND_SECONDS = 15.0
+"""The most seconds :func:`found_with` may take where a capped solve ended with neither a test
+nor a proof (its budgets are deterministic and end it sooner: about 4 s for walls and 10 s for
+doors on the 30x30 rack floor)."""
+
+FOUND_SHARE = 0.1
+"""The share of a capped synthesis's time limit kept back from the solve for :func:`found_with`
+(at most :data:`FOUND_SECONDS`), so the limit holds for the message too."""
+
 
 class CapsTimeout(TimeoutError):
     """A time limit that ended a capped solve with neither a test nor a proof that none fits.
@@ -126,23 +135,23 @@ def fewest_within(products: Products, options: MilpOptions, cap: str, deadline: 
 
 
 def found_with(products: Products, options: MilpOptions, cap: str, deadline: float | None = None) -> int | None:
-    """How many items ``cap`` counts a test that :func:`capped_guess` finds uses, with ``cap``
-    lifted and the other caps of ``options.caps`` kept (every feasibility flow up front, as
-    :func:`fewest_within`): a cap the user can ask for and get a test, for the message of a
-    capped solve that the time limit ended with neither a test nor a proof. ``None`` where
-    the search finds none (by ``deadline``, a ``perf_counter`` time). Not the fewest: an
-    upper bound on it, next to the proven lower bound.
+    """How many items ``cap`` counts a test uses that :func:`capped_guess` finds under
+    ``options.caps`` (every feasibility flow up front, as :func:`fewest_within`), where none
+    fits: the test over the caps with the fewest items they count that its search met
+    (:func:`fewer_items` applied), so a cap the user can ask for and get a test, for the
+    message of a capped solve that the time limit ended with neither a test nor a proof.
+    ``None`` where the search finds none (by ``deadline``, a ``perf_counter`` time). Not the
+    fewest: an upper bound on it, next to the proven lower bound. Deterministic (the
+    search's budgets), so the same problem names the same cap on every machine.
 
     Example::
 
-        n = found_with(products, milp, "max_walls")  # e.g. 13: --max-walls 13 gives a test
+        n = found_with(products, milp, "max_walls")  # 9 on the 30x30 rack floor under --max-walls 7
     """
-    caps = {k: v for k, v in options.caps.items() if k != cap}
-    caps[cap] = 10**9  # present, so its items are counted; never binding
-    opts = replace(options, caps=caps, exclusions=list(options.exclusions))
+    opts = replace(options, exclusions=list(options.exclusions))
     entries = dict(required_entries(products, opts))
     rm = build_model(products, opts, entries, check_consistency(products))
-    guess = capped_guess(products, rm, opts, entries, deadline)
+    guess = capped_guess(products, rm, opts, entries, deadline, keep_best=True)
     if guess is None or rm.caps is None:
         return None
     used = np.zeros(rm.caps.items.is_wall.size, dtype=bool)
@@ -426,6 +435,7 @@ def capped_guess(
     options: MilpOptions,
     entries: dict[int, np.ndarray] | None = None,
     deadline: float | None = None,
+    keep_best: bool = False,
 ) -> RoutingGuess | None:
     """A test within the caps to start a capped solve from, where the routing heuristic's test
     (:meth:`RoutingModel.guess`) uses more walls or doors than a cap allows; ``None`` where
@@ -457,7 +467,9 @@ def capped_guess(
     only adds cuts), and the search starts over with the route search's ties broken
     another way, up to :data:`CAPPED_ATTEMPTS` attempts and :data:`CAPPED_ROUNDS` rounds in
     all, and never past ``deadline`` (a ``perf_counter`` time: the solve's time limit holds). A start,
-    not an answer: the solver checks it as a whole solution and improves on it.
+    not an answer: the solver checks it as a whole solution and improves on it. With
+    ``keep_best``, where no test fits, the test over the caps with the fewest items they
+    count that the search met (after :func:`fewer_items`) instead of ``None``.
 
     Example::
 
@@ -480,6 +492,13 @@ def capped_guess(
     eu5, ev5, grp5 = me.eu[c5], me.ev[c5], me.grp[c5]
     usable = usable_edges(me.c5, me.ev, target)
     rounds = 0
+    best: tuple[int, np.ndarray] | None = None  # the fewest counted items of a test over the caps, and its cut
+
+    def fallback() -> RoutingGuess | None:
+        if not keep_best or best is None:
+            return None
+        return guess_routing(n, src, me.eu, me.ev, me.grp, me.c5, me.has_var & best[1], target, traps=traps)
+
     for attempt in range(CAPPED_ATTEMPTS):
         # each attempt breaks the route search's ties its own way (random edge lengths from a
         # fixed seed: the same start on every machine); the first takes the shortest routes
@@ -489,7 +508,7 @@ def capped_guess(
         while rounds < CAPPED_ROUNDS:
             rounds += 1
             if deadline is not None and time.perf_counter() >= deadline:
-                return None
+                return fallback()
             open_now = cuttable & ~keep_open
             cut = _min_bypass_cut(n, src, eu5, ev5, grp5, open_now, tied_cost if tied else cost, target)
             if cut is None:
@@ -518,6 +537,9 @@ def capped_guess(
                         # a test, over a cap: the local search may close its bypasses with fewer
                         fewer = fewer_items(products, rm, options, guess.cut_groups, entries, deadline)
                         if caps.items.over_cap(fewer, options.caps):
+                            n_fewer = caps.items.n_counted(fewer, options.caps)
+                            if best is None or n_fewer < best[0]:
+                                best = (n_fewer, fewer)
                             break  # keeping more open only adds cuts; try again otherwise
                         guess = guess_routing(n, src, me.eu, me.ev, me.grp, me.c5, me.has_var & fewer, target, traps=traps)
                         if guess.flow < 1 or (traps is not None and traps(guess.cut_groups)):
@@ -526,7 +548,7 @@ def capped_guess(
                         guess = replace(guess, upper_bound=rm.flow_bound)  # as RoutingModel.guess lowers it
                     return guess
             keep_open[crossed] = True
-    return None
+    return fallback()
 
 
 FEWER_CUTS = 1500

@@ -238,6 +238,15 @@ class PhysicalItems:
             return out
         return np.ones(self.is_wall.size, dtype=bool)
 
+    def n_counted(self, cut: np.ndarray, caps: dict[str, int]) -> int:
+        """How many items of the cut set some cap of ``caps`` counts."""
+        used = np.zeros(self.is_wall.size, dtype=bool)
+        used[self.of_group[cut]] = True
+        counted = np.zeros(self.is_wall.size, dtype=bool)
+        for cap in caps:
+            counted |= self.kinds(cap)
+        return int((used & counted).sum())
+
     def over_cap(self, cut: np.ndarray, caps: dict[str, int]) -> list[tuple[str, np.ndarray]]:
         """The caps a cut set exceeds, each with the items it uses that the cap counts."""
         used = np.zeros(self.is_wall.size, dtype=bool)

@@ -501,8 +501,9 @@ def _checked_counts(problem: Problem, products: Products, rm: RoutingModel, cut:
 
 def test_a_cap_that_gives_a_test_is_found_for_the_message(tmp_path: Path) -> None:
     """For a capped solve the time limit ends with neither a test nor a proof: a cap that does
-    give one (found_with: the capped search with the cap lifted), above the proven bound, and
-    a test with that many walls exists (the capped start under that cap finds it)."""
+    give one (found_with: the test over the cap with the fewest walls the capped search met),
+    above the proven bound, and a test with that many walls exists (the capped start under
+    that cap finds it); the timeout's message names it next to the proven bound."""
     from synthesis.routing.caps import found_with
 
     path = rack_floor(tmp_path, 12, "static")
@@ -513,6 +514,9 @@ def test_a_cap_that_gives_a_test_is_found_for_the_message(tmp_path: Path) -> Non
     assert n is not None and disjoint_bypasses(products, milp, "max_walls", stop_above=n) <= n < 20
     _, _, (_, _, x_guess), (_, x) = _capped_start(path, "max_walls", n)
     assert x is not None and x_guess is None
+    said = str(pipeline.capped_timeout(milp, TimeoutError("time limit reached"), {"max_walls": 3}, products))
+    assert f"at least 3 walls are needed (proven), at most 4 allowed, and a test with {n} walls was found" in said
+    assert f"a cap of {n} allows it" in said
 
 
 @pytest.mark.parametrize(("kind", "cap", "limit", "found"), [("static", "walls", 40, 14), ("reactive", "doors", 40, 19)])
