@@ -38,6 +38,7 @@ from .model import CutGroups, PhysicalItems, RoutingModel, build_model, cut_grou
 from .options import MilpOptions
 from .phases import guess_solution
 from .result import blocked_of_edges, required_entries
+from .separations import separations_exceed
 from .solver_control import quiet_highs, run_highs
 from .traps import trapped_entries
 
@@ -163,7 +164,10 @@ def check_caps_reachable(products: Products, options: MilpOptions) -> dict[str, 
     """Refuse caps below what the problem needs before any solve: a cap ``N`` below
     :func:`disjoint_bypasses` (``N + 1`` walks around the test objective that share no item
     it counts) admits no test, nor does one below :func:`routed_bypasses` (the same count with
-    the route every test leaves open spared, branched over its first and last moves).
+    the route every test leaves open spared, branched over its first and last moves), nor one
+    that :func:`~synthesis.routing.separations.separations_exceed` refutes (what a test must
+    close under one history while leaving the system a way to its goal: the feasibility flows
+    the bypass counts leave out).
 
     Returns the proven lower bound of each cap (:func:`proven_bound`), for the message of a
     solve the time limit ends with neither a test nor a proof.
@@ -194,6 +198,17 @@ def check_caps_reachable(products: Products, options: MilpOptions) -> dict[str, 
                 f"at least {limit + 1} {noun} are needed (whatever way through the test objective a test leaves open, "
                 f"{limit + 1} ways from the start to the goal around the test objective share no {noun[:-1]} off that way, "
                 f"and a test must close each); raise the cap or drop it",
+            )
+        while bounds[cap] <= limit and separations_exceed(products, options, cap, bounds[cap], deadline=deadline):
+            bounds[cap] += 1
+        if bounds[cap] > limit:
+            raise InconsistentProblem(
+                "unroutable",
+                f"no test with {caps_text({cap: limit})} routes every successful execution through the test objective: "
+                f"at least {limit + 1} {noun} are needed (under a history the system must pass on any way through the "
+                f"test objective, a test must close every way to the goal that keeps that history while leaving the "
+                f"system a way to the goal, and that takes more than {limit} {noun} whichever way is left); "
+                f"raise the cap or drop it",
             )
     return bounds
 

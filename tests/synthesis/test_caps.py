@@ -10,6 +10,7 @@ import itertools
 import json
 import time
 from collections.abc import Iterator
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -731,6 +732,53 @@ def test_route_spared_bound_never_refuses_a_cap_a_test_fits(tmp_path: Path, floo
                 assert _relaxed_fewest_walls(problem, products, cap) is None, (i, cap, plain, routed)
             stronger += int(routed > cap >= plain)
     assert checked == floors and stronger >= floors // 6, (checked, stronger)
+
+
+@pytest.mark.parametrize("floors", [pytest.param(12, id="12-floors"), pytest.param(60, id="60-floors", marks=pytest.mark.slow)])
+def test_history_separation_never_refuses_a_cap_a_test_fits(tmp_path: Path, floors: int) -> None:
+    """On random reactive 3x4 floors, wherever :func:`separations_exceed` says no test uses at
+    most ``c`` doors, the fewest a test needs is above ``c``: the routing model's own optimum
+    with every feasibility flow (:func:`fewest_within`, exact on these floors); and the bound
+    is the fewest exactly on some of them (it is not vacuous). Static tests: not used (see
+    its module), and so never refused by it."""
+    from synthesis.routing.caps import fewest_within
+    from synthesis.routing.separations import separations_exceed
+
+    cap = "max_doors"
+    checked = exact = 0
+    for i, problem, products in _random_floors(tmp_path, np.random.default_rng(20261129), "reactive", 10 * floors):
+        if checked == floors:
+            break
+        checked += 1
+        milp = pipeline.milp_options(problem, pipeline.SynthesisOptions(caps={cap: 99}))
+        found = fewest_within(products, milp, cap, deadline=time.perf_counter() + 60)
+        assert found.exact or found.value is None, (i, found)
+        fewest = found.value
+        static = pipeline.milp_options(problem, pipeline.SynthesisOptions(caps={"max_walls": 0}))
+        assert not separations_exceed(products, replace(static, mode="static"), "max_walls", 0)
+        for limit in range(6):
+            milp = pipeline.milp_options(problem, pipeline.SynthesisOptions(caps={cap: limit}))
+            if separations_exceed(products, milp, cap, limit):
+                assert fewest is None or fewest > limit, (i, limit, fewest)
+                exact += int(fewest == limit + 1)
+    assert checked == floors and exact >= floors // 6, (checked, exact)
+
+
+@pytest.mark.slow
+def test_30x30_floor_four_doors_are_refused_before_the_solve(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The issue's floor with at most 4 doors ran to the time limit (exit 5): the bypass counts
+    prove 2 (closing the two moves into the dock before the test objective closes every bypass,
+    and traps the system). What a test must close under the start's history, and under each
+    history a way through the test objective passes, while leaving the system a way to its
+    goal, proves 5: exit 3 before any solve (about 9 s here)."""
+    path = floor30(tmp_path, "reactive")
+    t0 = time.perf_counter()
+    code, out, err = run(["synthesize", str(path), "--json", "-q", "--time-limit", "120", "--max-doors", "4"], capsys)
+    took = time.perf_counter() - t0
+    assert code == 3, err
+    line = error_line(err)
+    assert "no test with at most 4 doors" in line and "at least 5 doors are needed" in line and "history" in line
+    assert took < 60, took
 
 
 @pytest.mark.slow
