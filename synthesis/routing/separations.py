@@ -4,7 +4,8 @@ close under a history the SUT is certain to pass through, while leaving it a way
 The bypass counts of :mod:`synthesis.routing.caps` know nothing of the feasibility flows
 (docs/method.md c6-c8): on a reactive floor they see that closing the two moves into the goal
 under every history before I closes every bypass, and prove 2 doors, where that test traps
-the SUT (under the start's history it has no way left to the goal). This bound uses them.
+the SUT (under the start's history it has no way left to the goal). This bound uses them (and,
+for walls, the route itself, which leaves every history it passes a way to the goal).
 
 **Lemma.** Let ``X`` be a test, ``q`` a history outside I and ``e`` an entry node of ``q``
 (the initial node, or the head of an edge of G that changes the history) that the SUT reaches
@@ -14,7 +15,9 @@ under ``X``. Then ``X`` (its walls, and its doors under ``q``) must
   (outside I): with the walk that reaches ``e`` it is a bypass (c4-c5);
 * (b) leave a way from ``e``'s place to the goal in ``G_sys`` over the moves not restricted
   under ``q``: c6-c8 of a reactive or mixed test (every kept entry: the route's entries reach
-  ``Tgt``, so their places reach the goal).
+  ``Tgt``, so their places reach the goal); for a static test, where ``e`` is the route's
+  entry into ``q``, the route's own rest (walls close a move under every history, and the
+  route from ``e`` to ``Tgt`` crosses none, so its projection is such a way).
 
 So ``X`` uses at least ``sep(q, e)`` items, the fewest of any restriction of the moves of the
 history ``q`` with (a) and (b), and ``sep`` is computed from below by branching on where the way
@@ -30,9 +33,7 @@ entry node of it. So where ``sep(q, e) > N`` for every entry ``e`` of every hist
 set ``B`` that every such sequence passes (removing ``B`` from the histories' graph cuts the
 initial history off from I), or for the initial node, no test fits a cap of ``N``.
 
-Not modelled (the function proves nothing there): static tests (MILP-static has no
-feasibility flows, so (b) holds only from ``Src``, and that alone proved nothing beyond the
-bypass counts on the random floors of the test suite), closed-loop traps and the test agent's
+Not modelled (the function proves nothing there): closed-loop traps and the test agent's
 places.
 """
 
@@ -209,7 +210,7 @@ def separations_exceed(
 
         separations_exceed(products, milp, "max_doors", 4)  # True on the 30x30 rack floor
     """
-    if options.mode == "static" or options.closed_loop or options.block_states:
+    if options.closed_loop or options.block_states:
         return False
     g = products.virtual
     groups = cut_groups(products, options)
