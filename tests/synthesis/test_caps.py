@@ -770,34 +770,24 @@ def test_history_separation_never_refuses_a_cap_a_test_fits(tmp_path: Path, kind
 
 
 @pytest.mark.slow
-def test_30x30_floor_four_doors_are_refused_before_the_solve(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    """The issue's floor with at most 4 doors ran to the time limit (exit 5): the bypass counts
-    prove 2 (closing the two moves into the dock before the test objective closes every bypass,
-    and traps the system). What a test must close under the start's history, and under each
-    history a way through the test objective passes, while leaving the system a way to its
-    goal, proves 5: exit 3 before any solve (about 9 s here)."""
-    path = floor30(tmp_path, "reactive")
+@pytest.mark.parametrize(("kind", "cap", "why"), [("static", "walls", "share no wall"), ("reactive", "doors", "history")])
+def test_30x30_floor_four_items_are_refused_before_the_solve(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], kind: str, cap: str, why: str
+) -> None:
+    """The issue's floor with at most 4 walls (doors) ran to the time limit (exit 5, 120 s).
+    Walls: two ways into the dock and two out of the start are all a plain count of bypasses
+    sees; sparing the route a test leaves open proves 5. Doors: the bypass counts prove 2
+    (closing the two moves into the dock before the test objective closes every bypass, and
+    traps the system); what a test must close under each history a way through the test
+    objective passes, while leaving the system a way to its goal, proves 5 (about 9 s here).
+    Either way: exit 3 before any solve."""
+    path = floor30(tmp_path, kind)
     t0 = time.perf_counter()
-    code, out, err = run(["synthesize", str(path), "--json", "-q", "--time-limit", "120", "--max-doors", "4"], capsys)
+    code, out, err = run(["synthesize", str(path), "--json", "-q", "--time-limit", "120", f"--max-{cap}", "4"], capsys)
     took = time.perf_counter() - t0
     assert code == 3, err
     line = error_line(err)
-    assert "no test with at most 4 doors" in line and "at least 5 doors are needed" in line and "history" in line
-    assert took < 60, took
-
-
-@pytest.mark.slow
-def test_30x30_floor_four_walls_are_refused_before_the_solve(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    """The issue's floor with at most 4 walls ran to the time limit (exit 5, 120 s): two ways
-    into the dock and two out of the start are all a plain count of bypasses sees. Sparing
-    the route a test leaves open proves 5 walls are needed: exit 3 before any solve."""
-    path = floor30(tmp_path, "static")
-    t0 = time.perf_counter()
-    code, out, err = run(["synthesize", str(path), "--json", "-q", "--time-limit", "120", "--max-walls", "4"], capsys)
-    took = time.perf_counter() - t0
-    assert code == 3, err
-    line = error_line(err)
-    assert "no test with at most 4 walls" in line and "at least 5 walls are needed" in line
+    assert f"no test with at most 4 {cap}" in line and f"at least 5 {cap} are needed" in line and why in line
     assert took < 60, took
 
 
