@@ -262,6 +262,8 @@ def synthesize(problem: Problem, options: SynthesisOptions | None = None) -> Syn
     )
     bounds: dict[str, int] = {}
     try:
+        if milp.caps:
+            note(f"checking {caps_text(milp.caps)} against what every test needs (lower bounds)")
         bounds, milp = caps_checked(products, milp)
         routing = solve_routing(products, milp)
     except InconsistentProblem as exc:
