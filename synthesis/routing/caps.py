@@ -38,7 +38,7 @@ from .model import CutGroups, PhysicalItems, RoutingModel, build_model, cut_grou
 from .options import MilpOptions
 from .phases import guess_solution
 from .result import blocked_of_edges, required_entries
-from .separations import separations_exceed
+from .separations import HistorySeparations
 from .solver_control import quiet_highs, run_highs
 from .traps import trapped_entries
 
@@ -165,7 +165,7 @@ def check_caps_reachable(products: Products, options: MilpOptions) -> dict[str, 
     :func:`disjoint_bypasses` (``N + 1`` walks around the test objective that share no item
     it counts) admits no test, nor does one below :func:`routed_bypasses` (the same count with
     the route every test leaves open spared, branched over its first and last moves), nor one
-    that :func:`~synthesis.routing.separations.separations_exceed` refutes (what a test must
+    that :class:`~synthesis.routing.separations.HistorySeparations` refutes (what a test must
     close under one history while leaving the system a way to its goal: the feasibility flows
     the bypass counts leave out).
 
@@ -199,7 +199,8 @@ def check_caps_reachable(products: Products, options: MilpOptions) -> dict[str, 
                 f"{limit + 1} ways from the start to the goal around the test objective share no {noun[:-1]} off that way, "
                 f"and a test must close each); raise the cap or drop it",
             )
-        while bounds[cap] <= limit and separations_exceed(products, options, cap, bounds[cap], deadline=deadline):
+        separations = HistorySeparations(products, options, cap)  # built once for every bound tried
+        while bounds[cap] <= limit and separations.exceed(bounds[cap], deadline=deadline):
             bounds[cap] += 1
         if bounds[cap] > limit:
             raise InconsistentProblem(

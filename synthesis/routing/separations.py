@@ -63,20 +63,17 @@ _MAX_SCALE = 720  # prices are shares 1/k of an item, scaled by lcm(k) up to thi
 
 @dataclass(frozen=True)
 class _Layer:
-    """The arcs of one history ``q``: ``eu -> ev`` (both ends of history ``q`` outside I, or
-    the head in ``Tgt``), each with its cut group, move, whether a cut may close it and its
-    integer price (``scale`` per item); their ends numbered ``0 .. n - 1`` here (``local``:
-    per node of G, its number, -1 outside the layer), ``target`` the ends in ``Tgt``."""
+    """The arcs of one history ``q`` (both ends of history ``q`` outside I, or the head in
+    ``Tgt``) as a flow network over its own node numbers (``local``: per node of G, its number,
+    -1 outside the layer), and per arc its move, whether a cut may close it and its integer
+    price (``scale`` per item)."""
 
-    n: int
     local: np.ndarray
     network: _Network
-    eu: np.ndarray
-    ev: np.ndarray
-    grp: np.ndarray
     move: np.ndarray
     cuttable: np.ndarray
     price: np.ndarray
+    scale: int
 
 
 def _layer_prices(eu: np.ndarray, ev: np.ndarray, item: np.ndarray, counted: np.ndarray) -> tuple[np.ndarray, int]:
@@ -158,16 +155,14 @@ class _Budget:
         return True
 
 
-def separation_exceeds(
-    products: Products, layer: _Layer, scale: int, entry: int, limit: int, budget: _Budget,
-) -> bool | None:
+def separation_exceeds(products: Products, layer: _Layer, entry: int, limit: int, budget: _Budget) -> bool | None:
     """Whether ``sep(q, entry) > limit`` (module docstring) for the history ``q`` of ``layer``:
     ``True`` proven, ``False`` a restriction within ``limit`` meets (a) and (b) (of the
     relaxation, where prices are shares), ``None`` out of budget."""
     gs = products.system
     start_sys = np.zeros(gs.n_nodes, dtype=bool)
     start_sys[int(products.projection[entry])] = True
-    bound = limit * scale  # a cut priced above it uses more than limit items
+    bound = limit * layer.scale  # a cut priced above it uses more than limit items
     stack: list[tuple[frozenset[int], frozenset[int]]] = [(frozenset(), frozenset())]
     while stack:
         spared_moves, banned_moves = stack.pop()
@@ -198,82 +193,95 @@ def separation_exceeds(
     return True
 
 
+class HistorySeparations:
+    """The lemma of the module docstring for one problem and cap, its graphs built once (every
+    history's layer on first use) and asked for one limit after another
+    (:meth:`exceed`), as :func:`~synthesis.routing.caps.check_caps_reachable` raises its bound."""
+
+    def __init__(self, products: Products, options: MilpOptions, cap: str) -> None:
+        self.products = products
+        self.modelled = not (options.closed_loop or options.block_states)
+        g = products.virtual
+        groups = cut_groups(products, options)
+        self.me = me = model_edges(products, groups, check_consistency(products))
+        items = physical_items(products, groups)
+        self._item, self._counted, self._has_var = items.of_group, items.kinds(cap), me.has_var
+        c5 = np.flatnonzero(me.c5)
+        self._eu, self._ev, self._grp, self._move = me.eu[c5], me.ev[c5], me.grp[c5], g.move[me.edges[c5]]
+        self._layers: dict[int, _Layer] = {}
+        # a route's entries lie on a walk Src -> I over the model's edges (the others never matter)
+        inter = products.intermediate
+        start = np.zeros(g.n_nodes, dtype=bool)
+        start[int(g.initial)] = True
+        outside = ~inter[me.eu]
+        before = reachable(g.n_nodes, me.eu[outside], me.ev[outside], start) & reachable(g.n_nodes, me.ev, me.eu, inter)
+        self._entries = {
+            int(q): nodes[before[nodes] & ~inter[nodes] & ~products.target[nodes]] for q, nodes in g.entry_nodes.items()
+        }
+
+    def _layer(self, q: int) -> _Layer:
+        if q not in self._layers:
+            hist, target = self.products.virtual.hist, self.products.target
+            eu, ev, grp = self._eu, self._ev, self._grp
+            keep = (hist[eu] == q) & ((hist[ev] == q) | target[ev])
+            price, scale = _layer_prices(eu[keep], ev[keep], self._item[grp[keep]], self._counted)
+            ends = np.unique(np.concatenate([eu[keep], ev[keep], np.flatnonzero(hist == q)]))
+            local = np.full(hist.size, -1, dtype=np.int64)
+            local[ends] = np.arange(ends.size)
+            network = _Network.of(int(ends.size), local[eu[keep]], local[ev[keep]], target[ends])
+            self._layers[q] = _Layer(local, network, self._move[keep], self._has_var[grp[keep]], price, scale)
+        return self._layers[q]
+
+    def exceed(self, limit: int, cuts: int = SEPARATION_CUTS, deadline: float | None = None) -> bool:
+        """Whether the lemma proves that no test uses at most ``limit`` of the items the cap
+        counts (``False``: not proven within ``cuts`` minimum cuts and by ``deadline``, a
+        ``perf_counter`` time)."""
+        if not self.modelled:
+            return False
+        g, products = self.products.virtual, self.products
+        budget = _Budget(cuts, deadline)
+        src = int(g.initial)
+        q0 = int(g.hist[src])
+        first = separation_exceeds(products, self._layer(q0), src, limit, budget)
+        if first is None:
+            return False
+        if first:
+            return True
+        # the histories' graph: a route passes from q0 to I; is every way through a history all of
+        # whose entries are proven to need more than limit?
+        blocked: set[int] = set()
+        for q in sorted(self._entries):
+            nodes = self._entries[q]
+            if q == q0 or nodes.size == 0:
+                continue
+            proven = True
+            for e in nodes.tolist():
+                r = separation_exceeds(products, self._layer(q), int(e), limit, budget)
+                if r is None:
+                    return False
+                if not r:
+                    proven = False
+                    break
+            if proven:
+                blocked.add(q)
+            if _cut_off(self.me.eu, self.me.ev, g.hist, products.intermediate, q0, blocked):
+                return True
+        return False
+
+
 def separations_exceed(
     products: Products, options: MilpOptions, cap: str, limit: int,
     cuts: int = SEPARATION_CUTS, deadline: float | None = None,
 ) -> bool:
     """Whether the lemma of the module docstring proves that no test uses at most ``limit`` of
     the items ``cap`` counts (``False``: not proven within ``cuts`` minimum cuts in all and by
-    ``deadline``, a ``perf_counter`` time).
+    ``deadline``, a ``perf_counter`` time); :class:`HistorySeparations` for several limits.
 
     Example::
 
         separations_exceed(products, milp, "max_doors", 4)  # True on the 30x30 rack floor
     """
-    if options.closed_loop or options.block_states:
-        return False
-    g = products.virtual
-    groups = cut_groups(products, options)
-    me = model_edges(products, groups, check_consistency(products))
-    items = physical_items(products, groups)
-    counted = items.kinds(cap)
-    inter, target = products.intermediate, products.target
-    hist = g.hist
-    c5 = np.flatnonzero(me.c5)
-    eu, ev, grp = me.eu[c5], me.ev[c5], me.grp[c5]
-    edge_move = g.move[me.edges[c5]]
-    budget = _Budget(cuts, deadline)
-    layers: dict[int, tuple[_Layer, int]] = {}
-
-    def layer_of(q: int) -> tuple[_Layer, int]:
-        if q not in layers:
-            keep = (hist[eu] == q) & ((hist[ev] == q) | target[ev])
-            price, scale = _layer_prices(eu[keep], ev[keep], items.of_group[grp[keep]], counted)
-            ends = np.unique(np.concatenate([eu[keep], ev[keep], np.flatnonzero(hist == q)]))
-            local = np.full(g.n_nodes, -1, dtype=np.int64)
-            local[ends] = np.arange(ends.size)
-            a, b = local[eu[keep]], local[ev[keep]]
-            network = _Network.of(int(ends.size), a, b, target[ends])
-            layers[q] = (_Layer(int(ends.size), local, network, a, b, grp[keep], edge_move[keep], me.has_var[grp[keep]], price),
-                         scale)
-        return layers[q]
-
-    src = int(g.initial)
-    q0 = int(hist[src])
-    first = separation_exceeds(products, *layer_of(q0), src, limit, budget)
-    if first is None:
-        return False
-    if first:
-        return True
-    # the histories' graph: a route passes from q0 to I; is every way through a history all of
-    # whose entries are proven to need more than limit?
-    blocked: set[int] = set()
-    entries = g.entry_nodes
-    # a route's entries lie on a walk Src -> I over the model's edges (the others never matter)
-    start = np.zeros(g.n_nodes, dtype=bool)
-    start[src] = True
-    outside = ~inter[me.eu]
-    before = reachable(g.n_nodes, me.eu[outside], me.ev[outside], start)
-    before &= reachable(g.n_nodes, me.ev, me.eu, inter)
-    for q in sorted(entries):
-        if q == q0:
-            continue
-        nodes = entries[q][before[entries[q]] & ~inter[entries[q]] & ~target[entries[q]]]
-        if nodes.size == 0:
-            continue
-        proven = True
-        for e in nodes.tolist():
-            r = separation_exceeds(products, *layer_of(q), int(e), limit, budget)
-            if r is None:
-                return False
-            if not r:
-                proven = False
-                break
-        if proven:
-            blocked.add(q)
-        if _cut_off(me.eu, me.ev, hist, inter, q0, blocked):
-            return True
-    return False
+    return HistorySeparations(products, options, cap).exceed(limit, cuts, deadline)
 
 
 def _cut_off(eu: np.ndarray, ev: np.ndarray, hist: np.ndarray, inter: np.ndarray, q0: int, blocked: set[int]) -> bool:
