@@ -28,9 +28,10 @@ from dataclasses import dataclass, replace
 import highspy
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import breadth_first_order, dijkstra, maximum_flow
+from scipy.sparse.csgraph import dijkstra
 
 from ..graphs.consistency import check_consistency
+from ..graphs.cuts import min_cut
 from ..graphs.products import Products, reachable
 from ..model.errors import InconsistentProblem
 from .bounds.heuristic import RoutingGuess, guess_routing, usable_edges
@@ -746,14 +747,9 @@ def _min_bypass_cut(
     mat.data = np.minimum(mat.data, _INF).astype(np.int32)
     mat.indices = mat.indices.astype(np.int32)
     mat.indptr = mat.indptr.astype(np.int32)
-    res = maximum_flow(mat, src, n)
-    if res.flow_value >= _INF:
+    value, side = min_cut(mat, src, n)
+    if value >= _INF:
         return None
-    residual = (mat - res.flow).tocsr()
-    residual.data = (residual.data > 0).astype(np.int8)
-    residual.eliminate_zeros()
-    side = np.zeros(n + 1, dtype=bool)
-    side[breadth_first_order(residual, src, directed=True, return_predecessors=False)] = True
     cut = np.zeros(cuttable.size, dtype=bool)
     crossing = side[eu] & ~side[ev]
     cut[grp[crossing]] = True

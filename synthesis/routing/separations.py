@@ -45,9 +45,9 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import breadth_first_order, maximum_flow
 
 from ..graphs.consistency import check_consistency
+from ..graphs.cuts import min_cut
 from ..graphs.products import Products, reachable
 from .model import cut_groups, model_edges, physical_items
 from .options import MilpOptions
@@ -129,16 +129,11 @@ class _Network:
         np.add.at(data, self.slot[: cap.size], cap)
         data[self.to_sink] = _INF
         mat = sp.csr_matrix((np.minimum(data, _INF).astype(np.int32), self.indices, self.indptr), shape=(self.n + 1, self.n + 1))
-        res = maximum_flow(mat, src, self.n)
-        residual = (mat - res.flow).tocsr()
-        residual.data = (residual.data > 0).astype(np.int8)
-        residual.eliminate_zeros()
-        side = np.zeros(self.n + 1, dtype=bool)
-        side[breadth_first_order(residual, src, directed=True, return_predecessors=False)] = True
+        value, side = min_cut(mat, src, self.n)
         rows = np.repeat(np.arange(self.n + 1), np.diff(self.indptr))
         crossing_entry = side[rows] & ~side[self.indices]
         crossing: np.ndarray = crossing_entry[self.slot[: cap.size]]
-        return int(res.flow_value), crossing
+        return value, crossing
 
 
 class _Budget:

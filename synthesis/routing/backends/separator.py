@@ -27,6 +27,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order, dijkstra, maximum_flow
 
+from ...graphs.cuts import sink_side, source_side
 from ...graphs.products import Products
 from ..model import CutGroups, ModelEdges, PhysicalItems, physical_items, static_moves_of
 from ..options import MilpOptions
@@ -309,12 +310,7 @@ class CoverSeparator:
 
     def _source_side(self, cap: sp.csr_matrix, f: sp.csr_matrix) -> np.ndarray:
         """``bool`` per node of G: the residual graph's nodes reachable from ``Src``."""
-        residual = (cap - f).tocsr()
-        residual.data = (residual.data > 0).astype(np.int8)
-        residual.eliminate_zeros()
-        side = np.zeros(self.n + 1, dtype=bool)
-        side[breadth_first_order(residual, self.src, directed=True, return_predecessors=False)] = True
-        out: np.ndarray = side[: self.n]
+        out: np.ndarray = source_side(cap, f, self.src)[: self.n]
         return out
 
     def _side_cuts(self, cut: np.ndarray, flow: int) -> list[FlowCut]:
@@ -323,12 +319,8 @@ class CoverSeparator:
         value, cap, f = self._max_flow(cut)
         if value >= flow:
             raise RuntimeError("a minimal flow-cutting group set lets the flow through: a FlowTest bug")
-        residual = (cap - f).tocsr()
-        residual.data = (residual.data > 0).astype(np.int8)
-        residual.eliminate_zeros()
         near_src = self._source_side(cap, f)
-        to_sink = np.zeros(self.n + 1, dtype=bool)
-        to_sink[breadth_first_order(residual.T.tocsr(), self.n, directed=True, return_predecessors=False)] = True
+        to_sink = sink_side(cap, f, self.n)
         out = [self._cut_of_side(near_src)]
         far = ~to_sink[: self.n]
         if not np.array_equal(far, near_src):

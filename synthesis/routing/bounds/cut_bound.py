@@ -92,6 +92,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order, maximum_flow
 
+from ...graphs.cuts import sink_side, source_side
 from ...graphs.products import Products
 from .flow_bound import Split, entry_choices
 
@@ -360,14 +361,8 @@ def _min_cut(
     value = int(res.flow_value)
     if value >= big:
         return value, []
-    # scipy's flow is skew-symmetric, so cap - flow is the residual graph, reverse arcs included
-    residual = (cap - res.flow).tocsr()
-    residual.data = (residual.data > 0).astype(np.int8)
-    residual.eliminate_zeros()
-    small = np.zeros(n, dtype=bool)
-    small[breadth_first_order(residual, s, directed=True, return_predecessors=False)] = True
-    large = np.ones(n, dtype=bool)
-    large[breadth_first_order(residual.T.tocsr(), t, directed=True, return_predecessors=False)] = False
+    small = source_side(cap, res.flow, s)
+    large = ~sink_side(cap, res.flow, t)
     return value, [small[:n_states], large[:n_states]]
 
 
