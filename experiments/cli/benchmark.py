@@ -160,7 +160,8 @@ T95: dict[int, float] = {}
 @dataclass(frozen=True)
 class BenchmarkConfig:
     """What ``flowtest benchmark`` runs. The defaults are the protocol's and fit 30 minutes
-    on 2 shared cores for a standard pool (docs/benchmark-protocol.md, *Budget*)."""
+    on 2 shared cores for a standard pool (docs/benchmark-protocol.md, *Budget*);
+    :meth:`for_pool` takes a standard pool's smaller shipped split, as the command does."""
 
     pool: str
     suts: tuple[str, ...] = DEFAULT_SUTS
@@ -179,6 +180,23 @@ class BenchmarkConfig:
     report_tests: int = 20
     bootstrap: int = 2000
     workers: int = field(default_factory=lambda: default_workers())
+
+    @classmethod
+    def for_pool(cls, pool: str, **settings: Any) -> BenchmarkConfig:
+        """The configuration ``flowtest benchmark --pool POOL`` runs, with ``settings`` (any
+        field) given: the split counts not given are :func:`default_counts`, so a standard
+        pool that ships a smaller split is scored on all of it, as the command line does,
+        instead of building the rest on demand (``BenchmarkConfig(pool)`` keeps the
+        protocol's counts).
+
+        Example::
+
+            BenchmarkConfig.for_pool("reachability1/5x5/blocked/agent-v1").test_count  # 250
+        """
+        counts = default_counts(pool)
+        for split in ("train", "validation", "test"):
+            settings.setdefault(f"{split}_count", counts[split])
+        return cls(pool, **settings)
 
     def baselines(self) -> list[str]:
         """The algorithms to train: ``--sut ppo`` stands for every ``--algo``; an
@@ -1449,11 +1467,10 @@ def run(args: argparse.Namespace) -> int:
     """``flowtest benchmark``: check everything, run, print the table (or the JSON)."""
     from synthesis.routing.solver_control import stdout_guard
 
-    counts = default_counts(args.pool)
-    config = BenchmarkConfig(
-        pool=args.pool, suts=tuple(args.sut or DEFAULT_SUTS), algos=tuple(dict.fromkeys(args.algo)),
-        train_count=args.train_count or counts["train"], validation_count=args.validation_count or counts["validation"],
-        test_count=args.test_count or counts["test"],
+    given = {f"{split}_count": getattr(args, f"{split}_count") for split in ("train", "validation", "test")}
+    config = BenchmarkConfig.for_pool(
+        args.pool, suts=tuple(args.sut or DEFAULT_SUTS), algos=tuple(dict.fromkeys(args.algo)),
+        **{k: v for k, v in given.items() if v is not None},
         train_eval_count=args.train_eval_count, steps=args.steps, seeds=tuple(dict.fromkeys(args.seeds)), runs=args.runs,
         curve_sizes=tuple(args.curve_sizes), curve_seeds=args.curve_seeds, curve_points=args.curve_points,
         trainer=args.trainer, report_tests=args.report_tests, bootstrap=args.bootstrap, workers=args.workers,

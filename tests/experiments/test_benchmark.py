@@ -300,6 +300,10 @@ def test_the_defaults_take_a_standard_pools_whole_smaller_split(monkeypatch: pyt
     agent = "reachability1/5x5/blocked/agent-v1"
     assert bench.default_counts(agent) == {"train": 4096, "validation": 256, "test": 250}
     assert bench.default_counts(POOL) == bench.BenchmarkConfig(POOL).counts()
+    # from Python as from the command line
+    assert bench.BenchmarkConfig.for_pool(agent).counts() == {"train": 4096, "validation": 256, "test": 250}
+    assert bench.BenchmarkConfig.for_pool(agent, test_count=1000, runs=2).test_count == 1000
+    assert bench.BenchmarkConfig.for_pool(POOL) == bench.BenchmarkConfig(POOL)
     seen: list[bench.BenchmarkConfig] = []
 
     def stop(config: bench.BenchmarkConfig) -> None:
