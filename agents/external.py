@@ -94,11 +94,14 @@ import os
 import queue
 import shlex
 import shutil
+import signal
 import subprocess
 import sys
 import threading
 import weakref
 from collections import deque
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import IO, Any
 
@@ -112,7 +115,8 @@ from .base import PolicyError, action_mask_of, game_of, state_index
 PROTOCOL = "flowtest-planner"
 PROTOCOL_VERSION = 1
 DEFAULT_STEP_TIMEOUT = 10.0
-"""Seconds a ``cmd:`` planner may take to answer one step (the first includes its start)."""
+"""Seconds a planner may take to answer one step (a ``cmd:`` planner's first answer
+includes its start; a ``python:`` planner's ``reset`` is timed as one step)."""
 
 PREFIXES = ("python", "cmd")
 """The name prefixes of systems from outside FlowTest."""
@@ -192,7 +196,7 @@ def _place_json(game: TestGame, place: int) -> object:
     return list(p) if isinstance(p, tuple) else p
 
 
-def parse_answer(answer: Any, game: TestGame, state: int, mask: np.ndarray, step: int) -> int:
+def parse_answer(answer: Any, game: TestGame, state: int, mask: np.ndarray, step: int, hint: str = "") -> int:
     """The action index a planner's answer names (a ``dict`` with ``action``, an index or
     a name; a protocol line is decoded first).
 
@@ -210,7 +214,7 @@ def parse_answer(answer: Any, game: TestGame, state: int, mask: np.ndarray, step
             answer = text
     if isinstance(answer, dict):
         if "action" not in answer:
-            raise PlannerError(f"step {step}: answered {_short(raw)}, an object without \"action\"")
+            raise PlannerError(f"step {step}: answered {_short(raw)}, an object without \"action\"{hint}")
         answer = answer["action"]
     names = [game.action_name(state, a) for a in range(game.n_actions)]
     action: int | None = None
@@ -226,7 +230,7 @@ def parse_answer(answer: Any, game: TestGame, state: int, mask: np.ndarray, step
             action = names.index(f"-> {word}")
     if action is None:
         raise PlannerError(f"step {step}: answered {_short(raw)}, which is not an action "
-                           f"(expected an index 0..{game.n_actions - 1} or one of: {', '.join(names)})")
+                           f"(expected an index 0..{game.n_actions - 1} or one of: {', '.join(names)}){hint}")
     if not mask[action]:
         allowed = ", ".join(names[a] for a in np.flatnonzero(mask))
         raise PlannerError(f"step {step}: chose {names[action]!r}, which the test does not allow now "
@@ -340,8 +344,9 @@ class PythonPlanner:
     object itself.
     """
 
-    def __init__(self, name: str, env: Any, target: Any, built: bool = False) -> None:
+    def __init__(self, name: str, env: Any, target: Any, built: bool = False, step_timeout: float | None = None) -> None:
         self.name = name
+        self.timeout = _step_timeout(step_timeout)
         self.messages = _Messages(env)
         self.game = self.messages.game
         if built:
@@ -363,7 +368,10 @@ class PythonPlanner:
         reset = getattr(self.planner, "reset", None)
         if callable(reset) and reset is not self._act:
             try:
-                reset(seed)
+                with _timed(self.timeout):
+                    reset(seed)
+            except _Overran:
+                raise PlannerError(f"reset: the planner did not return within {self.timeout:g} s (--step-timeout)") from None
             except Exception as exc:
                 raise PlannerError(f"reset raised {type(exc).__name__}: {exc}") from None
 
@@ -371,7 +379,11 @@ class PythonPlanner:
         msg, mask, s = self.messages.step(observation, info)
         msg["observation"] = observation
         try:
-            answer = self._act(msg, mask.copy())
+            with _timed(self.timeout):
+                answer = self._act(msg, mask.copy())
+        except _Overran:
+            raise PlannerError(f"step {msg['step']}: the planner gave no answer within {self.timeout:g} s "
+                               "(--step-timeout); it was stopped") from None
         except Exception as exc:
             raise PlannerError(f"step {msg['step']}: raised {type(exc).__name__}: {exc}") from None
         return parse_answer(answer, self.game, s, mask, msg["step"])
@@ -382,7 +394,41 @@ class PythonPlanner:
             close()
 
 
-def make_python(env: Any, arg: str) -> PythonPlanner:
+class _Overran(BaseException):
+    """Raised inside a ``python:`` planner's call when its step timer rings: a
+    ``BaseException``, so the planner's own ``except Exception`` does not swallow it."""
+
+
+def _step_timeout(step_timeout: float | None) -> float:
+    timeout = DEFAULT_STEP_TIMEOUT if step_timeout is None else float(step_timeout)
+    if not timeout > 0:
+        raise PolicyError(f"the step timeout must be positive, not {step_timeout}")
+    return timeout
+
+
+@contextmanager
+def _timed(seconds: float) -> Iterator[None]:
+    """Interrupt the ``with`` body after ``seconds`` (raising :class:`_Overran` in it), by
+    ``SIGALRM``: a Python planner's loop or sleep is stopped, a call into C code that does
+    not return is not. Untimed where there is no ``SIGALRM`` (Windows) and off the main
+    thread, where Python delivers no signals."""
+    if not hasattr(signal, "setitimer") or threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def ring(signum: int, frame: Any) -> None:
+        raise _Overran
+
+    old = signal.signal(signal.SIGALRM, ring)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, old)
+
+
+def make_python(env: Any, arg: str, step_timeout: float | None = None) -> PythonPlanner:
     """``python:MODULE:NAME``: the planner ``NAME`` of ``MODULE`` for ``env``.
 
     Raises
@@ -390,13 +436,15 @@ def make_python(env: Any, arg: str) -> PythonPlanner:
     PolicyError
         If the module or the name is missing, or the factory fails.
     """
-    return PythonPlanner(f"python:{arg}", env, resolve(arg))
+    return PythonPlanner(f"python:{arg}", env, resolve(arg), step_timeout=step_timeout)
 
 
-def planner_policy(obj: Any, env: Any, name: str | None = None) -> PythonPlanner:
+def planner_policy(obj: Any, env: Any, name: str | None = None, step_timeout: float | None = None) -> PythonPlanner:
     """A planner given as a Python object (a function, a factory, or a planner object with
     ``act(observation, mask)``) as a :class:`~agents.base.Policy` for ``env``; named
-    ``name``, else by :func:`spec_of` where it can be, else by its type.
+    ``name``, else by :func:`spec_of` where it can be, else by its type. Each call of its
+    ``act`` and ``reset`` may take ``step_timeout`` seconds (default
+    :data:`DEFAULT_STEP_TIMEOUT`; on the main thread of a POSIX process).
 
     Examples
     --------
@@ -414,8 +462,8 @@ def planner_policy(obj: Any, env: Any, name: str | None = None) -> PythonPlanner
     """
     label = name or spec_of(obj) or f"python object {getattr(obj, '__qualname__', type(obj).__name__)}"
     if inspect.isclass(obj) or inspect.isfunction(obj) or inspect.ismethod(obj) or not hasattr(obj, "act"):
-        return PythonPlanner(label, env, obj)
-    return PythonPlanner(label, env, obj, built=True)
+        return PythonPlanner(label, env, obj, step_timeout=step_timeout)
+    return PythonPlanner(label, env, obj, built=True, step_timeout=step_timeout)
 
 
 # --------------------------------------------------------------------------- cmd:
@@ -467,6 +515,9 @@ def _stop(proc: subprocess.Popen[str]) -> None:
         pass
 
 
+LOGS_HINT = "; a planner process answers one line per step on standard output and writes its logs to standard error"
+"""Said after an answer line of a process that is not an action: most often a log line."""
+
 MAX_LINE = 1 << 16
 """Longest line read from a planner at once (a longer one arrives in pieces, the first of
 which is not an action)."""
@@ -493,9 +544,7 @@ class CommandPlanner:
         self.name = name
         self.words = command_words(arg)
         self.cwd = os.getcwd()
-        self.timeout = DEFAULT_STEP_TIMEOUT if step_timeout is None else float(step_timeout)
-        if not self.timeout > 0:
-            raise PolicyError(f"the step timeout must be positive, not {step_timeout}")
+        self.timeout = _step_timeout(step_timeout)
         self.messages = _Messages(env)
         self.game = self.messages.game
         self.proc: subprocess.Popen[str] | None = None
@@ -586,7 +635,7 @@ class CommandPlanner:
         self._send(msg, where)
         line = self._receive(where)
         try:
-            return parse_answer(line, self.game, s, mask, msg["step"])
+            return parse_answer(line, self.game, s, mask, msg["step"], hint=LOGS_HINT)
         except PlannerError:
             self._drop()
             raise

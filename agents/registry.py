@@ -68,7 +68,8 @@ def make_policy(name: str | Any, env: Any, step_timeout: float | None = None) ->
     ``name`` may also be a Python object: a :class:`~agents.base.Policy` (returned as it
     is) or a planner (a function ``act(observation, mask)``, a factory or a planner
     object, :func:`agents.external.planner_policy`). ``step_timeout`` bounds each answer
-    of a ``cmd:`` planner (seconds; default :data:`agents.external.DEFAULT_STEP_TIMEOUT`):
+    of a planner from outside FlowTest, ``cmd:`` or ``python:`` (seconds; default
+    :data:`agents.external.DEFAULT_STEP_TIMEOUT`):
     ``make_policy("cmd:python3 planner.py", env, step_timeout=2.0)``.
 
     Raises
@@ -97,13 +98,15 @@ def make_policy(name: str | Any, env: Any, step_timeout: float | None = None) ->
         if isinstance(name, Policy):
             return name
         if callable(name) or callable(getattr(name, "act", None)):
-            return external.planner_policy(name, env)
+            return external.planner_policy(name, env, step_timeout=step_timeout)
         raise PolicyError(f"a system under test is a name, a Policy or a planner, not a {type(name).__name__}")
     m = _NAME.match(name.strip())
     if not m or m.group(1) not in FACTORIES:
         raise PolicyError(f"unknown policy {name!r}; known: {KNOWN}")
     if m.group(1) == "cmd":
         policy: Policy = external.make_command(env, m.group(2) or "", step_timeout)
+    elif m.group(1) == "python":
+        policy = external.make_python(env, m.group(2) or "", step_timeout)
     else:
         policy = FACTORIES[m.group(1)](env, m.group(2) or "")
     policy.name = name

@@ -110,12 +110,12 @@ def replay_command(env_id: str, sut: str, seed: int, tester: str = "synthesized"
     """The command that replays one run exactly (shell-quoted: a model path may hold spaces).
 
     A ``python:`` or ``cmd:`` planner is found from the directory the evaluation ran in
-    (``cwd``, default the current one): its command starts with ``cd DIR &&``, and a
-    ``cmd:`` planner's carries ``--step-timeout`` when one was given. With
+    (``cwd``, default the current one): its command starts with ``cd DIR &&``, and
+    carries ``--step-timeout`` when one was given. With
     ``trust_model`` (the evaluation loaded stable-baselines3 zips, ``--trust-model``) a
     ``ppo:`` system or tester's command carries ``--trust-model`` too."""
     against = "" if tester == "synthesized" else f" --tester {shlex.quote(tester)}"
-    timeout = f" --step-timeout {step_timeout:g}" if step_timeout is not None and sut.startswith("cmd:") else ""
+    timeout = f" --step-timeout {step_timeout:g}" if step_timeout is not None and sut.startswith(("cmd:", "python:")) else ""
     trust = " --trust-model" if trust_model and (sut.startswith("ppo:") or tester.startswith("ppo:")) else ""
     command = (f"flowtest evaluate --env {shlex.quote(env_id)} --sut {shlex.quote(sut)}{against}{timeout}{trust} "
                f"--episodes 1 --seed {seed} --replay")
@@ -545,8 +545,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "act(observation, mask) or a factory, found from the current directory) or "
                         "cmd:\"COMMAND\" (a process speaking JSON lines; docs/runtime.md)")
     p.add_argument("--step-timeout", type=positive_seconds, default=None, metavar="SECONDS",
-                   help="how long a cmd: planner may take to answer one step (default "
-                        f"{DEFAULT_STEP_TIMEOUT:g}; the first answer includes its start)")
+                   help="how long a cmd: or python: planner may take to answer one step (default "
+                        f"{DEFAULT_STEP_TIMEOUT:g}; a cmd: planner's first answer includes its start)")
     p.add_argument("--tester", nargs="+", default=["synthesized"], metavar="TESTER",
                    help="who plays the test: synthesized (default), ppo:PATH (a learned tester, flowtest "
                         "train-tester); several give a side-by-side comparison")

@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 
 from synthesis.artifacts.summary import stop_note
+from synthesis.routing.caps import caps_text
 
 
 def _state_text(ts: Any, s: int) -> str:
@@ -58,8 +59,7 @@ def _uses(summary: dict[str, Any]) -> str:
     text = f"{walls} wall{'s' if walls != 1 else ''}, {doors} door{'s' if doors != 1 else ''}"
     caps = summary.get("caps")
     if caps:
-        nouns = {"max_walls": "walls", "max_doors": "doors", "max_restrictions": "restrictions"}
-        text += " (caps: " + ", ".join(f"at most {n} {nouns.get(k, k)}" for k, n in caps.items()) + ")"
+        text += f" (caps: {caps_text(caps)})"
     return text
 
 

@@ -113,6 +113,8 @@ def test_summary_counts_walls_and_doors_first(capsys: pytest.CaptureFixture[str]
     code, out, _ = run(["synthesize", "small-reactive", "-q"], capsys)
     assert "uses         0 walls, 3 doors" in out
     assert out.index("uses") < out.index("cuts         4 edges")
+    code, out, _ = run(["synthesize", "small-reactive", "-q", "--max-doors", "2", "--max-walls", "1"], capsys)
+    assert code == 0 and "2 doors (caps: at most 1 wall and at most 2 doors)" in out, out
 
 
 def test_one_way_wall_is_named(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
