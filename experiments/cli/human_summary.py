@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 
 from synthesis.artifacts.summary import stop_note
+from synthesis.problems.diagnose import implied
 from synthesis.routing.caps import caps_text
 
 
@@ -131,4 +132,10 @@ def human_summary(test: Any, summary: dict[str, Any]) -> str:
     else:
         lines.append(f"  time         graphs {stats['graph_seconds']:.2f} s, solve {stats['solve_seconds']:.2f} s{gap_text}")
     lines.append(f"  check        bypass flow {summary['bypass_flow']} (must be 0), feasibility flows ok")
+    if implied(test.products):
+        lines.append(
+            f"  note         the system objective `{p.system_objective.text}` already implies the test objective "
+            f"`{p.test_objective.text}`: every correct system passes this test, which needs no restriction; "
+            "ask the test for something the system objective does not"
+        )
     return "\n".join(lines)

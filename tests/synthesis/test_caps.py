@@ -291,6 +291,22 @@ def test_test_objective_implied_by_the_system_objective(tmp_path: Path, capsys: 
     assert "also meets the test objective" not in line
 
 
+@pytest.mark.parametrize("test", ["F !hazard", "F !dock"])
+def test_a_test_objective_met_from_the_start_is_said_to_be_implied(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], test: str
+) -> None:
+    """A test objective met at the start (``F !hazard`` beside ``G !hazard``) is routable, so
+    the test is synthesized (no restriction, as it should be), and the summary says why it
+    tests nothing, where it once said nothing; a test objective that needs restrictions
+    gets no such note."""
+    code, out, _ = run(["synthesize", str(warehouse(tmp_path, test=test)), "-q"], capsys)
+    assert code == 0
+    assert "uses         0 walls, 0 doors" in out
+    assert f"already implies the test objective `{test}`: every correct system passes this test" in out, out
+    code, out, _ = run(["synthesize", str(warehouse(tmp_path)), "-q"], capsys)
+    assert code == 0 and "already implies" not in out
+
+
 def test_implied_on_a_grid_built_in_python() -> None:
     ts = grid_world([(0, 0), (0, 1), (0, 2)], 1, 3, (0, 0), [(0, 2)], {(0, 2): {"goal", "I"}})
     with pytest.raises(InconsistentProblem, match="already implies") as err:
