@@ -62,7 +62,7 @@ from typing import Any
 
 import numpy as np
 
-from synthesis.model.errors import ProblemError
+from synthesis.model.errors import InconsistentProblem, ProblemError
 
 from .arguments import nonnegative_int, positive_int, positive_seconds
 from .command import Command
@@ -103,6 +103,16 @@ EXIT_TEST_FAILED = EXIT_CHECK_FAILED
 
 EXTERNAL_PREFIXES = ("python:", "cmd:")
 """Systems named from outside FlowTest: their names depend on the working directory."""
+
+
+def _env_named(env_id: str, several: bool) -> Any:
+    """:func:`make_env`; among several envs, an inconsistent problem's message names which."""
+    try:
+        return make_env(env_id)
+    except InconsistentProblem as exc:
+        if not several:
+            raise
+        raise InconsistentProblem(exc.reason, str(exc), source=f"--env {env_id}") from None
 
 
 def replay_command(env_id: str, sut: str, seed: int, tester: str = "synthesized", step_timeout: float | None = None,
@@ -307,7 +317,7 @@ def evaluate(
     if episodes < 1:
         raise ProblemError("--episodes must be at least 1")
     check_sut_names(suts)
-    envs = {env_id: make_env(env_id) for env_id in dict.fromkeys(env_ids)}
+    envs = {env_id: _env_named(env_id, len(env_ids) > 1) for env_id in dict.fromkeys(env_ids)}
     cells: list[Cell] = []
     for env in envs.values():
         env.close()
@@ -609,7 +619,7 @@ def run(args: argparse.Namespace) -> int:
     # refuse bad IDs and SUTs before any run or any file: a SUT that can play none of the
     # tests is bad input (a missing model, a typo); one that cannot play some is a report row
     check_sut_names(args.sut)
-    envs = [make_env(env_id) for env_id in dict.fromkeys(args.env)]
+    envs = [_env_named(env_id, len(args.env) > 1) for env_id in dict.fromkeys(args.env)]
     for sut in args.sut:
         first: ProblemError | None = None
         for env in envs:

@@ -80,7 +80,8 @@ def exit_code_for(exc: Exception) -> int:
         return EXIT_INVALID
     if isinstance(exc, InconsistentProblem):
         meaning = INCONSISTENT_REASONS.get(exc.reason, exc.reason)
-        error(f"inconsistent problem ({exc.reason}): {meaning}: {exc}")
+        where = f"{exc.source}: " if exc.source else ""
+        error(f"{where}inconsistent problem ({exc.reason}): {meaning}: {exc}")
         return EXIT_INCONSISTENT
     if isinstance(exc, CheckFailed):
         error(f"FLOWTEST BUG (please report it with the problem): the synthesized test failed its check: {exc}")

@@ -31,9 +31,10 @@ class InconsistentProblem(FlowTestError):
     agent strategy realizes any routing cut set).
     """
 
-    def __init__(self, reason: str, message: str) -> None:
+    def __init__(self, reason: str, message: str, source: str | None = None) -> None:
         super().__init__(message)
         self.reason = reason
+        self.source = source  # which of several inputs has no test (a command's --env), where it matters
 
 
 class CheckFailed(FlowTestError, AssertionError):

@@ -132,6 +132,18 @@ def test_unknown_env_is_invalid_input(tmp_path: Path) -> None:
     assert main(["evaluate", "--env", "FlowTest-Nope-v0", "--sut", "random", "--out", str(tmp_path), "-q"]) == 2
 
 
+def test_an_inconsistent_problem_among_several_envs_is_named(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """With several ``--env``, the message of the one with no test says which it is."""
+    behind = tmp_path / "behind.toml"
+    behind.write_text('name = "behind"\n[system]\ngrid = """\nS . X D\n"""\nstart = "S"\nterminal = ["D"]\n'
+                      '[labels]\ndock = ["D"]\nspill = ["X"]\n[objectives]\nsystem = "F dock & G !spill"\n'
+                      'test = "F dock"\n[environment]\nkind = "reactive"\n')
+    code = main(["evaluate", "--env", "small-reactive", str(behind), "--sut", "random", "--out", str(tmp_path / "r"), "-q"])
+    err = capsys.readouterr().err
+    assert code == 3 and err.startswith(f"error: --env {behind}: inconsistent problem (unreachable): the goal is "), err
+    assert "Traceback" not in err
+
+
 def test_unknown_sut_is_invalid_input(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     code = main(["evaluate", "--env", "FlowTest-SmallReactive-v0", "--sut", "scripted:nope", "--out", str(tmp_path), "-q"])
     assert code == 2 and "error: --sut scripted:nope" in capsys.readouterr().err
