@@ -117,7 +117,7 @@ def cap_count(text: str) -> int:
     try:
         value = int(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number from 0, not {text[:40]!r}") from None
+        raise argparse.ArgumentTypeError(f"expected a whole number from 0 to {MAX_CAP}, not {text[:40]!r}") from None
     if not 0 <= value <= MAX_CAP:
         raise argparse.ArgumentTypeError(f"expected a whole number from 0 to {MAX_CAP}, not {text[:40]!r}")
     return value

@@ -160,7 +160,7 @@ class _Parser:
     def unary(self) -> Formula:
         tok = self.peek()
         if tok is None:
-            raise self.error("formula ends too early")
+            raise self.error("an operand is missing")
         if tok == "!":
             self.take()
             self.nest()

@@ -214,9 +214,11 @@ def test_syntax_errors_give_positions(text: str, position: int) -> None:
 
 @pytest.mark.parametrize("text", ["(a", "F(a & b", "a ->", "F", "!"])
 def test_syntax_errors_at_the_end(text: str) -> None:
-    """A formula that stops too early says so."""
-    with pytest.raises(ProblemError, match="at the end"):
+    """A formula that stops too early says so, and what is missing (not "ends too early at
+    the end")."""
+    with pytest.raises(ProblemError, match="at the end") as err:
         parse_formula(text)
+    assert re.match(r"(an operand is missing|missing '\)') at the end in formula ", str(err.value)), str(err.value)
 
 
 @pytest.mark.parametrize("text", ["", "   "])
