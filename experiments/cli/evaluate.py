@@ -72,6 +72,7 @@ from .outputs import json_safe, prepare_output_folder, write_atomically
 from .report import (
     GLOSSARY,
     TestInfo,
+    column_titles,
     file_key,
     fold_rows,
     outcome_class,
@@ -415,6 +416,9 @@ def write_report(cells: Sequence[Cell], out: Path, tests: Sequence[TestInfo] | N
     if tests is None:
         tests = test_infos(list(dict.fromkeys(c.env_id for c in cells)), out)
     records = [cell.record() for cell in cells]
+    titles = column_titles(records, tests)
+    for r in records:  # what the report calls the test (its problem's name), next to its env ID
+        r["title"] = titles[test_name(r)]
     write_atomically(out / "results.json", lambda tmp: tmp.write_text(json.dumps(json_safe(records), indent=1) + "\n"))
     md, body = _markdown(records), render_html(records, tests, (TESTER_COLUMNS, tester_comparison_rows(records)))
     write_atomically(out / "report.md", lambda tmp: tmp.write_text(md))
@@ -483,11 +487,12 @@ def _markdown(records: Sequence[dict[str, Any]]) -> str:
         for r in bugs:
             for f in r["failures"]:
                 if f["kind"] == "test":
-                    lines.append(f"- {r['sut']} on {r['env']}: {f['reason']} — `{f['replay']}`")
+                    lines.append(f"- {r['sut']} on {r['title']}: {f['reason']} — `{f['replay']}`")
         lines.append("")
     envs = list(dict.fromkeys(test_name(r) for r in records))
     by = {(r["sut"], test_name(r)): r for r in records}
-    lines += ["| system under test | " + " | ".join(envs) + " |", "|---" * (len(envs) + 1) + "|"]
+    title = {test_name(r): r["title"] for r in records}
+    lines += ["| system under test | " + " | ".join(title[e] for e in envs) + " |", "|---" * (len(envs) + 1) + "|"]
     for group in fold_rows(records, envs):
         cells = []
         for env in envs:
@@ -517,10 +522,10 @@ def _markdown(records: Sequence[dict[str, Any]]) -> str:
         rows = [r for r in records if r["sut"] == sut]
         for r in rows:
             if r["error"]:
-                lines.append(f"| {test_name(r)} | 0 | not run: {r['error']} |  |  |  |  |  |  |")
+                lines.append(f"| {r['title']} | 0 | not run: {r['error']} |  |  |  |  |  |  |")
                 continue
             lines.append(
-                f"| {test_name(r)} | {r['episodes']} | {_pct(r['system_objective_met_rate'])} "
+                f"| {r['title']} | {r['episodes']} | {_pct(r['system_objective_met_rate'])} "
                 f"| {_pct(r['test_objective_realized_rate'])} | {r['violated']} | {r['open']} "
                 f"| {r['mean_restrictions']:.1f} | {r['mean_steps']:.1f} | {r['n_failures']}"
                 f"{' (' + str(r['test_failures']) + ' test)' if r['test_failures'] else ''} |"
@@ -529,14 +534,14 @@ def _markdown(records: Sequence[dict[str, Any]]) -> str:
         for r in rows:
             pics = r["pictures"]
             if r.get("stopped"):
-                lines += [f"**{test_name(r)}** — stopped: {r['stopped']}", ""]
+                lines += [f"**{r['title']}** — stopped: {r['stopped']}", ""]
             if r["failures"]:
                 f = r["failures"][0]
-                lines += [f"**{test_name(r)}** — first failure ({f['kind']}): {f['reason']}. Replay:", "",
+                lines += [f"**{r['title']}** — first failure ({f['kind']}): {f['reason']}. Replay:", "",
                           f"    {f['replay']}", ""]
             for label in ("typical", "failing"):
                 if label in pics:
-                    lines.append(f"![{label} run of {sut} on {r['env']}]({pics[label]})")
+                    lines.append(f"![{label} run of {sut} on {r['title']}]({pics[label]})")
             lines.append("")
     return "\n".join(lines) + "\n"
 
@@ -646,17 +651,20 @@ def run(args: argparse.Namespace) -> int:
                      step_timeout=args.step_timeout)
     progress("drawing trace pictures")
     records = write_report(cells, args.out)
+    # the tests as given on the command line (--env), columns as wide as the longest name
+    w_sut = max([24, *(len(r["sut"]) for r in records)])
+    w_test = max([30, *(len(test_name(r)) for r in records)])
     for r in records:
         if r["error"]:
-            sys.stdout.write(f"{r['sut']:24s} {test_name(r):30s} not run: {r['error']}\n")
+            sys.stdout.write(f"{r['sut']:{w_sut}s} {test_name(r):{w_test}s} not run: {r['error']}\n")
             continue
         trapped = f"  trapped {r['trapped']}" if r["tester"] != "synthesized" else ""
         sys.stdout.write(
-            f"{r['sut']:24s} {test_name(r):30s} met {_pct(r['system_objective_met_rate']):>6s}  "
+            f"{r['sut']:{w_sut}s} {test_name(r):{w_test}s} met {_pct(r['system_objective_met_rate']):>6s}  "
             f"realized {_pct(r['test_objective_realized_rate']):>6s}  failures {r['n_failures']}{trapped}\n"
         )
         if r["stopped"]:
-            sys.stdout.write(f"{'':24s} stopped: {r['stopped']}\n")
+            sys.stdout.write(f"{'':{w_sut}s} stopped: {r['stopped']}\n")
     bugs = test_failure_records(records)
     if bugs:
         sys.stderr.write("flowtest: FLOWTEST BUG: a test failed its guarantee; see the report\n")

@@ -253,6 +253,9 @@ def test_misbehaving_planners_in_the_cli_report_and_replay(project: Path, capsys
         assert html_escaped(reason.split(": ")[-1][:30]) in page or reason.split(": ")[-1][:30] in page
     md = (project / "report" / "report.md").read_text()
     assert md.count("— stopped: the planner failed in run 1 of 2 (seed 0)") == len(BAD_PLANNERS)
+    # the test by its problem's name, as in the HTML, never the file's path
+    assert "| system under test | warehouse |" in md and str(project) + "/warehouse.toml |" not in md
+    assert all(r["title"] == "warehouse" for r in records.values())
     crash = records["cmd:python3 crash.py"]["failures"][0]
     assert main(replay_args(crash["replay"], project)) == 0
     assert "out of battery at step 3" in capsys.readouterr().out
