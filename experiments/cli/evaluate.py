@@ -67,7 +67,7 @@ from synthesis.model.errors import InconsistentProblem, ProblemError
 from .arguments import nonnegative_int, positive_int, positive_seconds
 from .command import Command
 from .episodes import Trace, make_env, make_tester_env, run_episode, sut_policy
-from .exits import EXIT_CHECK_FAILED, EXIT_OK
+from .exits import EXIT_CHECK_FAILED, EXIT_OK, say
 from .outputs import json_safe, prepare_output_folder, write_atomically
 from .report import (
     GLOSSARY,
@@ -104,6 +104,15 @@ EXIT_TEST_FAILED = EXIT_CHECK_FAILED
 
 EXTERNAL_PREFIXES = ("python:", "cmd:")
 """Systems named from outside FlowTest: their names depend on the working directory."""
+
+
+class EvaluationInterrupted(KeyboardInterrupt):
+    """Ctrl-C (or SIGTERM) during :func:`evaluate`: ``cells`` holds the (system, test) pairs
+    played to the end before it, and ``total`` how many there were to play."""
+
+    def __init__(self, cells: list[Cell], total: int) -> None:
+        super().__init__()
+        self.cells, self.total = cells, total
 
 
 def _env_named(env_id: str, several: bool) -> Any:
@@ -301,6 +310,8 @@ def evaluate(
     ProblemError
         Before anything runs, if an env or a SUT name is invalid input (not a test, an
         unknown policy, a missing module or program), or ``episodes < 1``.
+    EvaluationInterrupted
+        On Ctrl-C (a ``KeyboardInterrupt``), with the pairs played to the end.
 
     Examples
     --------
@@ -311,10 +322,6 @@ def evaluate(
     >>> [(cell.sut, cell.record()["system_objective_met_rate"]) for cell in cells]
     [('python object greedy', 0.0), ('scripted:replanner', 1.0)]
     """
-    from agents.base import PolicyError
-    from agents.external import spec_of
-    from agents.registry import make_policy
-
     if episodes < 1:
         raise ProblemError("--episodes must be at least 1")
     check_sut_names(suts)
@@ -323,6 +330,20 @@ def evaluate(
     for env in envs.values():
         env.close()
     total = len(envs) * len(suts) * len(testers)
+    try:
+        _play(envs, suts, testers, episodes, seed, progress, step_timeout, cells, total)
+    except KeyboardInterrupt:
+        raise EvaluationInterrupted(cells, total) from None
+    return cells
+
+
+def _play(envs: dict[str, Any], suts: Sequence[Any], testers: Sequence[str], episodes: int, seed: int,
+          progress: Callable[[str], None] | None, step_timeout: float | None, cells: list[Cell], total: int) -> None:
+    """:func:`evaluate`'s loop: each pair played to the end is appended to ``cells``."""
+    from agents.base import PolicyError
+    from agents.external import spec_of
+    from agents.registry import make_policy
+
     k = 0
     for env_id in envs:
         for tester in testers:
@@ -364,7 +385,6 @@ def evaluate(
                 cell.seconds = time.perf_counter() - t0
                 cells.append(cell)
             env.close()
-    return cells
 
 
 # --------------------------------------------------------------------------- pictures
@@ -423,6 +443,20 @@ def write_report(cells: Sequence[Cell], out: Path, tests: Sequence[TestInfo] | N
     md, body = _markdown(records), render_html(records, tests, (TESTER_COLUMNS, tester_comparison_rows(records)))
     write_atomically(out / "report.md", lambda tmp: tmp.write_text(md))
     write_atomically(out / "report.html", lambda tmp: tmp.write_text(body))
+    return records
+
+
+def write_partial_report(cells: Sequence[Cell], out: Path) -> list[dict[str, Any]]:
+    """``results.json`` and ``report.md`` of the pairs an interrupted evaluation played, at
+    once: no pictures and no ``report.html``, whose drawing would outlast a Ctrl-C."""
+    records = [cell.record() for cell in cells]
+    titles = column_titles(records)
+    for r in records:
+        r["title"] = titles[test_name(r)]
+        r["interrupted"] = True
+    write_atomically(out / "results.json", lambda tmp: tmp.write_text(json.dumps(json_safe(records), indent=1) + "\n"))
+    md = _markdown(records).replace("# FlowTest evaluation\n", "# FlowTest evaluation (interrupted: the pairs played)\n", 1)
+    write_atomically(out / "report.md", lambda tmp: tmp.write_text(md))
     return records
 
 
@@ -647,8 +681,15 @@ def run(args: argparse.Namespace) -> int:
             sys.stderr.write(msg + "\n")
             sys.stderr.flush()
 
-    cells = evaluate(args.env, args.sut, args.episodes, args.seed, progress, testers=args.tester,
-                     step_timeout=args.step_timeout)
+    try:
+        cells = evaluate(args.env, args.sut, args.episodes, args.seed, progress, testers=args.tester,
+                         step_timeout=args.step_timeout)
+    except EvaluationInterrupted as stop:
+        if stop.cells:  # keep the pairs played: results.json and report.md at once (no pictures)
+            write_partial_report(stop.cells, args.out)
+            say(f"flowtest: {len(stop.cells)} of {stop.total} (system, test) pairs were played to the end; "
+                f"{args.out / 'results.json'} and report.md hold them (no pictures, no report.html)")
+        raise
     progress("drawing trace pictures")
     records = write_report(cells, args.out)
     # the tests as given on the command line (--env), columns as wide as the longest name

@@ -235,6 +235,23 @@ def test_hanging_python_planners_fail_their_run_and_the_others_go_on(project: Pa
     assert signal.getsignal(signal.SIGALRM) in (signal.SIG_DFL, None) and signal.getitimer(signal.ITIMER_REAL) == (0.0, 0.0)
 
 
+def test_ctrl_c_keeps_the_pairs_played(project: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Ctrl-C in the middle of an evaluation (here: inside a planner's step) exits 130 at
+    once, and the pairs played to the end are kept in results.json and report.md (a walker
+    lost every finished pair to a Ctrl-C)."""
+    write(project, "quitter.py", "def quit_now(observation, mask):\n    raise KeyboardInterrupt\n")
+    code = main(["evaluate", "--env", "warehouse.toml", "--sut", "python:bfs_planner:BfsPlanner",
+                 "python:quitter:quit_now", "scripted:replanner", "--episodes", "2", "--out", "report"])
+    err = capsys.readouterr().err
+    assert code == 130 and err.rstrip().endswith("flowtest: interrupted"), err
+    assert "1 of 3 (system, test) pairs were played to the end" in err, err
+    records = json.loads((project / "report" / "results.json").read_text())
+    assert [(r["sut"], r["episodes"], r["interrupted"]) for r in records] == [("python:bfs_planner:BfsPlanner", 2, True)]
+    md = (project / "report" / "report.md").read_text()
+    assert md.startswith("# FlowTest evaluation (interrupted: the pairs played)") and "| warehouse |" in md
+    assert not (project / "report" / "report.html").exists()
+
+
 @pytest.mark.slow
 def test_misbehaving_planners_in_the_cli_report_and_replay(project: Path, capsys: pytest.CaptureFixture[str]) -> None:
     for name, body in BAD_PLANNERS.items():
