@@ -457,6 +457,7 @@ def write_partial_report(cells: Sequence[Cell], out: Path) -> list[dict[str, Any
     write_atomically(out / "results.json", lambda tmp: tmp.write_text(json.dumps(json_safe(records), indent=1) + "\n"))
     md = _markdown(records).replace("# FlowTest evaluation\n", "# FlowTest evaluation (interrupted: the pairs played)\n", 1)
     write_atomically(out / "report.md", lambda tmp: tmp.write_text(md))
+    (out / "report.html").unlink(missing_ok=True)  # an earlier run's, which would now disagree with them
     return records
 
 
