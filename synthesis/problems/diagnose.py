@@ -105,7 +105,10 @@ def explain_unroutable(problem: Problem) -> str:
     visits = [t for t in system if t.is_visit]
     others = [t for t in system if not t.is_visit]
     text = f"the test objective's `{visit.text}` cannot be routed: no execution that meets {sys_text} makes it before the goal"
-    if others and _routable(problem, visits, [visit]):
+    if implied(_products(problem, _objective(system), _objective([visit]))):
+        text += (f" (the system objective already asks for it: every execution that meets {sys_text} meets "
+                 f"`{visit.text}` by the time it ends; drop it from the test objective)")
+    elif others and _routable(problem, visits, [visit]):
         culprits = [t for t in others if not _routable(problem, [*visits, t], [visit])]
         if culprits:
             text += f" (every way through it breaks {_quoted(culprits)})"

@@ -291,6 +291,17 @@ def test_test_objective_implied_by_the_system_objective(tmp_path: Path, capsys: 
     assert "also meets the test objective" not in line
 
 
+def test_an_implied_visit_inside_the_test_objective_is_named(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``test = "F dock & F aisle"``: the dock visit is the goal itself, so it cannot be
+    routed; the message says the system objective already asks for it, not that no way
+    makes it."""
+    code, _, err = run(["synthesize", str(warehouse(tmp_path, test="F dock & F aisle")), "-q"], capsys)
+    assert code == 3
+    line = error_line(err)
+    assert "`F dock` cannot be routed" in line and "the system objective already asks for it" in line, line
+    assert "drop it from the test objective" in line and "no way from the start makes it" not in line
+
+
 @pytest.mark.parametrize("test", ["F !hazard", "F !dock"])
 def test_a_test_objective_met_from_the_start_is_said_to_be_implied(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], test: str
