@@ -410,9 +410,11 @@ def _step_timeout(step_timeout: float | None) -> float:
 def _timed(seconds: float) -> Iterator[None]:
     """Interrupt the ``with`` body after ``seconds`` (raising :class:`_Overran` in it), by
     ``SIGALRM``: a Python planner's loop or sleep is stopped, a call into C code that does
-    not return is not. Untimed where there is no ``SIGALRM`` (Windows) and off the main
-    thread, where Python delivers no signals."""
-    if not hasattr(signal, "setitimer") or threading.current_thread() is not threading.main_thread():
+    not return is not. Untimed where there is no ``SIGALRM`` (Windows), off the main
+    thread, where Python delivers no signals, and where a real-time timer is already armed
+    (the caller's own, which this one would cancel)."""
+    if (not hasattr(signal, "setitimer") or threading.current_thread() is not threading.main_thread()
+            or signal.getitimer(signal.ITIMER_REAL)[0] > 0):
         yield
         return
 

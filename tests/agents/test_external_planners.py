@@ -235,6 +235,32 @@ def test_hanging_python_planners_fail_their_run_and_the_others_go_on(project: Pa
     assert signal.getsignal(signal.SIGALRM) in (signal.SIG_DFL, None) and signal.getitimer(signal.ITIMER_REAL) == (0.0, 0.0)
 
 
+def test_a_timer_the_caller_armed_is_left_alone(project: Path) -> None:
+    """Where the caller has a real-time timer armed (pytest-timeout's signal method, a
+    script's own alarm), the planner's step is not timed, so that timer is not cancelled."""
+    import signal
+
+    from agents.registry import make_policy
+    from experiments.cli.episodes import make_env
+
+    env = make_env("warehouse.toml")
+    policy = make_policy("python:bfs_planner:BfsPlanner", env, step_timeout=0.05)
+    obs, info = env.reset(seed=0)
+    policy.reset(0)
+    rang: list[int] = []
+    old = signal.signal(signal.SIGALRM, lambda signum, frame: rang.append(signum))
+    try:
+        signal.setitimer(signal.ITIMER_REAL, 5.0)
+        policy.act(obs, info)
+        assert signal.getitimer(signal.ITIMER_REAL)[0] > 0  # still armed, not cancelled
+        signal.setitimer(signal.ITIMER_REAL, 0.05)
+        time.sleep(0.5)
+        assert rang == [signal.SIGALRM]  # and the caller's handler is back
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, old)
+
+
 def test_ctrl_c_keeps_the_pairs_played(project: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """Ctrl-C in the middle of an evaluation (here: inside a planner's step) exits 130 at
     once, and the pairs played to the end are kept in results.json and report.md (a walker
