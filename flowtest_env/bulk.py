@@ -11,6 +11,7 @@ from __future__ import annotations
 import gc
 import multiprocessing
 import os
+import signal
 import sys
 import threading
 from collections.abc import Iterator
@@ -55,3 +56,15 @@ def free_cores() -> int:
         return len(os.sched_getaffinity(0))
     except (AttributeError, OSError):
         return os.cpu_count() or 1
+
+
+def helper_signals() -> None:
+    """In a forked helper, first thing: Ctrl-C (sent to the whole process group) is left to
+    the parent, which stops its helpers, and the parent's ``terminate()`` ends the helper at
+    once. Without it, the parent's handlers, inherited by the fork, turned either signal into
+    a ``KeyboardInterrupt`` in the helper, whose traceback the user then read."""
+    try:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    except ValueError:  # not the main thread of the helper: the handlers stay as they are
+        pass

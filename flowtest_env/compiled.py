@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from .bulk import can_fork, free_cores, gc_paused
+from .bulk import can_fork, free_cores, gc_paused, helper_signals
 from .encoding import Encoder
 from .game import MET, OPEN, VIOLATED, RunState, TestGame
 
@@ -488,7 +488,9 @@ class _RowWriter:
 
 def _helper(todo: list[tuple[Encoder, list[RunState], np.ndarray]]) -> None:
     """A forked helper: its rows written into the shared table, then gone (no exit
-    handler of the parent runs; Ctrl-C, sent to the whole process group, ends it quietly)."""
+    handler of the parent runs; Ctrl-C, sent to the whole process group, is left to the
+    parent, which stops it: :func:`~flowtest_env.bulk.helper_signals`)."""
+    helper_signals()
     code = 1
     try:
         _write_rows(todo)

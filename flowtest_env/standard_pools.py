@@ -56,7 +56,7 @@ from synthesis.artifacts.pool_records import CHECKS, rebuild_artifact
 from synthesis.artifacts.provenance import versions
 from synthesis.model.errors import ProblemError
 
-from .bulk import can_fork, free_cores, gc_paused
+from .bulk import can_fork, free_cores, gc_paused, helper_signals
 from .random_grid import SPLIT_SPAN, SPLITS, BuildProgress, PoolName, changed_params, parse_pool, pool_params, split_seeds
 
 __all__ = [
@@ -425,8 +425,9 @@ def _next_chunk(counter: Any, n_chunks: int) -> int:
 
 def _helper(job: _Job, counter: Any, n_chunks: int, conn: Any) -> None:
     """A forked helper: chunks taken in turn, each sent back as ``(chunk, tests, refusal)``
-    until none is left or one is refused; Ctrl-C (sent to the whole process group) ends
-    it quietly, the loader stops it."""
+    until none is left or one is refused. Ctrl-C (sent to the whole process group) is left
+    to the loader, which stops it (:func:`~flowtest_env.bulk.helper_signals`)."""
+    helper_signals()
     code = 0
     try:
         while (c := _next_chunk(counter, n_chunks)) < n_chunks:

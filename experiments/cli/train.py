@@ -554,6 +554,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         g.add_argument(*names, dest=key, **kw)
 
 
+POOL_ENV = "FlowTest-RandomGrid-v0"
+"""The environment whose tests ``--pool`` names (the others take no pool options)."""
+
+
 def _pool_options(args: argparse.Namespace) -> dict[str, Any]:
     if args.pool is None:
         if args.split is not None or args.count is not None or args.heldout_count:
@@ -584,6 +588,9 @@ def run(args: argparse.Namespace) -> int:
     else:
         require_native()
         settings = native_settings(given)
+    if pool and args.ENV != POOL_ENV:
+        raise ProblemError(f"--pool trains on a named pool's tests through {POOL_ENV}, not {args.ENV}: "
+                           f"flowtest train {POOL_ENV} --pool {args.pool} ... (or drop --pool to train on {args.ENV})")
     make_env(args.ENV, **pool).close()  # a bad environment is refused before anything else
     model_path = args.out if args.out.suffix == ".zip" else args.out.with_suffix(".zip")
     for path, what in ((model_path, "model"), (model_path.with_suffix(".png"), "curve"),

@@ -200,6 +200,7 @@ def test_flowtest_train_native_writes_every_setting_logs_and_a_safe_checkpoint(
     (["--device", "tpu"], "device"),
     (["--count", "4"], "go with --pool"),
     (["--pool", "nonsense/5x5"], "unknown family"),
+    (["--pool", "reachability1/5x5"], "--pool trains on a named pool's tests through FlowTest-RandomGrid-v0, not small-reactive"),
 ])
 def test_bad_training_flags_are_one_error_line(tmp_path: Path, capsys: pytest.CaptureFixture[str], argv: list[str],
                                                says: str) -> None:
