@@ -225,6 +225,11 @@ class BenchmarkConfig:
         return sorted({n for n in self.curve_sizes if 0 < n < self.train_count} | {self.train_count})
 
 
+def _runs(n: int, what: str = "") -> str:
+    """``"8 sampled runs"``, ``"1 sampled run"``."""
+    return f"{n} {what}run{'s' if n != 1 else ''}"
+
+
 def default_workers() -> int:
     """Training processes by default: one per CPU, at most 2 (each run uses one thread)."""
     return max(1, min(2, os.cpu_count() or 1))
@@ -1073,7 +1078,7 @@ def table_markdown(doc: dict[str, Any]) -> str:
         f"**{headline_text(doc)}**", "",
         f"Splits: train {sp['train']['count']} tests (the first {sp['train']['scored']} scored), validation "
         f"{sp['validation']['count']}, held-out test {sp['test']['count']} (never seen in training). "
-        f"Scale per split (met): floor = random ({cfg['runs']} runs per test) "
+        f"Scale per split (met): floor = random ({_runs(cfg['runs'])} per test) "
         + ", ".join(f"{s} {frac(sc[s]['floor'])}" for s in SPLIT_NAMES)
         + "; ceiling = the best reference " + ", ".join(f"{s} {frac(sc[s]['ceiling'])}" for s in SPLIT_NAMES) + ".", "",
         f"**Budget**: {cfg['steps']:,} time steps per training run, {doc['budget']['training_runs']} runs "
@@ -1094,7 +1099,7 @@ def table_markdown(doc: dict[str, Any]) -> str:
         "*Normalized*: (met - floor) / (ceiling - floor) on the split, 0 = random, 1 = the reference; IQM: the "
         "interquartile mean over training seeds of each seed's score; [95 % CI]: stratified bootstrap (seeds resampled, "
         f"tests resampled within each seed), {cfg['bootstrap']} replicates. *Greedy*: each test played once by the most "
-        f"likely action; *sampled*: {cfg['runs']} seeded runs per test drawn from the policy. *Worst 10 %*: the mean "
+        f"likely action; *sampled*: {_runs(cfg['runs'], 'seeded ')} per test drawn from the policy. *Worst 10 %*: the mean "
         "over the 10 % of held-out tests the policy met least often. *Met*: share of runs whose system objective was "
         "met (± 95 % t-interval over seeds). *Realized (of met)*: share of those that also realized the hidden test "
         "objective (the synthesized test guarantees 100 %). *Held-out gap*: train met minus held-out met per seed.",
@@ -1235,7 +1240,7 @@ def score_all(config: BenchmarkConfig, splits: dict[str, Split], trained: Sequen
     for algo in config.baselines():
         runs = []
         for b in (b for b in trained if b.algo == algo and b.train_tests == config.train_count):
-            say(f"scoring {algo} seed {b.seed} (greedy, and {config.runs} sampled runs per test)")
+            say(f"scoring {algo} seed {b.seed} (greedy, and {_runs(config.runs, 'sampled ')} per test)")
             runs.append({"seed": b.seed, "sut": b.sut, **batched(b.policies)})
         systems.append(SystemRuns(algo, "baseline", runs))
     single: list[str] = []
@@ -1481,6 +1486,10 @@ def run(args: argparse.Namespace) -> int:
         trust_pickled_models(True)
     check_config(config)
     _check_out(args.out, args.force)
+    dropped = [n for n in config.curve_sizes if n >= config.train_count]
+    if dropped and config.baselines():
+        sys.stderr.write(f"flowtest: warning: --curve-sizes {' '.join(map(str, dropped))}: not below --train-count "
+                         f"{config.train_count}, left out of the generalization curve\n")
 
     def say(message: str) -> None:
         if not args.quiet:

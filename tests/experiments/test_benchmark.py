@@ -318,6 +318,21 @@ def test_the_defaults_take_a_standard_pools_whole_smaller_split(monkeypatch: pyt
     assert "--test-count 250" in bench.command_of(seen[0])
 
 
+def test_curve_sizes_not_below_the_train_count_are_said_to_be_left_out(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    def stop(config: bench.BenchmarkConfig, *args: object, **kwargs: object) -> None:
+        raise bench.ProblemError("stopped here")
+
+    monkeypatch.setattr(bench, "run_benchmark", stop)
+    assert main(["benchmark", "--pool", POOL, "--train-count", "4", "--curve-sizes", "2", "16", "32",
+                 "--out", str(tmp_path / "a")]) == 2
+    err = capsys.readouterr().err
+    assert "flowtest: warning: --curve-sizes 16 32: not below --train-count 4, left out of the generalization curve" in err
+    assert main(["benchmark", "--pool", POOL, "--train-count", "4", "--curve-sizes", "2", "--out", str(tmp_path / "b")]) == 2
+    assert "warning" not in capsys.readouterr().err
+
+
 def test_sb3_trains_on_the_standard_pools_shipped_records(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
     """With ``--trainer sb3`` on a standard pool the training envs load its shipped records
     (the id itself), not the on-demand pool of the same seeds, which synthesized every test
