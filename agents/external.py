@@ -370,7 +370,8 @@ class PythonPlanner:
             try:
                 with _timed(self.timeout):
                     reset(seed)
-            except _Overran:
+            except _Overran as exc:
+                _keep_interrupt(exc)
                 raise PlannerError(f"reset: the planner did not return within {self.timeout:g} s (--step-timeout)") from None
             except Exception as exc:
                 raise PlannerError(f"reset raised {type(exc).__name__}: {exc}") from None
@@ -381,7 +382,8 @@ class PythonPlanner:
         try:
             with _timed(self.timeout):
                 answer = self._act(msg, mask.copy())
-        except _Overran:
+        except _Overran as exc:
+            _keep_interrupt(exc)
             raise PlannerError(f"step {msg['step']}: the planner gave no answer within {self.timeout:g} s "
                                "(--step-timeout); it was stopped") from None
         except Exception as exc:
@@ -399,6 +401,13 @@ class _Overran(BaseException):
     ``BaseException``, so the planner's own ``except Exception`` does not swallow it."""
 
 
+def _keep_interrupt(exc: _Overran) -> None:
+    """A ring while a Ctrl-C unwound the planner's call replaced the ``KeyboardInterrupt``:
+    raise that again (the user's stop, not the planner's timeout)."""
+    if isinstance(exc.__context__, KeyboardInterrupt):
+        raise exc.__context__
+
+
 def _step_timeout(step_timeout: float | None) -> float:
     timeout = DEFAULT_STEP_TIMEOUT if step_timeout is None else float(step_timeout)
     if not timeout > 0:
@@ -411,23 +420,35 @@ def _timed(seconds: float) -> Iterator[None]:
     """Interrupt the ``with`` body after ``seconds`` (raising :class:`_Overran` in it), by
     ``SIGALRM``: a Python planner's loop or sleep is stopped, a call into C code that does
     not return is not. Untimed where there is no ``SIGALRM`` (Windows), off the main
-    thread, where Python delivers no signals, and where a real-time timer is already armed
-    (the caller's own, which this one would cancel)."""
+    thread, where Python delivers no signals, where a real-time timer is already armed
+    (the caller's own, which this one would cancel) and where ``SIGALRM``'s handler was
+    installed outside Python (it could not be put back).
+
+    A ring that comes after the body has ended (the timer's last instant, or while a
+    ``KeyboardInterrupt`` unwinds it) is ignored: the body's own outcome stands."""
     if (not hasattr(signal, "setitimer") or threading.current_thread() is not threading.main_thread()
-            or signal.getitimer(signal.ITIMER_REAL)[0] > 0):
+            or signal.getitimer(signal.ITIMER_REAL)[0] > 0 or signal.getsignal(signal.SIGALRM) is None):
         yield
         return
+    active = [True]
 
     def ring(signum: int, frame: Any) -> None:
-        raise _Overran
+        if active[0]:
+            raise _Overran
 
     old = signal.signal(signal.SIGALRM, ring)
-    signal.setitimer(signal.ITIMER_REAL, seconds)
     try:
+        signal.setitimer(signal.ITIMER_REAL, seconds)
         yield
     finally:
-        signal.setitimer(signal.ITIMER_REAL, 0)
-        signal.signal(signal.SIGALRM, old)
+        while True:  # a ring before the first line here is caught, and the restoring goes on
+            try:
+                active[0] = False
+                signal.setitimer(signal.ITIMER_REAL, 0)
+                signal.signal(signal.SIGALRM, old)
+                break
+            except _Overran:
+                continue
 
 
 def make_python(env: Any, arg: str, step_timeout: float | None = None) -> PythonPlanner:

@@ -471,15 +471,16 @@ def _load_forked(job: _Job, n_proc: int, bar: BuildProgress) -> list[TestArtifac
                 recv, send = ctx.Pipe(duplex=False)
             except OSError:
                 break
+            proc = ctx.Process(target=_helper, args=(job, counter, n_chunks, send), daemon=True)
+            procs.append(proc)  # before it starts: a Ctrl-C right after start() still stops it below
             try:
-                proc = ctx.Process(target=_helper, args=(job, counter, n_chunks, send), daemon=True)
                 proc.start()
             except OSError:  # out of processes or memory: the others take its chunks
+                procs.pop()
                 recv.close()
                 break
             finally:
                 send.close()
-            procs.append(proc)
             conns.append(recv)
 
         def take(msg: tuple[int, list[TestArtifact], str | None]) -> None:
@@ -514,6 +515,7 @@ def _load_forked(job: _Job, n_proc: int, bar: BuildProgress) -> list[TestArtifac
             raise ProblemError(f"a loading process stopped before chunk {missing[0]} of {job.pool.id} {job.split} was loaded")
         return [t for c in range(n_chunks) for t in results[c]]
     finally:
+        procs = [proc for proc in procs if proc.pid is not None]  # started (a Ctrl-C may come before start())
         for proc in procs:
             if proc.is_alive():
                 proc.terminate()

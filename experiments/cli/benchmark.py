@@ -195,7 +195,8 @@ class BenchmarkConfig:
         """
         counts = default_counts(pool)
         for split in ("train", "validation", "test"):
-            settings.setdefault(f"{split}_count", counts[split])
+            if settings.get(f"{split}_count") is None:
+                settings[f"{split}_count"] = counts[split]
         return cls(pool, **settings)
 
     def baselines(self) -> list[str]:
@@ -1486,10 +1487,10 @@ def run(args: argparse.Namespace) -> int:
         trust_pickled_models(True)
     check_config(config)
     _check_out(args.out, args.force)
-    dropped = [n for n in config.curve_sizes if n >= config.train_count]
+    dropped = [n for n in config.curve_sizes if n > config.train_count]  # train_count is on the curve anyway
     if dropped and config.baselines():
-        sys.stderr.write(f"flowtest: warning: --curve-sizes {' '.join(map(str, dropped))}: not below --train-count "
-                         f"{config.train_count}, left out of the generalization curve\n")
+        sys.stderr.write(f"flowtest: warning: curve sizes {' '.join(map(str, dropped))} (--curve-sizes) are above "
+                         f"--train-count {config.train_count}: left out of the generalization curve\n")
 
     def say(message: str) -> None:
         if not args.quiet:

@@ -200,6 +200,7 @@ class Cell:
     stopped: str | None = None  # why fewer runs than asked (the planner failed)
     replayable: bool = True  # False for a system given as a Python object without a name
     step_timeout: float | None = None
+    problem: str = ""  # the test's problem name, for a report written without the tests' pictures
     cwd: str = field(default_factory=os.getcwd)
     trust_model: bool = field(default_factory=lambda: _models_trusted())
 
@@ -348,6 +349,7 @@ def _play(envs: dict[str, Any], suts: Sequence[Any], testers: Sequence[str], epi
     for env_id in envs:
         for tester in testers:
             env = make_tester_env(env_id, tester)
+            problem = str(getattr(getattr(getattr(env.unwrapped, "game", None), "artifact", None), "name", "") or "")
             fairness = tester_fairness(env_id, tester) if len(testers) > 1 or tester != "synthesized" else None
             against = "" if tester == "synthesized" else f" against {tester}"
             for sut in suts:
@@ -355,7 +357,7 @@ def _play(envs: dict[str, Any], suts: Sequence[Any], testers: Sequence[str], epi
                 label = sut_label(sut)
                 replayable = isinstance(sut, str) or (label.startswith("python:") and label == spec_of(sut))
                 cell = Cell(env_id, label, [], seed, 0.0, tester=tester, fairness=fairness, replayable=replayable,
-                            step_timeout=step_timeout)
+                            step_timeout=step_timeout, problem=problem)
                 t0 = time.perf_counter()
                 try:
                     policy = make_policy(sut, env, step_timeout=step_timeout)
@@ -450,12 +452,13 @@ def write_partial_report(cells: Sequence[Cell], out: Path) -> list[dict[str, Any
     """``results.json`` and ``report.md`` of the pairs an interrupted evaluation played, at
     once: no pictures and no ``report.html``, whose drawing would outlast a Ctrl-C."""
     records = [cell.record() for cell in cells]
-    titles = column_titles(records)
+    titles = column_titles(records, problems={c.env_id: c.problem for c in cells if c.problem})
     for r in records:
         r["title"] = titles[test_name(r)]
         r["interrupted"] = True
     write_atomically(out / "results.json", lambda tmp: tmp.write_text(json.dumps(json_safe(records), indent=1) + "\n"))
-    md = _markdown(records).replace("# FlowTest evaluation\n", "# FlowTest evaluation (interrupted: the pairs played)\n", 1)
+    md = (_markdown(records).replace("# FlowTest evaluation\n", "# FlowTest evaluation (interrupted: the pairs played)\n", 1)
+          if records else "# FlowTest evaluation (interrupted before any pair was played to the end)\n")
     write_atomically(out / "report.md", lambda tmp: tmp.write_text(md))
     (out / "report.html").unlink(missing_ok=True)  # an earlier run's, which would now disagree with them
     return records
@@ -686,10 +689,15 @@ def run(args: argparse.Namespace) -> int:
         cells = evaluate(args.env, args.sut, args.episodes, args.seed, progress, testers=args.tester,
                          step_timeout=args.step_timeout)
     except EvaluationInterrupted as stop:
-        if stop.cells:  # keep the pairs played: results.json and report.md at once (no pictures)
-            write_partial_report(stop.cells, args.out)
+        # keep the pairs played: results.json and report.md at once (no pictures); none played,
+        # they say so (an earlier run's files would otherwise look current)
+        write_partial_report(stop.cells, args.out)
+        if stop.cells:
             say(f"flowtest: {len(stop.cells)} of {stop.total} (system, test) pairs were played to the end; "
                 f"{args.out / 'results.json'} and report.md hold them (no pictures, no report.html)")
+        else:
+            say(f"flowtest: no (system, test) pair was played to the end; {args.out / 'results.json'} and report.md "
+                "say so")
         raise
     progress("drawing trace pictures")
     records = write_report(cells, args.out)

@@ -110,13 +110,15 @@ def _title_of(env_id: str, info: TestInfo | None) -> str:
     return test_title(env_id, info.problem if info is not None else "")
 
 
-def test_titles(env_ids: Sequence[str], infos: Sequence[TestInfo] = ()) -> dict[str, str]:
+def test_titles(env_ids: Sequence[str], infos: Sequence[TestInfo] = (), problems: dict[str, str] | None = None) -> dict[str, str]:
     """What each test is called in the report: its problem's name (a file's ``name``, else
     its stem; a registered ID shortened), never a path; tests that would share a name get
-    the shortest tail of their paths that tells them apart (``a (x/a.toml)``, ``a (y/a.toml)``)."""
+    the shortest tail of their paths that tells them apart (``a (x/a.toml)``, ``a (y/a.toml)``).
+    The problem's name comes from ``infos``, else from ``problems`` (env ID -> name)."""
     info = {t.env_id: t for t in infos}
     envs = list(dict.fromkeys(env_ids))
-    titles = {env: _title_of(env, info.get(env)) for env in envs}
+    titles = {env: _title_of(env, info.get(env)) if env in info else test_title(env, (problems or {}).get(env, ""))
+              for env in envs}
     groups: dict[str, list[str]] = {}
     for env in envs:
         groups.setdefault(titles[env], []).append(env)
@@ -135,10 +137,12 @@ def test_titles(env_ids: Sequence[str], infos: Sequence[TestInfo] = ()) -> dict[
     return titles
 
 
-def column_titles(records: Sequence[dict[str, Any]], infos: Sequence[TestInfo] = ()) -> dict[str, str]:
+def column_titles(
+    records: Sequence[dict[str, Any]], infos: Sequence[TestInfo] = (), problems: dict[str, str] | None = None
+) -> dict[str, str]:
     """What each matrix column (:func:`test_name`) is called: :func:`test_titles` of its
     test, with the tester when it is not the synthesized one."""
-    titles = test_titles([r["env"] for r in records], infos)
+    titles = test_titles([r["env"] for r in records], infos, problems)
     out: dict[str, str] = {}
     for r in records:
         tester = r.get("tester", "synthesized")

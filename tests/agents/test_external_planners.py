@@ -235,6 +235,34 @@ def test_hanging_python_planners_fail_their_run_and_the_others_go_on(project: Pa
     assert signal.getsignal(signal.SIGALRM) in (signal.SIG_DFL, None) and signal.getitimer(signal.ITIMER_REAL) == (0.0, 0.0)
 
 
+def test_the_step_timer_leaves_nothing_behind_and_keeps_a_ctrl_c() -> None:
+    """Bodies that end at the timer's last instant leave no handler and no armed timer (a
+    ring while the timer is put back is caught there), and a ring that replaces a Ctrl-C
+    unwinding the planner's call gives the Ctrl-C back."""
+    import signal
+
+    from agents import external
+
+    for _ in range(200):
+        try:
+            with external._timed(0.002):
+                t = time.perf_counter()
+                while time.perf_counter() - t < 0.00199:
+                    pass
+        except external._Overran:
+            pass
+        assert signal.getsignal(signal.SIGALRM) is signal.SIG_DFL and signal.getitimer(signal.ITIMER_REAL) == (0.0, 0.0)
+    with pytest.raises(KeyboardInterrupt):
+        try:
+            try:
+                raise KeyboardInterrupt
+            except KeyboardInterrupt:
+                raise external._Overran from None
+        except external._Overran as exc:
+            exc.__context__ = KeyboardInterrupt()
+            external._keep_interrupt(exc)
+
+
 def test_a_timer_the_caller_armed_is_left_alone(project: Path) -> None:
     """Where the caller has a real-time timer armed (pytest-timeout's signal method, a
     script's own alarm), the planner's step is not timed, so that timer is not cancelled."""
@@ -276,6 +304,11 @@ def test_ctrl_c_keeps_the_pairs_played(project: Path, capsys: pytest.CaptureFixt
     md = (project / "report" / "report.md").read_text()
     assert md.startswith("# FlowTest evaluation (interrupted: the pairs played)") and "| warehouse |" in md
     assert not (project / "report" / "report.html").exists()
+    # interrupted before any pair ends: the earlier run's files do not stay as if current
+    code = main(["evaluate", "--env", "warehouse.toml", "--sut", "python:quitter:quit_now", "--out", "report"])
+    assert code == 130 and "no (system, test) pair was played to the end" in capsys.readouterr().err
+    assert json.loads((project / "report" / "results.json").read_text()) == []
+    assert (project / "report" / "report.md").read_text().startswith("# FlowTest evaluation (interrupted before any pair")
 
 
 @pytest.mark.slow
