@@ -51,6 +51,12 @@ FACTORIES: dict[str, PolicyFactory] = {
 }
 """Every policy by the prefix of its name (``prefix`` or ``prefix:ARG``)."""
 
+TIMED_FACTORIES: dict[str, Callable[[Any, str, float | None], Policy]] = {
+    "python": external.make_python,
+    "cmd": external.make_command,
+}
+"""The planners from outside FlowTest, whose answers are timed (``step_timeout``)."""
+
 _NAME = re.compile(r"^([a-z0-9_-]+)(?::(.*))?$", re.DOTALL)
 
 KNOWN = "random, scripted:<name>, gr1, ppo:PATH, python:MODULE:NAME, cmd:COMMAND"
@@ -103,10 +109,8 @@ def make_policy(name: str | Any, env: Any, step_timeout: float | None = None) ->
     m = _NAME.match(name.strip())
     if not m or m.group(1) not in FACTORIES:
         raise PolicyError(f"unknown policy {name!r}; known: {KNOWN}")
-    if m.group(1) == "cmd":
-        policy: Policy = external.make_command(env, m.group(2) or "", step_timeout)
-    elif m.group(1) == "python":
-        policy = external.make_python(env, m.group(2) or "", step_timeout)
+    if m.group(1) in TIMED_FACTORIES:
+        policy: Policy = TIMED_FACTORIES[m.group(1)](env, m.group(2) or "", step_timeout)
     else:
         policy = FACTORIES[m.group(1)](env, m.group(2) or "")
     policy.name = name

@@ -341,7 +341,7 @@ def evaluate(
 def _play(envs: dict[str, Any], suts: Sequence[Any], testers: Sequence[str], episodes: int, seed: int,
           progress: Callable[[str], None] | None, step_timeout: float | None, cells: list[Cell], total: int) -> None:
     """:func:`evaluate`'s loop: each pair played to the end is appended to ``cells``."""
-    from agents.base import PolicyError
+    from agents.base import PolicyError, game_of
     from agents.external import spec_of
     from agents.registry import make_policy
 
@@ -349,7 +349,7 @@ def _play(envs: dict[str, Any], suts: Sequence[Any], testers: Sequence[str], epi
     for env_id in envs:
         for tester in testers:
             env = make_tester_env(env_id, tester)
-            problem = str(getattr(getattr(getattr(env.unwrapped, "game", None), "artifact", None), "name", "") or "")
+            problem = str(game_of(env).artifact.name)
             fairness = tester_fairness(env_id, tester) if len(testers) > 1 or tester != "synthesized" else None
             against = "" if tester == "synthesized" else f" against {tester}"
             for sut in suts:
@@ -437,28 +437,30 @@ def write_report(cells: Sequence[Cell], out: Path, tests: Sequence[TestInfo] | N
             cell.pictures["filmstrip"] = name
     if tests is None:
         tests = test_infos(list(dict.fromkeys(c.env_id for c in cells)), out)
-    records = [cell.record() for cell in cells]
-    titles = column_titles(records, tests)
-    for r in records:  # what the report calls the test (its problem's name), next to its env ID
-        r["title"] = titles[test_name(r)]
-    write_atomically(out / "results.json", lambda tmp: tmp.write_text(json.dumps(json_safe(records), indent=1) + "\n"))
+    records = _write_results(cells, out, tests)
     md, body = _markdown(records), render_html(records, tests, (TESTER_COLUMNS, tester_comparison_rows(records)))
     write_atomically(out / "report.md", lambda tmp: tmp.write_text(md))
     write_atomically(out / "report.html", lambda tmp: tmp.write_text(body))
     return records
 
 
+def _write_results(cells: Sequence[Cell], out: Path, tests: Sequence[TestInfo] = (), **extra: Any) -> list[dict[str, Any]]:
+    """The cells' records, each with the ``title`` the report calls its test (its problem's
+    name, next to its env ID) and ``extra``, written to ``results.json``."""
+    records = [{**cell.record(), **extra} for cell in cells]
+    titles = column_titles(records, tests, problems={c.env_id: c.problem for c in cells if c.problem})
+    for r in records:
+        r["title"] = titles[test_name(r)]
+    write_atomically(out / "results.json", lambda tmp: tmp.write_text(json.dumps(json_safe(records), indent=1) + "\n"))
+    return records
+
+
 def write_partial_report(cells: Sequence[Cell], out: Path) -> list[dict[str, Any]]:
     """``results.json`` and ``report.md`` of the pairs an interrupted evaluation played, at
     once: no pictures and no ``report.html``, whose drawing would outlast a Ctrl-C."""
-    records = [cell.record() for cell in cells]
-    titles = column_titles(records, problems={c.env_id: c.problem for c in cells if c.problem})
-    for r in records:
-        r["title"] = titles[test_name(r)]
-        r["interrupted"] = True
-    write_atomically(out / "results.json", lambda tmp: tmp.write_text(json.dumps(json_safe(records), indent=1) + "\n"))
-    md = (_markdown(records).replace("# FlowTest evaluation\n", "# FlowTest evaluation (interrupted: the pairs played)\n", 1)
-          if records else "# FlowTest evaluation (interrupted before any pair was played to the end)\n")
+    records = _write_results(cells, out, interrupted=True)
+    md = (_markdown(records, "FlowTest evaluation (interrupted: the pairs played)") if records
+          else "# FlowTest evaluation (interrupted before any pair was played to the end)\n")
     write_atomically(out / "report.md", lambda tmp: tmp.write_text(md))
     (out / "report.html").unlink(missing_ok=True)  # an earlier run's, which would now disagree with them
     return records
@@ -515,8 +517,8 @@ def tester_comparison_markdown(records: Sequence[dict[str, Any]]) -> list[str]:
     return lines + [""]
 
 
-def _markdown(records: Sequence[dict[str, Any]]) -> str:
-    lines = ["# FlowTest evaluation", ""]
+def _markdown(records: Sequence[dict[str, Any]], heading: str = "FlowTest evaluation") -> str:
+    lines = [f"# {heading}", ""]
     bugs = test_failure_records(records)
     if bugs:
         lines += ["> **FLOWTEST BUG: a test failed its guarantee.** A run met the system objective without "

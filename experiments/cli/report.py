@@ -106,10 +106,6 @@ def test_title(env_id: str, problem: str = "") -> str:
     return _short(env_id)
 
 
-def _title_of(env_id: str, info: TestInfo | None) -> str:
-    return test_title(env_id, info.problem if info is not None else "")
-
-
 def test_titles(env_ids: Sequence[str], infos: Sequence[TestInfo] = (), problems: dict[str, str] | None = None) -> dict[str, str]:
     """What each test is called in the report: its problem's name (a file's ``name``, else
     its stem; a registered ID shortened), never a path; tests that would share a name get
@@ -117,8 +113,8 @@ def test_titles(env_ids: Sequence[str], infos: Sequence[TestInfo] = (), problems
     The problem's name comes from ``infos``, else from ``problems`` (env ID -> name)."""
     info = {t.env_id: t for t in infos}
     envs = list(dict.fromkeys(env_ids))
-    titles = {env: _title_of(env, info.get(env)) if env in info else test_title(env, (problems or {}).get(env, ""))
-              for env in envs}
+    names = {**(problems or {}), **{env: t.problem for env, t in info.items()}}
+    titles = {env: test_title(env, names.get(env, "")) for env in envs}
     groups: dict[str, list[str]] = {}
     for env in envs:
         groups.setdefault(titles[env], []).append(env)
