@@ -4,7 +4,8 @@ Before any test module (and so any FlowTest module) is imported, ``HOME``, the X
 folders and ``FLOWTEST_CACHE_DIR`` are pointed into one temporary folder for the session
 (shared by pytest-xdist workers, which inherit the environment, and removed at exit by the
 process that made it). ``tests/flowtest_env/test_pools.py`` proves it: a test run with a fresh fake
-home leaves that home empty.
+home leaves that home empty. Helpers shared by test modules live in ``tests/testing_*.py``,
+imported by package path (``from tests.testing_processes import start_until``).
 """
 
 from __future__ import annotations
@@ -12,20 +13,14 @@ from __future__ import annotations
 import atexit
 import os
 import shutil
-import signal
-import subprocess
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
 
 import pytest
 
 SANDBOX_ENV = "FLOWTEST_TEST_SANDBOX"
 """Set to the session's temporary folder once the environment points into it."""
-
-BURNER = "while True:\n    pass\n"
-"""A Python program that keeps one core busy (``python -c BURNER``): the tests that load the machine start one per core."""
 
 REAL_HOME_ENV = "FLOWTEST_TEST_REAL_HOME"
 """The home folder the session started with (for the test that proves it stays untouched)."""
@@ -59,19 +54,6 @@ def _sandbox() -> Path:
 SANDBOX = _sandbox()
 
 
-def _small_reactive_toml() -> str:
-    from synthesis.problems.builtins import SMALL_REACTIVE
-
-    lines = SMALL_REACTIVE.replace('name = "small-reactive"', 'name = "t"', 1).strip().splitlines()
-    return "\n".join(line for line in lines if not line.startswith("description = ")) + "\n"
-
-
-SMALL_REACTIVE_TOML = _small_reactive_toml()
-"""The paper's small-reactive example as a problem file (``name = "t"``, no description):
-the built-in's own text (:data:`synthesis.problems.builtins.SMALL_REACTIVE`), which tests
-edit line by line instead of typing the problem out again."""
-
-
 @pytest.fixture(scope="module")
 def pool_cache(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
     """A private pool cache (never the user's)."""
@@ -80,21 +62,6 @@ def pool_cache(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
     mp.setenv("FLOWTEST_CACHE_DIR", str(path))
     yield path
     mp.undo()
-
-
-def start_until(argv: list[str], marker: str, sig: signal.Signals = signal.SIGINT) -> subprocess.Popen[str]:
-    """Start ``argv`` (stdout and stderr piped, ``sig`` at its default action even if our
-    caller ignores it) and read its standard error until a line holds ``marker``: the
-    moment a test sends it a signal. Fails the test if the process ends first."""
-    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            preexec_fn=lambda: signal.signal(sig, signal.SIG_DFL))
-    assert proc.stderr is not None
-    seen = []
-    for line in proc.stderr:
-        seen.append(line)
-        if marker in line:
-            return proc
-    pytest.fail(f"no line with {marker!r}: " + "".join(seen))
 
 
 @pytest.fixture()
@@ -107,12 +74,3 @@ def cache(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     monkeypatch.setattr(sources, "_LOADED", {})
     monkeypatch.setattr(sources, "_GAMES", {})
     return tmp_path / "cache"
-
-
-def played_artifact(env: Any) -> Any:
-    """The :class:`~synthesis.artifacts.artifact.TestArtifact` a FlowTest env plays."""
-    from synthesis.artifacts.artifact import TestArtifact
-
-    art = env.unwrapped.artifact
-    assert isinstance(art, TestArtifact)
-    return art

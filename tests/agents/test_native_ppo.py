@@ -20,7 +20,8 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import pytest
-from conftest import start_until
+
+from tests.testing_processes import start_until
 
 torch = pytest.importorskip("torch")
 

@@ -15,12 +15,12 @@ from typing import Any
 
 import numpy as np
 import pytest
-from conftest import start_until
 
 from agents.checkpoint import mark_own_file
 from experiments.cli import benchmark as bench
 from experiments.cli.cli import main
 from experiments.cli.episodes import Trace
+from tests.testing_processes import start_until
 
 pytest.importorskip("sb3_contrib")
 

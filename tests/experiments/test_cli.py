@@ -21,7 +21,6 @@ from typing import Any
 
 import numpy as np
 import pytest
-from conftest import start_until
 
 from experiments.cli import cli
 from experiments.cli.cli import main
@@ -32,6 +31,7 @@ from synthesis import pipeline
 from synthesis.artifacts.artifact import TestArtifact
 from synthesis.model.errors import CheckFailed, InconsistentProblem
 from synthesis.problems.load import load_problem
+from tests.testing_processes import start_until
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 FLOWTEST = Path(sys.executable).parent / "flowtest"

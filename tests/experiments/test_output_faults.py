@@ -23,7 +23,6 @@ from typing import Any
 
 import gymnasium as gym
 import pytest
-from conftest import played_artifact
 
 import flowtest_env
 import flowtest_env.random_grid as rg
@@ -32,6 +31,7 @@ from experiments.cli.outputs import output_subfolder, prepare_output_folder, wri
 from flowtest_env import sources
 from synthesis.artifacts.artifact import TestArtifact
 from synthesis.model.errors import ProblemError
+from tests.testing_artifacts import played_artifact
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 ROOT = Path(__file__).resolve().parents[2]

@@ -15,7 +15,6 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 import pytest
-from conftest import BURNER
 
 import flowtest_env  # noqa: F401  (registers the envs)
 import flowtest_env.random_grid as rg
@@ -25,6 +24,7 @@ from synthesis.model.errors import InconsistentProblem, ProblemError
 from synthesis.problems.random_grid import random_problem
 from synthesis.problems.random_worlds import blocked_count, fuel_capacity, refuel_count, world_problem
 from tests.flowtest_env.test_vector import _compare
+from tests.testing_processes import BURNER
 
 #: One pool per new family at 5x5 (the train split's first seed is cheap in each).
 FAMILY_POOLS = [

@@ -16,13 +16,13 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from conftest import BURNER
 
 import flowtest_env.random_grid as rg
 from synthesis.artifacts import provenance
 from synthesis.artifacts.summary import stop_note, without_timings
 from synthesis.pipeline import SynthesisOptions, synthesize
 from synthesis.problems.random_grid import first_consistent, random_problem
+from tests.testing_processes import BURNER
 
 ROOT = Path(__file__).resolve().parents[2]
 POOL = (5, "reachability", 1)  # a few seconds per pool of three seeds

@@ -22,7 +22,6 @@ from typing import Any
 
 import gymnasium as gym
 import pytest
-from conftest import played_artifact
 
 import flowtest_env
 import flowtest_env.artifacts as artifacts
@@ -41,6 +40,7 @@ from synthesis.artifacts.artifact import (
     with_digest,
 )
 from synthesis.model.errors import ProblemError
+from tests.testing_artifacts import played_artifact
 
 SHIPPED = Path(artifacts.__file__).parent / "artifacts"
 DATA = Path(__file__).resolve().parents[1] / "data"

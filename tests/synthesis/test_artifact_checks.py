@@ -19,13 +19,13 @@ from typing import Any
 
 import gymnasium as gym
 import pytest
-from conftest import played_artifact
 
 import flowtest_env  # noqa: F401  (registers the envs)
 import flowtest_env.artifacts as artifacts
 from synthesis.artifacts.artifact import TestArtifact, problem_source_hash, source_hash
 from synthesis.model.errors import ProblemError
 from synthesis.problems.builtins import BUILTINS
+from tests.testing_artifacts import played_artifact
 
 SHIPPED = Path(artifacts.__file__).parent / "artifacts"
 NAMES = sorted(p.stem for p in SHIPPED.glob("*.json"))

@@ -17,7 +17,6 @@ from dataclasses import replace
 from importlib.metadata import version
 
 import pytest
-from test_optimality import compare_reactive, compare_static, graph_instance, grid_instance
 
 from synthesis.checks import verify
 from synthesis.graphs.consistency import check_consistency
@@ -34,6 +33,7 @@ from synthesis.routing.restrictions import strategy_from_routing
 from synthesis.routing.result import RoutingResult, required_entries
 from synthesis.routing.solve import SOLVERS, solve_routing
 from synthesis.routing.solver_control import Clock
+from tests.testing_optimality import compare_reactive, compare_static, graph_instance, grid_instance
 
 #: The package each backend's answers depend on (its ``solver_version``).
 PACKAGE = {"highs": "highspy", "cpsat": "ortools"}

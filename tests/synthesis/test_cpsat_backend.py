@@ -22,8 +22,6 @@ from typing import Any
 
 import numpy as np
 import pytest
-from conftest import start_until
-from test_optimality import compare_reactive, compare_static, graph_instance, grid_instance
 
 from experiments.cli.cli import main
 from synthesis.artifacts.summary import summary_of, without_timings
@@ -34,6 +32,8 @@ from synthesis.problems.random_grid import first_consistent
 from synthesis.routing import certificates, model, solver_control
 from synthesis.routing.backends import cpsat, cpsat_phases
 from synthesis.routing.solver_control import SolveControl
+from tests.testing_optimality import compare_reactive, compare_static, graph_instance, grid_instance
+from tests.testing_processes import start_until
 
 FLOWTEST = Path(sys.executable).parent / "flowtest"
 

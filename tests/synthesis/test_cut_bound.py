@@ -23,7 +23,6 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from test_optimality import View, bypass_exists, compare_static, graph_instance, grid_instance, max_flow, view_of
 
 from synthesis.graphs.consistency import check_consistency
 from synthesis.model.errors import InconsistentProblem, ProblemError
@@ -36,6 +35,7 @@ from synthesis.routing.bounds.cut_bound import static_cut_bound
 from synthesis.routing.certificates import cut_proof
 from synthesis.routing.model import RoutingModel, build_model
 from synthesis.routing.phases import phase2_cost
+from tests.testing_optimality import View, bypass_exists, compare_static, graph_instance, grid_instance, max_flow, view_of
 
 MAX_GROUPS = 13  # enumerate at most 2^13 cut group sets per instance
 

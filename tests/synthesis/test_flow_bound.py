@@ -23,7 +23,6 @@ import random
 from dataclasses import replace
 
 import pytest
-from test_optimality import graph_instance, grid_instance, static_optimum, view_of
 
 from synthesis.graphs.consistency import check_consistency
 from synthesis.model.errors import InconsistentProblem
@@ -33,6 +32,7 @@ from synthesis.problems.problem import Problem, build_graphs, make_problem
 from synthesis.problems.random_grid import first_consistent
 from synthesis.routing.bounds import flow_bound
 from synthesis.routing.model import build_model
+from tests.testing_optimality import graph_instance, grid_instance, static_optimum, view_of
 
 
 def _bound_and_truth(problem: Problem) -> tuple[int, int, int] | None:

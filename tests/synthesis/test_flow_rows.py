@@ -24,7 +24,6 @@ from dataclasses import replace
 import highspy
 import numpy as np
 import pytest
-from test_optimality import compare_reactive, graph_instance, grid_instance
 
 import synthesis.routing.backends.rules as rules
 import synthesis.routing.solve as solve
@@ -37,6 +36,7 @@ from synthesis.routing.model import RoutingModel, build_model
 from synthesis.routing.options import MilpOptions
 from synthesis.routing.result import blocked_of_edges, required_entries
 from synthesis.routing.traps import trapped_entries
+from tests.testing_optimality import compare_reactive, graph_instance, grid_instance
 
 N = 40  # seeds, as in tests/synthesis/test_optimality.py
 

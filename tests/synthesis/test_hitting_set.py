@@ -11,7 +11,6 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from test_optimality import compare_static, grid_instance, static_optimum, view_of
 
 from synthesis.graphs.consistency import check_consistency
 from synthesis.graphs.products import Products
@@ -22,6 +21,7 @@ from synthesis.routing import certificates, solve
 from synthesis.routing.backends import cpsat, hitting_set
 from synthesis.routing.backends.separator import CoverSeparator
 from synthesis.routing.model import build_model
+from tests.testing_optimality import compare_static, grid_instance, static_optimum, view_of
 
 pytestmark = pytest.mark.skipif(not cpsat.available(), reason="OR-Tools is not installed (a core dependency, missing here)")
 

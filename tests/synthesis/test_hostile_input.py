@@ -10,11 +10,11 @@ import os
 from pathlib import Path
 
 import pytest
-from conftest import SMALL_REACTIVE_TOML
 
 from synthesis.model.errors import ProblemError
 from synthesis.model.specs import MAX_FORMULA_DEPTH, parse_objective
 from synthesis.problems.files import MAX_FILE_BYTES, load_problem_file, problem_from_dict
+from tests.testing_problems import SMALL_REACTIVE_TOML
 
 GRID = SMALL_REACTIVE_TOML
 

@@ -21,7 +21,6 @@ from dataclasses import replace
 import highspy
 import numpy as np
 import pytest
-from test_optimality import compare_reactive, graph_instance, grid_instance
 
 import synthesis.pipeline as pipeline
 import synthesis.routing.backends.highs as highs
@@ -32,6 +31,7 @@ from synthesis.pipeline import SynthesisOptions, milp_options
 from synthesis.problems.problem import Problem, build_graphs
 from synthesis.routing.model import RoutingModel, build_model, phase2_integral_columns
 from synthesis.routing.result import required_entries
+from tests.testing_optimality import compare_reactive, graph_instance, grid_instance
 
 TOL = 1e-6
 N = 40  # seeds, as in tests/synthesis/test_optimality.py

@@ -19,7 +19,6 @@ from typing import Any, get_type_hints
 
 import numpy as np
 import pytest
-from conftest import SMALL_REACTIVE_TOML
 
 from experiments.cli.cli import main
 from synthesis.model.errors import ProblemError
@@ -41,6 +40,7 @@ from synthesis.routing.options import (
     group_of,
 )
 from synthesis.routing.solve import SOLVERS, solve_routing
+from tests.testing_problems import SMALL_REACTIVE_TOML
 
 GROUPS = (ModelOptions, Budgets, MeasurementSwitches, RunOptions)
 

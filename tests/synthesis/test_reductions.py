@@ -17,7 +17,6 @@ from collections.abc import Callable
 import networkx as nx
 import numpy as np
 import pytest
-from test_optimality import BACKENDS, compare_reactive, compare_static, graph_instance, grid_instance
 
 from synthesis.graphs.consistency import check_consistency
 from synthesis.graphs.products import Products
@@ -25,6 +24,7 @@ from synthesis.pipeline import SynthesisOptions, milp_options, synthesize
 from synthesis.problems.problem import Problem, build_graphs
 from synthesis.routing.model import RoutingModel, build_model
 from synthesis.routing.result import required_entries
+from tests.testing_optimality import BACKENDS, compare_reactive, compare_static, graph_instance, grid_instance
 
 # routable instances of the exhaustive-optimality generators on which a rule fires, by rule
 # (static3x3 #0 of NEVER_CLOSED is unroutable: the rule must keep that answer too)
