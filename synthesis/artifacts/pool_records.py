@@ -37,6 +37,13 @@ per-history trap searches, which dominate a full check: the certificate says tho
 on exactly these restrictions, and any change to the restrictions, the products built from
 the seed or the record shows as a mismatch. ``check="full"`` (the default) runs every
 check whatever the record carries.
+
+**Content keys** (the ``-v2`` standard pools, drawn disjoint by content): a record may also
+carry ``content``, the content key of its test (:func:`synthesis.artifacts.content.content_key`:
+which game a policy plays, not its name, seed or statistics), written by
+``certify(..., content=True)`` and covered by the digest. Either check recomputes it from
+the rebuilt test and refuses a record whose test is not the one its key names, so the key
+a pool's disjointness is checked with is the key of the test it serves.
 """
 
 from __future__ import annotations
@@ -60,13 +67,18 @@ from ..routing.restrictions import strategy_from_routing
 from ..routing.result import RoutingResult
 from ..test_agent.loop import AgentSynthesis, realize_agent_strategy
 from .artifact import TestArtifact, artifact_of
+from .content import content_key
 from .summary import DERIVED_KEYS, DERIVED_STATS, derived_summary, without_timings
 
-__all__ = ["CHECKS", "RECORD_KEYS", "certificate_of", "certify", "rebuild_artifact", "record_digest", "record_of"]
+__all__ = ["CHECKS", "OPTIONAL_KEYS", "RECORD_KEYS", "certificate_of", "certify", "rebuild_artifact", "record_content_key", "record_digest", "record_of"]
 
 RECORD_KEYS: tuple[str, ...] = ("seed", "attempt", "cuts", "static", "summary", "digest")
 """The fields of a record, in the order they are written (a certified record has
-``certificate`` too)."""
+``certificate`` too, and may have ``content``: :data:`OPTIONAL_KEYS`)."""
+
+OPTIONAL_KEYS: tuple[str, ...] = ("certificate", "content")
+"""Fields a record may carry besides :data:`RECORD_KEYS`: the certificate of its checked
+restrictions (:func:`certify`) and its test's content key (``certify(..., content=True)``)."""
 
 CHECKS: tuple[str, ...] = ("full", "certificate")
 """How :func:`rebuild_artifact` checks a record: every check, or the certificate."""
@@ -112,27 +124,40 @@ def certificate_of(products: Products, strategy: TestStrategy, flow: int) -> dic
     return {"sha256": h.hexdigest()}
 
 
-def certify(record: dict[str, Any], size: int, family: str, n: int, world: str, kind: str) -> dict[str, Any]:
+def certify(
+    record: dict[str, Any], size: int, family: str, n: int, world: str, kind: str, content: bool = False
+) -> dict[str, Any]:
     """A record with its certificate: the test rebuilt and fully checked
-    (:func:`rebuild_artifact`), then the certificate of what passed, and the digest
-    written again over the whole.
+    (:func:`rebuild_artifact`), then the certificate of what passed (and, with ``content``,
+    the content key of the test, :func:`synthesis.artifacts.content.content_key`), and the
+    digest written again over the whole.
 
     Raises
     ------
     ProblemError
         If the record fails a check (an uncertifiable record is never certified).
     """
-    plain = {k: v for k, v in record.items() if k != "certificate"}
-    if "certificate" in record:  # certified before: its digest must hold, then it is written anew
+    plain = {k: v for k, v in record.items() if k not in OPTIONAL_KEYS}
+    if any(k in record for k in OPTIONAL_KEYS):  # certified before: its digest must hold, then it is written anew
         try:
             _check_digest(record)
         except (EditedRecord, KeyError) as exc:
             raise ProblemError(f"pool record of seed {record.get('seed')!r}: {exc}") from None
         plain["digest"] = {"sha256": record_digest(plain)}
-    _, products, strategy = _rebuilt(plain, size, family, n, world, kind, None, "full")
+    art, products, strategy = _rebuilt(plain, size, family, n, world, kind, None, "full")
     out = {**plain, "certificate": certificate_of(products, strategy, int(plain["summary"]["flow"]))}
+    if content:
+        out["content"] = {"sha256": content_key(art)}
     out["digest"] = {"sha256": record_digest(out)}
     return out
+
+
+def record_content_key(record: Mapping[str, Any]) -> str | None:
+    """The content key a record states (``None`` if it carries none), unchecked: loading the
+    record (:func:`rebuild_artifact`) checks it against its test."""
+    content = record.get("content")
+    key = content.get("sha256") if isinstance(content, Mapping) else None
+    return key if isinstance(key, str) else None
 
 
 def _indices(values: Any, bound: int, what: str) -> np.ndarray:
@@ -252,8 +277,12 @@ def _rebuild(
     record: dict[str, Any], size: int, family: str, n: int, world: str, kind: str, extras: Mapping[str, Any] | None, check: str
 ) -> tuple[TestArtifact, Products, TestStrategy]:
     keys = sorted(RECORD_KEYS)
-    if not isinstance(record, dict) or sorted(k for k in record if k != "certificate") != keys:
-        raise ProblemError(f"a pool record has the fields {', '.join(RECORD_KEYS)} (and certificate, if certified)")
+    if not isinstance(record, dict) or sorted(k for k in record if k not in OPTIONAL_KEYS) != keys:
+        raise ProblemError(
+            f"a pool record has the fields {', '.join(RECORD_KEYS)} (and certificate, if certified, and content, if keyed)"
+        )
+    if "content" in record and record_content_key(record) is None:
+        raise ProblemError("field content must be {\"sha256\": <hex>}")
     if check == "certificate":
         if not isinstance(record.get("certificate"), dict):
             raise ProblemError("the record has no certificate (load it with check='full')")
@@ -299,11 +328,15 @@ def _rebuild(
         )
     derived = derived_summary(problem, spec, products, cuts, strategy, checks.bypass_flow)
     summary = {**derived, **{k: v for k, v in rest.items() if k != "stats"}, "stats": {**derived["stats"], **rest["stats"]}}
+    # graph_seconds: not measured here; a rebuilt test's summary holds no timings
+    test = SynthesizedTest(problem, spec, products, routing, strategy, checks, graph_seconds=0.0, agent=agent)
+    art = artifact_of(test, summary, extras)
+    stated = record_content_key(record)
+    if stated is not None and stated != content_key(art):
+        raise CheckFailed("the test rebuilt from the record is not the one its content key names")
     if check == "full":
         # last, so that a record whose answer fails a check is told so: one that passes
         # them all but is not the record FlowTest wrote (one more cut, a summary edited)
         # is refused here (the certificate check did it first)
         _check_digest(record)
-    # graph_seconds: not measured here; a rebuilt test's summary holds no timings
-    test = SynthesizedTest(problem, spec, products, routing, strategy, checks, graph_seconds=0.0, agent=agent)
-    return artifact_of(test, summary, extras), products, strategy
+    return art, products, strategy
