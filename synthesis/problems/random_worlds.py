@@ -33,6 +33,11 @@ kind), then the blocked or refuel cells among the remaining cells in row-major o
 special cells of the empty instance of the same seed and attempt; ``static`` and
 ``reactive`` see the same instance.
 
+**Layouts.** :func:`layout_count` counts the distinct draws of a family exactly (the
+special cells in order, the agent's column and start row, the blocked or refuel cells as
+a set): an upper bound on its distinct tests, and what the birthday bound of a pool's
+expected repeats is computed from (docs/pools.md).
+
 An attempt whose problem has no test is redrawn from the next attempt
 (:func:`first_accepted`): what "no test" means is the caller's ``accept``. An attempt
 whose goal or agent column is cut off from the start (a fuel grid's far cells may be
@@ -44,6 +49,7 @@ This module is pure: no Gymnasium, no environment code.
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable
+from math import comb, perm
 from typing import TypeVar
 
 from ..model.agent_system import TestAgent, make_test_agent, places_of_cells
@@ -59,6 +65,7 @@ __all__ = [
     "blocked_count",
     "first_accepted",
     "fuel_capacity",
+    "layout_count",
     "refuel_count",
     "world_problem",
     "world_problem_name",
@@ -90,6 +97,41 @@ def fuel_capacity(size: int) -> int:
 def refuel_count(size: int) -> int:
     """Refuel cells of a ``fuel`` world: 1 below 8x8, else 2."""
     return 1 if size < 8 else 2
+
+
+def layout_count(size: int, family: str, n: int, world: str = "empty", kind: str = "reactive") -> int:
+    """The number of distinct layouts :func:`world_problem` draws for a family: every way
+    to place the start, the goal and one cell per proposition (distinct cells, in order),
+    then, for a test agent, its column (one holding neither the start nor the goal) and
+    start row, then the blocked or refuel cells (a set, among the cells left and off the
+    agent's column). Exact: a sum over the columns and over how many proposition cells
+    fall on the agent's column. An upper bound on the family's distinct tests (an attempt
+    without a test is redrawn, so some layouts never appear).
+
+    Example::
+
+        layout_count(5, "reachability", 1)   # 25 * 24 * 23 = 13,800
+
+    Raises
+    ------
+    ValueError
+        On an unknown family, ``n``, world or kind.
+    """
+    _check_world(world, kind)
+    _, _, props, _ = family_objectives(family, n)
+    cells, p = size * size, len(props)
+    k = blocked_count(size) if world == "blocked" else refuel_count(size) if world == "fuel" else 0
+    if kind != "agent":
+        return perm(cells, p + 2) * comb(cells - p - 2, k)
+    total = 0
+    for same_column in (True, False):  # the start and the goal in one column, or in two
+        pairs = cells * (size - 1) if same_column else cells * (cells - size)
+        columns = size - (1 if same_column else 2)
+        for j in range(p + 1):  # proposition cells on the agent's column
+            props_placed = comb(p, j) * perm(size, j) * perm(cells - 2 - size, p - j)
+            left = cells - size - 2 - (p - j)
+            total += pairs * columns * props_placed * size * comb(left, k)
+    return total
 
 
 def world_problem_name(size: int, family: str, n: int, seed: int, world: str, kind: str) -> str:
