@@ -6,12 +6,26 @@ whenever a test of the pool could change (the family, the world, the kind, the s
 budget, the attempt rules): a result reported on ``reachability1/5x5-v1`` names the same
 tests on every machine and in every later FlowTest that still ships ``-v1``.
 
-Each pool has three fixed splits, ranges of seeds as for every pool: ``train`` (at least
-4,096 tests planned), ``validation`` (for model selection) and ``test`` (the held-out
-tests, at least 1,000 planned; 250 where a family builds slowly). Split ``s`` of a
-standard pool is the first tests of the on-demand pool's split ``s``, so
-``load_standard_pool("reachability1/5x5-v1", "test", 32)`` and
-``load_pool("reachability1/5x5", "test", 32)`` are the same tests.
+Each pool has three fixed splits drawn from ranges of seeds as for every pool: ``train``
+(at least 4,096 tests planned), ``validation`` (for model selection) and ``test`` (the
+held-out tests, at least 1,000 planned; 250 where a family builds slowly).
+
+**Disjoint by content (``-v2``).** The ``-v2`` pools (:data:`StandardPool.draw` ``"content"``)
+are drawn so that no test of one split is the same game as a test of another and no split
+repeats a test: the splits are drawn in :data:`DRAW_ORDER` (held-out first), each from its
+seed range in order, and a seed whose test has a content key already taken
+(:func:`synthesis.artifacts.content.content_key`: the game a policy plays, not its name,
+seed or statistics) is skipped. Each record carries its content key, checked against its
+test on every load; :mod:`flowtest_env.pool_content` checks the splits pairwise. A ``-v2``
+split is its shipped tests (the draw depends on every split, so nothing is built on
+demand beyond them).
+
+**Superseded (``-v1``).** Split ``s`` of a ``-v1`` pool is the first tests of the on-demand
+pool's split ``s`` (``load_standard_pool("reachability1/5x5-v1", "test", 32)`` and
+``load_pool("reachability1/5x5", "test", 32)`` are the same tests): disjoint seeds, but
+not disjoint by content (a quarter of ``reachability1/5x5-v1``'s held-out tests are also
+train tests). They stay loadable, with a :class:`SupersededPoolWarning` naming the
+``-v2`` pool.
 
 **Shipped records.** The compact records of each pool
 (:mod:`synthesis.artifacts.pool_records`, a few hundred bytes a test) are stored in the
@@ -32,7 +46,7 @@ Example::
 
     from flowtest_env.standard_pools import load_standard_pool, standard_pool
 
-    pool = standard_pool("reachability1/5x5-v1")
+    pool = standard_pool("reachability1/5x5-v2")
     tests = load_standard_pool(pool.id, "test")  # every shipped held-out test, checked
 """
 
@@ -44,6 +58,7 @@ import json
 import multiprocessing
 import os
 import re
+import warnings
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from functools import lru_cache
@@ -61,14 +76,19 @@ from .random_grid import SPLIT_SPAN, SPLITS, BuildProgress, PoolName, changed_pa
 
 __all__ = [
     "DATA_DIR",
+    "DRAWS",
+    "DRAW_ORDER",
     "PROGRESS_FROM",
     "STANDARD_POOLS",
     "StandardPool",
+    "SupersededPoolWarning",
     "changed_params",
+    "current",
     "is_standard",
     "load_standard_pool",
     "read_records",
     "standard_pool",
+    "warn_superseded",
     "write_records",
 ]
 
@@ -79,6 +99,20 @@ PROGRESS_FROM = 1000
 """Loads of this many tests or more show their progress unless told not to."""
 
 _ID = re.compile(r"^(?P<pool>.+)-v(?P<version>[1-9][0-9]*)$")
+
+DRAWS: tuple[str, ...] = ("seeds", "content")
+"""How a standard pool's splits are drawn: ``"seeds"`` (``-v1``: split ``s`` is the first
+seeds of the on-demand pool's split ``s``) or ``"content"`` (``-v2``: disjoint by content,
+module docstring)."""
+
+DRAW_ORDER: tuple[str, ...] = ("test", "validation", "train")
+"""The order a ``"content"`` pool's splits are drawn in: the held-out split first, so it
+never gives up a test to the others."""
+
+
+class SupersededPoolWarning(UserWarning):
+    """A superseded standard pool was loaded (it stays loadable; the warning names the pool
+    that replaces it and why)."""
 
 
 @dataclass(frozen=True)
@@ -101,6 +135,12 @@ class StandardPool:
     slow
         Builds slowly (seconds a test): its held-out split is planned at 250 tests, not
         1,000.
+    draw
+        How its splits are drawn (:data:`DRAWS`): ``"seeds"`` or ``"content"`` (disjoint by
+        content, the seeds of tests already taken skipped).
+    superseded_by
+        The id of the pool that replaces it (it stays loadable, with a
+        :class:`SupersededPoolWarning`), or ``None``.
     """
 
     id: str
@@ -109,6 +149,8 @@ class StandardPool:
     splits: Mapping[str, int] = field(default_factory=lambda: {"train": 4096, "validation": 256, "test": 1000})
     about: str = ""
     slow: bool = False
+    draw: str = "seeds"
+    superseded_by: str | None = None
 
     @property
     def name(self) -> PoolName:
@@ -149,42 +191,39 @@ class StandardPool:
         """Tests shipped per split."""
         return {s: self.shipped(s) for s in SPLITS}
 
+    def seeds(self, split: str) -> list[int]:
+        """The seeds of a split's shipped tests, in order (a ``"seeds"`` pool's are the
+        split's first seeds; a ``"content"`` pool's skip the seeds of tests already taken)."""
+        path = self.path(split)
+        try:
+            stat = path.stat()
+        except OSError:
+            return []
+        return list(_shipped_seeds(self.id, split, stat.st_mtime_ns, stat.st_size))
+
+
+_FAMILIES: tuple[tuple[str, str, bool], ...] = (
+    ("reachability1/5x5", "the paper's empty 5x5 grid, one hidden goal, reactive doors; the continuity pool (a random policy meets about half)",
+     False),
+    ("safety2/5x5/fuel", "5x5 fuel grid (capacity 5, refuel cells, never run empty), a goal and a cell to avoid, reactive doors", False),
+    ("safety2/5x5/fuel/static", "the same fuel grids with static walls (the whole test) instead of doors", False),
+    ("reachability1/5x5/blocked/agent", "5x5 grid, a fifth of the cells blocked, a test agent patrolling one column (a GR(1) strategy)",
+     True),
+    ("reachability2/7x7/blocked", "7x7 grid, a fifth of the cells blocked, two hidden goals, reactive doors", False),
+)
+"""The families of the standard pools: on-demand pool, what it exercises, slow to build."""
+
+
+def _plan(slow: bool) -> dict[str, int]:
+    return {"train": 4096, "validation": 256, "test": 250 if slow else 1000}
+
 
 STANDARD_POOLS: dict[str, StandardPool] = {
     p.id: p
+    for name, about, slow in _FAMILIES
     for p in (
-        StandardPool(
-            "reachability1/5x5-v1",
-            "reachability1/5x5",
-            1,
-            about="the paper's empty 5x5 grid, one hidden goal, reactive doors; the continuity pool (a random policy meets about half)",
-        ),
-        StandardPool(
-            "safety2/5x5/fuel-v1",
-            "safety2/5x5/fuel",
-            1,
-            about="5x5 fuel grid (capacity 5, refuel cells, never run empty), a goal and a cell to avoid, reactive doors",
-        ),
-        StandardPool(
-            "safety2/5x5/fuel/static-v1",
-            "safety2/5x5/fuel/static",
-            1,
-            about="the same fuel grids with static walls (the whole test) instead of doors",
-        ),
-        StandardPool(
-            "reachability1/5x5/blocked/agent-v1",
-            "reachability1/5x5/blocked/agent",
-            1,
-            splits={"train": 4096, "validation": 256, "test": 250},
-            about="5x5 grid, a fifth of the cells blocked, a test agent patrolling one column (a GR(1) strategy)",
-            slow=True,
-        ),
-        StandardPool(
-            "reachability2/7x7/blocked-v1",
-            "reachability2/7x7/blocked",
-            1,
-            about="7x7 grid, a fifth of the cells blocked, two hidden goals, reactive doors",
-        ),
+        StandardPool(f"{name}-v1", name, 1, _plan(slow), about, slow, superseded_by=f"{name}-v2"),
+        StandardPool(f"{name}-v2", name, 2, _plan(slow), about, slow, draw="content"),
     )
 }
 """Every standard pool by id."""
@@ -220,6 +259,34 @@ def _check_split(split: str) -> None:
         raise ValueError(f"unknown split {split!r}; expected one of {', '.join(SPLITS)}")
 
 
+def current(pool_id: str) -> StandardPool:
+    """The pool that stands for ``pool_id`` today: itself, or the pool that supersedes it."""
+    pool = standard_pool(pool_id)
+    while pool.superseded_by is not None:
+        pool = standard_pool(pool.superseded_by)
+    return pool
+
+
+_WARNED: set[str] = set()
+
+
+def warn_superseded(pool: StandardPool) -> None:
+    """Warn once per process that a superseded pool is being loaded
+    (:class:`SupersededPoolWarning`)."""
+    if pool.superseded_by is None or pool.id in _WARNED:
+        return
+    _WARNED.add(pool.id)
+    warnings.warn(SupersededPoolWarning(
+        f"{pool.id} is superseded by {pool.superseded_by}: its splits have disjoint seeds but share tests by content "
+        f"(docs/pools.md); it stays loadable to compare with results reported on it"), stacklevel=3)
+
+
+@lru_cache(maxsize=64)
+def _shipped_seeds(pool_id: str, split: str, mtime_ns: int, size: int) -> tuple[int, ...]:
+    """The seeds of a split file's records (cached per pool, file version and size)."""
+    return tuple(int(r["seed"]) for r in read_records(standard_pool(pool_id), split))
+
+
 @lru_cache(maxsize=64)
 def _count_lines(path: str, mtime_ns: int, size: int) -> int:
     """Lines of a gzipped file (cached per path, modification time and size)."""
@@ -233,8 +300,9 @@ def read_records(pool: StandardPool, split: str) -> list[dict[str, Any]]:
     Raises
     ------
     ProblemError
-        If the file is not gzipped JSON lines, or its records are not the split's first
-        seeds in order (``file, line N: ...``).
+        If the file is not gzipped JSON lines, or its records are not the split's seeds in
+        order (``file, line N: ...``): its first seeds for a ``"seeds"`` pool, increasing
+        seeds of the split's range for a ``"content"`` pool.
     """
     path = pool.path(split)
     if not path.exists():
@@ -251,7 +319,14 @@ def read_records(pool: StandardPool, split: str) -> list[dict[str, Any]]:
             rec = json.loads(text)
         except ValueError as exc:
             raise ProblemError(f"{path}, line {k + 1}: not JSON ({exc})") from None
-        if not isinstance(rec, dict) or rec.get("seed") != base + k:
+        seed = rec.get("seed") if isinstance(rec, dict) else None
+        if pool.draw == "content":
+            low = out[-1]["seed"] + 1 if out else base
+            if isinstance(seed, bool) or not isinstance(seed, int) or not low <= seed < base + SPLIT_SPAN:
+                raise ProblemError(
+                    f"{path}, line {k + 1}: expected the record of a seed in {low}..{base + SPLIT_SPAN - 1} (the split's seeds, increasing)"
+                )
+        elif seed != base + k:
             raise ProblemError(f"{path}, line {k + 1}: expected the record of seed {base + k} (the split's seeds in order)")
         out.append(rec)
     return out
@@ -328,6 +403,7 @@ def load_standard_pool(
     """
     pool = standard_pool(pool_id)
     _check_split(split)
+    warn_superseded(pool)
     if check not in CHECKS:
         raise ValueError(f"unknown check {check!r}; expected one of {', '.join(CHECKS)}")
     records = read_records(pool, split)
@@ -337,7 +413,8 @@ def load_standard_pool(
     if count < 1 or start + count > len(records):
         raise ValueError(
             f"{pool.id} ships {len(records)} tests of its {split!r} split; asked for tests {start}..{start + count - 1} "
-            "(flowtest_env.pools.load_pool builds the ones beyond on demand)"
+            + ("(flowtest_env.pools.load_pool builds the ones beyond on demand)" if pool.draw == "seeds" else
+               "(a pool disjoint by content is its shipped tests: python -m experiments.tools.build_pools builds more)")
         )
     if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
         raise ValueError(f"workers must be a positive integer or None, got {workers!r}")

@@ -22,10 +22,10 @@ from synthesis.problems.problem import build_graphs
 from synthesis.problems.random_worlds import world_problem
 from synthesis.routing.restrictions import strategy_from_routing
 from synthesis.routing.result import RoutingResult
+from tests.testing_pools import copy_split, empty_data
 
 SHIPPED = [p for p in sp.STANDARD_POOLS.values() if p.shipped("test")]
 R1 = "reachability1/5x5-v1"
-REAL_DATA = sp.DATA_DIR  # before a test puts a temporary folder in its place
 
 
 @pytest.fixture
@@ -39,21 +39,7 @@ def cache(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
 @pytest.fixture
 def data(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     """An empty folder in place of the shipped records."""
-    folder = tmp_path / "pools"
-    monkeypatch.setattr(sp, "DATA_DIR", folder)
-    return folder
-
-
-def copy_split(pool: sp.StandardPool, split: str, data: Path, count: int, edit: Any = None) -> Path:
-    """The first ``count`` shipped records of a split, copied (``edit(records)`` first) into ``data``."""
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(sp, "DATA_DIR", REAL_DATA)
-        records = sp.read_records(pool, split)[:count]
-    if edit is not None:
-        edit(records)
-    target = data / pool.slug / f"{split}.jsonl.gz"
-    sp.write_records(target, records)
-    return target
+    return empty_data(tmp_path, monkeypatch)
 
 
 # ------------------------------------------------------------------- the registry
@@ -109,7 +95,8 @@ def test_shipped_files_are_compact_certified_and_in_seed_order(pool: sp.Standard
         records = sp.read_records(pool, split)  # raises unless the split's seeds in order
         if not records:
             continue
-        assert all(set(r) == {"seed", "attempt", "cuts", "static", "summary", "digest", "certificate"} for r in records)
+        keyed = {"content"} if pool.draw == "content" else set()  # a -v2 record carries its test's content key
+        assert all(set(r) == {"seed", "attempt", "cuts", "static", "summary", "digest", "certificate", *keyed} for r in records)
         assert all(r["digest"] == {"sha256": record_digest(r)} for r in records)
         per_test = pool.path(split).stat().st_size / len(records)
         assert per_test < 500, f"{pool.id} {split}: {per_test:.0f} bytes a test"
@@ -434,7 +421,7 @@ def test_ctrl_c_stops_a_load_in_two_processes_within_a_second(tmp_path: Path) ->
         "signal.signal(signal.SIGINT, signal.default_int_handler)\n"  # as on a terminal: a job started in the background inherits SIGINT ignored
         "from flowtest_env.standard_pools import load_standard_pool\n"
         "try:\n"
-        "    load_standard_pool('reachability1/5x5-v1', 'train', 4096, progress=True, workers=2)\n"
+        "    load_standard_pool('reachability1/5x5-v2', 'train', 4096, progress=True, workers=2)\n"
         "except KeyboardInterrupt:\n"
         "    print('interrupted', len(multiprocessing.active_children()), file=sys.stderr, flush=True)\n"
         "    sys.exit(130)\n"
@@ -442,7 +429,7 @@ def test_ctrl_c_stops_a_load_in_two_processes_within_a_second(tmp_path: Path) ->
     proc = subprocess.Popen([sys.executable, "-c", script], stderr=subprocess.PIPE, text=True, start_new_session=True)
     assert proc.stderr is not None
     line = proc.stderr.readline()
-    assert "loading reachability1/5x5-v1 train" in line, line
+    assert "loading reachability1/5x5-v2 train" in line, line
     time.sleep(1.0)  # the helper is at work
     sent = time.monotonic()
     os.killpg(proc.pid, signal.SIGINT)
