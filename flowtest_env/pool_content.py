@@ -19,7 +19,8 @@ of one is a key of the other, and a split *repeats* a test when one key appears 
 Example::
 
     from flowtest_env.pool_content import overlaps, split_keys
-    from flowtest_env.standard_pools import SPLITS, standard_pool
+    from flowtest_env.pools import SPLITS
+    from flowtest_env.standard_pools import standard_pool
 
     pool = standard_pool("reachability1/5x5-v2")
     report = overlaps({s: split_keys(pool, s) for s in SPLITS})
