@@ -36,7 +36,7 @@ from typing import IO, Any
 
 from synthesis.model.errors import ProblemError
 
-from .arguments import nonnegative_int
+from .arguments import int_between, nonnegative_int
 from .command import Command
 from .exits import EXIT_OK
 
@@ -138,7 +138,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     """Declare ``flowtest serve``'s arguments."""
     p.add_argument("test", metavar="ARTIFACT",
                    help="the test: an artifact file (flowtest synthesize --out), a built-in name or a problem file")
-    p.add_argument("--port", type=nonnegative_int, default=None,
+    p.add_argument("--port", type=int_between(0, 65535, "a port"), default=None,
                    help="serve on 127.0.0.1:PORT instead of standard input and output (0: a free port, printed)")
     p.add_argument("--max-steps", type=nonnegative_int, default=None,
                    help="the step budget of a run (default: the environment's)")
