@@ -82,9 +82,9 @@ def replay_args(command: str, folder: Path) -> list[str]:
     return words[4:]
 
 
-def test_the_doc_has_a_python_and_a_shell_planner() -> None:
+def test_the_doc_has_a_python_a_javascript_and_a_shell_planner() -> None:
     files = doc_files()
-    assert set(files) == {"bfs_planner.py", "prefer.sh"}
+    assert set(files) == {"bfs_planner.py", "replanner.js", "prefer.sh"}
     assert "import flowtest" not in files["bfs_planner.py"] and "from flowtest" not in files["bfs_planner.py"]
 
 
