@@ -117,12 +117,12 @@ def test_serve_answers_each_line_and_goes_on_after_bad_ones() -> None:
     assert len(answers) == 10  # nothing after quit
     assert answers[0]["test"]["objective"] == "F goal" and "test" not in json.dumps(answers[0]["test"]["system"]).lower()
     assert answers[1]["ok"] and answers[1]["id"] == 7 and answers[1]["status"]["state"] == [1, 0]
-    assert answers[2] == {"ok": False, "error": "not a JSON object on one line"}
+    assert answers[2] == {"ok": False, "code": "not_json", "error": "not a JSON object on one line (NaN and Infinity are not JSON)"}
     assert answers[3]["status"]["state"] == [1, 1]
-    assert not answers[4]["ok"] and "is not a state" in answers[4]["error"]
-    assert not answers[5]["ok"] and "unknown field(s) of a step: extra" in answers[5]["error"]
-    assert not answers[6]["ok"] and "unknown op" in answers[6]["error"]
-    assert not answers[7]["ok"] and "a request is a JSON object" in answers[7]["error"]
+    assert not answers[4]["ok"] and "is not a state" in answers[4]["error"] and answers[4]["code"] == "not_a_state"
+    assert not answers[5]["ok"] and "unknown field(s) of a step: extra" in answers[5]["error"] and answers[5]["code"] == "bad_request"
+    assert not answers[6]["ok"] and "unknown op" in answers[6]["error"] and answers[6]["code"] == "unknown_op"
+    assert not answers[7]["ok"] and "a request is a JSON object" in answers[7]["error"] and answers[7]["code"] == "not_an_object"
     assert answers[8]["status"] == answers[3]["status"]
     assert answers[9] == {"ok": True}
 
