@@ -314,3 +314,33 @@ def test_the_step_timeout_has_its_range_from_python_too() -> None:
     for bad in (1e300, float("inf"), float("nan"), 0, -1, 3600.5):
         with pytest.raises(PolicyError, match="the step timeout must be above 0 and at most 3600 seconds"):
             make_policy("cmd:python3 -c pass", env, step_timeout=bad)
+
+
+PROMISES = '''import numpy as np
+
+def checked(observation, mask):
+    """What docs/runtime.md promises a python: planner: the step message as a dict, the
+    environment's observation array in it, and the mask as an int8 array of its own."""
+    assert observation["type"] == "step" and isinstance(observation["observation"], np.ndarray)
+    assert observation["observation"].tolist() == [float(x) for x in open("obs.txt").read().split()]
+    assert mask.dtype == np.int8 and list(mask) == observation["mask"]
+    mask[:] = 0  # its own copy
+    return observation["allowed"][-1]
+'''
+
+
+def test_a_python_planner_gets_what_the_docs_promise(folder: Path) -> None:
+    from agents.external import PythonPlanner
+    from agents.registry import make_policy
+    from experiments.cli.episodes import make_env
+
+    (folder / "promises.py").write_text(PROMISES)
+    env = make_env("small-reactive")
+    policy = make_policy("python:promises:checked", env, step_timeout=10)
+    obs, info = env.reset(seed=0)
+    policy.reset(0)
+    for _ in range(3):
+        (folder / "obs.txt").write_text(" ".join(map(str, obs.tolist())))
+        obs, _, _, _, info = env.step(policy.act(obs, info))
+    assert isinstance(policy, PythonPlanner)
+    policy.close()
