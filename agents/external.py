@@ -20,42 +20,63 @@ Two names put your own system wherever FlowTest names one (``flowtest evaluate -
   report's message if it fails. ``COMMAND`` is split as a shell would split words
   (``shlex``), with no shell features (write ``cmd:"sh -c '...'"`` for those).
 
-The protocol (one JSON object per line; FlowTest writes compact JSON)
----------------------------------------------------------------------
+The protocol (one JSON object per line; FlowTest writes compact JSON), version 2
+----------------------------------------------------------------------------------
 FlowTest to the planner:
 
-``{"type": "hello", "protocol": "flowtest-planner", "version": 1, "test": {...}}``
-    Once, when the process starts. ``test``: ``name``, ``kind`` (``static``, ``reactive``,
-    ``mixed``, ``agent``), ``objective`` (the system objective, the SUT's own task; never
-    the hidden test objective), ``system`` (the transition system as the artifact writes
-    it: ``states``, ``moves``, ``labels``, ``layout``, ...; docs/artifact-schema.md; the
-    labels only of the system objective's propositions, as the environments show them),
-    ``actions`` (the action names of a grid: ``N S E W stay``; on graphs ``null``: the
-    names are given per step), ``max_steps`` and ``agent`` (whether a test agent moves).
+``{"type": "hello", "protocol": "flowtest-planner", "version": 2, "test": {...}}``
+    Once, when the process starts. ``test`` (:func:`flowtest_env.runtime.describe`):
+    ``name``, ``kind`` (``static``, ``reactive``, ``mixed``, ``agent``), ``objective`` (the
+    system objective, the SUT's own task; never the hidden test objective), ``system`` (the
+    transition system as the artifact writes it: ``states``, ``moves``, ``labels``,
+    ``layout``, ...; docs/artifact-schema.md; the labels only of the system objective's
+    propositions, as the environments show them; the test's static walls apart, in
+    ``walls``, and not among ``moves``), ``automaton`` (the system objective's automaton over
+    the system's states: ``initial``, ``accepting``, ``next[q][s]``), ``actions`` (the action
+    names of a grid: ``N S E W stay``; on graphs ``null``: the names are given per step),
+    ``max_steps`` and ``agent`` (whether a test agent moves). That is what the built-in
+    systems know (``scripted:replanner`` plans on exactly this).
 ``{"type": "reset", "seed": S}``
     A run starts (``seed`` is the run's seed, for a planner that draws random numbers).
-``{"type": "step", "step": K, "state": ..., "allowed": [...], "to": [...], "mask": [...], "agent": ...}``
+``{"type": "step", "step": K, "state": ..., "allowed": [...], "to": [...], "mask": [...], "restricted": [...], "agent": ...}``
     Answer it. ``state``: the system's state as in problem-format.md (``[row, col]``,
     ``[[row, col], fuel]`` or a state name); ``allowed``: the names of the actions the
     test allows now (``"N"``, ``"stay"``, on graphs ``"-> NAME"``); ``to``: the state each
     allowed action leads to, in the same order; ``mask``: per action index 1 if allowed;
-    ``agent``: the test agent's place (``[row, col]`` or a place name), or ``null``.
+    ``restricted``: the moves out of ``state`` refused now, ``{"action", "to", "by"}`` with
+    ``by`` one of ``wall`` (static, for the whole test), ``door`` (the test closes it now;
+    it may open again) and ``agent`` (the test agent stands there); ``agent``: the test
+    agent's place (``[row, col]`` or a place name), or ``null``.
 ``{"type": "end", "verdict": {...}}``
     The run ended (the verdict of ``flowtest evaluate``); no answer.
 
+Version 1 had no ``walls``, ``automaton`` or ``restricted`` (its ``moves`` held the walled
+moves too); a version 1 planner works unchanged.
+
 The planner answers every ``step`` with one line: ``{"action": A}``, or ``A`` alone,
 where ``A`` is an action index (``0``) or name (``"N"``, ``N``, ``stay``). It must answer
-within the step timeout (``--step-timeout``, default :data:`DEFAULT_STEP_TIMEOUT` s; the
-first answer includes the process's start) and must choose an allowed action. A planner
-that exits, hangs, answers something that is not an action or an action the test does not
-allow now **fails the run** (:class:`PlannerError`): the run is reported as the system's
-failure with what happened (the exit status and the end of its error output, the step),
-and every other system and test still runs. At the end FlowTest closes the planner's
-standard input; it should then exit.
+within the step timeout (``--step-timeout``, default :data:`DEFAULT_STEP_TIMEOUT` s, at most
+:data:`MAX_STEP_TIMEOUT`; the first answer includes the process's start), and read each
+message within it too, and must choose an allowed action. A planner that exits, hangs,
+stops reading, answers something that is not an action (a line over
+:data:`MAX_ANSWER` bytes is not one) or an action the test does not allow now **fails the
+run** (:class:`PlannerError`): the run is reported as the system's failure with what
+happened (the exit status and the end of its error output, the step), and every other
+system and test still runs. At the end FlowTest closes the planner's standard input; it
+should then exit (it is killed, with every process of its group, half a second later).
+
+A planner process runs in a session of its own (:mod:`agents.planner_process`): Ctrl-C at
+the terminal reaches FlowTest only, which stops at once and kills the planner's whole
+process group, background children included.
 
 A ``python:`` planner receives exactly these ``step`` messages as ``observation`` (a
 ``dict``; plus ``observation["observation"]``, the Gymnasium environment's observation
-array) and ``mask`` as an ``int8`` array; its answer is an index or a name as above.
+array) and ``mask`` as an ``int8`` array; its answer is an index or a name as above. It
+runs in a child process forked from FlowTest's (its own session, its prints sent to
+standard error), so a planner that loops, sleeps, exits (``sys.exit``) or swallows every
+exception (a bare ``except:``) is stopped at the step timeout and fails its run; what it
+changes in its own objects stays in that process. Its factory runs there too, within the
+step timeout.
 
 Examples
 --------
@@ -91,160 +112,65 @@ import importlib.util
 import inspect
 import json
 import os
-import queue
+import pickle
 import shlex
 import shutil
 import signal
-import subprocess
+import socket
+import struct
 import sys
-import threading
-import weakref
-from collections import deque
-from collections.abc import Iterator
-from contextlib import contextmanager
+import time
 from pathlib import Path
-from typing import IO, Any
+from typing import Any
 
 import numpy as np
 
-from flowtest_env.game import TestGame
-from flowtest_env.runtime import describe
+from .base import PolicyError
+from .planner_process import Running, WireClosed, WireTimeout, WireTooLong, fork_child, frame_bytes, start_command
+from .planner_protocol import (
+    DEFAULT_STEP_TIMEOUT,
+    MAX_ANSWER,
+    MAX_STEP_TIMEOUT,
+    PROTOCOL,
+    PROTOCOL_VERSION,
+    Messages,
+    PlannerError,
+    describe_test,
+    parse_answer,
+    plain_answer,
+    short,
+    step_timeout,
+)
 
-from .base import PolicyError, action_mask_of, game_of, state_index
-
-PROTOCOL = "flowtest-planner"
-PROTOCOL_VERSION = 1
-DEFAULT_STEP_TIMEOUT = 10.0
-"""Seconds a planner may take to answer one step (a ``cmd:`` planner's first answer
-includes its start; a ``python:`` planner's ``reset`` is timed as one step)."""
+__all__ = [
+    "DEFAULT_STEP_TIMEOUT", "MAX_ANSWER", "MAX_STEP_TIMEOUT", "PREFIXES", "PROTOCOL", "PROTOCOL_VERSION", "CommandPlanner",
+    "PlannerError", "PythonPlanner", "check_spec", "command_words", "describe_test", "is_planner_function", "make_command",
+    "make_python", "parse_answer", "planner_policy", "resolve", "spec_of",
+]
 
 PREFIXES = ("python", "cmd")
 """The name prefixes of systems from outside FlowTest."""
 
-
-class PlannerError(RuntimeError):
-    """A planner failed during a run: it crashed (raised, exited), hung past the step
-    timeout, or answered something that is not an allowed action. The run is the
-    system's failure; the message says what happened and at which step."""
+CLOSE_GRACE = 0.5
+"""Seconds a planner is given to exit after its input is closed at the end, before its
+process group is killed (none when a Ctrl-C is on its way)."""
 
 
-# --------------------------------------------------------------------------- messages
+def _interrupted() -> bool:
+    """Whether a Ctrl-C (or SIGTERM, which takes its path) is unwinding the caller now."""
+    return isinstance(sys.exc_info()[1], KeyboardInterrupt)
 
 
-def _max_steps(env: Any) -> int | None:
-    for obj in (env, getattr(env, "unwrapped", None)):
-        n = getattr(obj, "max_steps", None)
-        if isinstance(n, int):
-            return n
-    return None
-
-
-def describe_test(game: TestGame, max_steps: int | None) -> dict[str, Any]:
-    """The public description of a test, as a system under test may know it (the
-    ``hello`` message's ``test``; :func:`flowtest_env.runtime.describe`): never the hidden
-    test objective or the restrictions."""
-    return describe(game, max_steps)
-
-
-def _run_of(env: Any) -> Any:
-    for obj in (getattr(env, "unwrapped", None), env):
-        run = getattr(obj, "run", None)
-        if run is not None and hasattr(run, "system"):
-            return run
-    return None
-
-
-class _Messages:
-    """Builds the protocol's messages for one env."""
-
-    def __init__(self, env: Any) -> None:
-        self.env = env
-        self.game = game_of(env)
-        self.test = describe_test(self.game, _max_steps(env))
-        self.count = 0
-
-    def hello(self) -> dict[str, Any]:
-        return {"type": "hello", "protocol": PROTOCOL, "version": PROTOCOL_VERSION, "test": self.test}
-
-    def step(self, observation: Any, info: dict[str, Any]) -> tuple[dict[str, Any], np.ndarray, int]:
-        """``(message, mask, state index)`` of the situation now."""
-        g = self.game
-        mask = np.asarray(action_mask_of(observation, info), dtype=np.int8)
-        run = _run_of(self.env)
-        if run is not None:
-            s, k = int(run.system), int(run.steps)
-            agent_state = int(run.agent)
-        else:
-            s, k, agent_state = state_index(g, info["system_state"]), self.count, -1
-        self.count = k + 1
-        allowed = [int(a) for a in np.flatnonzero(mask)]
-        place = g.agent_place[agent_state] if 0 <= agent_state < g.n_agent_states else -1
-        msg = {
-            "type": "step",
-            "step": k,
-            "state": g.state_json(s),
-            "allowed": [g.action_name(s, a) for a in allowed],
-            "to": [g.state_json(s if a == g.stay_action else int(g.succ_list[s][a])) for a in allowed],
-            "mask": mask.tolist(),
-            "agent": None if place < 0 else _place_json(g, place),
-        }
-        return msg, mask, s
-
-
-def _place_json(game: TestGame, place: int) -> object:
-    p = game.ts.places[place]
-    return list(p) if isinstance(p, tuple) else p
-
-
-def parse_answer(answer: Any, game: TestGame, state: int, mask: np.ndarray, step: int, hint: str = "") -> int:
-    """The action index a planner's answer names (a ``dict`` with ``action``, an index or
-    a name; a protocol line is decoded first).
-
-    Raises
-    ------
-    PlannerError
-        If the answer names no action, or one the test does not allow now.
-    """
-    raw = answer
-    if isinstance(answer, str):
-        text = answer.strip()
+def _ended(status: int | None) -> str:
+    """How a planner process ended, for a message."""
+    if status is None:
+        return "closed its output"
+    if status < 0:
         try:
-            answer = json.loads(text)
+            return f"was ended by signal {signal.Signals(-status).name}"
         except ValueError:
-            answer = text
-    if isinstance(answer, dict):
-        if "action" not in answer:
-            raise PlannerError(f"step {step}: answered {_short(raw)}, an object without \"action\"{hint}")
-        answer = answer["action"]
-    names = [game.action_name(state, a) for a in range(game.n_actions)]
-    action: int | None = None
-    if isinstance(answer, (int, np.integer)) and not isinstance(answer, (bool, np.bool_)):
-        action = int(answer) if 0 <= int(answer) < game.n_actions else None
-    elif isinstance(answer, str):
-        word = answer.strip()
-        if word in names:
-            action = names.index(word)
-        elif word.isdigit() and int(word) < game.n_actions:
-            action = int(word)
-        elif not game.is_grid and f"-> {word}" in names:
-            action = names.index(f"-> {word}")
-    if action is None:
-        raise PlannerError(f"step {step}: answered {_short(raw)}, which is not an action "
-                           f"(expected an index 0..{game.n_actions - 1} or one of: {', '.join(names)}){hint}")
-    if not mask[action]:
-        allowed = ", ".join(names[a] for a in np.flatnonzero(mask))
-        raise PlannerError(f"step {step}: chose {names[action]!r}, which the test does not allow now "
-                           f"(allowed: {allowed})")
-    return action
-
-
-def _short(x: Any, n: int = 80) -> str:
-    """A short quotation of an answer: a line in quotes, a Python value as its ``repr``."""
-    if not isinstance(x, str):
-        text = repr(x)
-        return text if len(text) <= n else text[:n] + "..."
-    text = x.strip()
-    return repr(text if len(text) <= n else text[:n] + "...")
+            return f"was ended by signal {-status}"
+    return f"exited with status {status}"
 
 
 # --------------------------------------------------------------------------- python:
@@ -252,7 +178,13 @@ def _short(x: Any, n: int = 80) -> str:
 
 def _import(module: str) -> Any:
     """Import ``module`` as ``python -m`` would (the current directory first), or load a
-    ``.py`` file."""
+    ``.py`` file.
+
+    Raises
+    ------
+    PolicyError
+        If it is missing, or raises (``sys.exit()`` included) while being imported.
+    """
     cwd = os.getcwd()
     if module.endswith(".py"):
         path = Path(module)
@@ -262,8 +194,11 @@ def _import(module: str) -> Any:
         if spec is None or spec.loader is None:
             raise PolicyError(f"cannot load {module!r} as a Python module")
         mod = importlib.util.module_from_spec(spec)
+        try:
+            spec.loader.exec_module(mod)
+        except (Exception, SystemExit) as exc:  # the user's file is broken, or raises while it runs
+            raise PolicyError(f"{module!r} could not be loaded: it {_did(exc)}") from None
         sys.modules.setdefault(path.stem, mod)
-        spec.loader.exec_module(mod)
         return mod
     if cwd not in sys.path and "" not in sys.path:
         sys.path.insert(0, cwd)
@@ -273,8 +208,25 @@ def _import(module: str) -> Any:
         if exc.name and (module == exc.name or module.startswith(exc.name + ".")):
             raise PolicyError(f"no Python module {module!r} (looked in {cwd} and sys.path)") from None
         raise PolicyError(f"module {module!r} could not be imported: {type(exc).__name__}: {exc}") from None
+    except SystemExit as exc:
+        raise PolicyError(f"module {module!r} {_did(exc)} while being imported") from None
     except Exception as exc:  # the user's module raised while being imported
-        raise PolicyError(f"module {module!r} raised while being imported: {type(exc).__name__}: {exc}") from None
+        raise PolicyError(f"module {module!r} raised while being imported: {_raised(exc)}") from None
+
+
+def _did(exc: BaseException) -> str:
+    """What a planner did, by the exception it ended with: ``raised ValueError: text``,
+    ``called sys.exit(3)``."""
+    return f"called sys.exit({short(exc.code)})" if isinstance(exc, SystemExit) else f"raised {_raised(exc)}"
+
+
+def _raised(exc: BaseException) -> str:
+    """What an exception says: ``ValueError: text`` (its type alone when it says nothing)."""
+    try:
+        text = str(exc)
+    except Exception:  # an exception whose str fails
+        text = ""
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
 
 
 def resolve(spec: str) -> Any:
@@ -337,118 +289,188 @@ def spec_of(obj: Any) -> str | None:
     return f"python:{module}:{qual}"
 
 
-class PythonPlanner:
-    """A Python planner as a FlowTest :class:`~agents.base.Policy` (see the module docstring).
+def _serve_planner(sock: socket.socket, build: Any) -> None:
+    """The child's side of a ``python:`` planner (:func:`agents.planner_process.fork_child`):
+    build the planner, say ``ready`` (or why not), then answer each request (``reset``,
+    ``act``, ``close``) with ``("ok", value)`` or ``("raised", what)`` until the parent
+    closes the socket. Whatever the planner raises, ``SystemExit`` and ``KeyboardInterrupt``
+    included, is an answer: its run fails, the evaluation goes on."""
+    sock.setblocking(True)
+    reader = sock.makefile("rb")
 
-    ``target`` is a planner function, a factory, or (from :func:`planner_policy`) a planner
-    object itself.
+    def send(value: Any) -> None:
+        sock.sendall(frame_bytes(value))
+
+    try:
+        planner, act = build()
+    except PolicyError as exc:
+        send(("failed", str(exc)))
+        return
+    except BaseException as exc:  # the planner's factory, whatever it raises
+        send(("failed", f"the factory {_did(exc)}"))
+        return
+    reset = getattr(planner, "reset", None)
+    reset = reset if callable(reset) and reset is not act else None
+    send(("ready", None))
+    while True:
+        head = reader.read(4)
+        if len(head) < 4:
+            return
+        request = pickle.loads(reader.read(struct.unpack("!I", head)[0]))
+        try:
+            if request[0] == "act":
+                message, observation, mask = request[1], _unpack(request[2]), _unpack(request[3])
+                message["observation"] = observation
+                send(("ok", plain_answer(act(message, mask))))
+                continue
+            if request[0] == "reset" and reset is not None:
+                reset(request[1])
+            elif request[0] == "close":
+                close = getattr(planner, "close", None)
+                if callable(close):
+                    close()
+            send(("ok", None))
+        except BaseException as exc:  # the planner's own failure, reported as its run's
+            send(("raised", _did(exc)))
+
+
+def _pack(value: Any) -> Any:
+    """An array as its dtype, shape and bytes (pickled several times faster than the array
+    itself); anything else as it is."""
+    if type(value) is np.ndarray:
+        return ("ndarray", value.dtype.str, value.shape, value.tobytes())
+    return value
+
+
+def _unpack(value: Any) -> Any:
+    """:func:`_pack` undone: a fresh, writable array."""
+    if isinstance(value, tuple) and len(value) == 4 and value[0] == "ndarray":
+        return np.frombuffer(value[3], dtype=np.dtype(value[1])).reshape(value[2]).copy()
+    return value
+
+
+class PythonPlanner:
+    """A Python planner as a FlowTest :class:`~agents.base.Policy` (see the module docstring),
+    played in a forked child process that the step timeout stops.
+
+    ``target`` is a planner function, a factory, or (``built``, from :func:`planner_policy`)
+    a planner object itself. The factory runs at once, in the child.
+
+    Raises
+    ------
+    PolicyError
+        If the step timeout is out of range, or the factory fails (raises, exits, returns no
+        planner, or takes longer than the step timeout).
     """
 
     def __init__(self, name: str, env: Any, target: Any, built: bool = False, step_timeout: float | None = None) -> None:
         self.name = name
-        self.timeout = _step_timeout(step_timeout)
-        self.messages = _Messages(env)
+        self.timeout = _timeout(step_timeout)
+        self.messages = Messages(env)
         self.game = self.messages.game
-        if built:
-            self.planner: Any = target
-        elif is_planner_function(target):
-            self.planner = target
+        self.target, self.built = target, built
+        self.running: Running | None = None
+        problem = self._start()
+        if problem is not None:
+            raise PolicyError(problem)
+
+    def _build(self) -> tuple[Any, Any]:
+        """(in the child) The planner and its ``act``."""
+        if self.built or is_planner_function(self.target):
+            planner = self.target
         else:
-            try:
-                self.planner = target(self.messages.test) if _accepts_one(target) else target()
-            except Exception as exc:
-                raise PolicyError(f"the factory raised {type(exc).__name__}: {exc}") from None
-        act = getattr(self.planner, "act", None)
-        self._act = act if callable(act) else self.planner
-        if not callable(self._act):
-            raise PolicyError(f"the factory returned a {type(self.planner).__name__} with no act(observation, mask)")
+            planner = self.target(self.messages.test) if _accepts_one(self.target) else self.target()
+        act = getattr(planner, "act", None)
+        act = act if callable(act) else planner
+        if not callable(act):
+            raise PolicyError(f"the factory returned a {type(planner).__name__} with no act(observation, mask)")
+        return planner, act
+
+    def _start(self) -> str | None:
+        """Fork the child and build the planner there; ``None``, or why it did not start."""
+        self.running = fork_child(lambda theirs: _serve_planner(theirs, self._build), 1 << 20)
+        try:
+            kind, value = self.running.wire.frame(time.monotonic() + self.timeout)
+        except WireTimeout:
+            self._drop()
+            return f"the factory did not return within {self.timeout:g} s (--step-timeout)"
+        except WireClosed:
+            return f"the planner's process {_ended(self._drop(wait=1.0))} before it was ready"
+        except BaseException:
+            self._drop()
+            raise
+        if kind != "ready":
+            self._drop()
+            return str(value)
+        return None
+
+    def _drop(self, grace: float = 0.0, wait: float = 0.0) -> int | None:
+        """End the child (its whole process group); its exit status."""
+        running, self.running = self.running, None
+        return running.end(grace, wait) if running is not None else None
+
+    def _call(self, request: tuple[Any, ...], where: str, late: str) -> Any:
+        """Send ``request`` to the child and return its answer's value, within the step timeout.
+
+        Raises
+        ------
+        PlannerError
+            If the planner did not answer in time (``late``), raised, or its process ended.
+        """
+        if self.running is None:
+            problem = self._start()
+            if problem is not None:
+                raise PlannerError(f"{where}: {problem}")
+        assert self.running is not None
+        deadline = time.monotonic() + self.timeout
+        try:
+            self.running.wire.send(frame_bytes(request), deadline)
+            kind, value = self.running.wire.frame(deadline)
+        except WireTimeout:
+            self._drop()
+            raise PlannerError(f"{where}: {late} within {self.timeout:g} s (--step-timeout); it was stopped") from None
+        except (WireClosed, WireTooLong):
+            raise PlannerError(f"{where}: the planner's process {_ended(self._drop(wait=1.0))}") from None
+        except BaseException:
+            self._drop()
+            raise
+        if kind != "ok":
+            self._drop()
+            raise PlannerError(f"{where}: {value}")
+        return value
 
     def reset(self, seed: int | None = None) -> None:
+        """A run starts: the planner's ``reset(seed)``, if it has one."""
         self.messages.count = 0
-        reset = getattr(self.planner, "reset", None)
-        if callable(reset) and reset is not self._act:
-            try:
-                with _timed(self.timeout):
-                    reset(seed)
-            except _Overran as exc:
-                _keep_interrupt(exc)
-                raise PlannerError(f"reset: the planner did not return within {self.timeout:g} s (--step-timeout)") from None
-            except Exception as exc:
-                raise PlannerError(f"reset raised {type(exc).__name__}: {exc}") from None
+        self._call(("reset", seed), "reset", "the planner did not return")
 
     def act(self, observation: Any, info: dict[str, Any]) -> int:
+        """The planner's answer to this step, as an allowed action index."""
         msg, mask, s = self.messages.step(observation, info)
-        msg["observation"] = observation
+        answer = self._call(("act", msg, _pack(observation), _pack(mask)), f"step {msg['step']}", "the planner gave no answer")
         try:
-            with _timed(self.timeout):
-                answer = self._act(msg, mask.copy())
-        except _Overran as exc:
-            _keep_interrupt(exc)
-            raise PlannerError(f"step {msg['step']}: the planner gave no answer within {self.timeout:g} s "
-                               "(--step-timeout); it was stopped") from None
-        except Exception as exc:
-            raise PlannerError(f"step {msg['step']}: raised {type(exc).__name__}: {exc}") from None
-        return parse_answer(answer, self.game, s, mask, msg["step"])
+            return parse_answer(answer, self.game, s, mask, msg["step"])
+        except PlannerError:
+            self._drop()
+            raise
 
     def close(self) -> None:
-        close = getattr(self.planner, "close", None)
-        if callable(close):
-            close()
-
-
-class _Overran(BaseException):
-    """Raised inside a ``python:`` planner's call when its step timer rings: a
-    ``BaseException``, so the planner's own ``except Exception`` does not swallow it."""
-
-
-def _keep_interrupt(exc: _Overran) -> None:
-    """A ring while a Ctrl-C unwound the planner's call replaced the ``KeyboardInterrupt``:
-    raise that again (the user's stop, not the planner's timeout)."""
-    if isinstance(exc.__context__, KeyboardInterrupt):
-        raise exc.__context__
-
-
-def _step_timeout(step_timeout: float | None) -> float:
-    timeout = DEFAULT_STEP_TIMEOUT if step_timeout is None else float(step_timeout)
-    if not timeout > 0:
-        raise PolicyError(f"the step timeout must be positive, not {step_timeout}")
-    return timeout
-
-
-@contextmanager
-def _timed(seconds: float) -> Iterator[None]:
-    """Interrupt the ``with`` body after ``seconds`` (raising :class:`_Overran` in it), by
-    ``SIGALRM``: a Python planner's loop or sleep is stopped, a call into C code that does
-    not return is not. Untimed where there is no ``SIGALRM`` (Windows), off the main
-    thread, where Python delivers no signals, where a real-time timer is already armed
-    (the caller's own, which this one would cancel) and where ``SIGALRM``'s handler was
-    installed outside Python (it could not be put back).
-
-    A ring that comes after the body has ended (the timer's last instant, or while a
-    ``KeyboardInterrupt`` unwinds it) is ignored: the body's own outcome stands."""
-    if (not hasattr(signal, "setitimer") or threading.current_thread() is not threading.main_thread()
-            or signal.getitimer(signal.ITIMER_REAL)[0] > 0 or signal.getsignal(signal.SIGALRM) is None):
-        yield
-        return
-    active = [True]
-
-    def ring(signum: int, frame: Any) -> None:
-        if active[0]:
-            raise _Overran
-
-    old = signal.signal(signal.SIGALRM, ring)
-    try:
-        signal.setitimer(signal.ITIMER_REAL, seconds)
-        yield
-    finally:
-        while True:  # a ring before the first line here is caught, and the restoring goes on
+        """The planner's ``close()``, then the end of its process."""
+        if self.running is not None and not _interrupted():
+            deadline = time.monotonic() + min(self.timeout, 1.0)
             try:
-                active[0] = False
-                signal.setitimer(signal.ITIMER_REAL, 0)
-                signal.signal(signal.SIGALRM, old)
-                break
-            except _Overran:
-                continue
+                self.running.wire.send(frame_bytes(("close",)), deadline)
+                self.running.wire.frame(deadline)
+            except (WireTimeout, WireClosed, WireTooLong):
+                pass
+            except BaseException:
+                self._drop()
+                raise
+        self._drop()
+
+
+def _timeout(seconds: float | None) -> float:
+    return step_timeout(seconds)
 
 
 def make_python(env: Any, arg: str, step_timeout: float | None = None) -> PythonPlanner:
@@ -465,9 +487,9 @@ def make_python(env: Any, arg: str, step_timeout: float | None = None) -> Python
 def planner_policy(obj: Any, env: Any, name: str | None = None, step_timeout: float | None = None) -> PythonPlanner:
     """A planner given as a Python object (a function, a factory, or a planner object with
     ``act(observation, mask)``) as a :class:`~agents.base.Policy` for ``env``; named
-    ``name``, else by :func:`spec_of` where it can be, else by its type. Each call of its
-    ``act`` and ``reset`` may take ``step_timeout`` seconds (default
-    :data:`DEFAULT_STEP_TIMEOUT`; on the main thread of a POSIX process).
+    ``name``, else by :func:`spec_of` where it can be, else by its type. It runs in a
+    child process, and each call of its ``act`` and ``reset`` may take ``step_timeout``
+    seconds (default :data:`DEFAULT_STEP_TIMEOUT`).
 
     Examples
     --------
@@ -482,6 +504,7 @@ def planner_policy(obj: Any, env: Any, name: str | None = None, step_timeout: fl
     >>> policy.reset(0)
     >>> policy.name, policy.act(obs, info)       # "N" is action 0
     ('first-allowed', 0)
+    >>> policy.close()
     """
     label = name or spec_of(obj) or f"python object {getattr(obj, '__qualname__', type(obj).__name__)}"
     if inspect.isclass(obj) or inspect.isfunction(obj) or inspect.ismethod(obj) or not hasattr(obj, "act"):
@@ -517,44 +540,8 @@ def command_words(arg: str) -> list[str]:
     return words
 
 
-def _stop(proc: subprocess.Popen[str]) -> None:
-    """End a planner process: close its input, give it a moment, then kill it."""
-    if proc.poll() is not None:
-        return
-    try:
-        if proc.stdin is not None:
-            proc.stdin.close()
-    except OSError:
-        pass
-    try:
-        proc.wait(timeout=1.0)
-        return
-    except subprocess.TimeoutExpired:
-        pass
-    proc.kill()
-    try:
-        proc.wait(timeout=2.0)
-    except subprocess.TimeoutExpired:  # pragma: no cover - a process that ignores SIGKILL
-        pass
-
-
 LOGS_HINT = "; a planner process answers one line per step on standard output and writes its logs to standard error"
 """Said after an answer line of a process that is not an action: most often a log line."""
-
-MAX_LINE = 1 << 16
-"""Longest line read from a planner at once (a longer one arrives in pieces, the first of
-which is not an action)."""
-
-
-def _pump(stream: IO[str], into: queue.Queue[str | None]) -> None:
-    while line := stream.readline(MAX_LINE):
-        into.put(line)
-    into.put(None)
-
-
-def _keep_tail(stream: IO[str], tail: deque[str]) -> None:
-    while line := stream.readline(MAX_LINE):
-        tail.append(line.rstrip("\n")[:300])
 
 
 class CommandPlanner:
@@ -567,96 +554,100 @@ class CommandPlanner:
         self.name = name
         self.words = command_words(arg)
         self.cwd = os.getcwd()
-        self.timeout = _step_timeout(step_timeout)
-        self.messages = _Messages(env)
+        self.timeout = _timeout(step_timeout)
+        self.messages = Messages(env)
         self.game = self.messages.game
-        self.proc: subprocess.Popen[str] | None = None
-        self.lines: queue.Queue[str | None] = queue.Queue()
-        self.errors: deque[str] = deque(maxlen=12)
-        self._finalizer: Any = None
+        self.running: Running | None = None
+        self._unread: str | None = None  # why the next run fails: the last run's end was not read
 
     # ---- the process
     def _start(self) -> None:
         try:
-            proc = subprocess.Popen(
-                self.words, cwd=self.cwd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                text=True, bufsize=1, encoding="utf-8", errors="replace",
-            )
+            self.running = start_command(self.words, self.cwd, MAX_ANSWER)
         except OSError as exc:
             raise PlannerError(f"could not start {shlex.join(self.words)!r}: {exc}") from None
-        self.proc = proc
-        self.lines = queue.Queue()
-        self.errors = deque(maxlen=12)
-        assert proc.stdout is not None and proc.stderr is not None
-        threading.Thread(target=_pump, args=(proc.stdout, self.lines), daemon=True).start()
-        threading.Thread(target=_keep_tail, args=(proc.stderr, self.errors), daemon=True).start()
-        self._finalizer = weakref.finalize(self, _stop, proc)
-        self._send(self.messages.hello(), "start")
+        self._send(self.messages.hello(), "start", time.monotonic() + self.timeout)
+
+    def _drop(self, grace: float = 0.0, wait: float = 0.0) -> int | None:
+        """End the process (its whole group); its exit status."""
+        running, self.running = self.running, None
+        return running.end(grace, wait) if running is not None else None
 
     def _crashed(self, where: str) -> PlannerError:
-        proc = self.proc
-        status = None
-        if proc is not None:
-            try:
-                status = proc.wait(timeout=2.0)
-            except subprocess.TimeoutExpired:
-                status = None
+        status, tail = None, ""
+        if self.running is not None:
+            status = self.running.session.wait_exit(1.0)
+            tail = self.running.wire.error_tail()
         self._drop()
-        what = "closed its output" if status is None else f"exited with status {status}"
-        tail = " | ".join(line for line in list(self.errors)[-4:] if line.strip())
-        return PlannerError(f"{where}: the planner {what}" + (f"; its last error output: {tail}" if tail else ""))
+        return PlannerError(f"{where}: the planner {_ended(status)}" + (f"; its last error output: {tail}" if tail else ""))
 
-    def _drop(self) -> None:
-        if self._finalizer is not None:
-            self._finalizer()  # stops the process
-            self._finalizer = None
-        self.proc = None
-
-    def _send(self, message: dict[str, Any], where: str) -> None:
-        proc = self.proc
-        assert proc is not None and proc.stdin is not None
+    def _send(self, message: dict[str, Any], where: str, deadline: float) -> None:
+        assert self.running is not None
+        data = (json.dumps(message, separators=(",", ":"), allow_nan=False) + "\n").encode()
         try:
-            proc.stdin.write(json.dumps(message, separators=(",", ":")) + "\n")
-            proc.stdin.flush()
-        except (BrokenPipeError, OSError, ValueError):
+            self.running.wire.send(data, deadline)
+        except WireTimeout:
+            self._drop()
+            raise PlannerError(f"{where}: the planner did not read its input within {self.timeout:g} s (--step-timeout); "
+                               "it was stopped") from None
+        except WireClosed:
             raise self._crashed(where) from None
+        except BaseException:
+            self._drop()
+            raise
 
-    def _receive(self, where: str) -> str:
+    def _receive(self, where: str, deadline: float) -> bytes:
+        assert self.running is not None
         try:
-            line = self.lines.get(timeout=self.timeout)
-        except queue.Empty:
+            return self.running.wire.line(deadline)
+        except WireTimeout:
             self._drop()
             raise PlannerError(f"{where}: the planner sent no answer within {self.timeout:g} s "
                                "(--step-timeout); it was stopped") from None
-        if line is None:
-            raise self._crashed(where)
-        return line
+        except WireClosed:
+            raise self._crashed(where) from None
+        except WireTooLong:
+            self._drop()
+            raise PlannerError(f"{where}: the planner answered a line longer than {MAX_ANSWER} bytes, which is not an action"
+                               + LOGS_HINT) from None
+        except BaseException:
+            self._drop()
+            raise
 
     # ---- the Policy interface
     def reset(self, seed: int | None = None) -> None:
+        """A run starts: the process (started if it is not running) gets ``reset``."""
         self.messages.count = 0
-        if self.proc is None or self.proc.poll() is not None:
+        if self._unread is not None:
+            why, self._unread = self._unread, None
+            self._drop()
+            raise PlannerError(why)
+        if self.running is None or self.running.session.exit_status() is not None:
             self._drop()
             self._start()
-        self._send({"type": "reset", "seed": seed}, "reset")
+        self._send({"type": "reset", "seed": seed}, "reset", time.monotonic() + self.timeout)
 
     def act(self, observation: Any, info: dict[str, Any]) -> int:
+        """Send this step and read the planner's answer, within the step timeout."""
         msg, mask, s = self.messages.step(observation, info)
         where = f"step {msg['step']}"
-        if self.proc is None:
+        if self.running is None:
             raise PlannerError(f"{where}: the planner is not running (reset was not called)")
+        deadline = time.monotonic() + self.timeout
         try:
-            early = self.lines.get_nowait()
-        except queue.Empty:
-            early = ""
-        if early is None:
-            raise self._crashed(where)
+            early, ended = self.running.wire.unasked()
+        except BaseException:
+            self._drop()
+            raise
         if early:
             self._drop()
-            raise PlannerError(f"{where}: the planner wrote {_short(early)} before it was asked (one line per step "
+            first = early.decode("utf-8", "replace").split("\n")[0]
+            raise PlannerError(f"{where}: the planner wrote {short(first)} before it was asked (one line per step "
                                "on standard output; write logs to standard error)")
-        self._send(msg, where)
-        line = self._receive(where)
+        if ended:
+            raise self._crashed(where)
+        self._send(msg, where, deadline)
+        line = self._receive(where, deadline)
         try:
             return parse_answer(line, self.game, s, mask, msg["step"], hint=LOGS_HINT)
         except PlannerError:
@@ -664,16 +655,27 @@ class CommandPlanner:
             raise
 
     def episode_end(self, verdict: dict[str, Any]) -> None:
-        """Tell the planner the run's verdict (no answer expected)."""
-        if self.proc is not None and self.proc.poll() is None:
-            try:
-                self._send({"type": "end", "verdict": verdict}, "end")
-            except PlannerError:
-                pass
+        """Tell the planner the run's verdict (no answer expected). A planner that does not
+        read it within the step timeout fails the next run (it has stopped reading)."""
+        if self.running is None or self.running.session.exit_status() is not None:
+            return
+        data = (json.dumps({"type": "end", "verdict": verdict}, separators=(",", ":")) + "\n").encode()
+        try:
+            self.running.wire.send(data, time.monotonic() + self.timeout)
+        except WireTimeout:
+            self._drop()
+            self._unread = (f"reset: the planner did not read the end of the last run within {self.timeout:g} s "
+                            "(--step-timeout); it was stopped")
+        except WireClosed:
+            self._drop()
+        except BaseException:
+            self._drop()
+            raise
 
     def close(self) -> None:
-        """Close the planner's input and end the process."""
-        self._drop()
+        """Close the planner's input and end its process group (at once on Ctrl-C, else after
+        :data:`CLOSE_GRACE` seconds at most)."""
+        self._drop(grace=0.0 if _interrupted() else CLOSE_GRACE)
 
 
 def make_command(env: Any, arg: str, step_timeout: float | None = None) -> CommandPlanner:

@@ -73,9 +73,9 @@ def make_policy(name: str | Any, env: Any, step_timeout: float | None = None) ->
 
     ``name`` may also be a Python object: a :class:`~agents.base.Policy` (returned as it
     is) or a planner (a function ``act(observation, mask)``, a factory or a planner
-    object, :func:`agents.external.planner_policy`). ``step_timeout`` bounds each answer
-    of a planner from outside FlowTest, ``cmd:`` or ``python:`` (seconds; default
-    :data:`agents.external.DEFAULT_STEP_TIMEOUT`):
+    object, :func:`agents.external.planner_policy`). ``step_timeout`` bounds each exchange
+    with a planner from outside FlowTest, ``cmd:`` or ``python:`` (seconds; default
+    :data:`agents.external.DEFAULT_STEP_TIMEOUT`, at most :data:`agents.external.MAX_STEP_TIMEOUT`):
     ``make_policy("cmd:python3 planner.py", env, step_timeout=2.0)``.
 
     Raises

@@ -38,6 +38,45 @@ def positive_seconds(text: str) -> float:
     return v
 
 
+def seconds_at_most(maximum: float) -> Callable[[str], float]:
+    """An argparse type: a number of seconds > 0 and at most ``maximum`` (timeouts: a
+    larger one would overflow the clocks that wait for it).
+
+    >>> seconds_at_most(60.0)("2.5")
+    2.5
+    """
+
+    def parse(text: str) -> float:
+        v = positive_seconds(text)
+        if v > maximum:
+            raise argparse.ArgumentTypeError(f"expected at most {maximum:g} seconds, got {text!r}")
+        return v
+
+    parse.__name__ = f"seconds_at_most({maximum:g})"
+    return parse
+
+
+def int_between(low: int, high: int, what: str) -> Callable[[str], int]:
+    """An argparse type: an integer from ``low`` to ``high`` (``what`` names it in the
+    message: ``a port``).
+
+    >>> int_between(0, 65535, "a port")("8765")
+    8765
+    """
+
+    def parse(text: str) -> int:
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {what} ({low}-{high}), got {text!r}") from None
+        if not low <= v <= high:
+            raise argparse.ArgumentTypeError(f"expected {what} ({low}-{high}), got {text!r}")
+        return v
+
+    parse.__name__ = f"int_between({low}, {high})"
+    return parse
+
+
 def nonnegative_int(text: str) -> int:
     """An argparse type: an integer >= 0 (seeds)."""
     try:

@@ -64,7 +64,7 @@ import numpy as np
 
 from synthesis.model.errors import InconsistentProblem, ProblemError
 
-from .arguments import nonnegative_int, positive_int, positive_seconds
+from .arguments import nonnegative_int, positive_int, seconds_at_most
 from .command import Command
 from .episodes import Trace, make_env, make_tester_env, run_episode, sut_policy
 from .exits import EXIT_CHECK_FAILED, EXIT_OK, say
@@ -84,9 +84,9 @@ from .report import (
 from .trace_picture import trace_picture
 from .violations import violation_of_trace
 
-DEFAULT_STEP_TIMEOUT = 10.0
-"""``--step-timeout``'s default (:data:`agents.external.DEFAULT_STEP_TIMEOUT`, which the
-command line does not import before it runs)."""
+DEFAULT_STEP_TIMEOUT, MAX_STEP_TIMEOUT = 10.0, 3600.0
+"""``--step-timeout``'s default and largest value (:data:`agents.external.DEFAULT_STEP_TIMEOUT`,
+:data:`agents.external.MAX_STEP_TIMEOUT`, which the command line does not import before it runs)."""
 
 REPORT_MARKER = ".flowtest-evaluation"
 """The file that marks a report folder as FlowTest's: ``--out`` refuses any other
@@ -599,9 +599,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "scripted:greedy, random, gr1, ppo:PATH; your own planner: python:MODULE:NAME (a function "
                         "act(observation, mask) or a factory, found from the current directory) or "
                         "cmd:\"COMMAND\" (a process speaking JSON lines; docs/runtime.md)")
-    p.add_argument("--step-timeout", type=positive_seconds, default=None, metavar="SECONDS",
+    p.add_argument("--step-timeout", type=seconds_at_most(MAX_STEP_TIMEOUT), default=None, metavar="SECONDS",
                    help="how long a cmd: or python: planner may take to answer one step (default "
-                        f"{DEFAULT_STEP_TIMEOUT:g}; a cmd: planner's first answer includes its start)")
+                        f"{DEFAULT_STEP_TIMEOUT:g}, at most {MAX_STEP_TIMEOUT:g}; a cmd: planner's first answer includes its start)")
     p.add_argument("--tester", nargs="+", default=["synthesized"], metavar="TESTER",
                    help="who plays the test: synthesized (default), ppo:PATH (a learned tester, flowtest "
                         "train-tester); several give a side-by-side comparison")

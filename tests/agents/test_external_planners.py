@@ -82,9 +82,9 @@ def replay_args(command: str, folder: Path) -> list[str]:
     return words[4:]
 
 
-def test_the_doc_has_a_python_and_a_shell_planner() -> None:
+def test_the_doc_has_a_python_a_javascript_and_a_shell_planner() -> None:
     files = doc_files()
-    assert set(files) == {"bfs_planner.py", "prefer.sh"}
+    assert set(files) == {"bfs_planner.py", "replanner.js", "prefer.sh"}
     assert "import flowtest" not in files["bfs_planner.py"] and "from flowtest" not in files["bfs_planner.py"]
 
 
@@ -235,34 +235,6 @@ def test_hanging_python_planners_fail_their_run_and_the_others_go_on(project: Pa
     assert signal.getsignal(signal.SIGALRM) in (signal.SIG_DFL, None) and signal.getitimer(signal.ITIMER_REAL) == (0.0, 0.0)
 
 
-def test_the_step_timer_leaves_nothing_behind_and_keeps_a_ctrl_c() -> None:
-    """Bodies that end at the timer's last instant leave no handler and no armed timer (a
-    ring while the timer is put back is caught there), and a ring that replaces a Ctrl-C
-    unwinding the planner's call gives the Ctrl-C back."""
-    import signal
-
-    from agents import external
-
-    for _ in range(200):
-        try:
-            with external._timed(0.002):
-                t = time.perf_counter()
-                while time.perf_counter() - t < 0.00199:
-                    pass
-        except external._Overran:
-            pass
-        assert signal.getsignal(signal.SIGALRM) is signal.SIG_DFL and signal.getitimer(signal.ITIMER_REAL) == (0.0, 0.0)
-    with pytest.raises(KeyboardInterrupt):
-        try:
-            try:
-                raise KeyboardInterrupt
-            except KeyboardInterrupt:
-                raise external._Overran from None
-        except external._Overran as exc:
-            exc.__context__ = KeyboardInterrupt()
-            external._keep_interrupt(exc)
-
-
 def test_a_timer_the_caller_armed_is_left_alone(project: Path) -> None:
     """Where the caller has a real-time timer armed (pytest-timeout's signal method, a
     script's own alarm), the planner's step is not timed, so that timer is not cancelled."""
@@ -290,10 +262,22 @@ def test_a_timer_the_caller_armed_is_left_alone(project: Path) -> None:
 
 
 def test_ctrl_c_keeps_the_pairs_played(project: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    """Ctrl-C in the middle of an evaluation (here: inside a planner's step) exits 130 at
-    once, and the pairs played to the end are kept in results.json and report.md (a walker
-    lost every finished pair to a Ctrl-C)."""
-    write(project, "quitter.py", "def quit_now(observation, mask):\n    raise KeyboardInterrupt\n")
+    """Ctrl-C in the middle of an evaluation (here: while a planner thinks about its step)
+    exits 130 at once, and the pairs played to the end are kept in results.json and
+    report.md (a walker lost every finished pair to a Ctrl-C). The planner runs in a child
+    process of its own session: it sends the Ctrl-C to FlowTest, as a terminal would."""
+    import signal
+
+    old = signal.signal(signal.SIGINT, signal.default_int_handler)  # Python's Ctrl-C, even under a runner that ignores it
+    try:
+        _ctrl_c_keeps_the_pairs_played(project, capsys)
+    finally:
+        signal.signal(signal.SIGINT, old)
+
+
+def _ctrl_c_keeps_the_pairs_played(project: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    write(project, "quitter.py", "import os, signal, time\ndef quit_now(observation, mask):\n"
+                                 "    os.kill(os.getppid(), signal.SIGINT)\n    time.sleep(30)\n")
     code = main(["evaluate", "--env", "warehouse.toml", "--sut", "python:bfs_planner:BfsPlanner",
                  "python:quitter:quit_now", "scripted:replanner", "--episodes", "2", "--out", "report"])
     err = capsys.readouterr().err

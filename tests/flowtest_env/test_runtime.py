@@ -56,9 +56,10 @@ def test_a_restricted_move_is_refused_with_its_reason() -> None:
     rt.reset()
     status = rt.step(state=[1, 1])
     status = rt.step(state=[0, 1])
-    assert status["restricted"] == [{"action": "E", "to": [0, 2], "by": "test"}]
-    with pytest.raises(RuntimeRefused, match=r"the move \[0, 1\] -> \[0, 2\] is restricted now \(by the test\)"):
+    assert status["restricted"] == [{"action": "E", "to": [0, 2], "by": "door"}]
+    with pytest.raises(RuntimeRefused, match=r"the move \[0, 1\] -> \[0, 2\] is restricted now \(by the test\)") as refused:
         rt.step(state=[0, 2])
+    assert refused.value.code == "restricted"
     with pytest.raises(RuntimeRefused, match=r"\[1, 0\] is not one move from \[0, 1\]"):
         rt.step(state=[1, 0])
     with pytest.raises(RuntimeRefused, match="is not a state of 'small-reactive'"):
@@ -92,7 +93,7 @@ def test_walls_and_the_test_agent_are_named() -> None:
     agent = _refusals("maze2", 30)
     assert {r["by"] for r in agent} == {"agent"} and all(r["to"] for r in agent)
     doors = _refusals("small-reactive", 20)
-    assert {r["by"] for r in doors} == {"test"}
+    assert {r["by"] for r in doors} == {"door"}
 
 
 def test_a_run_that_ended_takes_no_step() -> None:
@@ -116,12 +117,12 @@ def test_serve_answers_each_line_and_goes_on_after_bad_ones() -> None:
     assert len(answers) == 10  # nothing after quit
     assert answers[0]["test"]["objective"] == "F goal" and "test" not in json.dumps(answers[0]["test"]["system"]).lower()
     assert answers[1]["ok"] and answers[1]["id"] == 7 and answers[1]["status"]["state"] == [1, 0]
-    assert answers[2] == {"ok": False, "error": "not a JSON object on one line"}
+    assert answers[2] == {"ok": False, "code": "not_json", "error": "not a JSON object on one line (NaN and Infinity are not JSON)"}
     assert answers[3]["status"]["state"] == [1, 1]
-    assert not answers[4]["ok"] and "is not a state" in answers[4]["error"]
-    assert not answers[5]["ok"] and "unknown field(s) of a step: extra" in answers[5]["error"]
-    assert not answers[6]["ok"] and "unknown op" in answers[6]["error"]
-    assert not answers[7]["ok"] and "a request is a JSON object" in answers[7]["error"]
+    assert not answers[4]["ok"] and "is not a state" in answers[4]["error"] and answers[4]["code"] == "not_a_state"
+    assert not answers[5]["ok"] and "unknown field(s) of a step: extra" in answers[5]["error"] and answers[5]["code"] == "bad_request"
+    assert not answers[6]["ok"] and "unknown op" in answers[6]["error"] and answers[6]["code"] == "unknown_op"
+    assert not answers[7]["ok"] and "a request is a JSON object" in answers[7]["error"] and answers[7]["code"] == "not_an_object"
     assert answers[8]["status"] == answers[3]["status"]
     assert answers[9] == {"ok": True}
 
@@ -178,3 +179,89 @@ def test_the_public_description_hides_the_test_objective(name: str, hidden: list
         assert p not in shown
         assert all(t[2] != p for t in (test["system"]["layout"] or {"tokens": []})["tokens"])
     assert shown  # the system objective's own propositions stay
+
+
+@pytest.mark.parametrize("name", ["example1", "refueling", "ok_mixed"])
+def test_the_description_gives_the_walls_apart_from_the_moves(name: str) -> None:
+    """What the built-in systems know (static walls are on their map, never planned through),
+    an outside planner knows too: ``walls`` are the static walls, none of them among
+    ``moves`` (whose per-move lists lose the same entries)."""
+    rt = TestRuntime.load(str(ROOT / "tests" / "data" / "ok_mixed.toml") if name == "ok_mixed" else name)
+    art = rt.game.artifact
+    system, full = rt.describe()["system"], art.system.to_dict()
+    wall = art.strategy.static_obstacles
+    assert wall.any(), "a test with walls"
+    assert system["walls"] == [m for m, w in zip(full["moves"], wall, strict=True) if w]
+    assert system["moves"] == [m for m, w in zip(full["moves"], wall, strict=True) if not w]
+    assert len(system["action"]) == len(system["restrictable"]) == len(system["moves"])
+    assert system["action"] == [a for a, w in zip(full["action"], wall, strict=True) if not w]
+
+
+@pytest.mark.parametrize("name", ["small-reactive", "refueling", "mars-exploration", "patrolling"])
+def test_the_description_gives_the_system_objectives_automaton(name: str) -> None:
+    """``automaton.next[q][s]`` is the system objective's automaton after entering ``s``
+    (the table the built-in planners plan on), and it reads only what the description
+    shows: states with the same shown labels have the same column."""
+    from flowtest_env.system_product import SystemProduct
+
+    rt = TestRuntime.load(name)
+    test = rt.describe()
+    aut, prod = test["automaton"], SystemProduct(rt.game)
+    assert aut["initial"] == prod.q0 and len(aut["accepting"]) == prod.n_q
+    assert aut["accepting"] == [bool(a) for a in rt.game.artifact.system_automaton.accepting[:, 0]]
+    for q in range(prod.n_q):
+        assert aut["next"][q] == [prod.step_q(q, s) for s in range(rt.game.ts.n_states)]
+    by_labels: dict[tuple[str, ...], list[int]] = {}
+    for s, labels in enumerate(test["system"]["labels"]):
+        column = [aut["next"][q][s] for q in range(prod.n_q)]
+        assert by_labels.setdefault(tuple(sorted(labels)), column) == column
+
+
+def test_a_status_says_why_the_run_ended_and_names_histories_neutrally() -> None:
+    rt = TestRuntime.load("small-reactive")
+    status = rt.reset()
+    assert status["reason"] is None and status["history_name"] == "q0"
+    for state in ([0, 0], [0, 1], [1, 1], [1, 2]):
+        status = rt.step(state=state)
+    assert status["history_name"] == f"q{status['history']}"
+    assert "I" not in json.dumps([status["history_name"], rt.history_names])  # nothing of "saw I1; saw I2"
+    status = rt.step(state=[0, 2])
+    assert status["done"] and status["reason"] == "met the system objective in 5 steps"
+    revealed = TestRuntime.load("small-reactive", reveal=True)
+    assert revealed.history_names == list(revealed.game.artifact.extras["history_descriptions"])
+    short = TestRuntime.load("small-reactive", max_steps=2)
+    short.reset()
+    short.step(action="stay")
+    assert short.step(action="stay")["reason"] == "did not meet the system objective within the step budget of 2 steps"
+    unsafe = TestRuntime.load("refueling")  # a static test: walk around its walls into an unsafe state
+    test = unsafe.describe()["system"]
+    status = unsafe.reset()
+    start = test["states"].index(status["state"])
+    path, todo, target = {start: [start]}, [start], None
+    while target is None:
+        s = todo.pop(0)
+        for a, b in test["moves"]:
+            if a == s and b not in path:
+                path[b] = [*path[s], b]
+                todo.append(b)
+                target = b if "unsafe" in test["labels"][b] and target is None else target
+    for s in path[target][1:]:  # (the objective is violated once the fuel left cannot reach the goal)
+        status = unsafe.step(state=test["states"][s])
+        if status["done"]:
+            break
+    assert status["verdict"]["system_objective"] == "violated"
+    assert status["reason"] == f"violated the system objective at step {status['step']}, entering {json.dumps(test['states'][s])}"
+
+
+@pytest.mark.parametrize("kwargs,code", [
+    ({}, "bad_request"), ({"state": [0, 0], "action": "N"}, "bad_request"), ({"state": "T"}, "not_a_state"),
+    ({"state": [1, 2]}, "not_one_move"), ({"action": "NE"}, "not_an_action"),
+])
+def test_each_refusal_has_its_code(kwargs: dict[str, Any], code: str) -> None:
+    from flowtest_env.runtime import REFUSALS
+
+    rt = TestRuntime.load("small-reactive")
+    rt.reset()
+    with pytest.raises(RuntimeRefused) as refused:
+        rt.step(**kwargs)
+    assert refused.value.code == code and code in REFUSALS
