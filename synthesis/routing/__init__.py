@@ -4,6 +4,8 @@ cuts that route every successful run through the test objective without trapping
 Layout, by role:
 
 * :mod:`.options` — :class:`~.options.MilpOptions`, the options of one solve;
+* :mod:`.groups` — what the model is built on: the cut groups, the walls and doors they stand
+  for, the model's edges of G (:func:`~.groups.cut_groups`, :func:`~.groups.model_edges`);
 * :mod:`.model` — the model itself, built in bulk as named column and row blocks
   (:func:`~.model.build_model`); :mod:`.result` — the answer (:class:`~.result.RoutingResult`)
   and the restrictions it puts on each history; :mod:`.traps` — the MILP's own trap search;

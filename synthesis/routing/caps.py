@@ -35,7 +35,8 @@ from ..graphs.cuts import min_cut
 from ..graphs.products import Products, reachable
 from ..model.errors import InconsistentProblem
 from .bounds.heuristic import RoutingGuess, guess_routing, usable_edges
-from .model import CutGroups, PhysicalItems, RoutingModel, build_model, cut_groups, model_edges, physical_items
+from .groups import CutGroups, PhysicalItems, cut_groups, model_edges, physical_items
+from .model import RoutingModel, build_model
 from .options import MilpOptions
 from .phases import guess_solution
 from .result import blocked_of_edges, required_entries

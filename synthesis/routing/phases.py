@@ -19,7 +19,8 @@ import numpy as np
 from ..graphs.products import Products
 from ..model.errors import InconsistentProblem
 from .bounds.heuristic import RoutingGuess
-from .model import CutGroups, RoutingModel, static_moves_of
+from .groups import CutGroups, static_moves_of
+from .model import RoutingModel
 from .options import MilpOptions
 from .result import RoutingResult, blocked_of_edges
 from .traps import trapped_entries

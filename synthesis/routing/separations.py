@@ -49,7 +49,7 @@ import scipy.sparse as sp
 from ..graphs.consistency import check_consistency
 from ..graphs.cuts import min_cut
 from ..graphs.products import Products, reachable
-from .model import cut_groups, model_edges, physical_items
+from .groups import cut_groups, model_edges, physical_items
 from .options import MilpOptions
 
 SEPARATION_CUTS = 6000

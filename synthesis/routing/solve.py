@@ -28,7 +28,8 @@ from .backends import cpsat_phases, highs
 from .backends.contract import Backend, Round
 from .backends.rules import auto_backend, per_cut_flow_rows
 from .certificates import cut_proof
-from .model import RoutingModel, build_model, static_moves_of
+from .groups import static_moves_of
+from .model import RoutingModel, build_model
 from .options import MilpOptions, check_options
 from .phases import flow_of_phase1, routing_result
 from .result import RoutingResult, blocked_by, blocked_of_edges, required_entries

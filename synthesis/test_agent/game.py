@@ -75,7 +75,7 @@ import numpy as np
 from ..graphs.products import Products, coreachable, reachable
 from ..model.agent_system import TestAgent
 from ..model.strategy import TestStrategy
-from ..routing.model import CutGroups
+from ..routing.groups import CutGroups
 from .gr1 import GR1Game
 
 __all__ = [
@@ -483,7 +483,7 @@ def realizability_exclusions(products: Products, agent: TestAgent, groups: CutGr
         The test agent.
     groups
         The MILP's cut groups (``of_edge``, ``keys``, ``restrictable``, ``static``), from
-        :func:`synthesis.routing.model.cut_groups`.
+        :func:`synthesis.routing.groups.cut_groups`.
 
     Returns
     -------

@@ -29,7 +29,7 @@ from ..model.agent_system import TestAgent, place_json
 from ..model.errors import CheckFailed, InconsistentProblem
 from ..model.strategy import TestStrategy
 from ..model.systems import TransitionSystem
-from ..routing.model import cut_groups
+from ..routing.groups import cut_groups
 from ..routing.options import Exclusion, MilpOptions
 from ..routing.restrictions import strategy_from_routing
 from ..routing.result import RoutingResult

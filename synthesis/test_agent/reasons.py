@@ -36,7 +36,7 @@ from scipy.sparse.csgraph import breadth_first_order
 from ..graphs.products import Products, coreachable, reachable
 from ..model.agent_system import TestAgent
 from ..model.strategy import TestStrategy
-from ..routing.model import CutGroups
+from ..routing.groups import CutGroups
 from ..routing.options import Exclusion
 from . import gr1
 from .game import AgentGame, GameRules, build_game, ended_nodes

@@ -19,7 +19,7 @@ from synthesis.problems.load import load_problem
 from synthesis.problems.problem import Problem
 from synthesis.problems.random_worlds import world_problem
 from synthesis.routing.backends import cpsat
-from synthesis.routing.model import CutGroups, cut_groups
+from synthesis.routing.groups import CutGroups, cut_groups
 from synthesis.routing.options import Exclusion, MilpOptions
 from synthesis.routing.restrictions import strategy_from_routing
 from synthesis.routing.result import RoutingResult
