@@ -178,7 +178,9 @@ def guess_solution(products: Products, rm: RoutingModel, guess: RoutingGuess, op
 
 
 def trap_test(products: Products, groups: CutGroups, entries: dict[int, np.ndarray]) -> Callable[[np.ndarray], bool] | None:
-    """Whether a cut set (``bool`` per group) traps an entry node, for the heuristic."""
+    """Whether a cut set (``bool`` per group) traps an entry node of ``entries``, for the routing
+    heuristic and the capped start (:mod:`synthesis.routing.caps.start`); ``None`` without
+    entries (nothing to trap)."""
     if not entries:
         return None
     def traps(cut: np.ndarray) -> bool:

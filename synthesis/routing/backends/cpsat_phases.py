@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from ...graphs.products import Products
-from ..caps import start_within_caps
+from ..caps.start import start_within_caps
 from ..certificates import CutProof, test_at_bound, with_cut_proof
 from ..model import RoutingModel
 from ..options import MilpOptions

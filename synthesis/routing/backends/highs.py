@@ -23,13 +23,13 @@ import highspy
 import numpy as np
 import scipy.sparse as sp
 
-from ..caps import start_within_caps
+from ..caps.start import start_within_caps
 from ..certificates import CutProof, test_at_bound, with_cut_proof
 from ..model import RoutingModel, phase2_integral_columns
 from ..options import MilpOptions
 from ..phases import FEASIBILITY_TOLERANCE, LIMIT_TEXT, Phase, guess_solution, no_cut_set, phase2_cost, trap_test
 from ..solver_control import Clock, SolverAbandoned, quiet_highs, run_highs, solver_version
-from .contract import Backend, Round
+from .contract import Backend, Least, LeastQuery, Round
 
 ABANDON_GRACE = 0.25
 """Seconds past the solve's deadline after which a HiGHS run still busy is left behind
@@ -383,6 +383,32 @@ def session(r: Round) -> Iterator[highspy.Highs]:
     yield h
 
 
+def least(q: LeastQuery) -> Least:
+    """A :class:`~synthesis.routing.backends.contract.LeastQuery` on HiGHS: the model minimised
+    with the row ``F >= 1`` added and ``q.integral`` declared integral, on ``q.options.threads``
+    threads (one where unset) with its seed; stopped by ``q.deadline``, HiGHS's proven (dual)
+    bound, where it has a finite one."""
+    options = q.options
+    h = quiet_highs(options.threads if options.threads else 1, options.random_seed)
+    h.passModel(q.rm.model.to_highs(q.cost, maximize=False))
+    out = q.rm.cols.flow[q.rm.out_src].astype(np.int32)
+    h.addRow(1.0, highspy.kHighsInf, out.size, out, np.ones(out.size))
+    cols = q.integral.astype(np.int32)
+    h.changeColsIntegrality(cols.size, cols, np.full(cols.size, highspy.HighsVarType.kInteger))
+    try:
+        run_highs(h, q.deadline, control=options.control, phase=q.label)
+    except TimeoutError:
+        return Least("stopped")
+    status = h.getModelStatus()
+    if status == highspy.HighsModelStatus.kInfeasible:
+        return Least("infeasible")
+    info = h.getInfo()
+    if status == highspy.HighsModelStatus.kOptimal:
+        return Least("optimal", value=float(info.objective_function_value))
+    bound = float(info.mip_dual_bound)
+    return Least("stopped", bound=bound if np.isfinite(bound) else None)
+
+
 def version() -> str:
     """highspy's version: the package HiGHS's answers depend on."""
     return solver_version()
@@ -397,5 +423,6 @@ BACKEND: Backend[highspy.Highs] = Backend(
     phase1=phase1,
     phase2=phase2,
     figures=lambda h: {},
+    least=least,
 )
 """HiGHS's branch and cut as a backend of the routing model (``MilpOptions.backend = "highs"``)."""
