@@ -23,13 +23,13 @@ import highspy
 import numpy as np
 import scipy.sparse as sp
 
-from ..caps.start import start_within_caps
-from ..certificates import CutProof, test_at_bound, with_cut_proof
+from ..certificates import CutProof, with_cut_proof
 from ..model import RoutingModel, phase2_integral_columns
 from ..options import MilpOptions
-from ..phases import FEASIBILITY_TOLERANCE, LIMIT_TEXT, Phase, guess_solution, no_cut_set, phase2_cost, trap_test
+from ..phases import FEASIBILITY_TOLERANCE, LIMIT_TEXT, Phase, no_cut_set, phase2_cost
 from ..solver_control import Clock, SolverAbandoned, quiet_highs, run_highs, solver_version
 from .contract import Backend, Least, LeastQuery, Round
+from .phase1_start import phase1_start
 
 ABANDON_GRACE = 0.25
 """Seconds past the solve's deadline after which a HiGHS run still busy is left behind
@@ -46,18 +46,11 @@ def phase1(h: highspy.Highs, r: Round) -> Phase:
     (MILP-static) by a checked candidate of the walls' cut bound at that bound
     (:func:`~synthesis.routing.certificates.test_at_bound`), else solved by HiGHS (seeded by
     the heuristic's answer, kept as the fallback)."""
-    rm, products, options, entries, clock = r.rm, r.products, r.options, r.entries, r.clock
-    guess = rm.guess(products, traps=trap_test(products, rm.groups, entries))
-    x_guess = guess_solution(products, rm, guess, options)
-    guess, x_guess = start_within_caps(products, rm, options, entries, guess, x_guess, clock.deadline)
-    if x_guess is not None:
-        clock.first_test()
-    if x_guess is not None and guess.flow == guess.upper_bound:
-        return Phase(x_guess, "optimal", 0.0, None)  # the flow upper bound is attained: proven
-    x_top = test_at_bound(products, rm, options, entries, guess.upper_bound)
-    if x_top is not None:
-        clock.first_test()
-        return Phase(x_top, "optimal", 0.0, None)  # a cut bound candidate attains the flow upper bound
+    rm, options, clock = r.rm, r.options, r.clock
+    start = phase1_start(r)
+    if start.proven is not None:
+        return start.proven
+    guess, x_guess = start.guess, start.x
     cost = np.zeros(rm.n_col)
     cost[rm.cols.flow[rm.out_src]] = 1.0
     h.changeColsCost(rm.n_col, np.arange(rm.n_col, dtype=np.int32), cost)
