@@ -53,13 +53,8 @@ def _as_index_array(value: Any, name: str, upper: int | None) -> np.ndarray:
 
 
 def _as_mask(value: Any, name: str, n: int) -> np.ndarray:
-    """Return ``value`` as a read-only boolean mask of length ``n``.
-
-    Raises
-    ------
-    ValueError
-        If ``value`` is not a boolean array of shape ``(n,)``.
-    """
+    """Return ``value`` as a read-only boolean mask of length ``n``; ``ValueError`` if it is not
+    a boolean array of shape ``(n,)``."""
     arr = np.asarray(value)
     if arr.dtype != np.bool_:
         raise ValueError(
@@ -73,13 +68,8 @@ def _as_mask(value: Any, name: str, n: int) -> np.ndarray:
 
 
 def _set_to_mask(value: Any, name: str, n: int) -> np.ndarray:
-    """Convert a position set (iterable of indices or bool mask) to a mask.
-
-    Raises
-    ------
-    ValueError
-        If an index is out of range or a mask has the wrong length.
-    """
+    """Convert a position set (iterable of indices or bool mask) to a mask; ``ValueError`` if
+    an index is out of range or a mask has the wrong length."""
     if isinstance(value, np.ndarray) and value.dtype == np.bool_:
         return _as_mask(value, name, n)
     idx = _as_index_array(list(value), name, n)
