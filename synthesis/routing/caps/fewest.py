@@ -92,11 +92,12 @@ def fewest_within(products: Products, options: MilpOptions, cap: str, deadline: 
 
 
 def found_with(products: Products, options: MilpOptions, cap: str, deadline: float | None = None) -> int | None:
-    """How many items ``cap`` counts a test uses that :func:`~synthesis.routing.caps.start.capped_guess` finds under
-    ``options.caps`` (every feasibility flow up front, as :func:`fewest_within`), where none
-    fits: the test over the caps with the fewest items they count that its search met
-    (:func:`~synthesis.routing.caps.start.fewer_items` applied), so a cap the user can ask for and get a test, for the
-    message of a capped solve that the time limit ended with neither a test nor a proof.
+    """How many items ``cap`` counts a test uses that
+    :func:`~synthesis.routing.caps.start.capped_guess` finds under ``options.caps`` (every
+    feasibility flow up front, as :func:`fewest_within`), where none fits: the test over the
+    caps with the fewest items they count that its search met
+    (:func:`~synthesis.routing.caps.start.fewer_items` applied), so a cap the user can ask for
+    and get a test, for the message of a capped solve that the time limit ended with neither a test nor a proof.
     ``None`` where the search finds none (by ``deadline``, a ``perf_counter`` time). Not the
     fewest: an upper bound on it, next to the proven lower bound. Deterministic (the
     search's budgets), so the same problem names the same cap on every machine.

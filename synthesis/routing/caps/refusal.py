@@ -16,15 +16,17 @@ from .messages import CAP_NOUNS, caps_text
 from .separations import HistorySeparations
 
 ROUTED_SHARE = 0.25
-"""The share of a synthesis's time limit :func:`~synthesis.routing.caps.bypasses.routed_bypasses` may take before the solve."""
+"""The share of a synthesis's time limit
+:func:`~synthesis.routing.caps.bypasses.routed_bypasses` may take before the solve."""
 
 
 def check_caps_reachable(products: Products, options: MilpOptions) -> dict[str, int]:
     """Refuse caps below what the problem needs before any solve: a cap ``N`` below
-    :func:`~synthesis.routing.caps.bypasses.disjoint_bypasses` (``N + 1`` walks around the test objective that share no item
-    it counts) admits no test, nor does one below :func:`~synthesis.routing.caps.bypasses.routed_bypasses` (the same count with
-    the route every test leaves open spared, branched over its first and last moves), nor one
-    that :class:`~synthesis.routing.caps.separations.HistorySeparations` refutes (what a test must
+    :func:`~synthesis.routing.caps.bypasses.disjoint_bypasses` (``N + 1`` walks around the test
+    objective that share no item it counts) admits no test, nor does one below
+    :func:`~synthesis.routing.caps.bypasses.routed_bypasses` (the same count with the route
+    every test leaves open spared, branched over its first and last moves), nor one that
+    :class:`~synthesis.routing.caps.separations.HistorySeparations` refutes (what a test must
     close under one history while leaving the system a way to its goal: the feasibility flows
     the bypass counts leave out).
 
@@ -77,9 +79,10 @@ def proven_bound(
     products: Products, options: MilpOptions, cap: str, limit: int, plain: int, deadline: float | None = None,
     bg: BypassGraph | None = None,
 ) -> int:
-    """The largest ``k <= limit + 1`` proven by :func:`~synthesis.routing.caps.bypasses.routed_bypasses` to be needed (``plain``,
-    :func:`~synthesis.routing.caps.bypasses.disjoint_bypasses`'s count, where it proves nothing more): ``limit + 1`` where no
-    test fits the cap. Proves ``k + 1`` for ``k = plain, plain + 1, ...`` and stops at the
+    """The largest ``k <= limit + 1`` proven by
+    :func:`~synthesis.routing.caps.bypasses.routed_bypasses` to be needed (``plain``,
+    :func:`~synthesis.routing.caps.bypasses.disjoint_bypasses`'s count, where it proves nothing
+    more): ``limit + 1`` where no test fits the cap. Proves ``k + 1`` for ``k = plain, plain + 1, ...`` and stops at the
     first it cannot prove (a search that cannot prove ``k + 1`` cannot prove more, so this
     costs little more than the one search for ``limit + 1``), by ``deadline``. ``bg``: the
     :func:`~synthesis.routing.caps.bypasses.bypass_graph`, where the caller has it already."""
