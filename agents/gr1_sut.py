@@ -1,7 +1,7 @@
 """A GR(1)-synthesized system under test (``gr1``), re-synthesized when restrictions change.
 
 The controller is a winning strategy of an explicit GR(1) game solved with
-:func:`synthesis.test_agent.gr1.solve` (and checked with :func:`synthesis.test_agent.gr1.verify_strategy`):
+:func:`synthesis.test_agent.gr1.solver.solve` (and checked with :func:`synthesis.test_agent.gr1.verify.verify_strategy`):
 
 * **positions** — the nodes ``(s, q_sys)`` of the SUT's own product graph
   ``G_sys = T x B_sys`` (:class:`flowtest_env.system_product.SystemProduct`); the hidden test
@@ -44,7 +44,10 @@ from typing import Any
 import numpy as np
 
 from flowtest_env.system_product import SystemProduct
-from synthesis.test_agent.gr1 import GR1Game, GR1Strategy, solve, verify_strategy
+from synthesis.test_agent.gr1.game import GR1Game
+from synthesis.test_agent.gr1.solver import solve
+from synthesis.test_agent.gr1.strategy import GR1Strategy
+from synthesis.test_agent.gr1.verify import verify_strategy
 
 from .base import Policy
 from .planning import Tracked, safe_wait

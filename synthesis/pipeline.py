@@ -27,17 +27,9 @@ from .problems.limits import MAX_GRAPH_EDGES, check_size
 from .problems.problem import Problem, build_graphs, check_caps
 from .routing.backends import cpsat
 from .routing.backends.rules import AUTO_CPSAT_MODES
-from .routing.caps import (
-    CAP_NOUNS,
-    FOUND_SECONDS,
-    FOUND_SHARE,
-    CapsTimeout,
-    Fewest,
-    caps_text,
-    check_caps_reachable,
-    fewest_within,
-    found_with,
-)
+from .routing.caps.fewest import FOUND_SECONDS, FOUND_SHARE, Fewest, fewest_within, found_with
+from .routing.caps.messages import CAP_NOUNS, CapsTimeout, caps_text
+from .routing.caps.refusal import check_caps_reachable
 from .routing.options import RULES, Budgets, MilpOptions, ModelOptions, RunOptions, default_of, values_of
 from .routing.options import check_options as check_routing_options
 from .routing.restrictions import strategy_from_routing

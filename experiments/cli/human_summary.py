@@ -9,7 +9,7 @@ import numpy as np
 
 from synthesis.artifacts.summary import stop_note
 from synthesis.problems.diagnose import implied
-from synthesis.routing.caps import caps_text
+from synthesis.routing.caps.messages import caps_text
 
 
 def _state_text(ts: Any, s: int) -> str:

@@ -22,8 +22,8 @@ from collections.abc import Sequence
 
 from synthesis.pipeline import synthesize
 from synthesis.problems.load import load_problem
-from synthesis.test_agent import gr1
 from synthesis.test_agent.game import build_agent_game
+from synthesis.test_agent.gr1.solver import solve as solve_gr1
 
 PROBLEMS = ("maze1", "maze2", "patrolling")
 END_TO_END_TARGET = 5.0
@@ -50,7 +50,7 @@ def bench(name: str, repeat: int) -> dict[str, float | int | str]:
     solo: list[float] = []
     for _ in range(max(repeat, 5)):
         t0 = time.perf_counter()
-        gr1.solve(game.game)
+        solve_gr1(game.game)
         solo.append(time.perf_counter() - t0)
     return {
         "problem": name,

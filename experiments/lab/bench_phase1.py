@@ -29,6 +29,7 @@ from synthesis.problems.load import load_problem
 from synthesis.problems.problem import Problem, build_graphs
 from synthesis.problems.random_grid import first_consistent, paper_ap
 from synthesis.routing.backends import cpsat
+from synthesis.routing.backends.contract import Round
 from synthesis.routing.backends.cpsat_phases import phase1_cpsat  # phase 1 as solve_routing runs it
 from synthesis.routing.model import build_model
 from synthesis.routing.phases import trap_test
@@ -57,7 +58,7 @@ def phase1(problem: Problem, name: str, work_limit: float) -> str:
 
         session.solve = record  # type: ignore[method-assign]
         try:
-            first, _ = phase1_cpsat(session, rm, products, options, entries, Clock(None, None))
+            first, _ = phase1_cpsat(session, Round(products, rm, options, entries, Clock(None, None)))
             outcome, flow = first.status, str(int(round(rm.flow_of(first.x))))
             if outcome == "optimal" and flow == "0":
                 outcome = "unroutable"  # flow 0 proven the maximum: what synthesize reports

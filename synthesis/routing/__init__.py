@@ -4,6 +4,8 @@ cuts that route every successful run through the test objective without trapping
 Layout, by role:
 
 * :mod:`.options` — :class:`~.options.MilpOptions`, the options of one solve;
+* :mod:`.groups` — what the model is built on: the cut groups, the walls and doors they stand
+  for, the model's edges of G (:func:`~.groups.cut_groups`, :func:`~.groups.model_edges`);
 * :mod:`.model` — the model itself, built in bulk as named column and row blocks
   (:func:`~.model.build_model`); :mod:`.result` — the answer (:class:`~.result.RoutingResult`)
   and the restrictions it puts on each history; :mod:`.traps` — the MILP's own trap search;
@@ -20,9 +22,11 @@ Layout, by role:
   :mod:`.backends.cpsat_worker`, :mod:`.backends.cpsat_pool`), the implicit hitting set that
   CP-SAT's phase 2 may try first (:mod:`.backends.hitting_set`, :mod:`.backends.separator`),
   and the rules that pick a backend on the built model (:mod:`.backends.rules`);
+* :mod:`.caps` — the caps on the physical restrictions: their lower bounds and the refusal of a
+  cap below them, phase 1's first test within them, and the fewest restrictions a test needs
+  where none fits (its package docstring gives its layout);
 * :mod:`.solver_control` — stop requests, live status and time budgets of a running solver;
-  :mod:`.caps` and :mod:`.restrictions` — caps on the physical restrictions, and an answer as
-  a test strategy.
+  :mod:`.restrictions` — an answer as a test strategy.
 
 **The backend contract.** Every backend is one
 :class:`~.backends.contract.Backend`: ``session(round)`` opens what holds the model between
@@ -31,8 +35,12 @@ flow ``F``, ``phase2(session, round, x, flow, proof)`` minimises the cuts (MILP-
 blocked places first) with ``F`` held, and both return a :class:`~.phases.Phase`: a whole
 model solution the backend has checked against the model, its status, gap and what stopped it.
 ``version()``, ``require()`` and ``figures(session)`` give the package version, a clear error
-when the package is missing, and extra stats. ``tests/synthesis/test_backend_contract.py`` holds
-every entry of :data:`~.solve.SOLVERS` to the same answers.
+when the package is missing, and extra stats. Beside the phases a backend may answer
+``least(query)`` (:class:`~.backends.contract.LeastQuery`: the least cost over the model's
+solutions with flow >= 1, what :func:`~.caps.fewest.fewest_within` asks); HiGHS does, CP-SAT
+does not, and :func:`~.solve.solve_least` takes the first backend that does.
+``tests/synthesis/test_backend_contract.py`` holds every entry of :data:`~.solve.SOLVERS` to the
+same answers.
 
 Reductions, none of which changes the optimum of docs/method.md §5:
 

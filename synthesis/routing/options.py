@@ -54,7 +54,7 @@ FEASIBILITY = ("auto", "eager", "lazy")
 @dataclass(frozen=True)
 class Exclusion:
     """Cut sets the routing MILP must not return: every cut set that cuts all of
-    :attr:`cut` and none of :attr:`open` (cut-group keys, see :func:`~synthesis.routing.model.cut_groups`).
+    :attr:`cut` and none of :attr:`open` (cut-group keys, see :func:`~synthesis.routing.groups.cut_groups`).
 
     A rejected cut set ``C`` alone is ``Exclusion(C)``; the counterexample loop of
     :mod:`synthesis.test_agent.loop` excludes, with the reason the agent lost
@@ -101,7 +101,7 @@ class ModelOptions:
         docs/method.md §5 exactly.
     caps
         Caps on the physical restrictions a test may use (``max_walls``, ``max_doors``,
-        ``max_restrictions``; :func:`~synthesis.routing.model.physical_items` says what one is):
+        ``max_restrictions``; :func:`~synthesis.routing.groups.physical_items` says what one is):
         rows of the model, lazy rows of the hitting set's separator. With a cap the dominance
         reduction is off (its proof swaps one cut group for another, which may add a physical
         restriction).

@@ -19,7 +19,8 @@ import numpy as np
 from ..graphs.products import Products
 from ..model.errors import InconsistentProblem
 from .bounds.heuristic import RoutingGuess
-from .model import CutGroups, RoutingModel, static_moves_of
+from .groups import CutGroups, static_moves_of
+from .model import RoutingModel
 from .options import MilpOptions
 from .result import RoutingResult, blocked_of_edges
 from .traps import trapped_entries
@@ -177,7 +178,9 @@ def guess_solution(products: Products, rm: RoutingModel, guess: RoutingGuess, op
 
 
 def trap_test(products: Products, groups: CutGroups, entries: dict[int, np.ndarray]) -> Callable[[np.ndarray], bool] | None:
-    """Whether a cut set (``bool`` per group) traps an entry node, for the heuristic."""
+    """Whether a cut set (``bool`` per group) traps an entry node of ``entries``, for the routing
+    heuristic and the capped start (:mod:`synthesis.routing.caps.start`); ``None`` without
+    entries (nothing to trap)."""
     if not entries:
         return None
     def traps(cut: np.ndarray) -> bool:

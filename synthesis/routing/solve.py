@@ -25,10 +25,11 @@ import numpy as np
 from ..graphs.consistency import check_consistency
 from ..graphs.products import Products
 from .backends import cpsat_phases, highs
-from .backends.contract import Backend, Round
+from .backends.contract import Backend, Least, LeastQuery, Round
 from .backends.rules import auto_backend, per_cut_flow_rows
 from .certificates import cut_proof
-from .model import RoutingModel, build_model, static_moves_of
+from .groups import static_moves_of
+from .model import RoutingModel, build_model
 from .options import MilpOptions, check_options
 from .phases import flow_of_phase1, routing_result
 from .result import RoutingResult, blocked_by, blocked_of_edges, required_entries
@@ -153,6 +154,24 @@ def backend_version(backend: str) -> str:
     """The version of the package a backend's answers depend on (highspy, OR-Tools; highspy's
     for a name outside :data:`SOLVERS`, such as ``"auto"``)."""
     return SOLVERS.get(backend, SOLVERS["highs"]).version()
+
+
+def solve_least(backend: str, query: LeastQuery) -> Least:
+    """Answer ``query`` (:class:`~synthesis.routing.backends.contract.LeastQuery`: the least cost
+    over the routing model's solutions with flow >= 1) on ``backend`` where it provides the
+    contract's ``least``, else on the first entry of :data:`SOLVERS` that does (HiGHS; also for
+    ``"auto"``, which names no backend), so the answer is the same whichever backend the solve
+    itself used.
+
+    Example::
+
+        least = solve_least(options.backend, LeastQuery(rm, cost, integral, options, deadline, "the fewest walls"))
+        least.status, least.value  # ("optimal", 4.0)
+    """
+    for candidate in (SOLVERS.get(backend), *SOLVERS.values()):
+        if candidate is not None and candidate.least is not None:
+            return candidate.least(query)
+    raise RuntimeError("no backend of SOLVERS answers a LeastQuery")
 
 
 def _with_rounds(result: RoutingResult, rounds: int, entries: dict[int, np.ndarray]) -> RoutingResult:

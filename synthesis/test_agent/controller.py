@@ -12,7 +12,7 @@ import numpy as np
 from ..graphs.products import Products
 from ..model.agent_system import TestAgent
 from .game import AgentGame
-from .gr1 import GR1Strategy
+from .gr1.strategy import GR1Strategy
 
 CONTROLLER_FORMAT = "flowtest.agent-controller"
 CONTROLLER_VERSION = 1

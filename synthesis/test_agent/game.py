@@ -5,7 +5,7 @@ Players and turns
 The test agent is the controlled player (the GR(1) *system*); the system under test
 (SUT) is its environment. A game *position* is a configuration at the SUT's turn,
 ``(v, a)`` with ``v = (x_sys, q_hist)`` a node of the virtual product graph G and ``a``
-an agent state (a cell of the agent or a park). One round of :class:`~synthesis.test_agent.gr1.GR1Game`
+an agent state (a cell of the agent or a park). One round of :class:`~synthesis.test_agent.gr1.game.GR1Game`
 is one SUT step followed by one agent step, so ``turn`` (g3, g4, a3) is built into the
 rounds and needs no variable:
 
@@ -75,8 +75,8 @@ import numpy as np
 from ..graphs.products import Products, coreachable, reachable
 from ..model.agent_system import TestAgent
 from ..model.strategy import TestStrategy
-from ..routing.model import CutGroups
-from .gr1 import GR1Game
+from ..routing.groups import CutGroups
+from .gr1.game import GR1Game
 
 __all__ = [
     "AgentGame",
@@ -483,7 +483,7 @@ def realizability_exclusions(products: Products, agent: TestAgent, groups: CutGr
         The test agent.
     groups
         The MILP's cut groups (``of_edge``, ``keys``, ``restrictable``, ``static``), from
-        :func:`synthesis.routing.model.cut_groups`.
+        :func:`synthesis.routing.groups.cut_groups`.
 
     Returns
     -------

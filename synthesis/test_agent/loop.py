@@ -29,15 +29,17 @@ from ..model.agent_system import TestAgent, place_json
 from ..model.errors import CheckFailed, InconsistentProblem
 from ..model.strategy import TestStrategy
 from ..model.systems import TransitionSystem
-from ..routing.model import cut_groups
+from ..routing.groups import cut_groups
 from ..routing.options import Exclusion, MilpOptions
 from ..routing.restrictions import strategy_from_routing
 from ..routing.result import RoutingResult
 from ..routing.solve import solve_routing
-from . import gr1
 from .closed_loop import ClosedLoopReport, verify_closed_loop
 from .controller import AgentController, controller_from_strategy
 from .game import AgentGame, build_agent_game, realizability_exclusions, trapped_nodes
+from .gr1.solver import solve as solve_gr1
+from .gr1.strategy import GR1Strategy
+from .gr1.verify import StrategyError, verify_strategy
 from .reasons import Reason, trap_reason, unrealizable_reason
 
 # ------------------------------------------------------ the counterexample-guided loop
@@ -170,7 +172,7 @@ def counterexample_loop(
     with every cut set rejected for the same reason (:mod:`synthesis.test_agent.reasons`; with
     ``reasons=False`` the cut set alone, ``sum_{e in C} d_e <= |C| - 1``) and solve again. The winning strategy is tabulated
     (:class:`AgentController`) and checked in closed loop (:func:`verify_closed_loop`),
-    by :func:`synthesis.test_agent.gr1.verify_strategy` and by the routing checks of
+    by :func:`synthesis.test_agent.gr1.verify.verify_strategy` and by the routing checks of
     :mod:`synthesis.checks.verify`.
 
     Parameters
@@ -272,7 +274,7 @@ def counterexample_loop(
             game = build_agent_game(products, strategy, agent)
             timings["game"] += time.perf_counter() - t
             t = time.perf_counter()
-            result = gr1.solve(game.game)
+            result = solve_gr1(game.game)
             record["gr1_seconds"] = time.perf_counter() - t
             timings["gr1"] += record["gr1_seconds"]
             record["positions"] = game.n_positions
@@ -325,7 +327,7 @@ def realize_agent_strategy(
 ) -> tuple[AgentGame, AgentController, ClosedLoopReport]:
     """The test agent's strategy for a routing strategy already known to be realizable
     (a stored test's restrictions): the test-agent game solved again, its GR(1) strategy
-    checked (:func:`synthesis.test_agent.gr1.verify_strategy`), tabulated and checked in closed loop,
+    checked (:func:`synthesis.test_agent.gr1.verify.verify_strategy`), tabulated and checked in closed loop,
     exactly as :func:`counterexample_loop` does for its last cut set. Deterministic:
     the same restrictions give the same table.
 
@@ -338,7 +340,7 @@ def realize_agent_strategy(
     if trapped_nodes(products, strategy).size:
         raise CheckFailed("the restrictions trap the system somewhere reachable")
     game = build_agent_game(products, strategy, agent)
-    result = gr1.solve(game.game)
+    result = solve_gr1(game.game)
     if not result.realizable or result.strategy is None:
         raise CheckFailed("the test agent cannot realize the restrictions (the GR(1) game is lost)")
     controller, report = checked_controller(products, strategy, agent, game, result.strategy)
@@ -346,7 +348,7 @@ def realize_agent_strategy(
 
 
 def checked_controller(
-    products: Products, strategy: TestStrategy, agent: TestAgent, game: AgentGame, gr1_strategy: gr1.GR1Strategy
+    products: Products, strategy: TestStrategy, agent: TestAgent, game: AgentGame, gr1_strategy: GR1Strategy
 ) -> tuple[AgentController, ClosedLoopReport]:
     """The test agent's table of a GR(1) strategy, after checking the strategy wins the game
     and the table keeps the restrictions in closed loop (restricted to the entries it uses).
@@ -357,8 +359,8 @@ def checked_controller(
         If the strategy is not winning or fails the closed-loop check.
     """
     try:
-        gr1.verify_strategy(game.game, gr1_strategy)
-    except gr1.StrategyError as exc:
+        verify_strategy(game.game, gr1_strategy)
+    except StrategyError as exc:
         raise CheckFailed(f"the test agent's GR(1) strategy is not winning: {exc}") from None
     full = controller_from_strategy(products, game, gr1_strategy, agent)
     report = verify_closed_loop(products, strategy, agent, full)

@@ -36,10 +36,10 @@ from scipy.sparse.csgraph import breadth_first_order
 from ..graphs.products import Products, coreachable, reachable
 from ..model.agent_system import TestAgent
 from ..model.strategy import TestStrategy
-from ..routing.model import CutGroups
+from ..routing.groups import CutGroups
 from ..routing.options import Exclusion
-from . import gr1
 from .game import AgentGame, GameRules, build_game, ended_nodes
+from .gr1.solver import solve as solve_gr1
 
 __all__ = ["Reason", "reason_groups", "trap_reason", "unrealizable_reason"]
 
@@ -97,7 +97,7 @@ def _exclusion(groups: CutGroups, cut: np.ndarray, open_: np.ndarray) -> Exclusi
 
 def _lost(products: Products, rules: GameRules, agent: TestAgent) -> tuple[bool, AgentGame]:
     game = build_game(products, rules, agent)
-    return not gr1.solve(game.game).realizable, game
+    return not solve_gr1(game.game).realizable, game
 
 
 def _env_witness(game: AgentGame) -> tuple[np.ndarray, np.ndarray]:

@@ -19,10 +19,11 @@ from synthesis.pipeline import SynthesisOptions, SynthesizedTest, synthesize
 from synthesis.problems.files import load_problem_file
 from synthesis.problems.load import load_problem
 from synthesis.problems.problem import Problem
-from synthesis.test_agent import gr1
 from synthesis.test_agent.closed_loop import verify_closed_loop
 from synthesis.test_agent.controller import AgentController
 from synthesis.test_agent.game import blocking_places, build_agent_game, trapped_nodes, walled_off_nodes
+from synthesis.test_agent.gr1.solver import solve as solve_gr1
+from synthesis.test_agent.gr1.verify import verify_strategy
 from synthesis.test_agent.loop import AgentSynthesis
 
 AGENT_BUILTINS = ("maze1", "maze2", "patrolling")
@@ -220,9 +221,9 @@ def test_walls_alone_dooming_a_node_set_no_trap(tests: dict[str, SynthesizedTest
 def test_game_is_solved_and_strategy_verified(tests: dict[str, SynthesizedTest]) -> None:
     test = tests["maze2"]
     game = build_agent_game(test.products, test.strategy, test.problem.agent)
-    result = gr1.solve(game.game)
+    result = solve_gr1(game.game)
     assert result.realizable and result.strategy is not None
-    gr1.verify_strategy(game.game, result.strategy)
+    verify_strategy(game.game, result.strategy)
 
 
 def test_verifier_rejects_a_lazy_agent(tests: dict[str, SynthesizedTest]) -> None:

@@ -19,12 +19,12 @@ from synthesis.problems.load import load_problem
 from synthesis.problems.problem import Problem
 from synthesis.problems.random_worlds import world_problem
 from synthesis.routing.backends import cpsat
-from synthesis.routing.model import CutGroups, cut_groups
+from synthesis.routing.groups import CutGroups, cut_groups
 from synthesis.routing.options import Exclusion, MilpOptions
 from synthesis.routing.restrictions import strategy_from_routing
 from synthesis.routing.result import RoutingResult
-from synthesis.test_agent import gr1
 from synthesis.test_agent.game import build_agent_game, build_game, trapped_nodes
+from synthesis.test_agent.gr1.solver import solve as solve_gr1
 from synthesis.test_agent.loop import _restrictable_for_agent
 from synthesis.test_agent.reasons import _rules, reason_groups, trap_reason, unrealizable_reason
 
@@ -62,7 +62,7 @@ def _rejected(products: Products, agent: TestAgent, strategy: TestStrategy) -> b
     """Whether the loop rejects this strategy's cut set (a trap, or a lost game)."""
     if trapped_nodes(products, strategy).size:
         return True
-    return not gr1.solve(build_agent_game(products, strategy, agent).game).realizable
+    return not solve_gr1(build_agent_game(products, strategy, agent).game).realizable
 
 
 @pytest.mark.parametrize("name", ["maze2", "patrolling"])
@@ -101,7 +101,7 @@ def _check_reasons_sound(problem: Problem, n_sets: int, n_supersets: int, seed: 
         trapped = trapped_nodes(products, strategy)
         if trapped.size:
             reason = trap_reason(products, groups, cut, strategy, int(trapped[0]))
-        elif not gr1.solve(build_agent_game(products, strategy, agent).game).realizable:
+        elif not solve_gr1(build_agent_game(products, strategy, agent).game).realizable:
             reason = unrealizable_reason(products, groups, cut, agent)
         else:
             continue

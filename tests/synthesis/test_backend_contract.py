@@ -16,6 +16,7 @@ from contextlib import AbstractContextManager
 from dataclasses import replace
 from importlib.metadata import version
 
+import numpy as np
 import pytest
 
 from synthesis.checks import verify
@@ -24,14 +25,14 @@ from synthesis.pipeline import SynthesisOptions, SynthesizedTest, milp_options, 
 from synthesis.problems.load import load_problem
 from synthesis.problems.problem import build_graphs
 from synthesis.routing.backends import cpsat
-from synthesis.routing.backends.contract import Backend, Round
+from synthesis.routing.backends.contract import Backend, LeastQuery, Round
 from synthesis.routing.certificates import cut_proof
 from synthesis.routing.model import build_model
 from synthesis.routing.options import BACKENDS
 from synthesis.routing.phases import Phase, phase2_cost
 from synthesis.routing.restrictions import strategy_from_routing
 from synthesis.routing.result import RoutingResult, required_entries
-from synthesis.routing.solve import SOLVERS, solve_routing
+from synthesis.routing.solve import SOLVERS, solve_least, solve_routing
 from synthesis.routing.solver_control import Clock
 from tests.testing_optimality import compare_reactive, compare_static, graph_instance, grid_instance
 
@@ -137,3 +138,22 @@ def test_the_same_phases_return_the_same_type(backend: str) -> None:
     assert (routing.status, routing.flow, int(routing.cut_edges.size)) == ("optimal", flow, _reference("small-reactive")[2])
     report = verify.check_test(products, strategy_from_routing(products, routing, "instantaneous"), routing.flow)
     assert report.ok
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_the_least_question_is_answered_whatever_the_backend(backend: str) -> None:
+    """The contract's question beside the phases (:class:`LeastQuery`: the least cost over the
+    model's solutions with flow >= 1): HiGHS answers it, CP-SAT provides none, and
+    :func:`solve_least` answers it for every backend name (``"auto"`` included) on the first
+    entry of the table that does. On small-reactive the least of ``-F`` is minus the maximum
+    flow, 2, as both phases prove."""
+    assert SOLVERS["highs"].least is not None and SOLVERS["cpsat"].least is None
+    problem = load_problem("small-reactive")
+    _, products = build_graphs(problem)
+    options = replace(milp_options(problem, SynthesisOptions()), feasibility="eager")
+    entries = required_entries(products, options)
+    rm = build_model(products, options, entries, check_consistency(products))
+    cost = np.zeros(rm.n_col)
+    cost[rm.cols.flow[rm.out_src]] = -1.0
+    least = solve_least(backend, LeastQuery(rm, cost, np.zeros(0, dtype=np.int64), options, None, "the largest flow"))
+    assert (least.status, least.value) == ("optimal", -2.0)

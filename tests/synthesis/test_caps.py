@@ -26,7 +26,7 @@ from synthesis.problems.files import load_problem_file
 from synthesis.problems.load import load_problem
 from synthesis.problems.problem import Problem, build_graphs, make_problem
 from synthesis.routing.bounds.heuristic import RoutingGuess
-from synthesis.routing.caps import disjoint_bypasses
+from synthesis.routing.caps.bypasses import disjoint_bypasses
 from synthesis.routing.model import RoutingModel
 from synthesis.routing.solve import solve_routing
 
@@ -477,7 +477,7 @@ def _capped_start(
     """The routing model of a capped solve of ``path`` (as the solver builds it, every
     feasibility flow up front), the heuristic's test and the capped start."""
     from synthesis.graphs.consistency import check_consistency
-    from synthesis.routing.caps import start_within_caps
+    from synthesis.routing.caps.start import start_within_caps
     from synthesis.routing.model import build_model
     from synthesis.routing.phases import guess_solution
     from synthesis.routing.result import required_entries
@@ -533,7 +533,7 @@ def test_a_cap_that_gives_a_test_is_found_for_the_message(tmp_path: Path) -> Non
     give one (found_with: the test over the cap with the fewest walls the capped search met),
     above the proven bound, and a test with that many walls exists (the capped start under
     that cap finds it); the timeout's message names it next to the proven bound."""
-    from synthesis.routing.caps import found_with
+    from synthesis.routing.caps.fewest import found_with
 
     path = rack_floor(tmp_path, 12, "static")
     problem = load_problem_file(path)
@@ -553,7 +553,7 @@ def test_fewer_items_closes_the_bypasses_with_fewer(tmp_path: Path, kind: str, c
     """On the 12x12 rack floor the routing heuristic's test uses 20 walls (35 doors); the local
     search gives a test with 14 walls (19 doors), checked independently, and never one with
     more items than it was given (from its own answer it finds nothing more to drop)."""
-    from synthesis.routing.caps import fewer_items
+    from synthesis.routing.caps.start import fewer_items
     from synthesis.routing.result import required_entries
 
     problem, products, (rm, guess, _), _ = _capped_start(rack_floor(tmp_path, 12, kind), f"max_{cap}", limit)
@@ -574,7 +574,7 @@ def test_fewer_items_gives_a_test_on_random_floors(tmp_path: Path, kind: str) ->
     force's fewest (a search that dropped a needed wall would go below it), and it reaches
     that fewest on most floors."""
     from synthesis.graphs.consistency import check_consistency
-    from synthesis.routing.caps import fewer_items
+    from synthesis.routing.caps.start import fewer_items
     from synthesis.routing.model import build_model
     from synthesis.routing.phases import guess_solution
     from synthesis.routing.result import required_entries
@@ -609,7 +609,7 @@ def test_30x30_floor_capped_start_within_the_cap(tmp_path: Path, kind: str, cap:
     """The issue's 30x30 floor: the heuristic's test uses far more walls (doors) than the cap;
     the capped start fits it (9 walls, 8 doors measured, in about 3 s each: a door closed under
     every history counts once, so some attempts close whole doors, and the local search of
-    :func:`~synthesis.routing.caps.fewer_items` brings 13 walls down to 9 and 11 doors to 8)
+    :func:`~synthesis.routing.caps.start.fewer_items` brings 13 walls down to 9 and 11 doors to 8)
     where phase 1 alone found no test in 120 s."""
     t0 = time.perf_counter()
     problem, _, (_, _, x_guess), (capped, x) = _capped_start(floor30(tmp_path, kind), f"max_{cap}", limit)
@@ -626,7 +626,7 @@ def test_a_capped_solve_the_time_limit_ends_says_neither_a_test_nor_a_proof(
     The answer says exactly that (found nor proven, the proven bound, the cap), with exit 5
     and advice that can help (a higher cap or time limit, not a gap: no test was found), never
     "no test fits"."""
-    from synthesis.routing.caps import CapsTimeout
+    from synthesis.routing.caps.messages import CapsTimeout
 
     path = rack_floor(tmp_path, 12, "static")
     with pytest.raises(CapsTimeout) as err:
@@ -657,7 +657,7 @@ def test_walls_block_both_ways_unless_the_problem_allows_one_way() -> None:
     out. On (the built-ins, as published) such a move may be cut alone."""
     from dataclasses import replace
 
-    from synthesis.routing.model import cut_groups, model_edges
+    from synthesis.routing.groups import cut_groups, model_edges
 
     problem = load_problem("maze2")
     _, products = build_graphs(problem)
@@ -744,7 +744,7 @@ def test_route_spared_bound_never_refuses_a_cap_a_test_fits(tmp_path: Path, floo
     :func:`disjoint_bypasses`) says a cap of ``c`` walls admits no test, no set of ``c`` walls
     closes every bypass and leaves a route; and the route-spared bound proves more than the
     plain one on some of them (it is not the plain bound under another name)."""
-    from synthesis.routing.caps import routed_bypasses
+    from synthesis.routing.caps.bypasses import routed_bypasses
 
     checked = stronger = 0
     for i, problem, products in _random_floors(tmp_path, np.random.default_rng(20261127), "static", 10 * floors):
@@ -771,8 +771,9 @@ def test_history_separation_never_refuses_a_cap_a_test_fits(tmp_path: Path, kind
     :func:`fewest_within`, exact on these floors); and the bound is the fewest exactly on some
     of them, and proves, for walls, caps the route-spared bypass count does not (it is neither
     vacuous nor that bound again)."""
-    from synthesis.routing.caps import fewest_within, routed_bypasses
-    from synthesis.routing.separations import separations_exceed
+    from synthesis.routing.caps.bypasses import routed_bypasses
+    from synthesis.routing.caps.fewest import fewest_within
+    from synthesis.routing.caps.separations import separations_exceed
 
     cap = "max_walls" if kind == "static" else "max_doors"
     checked = exact = beyond = 0
@@ -824,7 +825,7 @@ def test_the_timeout_message_names_the_best_proven_bound(tmp_path: Path) -> None
     """On the 12x12 rack floor the plain count proves 2 walls; sparing the route proves 3, 4
     and 5, and no more within its budget: a solve the time limit ends says "at least 5"
     (the bounds the check proved before the solve), the cap and no false "no test fits"."""
-    from synthesis.routing.caps import check_caps_reachable
+    from synthesis.routing.caps.refusal import check_caps_reachable
 
     problem = load_problem_file(rack_floor(tmp_path, 12, "static"))
     _, products = build_graphs(problem)

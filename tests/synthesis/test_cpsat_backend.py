@@ -30,7 +30,7 @@ from synthesis.pipeline import SynthesisOptions, synthesize
 from synthesis.problems.load import load_problem
 from synthesis.problems.random_grid import first_consistent
 from synthesis.routing import certificates, model, solver_control
-from synthesis.routing.backends import cpsat, cpsat_phases
+from synthesis.routing.backends import cpsat, phase1_start
 from synthesis.routing.solver_control import SolveControl
 from tests.testing_optimality import compare_reactive, compare_static, graph_instance, grid_instance
 from tests.testing_processes import start_until
@@ -77,7 +77,7 @@ def test_the_level_search_keeps_the_optimum(monkeypatch: pytest.MonkeyPatch) -> 
     empty; the exhaustive comparisons of tests/synthesis/test_optimality.py run with both)."""
     monkeypatch.setattr(cpsat, "PROOF_WORK", 1e-9)
     monkeypatch.setattr(model, "model_flow_bound", lambda *args: None)
-    monkeypatch.setattr(cpsat_phases, "guess_solution", lambda *args: None)
+    monkeypatch.setattr(phase1_start, "guess_solution", lambda *args: None)
     monkeypatch.setattr(certificates, "guess_solution", lambda *args: None)
     outcomes: list[str] = []
     real = cpsat.CpSatSession.solve

@@ -44,14 +44,10 @@ import time
 import numpy as np
 import pytest
 
-from synthesis.test_agent.gr1 import (
-    GR1Game,
-    GR1Result,
-    GR1Strategy,
-    StrategyError,
-    solve,
-    verify_strategy,
-)
+from synthesis.test_agent.gr1.game import GR1Game
+from synthesis.test_agent.gr1.solver import GR1Result, solve
+from synthesis.test_agent.gr1.strategy import GR1Strategy
+from synthesis.test_agent.gr1.verify import StrategyError, verify_strategy
 
 omega_gr1 = pytest.importorskip("omega.games.gr1")
 omega_temporal = pytest.importorskip("omega.symbolic.temporal")

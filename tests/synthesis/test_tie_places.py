@@ -20,7 +20,8 @@ from synthesis.problems.builtins import patrolling, refueling
 from synthesis.problems.load import load_problem
 from synthesis.problems.problem import TIE_PLACES, Problem, build_graphs, make_problem
 from synthesis.routing.backends import cpsat
-from synthesis.routing.model import CutGroups, build_model, cut_groups
+from synthesis.routing.groups import CutGroups, cut_groups
+from synthesis.routing.model import build_model
 from synthesis.routing.options import MilpOptions
 
 

@@ -15,16 +15,15 @@ from typing import Any
 
 import numpy as np
 
-from ...graphs.products import Products
-from ..caps import start_within_caps
-from ..certificates import CutProof, test_at_bound, with_cut_proof
+from ..certificates import CutProof, with_cut_proof
 from ..model import RoutingModel
 from ..options import MilpOptions
-from ..phases import LIMIT_TEXT, Phase, guess_solution, no_cut_set, phase2_cost, trap_test
+from ..phases import LIMIT_TEXT, Phase, no_cut_set, phase2_cost
 from ..solver_control import Clock
 from . import cpsat
 from .contract import Backend, Round
 from .hitting_set import HittingSetOutcome, try_hitting_set
+from .phase1_start import phase1_start
 
 
 def _cpsat_budget(clock: Clock) -> tuple[float | None, float | None]:
@@ -35,9 +34,7 @@ def _cpsat_budget(clock: Clock) -> tuple[float | None, float | None]:
     return seconds, (clock.after_first if clock.watching_first() else None)
 
 
-def phase1_cpsat(
-    session: cpsat.CpSatSession, rm: RoutingModel, products: Products, options: MilpOptions, entries: dict[int, np.ndarray], clock: Clock
-) -> tuple[Phase, list[dict[str, Any]]]:
+def phase1_cpsat(session: cpsat.CpSatSession, r: Round) -> tuple[Phase, list[dict[str, Any]]]:
     """:func:`synthesis.routing.backends.highs.phase1` on CP-SAT: the heuristic's answer (or a checked candidate of the walls'
     cut bound) proves the maximum flow when it attains the upper bound; else CP-SAT maximises the flow from it (as a hint) with its
     default search, whose LP bound proves small cases at once, for at most
@@ -47,17 +44,11 @@ def phase1_cpsat(
     rise; proven impossible, the best test is the maximum (the row ``F <= level - 1`` is
     valid and kept for phase 2), and with no test at all, level 1 impossible means no cut
     set exists. ``work_limit`` bounds the whole phase."""
-    guess = rm.guess(products, traps=trap_test(products, rm.groups, entries))
-    x_guess = guess_solution(products, rm, guess, options)
-    guess, x_guess = start_within_caps(products, rm, options, entries, guess, x_guess, clock.deadline)
-    if x_guess is not None:
-        clock.first_test()
-    if x_guess is not None and guess.flow == guess.upper_bound:
-        return Phase(x_guess, "optimal", 0.0, None), []
-    x_top = test_at_bound(products, rm, options, entries, guess.upper_bound)
-    if x_top is not None:
-        clock.first_test()
-        return Phase(x_top, "optimal", 0.0, None), []  # a cut bound candidate attains the flow upper bound
+    rm, options, clock = r.rm, r.options, r.clock
+    start = phase1_start(r)
+    if start.proven is not None:
+        return start.proven, []
+    guess, x_guess = start.guess, start.x
     out = rm.cols.flow[rm.out_src]
     cost = np.zeros(rm.n_col)
     cost[out] = 1.0
@@ -220,7 +211,7 @@ def session(r: Round) -> Iterator[CpSatRun]:
 
 def phase1(s: CpSatRun, r: Round) -> Phase:
     """Phase 1 (maximum flow) on CP-SAT: :func:`phase1_cpsat`, its runs kept for :func:`figures`."""
-    first, runs = phase1_cpsat(s.session, r.rm, r.products, r.options, r.entries, r.clock)
+    first, runs = phase1_cpsat(s.session, r)
     s.runs += runs
     return first
 

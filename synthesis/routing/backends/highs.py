@@ -23,13 +23,13 @@ import highspy
 import numpy as np
 import scipy.sparse as sp
 
-from ..caps import start_within_caps
-from ..certificates import CutProof, test_at_bound, with_cut_proof
+from ..certificates import CutProof, with_cut_proof
 from ..model import RoutingModel, phase2_integral_columns
 from ..options import MilpOptions
-from ..phases import FEASIBILITY_TOLERANCE, LIMIT_TEXT, Phase, guess_solution, no_cut_set, phase2_cost, trap_test
+from ..phases import FEASIBILITY_TOLERANCE, LIMIT_TEXT, Phase, no_cut_set, phase2_cost
 from ..solver_control import Clock, SolverAbandoned, quiet_highs, run_highs, solver_version
-from .contract import Backend, Round
+from .contract import Backend, Least, LeastQuery, Round
+from .phase1_start import phase1_start
 
 ABANDON_GRACE = 0.25
 """Seconds past the solve's deadline after which a HiGHS run still busy is left behind
@@ -46,18 +46,11 @@ def phase1(h: highspy.Highs, r: Round) -> Phase:
     (MILP-static) by a checked candidate of the walls' cut bound at that bound
     (:func:`~synthesis.routing.certificates.test_at_bound`), else solved by HiGHS (seeded by
     the heuristic's answer, kept as the fallback)."""
-    rm, products, options, entries, clock = r.rm, r.products, r.options, r.entries, r.clock
-    guess = rm.guess(products, traps=trap_test(products, rm.groups, entries))
-    x_guess = guess_solution(products, rm, guess, options)
-    guess, x_guess = start_within_caps(products, rm, options, entries, guess, x_guess, clock.deadline)
-    if x_guess is not None:
-        clock.first_test()
-    if x_guess is not None and guess.flow == guess.upper_bound:
-        return Phase(x_guess, "optimal", 0.0, None)  # the flow upper bound is attained: proven
-    x_top = test_at_bound(products, rm, options, entries, guess.upper_bound)
-    if x_top is not None:
-        clock.first_test()
-        return Phase(x_top, "optimal", 0.0, None)  # a cut bound candidate attains the flow upper bound
+    rm, options, clock = r.rm, r.options, r.clock
+    start = phase1_start(r)
+    if start.proven is not None:
+        return start.proven
+    guess, x_guess = start.guess, start.x
     cost = np.zeros(rm.n_col)
     cost[rm.cols.flow[rm.out_src]] = 1.0
     h.changeColsCost(rm.n_col, np.arange(rm.n_col, dtype=np.int32), cost)
@@ -383,6 +376,32 @@ def session(r: Round) -> Iterator[highspy.Highs]:
     yield h
 
 
+def least(q: LeastQuery) -> Least:
+    """A :class:`~synthesis.routing.backends.contract.LeastQuery` on HiGHS: the model minimised
+    with the row ``F >= 1`` added and ``q.integral`` declared integral, on ``q.options.threads``
+    threads (one where unset) with its seed; stopped by ``q.deadline``, HiGHS's proven (dual)
+    bound, where it has a finite one."""
+    options = q.options
+    h = quiet_highs(options.threads if options.threads else 1, options.random_seed)
+    h.passModel(q.rm.model.to_highs(q.cost, maximize=False))
+    out = q.rm.cols.flow[q.rm.out_src].astype(np.int32)
+    h.addRow(1.0, highspy.kHighsInf, out.size, out, np.ones(out.size))
+    cols = q.integral.astype(np.int32)
+    h.changeColsIntegrality(cols.size, cols, np.full(cols.size, highspy.HighsVarType.kInteger))
+    try:
+        run_highs(h, q.deadline, control=options.control, phase=q.label)
+    except TimeoutError:
+        return Least("stopped")
+    status = h.getModelStatus()
+    if status == highspy.HighsModelStatus.kInfeasible:
+        return Least("infeasible")
+    info = h.getInfo()
+    if status == highspy.HighsModelStatus.kOptimal:
+        return Least("optimal", value=float(info.objective_function_value))
+    bound = float(info.mip_dual_bound)
+    return Least("stopped", bound=bound if np.isfinite(bound) else None)
+
+
 def version() -> str:
     """highspy's version: the package HiGHS's answers depend on."""
     return solver_version()
@@ -397,5 +416,6 @@ BACKEND: Backend[highspy.Highs] = Backend(
     phase1=phase1,
     phase2=phase2,
     figures=lambda h: {},
+    least=least,
 )
 """HiGHS's branch and cut as a backend of the routing model (``MilpOptions.backend = "highs"``)."""

@@ -1,7 +1,7 @@
 """The separator of the implicit hitting set (:mod:`synthesis.routing.backends.hitting_set`): which
 checks a cut set fails, and the valid row over the cut binaries each failure gives.
 
-A cut set is a ``bool`` per cut group (:class:`~synthesis.routing.model.CutGroups`); the
+A cut set is a ``bool`` per cut group (:class:`~synthesis.routing.groups.CutGroups`); the
 master's columns are the groups with a binary, then (MILP-agent) one ``d_state`` per place
 a cut may enter. The checks, all graph searches in bulk (SciPy's ``csgraph``):
 
@@ -29,7 +29,7 @@ from scipy.sparse.csgraph import breadth_first_order, dijkstra, maximum_flow
 
 from ...graphs.cuts import sink_side, source_side
 from ...graphs.products import Products
-from ..model import CutGroups, ModelEdges, PhysicalItems, physical_items, static_moves_of
+from ..groups import CutGroups, ModelEdges, PhysicalItems, physical_items, static_moves_of
 from ..options import MilpOptions
 from ..result import blocked_of_edges
 from ..traps import trapped_configurations, trapped_entries

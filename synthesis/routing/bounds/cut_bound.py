@@ -215,7 +215,7 @@ def static_cut_bound(
     products
         The product graphs (the whole G, ``Src``, I, ``Tgt``).
     of_edge, weight, restrictable
-        The cut groups (:class:`~synthesis.routing.model.CutGroups`): each G edge's group,
+        The cut groups (:class:`~synthesis.routing.groups.CutGroups`): each G edge's group,
         each group's weight (phase 2's objective) and whether it may be cut.
     eu, ev
         The routing model's edges (for the flow bound's count of entries and exits).

@@ -134,7 +134,7 @@ def static_flow_bound(products: Products, eu: np.ndarray, ev: np.ndarray, known:
     products
         The product graphs (the whole G, ``Src``, I, ``Tgt``).
     eu, ev
-        The routing model's edges (:class:`~synthesis.routing.model.ModelEdges`).
+        The routing model's edges (:class:`~synthesis.routing.groups.ModelEdges`).
     known
         A proven upper bound on the flow (the heuristic's maximum flow with every group open).
     """

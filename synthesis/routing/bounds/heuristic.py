@@ -170,6 +170,7 @@ def guess_routing(
     if traps is not None and flow > 0 and traps(border(separated(is_open)[1])):
         # grown from a trapping start and never left it: no use as a solution
         flow, is_open, f = 0, ~has_var, np.zeros(m, dtype=bool)
+
     def grow_from(routes: list[np.ndarray], work: Work) -> tuple[int, np.ndarray, np.ndarray] | None:
         """Grow from the first of ``routes`` with every route's groups open, ``None`` where
         those groups alone open a bypass or trap."""
@@ -183,6 +184,16 @@ def guess_routing(
         f0[routes[0]] = True
         return grow(seeded, f0, 1, work)
 
+    def seed_with(routes: list[np.ndarray], work: Work) -> bool:
+        """Grow from ``routes`` (:func:`grow_from`) and keep that test where its flow is larger
+        than the best so far; whether the flow upper bound is reached."""
+        nonlocal flow, is_open, f, from_route
+        grown = grow_from(routes, work)
+        if grown is not None and grown[0] > flow:
+            flow, is_open, f = grown
+            from_route = True
+        return flow >= upper
+
     if route_seed is not None and flow < upper:
         # grow from one route, then from the union of two (two routes through the same
         # labelled cell in different orders can cross there without a shortcut)
@@ -190,15 +201,7 @@ def guess_routing(
         work = Work(route_seed.work)
         for route in simple_routes(n, src, eu, ev, usable, target, route_seed, work):
             for other in [None] + pool:
-                if work.exhausted:
-                    break
-                grown = grow_from([route] if other is None else [route, other], work)
-                if grown is None:
-                    continue
-                flow2, open2, f2 = grown
-                if flow2 > flow:
-                    flow, is_open, f, from_route = flow2, open2, f2, True
-                if flow >= upper:
+                if work.exhausted or seed_with([route] if other is None else [route, other], work):
                     break
             pool.append(route)
             if flow >= upper or len(pool) >= route_seed.pool or work.exhausted:
@@ -217,13 +220,7 @@ def guess_routing(
             group = disjoint_routes(n, src, eu, ev, usable, target, route_seed, route, upper, work)
             if len(group) < 2:
                 continue
-            grown = grow_from(group, work)  # group[0] is route
-            if grown is None:
-                continue
-            flow2, open2, f2 = grown
-            if flow2 > flow:
-                flow, is_open, f, from_route = flow2, open2, f2, True
-            if flow >= upper:
+            if seed_with(group, work):  # group[0] is route
                 break
     _, reach = separated(is_open)
     return RoutingGuess(flow, upper, f.astype(float), border(reach), reach, from_route)

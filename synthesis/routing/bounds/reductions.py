@@ -7,7 +7,7 @@ reads the model gets it; a backend that builds its own formulation from the cut 
 reads :attr:`Reductions.fixed_open` (or ``RoutingModel.reductions``) and leaves those groups
 open.
 
-Terms, on the model's edges of G (:class:`~synthesis.routing.model.ModelEdges`): a **bypass
+Terms, on the model's edges of G (:class:`~synthesis.routing.groups.ModelEdges`): a **bypass
 walk** is a walk ``Src -> Tgt`` over c5 edges (both ends outside I); a **route** is a walk
 ``Src -> Tgt`` over model edges that visits I. Walks, not simple paths: every statement
 about all walks holds for all simple paths, and walks are decided by two graph searches.
@@ -131,7 +131,7 @@ def reduce_groups(
         The product graphs (``Src``, ``I``, ``Tgt`` and the node count of G).
     eu, ev, grp, c5, has_var
         The model's edges, their cut groups, which are c5 edges, and which groups have a
-        binary (:class:`~synthesis.routing.model.ModelEdges`).
+        binary (:class:`~synthesis.routing.groups.ModelEdges`).
     weight
         Edges of G per cut group (the phase-2 cost).
     dominance

@@ -1,7 +1,7 @@
 """A lower bound on the walls (doors) a test needs, one history at a time: what the test must
 close under a history the SUT is certain to pass through, while leaving it a way to its goal.
 
-The bypass counts of :mod:`synthesis.routing.caps` know nothing of the feasibility flows
+The bypass counts of :mod:`synthesis.routing.caps.bypasses` know nothing of the feasibility flows
 (docs/method.md c6-c8): on a reactive floor they see that closing the two moves into the goal
 under every history before I closes every bypass, and prove 2 doors, where that test traps
 the SUT (under the start's history it has no way left to the goal). This bound uses them (and,
@@ -46,11 +46,11 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from ..graphs.consistency import check_consistency
-from ..graphs.cuts import min_cut
-from ..graphs.products import Products, reachable
-from .model import cut_groups, model_edges, physical_items
-from .options import MilpOptions
+from ...graphs.consistency import check_consistency
+from ...graphs.cuts import min_cut
+from ...graphs.products import Products, reachable
+from ..groups import cut_groups, model_edges, physical_items
+from ..options import MilpOptions
 
 SEPARATION_CUTS = 6000
 """The most minimum cuts one :func:`separations_exceed` makes in all: a deterministic budget,
@@ -191,7 +191,7 @@ def separation_exceeds(products: Products, layer: _Layer, entry: int, limit: int
 class HistorySeparations:
     """The lemma of the module docstring for one problem and cap, its graphs built once (every
     history's layer on first use) and asked for one limit after another
-    (:meth:`exceed`), as :func:`~synthesis.routing.caps.check_caps_reachable` raises its bound."""
+    (:meth:`exceed`), as :func:`~synthesis.routing.caps.refusal.check_caps_reachable` raises its bound."""
 
     def __init__(self, products: Products, options: MilpOptions, cap: str) -> None:
         self.products = products
