@@ -2,28 +2,29 @@
 
 :func:`synthesize` is the one entry point for every kind of problem; agent problems go
 through :func:`synthesize_agent_test`, which runs the counterexample-guided loop of
-:mod:`synthesis.test_agent.loop` on the same graphs and MILP options.
+:mod:`synthesis.test_agent.loop` on the same graphs and MILP options. What they return, a
+:class:`~synthesis.synthesized_test.SynthesizedTest`, is defined in
+:mod:`synthesis.synthesized_test` (and importable from here too), so that reading a test needs
+none of the solvers this module imports; its options, :class:`~synthesis.options.SynthesisOptions`,
+likewise live in :mod:`synthesis.options`.
 """
 
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field, replace
-from typing import Any
-
-import numpy as np
+from collections.abc import Callable
+from dataclasses import replace
 
 from .checks.physical import cap_count, physical_counts
-from .checks.verify import CheckReport, check_test, restricted_edges, routed_flow
-from .graphs.automata import SpecificationProduct
+from .checks.verify import check_test, restricted_edges, routed_flow
 from .graphs.products import Products
 from .model.agent_system import TestAgent
 from .model.errors import CheckFailed, InconsistentProblem, ProblemError
-from .model.option_rules import COUNT, SETTING, Rule
 from .model.strategy import TestStrategy
+from .options import SYNTHESIS_RULES as SYNTHESIS_RULES  # re-exported: the options live in synthesis.options
+from .options import SynthesisOptions as SynthesisOptions  # re-exported, as SYNTHESIS_RULES
 from .problems.diagnose import check_problem_consistency
-from .problems.limits import MAX_GRAPH_EDGES, check_size
+from .problems.limits import check_size
 from .problems.problem import Problem, build_graphs, check_caps
 from .routing.backends import cpsat
 from .routing.backends.rules import AUTO_CPSAT_MODES
@@ -38,70 +39,12 @@ from .routing.caps import (
     fewest_within,
     found_with,
 )
-from .routing.options import RULES, Budgets, MilpOptions, ModelOptions, RunOptions, default_of, values_of
+from .routing.options import Budgets, MilpOptions, RunOptions, values_of
 from .routing.options import check_options as check_routing_options
 from .routing.restrictions import strategy_from_routing
-from .routing.result import RoutingResult
 from .routing.solve import solve_routing
-from .test_agent.loop import AgentSynthesis, counterexample_loop
-
-
-@dataclass(frozen=True, kw_only=True)
-class SynthesisOptions(Budgets, RunOptions):
-    """What a synthesis may spend, how it runs, and what it may choose beyond the problem.
-
-    The budgets (``time_limit``, ``after_first``, ``mip_rel_gap``, ``node_limit``,
-    ``work_limit``, ``threads``, ``random_seed``) and the run options (``backend``,
-    ``progress``, ``control``) are the routing model's own groups
-    (:class:`~synthesis.routing.options.Budgets`, :class:`~synthesis.routing.options.RunOptions`:
-    their docstrings say what each does), passed on to it by :func:`milp_options`, with two
-    fallbacks: ``time_limit=None`` is the problem's time limit, ``threads=None`` is one thread
-    (so the answer is the same on every machine). Every field is checked by
-    :func:`check_options` before any work, by the rules the routing options, problem files
-    and the command line share.
-
-    Attributes
-    ----------
-    closed_loop
-        :attr:`~synthesis.routing.options.ModelOptions.closed_loop`: also forbid restrictions that
-        trap the system off entry nodes.
-    setting
-        How reactive obstacles are shown (:data:`~synthesis.model.strategy.SETTINGS`; ``None``:
-        the problem's, else ``"instantaneous"``).
-    agent_iterations
-        Bound on the counterexample-guided loop of an agent problem (``None``: the test
-        agent's ``max_iterations``).
-    max_graph_edges
-        Refuse problems whose product graph may exceed this many edges, before building
-        anything (:mod:`synthesis.problems.limits`; ``None``: no limit).
-    caps
-        Caps on the physical restrictions a test may use (``max_walls``, ``max_doors``,
-        ``max_restrictions``); each key given here replaces the problem's (:func:`caps_of`).
-
-    Example
-    -------
-    >>> from synthesis import SynthesisOptions, load_problem, synthesize
-    >>> test = synthesize(load_problem("small-reactive"), SynthesisOptions(node_limit=10_000, caps={"max_walls": 4}))
-    >>> test.routing.status, test.caps
-    ('optimal', {'max_walls': 4})
-    """
-
-    closed_loop: bool = default_of(ModelOptions, "closed_loop")
-    setting: str | None = None
-    agent_iterations: int | None = None
-    max_graph_edges: int | None = MAX_GRAPH_EDGES
-    caps: dict[str, int] | None = None
-
-
-SYNTHESIS_RULES: Mapping[str, Rule] = {
-    **RULES,
-    "setting": SETTING,
-    "agent_iterations": COUNT,
-    "max_graph_edges": COUNT,
-    "caps": replace(RULES["caps"], optional=True),
-}
-"""The rule of each field of :class:`SynthesisOptions`: the routing options' (:data:`~synthesis.routing.options.RULES`)
-and the synthesis's own."""
+from .synthesized_test import SynthesizedTest as SynthesizedTest  # re-exported: the result lives in synthesis.synthesized_test
+from .test_agent.loop import counterexample_loop
 
 
 def check_options(options: SynthesisOptions) -> None:
@@ -124,31 +67,6 @@ def caps_of(problem: Problem, options: SynthesisOptions) -> dict[str, int]:
     caps = dict(problem.caps)
     caps.update(check_caps(options.caps or {}, " (option caps)"))
     return caps
-
-
-@dataclass(frozen=True)
-class SynthesizedTest:
-    """A synthesized, checked test: everything an environment or a report needs."""
-
-    __test__ = False
-
-    problem: Problem
-    spec: SpecificationProduct
-    products: Products
-    routing: RoutingResult
-    strategy: TestStrategy
-    checks: CheckReport
-    graph_seconds: float
-    agent: AgentSynthesis | None = None  # the test agent's synthesized strategy (agent problems)
-    extra_stats: dict[str, Any] = field(default_factory=dict)
-    caps: dict[str, int] = field(default_factory=dict)  # the caps it was synthesized under
-
-    @property
-    def cut_edges_outside_intermediate(self) -> np.ndarray:
-        """The cut set C: cut edges of G outside ``E(I)``."""
-        e = self.routing.cut_edges
-        out: np.ndarray = e[~self.products.touches_intermediate[e]]
-        return out
 
 
 def routing_mode(problem: Problem) -> str:

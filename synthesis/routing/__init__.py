@@ -5,7 +5,7 @@ Layout, by role:
 
 * :mod:`.options` — :class:`~.options.MilpOptions`, the options of one solve;
 * :mod:`.model` — the model itself, built in bulk as named column and row blocks
-  (:func:`~.model.build_model`); :mod:`.result` — the answer (:class:`~.result.RoutingResult`)
+  (:func:`~.model.build_model`), over the cut groups of :mod:`.groups`; :mod:`.result` — the answer (:class:`~.result.RoutingResult`)
   and the restrictions it puts on each history; :mod:`.traps` — the MILP's own trap search;
 * :mod:`.solve` — the one front: :func:`~.solve.solve_routing`, its lazy loop over the
   feasibility flows, and the table of backends (:data:`~.solve.SOLVERS`) it picks a solver from,
@@ -20,7 +20,8 @@ Layout, by role:
   :mod:`.backends.cpsat_worker`, :mod:`.backends.cpsat_pool`), the implicit hitting set that
   CP-SAT's phase 2 may try first (:mod:`.backends.hitting_set`, :mod:`.backends.separator`),
   and the rules that pick a backend on the built model (:mod:`.backends.rules`);
-* :mod:`.solver_control` — stop requests, live status and time budgets of a running solver;
+* :mod:`.solver_control` — time budgets of a running solver, and the stop requests and live
+  status it reads from :mod:`.solve_status`;
   :mod:`.caps` and :mod:`.restrictions` — caps on the physical restrictions, and an answer as
   a test strategy.
 

@@ -27,6 +27,7 @@ from .bounds.cut_bound import CutBound, static_cut_bound
 from .bounds.flow_bound import static_flow_bound
 from .bounds.heuristic import RouteSeed, RoutingGuess, guess_routing, open_flow_bound
 from .bounds.reductions import Reductions, reduce_groups
+from .groups import CutGroups as CutGroups  # re-exported: the cut groups live in groups
 from .options import MODES, Exclusion, MilpOptions
 
 
@@ -110,24 +111,6 @@ class _Model:
     @property
     def n_integer(self) -> int:
         return int(sum(int(x.sum()) for x in self.integer))
-
-
-@dataclass(frozen=True)
-class CutGroups:
-    """Edges of G grouped by shared cut value.
-
-    ``of_edge[e]`` is the group of edge ``e`` (every edge has one; groups of
-    unrestrictable edges are never cut), ``keys[g]`` its stable key, ``weight[g]``
-    the number of edges of G it stands for, ``restrictable[g]`` whether it may be cut,
-    ``static[g]`` whether it is a static (history-independent) group.
-    """
-
-    of_edge: np.ndarray
-    keys: np.ndarray
-    weight: np.ndarray
-    restrictable: np.ndarray
-    static: np.ndarray
-    move_key: np.ndarray  # per move of T, its static tie key
 
 
 def cut_groups(products: Products, options: MilpOptions) -> CutGroups:

@@ -75,7 +75,7 @@ import numpy as np
 from ..graphs.products import Products, coreachable, reachable
 from ..model.agent_system import TestAgent
 from ..model.strategy import TestStrategy
-from ..routing.model import CutGroups
+from ..routing.groups import CutGroups
 from .gr1 import GR1Game
 
 __all__ = [
