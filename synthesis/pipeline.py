@@ -17,6 +17,7 @@ from dataclasses import replace
 
 from .checks.physical import cap_count, physical_counts
 from .checks.verify import check_test, restricted_edges, routed_flow
+from .graphs.automata import SpecificationProduct
 from .graphs.products import Products
 from .model.agent_system import TestAgent
 from .model.errors import CheckFailed, InconsistentProblem, ProblemError
@@ -141,6 +142,39 @@ def remaining_time(problem: Problem, options: SynthesisOptions, spent: float, ed
     return replace(options, time_limit=limit - spent - reserve)
 
 
+def graphs_and_milp(
+    problem: Problem, options: SynthesisOptions, started: float, note: Callable[[str], None]
+) -> tuple[SpecificationProduct, Products, float, MilpOptions]:
+    """What every synthesis does before its solve: start CP-SAT's child process when the
+    ``cpsat`` backend is asked for (OR-Tools loads in it while the graphs are built), build
+    the automata and product graphs and check the problem's consistency on them
+    (:func:`~synthesis.problems.diagnose.check_problem_consistency`), and the routing MILP's
+    options with the time that is left since ``started`` (:func:`remaining_time`).
+
+    Returns
+    -------
+    tuple
+        The specification product, the product graphs, the seconds they took to build and
+        check (``SynthesizedTest.graph_seconds``) and the MILP options.
+
+    Raises
+    ------
+    InconsistentProblem
+        If the goal is unreachable or the test objective cannot be routed.
+    TimeoutError
+        If building the graphs spent the whole time limit.
+    """
+    if options.backend == "cpsat":
+        cpsat.prestart()
+    t0 = time.perf_counter()
+    note("building automata and product graphs")
+    spec, products = build_graphs(problem)
+    check_problem_consistency(problem, products)
+    graph_seconds = time.perf_counter() - t0
+    milp = milp_options(problem, remaining_time(problem, options, time.perf_counter() - started, int(products.virtual.n_edges)))
+    return spec, products, graph_seconds, milp
+
+
 def synthesize(problem: Problem, options: SynthesisOptions | None = None) -> SynthesizedTest:
     """Synthesize and check the least-restrictive test of a static, reactive or mixed problem.
 
@@ -168,16 +202,7 @@ def synthesize(problem: Problem, options: SynthesisOptions | None = None) -> Syn
     if problem.kind == "agent":
         return synthesize_agent_test(problem, options, started=started)
     note = options.progress or (lambda msg: None)
-    if options.backend == "cpsat":
-        cpsat.prestart()  # OR-Tools loads in the child while the graphs are built
-    t0 = time.perf_counter()
-    note("building automata and product graphs")
-    spec, products = build_graphs(problem)
-    check_problem_consistency(problem, products)
-    graph_seconds = time.perf_counter() - t0
-    milp = milp_options(
-        problem, remaining_time(problem, options, time.perf_counter() - started, int(products.virtual.n_edges))
-    )
+    spec, products, graph_seconds, milp = graphs_and_milp(problem, options, started, note)
     bounds: dict[str, int] = {}
     try:
         if milp.caps:
@@ -375,16 +400,7 @@ def synthesize_agent_test(
         raise ProblemError(f"agent problem {problem.name!r} has no static area (static_moves)")
     bound = max_iterations or options.agent_iterations or agent.max_iterations
     note = options.progress or (lambda msg: None)
-    if options.backend == "cpsat":
-        cpsat.prestart()  # OR-Tools loads in the child while the graphs are built
-    t0 = time.perf_counter()
-    note("building automata and product graphs")
-    spec, products = build_graphs(problem)
-    check_problem_consistency(problem, products)
-    graph_seconds = time.perf_counter() - t0
-    milp = milp_options(
-        problem, remaining_time(problem, options, time.perf_counter() - started, int(products.virtual.n_edges))
-    )
+    spec, products, graph_seconds, milp = graphs_and_milp(problem, options, started, note)
     try:
         _, milp = caps_checked(products, milp)
         outcome = counterexample_loop(
