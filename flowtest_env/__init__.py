@@ -90,7 +90,7 @@ def make_env(test: TestLike, **options: Any) -> FlowTestEnv:
 
     ``test`` is anything :func:`flowtest_env.sources.load_test` accepts: a built-in name,
     a problem or artifact file path, a :class:`~synthesis.problems.problem.Problem`, a
-    :class:`~synthesis.pipeline.SynthesizedTest` or a
+    :class:`~synthesis.synthesized_test.SynthesizedTest` or a
     :class:`~synthesis.artifacts.artifact.TestArtifact`; ``options`` are :class:`FlowTestEnv`'s
     arguments (``obs_kind``, ``max_steps``, ``render_mode``, ...). Equivalent to
     ``gymnasium.make("FlowTest-v0", test=test, **options).unwrapped``, without

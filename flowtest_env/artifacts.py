@@ -45,10 +45,9 @@ from synthesis.artifacts.artifact import TestArtifact, artifact_of, problem_sour
 from synthesis.artifacts.provenance import cache_key, versions
 from synthesis.artifacts.summary import summary_of
 from synthesis.model.errors import ProblemError
-from synthesis.pipeline import SynthesisOptions, synthesize
+from synthesis.options import SynthesisOptions
 from synthesis.problems.builtins import BUILTINS
 from synthesis.problems.files import read_limited
-from synthesis.routing.solve import backend_version
 
 from .game import TestGame
 
@@ -112,6 +111,8 @@ def synthesize_artifact(name: str, node_limit: int | None = None) -> TestArtifac
     """
     if name not in BUILTINS:
         raise KeyError(f"unknown built-in problem {name!r}; known: {', '.join(sorted(BUILTINS))}")
+    from synthesis.pipeline import synthesize  # the solvers load only when a test is synthesized
+
     options = artifact_options(node_limit, name)
     test = synthesize(BUILTINS[name](), SynthesisOptions(**options))
     # which solver made it: with ties between optimal answers, another solver or release may
@@ -127,6 +128,8 @@ SOLVER_KEY = "made_with"
 def made_with(stats: dict[str, Any]) -> dict[str, str]:
     """``{"backend": ..., "version": ...}``: the routing solver a synthesis ran (its stats
     name the one ``auto`` chose) and that solver's package version."""
+    from synthesis.routing.solve import backend_version  # the backends' table, as synthesizing loads it
+
     backend = str(stats.get("backend", "highs"))
     return {"backend": backend, "version": backend_version(backend)}
 

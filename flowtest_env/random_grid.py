@@ -60,12 +60,13 @@ from synthesis.artifacts.pool_records import rebuild_artifact, record_of
 from synthesis.artifacts.provenance import cache_key, versions
 from synthesis.artifacts.summary import summary_of
 from synthesis.model.errors import InconsistentProblem, ProblemError
-from synthesis.pipeline import SynthesisOptions, SynthesizedTest, synthesize
+from synthesis.options import SynthesisOptions
 from synthesis.problems.files import read_limited
 from synthesis.problems.limits import check_file_size
 from synthesis.problems.problem import Problem
 from synthesis.problems.random_grid import FAMILIES, MAX_ATTEMPTS, family_objectives, random_problem
 from synthesis.problems.random_worlds import AGENT_ITERATIONS, POOL_KINDS, WORLDS, first_accepted, world_problem
+from synthesis.synthesized_test import SynthesizedTest
 
 from .artifacts import cache_dir, warn_refused_entry
 
@@ -255,6 +256,8 @@ def pool_path(size: int, family: str, n: int, seed: int, kind: str, world: str =
 
 def _accept(problem: Problem) -> SynthesizedTest:
     """Synthesize a pool attempt; no test within the budget counts as no test (redraw)."""
+    from synthesis.pipeline import synthesize  # the solvers load when a pool test is synthesized, not to play one
+
     try:
         return synthesize(problem, pool_options())
     except TimeoutError as exc:

@@ -15,7 +15,7 @@ command that takes an environment gets its test from :func:`load_test`, which ac
   written (see :func:`flowtest_env.artifacts.write_cache_entry`) is a warning only;
 * an **artifact file** (``mine.json``, written by ``flowtest synthesize --out``), checked on
   load like every artifact (:func:`synthesis.artifacts.artifact.verify_artifact`);
-* a :class:`~synthesis.problems.problem.Problem`, a :class:`~synthesis.pipeline.SynthesizedTest`
+* a :class:`~synthesis.problems.problem.Problem`, a :class:`~synthesis.synthesized_test.SynthesizedTest`
   or a :class:`~synthesis.artifacts.artifact.TestArtifact` object.
 
 Every file is read through :func:`synthesis.problems.files.read_limited`: a regular file of
@@ -39,11 +39,11 @@ from synthesis.artifacts.artifact import FORMAT, TestArtifact, artifact_of, pars
 from synthesis.artifacts.provenance import content_key
 from synthesis.artifacts.summary import summary_of
 from synthesis.model.errors import ProblemError
-from synthesis.pipeline import SynthesizedTest, synthesize
 from synthesis.problems.builtins import BUILTINS
 from synthesis.problems.files import MAX_FILE_BYTES, load_problem_file, read_limited
 from synthesis.problems.limits import check_file_size
 from synthesis.problems.problem import Problem
+from synthesis.synthesized_test import SynthesizedTest
 
 from .artifacts import builtin_game, cache_dir, load_builtin, warn_refused_entry, write_cache_entry
 from .game import TestGame
@@ -69,6 +69,10 @@ def problem_cache_path(path: Path, raw: bytes) -> Path:
 
 
 def _synthesized_artifact(problem: Problem, origin: dict[str, str] | None = None) -> TestArtifact:
+    """Synthesize ``problem`` (the solvers are imported here, on the first test that needs
+    them: playing a shipped or cached test loads none) and make its artifact."""
+    from synthesis.pipeline import synthesize
+
     test = synthesize(problem)
     return artifact_of(test, summary_of(test), None if origin is None else {"origin": origin})
 

@@ -9,7 +9,10 @@ The package is split by stage; each sub-package imports only from those before i
 * :mod:`synthesis.routing` — the routing MILP, its heuristic and the HiGHS runner (§5);
 * :mod:`synthesis.checks` — the independent checks of a test (Theorems 1, 2);
 * :mod:`synthesis.test_agent` — the dynamic test agent (§7);
+* :mod:`synthesis.options` — :class:`SynthesisOptions`, what a synthesis may spend and choose;
 * :mod:`synthesis.pipeline` — :func:`synthesize`, the one entry point;
+* :mod:`synthesis.synthesized_test` — :class:`SynthesizedTest`, what it returns (it imports no
+  solver, so what only reads a test, an artifact or an environment, loads none);
 * :mod:`synthesis.artifacts` — the JSON summary, the versioned test artifact, cache keys.
 
 What is exported here is the public API; everything else may move between versions. The
@@ -25,13 +28,15 @@ if TYPE_CHECKING:
     from .model.errors import CheckFailed, FlowTestError, InconsistentProblem, ProblemError, ProblemTooLarge
     from .model.strategy import TestStrategy
     from .model.systems import TransitionSystem
-    from .pipeline import SynthesisOptions, SynthesizedTest, synthesize
+    from .options import SynthesisOptions
+    from .pipeline import synthesize
     from .problems.builtins import BUILTINS
     from .problems.files import load_problem_file
     from .problems.load import load_problem
     from .problems.problem import Problem, make_problem
     from .routing.result import RoutingResult
-    from .routing.solver_control import SolveControl
+    from .routing.solve_status import SolveControl
+    from .synthesized_test import SynthesizedTest
 
 _PUBLIC: dict[str, str] = {
     "BUILTINS": ".problems.builtins",
@@ -43,9 +48,9 @@ _PUBLIC: dict[str, str] = {
     "ProblemError": ".model.errors",
     "ProblemTooLarge": ".model.errors",
     "RoutingResult": ".routing.result",
-    "SolveControl": ".routing.solver_control",
-    "SynthesisOptions": ".pipeline",
-    "SynthesizedTest": ".pipeline",
+    "SolveControl": ".routing.solve_status",
+    "SynthesisOptions": ".options",
+    "SynthesizedTest": ".synthesized_test",
     "TestArtifact": ".artifacts.artifact",
     "TestStrategy": ".model.strategy",
     "TransitionSystem": ".model.systems",
@@ -59,7 +64,8 @@ _PUBLIC: dict[str, str] = {
 }
 """Where each public name lives: imported on first use (PEP 562), so importing one module of
 the package (say ``synthesis.routing.backends.cpsat_pool`` at the start of ``flowtest synthesize``)
-does not load all of them with NumPy, SciPy and HiGHS."""
+does not load all of them with NumPy, SciPy and HiGHS, and reading a test
+(``synthesis.artifacts.artifact``, the environments) loads no solver."""
 
 
 def __getattr__(name: str) -> Any:

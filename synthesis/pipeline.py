@@ -2,98 +2,42 @@
 
 :func:`synthesize` is the one entry point for every kind of problem; agent problems go
 through :func:`synthesize_agent_test`, which runs the counterexample-guided loop of
-:mod:`synthesis.test_agent.loop` on the same graphs and MILP options.
+:mod:`synthesis.test_agent.loop` on the same graphs and MILP options. What they return, a
+:class:`~synthesis.synthesized_test.SynthesizedTest`, is defined in
+:mod:`synthesis.synthesized_test` (and importable from here too), so that reading a test needs
+none of the solvers this module imports; its options, :class:`~synthesis.options.SynthesisOptions`,
+likewise live in :mod:`synthesis.options`.
 """
 
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field, replace
-from typing import Any
-
-import numpy as np
+from collections.abc import Callable
+from dataclasses import replace
 
 from .checks.physical import cap_count, physical_counts
-from .checks.verify import CheckReport, check_test, restricted_edges, routed_flow
+from .checks.verify import check_test, restricted_edges, routed_flow
 from .graphs.automata import SpecificationProduct
 from .graphs.products import Products
 from .model.agent_system import TestAgent
 from .model.errors import CheckFailed, InconsistentProblem, ProblemError
-from .model.option_rules import COUNT, SETTING, Rule
 from .model.strategy import TestStrategy
+from .options import SYNTHESIS_RULES as SYNTHESIS_RULES  # re-exported: the options live in synthesis.options
+from .options import SynthesisOptions as SynthesisOptions  # re-exported, as SYNTHESIS_RULES
 from .problems.diagnose import check_problem_consistency
-from .problems.limits import MAX_GRAPH_EDGES, check_size
+from .problems.limits import check_size
 from .problems.problem import Problem, build_graphs, check_caps
 from .routing.backends import cpsat
 from .routing.backends.rules import AUTO_CPSAT_MODES
 from .routing.caps.fewest import FOUND_SECONDS, FOUND_SHARE, Fewest, fewest_within, found_with
 from .routing.caps.messages import CAP_NOUNS, CapsTimeout, caps_text
 from .routing.caps.refusal import check_caps_reachable
-from .routing.options import RULES, Budgets, MilpOptions, ModelOptions, RunOptions, default_of, values_of
+from .routing.options import Budgets, MilpOptions, RunOptions, values_of
 from .routing.options import check_options as check_routing_options
 from .routing.restrictions import strategy_from_routing
-from .routing.result import RoutingResult
 from .routing.solve import solve_routing
-from .test_agent.loop import AgentSynthesis, counterexample_loop
-
-
-@dataclass(frozen=True, kw_only=True)
-class SynthesisOptions(Budgets, RunOptions):
-    """What a synthesis may spend, how it runs, and what it may choose beyond the problem.
-
-    The budgets (``time_limit``, ``after_first``, ``mip_rel_gap``, ``node_limit``,
-    ``work_limit``, ``threads``, ``random_seed``) and the run options (``backend``,
-    ``progress``, ``control``) are the routing model's own groups
-    (:class:`~synthesis.routing.options.Budgets`, :class:`~synthesis.routing.options.RunOptions`:
-    their docstrings say what each does), passed on to it by :func:`milp_options`, with two
-    fallbacks: ``time_limit=None`` is the problem's time limit, ``threads=None`` is one thread
-    (so the answer is the same on every machine). Every field is checked by
-    :func:`check_options` before any work, by the rules the routing options, problem files
-    and the command line share.
-
-    Attributes
-    ----------
-    closed_loop
-        :attr:`~synthesis.routing.options.ModelOptions.closed_loop`: also forbid restrictions that
-        trap the system off entry nodes.
-    setting
-        How reactive obstacles are shown (:data:`~synthesis.model.strategy.SETTINGS`; ``None``:
-        the problem's, else ``"instantaneous"``).
-    agent_iterations
-        Bound on the counterexample-guided loop of an agent problem (``None``: the test
-        agent's ``max_iterations``).
-    max_graph_edges
-        Refuse problems whose product graph may exceed this many edges, before building
-        anything (:mod:`synthesis.problems.limits`; ``None``: no limit).
-    caps
-        Caps on the physical restrictions a test may use (``max_walls``, ``max_doors``,
-        ``max_restrictions``); each key given here replaces the problem's (:func:`caps_of`).
-
-    Example
-    -------
-    >>> from synthesis import SynthesisOptions, load_problem, synthesize
-    >>> test = synthesize(load_problem("small-reactive"), SynthesisOptions(node_limit=10_000, caps={"max_walls": 4}))
-    >>> test.routing.status, test.caps
-    ('optimal', {'max_walls': 4})
-    """
-
-    closed_loop: bool = default_of(ModelOptions, "closed_loop")
-    setting: str | None = None
-    agent_iterations: int | None = None
-    max_graph_edges: int | None = MAX_GRAPH_EDGES
-    caps: dict[str, int] | None = None
-
-
-SYNTHESIS_RULES: Mapping[str, Rule] = {
-    **RULES,
-    "setting": SETTING,
-    "agent_iterations": COUNT,
-    "max_graph_edges": COUNT,
-    "caps": replace(RULES["caps"], optional=True),
-}
-"""The rule of each field of :class:`SynthesisOptions`: the routing options' (:data:`~synthesis.routing.options.RULES`)
-and the synthesis's own."""
+from .synthesized_test import SynthesizedTest as SynthesizedTest  # re-exported: the result lives in synthesis.synthesized_test
+from .test_agent.loop import counterexample_loop
 
 
 def check_options(options: SynthesisOptions) -> None:
@@ -116,31 +60,6 @@ def caps_of(problem: Problem, options: SynthesisOptions) -> dict[str, int]:
     caps = dict(problem.caps)
     caps.update(check_caps(options.caps or {}, " (option caps)"))
     return caps
-
-
-@dataclass(frozen=True)
-class SynthesizedTest:
-    """A synthesized, checked test: everything an environment or a report needs."""
-
-    __test__ = False
-
-    problem: Problem
-    spec: SpecificationProduct
-    products: Products
-    routing: RoutingResult
-    strategy: TestStrategy
-    checks: CheckReport
-    graph_seconds: float
-    agent: AgentSynthesis | None = None  # the test agent's synthesized strategy (agent problems)
-    extra_stats: dict[str, Any] = field(default_factory=dict)
-    caps: dict[str, int] = field(default_factory=dict)  # the caps it was synthesized under
-
-    @property
-    def cut_edges_outside_intermediate(self) -> np.ndarray:
-        """The cut set C: cut edges of G outside ``E(I)``."""
-        e = self.routing.cut_edges
-        out: np.ndarray = e[~self.products.touches_intermediate[e]]
-        return out
 
 
 def routing_mode(problem: Problem) -> str:
@@ -215,6 +134,39 @@ def remaining_time(problem: Problem, options: SynthesisOptions, spent: float, ed
     return replace(options, time_limit=limit - spent - reserve)
 
 
+def graphs_and_milp(
+    problem: Problem, options: SynthesisOptions, started: float, note: Callable[[str], None]
+) -> tuple[SpecificationProduct, Products, float, MilpOptions]:
+    """What every synthesis does before its solve: start CP-SAT's child process when the
+    ``cpsat`` backend is asked for (OR-Tools loads in it while the graphs are built), build
+    the automata and product graphs and check the problem's consistency on them
+    (:func:`~synthesis.problems.diagnose.check_problem_consistency`), and the routing MILP's
+    options with the time that is left since ``started`` (:func:`remaining_time`).
+
+    Returns
+    -------
+    tuple
+        The specification product, the product graphs, the seconds they took to build and
+        check (``SynthesizedTest.graph_seconds``) and the MILP options.
+
+    Raises
+    ------
+    InconsistentProblem
+        If the goal is unreachable or the test objective cannot be routed.
+    TimeoutError
+        If building the graphs spent the whole time limit.
+    """
+    if options.backend == "cpsat":
+        cpsat.prestart()
+    t0 = time.perf_counter()
+    note("building automata and product graphs")
+    spec, products = build_graphs(problem)
+    check_problem_consistency(problem, products)
+    graph_seconds = time.perf_counter() - t0
+    milp = milp_options(problem, remaining_time(problem, options, time.perf_counter() - started, int(products.virtual.n_edges)))
+    return spec, products, graph_seconds, milp
+
+
 def synthesize(problem: Problem, options: SynthesisOptions | None = None) -> SynthesizedTest:
     """Synthesize and check the least-restrictive test of a static, reactive or mixed problem.
 
@@ -242,16 +194,7 @@ def synthesize(problem: Problem, options: SynthesisOptions | None = None) -> Syn
     if problem.kind == "agent":
         return synthesize_agent_test(problem, options, started=started)
     note = options.progress or (lambda msg: None)
-    if options.backend == "cpsat":
-        cpsat.prestart()  # OR-Tools loads in the child while the graphs are built
-    t0 = time.perf_counter()
-    note("building automata and product graphs")
-    spec, products = build_graphs(problem)
-    check_problem_consistency(problem, products)
-    graph_seconds = time.perf_counter() - t0
-    milp = milp_options(
-        problem, remaining_time(problem, options, time.perf_counter() - started, int(products.virtual.n_edges))
-    )
+    spec, products, graph_seconds, milp = graphs_and_milp(problem, options, started, note)
     bounds: dict[str, int] = {}
     try:
         if milp.caps:
@@ -294,7 +237,7 @@ def check_caps_held(problem: Problem, strategy: TestStrategy, caps: dict[str, in
 
 
 def caps_checked(products: Products, milp: MilpOptions) -> tuple[dict[str, int], MilpOptions]:
-    """:func:`~synthesis.routing.caps.check_caps_reachable` (refuse a cap no test fits, and
+    """:func:`~synthesis.routing.caps.refusal.check_caps_reachable` (refuse a cap no test fits, and
     the lower bounds it proves), and ``milp`` with the time it took taken off its time limit,
     so the limit holds for the check and the solve together.
 
@@ -316,7 +259,7 @@ def caps_checked(products: Products, milp: MilpOptions) -> tuple[dict[str, int],
 
 def found_reserve(time_limit: float | None) -> float:
     """The seconds of a capped synthesis's time limit kept for
-    :func:`~synthesis.routing.caps.found_with` (``FOUND_SECONDS`` without a limit)."""
+    :func:`~synthesis.routing.caps.fewest.found_with` (``FOUND_SECONDS`` without a limit)."""
     return FOUND_SECONDS if time_limit is None else min(FOUND_SECONDS, FOUND_SHARE * time_limit)
 
 
@@ -325,13 +268,13 @@ def capped_timeout(
     deadline: float | None = None,
 ) -> TimeoutError:
     """A time limit that ended a capped solve before any test: ``exc`` with what is known of
-    the caps (``bounds``: the lower bounds :func:`synthesis.routing.caps.check_caps_reachable`
+    the caps (``bounds``: the lower bounds :func:`synthesis.routing.caps.refusal.check_caps_reachable`
     proved before the solve; with ``products``, the items of a test found with each cap
-    lifted, :func:`synthesis.routing.caps.found_with`, by ``deadline``: the synthesis's, a
+    lifted, :func:`synthesis.routing.caps.fewest.found_with`, by ``deadline``: the synthesis's, a
     ``perf_counter`` time, whose last share :func:`caps_checked` kept for it; ``None``:
-    :data:`~synthesis.routing.caps.FOUND_SECONDS` from now), so the user can tell a cap too tight
+    :data:`~synthesis.routing.caps.fewest.FOUND_SECONDS` from now), so the user can tell a cap too tight
     from a time limit too short and sees the band the fewest lies in; a
-    :class:`~synthesis.routing.caps.CapsTimeout` whose advice is a higher cap or time limit
+    :class:`~synthesis.routing.caps.messages.CapsTimeout` whose advice is a higher cap or time limit
     (a gap cannot help: no test was found).
 
     Example of the message: ``... no test with at most 7 walls was found, nor proven
@@ -359,10 +302,10 @@ def over_caps(
 ) -> InconsistentProblem:
     """The error to raise when the routing solve found no test: ``exc`` itself without caps
     (or when the problem has no test whatever the caps); with caps, a message that names
-    them and how many items a test needs (:func:`synthesis.routing.caps.fewest_within`):
+    them and how many items a test needs (:func:`synthesis.routing.caps.fewest.fewest_within`):
     ``no test with at most 3 doors routes ... : the fewest that does is 5 doors``. That
     solve ends by ``deadline`` (the synthesis's, a ``perf_counter`` time; ``None``: at most
-    :data:`~synthesis.routing.caps.FEWEST_SECONDS`)."""
+    :data:`~synthesis.routing.caps.fewest.FEWEST_SECONDS`)."""
     if not milp.caps or exc.reason not in ("unroutable", "infeasible") or str(exc).startswith("no test with"):
         return exc
     note("no test within the caps: finding how few restrictions a test needs")
@@ -449,16 +392,7 @@ def synthesize_agent_test(
         raise ProblemError(f"agent problem {problem.name!r} has no static area (static_moves)")
     bound = max_iterations or options.agent_iterations or agent.max_iterations
     note = options.progress or (lambda msg: None)
-    if options.backend == "cpsat":
-        cpsat.prestart()  # OR-Tools loads in the child while the graphs are built
-    t0 = time.perf_counter()
-    note("building automata and product graphs")
-    spec, products = build_graphs(problem)
-    check_problem_consistency(problem, products)
-    graph_seconds = time.perf_counter() - t0
-    milp = milp_options(
-        problem, remaining_time(problem, options, time.perf_counter() - started, int(products.virtual.n_edges))
-    )
+    spec, products, graph_seconds, milp = graphs_and_milp(problem, options, started, note)
     try:
         _, milp = caps_checked(products, milp)
         outcome = counterexample_loop(

@@ -25,7 +25,8 @@ import numpy as np
 from synthesis.pipeline import SynthesisOptions, milp_options
 from synthesis.problems.problem import build_graphs
 from synthesis.problems.random_grid import first_consistent, paper_ap
-from synthesis.routing.groups import cut_groups, model_edges
+from synthesis.routing.edges import model_edges
+from synthesis.routing.groups import cut_groups
 
 DEFAULT_CELLS = ["reaction:2:5", "reaction:3:5", "reaction:4:5", "reaction:2:10", "reaction:3:10", "reaction:4:10",
                  "reaction:4:20"]

@@ -48,10 +48,10 @@ from ..model.errors import CheckFailed, ProblemError, ProblemTooLarge
 from ..model.specs import parse_objective
 from ..model.strategy import TestStrategy
 from ..model.systems import TransitionSystem
-from ..pipeline import SynthesizedTest
 from ..problems.files import MAX_FILE_BYTES, read_limited
 from ..problems.limits import check_file_size
 from ..problems.problem import Problem
+from ..synthesized_test import SynthesizedTest
 from ..test_agent.closed_loop import verify_closed_loop
 from ..test_agent.controller import AgentController
 from .schema import validate_artifact
@@ -562,7 +562,7 @@ def artifact_agent(art: TestArtifact, where: str | None = None) -> tuple[TestAge
 
 
 def artifact_of(test: SynthesizedTest, summary: dict[str, Any], extras: Mapping[str, Any] | None = None) -> TestArtifact:
-    """The artifact of a :class:`~synthesis.pipeline.SynthesizedTest` and its summary, with
+    """The artifact of a :class:`~synthesis.synthesized_test.SynthesizedTest` and its summary, with
     ``extras`` (e.g. provenance) added to its own.
 
     Examples

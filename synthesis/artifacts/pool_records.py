@@ -13,7 +13,7 @@ and checks it as a fresh synthesis is checked: the restrictions pass
 :func:`synthesis.checks.verify.check_test` (bypass flow 0, the stated flow, a way to the goal
 from every history's entry nodes); for a test agent, the GR(1) game of the restrictions
 is solved again and its strategy checked and tabulated
-(:func:`synthesis.test_agent.realize_agent_strategy`), and the table must have the size the
+(:func:`synthesis.test_agent.realize.realize_agent_strategy`), and the table must have the size the
 record states. Everything is deterministic: one record gives one artifact on every
 machine. A record that fails raises :class:`ProblemError` naming the check.
 
@@ -60,12 +60,12 @@ from ..graphs.automata import SpecificationProduct, specification_product
 from ..graphs.products import Products, build_products, reachable
 from ..model.errors import CheckFailed, InconsistentProblem, ProblemError
 from ..model.strategy import TestStrategy
-from ..pipeline import SynthesizedTest
 from ..problems.problem import Problem, build_graphs
 from ..problems.random_worlds import world_problem
 from ..routing.restrictions import strategy_from_routing
 from ..routing.result import RoutingResult
-from ..test_agent.loop import AgentSynthesis, realize_agent_strategy
+from ..synthesized_test import SynthesizedTest
+from ..test_agent.realize import AgentSynthesis, realize_agent_strategy
 from .artifact import TestArtifact, artifact_of
 from .content import content_key
 from .summary import DERIVED_KEYS, DERIVED_STATS, derived_summary, without_timings

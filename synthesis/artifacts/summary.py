@@ -10,8 +10,8 @@ from ..checks.physical import physical_counts
 from ..graphs.automata import SpecificationProduct
 from ..graphs.products import Products
 from ..model.strategy import TestStrategy
-from ..pipeline import SynthesizedTest
 from ..problems.problem import Problem
+from ..synthesized_test import SynthesizedTest
 
 DERIVED_KEYS: tuple[str, ...] = (
     "problem", "environment", "n_walls", "n_doors", "n_one_way_walls", "physical", "cuts", "restrictions",
@@ -72,7 +72,7 @@ def derived_summary(
 
 
 def summary_of(test: SynthesizedTest) -> dict[str, Any]:
-    """The problem-format.md JSON object of a :class:`~synthesis.pipeline.SynthesizedTest`.
+    """The problem-format.md JSON object of a :class:`~synthesis.synthesized_test.SynthesizedTest`.
 
     Examples
     --------

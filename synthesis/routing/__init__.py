@@ -4,10 +4,11 @@ cuts that route every successful run through the test objective without trapping
 Layout, by role:
 
 * :mod:`.options` — :class:`~.options.MilpOptions`, the options of one solve;
-* :mod:`.groups` — what the model is built on: the cut groups, the walls and doors they stand
-  for, the model's edges of G (:func:`~.groups.cut_groups`, :func:`~.groups.model_edges`);
+* :mod:`.groups` — what the model is built on: the cut groups and the walls and doors they
+  stand for (:func:`~.groups.cut_groups`); :mod:`.edges` — the model's edges of G and the
+  routing heuristic on them (:func:`~.edges.model_edges`);
 * :mod:`.model` — the model itself, built in bulk as named column and row blocks
-  (:func:`~.model.build_model`); :mod:`.result` — the answer (:class:`~.result.RoutingResult`)
+  (:func:`~.model.build_model`), over the cut groups of :mod:`.groups`; :mod:`.result` — the answer (:class:`~.result.RoutingResult`)
   and the restrictions it puts on each history; :mod:`.traps` — the MILP's own trap search;
 * :mod:`.solve` — the one front: :func:`~.solve.solve_routing`, its lazy loop over the
   feasibility flows, and the table of backends (:data:`~.solve.SOLVERS`) it picks a solver from,
@@ -25,7 +26,8 @@ Layout, by role:
 * :mod:`.caps` — the caps on the physical restrictions: their lower bounds and the refusal of a
   cap below them, phase 1's first test within them, and the fewest restrictions a test needs
   where none fits (its package docstring gives its layout);
-* :mod:`.solver_control` — stop requests, live status and time budgets of a running solver;
+* :mod:`.solver_control` — time budgets of a running solver, and the stop requests and live
+  status it reads from :mod:`.solve_status`;
   :mod:`.restrictions` — an answer as a test strategy.
 
 **The backend contract.** Every backend is one

@@ -25,7 +25,8 @@ from .bounds.cut_bound import CutBound, static_cut_bound
 from .bounds.flow_bound import static_flow_bound
 from .bounds.heuristic import RoutingGuess, open_flow_bound
 from .bounds.reductions import Reductions, reduce_groups
-from .groups import CutGroups, ModelEdges, PhysicalItems, cut_groups, model_edges, physical_items
+from .edges import ModelEdges, model_edges
+from .groups import CutGroups, PhysicalItems, cut_groups, physical_items
 from .options import Exclusion, MilpOptions
 
 

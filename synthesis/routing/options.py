@@ -36,7 +36,7 @@ import numpy as np
 
 from ..model.option_rules import COUNT, FLAG, GAP, SECONDS, SEED, THREADS, WORK, Rule, choice, instance_of
 from ..problems.problem import CAP_KEYS, TIE_PLACES, check_caps
-from .solver_control import SolveControl
+from .solve_status import SolveControl
 
 MODES = ("static", "reactive", "mixed")
 """The routing model's modes (``MilpOptions.mode``): MILP-static, MILP-reactive, MILP-mixed."""

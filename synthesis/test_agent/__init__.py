@@ -10,7 +10,8 @@ Three words, three things (FlowTest never says plain "agent" for more than one o
   :class:`synthesis.model.agent_system.TestAgent`; this package synthesizes its strategy
   (:mod:`~synthesis.test_agent.game`, :mod:`~synthesis.test_agent.gr1`,
   :mod:`~synthesis.test_agent.loop`) and tabulates and checks its controller
-  (:mod:`~synthesis.test_agent.controller`, :mod:`~synthesis.test_agent.closed_loop`).
+  (:mod:`~synthesis.test_agent.controller`, :mod:`~synthesis.test_agent.closed_loop`,
+  :mod:`~synthesis.test_agent.realize`, which also holds the result, ``AgentSynthesis``).
 * **tester** — whoever plays ``tester_0`` against the SUT: the synthesized test (cuts, or the
   test agent's controller) or a learned tester (:mod:`agents.testers`).
 

@@ -54,7 +54,7 @@ def test_problem_file_is_synthesized_once_then_cached(cache: Path, problem_file:
     assert len(entries) == 1
     # a new process (empty memory cache) finds the disk entry and never synthesizes
     monkeypatch.setattr(sources, "_LOADED", {})
-    monkeypatch.setattr(sources, "synthesize", lambda *a, **k: pytest.fail("synthesized again"))
+    monkeypatch.setattr("synthesis.pipeline.synthesize", lambda *a, **k: pytest.fail("synthesized again"))  # where sources synthesizes
     art = flowtest_env.load_test(problem_file)
     assert art.name == "ok-grid"
     # another content is another key: synthesized again

@@ -657,7 +657,8 @@ def test_walls_block_both_ways_unless_the_problem_allows_one_way() -> None:
     out. On (the built-ins, as published) such a move may be cut alone."""
     from dataclasses import replace
 
-    from synthesis.routing.groups import cut_groups, model_edges
+    from synthesis.routing.edges import model_edges
+    from synthesis.routing.groups import cut_groups
 
     problem = load_problem("maze2")
     _, products = build_graphs(problem)

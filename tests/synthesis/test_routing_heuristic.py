@@ -27,7 +27,8 @@ from synthesis.pipeline import SynthesisOptions, milp_options, synthesize
 from synthesis.problems.problem import Problem, build_graphs
 from synthesis.problems.random_grid import first_consistent
 from synthesis.routing.bounds.heuristic import RouteSeed, RoutingGuess, Work, disjoint_routes, guess_routing, simple_route, simple_routes
-from synthesis.routing.groups import ModelEdges, cut_groups, model_edges
+from synthesis.routing.edges import ModelEdges, model_edges
+from synthesis.routing.groups import cut_groups
 from synthesis.routing.model import build_model
 from synthesis.routing.solver_control import Clock
 
@@ -110,7 +111,7 @@ def test_after_first_stops_soon_after_highs_finds_a_first_test(monkeypatch: pyte
     """Without a heuristic start, the first test comes from HiGHS's maximum-flow phase; the
     solve still ends ``after_first`` seconds after it (the interrupt callback), not at the
     overall limit."""
-    import synthesis.routing.groups as milp  # the routing MILP's model edges: where the heuristic is called
+    import synthesis.routing.edges as milp  # the routing MILP's model edges: where the heuristic is called
 
     def no_guess(n, src, eu, ev, grp, c5, has_var, target, **kw):  # type: ignore[no-untyped-def]
         g = guess_routing(n, src, eu, ev, grp, c5, has_var, target)

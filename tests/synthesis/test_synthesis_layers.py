@@ -3,7 +3,7 @@ or from layers below, at module level (no import inside a function, no ``TYPE_CH
 
 The order (synthesis/__init__.py says what each holds)::
 
-    model < graphs < problems < routing, checks < test_agent < pipeline < artifacts
+    model < graphs < problems < routing, checks < test_agent < options, synthesized_test, pipeline < artifacts
 
 ``routing`` and ``checks`` are one level and import nothing from each other
 (tests/synthesis/test_checks_independent.py).
@@ -17,7 +17,8 @@ from pathlib import Path
 import synthesis
 
 PACKAGE = Path(synthesis.__file__).parent
-LAYER = {"model": 0, "graphs": 1, "problems": 2, "routing": 3, "checks": 3, "test_agent": 4, "pipeline": 5, "artifacts": 6}
+LAYER = {"model": 0, "graphs": 1, "problems": 2, "routing": 3, "checks": 3, "test_agent": 4, "options": 5, "synthesized_test": 5, "pipeline": 5,
+         "artifacts": 6}
 
 
 def _part(parts: list[str]) -> str:

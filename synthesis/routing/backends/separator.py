@@ -29,7 +29,8 @@ from scipy.sparse.csgraph import breadth_first_order, dijkstra, maximum_flow
 
 from ...graphs.cuts import sink_side, source_side
 from ...graphs.products import Products
-from ..groups import CutGroups, ModelEdges, PhysicalItems, physical_items, static_moves_of
+from ..edges import ModelEdges
+from ..groups import CutGroups, PhysicalItems, physical_items, static_moves_of
 from ..options import MilpOptions
 from ..result import blocked_of_edges
 from ..traps import trapped_configurations, trapped_entries

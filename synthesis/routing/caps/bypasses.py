@@ -17,7 +17,8 @@ from scipy.sparse.csgraph import dijkstra
 
 from ...graphs.consistency import check_consistency
 from ...graphs.products import Products, reachable
-from ..groups import cut_groups, model_edges, physical_items
+from ..edges import model_edges
+from ..groups import cut_groups, physical_items
 from ..options import MilpOptions
 
 

@@ -49,7 +49,8 @@ import scipy.sparse as sp
 from ...graphs.consistency import check_consistency
 from ...graphs.cuts import min_cut
 from ...graphs.products import Products, reachable
-from ..groups import cut_groups, model_edges, physical_items
+from ..edges import model_edges
+from ..groups import cut_groups, physical_items
 from ..options import MilpOptions
 
 SEPARATION_CUTS = 6000
