@@ -198,3 +198,46 @@ def test_evaluate_accepts_trust_model(tmp_path: Path) -> None:
     trust_pickled_models(False)  # the flag sets it for the process; leave the next test as it found it
     assert code == 0
 
+
+@pytest.fixture
+def env_builds(monkeypatch: pytest.MonkeyPatch) -> list[str]:
+    """Every construction of a single-agent env (:class:`flowtest_env.envs.FlowTestEnv`,
+    whatever builds it: ``gymnasium.make``, :func:`flowtest_env.make_env`), by its class."""
+    from flowtest_env.envs import FlowTestEnv
+
+    built: list[str] = []
+    init = FlowTestEnv.__init__
+
+    def counting(self: FlowTestEnv, *args: object, **kwargs: object) -> None:
+        built.append(type(self).__name__)
+        init(self, *args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(FlowTestEnv, "__init__", counting)
+    return built
+
+
+def test_one_pair_of_one_episode_builds_its_test_once(tmp_path: Path, env_builds: list[str],
+                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    """``flowtest evaluate --env FlowTest-Maze2-v0 --sut scripted:replanner`` resolves its test
+    once and hands it on: the SUT check, the run, the trace picture, the test's card and the
+    report read that one env and its game (it was built five times). A failing system on the
+    same test (its filmstrip and the broken conjunct drawn too) builds nothing more."""
+    code = main(["evaluate", "--env", "FlowTest-Maze2-v0", "--sut", "scripted:replanner", "--episodes", "1",
+                 "--out", str(tmp_path / "one"), "-q"])
+    assert code == 0, capsys.readouterr().err
+    assert len(env_builds) == 1, env_builds
+    env_builds.clear()
+    code = main(["evaluate", "--env", "FlowTest-Maze2-v0", "--sut", "scripted:replanner", "random", "--episodes", "1",
+                 "--out", str(tmp_path / "two"), "-q"])
+    records = json.loads((tmp_path / "two" / "results.json").read_text())
+    assert code == 0 and [r["n_failures"] for r in records] == [0, 1]  # the failing pictures were drawn
+    assert "filmstrip" in records[1]["pictures"]
+    assert len(env_builds) == 1, env_builds
+
+
+def test_the_python_api_builds_each_test_once(tmp_path: Path, env_builds: list[str]) -> None:
+    """:func:`experiments.evaluation.evaluate` and :func:`~experiments.evaluation.write_report`
+    on two tests and two systems: one env per test, whatever the systems, runs and pictures."""
+    cells = evaluate(["small-reactive", "FlowTest-Maze2-v0"], ["scripted:replanner", "random"], episodes=2)
+    write_report(cells, tmp_path)
+    assert sorted(env_builds) == ["FlowTestEnv", "Maze2Env"], env_builds
