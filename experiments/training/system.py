@@ -137,6 +137,11 @@ def train(env_id: str, steps: int, out: str | Path, seed: int = 0, progress_bar:
     ``n_envs x n_steps``); save model, curve, summary. ``overrides`` replace entries of
     :data:`DEFAULTS`. The native trainer's entry point is :func:`train_native`.
 
+    Example::
+
+        s = train("FlowTest-Maze2-v0", 50_000, "maskable-maze2.zip", algo="maskable-ppo")
+        s["success_rate"]    # single-env evaluation runs (greedy) that met the system objective
+
     Returns
     -------
     dict

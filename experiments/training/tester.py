@@ -144,6 +144,11 @@ def train_tester(problem: str, steps: int, out: str | Path, system: str = "scrip
     """Train a tester on ``problem`` against ``system`` for ``steps`` tester steps (rounded
     up to whole rollouts); save model, curve and summary (see the module docstring).
 
+    Example::
+
+        s = train_tester("maze2", 20_480, "testers/maze2.zip", system="scripted:replanner")
+        s["fairness"]["fair"], s["realized_before_goal_rate"]   # the exhaustive check; the runs against it
+
     Returns
     -------
     dict
