@@ -1,7 +1,7 @@
 """Systems under test written outside FlowTest: a Python planner or a planner process.
 
 Two names put your own system wherever FlowTest names one (``flowtest evaluate --sut``,
-``flowtest benchmark --sut``, :func:`experiments.cli.evaluate.evaluate`):
+``flowtest benchmark --sut``, :func:`experiments.evaluation.evaluate`):
 
 * ``python:MODULE:NAME`` — ``NAME`` in the Python module ``MODULE`` (found from the current
   directory, then ``sys.path``, as ``python -m`` finds modules; ``MODULE`` may also be a

@@ -26,7 +26,7 @@ policies finds none). A SUT needs memory of its own run: the public wrapper
 :class:`flowtest_env.wrappers.VisitedPlaces` (or the env option ``memory="visited"``)
 gives it the smallest useful one, the places it has occupied since the episode began,
 taken from its own position in the observations it has seen (never the hidden history).
-:func:`experiments.cli.train.train` trains with it and records it in the model (attribute
+:func:`experiments.training.system.train` trains with it and records it in the model (attribute
 ``flowtest_memory``); :class:`PPOPolicy` rebuilds the same memory when it plays, so a
 saved model acts exactly as it was trained.
 """

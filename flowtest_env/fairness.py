@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .game import MET, GameError, RunState
+from .game import MET, GameError, RunState, TestGame
 from .multiagent import SYSTEM, raw_env
 
 TesterChoice = Callable[[raw_env], int]
@@ -219,31 +219,67 @@ def can_still_meet(
         return True
     if run.done:
         return False
-    game = env.game
     saved = env.run
     try:
-        run = _tester_turn(env, run, choose, FairnessReport()) if tester_next else run.copy()
-        seen = {_key(run)}
-        frontier = [run]
-        while frontier:
-            nxt_frontier = []
-            for r in frontier:
-                for a in np.flatnonzero(game.action_mask(r)):
-                    r2 = r.copy()
-                    game.system_step(r2, int(a))
-                    if r2.outcome == MET:
-                        return True
-                    if r2.done:
-                        continue
-                    r2 = _tester_turn(env, r2, choose, FairnessReport())
-                    k = _key(r2)
-                    if k in seen:
-                        continue
-                    if len(seen) >= max_nodes:
-                        raise SearchTooLarge(f"more than {max_nodes} reachable game states")
-                    seen.add(k)
-                    nxt_frontier.append(r2)
-            frontier = nxt_frontier
-        return False
+        start = _tester_turn(env, run, choose, FairnessReport()) if tester_next else run.copy()
+        return _meets_from(env.game, start, lambda r: _tester_turn(env, r, choose, FairnessReport()), max_nodes)
     finally:
         env.run = saved
+
+
+def can_still_meet_in_game(game: TestGame, run: RunState) -> bool:
+    """Whether some sequence of legal system moves from ``run`` meets the system objective
+    against the test as the single-agent game plays it (its restrictions per history, its
+    test agent moved by the synthesized strategy), with no step budget: the search of
+    :func:`can_still_meet` with the game's own answers. ``run`` is not changed.
+
+    The test is deterministic, so this is a search over the run states reachable from
+    ``run``. A run that ends where this is false, although the static walls alone would let
+    the system through, was trapped by the test (``flowtest evaluate`` calls it a FlowTest bug).
+    """
+    if run.outcome == MET:
+        return True
+    if run.done:
+        return False
+
+    def answer(r: RunState) -> RunState:
+        if game.has_agent:
+            game.agent_respond(r)
+        return r
+
+    return _meets_from(game, run.copy(), answer, None)
+
+
+def _meets_from(game: TestGame, start: RunState, answer: Callable[[RunState], RunState], max_nodes: int | None) -> bool:
+    """The search of :func:`can_still_meet`: breadth first over the run states at the system's
+    turn reachable from ``start`` (a live run at the system's turn), each system move followed
+    by the test's ``answer`` (a function of the run after the move); whether one meets the
+    system objective. ``max_nodes`` bounds the states explored (``None``: no bound).
+
+    Raises
+    ------
+    SearchTooLarge
+        If more than ``max_nodes`` nodes are reachable.
+    """
+    seen = {_key(start)}
+    frontier = [start]
+    while frontier:
+        nxt_frontier = []
+        for r in frontier:
+            for a in np.flatnonzero(game.action_mask(r)):
+                r2 = r.copy()
+                game.system_step(r2, int(a))
+                if r2.outcome == MET:
+                    return True
+                if r2.done:
+                    continue
+                r2 = answer(r2)
+                k = _key(r2)
+                if k in seen:
+                    continue
+                if max_nodes is not None and len(seen) >= max_nodes:
+                    raise SearchTooLarge(f"more than {max_nodes} reachable game states")
+                seen.add(k)
+                nxt_frontier.append(r2)
+        frontier = nxt_frontier
+    return False

@@ -12,6 +12,7 @@ import math
 from collections.abc import Callable
 from typing import Any, NoReturn
 
+from flowtest_env.validation import positive_int as checked_positive_int
 from synthesis.model.option_rules import Rule
 
 from .exits import EXIT_INVALID
@@ -36,6 +37,14 @@ def positive_seconds(text: str) -> float:
     if not math.isfinite(v) or v <= 0:
         raise argparse.ArgumentTypeError(f"expected a positive number of seconds, got {text!r}")
     return v
+
+
+def _integer(text: str, expected: str) -> int:
+    """``text`` as an integer; an argparse error that says ``expected`` otherwise."""
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected {expected}, got {text!r}") from None
 
 
 def seconds_at_most(maximum: float) -> Callable[[str], float]:
@@ -65,10 +74,7 @@ def int_between(low: int, high: int, what: str) -> Callable[[str], int]:
     """
 
     def parse(text: str) -> int:
-        try:
-            v = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected {what} ({low}-{high}), got {text!r}") from None
+        v = _integer(text, f"{what} ({low}-{high})")
         if not low <= v <= high:
             raise argparse.ArgumentTypeError(f"expected {what} ({low}-{high}), got {text!r}")
         return v
@@ -79,24 +85,18 @@ def int_between(low: int, high: int, what: str) -> Callable[[str], int]:
 
 def nonnegative_int(text: str) -> int:
     """An argparse type: an integer >= 0 (seeds)."""
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a non-negative integer, got {text!r}") from None
-    if v < 0:
+    if (v := _integer(text, "a non-negative integer")) < 0:
         raise argparse.ArgumentTypeError(f"expected a non-negative integer, got {text!r}")
     return v
 
 
 def positive_int(text: str) -> int:
-    """An argparse type: an integer >= 1 (episodes, steps, threads)."""
+    """An argparse type: an integer >= 1 (episodes, steps, threads), by the rule the envs
+    check their counts with (:func:`flowtest_env.validation.positive_int`)."""
     try:
-        v = int(text)
+        return checked_positive_int("value", _integer(text, "a positive integer"))
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if v <= 0:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
-    return v
 
 
 def option_type(rule: Rule) -> Callable[[str], Any]:
@@ -117,3 +117,18 @@ def option_type(rule: Rule) -> Callable[[str], Any]:
 
     parse.__name__ = f"option_type({rule.what})"
     return parse
+
+
+def add_trust_model(p: argparse.ArgumentParser, help_text: str) -> None:
+    """Declare ``--trust-model`` (loading stable-baselines3 zips, which unpickles them), with
+    what it lets the command load (``help_text``); :func:`apply_trust_model` acts on it."""
+    p.add_argument("--trust-model", action="store_true", help=help_text)
+
+
+def apply_trust_model(args: argparse.Namespace) -> None:
+    """With ``--trust-model``, let this process load stable-baselines3 zips
+    (:func:`agents.checkpoint.trust_pickled_models`); before any model is loaded."""
+    if args.trust_model:
+        from agents.checkpoint import trust_pickled_models
+
+        trust_pickled_models(True)

@@ -27,12 +27,13 @@ import warnings
 from collections.abc import Sequence
 from types import FrameType
 
+from experiments.progress import PROG, say
 from synthesis.routing.solver_control import solves_running
 
 from .arguments import ArgumentParser
 from .command import Command
 from .commands import COMMANDS
-from .exits import EXIT_INTERNAL, EXIT_INTERRUPTED, PROG, exit_code_for, flush_and_exit, say
+from .exits import EXIT_INTERNAL, EXIT_INTERRUPTED, exit_code_for, flush_and_exit
 
 _ANSI = re.compile(r"\x1b\[[0-9;]*m")
 

@@ -16,10 +16,12 @@ The command list (:data:`experiments.cli.commands.COMMANDS`) names every command
 nothing registers itself on import. ``run`` receives the parsed arguments and returns an
 exit code (:mod:`experiments.cli.exits`); it raises FlowTest's errors and
 :func:`experiments.cli.cli.main` maps them to exit codes, so a command never prints a
-traceback or calls ``sys.exit``. A command module imports the shared plumbing
-(:mod:`~experiments.cli.exits`, :mod:`~experiments.cli.arguments`, :mod:`~experiments.cli.outputs`,
-:mod:`~experiments.cli.progress`) and what it needs below it, never :mod:`experiments.cli.cli`
-or :mod:`experiments.cli.commands`.
+traceback or calls ``sys.exit``. A command module parses its arguments and calls the library
+(:mod:`experiments.evaluation`, :mod:`experiments.benchmark`, :mod:`experiments.training`, ...);
+it imports the parser's plumbing (:mod:`~experiments.cli.exits`, :mod:`~experiments.cli.arguments`),
+the shared plumbing (:mod:`experiments.outputs`, :mod:`experiments.progress`) and the library,
+never another command module, :mod:`experiments.cli.cli` or :mod:`experiments.cli.commands`
+(``tests/docs/test_import_graph.py``).
 """
 
 from __future__ import annotations

@@ -27,6 +27,7 @@ import os
 import sys
 import traceback
 
+from experiments.progress import say
 from synthesis.model.errors import CheckFailed, InconsistentProblem, ProblemError
 
 EXIT_OK = 0
@@ -37,24 +38,12 @@ EXIT_CHECK_FAILED = 4
 EXIT_TIMEOUT = 5
 EXIT_INTERRUPTED = 130
 
-PROG = "flowtest"
-"""The program name every message starts with."""
-
 INCONSISTENT_REASONS: dict[str, str] = {
     "unreachable": "the goal is unreachable",
     "unroutable": "the test objective is unroutable",
     "infeasible": "no test agent strategy is feasible",
 }
 """What each :attr:`InconsistentProblem.reason` means, for the one-line error message."""
-
-
-def say(line: str) -> None:
-    """One line on stderr, best effort (stderr may be closed)."""
-    try:
-        sys.stderr.write(line + "\n")
-        sys.stderr.flush()
-    except (OSError, ValueError):
-        pass
 
 
 def error(message: str) -> None:

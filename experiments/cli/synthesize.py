@@ -16,6 +16,9 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from experiments.human_summary import human_summary
+from experiments.outputs import check_output_path, json_safe, print_json, write_atomically
+from experiments.progress import PROGRESS_EVERY, StageProgress
 from synthesis import pipeline
 from synthesis.model.errors import ProblemError
 from synthesis.model.option_rules import GAP, SECONDS, THREADS
@@ -27,9 +30,6 @@ from synthesis.routing.solver_control import SolveControl, status_line, stdout_g
 from .arguments import option_type, positive_seconds
 from .command import Command
 from .exits import EXIT_OK
-from .human_summary import human_summary
-from .outputs import check_output_path, json_safe, print_json, write_atomically
-from .progress import PROGRESS_EVERY, StageProgress
 
 if TYPE_CHECKING:
     from synthesis.problems.problem import Problem
@@ -147,7 +147,7 @@ def run(args: argparse.Namespace) -> int:
     for path, what in outputs:  # refuse before spending time on synthesis
         check_output_path(path, args.force, what)
     if args.plot is not None:
-        from .plots import check_plot_format
+        from experiments.plots import check_plot_format
 
         check_plot_format(args.plot)
 
@@ -202,7 +202,7 @@ def _synthesize(args: argparse.Namespace, problem: Problem) -> int:
             write_atomically(args.out, artifact_of(test, summary).save)
         if args.plot is not None:
             progress(f"drawing {args.plot}")
-            from .plots import plot_test
+            from experiments.plots import plot_test
 
             check_output_path(args.plot, args.force, "plot")
             write_atomically(args.plot, lambda tmp: plot_test(test, tmp))

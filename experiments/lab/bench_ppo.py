@@ -2,7 +2,7 @@
 met in at least 95 % of 100 evaluation runs; print the steps and wall time it took.
 
 Trains in rounds of ``--chunk`` time steps (one model, training continued), evaluating
-after each round, up to ``--max-steps``. The settings are :data:`experiments.cli.train.DEFAULTS`
+after each round, up to ``--max-steps``. The settings are :data:`experiments.training.settings.DEFAULTS`
 (the ones ``flowtest train`` uses); ``--set KEY=VALUE`` changes one (a JSON value), e.g.
 ``--set memory='"none"'`` or ``--set shaping=0`` for the ablations in docs/benchmarks.md.
 The wall time counts training only; evaluation runs are timed apart.
@@ -34,7 +34,8 @@ def main(argv: list[str] | None = None) -> int:
                    help="override one training setting (JSON value), e.g. --set n_envs=1")
     args = p.parse_args(argv)
 
-    from experiments.cli.train import DEFAULTS, make_model, make_training_vec_env, success_rate
+    from experiments.training.settings import DEFAULTS
+    from experiments.training.system import make_model, make_training_vec_env, success_rate
 
     settings = dict(DEFAULTS)
     for item in args.set:

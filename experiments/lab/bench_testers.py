@@ -35,13 +35,13 @@ SUTS = ["scripted:replanner", "gr1", "scripted:committed", "scripted:fuel-blind"
 
 
 def witness_trace(problem: str, tester: str, env_id: str, kind: str = "trap", extra_steps: int = 20) -> Any:
-    """A :class:`experiments.cli.episodes.Trace` of the exhaustive search's shortest witness
+    """A :class:`experiments.evaluation.episodes.Trace` of the exhaustive search's shortest witness
     against ``tester``: into its first trap (``kind="trap"``; then the correct replanner
     tries for ``extra_steps`` steps from there), or a run that meets the system objective
     without the test objective (``kind="bypass"``). ``None`` if there is no such run."""
     from agents.registry import make_policy
     from agents.testers import VersusTesterEnv
-    from experiments.cli.episodes import Trace
+    from experiments.evaluation.episodes import Trace
     from flowtest_env.fairness import check_tester
 
     env = VersusTesterEnv(problem, tester, max_steps=10_000)
@@ -75,8 +75,8 @@ def draw(out: Path, figures: Path | None, seed: int) -> None:
     correct replanner's run against the synthesized test of the same problem."""
     import flowtest_env
     from agents.testers import problem_of
-    from experiments.cli.episodes import make_tester_env, run_episode, sut_policy
-    from experiments.cli.trace_picture import trace_picture
+    from experiments.evaluation.episodes import make_tester_env, run_episode, sut_policy
+    from experiments.evaluation.trace_picture import trace_picture
 
     tester = f"ppo:{out / 'testers'}"
     for problem in PROBLEMS:
@@ -106,7 +106,7 @@ def draw(out: Path, figures: Path | None, seed: int) -> None:
 def seed_study(out: Path, seeds: list[int], steps: int, trap_penalty: float = 0.0) -> str:
     """Train a tester per problem and seed (no evaluation) and tabulate the exhaustive
     checks: how much of what a learned tester is depends on its seed."""
-    from experiments.cli.train_tester import train_tester
+    from experiments.training.tester import train_tester
 
     lines = ["| problem | " + " | ".join(f"seed {s}: trap states / bypass moves" for s in seeds) + " |",
              "|---|" + "---|" * len(seeds)]
@@ -146,9 +146,10 @@ def main(argv: list[str] | None = None) -> int:
         return 0
 
     from agents.testers import problem_of
-    from experiments.cli.evaluate import TESTER_COLUMNS, evaluate, tester_comparison_rows, write_report
-    from experiments.cli.train import train
-    from experiments.cli.train_tester import train_tester
+    from experiments.evaluation import evaluate, write_report
+    from experiments.evaluation.results import TESTER_COLUMNS, tester_comparison_rows
+    from experiments.training.system import train
+    from experiments.training.tester import train_tester
 
     out: Path = args.out
     testers = out / "testers"

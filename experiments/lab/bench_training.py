@@ -61,7 +61,8 @@ def native_row(name: str, pool: dict[str, Any], steps: int, net: list[int], back
 
 def sb3_row(name: str, pool: dict[str, Any], steps: int, net: list[int], settings: dict[str, Any]) -> dict[str, Any]:
     """MaskablePPO's steps per second (``model.learn`` only)."""
-    from experiments.cli.train import DEFAULTS, make_model, make_training_vec_env
+    from experiments.training.settings import DEFAULTS
+    from experiments.training.system import make_model, make_training_vec_env
 
     s = {**DEFAULTS, "net_arch": list(net), "shaping": 0.0, "memory": "visited", **settings}
     env = make_training_vec_env(POOL_ENV_ID, 0, s, pool)

@@ -25,6 +25,9 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from experiments.benchmark.table import interval_text, worst_text
+from experiments.formatting import MISSING, percent
+
 ROOT = Path(__file__).resolve().parents[2]
 RESULTS_DIR = ROOT / "docs" / "leaderboard"
 PAGE = ROOT / "docs" / "leaderboard.md"
@@ -111,22 +114,6 @@ def load_entries(results: Path = RESULTS_DIR) -> list[dict[str, Any]]:
     return entries
 
 
-def _norm(n: dict[str, Any] | None) -> str:
-    if not n or n.get("iqm") is None:
-        return "–"
-    return f"{n['iqm']:.2f} [{n['low']:.2f}, {n['high']:.2f}]"
-
-
-def _pct(x: float | None) -> str:
-    return "–" if x is None else f"{100 * x:.1f} %"
-
-
-def _worst(m: dict[str, Any] | None) -> str:
-    if not m or m["normalized"].get("worst10") is None:
-        return "–"
-    return f"{m['normalized']['worst10']:.2f} ({100 * m['normalized']['worst10_met']:.1f} % met)"
-
-
 COLUMNS = ["system", "kind", "seeds", "held-out normalized, greedy: IQM [95 % CI]", "held-out normalized, sampled",
            "held-out met, greedy", "held-out met, sampled", "worst 10 % held-out", "train met"]
 
@@ -140,22 +127,22 @@ def entry_markdown(e: dict[str, Any]) -> list[str]:
              f"{sp['test']['count']:,}; {len(cfg['seeds'])} training seeds; {cfg['steps']:,} steps per run "
              f"({budget['training_runs']} runs, {budget['training_steps']:,} steps; trainer {cfg['trainer']}); "
              f"{cfg['runs']} sampled runs per test; floor (random) / ceiling on the held-out tests: "
-             f"{_pct(e['scale']['test']['floor'])} / {_pct(e['scale']['test']['ceiling'])}.", "",
+             f"{percent(e['scale']['test']['floor'], 1)} / {percent(e['scale']['test']['ceiling'], 1)}.", "",
              "| " + " | ".join(COLUMNS) + " |", "|" + "---|" * len(COLUMNS)]
     for s in sorted(e["systems"], key=lambda s: (KIND_ORDER.get(s["kind"], 9), s["name"])):
         te = s.get("test") or {}
         g, sm = te.get("greedy"), te.get("sampled")
-        seeds = str(len(s["seeds"])) if s["kind"] == "baseline" else "–"
+        seeds = str(len(s["seeds"])) if s["kind"] == "baseline" else MISSING
         lines.append("| " + " | ".join([
-            s["name"], s["kind"], seeds, _norm(g["normalized"] if g else None), _norm(sm["normalized"] if sm else None),
-            _pct(g["met"] if g else None), _pct(sm["met"] if sm else None), _worst(g or sm),
-            _pct((s.get("train") or {}).get("met"))]) + " |")
+            s["name"], s["kind"], seeds, interval_text(g["normalized"] if g else None),
+            interval_text(sm["normalized"] if sm else None), percent(g["met"] if g else None, 1),
+            percent(sm["met"] if sm else None, 1), worst_text(g or sm), percent((s.get("train") or {}).get("met"), 1)]) + " |")
     if e.get("generalization"):
         lines += ["", "Generalization curve (held-out normalized score, IQM [95 % CI]):", "",
                   "| training tests | seeds | greedy | sampled | train met |", "|---|---|---|---|---|"]
         for p in e["generalization"]:
-            lines.append(f"| {p['train_tests']:,} | {len(p['seeds'])} | {_norm(p['greedy'])} | {_norm(p['sampled'])} | "
-                         f"{_pct(p['train_met'])} |")
+            lines.append(f"| {p['train_tests']:,} | {len(p['seeds'])} | {interval_text(p['greedy'])} | "
+                         f"{interval_text(p['sampled'])} | {percent(p['train_met'], 1)} |")
     m = e.get("machine") or {}
     secs = (e.get("seconds") or {}).get("total")
     lines += ["", f"Command: `{e['command']}`  ", f"Commit: `{(e['commit'] or 'unknown')[:12]}`; machine: "

@@ -9,7 +9,7 @@ import pytest
 import flowtest_env
 from agents.base import Policy, PolicyError
 from agents.registry import make_policy
-from experiments.cli.episodes import run_episode
+from experiments.evaluation.episodes import run_episode
 from flowtest_env.artifacts import artifact_path
 
 SHIPPED_IDS = [
@@ -98,7 +98,7 @@ def test_ppo_smoke_training_learns_saves_model_curve_and_loads_as_sut(tmp_path) 
     pytest.importorskip("sb3_contrib")
     import json
 
-    from experiments.cli.train import train
+    from experiments.training.system import train
 
     s = train("FlowTest-SmallReactive-v0", 2048, tmp_path / "m.zip", seed=0, progress_bar=True,
               eval_episodes=3, n_envs=4, n_steps=64, batch_size=128)
@@ -141,7 +141,7 @@ def test_policy_memory_matches_the_training_wrapper() -> None:
 
 def test_ppo_model_for_another_observation_shape_is_refused(tmp_path) -> None:
     pytest.importorskip("sb3_contrib")
-    from experiments.cli.train import train
+    from experiments.training.system import train
 
     train("FlowTest-SmallReactive-v0", 64, tmp_path / "m.zip", seed=0, progress_bar=False, eval_episodes=0,
           n_envs=1, n_steps=64, batch_size=64, n_epochs=1)
@@ -155,7 +155,7 @@ def test_ppo_learns_maze2() -> None:
     pytest.importorskip("sb3_contrib")
     import tempfile
 
-    from experiments.cli.train import train
+    from experiments.training.system import train
 
     with tempfile.TemporaryDirectory() as tmp:
         s = train("FlowTest-Maze2-v0", 16_384, f"{tmp}/m.zip", seed=0, progress_bar=False, eval_episodes=100)

@@ -116,7 +116,7 @@ def test_documented_planners_run_from_the_cli_with_a_report_and_replay_commands(
 
 
 def test_replay_of_a_python_planner_runs_from_its_folder(project: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    from experiments.cli.evaluate import replay_command
+    from experiments.evaluation.runs import replay_command
 
     command = replay_command("warehouse.toml", "python:bfs_planner:BfsPlanner", 4)
     assert main(replay_args(command, project)) == 0
@@ -164,7 +164,7 @@ EXPECTED = {
 
 
 def test_crashing_hanging_and_lying_planners_fail_their_run_and_the_others_go_on(project: Path) -> None:
-    from experiments.cli.evaluate import evaluate
+    from experiments.evaluation.runs import evaluate
 
     for name, body in BAD_PLANNERS.items():
         write(project, name, body)
@@ -212,7 +212,7 @@ def test_hanging_python_planners_fail_their_run_and_the_others_go_on(project: Pa
     """A ``python:`` planner runs in FlowTest's process; one that loops, sleeps or swallows
     exceptions past ``--step-timeout`` fails its run with the reason (a walker once waited
     ten minutes on one, and Ctrl-C lost the pairs already played)."""
-    from experiments.cli.evaluate import evaluate
+    from experiments.evaluation.runs import evaluate
 
     write(project, "hangs.py", PYTHON_HANGS)
     suts = [f"python:hangs:{name}" for name in ("spin", "sleepy", "stubborn", "SlowReset")] + ["python:bfs_planner:BfsPlanner"]
@@ -241,7 +241,7 @@ def test_a_timer_the_caller_armed_is_left_alone(project: Path) -> None:
     import signal
 
     from agents.registry import make_policy
-    from experiments.cli.episodes import make_env
+    from experiments.evaluation.episodes import env_named as make_env
 
     env = make_env("warehouse.toml")
     policy = make_policy("python:bfs_planner:BfsPlanner", env, step_timeout=0.05)
@@ -353,7 +353,7 @@ def test_a_module_that_raises_on_import_is_one_error_line(project: Path, capsys:
 
 
 def test_python_api_takes_planner_objects(project: Path) -> None:
-    from experiments.cli.evaluate import NOT_REPLAYABLE, evaluate
+    from experiments.evaluation.runs import NOT_REPLAYABLE, evaluate
 
     sys.path.insert(0, str(project))
     from bfs_planner import BfsPlanner  # type: ignore[import-not-found]
@@ -371,7 +371,7 @@ def test_python_api_takes_planner_objects(project: Path) -> None:
 
 
 def test_a_python_planner_that_raises_or_lies_fails_its_run(project: Path) -> None:
-    from experiments.cli.evaluate import evaluate
+    from experiments.evaluation.runs import evaluate
 
     def raises(observation: dict[str, Any], mask: object) -> int:
         if observation["step"] == 2:
@@ -390,7 +390,7 @@ def test_a_python_planner_that_raises_or_lies_fails_its_run(project: Path) -> No
 
 def test_benchmark_scores_a_planner_process_through_make_policy(project: Path) -> None:
     """``flowtest benchmark`` scores other systems through make_policy (no change there)."""
-    from experiments.cli.benchmark import Split, score_systems
+    from experiments.benchmark import Split, score_systems
     from flowtest_env.artifacts import load_builtin
 
     art = load_builtin("small-reactive")
@@ -412,7 +412,7 @@ def test_a_factory_that_raises_is_one_error_line(project: Path, capsys: pytest.C
 
 
 def test_a_planner_that_writes_unasked_lines_fails_its_run(project: Path) -> None:
-    from experiments.cli.evaluate import evaluate
+    from experiments.evaluation.runs import evaluate
 
     write(project, "banner.py", "import sys\nprint('BFS planner v2 ready', flush=True)\n"
                                 "for line in sys.stdin:\n    if '\"step\"' in line[:20]:\n        print('stay', flush=True)\n")

@@ -189,7 +189,7 @@ def test_a_broken_native_checkpoint_is_one_error_line_as_a_sut(tmp_path: Path, c
 
 
 def test_the_demo_refuses_a_pickled_model_it_did_not_make(tmp_path: Path) -> None:
-    from experiments.cli.demo import check_demo_model
+    from experiments.demo import check_demo_model
 
     folder = tmp_path / "evaluation"
     folder.mkdir()

@@ -157,7 +157,7 @@ def test_a_seed_gives_the_same_run_and_the_checkpoint_plays_it(tmp_path: Path, a
     assert ca.settings["training"]["seed"] == 0 and ca.settings["n_actions"] == a.agent.n_actions
     # the greedy score the trainer measured is the score of the saved file, played one env at a time
     from agents.registry import make_policy
-    from experiments.cli.episodes import run_episode
+    from experiments.evaluation.episodes import run_episode
 
     env = gym.make("FlowTest-SmallReactive-v0")
     policy = make_policy(f"ppo:{tmp_path / 'a.zip'}", env)

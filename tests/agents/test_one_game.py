@@ -118,7 +118,7 @@ def test_each_step_says_what_is_restricted_and_why(planners: Path, test: str) ->
 def test_the_hello_has_version_2() -> None:
     from agents.base import game_of
     from agents.planner_protocol import Messages
-    from experiments.cli.episodes import make_env
+    from experiments.evaluation.episodes import env_named as make_env
 
     hello = Messages(make_env("example1")).hello()
     assert (hello["protocol"], hello["version"]) == ("flowtest-planner", 2)

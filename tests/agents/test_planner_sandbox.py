@@ -219,7 +219,7 @@ def test_parse_answer_takes_names_and_small_indices_only() -> None:
 
     from agents.base import game_of
     from agents.external import PlannerError, parse_answer
-    from experiments.cli.episodes import make_env
+    from experiments.evaluation.episodes import env_named as make_env
 
     game = game_of(make_env("small-reactive"))
     mask = np.ones(game.n_actions, dtype=np.int8)
@@ -307,7 +307,7 @@ def test_the_step_timeout_has_its_range_from_python_too() -> None:
     from agents.base import PolicyError
     from agents.registry import make_policy
     from experiments.cli import evaluate
-    from experiments.cli.episodes import make_env
+    from experiments.evaluation.episodes import env_named as make_env
 
     assert (evaluate.DEFAULT_STEP_TIMEOUT, evaluate.MAX_STEP_TIMEOUT) == (external.DEFAULT_STEP_TIMEOUT, external.MAX_STEP_TIMEOUT)
     env = make_env("small-reactive")
@@ -332,7 +332,7 @@ def checked(observation, mask):
 def test_a_python_planner_gets_what_the_docs_promise(folder: Path) -> None:
     from agents.external import PythonPlanner
     from agents.registry import make_policy
-    from experiments.cli.episodes import make_env
+    from experiments.evaluation.episodes import env_named as make_env
 
     (folder / "promises.py").write_text(PROMISES)
     env = make_env("small-reactive")

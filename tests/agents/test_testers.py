@@ -85,7 +85,8 @@ def test_fairness_check_finds_a_trap_reached_only_by_some_system_moves() -> None
 
 
 def test_versus_env_with_the_synthesized_tester_matches_the_single_agent_env() -> None:
-    from experiments.cli.episodes import make_env, run_episode
+    from experiments.evaluation.episodes import env_named as make_env
+    from experiments.evaluation.episodes import run_episode
 
     for env_id in ("FlowTest-Maze2-v0", "FlowTest-SmallReactive-v0"):
         single = make_env(env_id)
@@ -132,7 +133,7 @@ def learned(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A folder of learned testers for maze2 and small-reactive (tiny training budgets:
     what they learned does not matter here, only that they load and play by the rules)."""
     pytest.importorskip("sb3_contrib")
-    from experiments.cli.train_tester import train_tester
+    from experiments.training.tester import train_tester
 
     folder = tmp_path_factory.mktemp("testers")
     for problem in ("maze2", "small-reactive"):
@@ -177,7 +178,8 @@ def test_learned_tester_of_another_problem_is_refused(learned: Path) -> None:
     with pytest.raises(PolicyError, match="trained on 'maze2'"):
         VersusTesterEnv("small-reactive", f"ppo:{learned / 'maze2'}.zip")
     with pytest.raises(PolicyError, match="is not a tester"):
-        from experiments.cli.train import DEFAULTS, make_model, make_training_vec_env
+        from experiments.training.settings import DEFAULTS
+        from experiments.training.system import make_model, make_training_vec_env
 
         sut_model = make_model(make_training_vec_env("FlowTest-Maze2-v0", 0, {**DEFAULTS, "n_envs": 1}), DEFAULTS, 0)
         from agents.testers import PPOTester

@@ -278,6 +278,54 @@ def test_packages_import_one_way(graph: list[Edge]) -> None:
     assert not upward, "imports against the package order:\n  " + "\n  ".join(map(str, upward))
 
 
+CLI = "experiments.cli"
+"""The command line: the console script, the parser, its plumbing and one module per command."""
+
+
+def command_modules() -> set[str]:
+    """The modules of ``experiments/cli`` that hold a command: those whose source assigns
+    ``COMMAND`` (:class:`experiments.cli.command.Command`, one per module), read from the source."""
+    found = set()
+    for module, path in module_files().items():
+        if not module.startswith(CLI + "."):
+            continue
+        tree = ast.parse(path.read_text(), filename=str(path))
+        for node in tree.body:
+            targets = node.targets if isinstance(node, ast.Assign) else [node.target] if isinstance(node, ast.AnnAssign) else []
+            if any(isinstance(t, ast.Name) and t.id == "COMMAND" for t in targets):
+                found.add(module)
+    return found
+
+
+def command_crossings(edges: list[Edge], commands: set[str]) -> list[Edge]:
+    """The imports of one command module by another (a command's library belongs outside
+    ``experiments/cli``, where every command and user can import it)."""
+    return [e for e in edges if e.source in commands and e.target in commands and e.source != e.target]
+
+
+def test_command_modules_do_not_import_each_other(graph: list[Edge]) -> None:
+    """Each command module parses its arguments, calls the library and maps errors to exit
+    codes: ``demo`` and ``benchmark`` import ``experiments.evaluation`` and
+    ``experiments.training``, never ``experiments.cli.evaluate`` or ``experiments.cli.train``.
+    The check itself finds a crossing when there is one."""
+    commands = command_modules()
+    assert {f"{CLI}.{name}" for name in ("synthesize", "demo", "evaluate", "train", "train_tester", "benchmark", "serve")} <= commands
+    crossings = command_crossings(graph, commands)
+    assert not crossings, "command modules import other command modules:\n  " + "\n  ".join(map(str, crossings))
+    fake = [Edge(f"{CLI}.demo", f"{CLI}.evaluate", "experiments/cli/demo.py", 3, False),
+            Edge(f"{CLI}.demo", f"{CLI}.arguments", "experiments/cli/demo.py", 4, False)]
+    assert command_crossings(fake, commands) == fake[:1]
+
+
+def test_the_library_does_not_import_the_command_line(graph: list[Edge]) -> None:
+    """The library lies under the command line: no product module outside ``experiments/cli``
+    imports one inside it (``python -m experiments``, which runs the command line, aside; the
+    lab's measurement scripts may drive the command line as a user does)."""
+    drivers = ("experiments.__main__", "experiments.lab")
+    upward = [e for e in graph if e.target.startswith(CLI) and not e.source.startswith((CLI, *drivers))]
+    assert not upward, "modules outside experiments/cli import it:\n  " + "\n  ".join(map(str, upward))
+
+
 def test_synthesis_does_not_import_the_environment_libraries() -> None:
     """``synthesis`` computes tests; Gymnasium, PettingZoo and the learners are the other
     packages' business (docs/architecture.md)."""

@@ -1,7 +1,7 @@
 """The method the code cites is in the repository, and every citation resolves.
 
 Docstrings and comments of the product code (``synthesis``, ``flowtest_env``, ``agents``,
-``experiments/cli``, ``experiments/tools``) cite ``docs/method.md §N``, the constraints of the
+``experiments`` but its lab) cite ``docs/method.md §N``, the constraints of the
 routing MILP (``c1`` .. ``c14``), the test agent's assumptions and guarantees (``a1`` .. ``a5``,
 ``g1`` .. ``g8``), ``docs/method.md#anchor`` and the method's notation (``G_sys``, ``Gr(q)``,
 ``T_TA``, ...). Each must name a section, label or definition that docs/method.md has, under an
@@ -28,7 +28,9 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
 METHOD = ROOT / "docs" / "method.md"
-PRODUCT = ("synthesis", "flowtest_env", "agents", "experiments/cli", "experiments/tools")
+PRODUCT = ("synthesis", "flowtest_env", "agents", "experiments")
+LAB = ROOT / "experiments" / "lab"
+"""The measurement scripts (not installed, not product code)."""
 
 #: Labels docs/method.md must define: the routing MILP's constraints, the GR(1) game's
 #: assumptions on the SUT and the test agent's guarantees.
@@ -163,7 +165,7 @@ def check_history(path: str, source: str) -> list[str]:
 
 
 def product_modules() -> list[Path]:
-    files = sorted(p for top in PRODUCT for p in (ROOT / top).rglob("*.py"))
+    files = sorted(p for top in PRODUCT for p in (ROOT / top).rglob("*.py") if LAB not in p.parents)
     assert len(files) > 50, f"found only {len(files)} product modules under {PRODUCT}"
     return files
 

@@ -58,8 +58,11 @@ ENTRY_POINTS: tuple[str, ...] = (
     "agents.external.planner_policy",
     "agents.native_ppo.train",
     "agents.checkpoint.trust_pickled_models",
-    # the command line's Python API
-    "experiments.cli.evaluate.evaluate",
+    # the library under the command line: evaluation and the benchmark protocol
+    "experiments.evaluation.evaluate",
+    "experiments.evaluation.write_report",
+    "experiments.evaluation.replay",
+    "experiments.benchmark.benchmark",
 )
 """The dotted names of the public entry points, each of which must carry a running example."""
 

@@ -17,9 +17,11 @@ import numpy as np
 import pytest
 
 from agents.checkpoint import mark_own_file
-from experiments.cli import benchmark as bench
+from experiments import benchmark as bench
+from experiments.benchmark import training_runs
 from experiments.cli.cli import main
-from experiments.cli.episodes import Trace
+from experiments.evaluation.episodes import Trace
+from synthesis.model.errors import ProblemError
 from tests.testing_processes import start_until
 
 pytest.importorskip("sb3_contrib")
@@ -155,7 +157,7 @@ def test_batch_evaluation_gives_the_single_env_verdicts(tmp_path: Path, algo: st
     """The learning curves' batch evaluation (one PoolVectorEnv, every test at once) gives
     exactly the verdicts of the single env that scores the systems and replays their runs,
     with the memory wrapper (MaskablePPO) and with an LSTM state (RecurrentPPO)."""
-    from experiments.cli.train import make_model, make_training_vec_env
+    from experiments.training.system import make_model, make_training_vec_env
 
     config = bench.BenchmarkConfig(POOL, suts=("ppo",), algos=(algo,), train_count=5, test_count=5, validation_count=2)
     splits = bench.load_splits(config, tmp_path, progress=False)
@@ -166,7 +168,7 @@ def test_batch_evaluation_gives_the_single_env_verdicts(tmp_path: Path, algo: st
     model.save(str(path))
     mark_own_file(path)  # written by this test: scored without --trust-model
     for split in splits.values():
-        games, budgets = bench._games_and_budgets(split)
+        games, budgets = bench.games_and_budgets(split)
         batch = bench.batch_verdicts(model, games, settings["memory"], budgets)
         single = bench.score_systems([f"ppo:{path}"], split)[f"ppo:{path}"]
         for key in ("system_objective", "test_objective_realized", "restrictions", "steps"):
@@ -284,7 +286,7 @@ def test_a_standard_pool_id_is_accepted_and_the_command_reruns_the_config() -> N
     the default."""
     config = bench.BenchmarkConfig("reachability1/5x5-v1", suts=("scripted:replanner",))
     bench.check_config(config)  # no error
-    with pytest.raises(bench.ProblemError, match="not a standard pool"):
+    with pytest.raises(ProblemError, match="not a standard pool"):
         bench.check_config(bench.BenchmarkConfig("nosuch1/5x5-v1"))
     assert bench.command_of(bench.BenchmarkConfig(POOL)) == f"flowtest benchmark --pool {POOL} --out OUT"
     small = bench.BenchmarkConfig(POOL, seeds=(0, 1), steps=5000, curve_sizes=(), algos=("plr-ppo",))
@@ -309,7 +311,7 @@ def test_the_defaults_take_a_standard_pools_whole_smaller_split(monkeypatch: pyt
 
     def stop(config: bench.BenchmarkConfig) -> None:
         seen.append(config)
-        raise bench.ProblemError("stopped here")
+        raise ProblemError("stopped here")
 
     monkeypatch.setattr(bench, "check_config", stop)
     assert main(["benchmark", "--pool", agent, "--out", str(tmp_path / "a")]) == 2
@@ -323,7 +325,7 @@ def test_curve_sizes_not_below_the_train_count_are_said_to_be_left_out(
     monkeypatch: pytest.MonkeyPatch, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     def stop(config: bench.BenchmarkConfig, *args: object, **kwargs: object) -> None:
-        raise bench.ProblemError("stopped here")
+        raise ProblemError("stopped here")
 
     monkeypatch.setattr(bench, "run_benchmark", stop)
     assert main(["benchmark", "--pool", POOL, "--train-count", "4", "--curve-sizes", "2", "16", "32",
@@ -347,7 +349,7 @@ def test_sb3_trains_on_the_standard_pools_shipped_records(monkeypatch: pytest.Mo
         asked.update(pool_options)
         raise Stop
 
-    monkeypatch.setattr(bench, "make_training_vec_env", capture)
+    monkeypatch.setattr(training_runs, "make_training_vec_env", capture)
     config = bench.BenchmarkConfig("reachability1/5x5-v1", trainer="sb3", train_count=16)
     with pytest.raises(Stop):
         bench.train_baseline(config, "maskable-ppo", 0, {}, tmp_path, train_tests=16)

@@ -26,7 +26,7 @@ from experiments.cli import cli
 from experiments.cli.cli import main
 from experiments.cli.command import Command
 from experiments.cli.commands import COMMANDS
-from experiments.cli.progress import StageProgress
+from experiments.progress import StageProgress
 from synthesis import pipeline
 from synthesis.artifacts.artifact import TestArtifact
 from synthesis.model.errors import CheckFailed, InconsistentProblem

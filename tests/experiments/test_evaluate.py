@@ -12,8 +12,9 @@ import pytest
 
 from agents.registry import make_policy
 from experiments.cli.cli import main
-from experiments.cli.episodes import can_still_meet, run_episode
-from experiments.cli.evaluate import evaluate, replay, write_report
+from experiments.evaluation import evaluate, replay, write_report
+from experiments.evaluation.episodes import run_episode
+from flowtest_env.fairness import can_still_meet_in_game as can_still_meet
 from flowtest_env.game import TestGame
 
 FAULTY_CASES = [
@@ -100,7 +101,7 @@ def test_open_run_with_a_way_left_is_the_suts_failure() -> None:
 
 
 def test_trapped_runs_are_reported_loudly(tmp_path: Path) -> None:
-    from experiments.cli.evaluate import Cell
+    from experiments.evaluation.runs import Cell
 
     env_id = "FlowTest-SmallReactive-v0"
     env = _trapping_env(env_id, free=int(gym.make(env_id).unwrapped.game.ts.initial))
@@ -150,7 +151,7 @@ def test_unknown_sut_is_invalid_input(tmp_path: Path, capsys: pytest.CaptureFixt
 
 
 def test_replay_command_quotes_a_model_path_with_spaces() -> None:
-    from experiments.cli.evaluate import replay_command
+    from experiments.evaluation.runs import replay_command
 
     cmd = replay_command("FlowTest-Maze2-v0", "ppo:/tmp/my models/m.zip", 7)
     assert shlex.split(cmd)[4:6] == ["--sut", "ppo:/tmp/my models/m.zip"]
@@ -158,7 +159,7 @@ def test_replay_command_quotes_a_model_path_with_spaces() -> None:
 
 def test_demo_evaluation_includes_a_ppo_system(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     pytest.importorskip("sb3_contrib")
-    import experiments.cli.demo as ev
+    import experiments.demo as ev
 
     monkeypatch.setattr(ev, "DEMO_PPO_STEPS", 256)  # the demo trains 16384 steps; here only the plumbing
     report = ev.run_evaluation_demo(tmp_path, episodes=1)
@@ -173,7 +174,7 @@ def test_demo_evaluation_includes_a_ppo_system(tmp_path: Path, monkeypatch: pyte
 @pytest.mark.slow
 def test_demo_ppo_system_passes_maze2(tmp_path: Path) -> None:
     pytest.importorskip("sb3_contrib")
-    from experiments.cli.demo import run_evaluation_demo
+    from experiments.demo import run_evaluation_demo
 
     run_evaluation_demo(tmp_path, episodes=2)
     records = json.loads((tmp_path / "results.json").read_text())
@@ -182,7 +183,7 @@ def test_demo_ppo_system_passes_maze2(tmp_path: Path) -> None:
 
 
 def test_replay_commands_carry_trust_model_for_trusted_model_zips() -> None:
-    from experiments.cli.evaluate import replay_command
+    from experiments.evaluation.runs import replay_command
 
     trusted = replay_command("FlowTest-Maze2-v0", "ppo:m.zip", 7, trust_model=True)
     assert "--trust-model" in shlex.split(trusted)
@@ -196,3 +197,47 @@ def test_evaluate_accepts_trust_model(tmp_path: Path) -> None:
 
     trust_pickled_models(False)  # the flag sets it for the process; leave the next test as it found it
     assert code == 0
+
+
+@pytest.fixture
+def env_builds(monkeypatch: pytest.MonkeyPatch) -> list[str]:
+    """Every construction of a single-agent env (:class:`flowtest_env.envs.FlowTestEnv`,
+    whatever builds it: ``gymnasium.make``, :func:`flowtest_env.make_env`), by its class."""
+    from flowtest_env.envs import FlowTestEnv
+
+    built: list[str] = []
+    init = FlowTestEnv.__init__
+
+    def counting(self: FlowTestEnv, *args: object, **kwargs: object) -> None:
+        built.append(type(self).__name__)
+        init(self, *args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(FlowTestEnv, "__init__", counting)
+    return built
+
+
+def test_one_pair_of_one_episode_builds_its_test_once(tmp_path: Path, env_builds: list[str],
+                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    """``flowtest evaluate --env FlowTest-Maze2-v0 --sut scripted:replanner`` resolves its test
+    once and hands it on: the SUT check, the run, the trace picture, the test's card and the
+    report read that one env and its game (it was built five times). A failing system on the
+    same test (its filmstrip and the broken conjunct drawn too) builds nothing more."""
+    code = main(["evaluate", "--env", "FlowTest-Maze2-v0", "--sut", "scripted:replanner", "--episodes", "1",
+                 "--out", str(tmp_path / "one"), "-q"])
+    assert code == 0, capsys.readouterr().err
+    assert len(env_builds) == 1, env_builds
+    env_builds.clear()
+    code = main(["evaluate", "--env", "FlowTest-Maze2-v0", "--sut", "scripted:replanner", "random", "--episodes", "1",
+                 "--out", str(tmp_path / "two"), "-q"])
+    records = json.loads((tmp_path / "two" / "results.json").read_text())
+    assert code == 0 and [r["n_failures"] for r in records] == [0, 1]  # the failing pictures were drawn
+    assert "filmstrip" in records[1]["pictures"]
+    assert len(env_builds) == 1, env_builds
+
+
+def test_the_python_api_builds_each_test_once(tmp_path: Path, env_builds: list[str]) -> None:
+    """:func:`experiments.evaluation.evaluate` and :func:`~experiments.evaluation.write_report`
+    on two tests and two systems: one env per test, whatever the systems, runs and pictures."""
+    cells = evaluate(["small-reactive", "FlowTest-Maze2-v0"], ["scripted:replanner", "random"], episodes=2)
+    write_report(cells, tmp_path)
+    assert sorted(env_builds) == ["FlowTestEnv", "Maze2Env"], env_builds

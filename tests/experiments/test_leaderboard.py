@@ -9,7 +9,7 @@ from typing import Any
 
 import pytest
 
-from experiments.cli import benchmark as bench
+from experiments import benchmark as bench
 from experiments.tools import leaderboard as lb
 
 

@@ -27,7 +27,7 @@ import pytest
 import flowtest_env
 import flowtest_env.random_grid as rg
 from experiments.cli.cli import main as cli_main
-from experiments.cli.outputs import output_subfolder, prepare_output_folder, write_atomically
+from experiments.outputs import output_subfolder, prepare_output_folder, write_atomically
 from flowtest_env import sources
 from synthesis.artifacts.artifact import TestArtifact
 from synthesis.model.errors import ProblemError

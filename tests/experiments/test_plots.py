@@ -1,4 +1,4 @@
-"""Pictures of synthesized tests (:mod:`experiments.cli.plots`): smoke tests and layout rules.
+"""Pictures of synthesized tests (:mod:`experiments.plots`): smoke tests and layout rules.
 
 The pictures themselves are judged by eye; these tests make sure every kind of problem
 (grid, fuel grid, graph; static, reactive, mixed; with a test-agent overlay) renders
@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from experiments.cli.plots import _fuel_note, check_plot_format, layered_positions, panels_of, plot_test
+from experiments.plots import _fuel_note, check_plot_format, layered_positions, panels_of, plot_test
 from synthesis.model.errors import InconsistentProblem, ProblemError
 from synthesis.model.strategy import TestStrategy
 from synthesis.pipeline import SynthesisOptions, SynthesizedTest, synthesize
@@ -177,7 +177,7 @@ def test_agent_overlay(name: str, tmp_path: Path) -> None:
 def test_an_artifact_is_drawn_with_its_synthesized_tests_panels(tmp_path: Path) -> None:
     """plot_artifact (the report's test cards) reads a loaded artifact as plot_test reads
     the synthesized test it was made from: the same panels, titles and restrictions."""
-    from experiments.cli.plots import artifact_view, plot_artifact
+    from experiments.plots import artifact_view, plot_artifact
     from synthesis.artifacts.artifact import TestArtifact, artifact_of
     from synthesis.artifacts.summary import summary_of
 
@@ -196,7 +196,7 @@ def test_an_artifact_is_drawn_with_its_synthesized_tests_panels(tmp_path: Path) 
 def test_propositions_are_named_with_where_they_hold() -> None:
     """Each proposition gets a legend line: the token that names exactly its cells, else
     its cells; on fuel grids the fuel levels where it holds; a colour of its own."""
-    from experiments.cli.plots import proposition_legend
+    from experiments.plots import proposition_legend
 
     legend = {p: (where, colour) for p, where, colour in proposition_legend(load_problem("small-reactive").system)}
     assert legend["goal"][0] == "cell T" and legend["I1"][0] == "cell I1" and legend["I2"][0] == "cell I2"
@@ -210,7 +210,7 @@ def test_propositions_are_named_with_where_they_hold() -> None:
 def test_a_mixed_picture_draws_the_static_area_typed_in(tmp_path: Path) -> None:
     """The borders of ``[environment] static`` (each once, whichever way it was typed) are drawn
     dashed in every panel, with a legend line, whether or not a wall was put there."""
-    from experiments.cli.plots import _static_area
+    from experiments.plots import _static_area
 
     test = synthesized(str(DATA / "ok_mixed.toml"))
     ts = test.problem.system

@@ -15,12 +15,11 @@ import gymnasium as gym
 import pytest
 
 from agents.registry import make_policy
-from experiments.cli.episodes import run_episode
-from experiments.cli.evaluate import Cell, evaluate, write_report
-from experiments.cli.filmstrip import MAX_FRAMES, frames_to_show, symbol_legend
-from experiments.cli.filmstrip import test_picture as draw_test_picture
-from experiments.cli.plots import artifact_view, panels_of
-from experiments.cli.report import (
+from experiments.evaluation import Cell, evaluate, write_report
+from experiments.evaluation.episodes import run_episode
+from experiments.evaluation.filmstrip import MAX_FRAMES, frames_to_show, symbol_legend
+from experiments.evaluation.filmstrip import test_picture as draw_test_picture
+from experiments.evaluation.report import (
     STYLE,
     TestInfo,
     failures_anchor,
@@ -29,10 +28,11 @@ from experiments.cli.report import (
     outcome_class,
     render_html,
 )
-from experiments.cli.report import test_anchor as card_anchor
-from experiments.cli.report import test_infos as draw_test_infos
-from experiments.cli.report import test_titles as titles_of
-from experiments.cli.violations import violation_of, violation_of_trace, written_conjuncts
+from experiments.evaluation.report import test_anchor as card_anchor
+from experiments.evaluation.report import test_infos as draw_test_infos
+from experiments.evaluation.report import test_titles as titles_of
+from experiments.evaluation.violations import violation_of, violation_of_trace, written_conjuncts
+from experiments.plots import artifact_view, panels_of
 
 
 def _game(env: Any) -> Any:
@@ -104,7 +104,7 @@ def test_filmstrip_keeps_start_end_and_the_changes() -> None:
 
 def test_filmstrip_names_what_the_test_did() -> None:
     """Doors on a reactive test, the test agent's moves on an agent test."""
-    from experiments.cli.filmstrip import _events
+    from experiments.evaluation.filmstrip import _events
 
     for env_id, sut, word in (
         ("FlowTest-SmallReactive-v0", "scripted:committed", "door closed"),
@@ -390,7 +390,7 @@ def test_a_mixed_card_draws_the_static_area_typed_in(tmp_path: Path) -> None:
     read it; without it (an older file) the picture differs. The caption says what the dashes are."""
     import dataclasses
 
-    from experiments.cli.plots import _static_area, plot_artifact, plot_test
+    from experiments.plots import _static_area, plot_artifact, plot_test
 
     out = tmp_path / "out"
     (info,) = draw_test_infos([str(MIXED)], out)

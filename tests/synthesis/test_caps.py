@@ -385,7 +385,7 @@ def test_time_limit_holds_graphs_and_checks_included(tmp_path: Path, limit: floa
     took = time.perf_counter() - t0
     assert test.routing.status == "feasible"  # the limit, not the proof, ended it
     assert took <= limit * 1.05 + 0.5, took
-    from experiments.cli.human_summary import human_summary
+    from experiments.human_summary import human_summary
     from synthesis.artifacts.summary import summary_of
 
     first = human_summary(test, summary_of(test)).splitlines()[0]

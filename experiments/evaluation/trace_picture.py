@@ -1,4 +1,4 @@
-"""Pictures of one run (``flowtest evaluate``'s ``traces/*.png``)."""
+"""Pictures of one run (the evaluation report's ``traces/*.png``)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from .episodes import Trace, make_env
+from .episodes import Trace, game_of_trace
 from .report import test_title
 from .violations import violation_of
 
@@ -33,9 +33,7 @@ def trace_picture(trace: Trace, path: Path) -> None:
 
     from flowtest_env.render import make_renderer
 
-    env = make_env(trace.env_id)
-    game = env.unwrapped.game
-    env.close()
+    game = game_of_trace(trace)
     tile = 48
     renderer = make_renderer(game, tile, "engineer")
     v = trace.verdict

@@ -1,10 +1,12 @@
 """Running systems under test through tests, one seeded episode at a time.
 
-What ``flowtest evaluate`` and ``flowtest train`` (its success rate) both need: the env
-named on the command line (:func:`make_env`, :func:`make_tester_env`), the SUT named
-there (:func:`sut_policy`), one run (:func:`run_episode`, a :class:`Trace`) and what its
-outcome means (:func:`classify`). Episode ``i`` of a series uses seed ``S + i`` for both
-the env and the policy, so each run can be replayed exactly.
+What the evaluation (:mod:`experiments.evaluation.runs`), the benchmark's single-env runs and
+the trainers' success rate (:mod:`experiments.training`) all need: the env a name stands for
+(:func:`env_named`, :func:`make_tester_env`), the SUT a name stands for (:func:`sut_policy`),
+one run (:func:`run_episode`, a :class:`Trace`, which keeps the game it was played on, so
+nothing drawn or explained afterwards builds the test again) and what its outcome means
+(:func:`classify`). Episode ``i`` of a series uses seed ``S + i`` for both the env and the
+policy, so each run can be replayed exactly.
 
 Two kinds of failure are told apart:
 
@@ -16,7 +18,7 @@ Two kinds of failure are told apart:
   stopped where no sequence of SUT actions can meet the system objective any more
   against the test as it really answers (its reactive restrictions, its test agent),
   although the static walls alone would still let the system through — the test, not
-  the SUT, closed every way (:func:`can_still_meet`).
+  the SUT, closed every way (:func:`flowtest_env.fairness.can_still_meet_in_game`).
 
 With a tester other than the synthesized one (:mod:`agents.testers`) a run that ends
 where the system can no longer meet its objective is ``trap``: an unfair test, not a
@@ -33,9 +35,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from synthesis.model.errors import ProblemError
+from synthesis.model.errors import InconsistentProblem, ProblemError
 
 
 @dataclass
@@ -52,6 +52,9 @@ class Trace:
     reason: str = ""
     tester: str = "synthesized"
     planner_error: str = ""  # what a planner from outside FlowTest did wrong (it failed the run)
+    game: Any = field(default=None, repr=False, compare=False)
+    """The :class:`~flowtest_env.game.TestGame` the run was played on (``None`` for a trace
+    made by hand): its pictures and its violation are drawn from it."""
 
     @property
     def failed(self) -> bool:
@@ -59,22 +62,76 @@ class Trace:
 
 
 
+@dataclass(frozen=True)
+class NamedEnv:
+    """One test as a name resolved it, once (:func:`resolve_env`): the name (``--env``), the
+    env built from it, and what the report reads of it (the game, the step budget, the
+    problem's name). The runs play ``env``; the pictures, the report and the failures'
+    explanations read ``game``: nothing after the resolution builds the test again."""
+
+    env_id: str
+    env: Any
+    game: Any
+    """The :class:`~flowtest_env.game.TestGame` the env plays."""
+    max_steps: int
+    """The env's step budget."""
+    problem: str
+    """The test's problem name."""
+
+    @classmethod
+    def of(cls, env_id: str, env: Any) -> NamedEnv:
+        """``env`` (built from ``env_id``) with what the report reads of it."""
+        u = env.unwrapped
+        return cls(env_id, env, u.game, int(u.max_steps), str(u.game.artifact.name))
+
+
+def resolve_env(env_id: str, among_several: bool = False) -> NamedEnv:
+    """:func:`env_named` of ``env_id``, kept with its name; among several envs
+    (``among_several``), an inconsistent problem's message says which ``--env`` it was.
+
+    Raises
+    ------
+    ProblemError
+        If ``env_id`` names no test.
+    InconsistentProblem
+        If it names a problem that has no test.
+    """
+    try:
+        return NamedEnv.of(env_id, env_named(env_id))
+    except InconsistentProblem as exc:
+        if not among_several:
+            raise
+        raise InconsistentProblem(exc.reason, str(exc), source=f"--env {env_id}") from None
+
+
 def make_tester_env(env_id: str, tester: str) -> Any:
-    """The env ``env_id`` with ``tester`` on the environment side: :func:`make_env` for
+    """The env ``env_id`` with ``tester`` on the environment side: :func:`env_named` for
     ``synthesized`` (the synthesized test as the single-agent env plays it), else
-    :class:`agents.testers.VersusTesterEnv` on the same problem and step budget.
+    :func:`versus_tester_env`.
+
+    Raises
+    ------
+    ProblemError
+        On an unknown env or tester, or a tester that cannot play ``env_id``.
+    """
+    if tester == "synthesized":
+        return env_named(env_id)
+    env_named(env_id).close()  # an unknown ID is reported as env_named reports it
+    return versus_tester_env(env_id, tester)
+
+
+def versus_tester_env(env_id: str, tester: str) -> Any:
+    """:class:`agents.testers.VersusTesterEnv`: ``tester`` against the system on the problem
+    and step budget of ``env_id`` (a name known to stand for a test).
 
     Raises
     ------
     ProblemError
         On an unknown tester, or one that cannot play ``env_id``.
     """
-    if tester == "synthesized":
-        return make_env(env_id)
     from agents.base import PolicyError
     from agents.testers import VersusTesterEnv, problem_of
 
-    make_env(env_id).close()  # an unknown ID is reported as make_env reports it
     try:
         problem, max_steps = problem_of(env_id)
         return VersusTesterEnv(problem, tester, max_steps=max_steps)
@@ -82,11 +139,10 @@ def make_tester_env(env_id: str, tester: str) -> Any:
         raise ProblemError(f"--tester {tester}: {exc}") from None
 
 
-
-def make_env(env_id: str, **options: Any) -> Any:
-    """The environment named by ``env_id``: a registered Gymnasium ID
-    (``FlowTest-Maze2-v0``), else ``gymnasium.make("FlowTest-v0", test=env_id)``: a
-    built-in name, a problem file (synthesized once, then cached) or an artifact file.
+def env_named(env_id: str, **options: Any) -> Any:
+    """The environment a name stands for (what ``--env`` takes): a registered Gymnasium ID
+    (``FlowTest-Maze2-v0``, through ``gymnasium.make``), else :func:`flowtest_env.make_env`
+    of a built-in name, a problem file (synthesized once, then cached) or an artifact file.
     ``options`` are env options (``memory``, ``obs_kind``, ...).
 
     Raises
@@ -113,7 +169,7 @@ def make_env(env_id: str, **options: Any) -> Any:
             raise ProblemError(f"{env_id!r} is not a FlowTest environment; known: {known}")
         return env
     try:
-        return gym.make(flowtest_env.ANY_TEST_ID, test=env_id, **options)
+        return flowtest_env.make_env(env_id, **options)
     except ProblemError as exc:
         if Path(env_id).suffix or Path(env_id).exists():
             raise
@@ -123,9 +179,28 @@ def make_env(env_id: str, **options: Any) -> Any:
         ) from exc
 
 
+def game_of_trace(trace: Trace) -> Any:
+    """The :class:`~flowtest_env.game.TestGame` ``trace`` was played on: the one it keeps,
+    else (a trace made without one) the game of the test its ``env_id`` names, built.
+
+    Raises
+    ------
+    ProblemError
+        If the trace keeps no game and its ``env_id`` names no test.
+    """
+    if trace.game is not None:
+        return trace.game
+    env = env_named(trace.env_id)
+    game = env.unwrapped.game
+    env.close()
+    return game
+
+
 def classify(env: Any, verdict: dict[str, Any]) -> tuple[str, str]:
     """``(kind, reason)`` of a finished run: ``pass``, ``sut`` (a SUT failure) or ``test``
     (a FlowTest bug); see the module docstring."""
+    from flowtest_env.fairness import can_still_meet_in_game
+
     met = verdict["system_objective"] == "met"
     u = env.unwrapped
     if hasattr(u, "trapped"):  # another tester than the synthesized one: no guarantee to break
@@ -141,44 +216,11 @@ def classify(env: Any, verdict: dict[str, Any]) -> tuple[str, str]:
     if met:
         return "pass", ""
     game, run = u.game, u.run
-    if not can_still_meet(game, run) and _reachable_past_walls(game, run.history, run.system):
+    if not can_still_meet_in_game(game, run) and _reachable_past_walls(game, run.history, run.system):
         return "test", "trapped: the test's restrictions closed every way to the goal"
     if verdict["system_objective"] == "violated":
         return "sut", "violated the system objective"
     return "sut", f"did not meet the system objective within {verdict['steps']} steps"
-
-
-def can_still_meet(game: Any, run: Any) -> bool:
-    """Whether some sequence of legal SUT actions from ``run`` meets the system objective,
-    against the test as it really answers: its restrictions per history and its test
-    agent moving by the synthesized strategy (no step budget).
-
-    The test is deterministic, so this is a search over the run states
-    ``(system, history, agent, memory)`` reachable from ``run``; ``run`` is not changed.
-    A run that ends where this is false, although the static walls alone would let the
-    system through (:func:`_reachable_past_walls`), was trapped by the test.
-    """
-    if run.outcome == "met":
-        return True
-    if run.done:
-        return False
-    seen = {run.key()}
-    frontier = [run.copy()]
-    while frontier:
-        nxt = []
-        for r in frontier:
-            for a in np.flatnonzero(game.action_mask(r)):
-                r2 = r.copy()
-                game.step(r2, int(a))
-                if r2.outcome == "met":
-                    return True
-                k = r2.key()
-                if r2.done or k in seen:
-                    continue
-                seen.add(k)
-                nxt.append(r2)
-        frontier = nxt
-    return False
 
 
 _WALL_GAMES: dict[int, Any] = {}
@@ -207,7 +249,7 @@ def run_episode(env: Any, policy: Any, env_id: str, sut: str, seed: int, record:
 
     obs, info = env.reset(seed=seed)
     u = env.unwrapped
-    trace = Trace(env_id, sut, seed, tester=tester)
+    trace = Trace(env_id, sut, seed, tester=tester, game=u.game)
     if record:
         trace.states.append(u.run.copy())
     try:

@@ -8,7 +8,7 @@ the test agent moved, the action refused).
 Frames where nothing changed (waits) are left out; a long run keeps its first and last
 frames and an even sample of the others. A run that violated the system objective keeps
 the frame where it did, marked in red with the broken conjunct and the cell
-(:func:`experiments.cli.violations.violation_of`), and the strip's title says it too.
+(:func:`experiments.evaluation.violations.violation_of`), and the strip's title says it too.
 """
 
 from __future__ import annotations
@@ -165,9 +165,9 @@ def filmstrip(game: Any, states: Sequence[Any], actions: Sequence[int], title: s
 
 def test_picture(game: Any, path: Path) -> None:
     """The test's restrictions per history, one panel each, its propositions in the legend
-    (:func:`experiments.cli.plots.plot_artifact`), to ``path`` (PNG): what the report's test
+    (:func:`experiments.plots.plot_artifact`), to ``path`` (PNG): what the report's test
     card shows. The format follows ``path``'s suffix (``.png``, ``.svg``, ``.pdf``)."""
-    from .plots import plot_artifact
+    from experiments.plots import plot_artifact
 
     # graphs one panel a row (a node-link panel is wide), grids two
     plot_artifact(game.artifact, path, dpi=90, header=False, max_cols=2 if game.is_grid else 1)

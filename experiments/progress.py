@@ -1,7 +1,10 @@
-"""Progress on standard error: :class:`StageProgress`, the stage lines every command shows.
+"""Progress on standard error: :class:`StageProgress`, the stage lines every command shows,
+and :func:`say`, one line.
 
-Nothing here writes to standard output, which stays clean for a command's result (its
-``--json`` document above all).
+The library (:mod:`experiments.evaluation`, :mod:`experiments.benchmark`,
+:mod:`experiments.training`) and the command line share these: a long piece of work says what
+it does on stderr, whoever called it. Nothing here writes to standard output, which stays clean
+for a command's result (its ``--json`` document above all).
 """
 
 from __future__ import annotations
@@ -15,7 +18,17 @@ import time
 from collections.abc import Callable
 from typing import TextIO
 
-from .exits import PROG
+PROG = "flowtest"
+"""The program name every message starts with."""
+
+def say(line: str) -> None:
+    """One line on stderr, best effort (stderr may be closed)."""
+    try:
+        sys.stderr.write(line + "\n")
+        sys.stderr.flush()
+    except (OSError, ValueError):
+        pass
+
 
 PROGRESS_EVERY = 5.0
 """Seconds between two status lines of ``--progress`` when stderr is not a terminal."""

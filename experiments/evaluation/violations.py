@@ -149,18 +149,19 @@ _GAMES: dict[str, Any] = {}
 
 def violation_of_trace(trace: Any) -> dict[str, Any] | None:
     """:meth:`Violation.to_dict` of a run whose system objective was violated (an
-    :class:`experiments.cli.episodes.Trace` with its states), else ``None``; what
-    ``results.json`` keeps in a failure's ``violation`` and the report shows."""
+    :class:`experiments.evaluation.episodes.Trace` with its states), else ``None``; what
+    ``results.json`` keeps in a failure's ``violation`` and the report shows. The run's
+    own game is read (a trace made without one: the test its ``env_id`` names)."""
     if trace.verdict.get("system_objective") != "violated" or not trace.states:
         return None
-    game = _GAMES.get(trace.env_id)
+    game = getattr(trace, "game", None) or _GAMES.get(trace.env_id)
     if game is None:
         from synthesis.model.errors import ProblemError
 
-        from .episodes import make_env
+        from .episodes import env_named
 
         try:
-            env = make_env(trace.env_id)
+            env = env_named(trace.env_id)
         except ProblemError:  # not one test (a pool's split): the reason alone is reported
             return None
         game = env.unwrapped.game

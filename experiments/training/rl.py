@@ -1,5 +1,6 @@
-"""What ``flowtest train`` and ``flowtest train-tester`` share: the ``rl`` extra, the PPO
-model, the timed training call and its learning curve.
+"""What training a system (:mod:`experiments.training.system`) and a tester
+(:mod:`experiments.training.tester`) share: the ``rl`` extra, the PPO model, the timed
+training call and its learning curve.
 
 Both learners are sb3-contrib PPO models trained on a few envs stepped in one process;
 the curve (:class:`EpisodeCurve`) records every episode end of every training env with
@@ -42,6 +43,21 @@ def require_rl() -> None:
         import stable_baselines3  # noqa: F401
     except ImportError:
         raise ProblemError("training needs the rl extra: pip install 'flowtest[rl]'") from None
+
+
+def require_native() -> None:
+    """Refuse, as invalid input, to train natively without torch.
+
+    Raises
+    ------
+    ProblemError
+        If torch cannot be imported.
+    """
+    try:
+        import torch  # noqa: F401
+    except ImportError:
+        raise ProblemError("training needs the rl extra: pip install 'flowtest[rl]'") from None
+
 
 
 def make_ppo(env: Any, settings: dict[str, Any], seed: int, recurrent: bool = False) -> Any:

@@ -24,9 +24,9 @@ anchor of a test comes from :func:`file_key`, which is one-to-one: ``probs/a.tom
 ``probs-a.toml``, ``A.toml`` and ``a.toml`` never share a picture or an anchor.
 The page is a grid of cards that wraps at laptop width (1366 px: three tests a row).
 
-The data comes from :mod:`experiments.cli.evaluate` (its ``results.json`` records, plus a
+The data comes from :mod:`experiments.evaluation.results` (its ``results.json`` records, plus a
 :class:`TestInfo` per test from :func:`test_infos`, and each failure's ``violation`` from
-:func:`experiments.cli.violations.violation_of_trace`); this module lays it out.
+:func:`experiments.evaluation.violations.violation_of_trace`); this module lays it out.
 """
 
 from __future__ import annotations
@@ -38,9 +38,14 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+from experiments.formatting import MISSING, percent
 
 from .violations import where_words
+
+if TYPE_CHECKING:
+    from .episodes import NamedEnv
 
 PROBLEM_SUFFIXES = (".toml", ".json")
 """File suffixes of problems and artifacts given as ``--env``."""
@@ -149,30 +154,35 @@ def column_titles(
 # --------------------------------------------------------------------------- the tests' cards
 
 
-def test_infos(env_ids: Sequence[str], out: Path) -> list[TestInfo]:
-    """Draw each test's restrictions per history (:func:`experiments.cli.plots.plot_artifact`:
+def test_infos(tests: Sequence[NamedEnv | str], out: Path) -> list[TestInfo]:
+    """Draw each test's restrictions per history (:func:`experiments.plots.plot_artifact`:
     the panels ``flowtest synthesize --plot`` draws, propositions in the legend) to
     ``out/tests/<file_key>.png`` and collect what the report shows of it (problem name,
-    kind, objectives, step budget, propositions)."""
-    from .episodes import make_env
+    kind, objectives, step budget, propositions). A test is the env an evaluation resolved
+    (:class:`~experiments.evaluation.episodes.NamedEnv`: its game is drawn, nothing is
+    built) or a name (its env built here)."""
+    from experiments.outputs import write_atomically
+    from experiments.plots import proposition_legend
+
+    from .episodes import NamedEnv, resolve_env
     from .filmstrip import test_picture
-    from .outputs import write_atomically
-    from .plots import proposition_legend
 
     (out / "tests").mkdir(parents=True, exist_ok=True)
     infos = []
-    for env_id in dict.fromkeys(env_ids):
-        env = make_env(env_id)
-        u = env.unwrapped
-        game = u.game
-        env.close()
+    for test in {(t if isinstance(t, str) else t.env_id): t for t in tests}.values():
+        if isinstance(test, NamedEnv):
+            named = test
+        else:
+            named = resolve_env(test)
+            named.env.close()
+        env_id, game = named.env_id, named.game
         name = f"tests/{file_key(env_id)}.png"
         write_atomically(out / name, partial(test_picture, game))
         art = game.artifact
         infos.append(TestInfo(
             env_id=env_id, problem=str(art.name), kind=str(art.kind),
             system_objective=str(art.objectives.get("system", "")), test_objective=str(art.objectives.get("test", "")),
-            max_steps=int(u.max_steps), picture=name, propositions=tuple(proposition_legend(art.system)),
+            max_steps=named.max_steps, picture=name, propositions=tuple(proposition_legend(art.system)),
         ))
     return infos
 
@@ -479,7 +489,7 @@ def render_html(
             parts.append(
                 f"<tr class='{outcome_class(r) if r['n_failures'] else ''}'><td>{e(col_titles[test_name(r)])}</td>"
                 f"<td>{r['episodes']}</td>"
-                f"<td>{_pct(r['system_objective_met_rate'])}</td><td>{_pct(r['test_objective_realized_rate'])}</td>"
+                f"<td>{percent(r['system_objective_met_rate'], space='&nbsp;')}</td><td>{percent(r['test_objective_realized_rate'], space='&nbsp;')}</td>"
                 f"<td>{r['violated']}</td><td>{r['open']}</td><td>{_num(r['mean_restrictions'])}</td>"
                 f"<td>{_num(r['mean_steps'])}</td><td>{r['n_failures']}</td></tr>"
             )
@@ -489,8 +499,4 @@ def render_html(
 
 
 def _num(x: float | None) -> str:
-    return "–" if x is None else f"{x:.1f}"
-
-
-def _pct(x: float | None) -> str:
-    return "–" if x is None else f"{100 * x:.0f}&nbsp;%"
+    return MISSING if x is None else f"{x:.1f}"

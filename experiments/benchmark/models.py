@@ -1,0 +1,124 @@
+"""Saved models as batched policies: every test of a split played at once in one vector env,
+greedy or sampled (what the learning curves and the scores of the baselines read)."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from .config import RUN_SEED
+
+
+class ModelBatchPolicy:
+    """A saved model (native or stable-baselines3, as :func:`agents.ppo.load_model` gives
+    it) as a batched policy of :mod:`flowtest_env.scoring`: greedy (``deterministic``) or
+    sampled, adding the visited-places memory when the model has it (``where``: the SUT's
+    place in the observation) and carrying a recurrent state. Sampling is seeded by
+    ``reset`` (torch's global generator, which stable-baselines3 samples from)."""
+
+    def __init__(self, model: Any, where: slice | None, deterministic: bool = True) -> None:
+        kind = type(model).__name__
+        self.model, self.where, self.deterministic = model, where, deterministic
+        self.recurrent = bool(getattr(model, "recurrent", kind == "RecurrentPPO"))
+        self.maskable = bool(getattr(model, "maskable", kind == "MaskablePPO"))
+        self.state: Any = None
+        self.seen: np.ndarray | None = None
+
+    def reset(self, num_runs: int, seed: int) -> None:
+        import torch
+
+        torch.manual_seed(int(seed))
+        self.state, self.seen = None, None
+
+    def __call__(self, observations: np.ndarray, masks: np.ndarray) -> np.ndarray:
+        obs = np.asarray(observations, dtype=np.float32)
+        starts = np.full(obs.shape[0], self.seen is None)
+        if self.where is not None:
+            here = obs[:, self.where]
+            self.seen = here.copy() if self.seen is None else np.maximum(self.seen, here)
+            obs = np.concatenate([obs, self.seen], axis=1)
+        elif self.seen is None:
+            self.seen = np.zeros((obs.shape[0], 0), dtype=np.float32)
+        kw: dict[str, Any] = {"deterministic": self.deterministic}
+        if self.maskable:
+            kw["action_masks"] = masks
+        if self.recurrent:
+            kw["state"], kw["episode_start"] = self.state, starts
+        actions, self.state = self.model.predict(obs, **kw)
+        return np.asarray(actions)
+
+
+def model_where(model: Any, games: Sequence[Any], memory: str) -> slice | None:
+    from agents.native_ppo import shared_position_slice
+
+    if memory != "visited":
+        return None
+    return shared_position_slice(games, "flat")
+
+
+def batch_verdicts(model: Any, games: Sequence[Any], memory: str, budgets: Sequence[int]) -> dict[str, np.ndarray]:
+    """Let the deterministic policy of ``model`` (a saved model as :func:`agents.ppo.load_model`
+    gives it: native or stable-baselines3) play every test of ``games`` once, all at once in
+    one :class:`~flowtest_env.vector.PoolVectorEnv`, and return the verdict arrays
+    (``system_objective``, ``test_objective_realized``, ``restrictions``, ``steps``), one
+    entry per test. Each test ends at its outcome or its own step budget ``budgets[i]``
+    (the tests' :func:`~flowtest_env.envs.default_max_steps`, which the batch uses).
+
+    Raises
+    ------
+    ValueError
+        If the tests do not share where the observation holds the system's place.
+    """
+    from flowtest_env.envs import default_max_steps
+    from flowtest_env.scoring import play_batch
+
+    if list(budgets) != [default_max_steps(g) for g in games]:
+        raise ValueError("the batch plays each test to its own default step budget")
+    policy = ModelBatchPolicy(model, model_where(model, games, memory), deterministic=True)
+    return {k: v[0] for k, v in play_batch(policy, games, 1, RUN_SEED).items()}
+
+
+class CurveRecorder:
+    """An SB3 callback that measures the learning curve: the share of the train tests and
+    of the validation tests whose system objective the deterministic policy meets
+    (:func:`batch_verdicts`), for the model as it is after learning from ``step`` time
+    steps: at the start, at the first rollout after every ``every`` steps, and at the end.
+    It only reads the model: training goes exactly as without it."""
+
+    def __init__(self, every: int, memory: str, splits: dict[str, tuple[list[Any], list[int]]]) -> None:
+        from stable_baselines3.common.callbacks import BaseCallback
+
+        recorder = self
+        self.points: list[tuple[int, dict[str, float]]] = []
+        self.seconds = 0.0
+
+        def measure(model: Any, step: int) -> None:
+            t0 = time.perf_counter()
+            rates = {}
+            for name, (games, budgets) in splits.items():
+                v = batch_verdicts(model, games, memory, budgets)
+                rates[name] = float(np.mean(v["system_objective"] == "met"))
+            recorder.points.append((step, rates))
+            recorder.seconds += time.perf_counter() - t0
+
+        class Callback(BaseCallback):
+            def __init__(self) -> None:
+                super().__init__()
+                self.next = 0
+
+            def _on_rollout_start(self) -> None:  # the model has learned from num_timesteps steps
+                if self.num_timesteps >= self.next:
+                    measure(self.model, self.num_timesteps)
+                    while self.next <= self.num_timesteps:
+                        self.next += every
+
+            def _on_step(self) -> bool:
+                return True
+
+            def _on_training_end(self) -> None:
+                measure(self.model, self.num_timesteps)
+
+        self.callback = Callback()

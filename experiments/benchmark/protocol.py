@@ -1,0 +1,250 @@
+"""The benchmark protocol, whole: ``flowtest benchmark --pool NAME`` as a Python call.
+
+The learned baselines on a test pool, scored by a fixed protocol on tests they never trained
+on, between a random floor and a reference ceiling (docs/benchmark-protocol.md has the reasons
+for each choice):
+
+1. **The pool** (:func:`~experiments.benchmark.pool.load_splits`): the first ``train_count``
+   tests of the pool's ``train`` split (the baselines train on them), the first
+   ``validation_count`` of its ``validation`` split (the learning curves, i.e. model
+   monitoring; no model selection is done) and the first ``test_count`` of its ``test`` split
+   (held out: never seen in training). The splits are disjoint seed ranges
+   (:mod:`flowtest_env.pools`); where the tests come from is pluggable (``source``,
+   :data:`flowtest_env.scoring.PoolSource`). The tests that are scored are written to
+   ``OUT/pool/<split>/seed<N>.json`` so every run in the report replays with
+   ``flowtest evaluate --env <that file> ... --replay``.
+2. **The baselines** (:func:`~experiments.benchmark.training_runs.train_baseline`), per
+   algorithm and training seed, on the train split, for ``steps`` time steps: with the native
+   trainer (default, :mod:`agents.native_ppo`) masked PPO with the visited-places memory
+   (``maskable-ppo``), with a GRU (``recurrent-ppo``) and with prioritized level replay over
+   the train tests (``plr-ppo``); with ``--trainer sb3`` sb3-contrib's MaskablePPO and
+   RecurrentPPO. Only ``maskable-ppo`` trains by default (the time budget); the others on
+   request (``--algo``).
+3. **The scores** (:mod:`~experiments.benchmark.scoring`). Every system on every split: the
+   learned policies greedily (each test once) **and**, on the held-out tests, sampled
+   (``runs`` seeded runs per test), every test x run of a split in one
+   :class:`~flowtest_env.vector.PoolVectorEnv` batch (:mod:`flowtest_env.scoring`); ``random``
+   (the **floor**, ``runs`` runs per test, batched too); the **references** (the scripted
+   replanner and the GR(1) system, correct systems that do not know the test: the
+   **ceiling**; on fuel grids with doors a door can close after the fuel to go round it is
+   spent, so they meet fewer than all tests there: docs/benchmark-protocol.md) and any system
+   that is not batched through the single env, once per test. The floor and the ceiling are
+   always scored: they define the scale.
+4. **The statistics** (:mod:`~experiments.benchmark.statistics`): per split, the
+   **normalized score** ``(met - floor) / (ceiling - floor)`` (0 = random, 1 = reference; floor
+   and ceiling are the split's own), its interquartile mean over training seeds with a
+   stratified-bootstrap 95 % interval (seeds resampled, and tests within each seed's stratum),
+   the mean over the worst 10 % of the held-out tests, raw met, test objective realized,
+   restrictions, steps, and the held-out gap (train met minus held-out met).
+5. **The generalization curve** (:func:`~experiments.benchmark.scoring.generalization_curve`):
+   the held-out normalized score of the first baseline trained on the first 16, 64, 256, 1,024
+   train tests (``curve_seeds`` seeds each, the same steps) and on all ``train_count`` (the
+   main runs). Every training run (main and curve) is trained first, ``workers`` at a time in
+   their own processes (:func:`~experiments.benchmark.training_runs.train_all`; the models do
+   not depend on it).
+6. **The outputs** in ``OUT``: ``table.md`` and ``table.json`` (the results file,
+   docs/benchmark-protocol.md; :mod:`~experiments.benchmark.table`), ``learning-curves.png``,
+   ``generalization.png`` (:mod:`~experiments.benchmark.plots`), the evaluation report of
+   :mod:`experiments.evaluation` on a sample of each split's tests (``report.html``,
+   ``report.md``, ``results.json``), the models and the scored tests.
+
+Every number is seeded (the tests, training, the sampled runs, the bootstrap), so the same
+configuration gives the same table; only the times differ.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable, Sequence
+from functools import partial
+from pathlib import Path
+from typing import Any
+
+from experiments.evaluation import Cell, write_report
+from experiments.evaluation.report import TestInfo
+from experiments.outputs import json_safe, prepare_output_folder, write_atomically
+from synthesis.artifacts.artifact import TestArtifact
+from synthesis.model.errors import ProblemError
+
+from .config import REPORT_SPLITS, RUN_SEED, BenchmarkConfig, check_config
+from .plots import plot_generalization, plot_learning_curves
+from .pool import Split, load_splits
+from .scoring import generalization_curve, score_all
+from .statistics import scale_of
+from .table import benchmark_table, commit, table_markdown
+from .training_runs import TrainingJob, train_all
+
+BENCHMARK_MARKER = ".flowtest-benchmark"
+"""The file that marks a folder as a benchmark's: ``--out`` refuses any other non-empty
+folder, and any earlier benchmark, unless ``--force``."""
+
+
+def _split_infos(splits: dict[str, Split], out: Path, shown: int) -> list[TestInfo]:
+    """What the report shows of each split's column: the first test's picture and the
+    pool's objectives (the same formulas for every test of a pool)."""
+    from experiments.evaluation.filmstrip import start_picture
+    from flowtest_env.envs import default_max_steps
+    from flowtest_env.game import TestGame
+
+    infos = []
+    for name in REPORT_SPLITS:
+        split = splits[name]
+        art = split.artifacts[0]
+        game = TestGame(art)
+        picture = f"tests/{split.name}-split-first.png"
+        write_atomically(out / picture, partial(start_picture, game))
+        infos.append(TestInfo(
+            env_id=_report_label(split, shown), problem=f"{art.name} (the first of {len(split.seeds)})", kind=str(art.kind),
+            system_objective=str(art.objectives.get("system", "")), test_objective=str(art.objectives.get("test", "")),
+            max_steps=default_max_steps(game), picture=picture,
+        ))
+    return infos
+
+
+def _report_label(split: Split, shown: int) -> str:
+    return f"{split.label.rsplit(' (', 1)[0]} (report: the first {min(shown, len(split.files))} tests)"
+
+
+def run_benchmark(config: BenchmarkConfig, out: Path, say: Callable[[str], None] = lambda _: None,
+                  progress_bar: bool = False,
+                  source: Callable[[str, str, int], Sequence[TestArtifact]] | None = None) -> dict[str, Any]:
+    """Run the benchmark (see the module docstring) into the folder ``out`` (created; it
+    is not checked here: the command checks it first) and return ``table.json``'s document.
+    ``source`` loads the pool's tests (default :func:`flowtest_env.pools.load_pool`)."""
+    t_start = time.perf_counter()
+    check_config(config)
+    code = commit()  # the code this run uses (the tree may move on while it runs)
+    out.mkdir(parents=True, exist_ok=True)
+    say(f"loading the pool {config.pool}: {config.train_count} train, {config.validation_count} validation and "
+        f"{config.test_count} held-out tests")
+    t0 = time.perf_counter()
+    splits = load_splits(config, out, progress=progress_bar, source=source)
+    pool_seconds = time.perf_counter() - t0
+    jobs = [TrainingJob(algo, seed, config.train_count, f"{algo}-seed{seed}")
+            for algo in config.baselines() for seed in config.seeds]
+    if config.baselines():
+        first = config.baselines()[0]
+        jobs += [TrainingJob(first, seed, n, f"curve-{first}-{n}-seed{seed}")
+                 for n in config.curve() if n != config.train_count for seed in config.seeds[:config.curve_seeds]]
+    t0 = time.perf_counter()
+    trained = train_all(config, jobs, splits, out, say, progress_bar)
+    train_seconds = time.perf_counter() - t0
+    if trained and config.trainer == "native":
+        import torch
+
+        torch.set_num_threads(1)  # as the trainer: on shared cores one thread plays the batches fastest
+    t0 = time.perf_counter()
+    systems, traces = score_all(config, splits, trained, say)
+    score_seconds = time.perf_counter() - t0
+    scale = scale_of(systems)
+    main = next((s for s in systems if s.kind == "baseline"), None)
+    t0 = time.perf_counter()
+    curve = generalization_curve(config, splits, trained, main, scale["test"], say)
+    curve_seconds = time.perf_counter() - t0
+    doc = benchmark_table(config, splits, systems, trained, curve)
+    doc["commit"] = code
+    say("writing the table, the curves and the report")
+    cells = []
+    for name in REPORT_SPLITS:
+        label = _report_label(splits[name], config.report_tests)
+        for sut, runs in traces[name].items():
+            cells.append(Cell(label, sut, runs[:config.report_tests], RUN_SEED, 0.0))
+    cells.sort(key=lambda c: c.sut)
+    write_report(cells, out, _split_infos(splits, out, config.report_tests))
+    doc["seconds"] = {"pool": round(pool_seconds, 1), "training": round(train_seconds, 1),
+                      "training_cpu": round(sum(b.seconds for b in trained), 1),
+                      "scoring": round(score_seconds, 1), "generalization": round(curve_seconds, 1),
+                      "total": round(time.perf_counter() - t_start, 1)}
+    doc["outputs"] = {k: str((out / v).resolve()) for k, v in OUTPUTS.items()}
+    if any(e["kind"] == "baseline" and e.get("training") for e in doc["systems"]):
+        write_atomically(out / OUTPUTS["curves"], lambda tmp: plot_learning_curves(doc, tmp))
+    else:
+        doc["outputs"].pop("curves")
+    if doc["generalization"]:
+        write_atomically(out / OUTPUTS["generalization"], lambda tmp: plot_generalization(doc, tmp))
+    else:
+        doc["outputs"].pop("generalization")
+    write_text(out / OUTPUTS["table_md"], table_markdown(doc))
+    write_text(out / OUTPUTS["table_json"], json.dumps(json_safe(doc), indent=1) + "\n")
+    return doc
+
+
+def write_text(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` atomically."""
+
+    def write(tmp: Path) -> None:
+        tmp.write_text(text)
+
+    write_atomically(path, write)
+
+
+OUTPUTS = {"table_md": "table.md", "table_json": "table.json", "curves": "learning-curves.png",
+           "generalization": "generalization.png", "report": "report.html"}
+"""The main files a benchmark writes into ``--out``."""
+
+
+def prepare_benchmark_folder(out: Path, force: bool) -> None:
+    """Make ``out`` a benchmark folder (:data:`BENCHMARK_MARKER`), refusing to overwrite: an
+    existing non-empty ``out`` needs ``force`` (``--force``), whoever wrote it.
+
+    Raises
+    ------
+    ProblemError
+        If ``out`` holds files and ``force`` is not given, or cannot be written.
+    """
+    if out.is_dir() and not force:
+        try:
+            used = any(out.iterdir())
+        except OSError as exc:
+            raise ProblemError(f"cannot read the benchmark folder {str(out)!r}: {exc.strerror or exc}") from None
+        if used:
+            what = "an earlier benchmark" if (out / BENCHMARK_MARKER).exists() else "files"
+            raise ProblemError(f"benchmark folder {str(out)!r} already holds {what}; use --force to overwrite, "
+                               "or choose another folder")
+    prepare_output_folder(out, BENCHMARK_MARKER, force, "benchmark folder")
+
+
+def benchmark(pool: str | BenchmarkConfig, out: str | Path, *, force: bool = False, say: Callable[[str], None] = lambda _: None,
+              progress_bar: bool = False, source: Callable[[str, str, int], Sequence[TestArtifact]] | None = None,
+              **settings: Any) -> dict[str, Any]:
+    """Run the benchmark protocol (see the module docstring) on ``pool`` into the folder
+    ``out`` and return ``table.json``'s document: what ``flowtest benchmark --pool POOL --out
+    OUT`` does, with ``settings`` as its options (any field of :class:`BenchmarkConfig`:
+    ``suts``, ``algos``, ``train_count``, ``steps``, ``seeds``, ...; the split counts not given
+    are :meth:`BenchmarkConfig.for_pool`'s, as the command's). ``pool`` may be a whole
+    :class:`BenchmarkConfig` instead (then no ``settings``). Everything is checked before any
+    work; ``out`` is refused when it holds files, unless ``force``. ``say`` gets the progress
+    lines; ``source(pool, split, count)`` loads the pool's tests (default
+    :func:`flowtest_env.pools.load_pool`).
+
+    Raises
+    ------
+    ProblemError
+        On a bad configuration (:func:`check_config`) or output folder
+        (:func:`prepare_benchmark_folder`).
+
+    Examples
+    --------
+    The floor and the references alone (no training) on 6 tests of each split:
+
+    >>> import tempfile
+    >>> from pathlib import Path
+    >>> from experiments.benchmark import benchmark
+    >>> out = Path(tempfile.mkdtemp()) / "bench"
+    >>> doc = benchmark("safety2/4x4", out, suts=("random", "scripted:replanner"), train_count=6,
+    ...                 validation_count=3, test_count=6)
+    >>> doc["scale"]["test"]["ceiling"], doc["scale"]["test"]["floor"] < 1.0
+    (1.0, True)
+    >>> sorted(p.name for p in out.glob("table.*"))
+    ['table.json', 'table.md']
+    """
+    if isinstance(pool, BenchmarkConfig):
+        if settings:
+            raise ProblemError(f"benchmark(): settings {sorted(settings)} given with a whole BenchmarkConfig")
+        config = pool
+    else:
+        config = BenchmarkConfig.for_pool(pool, **settings)
+    check_config(config)
+    prepare_benchmark_folder(Path(out), force)
+    return run_benchmark(config, Path(out), say, progress_bar, source)
