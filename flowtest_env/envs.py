@@ -197,26 +197,15 @@ class FlowTestEnv(gym.Env[np.ndarray, np.int64]):
         for g, e in zip(games, self.encoders, strict=True):
             if e.space != first or g.n_actions != games[0].n_actions:
                 raise GameError(f"problem {g.artifact.name!r} does not share the pool's observation or action space")
-        self.memory_kind = memory
         self.memory: VisitedMemory | None = None
         if memory == "visited":
             self.memory = VisitedMemory(shared_position_slice(self.encoders))
             first = spaces.Box(0.0, 1.0, shape=(int(first.shape[0]) + self.memory.size,), dtype=np.float32)
-        self.shaping = config.shaping
-        self.shaping_gamma = config.shaping_gamma
-        self._potential = DistancePotential(self.shaping) if self.shaping > 0 else None
+        self._potential = DistancePotential(config.shaping) if config.shaping > 0 else None
         self._phi = 0.0
         self.observation_space = first
         self.action_space = spaces.Discrete(games[0].n_actions)
-        self.max_steps = config.max_steps
-        self.obs_kind = obs_kind
-        self.render_mode = config.render_mode
-        self.view = config.view
-        self.tile_size = config.tile_size
-        self.step_cost = config.step_cost
-        self.restricted_penalty = config.restricted_penalty
-        self.goal_reward = config.goal_reward
-        self.violation_penalty = config.violation_penalty
+        self.render_mode = config.render_mode  # Gymnasium reads it off the env
         self._index = 0
         self.game = games[0]
         self.encoder = self.encoders[0]
@@ -226,6 +215,18 @@ class FlowTestEnv(gym.Env[np.ndarray, np.int64]):
         self._episode = -1  # episodes since that seed
 
     # ------------------------------------------------------------------ API
+
+    @property
+    def max_steps(self) -> int:
+        """The step budget of an episode (``config.max_steps``: by default the test's own,
+        :func:`default_max_steps`)."""
+        assert self.config.max_steps is not None
+        return self.config.max_steps
+
+    @property
+    def obs_kind(self) -> str:
+        """The observation's encoding (``config.obs_kind``)."""
+        return self.config.obs_kind
 
     @property
     def artifact(self) -> TestArtifact:
@@ -278,17 +279,17 @@ class FlowTestEnv(gym.Env[np.ndarray, np.int64]):
             raise gym.error.ResetNeeded("the episode has ended; call reset()")
         a = action_index(action, self.game.n_actions)
         out = self.game.step(run, a)
-        reward = -self.step_cost
+        reward = -self.config.step_cost
         if out.restricted or out.invalid:
-            reward -= self.restricted_penalty
+            reward -= self.config.restricted_penalty
         terminated = run.done
         if run.outcome == MET:
-            reward += self.goal_reward
+            reward += self.config.goal_reward
         elif run.outcome == VIOLATED:
-            reward -= self.violation_penalty
+            reward -= self.config.violation_penalty
         if self._potential is not None:
             phi = 0.0 if terminated else self._potential(self.game, run)
-            reward += self.shaping_gamma * phi - self._phi
+            reward += self.config.shaping_gamma * phi - self._phi
             self._phi = phi
         truncated = not terminated and run.steps >= self.max_steps
         info = self._info(run)
@@ -335,7 +336,7 @@ class FlowTestEnv(gym.Env[np.ndarray, np.int64]):
             return None
         run = self.run if self.run is not None else self.game.reset()
         if self.render_mode == "ansi":
-            return ansi(self.game, run, self.view)
+            return ansi(self.game, run, self.config.view)
         return self.frame(run)
 
     def frame(self, run: RunState | None = None) -> np.ndarray:
@@ -343,7 +344,7 @@ class FlowTestEnv(gym.Env[np.ndarray, np.int64]):
         run = run if run is not None else (self.run if self.run is not None else self.game.reset())
         r = self._renderers.get(self._index)
         if r is None:
-            r = self._renderers[self._index] = make_renderer(self.game, self.tile_size, self.view)
+            r = self._renderers[self._index] = make_renderer(self.game, self.config.tile_size, self.config.view)
         return r.frame(run)
 
     def close(self) -> None:
