@@ -1,7 +1,7 @@
 """Model files that are data, not code: the native policy checkpoint, and the trust gate
 for stable-baselines3 zips.
 
-**The native checkpoint** (written by :mod:`agents.native_ppo`, read here) is a zip
+**The native checkpoint** (written by :mod:`agents.native.checkpoint`, read here) is a zip
 archive holding exactly:
 
 * ``flowtest-policy.json``: plain settings (UTF-8 JSON, at most :data:`MAX_SETTINGS_BYTES`):

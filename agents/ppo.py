@@ -172,11 +172,11 @@ def _is_zip(path: Path) -> bool:
 
 
 def _load_native(path: Path) -> Any:
-    """A native checkpoint as a model (:class:`agents.native_ppo.NativeModel`)."""
+    """A native checkpoint as a model (:class:`agents.native.checkpoint.NativeModel`)."""
     from .checkpoint import CheckpointError
 
     try:
-        from .native_ppo import load_native
+        from .native.checkpoint import load_native
     except ImportError as exc:  # pragma: no cover - torch missing
         raise PolicyError("a FlowTest policy checkpoint needs the rl extra (torch): pip install 'flowtest[rl]'") from exc
     try:

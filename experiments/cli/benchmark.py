@@ -443,11 +443,12 @@ class ModelBatchPolicy:
 
 
 def _model_where(model: Any, games: Sequence[Any], memory: str) -> slice | None:
-    from agents.native_ppo import shared_position_slice
+    from flowtest_env.encoding import make_encoder
+    from flowtest_env.wrappers import shared_position_slice
 
     if memory != "visited":
         return None
-    return shared_position_slice(games, "flat")
+    return shared_position_slice([make_encoder(g, "flat") for g in games])
 
 
 def batch_verdicts(model: Any, games: Sequence[Any], memory: str, budgets: Sequence[int]) -> dict[str, np.ndarray]:
@@ -607,7 +608,7 @@ def train_all(config: BenchmarkConfig, jobs: Sequence[TrainingJob], splits: dict
         return done
     import multiprocessing
 
-    from agents.native_ppo import load_native
+    from agents.native.checkpoint import load_native
 
     _JOB_STATE.update(config=config, splits=splits, out=out)
     algos = ", ".join(dict.fromkeys(j.algo for j in jobs))
@@ -650,7 +651,8 @@ def _train_native_baseline(config: BenchmarkConfig, algo: str, seed: int, splits
     """One baseline with the native trainer on the first ``count`` train tests (a
     :class:`~flowtest_env.vector.PoolVectorEnv` of exactly the loaded tests), its greedy
     curve measured by the trainer on the scored train tests and the validation tests."""
-    from agents.native_ppo import BatchActor, save_policy
+    from agents.native.checkpoint import save_policy
+    from agents.native.evaluation import BatchActor
     from agents.native_ppo import train as native_train
     from flowtest_env.game import TestGame
     from flowtest_env.vector import PoolVectorEnv
@@ -746,7 +748,7 @@ def batched_system(sut: str, runs: int) -> dict[str, Any] | None:
 
         if not is_native_checkpoint(sut[4:]):
             return None
-        from agents.native_ppo import load_native
+        from agents.native.checkpoint import load_native
 
         try:
             model = load_native(sut[4:])

@@ -34,13 +34,15 @@ from agents.native_ppo import (  # noqa: E402
     Runner,
     advantages,
     collect_rollout,
+    make_agent,
     masked_logits,
     minibatch_indices,
     ppo_update,
-    shared_position_slice,
     train,
 )
 from experiments.cli.cli import main  # noqa: E402
+from flowtest_env.encoding import make_encoder  # noqa: E402
+from flowtest_env.wrappers import shared_position_slice  # noqa: E402
 
 FLOWTEST = Path(sys.executable).parent / "flowtest"
 
@@ -50,9 +52,9 @@ def _runner(kind: str, max_steps: int = 3, n: int = 4, seed: int = 0) -> tuple[R
     env: Any = gym.make_vec("FlowTest-SmallReactive-v0", num_envs=n, vectorization_mode="vector_entry_point",
                             max_steps=max_steps)
     torch.manual_seed(seed)
-    where = shared_position_slice(env.unwrapped.games, "flat")
+    where = shared_position_slice([make_encoder(g, "flat") for g in env.unwrapped.games])
     obs_size = int(env.single_observation_space.shape[0]) + (where.stop - where.start)
-    agent = Agent(obs_size, int(env.single_action_space.n), (16,), "gru" if kind == "recurrent-ppo" else "mlp", 8)
+    agent = make_agent(obs_size, int(env.single_action_space.n), (16,), "gru" if kind == "recurrent-ppo" else "mlp", 8)
     args = NativeArgs(algo=kind, num_envs=n, num_steps=12, num_minibatches=2, update_epochs=2, hidden=(16,), gru_hidden=8)
     return Runner(env, agent, where, torch.device("cpu"), seed), agent, args
 
