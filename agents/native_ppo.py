@@ -201,10 +201,13 @@ def train(args: NativeArgs, out: str | Path | None = None, heldout: Sequence[Any
                     bar.set_postfix(met=f"{100 * episode['met']:.0f}%", refresh=False)
         seconds = time.perf_counter() - t0 - eval_seconds
         final = evaluate(step) if splits else {}
+    except BaseException:
+        logs.close(wait=False)  # Ctrl-C ends the run now (Logs.close)
+        raise
     finally:
         if bar is not None:
             bar.close()
-        logs.close()
+    logs.close()
     settings = checkpoint_settings(args, inner, obs_size, n_actions, where, step)
     settings["trained_on"] = str(device)
     path = None

@@ -64,10 +64,15 @@ class Logs:
         finally:
             tmp.unlink(missing_ok=True)
 
-    def close(self) -> None:
-        if self.writer is not None:
-            self.writer.close()
-
+    def close(self, wait: bool = True) -> None:
+        """Flush and close the TensorBoard writer. ``wait=False`` (a run ended by an
+        exception, Ctrl-C above all): drop it without waiting for its thread. A
+        KeyboardInterrupt raised inside the writer's queue can leave that thread unable
+        to wake, and waiting for it would hang the interrupted command for good; the
+        thread is a daemon, and ``progress.csv`` already holds every row."""
+        writer, self.writer = self.writer, None
+        if writer is not None and wait:
+            writer.close()
 
 
 __all__ = ["Logs"]

@@ -242,6 +242,46 @@ def test_ctrl_c_while_training_leaves_nothing_half_written(tmp_path: Path) -> No
     assert rows[0].startswith("step,") and all(r.count(",") == rows[0].count(",") for r in rows)
 
 
+def test_an_interrupted_run_does_not_wait_for_the_tensorboard_thread(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A KeyboardInterrupt inside TensorBoard's queue can leave its writer thread unable to
+    wake, so closing the writer after Ctrl-C could hang for good (it did, under load): an
+    interrupted run drops the writer without waiting; a finished one closes it."""
+    import torch.utils.tensorboard
+
+    import agents.native_ppo as native_ppo
+
+    closed: list[str] = []
+
+    class Writer:
+        def __init__(self, log_dir: str) -> None:
+            self.log_dir = log_dir
+
+        def add_scalar(self, tag: str, value: float, step: int) -> None:
+            pass
+
+        def close(self) -> None:
+            closed.append(self.log_dir)
+
+    monkeypatch.setattr(torch.utils.tensorboard, "SummaryWriter", Writer)
+    args = NativeArgs(env_id="FlowTest-SmallReactive-v0", total_steps=256, num_envs=8, num_steps=16, num_minibatches=2,
+                      hidden=(16,), device="cpu", eval_every=0)
+    train(args, progress_bar=False, log_dir=tmp_path / "done")
+    assert closed == [str(tmp_path / "done")]
+    calls = []
+
+    def interrupted(*a: Any, **kw: Any) -> dict[str, float]:
+        calls.append(1)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return ppo_update(*a, **kw)
+
+    monkeypatch.setattr(native_ppo, "ppo_update", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        train(args, progress_bar=False, log_dir=tmp_path / "stopped")
+    assert closed == [str(tmp_path / "done")] and len(calls) == 2
+    assert (tmp_path / "stopped" / "progress.csv").read_text().count("\n") == 2  # the header and the one finished update
+
+
 # --------------------------------------------------------------------------- prioritized level replay
 
 
