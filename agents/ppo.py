@@ -181,8 +181,8 @@ def _load_native(path: Path) -> Any:
         raise PolicyError("a FlowTest policy checkpoint needs the rl extra (torch): pip install 'flowtest[rl]'") from exc
     try:
         return load_native(path)
-    except CheckpointError as exc:
-        raise PolicyError(f"{str(path)!r} is not a valid FlowTest policy checkpoint: {exc}") from None
+    except CheckpointError as exc:  # its message names the file and the field
+        raise PolicyError(str(exc)) from None
 
 
 class PPOPolicy:

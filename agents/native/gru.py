@@ -39,6 +39,20 @@ class GRUAgent(Agent):
         self.actor_head = layer_init(self.state_size, n_actions, 0.01)
         self.critic_head = layer_init(self.state_size, 1, 1.0)
 
+    @staticmethod
+    def tensor_shapes(obs_size: int, n_actions: int, hidden: Sequence[int], gru_hidden: int) -> dict[str, tuple[int, ...]]:
+        """The shapes of the ``state_dict`` such a network has, computed without building it."""
+        shapes: dict[str, tuple[int, ...]] = {}
+        n_in = obs_size
+        for i, w in enumerate(hidden):
+            shapes[f"encoder.{2 * i}.weight"], shapes[f"encoder.{2 * i}.bias"] = (w, n_in), (w,)
+            n_in = w
+        H = gru_hidden
+        shapes.update({"gru.weight_ih": (3 * H, n_in), "gru.weight_hh": (3 * H, H), "gru.bias_ih": (3 * H,), "gru.bias_hh": (3 * H,),
+                       "actor_head.weight": (n_actions, H), "actor_head.bias": (n_actions,), "critic_head.weight": (1, H),
+                       "critic_head.bias": (1,)})
+        return shapes
+
     def step(self, x: torch.Tensor, h: torch.Tensor, start: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         h = h * (~start).to(h.dtype).unsqueeze(-1)
         h = self.gru(self.encoder(x), h)

@@ -39,6 +39,17 @@ class MLPAgent(Agent):
         self.actor = mlp(obs_size, hidden, n_actions, 0.01)
         self.critic = mlp(obs_size, hidden, 1, 1.0)
 
+    @staticmethod
+    def tensor_shapes(obs_size: int, n_actions: int, hidden: Sequence[int]) -> dict[str, tuple[int, ...]]:
+        """The shapes of the ``state_dict`` such a network has, computed without building it."""
+        shapes: dict[str, tuple[int, ...]] = {}
+        for head, n_out in (("actor", n_actions), ("critic", 1)):
+            n_in = obs_size
+            for i, w in enumerate([*hidden, n_out]):
+                shapes[f"{head}.{2 * i}.weight"], shapes[f"{head}.{2 * i}.bias"] = (w, n_in), (w,)
+                n_in = w
+        return shapes
+
     def step(self, x: torch.Tensor, h: torch.Tensor, start: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         return self.actor(x), self.critic(x).squeeze(-1), h
 
