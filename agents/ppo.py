@@ -172,17 +172,17 @@ def _is_zip(path: Path) -> bool:
 
 
 def _load_native(path: Path) -> Any:
-    """A native checkpoint as a model (:class:`agents.native_ppo.NativeModel`)."""
+    """A native checkpoint as a model (:class:`agents.native.checkpoint.NativeModel`)."""
     from .checkpoint import CheckpointError
 
     try:
-        from .native_ppo import load_native
+        from .native.checkpoint import load_native
     except ImportError as exc:  # pragma: no cover - torch missing
         raise PolicyError("a FlowTest policy checkpoint needs the rl extra (torch): pip install 'flowtest[rl]'") from exc
     try:
         return load_native(path)
-    except CheckpointError as exc:
-        raise PolicyError(f"{str(path)!r} is not a valid FlowTest policy checkpoint: {exc}") from None
+    except CheckpointError as exc:  # its message names the file and the field
+        raise PolicyError(str(exc)) from None
 
 
 class PPOPolicy:

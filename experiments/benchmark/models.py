@@ -52,11 +52,12 @@ class ModelBatchPolicy:
 
 
 def model_where(model: Any, games: Sequence[Any], memory: str) -> slice | None:
-    from agents.native_ppo import shared_position_slice
+    from flowtest_env.encoding import make_encoder
+    from flowtest_env.wrappers import shared_position_slice
 
     if memory != "visited":
         return None
-    return shared_position_slice(games, "flat")
+    return shared_position_slice([make_encoder(g, "flat") for g in games])
 
 
 def batch_verdicts(model: Any, games: Sequence[Any], memory: str, budgets: Sequence[int]) -> dict[str, np.ndarray]:

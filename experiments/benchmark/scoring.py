@@ -85,7 +85,7 @@ def batched_system(sut: str, runs: int) -> dict[str, Any] | None:
 
         if not is_native_checkpoint(sut[4:]):
             return None
-        from agents.native_ppo import load_native
+        from agents.native.checkpoint import load_native
 
         try:
             model = load_native(sut[4:])

@@ -111,7 +111,7 @@ def train_all(config: BenchmarkConfig, jobs: Sequence[TrainingJob], splits: dict
         return done
     import multiprocessing
 
-    from agents.native_ppo import load_native
+    from agents.native.checkpoint import load_native
 
     _JOB_STATE.update(config=config, splits=splits, out=out)
     algos = ", ".join(dict.fromkeys(j.algo for j in jobs))
@@ -154,7 +154,8 @@ def _train_native_baseline(config: BenchmarkConfig, algo: str, seed: int, splits
     """One baseline with the native trainer on the first ``count`` train tests (a
     :class:`~flowtest_env.vector.PoolVectorEnv` of exactly the loaded tests), its greedy
     curve measured by the trainer on the scored train tests and the validation tests."""
-    from agents.native_ppo import BatchActor, save_policy
+    from agents.native.checkpoint import save_policy
+    from agents.native.evaluation import BatchActor
     from agents.native_ppo import train as native_train
     from flowtest_env.game import TestGame
     from flowtest_env.vector import PoolVectorEnv

@@ -142,7 +142,7 @@ def native_settings(overrides: dict[str, Any]) -> dict[str, Any]:
         raise ProblemError("--obs-kind grid: the native trainer reads flat or padded observations")
     if settings["obs_kind"] == "padded" and int(settings["pad_to"]) != 8:
         raise ProblemError("--pad-to: the vector env pads to 8 x 8 only")
-    from agents.native_ppo import check_args
+    from agents.native.args import check_args
 
     try:
         check_args(native_args(settings, "FlowTest-v0", {}, 1, 0))
@@ -155,7 +155,7 @@ def native_args(settings: dict[str, Any], env_id: str, env_kwargs: dict[str, Any
                 eval_every: int = 0) -> Any:
     """The :class:`agents.native_ppo.NativeArgs` of ``settings`` (flag names as the sb3
     trainer's: ``n_envs``, ``n_steps``, ``batch_size`` (a minibatch), ``n_epochs``, ``net_arch``)."""
-    from agents.native_ppo import NativeArgs
+    from agents.native.args import NativeArgs
 
     n_envs, n_steps = int(settings["n_envs"]), int(settings["n_steps"])
     minibatches = max(1, (n_envs * n_steps) // max(1, int(settings["batch_size"])))

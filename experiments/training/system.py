@@ -253,7 +253,7 @@ def train_native(env_id: str, steps: int, out: str | Path, seed: int = 0, progre
         result = native_train(args, out=None, heldout=heldout, log_dir=log_dir, progress_bar=progress_bar)
     except ValueError as exc:
         raise ProblemError(str(exc)) from None
-    from agents.native_ppo import save_policy
+    from agents.native.checkpoint import save_policy
 
     try:
         save_policy(ckpt_tmp, result.agent, {**result.settings, "flowtest_train": {"settings": settings}})

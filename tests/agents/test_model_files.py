@@ -179,10 +179,17 @@ def test_native_checkpoint_refuses_anything_else(tmp_path: Path, case: str, says
 
 def test_a_broken_native_checkpoint_is_one_error_line_as_a_sut(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     pytest.importorskip("torch")
+    from agents.native_ppo import make_agent, save_policy
+
     path = _native(tmp_path)  # valid format, but no network in it
     with pytest.raises(PolicyError, match="not a valid FlowTest policy checkpoint"):
         load_model(path)
-    _rewrite(path, {"tensors/w.npy": _object_npy(tmp_path / "m")})
+    # a network's checkpoint (its settings are checked before any tensor is read) with a pickled tensor
+    path = tmp_path / "net.zip"
+    save_policy(path, make_agent(3, 2, [4]), {"algo": "ppo", "network": {"kind": "mlp", "hidden": [4], "gru_hidden": 1},
+                                              "obs_size": 3, "n_actions": 2})
+    load_model(path)
+    _rewrite(path, {"tensors/actor.0.weight.npy": _object_npy(tmp_path / "m")})
     with pytest.raises(PolicyError, match="not a plain .npy"):
         load_model(path)
     assert not (tmp_path / "m").exists()

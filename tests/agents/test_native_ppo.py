@@ -34,13 +34,15 @@ from agents.native_ppo import (  # noqa: E402
     Runner,
     advantages,
     collect_rollout,
+    make_agent,
     masked_logits,
     minibatch_indices,
     ppo_update,
-    shared_position_slice,
     train,
 )
 from experiments.cli.cli import main  # noqa: E402
+from flowtest_env.encoding import make_encoder  # noqa: E402
+from flowtest_env.wrappers import shared_position_slice  # noqa: E402
 
 FLOWTEST = Path(sys.executable).parent / "flowtest"
 
@@ -50,9 +52,9 @@ def _runner(kind: str, max_steps: int = 3, n: int = 4, seed: int = 0) -> tuple[R
     env: Any = gym.make_vec("FlowTest-SmallReactive-v0", num_envs=n, vectorization_mode="vector_entry_point",
                             max_steps=max_steps)
     torch.manual_seed(seed)
-    where = shared_position_slice(env.unwrapped.games, "flat")
+    where = shared_position_slice([make_encoder(g, "flat") for g in env.unwrapped.games])
     obs_size = int(env.single_observation_space.shape[0]) + (where.stop - where.start)
-    agent = Agent(obs_size, int(env.single_action_space.n), (16,), "gru" if kind == "recurrent-ppo" else "mlp", 8)
+    agent = make_agent(obs_size, int(env.single_action_space.n), (16,), "gru" if kind == "recurrent-ppo" else "mlp", 8)
     args = NativeArgs(algo=kind, num_envs=n, num_steps=12, num_minibatches=2, update_epochs=2, hidden=(16,), gru_hidden=8)
     return Runner(env, agent, where, torch.device("cpu"), seed), agent, args
 
@@ -238,6 +240,46 @@ def test_ctrl_c_while_training_leaves_nothing_half_written(tmp_path: Path) -> No
     assert all(not p.name.startswith(".") for p in (out / "logs").iterdir())
     rows = (out / "logs" / "progress.csv").read_text().splitlines()
     assert rows[0].startswith("step,") and all(r.count(",") == rows[0].count(",") for r in rows)
+
+
+def test_an_interrupted_run_does_not_wait_for_the_tensorboard_thread(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A KeyboardInterrupt inside TensorBoard's queue can leave its writer thread unable to
+    wake, so closing the writer after Ctrl-C could hang for good (it did, under load): an
+    interrupted run drops the writer without waiting; a finished one closes it."""
+    import torch.utils.tensorboard
+
+    import agents.native_ppo as native_ppo
+
+    closed: list[str] = []
+
+    class Writer:
+        def __init__(self, log_dir: str) -> None:
+            self.log_dir = log_dir
+
+        def add_scalar(self, tag: str, value: float, step: int) -> None:
+            pass
+
+        def close(self) -> None:
+            closed.append(self.log_dir)
+
+    monkeypatch.setattr(torch.utils.tensorboard, "SummaryWriter", Writer)
+    args = NativeArgs(env_id="FlowTest-SmallReactive-v0", total_steps=256, num_envs=8, num_steps=16, num_minibatches=2,
+                      hidden=(16,), device="cpu", eval_every=0)
+    train(args, progress_bar=False, log_dir=tmp_path / "done")
+    assert closed == [str(tmp_path / "done")]
+    calls = []
+
+    def interrupted(*a: Any, **kw: Any) -> dict[str, float]:
+        calls.append(1)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return ppo_update(*a, **kw)
+
+    monkeypatch.setattr(native_ppo, "ppo_update", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        train(args, progress_bar=False, log_dir=tmp_path / "stopped")
+    assert closed == [str(tmp_path / "done")] and len(calls) == 2
+    assert (tmp_path / "stopped" / "progress.csv").read_text().count("\n") == 2  # the header and the one finished update
 
 
 # --------------------------------------------------------------------------- prioritized level replay

@@ -1,0 +1,79 @@
+"""The env a native run steps (CleanRL's ``make_env``) and the memory the trainer keeps
+beside it: :func:`make_vec_env` (the NumPy vector env, or its torch twin on the training
+device) and :class:`VisitedBits` (the visited-places memory of a batch, in torch).
+
+Example::
+
+    from agents.native.args import NativeArgs
+    from agents.native.envs import make_vec_env
+    np_env, env, env_memory = make_vec_env(NativeArgs(env_id="FlowTest-Maze2-v0", num_envs=16, device="cpu"))
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import torch
+
+from .args import NativeArgs, resolve_device
+
+
+def make_vec_env(args: NativeArgs) -> tuple[Any, Any, bool]:
+    """``args.num_envs`` runs of ``args.env_id`` with the env options of ``args``: the
+    NumPy vector env (``vectorization_mode="vector_entry_point"``), and the env to step
+    (that one, or with ``env_backend="torch"`` its torch twin on the training device);
+    and whether the env itself appends the visited-places memory (``memory="visited"``).
+
+    Raises
+    ------
+    ValueError
+        If the env cannot be made with these options.
+    """
+    import gymnasium as gym
+
+    import flowtest_env  # noqa: F401 - registers the IDs
+
+    kwargs = dict(args.env_kwargs)
+    if args.obs_kind != "flat":
+        kwargs["obs_kind"] = args.obs_kind
+    if args.shaping > 0:
+        kwargs["shaping"], kwargs["shaping_gamma"] = float(args.shaping), float(args.gamma)
+    env_memory = args.memory == "visited"
+    with_memory: dict[str, Any] = {**kwargs, "memory": "visited"} if env_memory else kwargs
+    try:
+        try:
+            np_env = gym.make_vec(args.env_id, num_envs=args.num_envs, vectorization_mode="vector_entry_point",
+                                  **with_memory)
+        except TypeError:  # a vector env without the memory option: the trainer keeps it
+            env_memory = False
+            np_env = gym.make_vec(args.env_id, num_envs=args.num_envs, vectorization_mode="vector_entry_point", **kwargs)
+    except TypeError as exc:
+        raise ValueError(f"{args.env_id}: the vector env does not take these options ({exc})") from None
+    device = resolve_device(args.device)
+    if args.env_backend == "torch" or (args.env_backend == "auto" and args.level_sampling != "plr"):
+        from flowtest_env.torch_vector import TorchVectorEnv
+
+        return np_env, TorchVectorEnv.from_numpy(np_env, device=device), env_memory
+    return np_env, np_env, env_memory
+
+
+class VisitedBits:
+    """The visited-places memory of a batch: ``seen |= obs[where]``, restarted from the
+    observation itself at each episode's first observation (``start``)."""
+
+    def __init__(self, where: slice | None) -> None:
+        self.where = where
+        self.seen: torch.Tensor | None = None
+
+    def __call__(self, obs: torch.Tensor, start: torch.Tensor) -> torch.Tensor:
+        if self.where is None:
+            return obs
+        here = obs[:, self.where]
+        if self.seen is None:
+            self.seen = here.clone()
+        else:
+            self.seen = torch.where(start.unsqueeze(-1), here, torch.maximum(self.seen, here))
+        return torch.cat([obs, self.seen], dim=1)
+
+
+__all__ = ["VisitedBits", "make_vec_env"]
