@@ -76,16 +76,22 @@ class Tracked:
         self.q = self.product.step_q(self.product.q0 if self.q is None else self.q, s)
         return s, self.q
 
+    def _look(self, observation: Any, info: dict[str, Any]) -> tuple[TestGame, int, int, np.ndarray]:
+        """The game, the current state index, the ``B_sys`` state (:meth:`_observe`) and the
+        legal-action mask: what every SUT here reads first."""
+        s, q = self._observe(info)
+        assert self.game is not None
+        return self.game, s, q, action_mask_of(observation, info)
+
     def _situation(
         self, observation: Any, info: dict[str, Any]
     ) -> tuple[TestGame, SystemProduct, int, np.ndarray, set[tuple[int, int]]]:
         """What a product-graph SUT knows before it acts: the game, its product graph,
         its node there, the legal-action mask and the restrictions active now (also
         remembered, see :meth:`_remember`)."""
-        s, q = self._observe(info)
-        mask = action_mask_of(observation, info)
-        game, prod = self.game, self.product
-        assert game is not None and prod is not None
+        game, s, q, mask = self._look(observation, info)
+        prod = self.product
+        assert prod is not None
         v = prod.node(s, q)
         return game, prod, v, mask, self._remember(s, v, mask)
 

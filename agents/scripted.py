@@ -43,7 +43,7 @@ import numpy as np
 from flowtest_env.game import TestGame, grid_cell
 from flowtest_env.system_product import INF
 
-from .base import Policy, PolicyError, action_mask_of
+from .base import Policy, PolicyError
 from .planning import Tracked, safe_wait
 
 
@@ -78,10 +78,9 @@ class Committed(Tracked):
         self.plan = None
 
     def act(self, observation: Any, info: dict[str, Any]) -> int:
-        s, q = self._observe(info)
-        mask = action_mask_of(observation, info)
-        game, prod = self.game, self.product
-        assert game is not None and prod is not None
+        game, s, q, mask = self._look(observation, info)
+        prod = self.product
+        assert prod is not None
         if self.plan is None:
             blocked = frozenset((s, a) for a in range(game.n_slots) if not mask[a])
             self.plan = prod.path(prod.node(s, q), blocked)
@@ -130,10 +129,7 @@ class FuelBlind(Tracked):
         self.known = set()
 
     def act(self, observation: Any, info: dict[str, Any]) -> int:
-        s, _ = self._observe(info)
-        mask = action_mask_of(observation, info)
-        game = self.game
-        assert game is not None
+        game, s, _, mask = self._look(observation, info)
         place = game.ts.place
         p = int(place[s])
         now = set()
@@ -183,10 +179,7 @@ class Greedy(Tracked):
             self.h = _place_distances(game)
 
     def act(self, observation: Any, info: dict[str, Any]) -> int:
-        s, _ = self._observe(info)
-        mask = action_mask_of(observation, info)
-        game = self.game
-        assert game is not None
+        game, s, _, mask = self._look(observation, info)
         place = game.ts.place
         here = int(self.h[place[s]])
         best, best_h = game.stay_action, here

@@ -26,7 +26,7 @@ from synthesis.graphs.products import Products, reachable
 from synthesis.pipeline import SynthesisOptions, milp_options, synthesize
 from synthesis.problems.problem import Problem, build_graphs
 from synthesis.problems.random_grid import first_consistent
-from synthesis.routing.bounds.heuristic import RouteSeed, RoutingGuess, Work, disjoint_routes, guess_routing, simple_route, simple_routes
+from synthesis.routing.bounds.heuristic import RouteGraph, RouteSeed, RoutingGuess, Work, disjoint_routes, guess_routing, simple_route, simple_routes
 from synthesis.routing.edges import ModelEdges, model_edges
 from synthesis.routing.groups import cut_groups
 from synthesis.routing.model import build_model
@@ -54,7 +54,7 @@ def test_simple_route_is_a_valid_test_by_itself(size: int, family: str, n: int, 
     products, me, _ = _instance(size, family, n, seed)
     src, tgt, n_nodes = products.virtual.initial, products.target, products.virtual.n_nodes
     usable = ~(me.c5 & tgt[me.ev])
-    route = simple_route(n_nodes, src, me.eu, me.ev, usable, tgt, _route_seed(products))
+    route = simple_route(RouteGraph(n_nodes, src, me.eu, me.ev, usable, tgt), _route_seed(products))
     if route is None:
         pytest.skip("no place-simple route found (some instances have none)")
     eu, ev = me.eu[route], me.ev[route]
@@ -151,8 +151,9 @@ def test_disjoint_routes_reach_flow_two_with_two_test_cells(seed: int) -> None:
     seed_ = _route_seed(products)
     usable = ~(me.c5 & tgt[me.ev])
     work = Work(seed_.work)
-    route = next(simple_routes(g.n_nodes, g.initial, me.eu, me.ev, usable, tgt, seed_, work))
-    group = disjoint_routes(g.n_nodes, g.initial, me.eu, me.ev, usable, tgt, seed_, route, 2, work)
+    graph = RouteGraph(g.n_nodes, g.initial, me.eu, me.ev, usable, tgt)
+    route = next(simple_routes(graph, seed_, work))
+    group = disjoint_routes(graph, seed_, route, 2, work)
     if len(group) == 2:
         a, b = group
         changes = g.hist[me.eu] != g.hist[me.ev]

@@ -194,12 +194,13 @@ def guess_routing(
             from_route = True
         return flow >= upper
 
+    graph = RouteGraph(n, src, eu, ev, usable, target)
     if route_seed is not None and flow < upper:
         # grow from one route, then from the union of two (two routes through the same
         # labelled cell in different orders can cross there without a shortcut)
         pool: list[np.ndarray] = []
         work = Work(route_seed.work)
-        for route in simple_routes(n, src, eu, ev, usable, target, route_seed, work):
+        for route in simple_routes(graph, route_seed, work):
             for other in [None] + pool:
                 if work.exhausted or seed_with([route] if other is None else [route, other], work):
                     break
@@ -214,10 +215,10 @@ def guess_routing(
         # checks the seed (random 10x10 grids with two test cells: flow 2 where the pairs
         # above give 1)
         work = Work(route_seed.work)
-        for route in simple_routes(n, src, eu, ev, usable, target, route_seed, work):
+        for route in simple_routes(graph, route_seed, work):
             if work.exhausted:
                 break
-            group = disjoint_routes(n, src, eu, ev, usable, target, route_seed, route, upper, work)
+            group = disjoint_routes(graph, route_seed, route, upper, work)
             if len(group) < 2:
                 continue
             if seed_with(group, work):  # group[0] is route
@@ -277,23 +278,31 @@ class Work:
         return self.spent >= self.limit
 
 
-def simple_route(
-    n: int, src: int, eu: np.ndarray, ev: np.ndarray, usable: np.ndarray, target: np.ndarray, seed: RouteSeed
-) -> np.ndarray | None:
+@dataclass(frozen=True)
+class RouteGraph:
+    """The part of G a route may take: ``n`` nodes, from ``src`` to a node of ``target`` over
+    the edges ``eu[e] -> ev[e]`` with ``usable[e]``."""
+
+    n: int
+    src: int
+    eu: np.ndarray
+    ev: np.ndarray
+    usable: np.ndarray
+    target: np.ndarray
+
+    def search(self, seed: RouteSeed, work: Work) -> _RouteSearch:
+        """A backtracking route search over the usable edges, within ``work``."""
+        ok = np.flatnonzero(self.usable)
+        out_ptr, out_order = _csr(self.eu[ok], self.n)
+        return _RouteSearch(self.eu, self.ev, out_ptr, ok[out_order], self.target, seed, work)
+
+
+def simple_route(graph: RouteGraph, seed: RouteSeed) -> np.ndarray | None:
     """The first of :func:`simple_routes`, or ``None``."""
-    return next(simple_routes(n, src, eu, ev, usable, target, seed), None)
+    return next(simple_routes(graph, seed), None)
 
 
-def simple_routes(
-    n: int,
-    src: int,
-    eu: np.ndarray,
-    ev: np.ndarray,
-    usable: np.ndarray,
-    target: np.ndarray,
-    seed: RouteSeed,
-    work: Work | None = None,
-) -> Iterator[np.ndarray]:
+def simple_routes(graph: RouteGraph, seed: RouteSeed, work: Work | None = None) -> Iterator[np.ndarray]:
     """``Src -> I -> Tgt`` paths of G that never return to a place, as edge indices: at most
     one per order of history changes, within the work budget ``work`` (a fresh one of
     ``seed.work`` if not given; shared with the caller's growth from the routes).
@@ -309,11 +318,9 @@ def simple_routes(
     segment per history, each a shortest path through places no earlier segment used
     (then randomized ones, backtracking when a segment walls off the goal).
     """
-    ok = np.flatnonzero(usable)
-    out_ptr, out_order = _csr(eu[ok], n)
-    out_order = ok[out_order]
-    search = _RouteSearch(eu, ev, out_ptr, out_order, target, seed, work if work is not None else Work(seed.work))
-    for changes in _history_sequences(src, eu[ok], ev[ok], target, seed):
+    src = graph.src
+    search = graph.search(seed, work if work is not None else Work(seed.work))
+    for changes in _history_sequences(src, graph.eu[graph.usable], graph.ev[graph.usable], graph.target, seed):
         if search.work.exhausted:
             break
         seen: set[tuple[int, ...]] = set()
@@ -327,18 +334,7 @@ def simple_routes(
                 yield np.asarray(route, dtype=np.int64)
 
 
-def disjoint_routes(
-    n: int,
-    src: int,
-    eu: np.ndarray,
-    ev: np.ndarray,
-    usable: np.ndarray,
-    target: np.ndarray,
-    seed: RouteSeed,
-    route: np.ndarray,
-    count: int,
-    work: Work,
-) -> list[np.ndarray]:
+def disjoint_routes(graph: RouteGraph, seed: RouteSeed, route: np.ndarray, count: int, work: Work) -> list[np.ndarray]:
     """``route`` and up to ``count - 1`` more place-simple routes through its order of
     history changes, each sharing no place with the others but the places where a route's
     history changes, the start's and the goal's (edge indices; fewer where none is found
@@ -349,14 +345,12 @@ def disjoint_routes(
     same histories), and they carry ``count`` units of flow where the place-simple routes
     of :func:`simple_routes`, combined in pairs, cross each other and open a shortcut. The
     caller checks separation rather than rely on the argument."""
-    h, place = seed.hist, seed.place
+    h, place, src, eu, ev = seed.hist, seed.place, graph.src, graph.eu, graph.ev
     change = h[eu[route]] != h[ev[route]]
     changes = (int(h[src]),) + tuple(int(x) for x in h[ev[route[change]]])
     shared = {int(p) for p in place[ev[route[change]]]} | {int(place[ev[route[-1]]])}
     taken = {int(place[src])} | {int(p) for p in place[ev[route]]}
-    ok = np.flatnonzero(usable)
-    out_ptr, out_order = _csr(eu[ok], n)
-    search = _RouteSearch(eu, ev, out_ptr, ok[out_order], target, seed, work)
+    search = graph.search(seed, work)
     group = [route]
     while len(group) < count and not work.exhausted:
         used = frozenset((taken - shared) | {int(place[src])})
