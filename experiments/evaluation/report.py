@@ -11,10 +11,12 @@ Layout, for a reader who has never seen FlowTest:
    --plot`` draws: walls in every panel, the doors each history closes), its propositions
    named in a legend, the system objective the SUT is given, and the test objective,
    hidden from the SUT, behind a "reveal" switch.
-3. **Failing runs**: per system and test, the reason (for a violation: the conjunct of the
-   system objective that broke, the step and the cell), a filmstrip of the first failing
-   run (the test agent's moves and the doors as they opened and closed) and the replay
-   command of every listed failure.
+3. **Failing runs**: per system and test, one line per way of failing with its seeds
+   (:mod:`~experiments.evaluation.explain`: the loop an open run ended in and the moves
+   toward the goal the test refused, and why; for a violation the conjunct of the system
+   objective that broke, the step and the cell) and the replay command of its first seed, a
+   filmstrip of the first failing run (a loop shown once), its whole path, and the replay
+   command of every listed failure behind a switch.
 4. **All numbers**: one table per system, as in ``report.md``.
 
 Tests are called by their problem's name (a problem file's ``name``, else its file stem;
@@ -231,9 +233,10 @@ table.props td:first-child{font-family:ui-monospace,monospace;white-space:nowrap
 .swatch{display:inline-block;width:.8em;height:.8em;margin-right:.4em;vertical-align:-.05em;border:1px solid #888}
 code{background:#f3f3f3;padding:2px 4px;overflow-wrap:anywhere}
 details summary{cursor:pointer;color:#1a4d8f}
-.broke{background:#fde3e1;border-left:4px solid #b00020;padding:.3em .6em;margin:.4em 0}
+.broke{background:#fde3e1;border-left:4px solid #b00020;padding:.3em .6em;margin:.2em 0}
+ul.outcomes li{margin:.35em 0}
 .film{max-width:100%;border:1px solid #ddd}.traces{display:flex;flex-wrap:wrap;gap:8px}
-.trace{flex:1 1 300px;max-width:560px;min-width:0;border:1px solid #ddd}
+.trace{flex:1 1 300px;max-width:560px;min-width:0}.trace img{width:100%;height:auto;border:1px solid #ddd}
 .bugbox{background:#b00020;color:#fff;padding:1em;font-weight:bold}.bugbox code{color:#222}
 """
 
@@ -317,6 +320,45 @@ def failure_text(f: dict[str, Any]) -> str:
     if isinstance(v, dict) and isinstance(v.get("text"), str):
         return f"{reason}: {v['text']}" if reason else str(v["text"])
     return reason
+
+
+def outcomes_of(r: dict[str, Any]) -> list[dict[str, Any]]:
+    """A record's failing runs, one entry per way of failing (``results.json``'s
+    ``outcomes``: ``line``, ``seeds``, ``kind``, ``replay``, the first run's ``explanation``);
+    a record without them (written by hand, or by an older FlowTest) gets one per listed
+    failure."""
+    if isinstance(r.get("outcomes"), list):
+        return list(r["outcomes"])
+    return [{"kind": f.get("kind", "sut"), "seeds": [f["seed"]], "steps": [], "text": failure_text(f),
+             "line": f"seed {f['seed']}: {failure_text(f)}", "replay": f.get("replay", ""),
+             "explanation": {"violation": f["violation"]} if isinstance(f.get("violation"), dict) else None}
+            for f in r.get("failures", [])]
+
+
+def _outcome_item(o: dict[str, Any]) -> str:
+    """One way of failing as a list item: its runs, what happened, its first run's replay
+    command; a violation says the conjunct, the step and the cell (class ``broke``)."""
+    from .explain import seed_words, steps_words
+
+    e = html.escape
+    seeds = [int(x) for x in o.get("seeds", [])]
+    who = o["line"][: -len(o["text"]) - 2] if o["line"].endswith(o["text"]) else seed_words(seeds)
+    bug = " <b>(FlowTest bug)</b>" if o.get("kind") == "test" else ""
+    v = (o.get("explanation") or {}).get("violation")
+    if isinstance(v, dict) and "conjunct" in v:
+        steps = [int(x) for x in o.get("steps") or [v.get("step", 0)]]
+        body = (f"<p class='broke'>{e(who[:1].upper() + who[1:])} broke <code>{e(str(v['conjunct']))}</code> of the "
+                f"system objective at {e(steps_words(steps))}, {e(where_words(str(v.get('where', ''))))}"
+                + ("" if v.get("alone", True) else " (no conjunct alone: they cannot all hold any more)")
+                + (": from there it can no longer be met" if v.get("kind") in ("visit", "sequenced", "delayed") else "")
+                + ".</p>")
+    else:
+        body = f"<b>{e(who)}</b>: {e(o['text'])}"
+    replay = o.get("replay", "")
+    first = f"seed {seeds[0]}" if seeds else "the first run"
+    more = " (the others: change --seed)" if len(seeds) > 1 else ""
+    tail = f"<span class='small'>Replay {first}{more}:</span> <code>{e(replay)}</code>" if replay else ""
+    return f"<li>{body}{bug}{'' if body.endswith('</p>') else '<br>'}{tail}</li>"
 
 
 CAPTIONS: dict[str, str] = {
@@ -440,39 +482,35 @@ def render_html(
     if not failing:
         parts.append("<p>No run failed.</p>")
     for r in failing:
-        f0 = r["failures"][0]
         col = test_name(r)
+        ways = outcomes_of(r)
         parts.append(
             f"<h3 id='{failures_anchor(r['sut'], col)}'><span class='sut'>{e(r['sut'])}</span> on "
             f"<a href='#{test_anchor(r['env'])}'>{e(col_titles[col])}</a></h3>"
-            f"<p>{r['n_failures']} of {r['episodes']} runs failed. First failure (seed {f0['seed']}, "
-            f"{'FlowTest bug' if f0['kind'] == 'test' else 'the SUT'}): {e(f0['reason'])}.</p>"
+            f"<p>{r['n_failures']} of {r['episodes']} runs failed"
+            + (f", in {len(ways)} ways" if len(ways) > 1 else "") + ":</p><ul class='outcomes'>"
         )
+        parts += [_outcome_item(o) for o in ways]
+        parts.append("</ul>")
         if r.get("stopped"):
             parts.append(f"<p>Stopped: {e(str(r['stopped']))}.</p>")
-        broken = next((f for f in r["failures"] if isinstance(f.get("violation"), dict)
-                       and "conjunct" in f["violation"]), None)
-        if broken is not None:
-            v = broken["violation"]
-            parts.append(f"<p class='broke'>Seed {broken['seed']} broke <code>{e(str(v['conjunct']))}</code> of the "
-                         f"system objective at step {e(str(v.get('step')))}, {e(where_words(str(v.get('where', ''))))}"
-                         + ("" if v.get("alone", True) else " (no conjunct alone: they cannot all hold any more)")
-                         + (": from there it can no longer be met" if v.get("kind") in ("visit", "sequenced", "delayed")
-                            else "")
-                         + ".</p>")
         pics = r.get("pictures", {})
+        first = r["failures"][0]["seed"] if r["failures"] else None
         if "filmstrip" in pics:
-            parts.append(f"<img class='film' src='{e(pics['filmstrip'])}' alt='filmstrip of the first failing run'>")
+            parts.append(f"<p class='small'>The first failing run (seed {first}), frame by frame; a loop is shown once:</p>"
+                         f"<a href='{e(pics['filmstrip'])}' title='open the picture at full size'>"
+                         f"<img class='film' src='{e(pics['filmstrip'])}' alt='filmstrip of the first failing run'></a>")
         traces = [label for label in ("failing", "typical") if label in pics]
         if traces:
             parts.append("<div class='traces'>")
-            parts += [f"<img class='trace' src='{e(pics[label])}' alt='{label} run, whole path'>" for label in traces]
+            parts += [f"<a class='trace' href='{e(pics[label])}' title='open the picture at full size'>"
+                      f"<img src='{e(pics[label])}' alt='{label} run, whole path'></a>" for label in traces]
             parts.append("</div>")
-        parts.append("<p>Replay a run step by step:</p><ul>")
+        parts.append("<details><summary>Replay commands of every listed run</summary><ul>")
         parts += [f"<li>seed {f['seed']}: {e(failure_text(f))}<br><code>{e(f['replay'])}</code></li>" for f in r["failures"]]
         if r["n_failures"] > len(r["failures"]):
             parts.append(f"<li>… {r['n_failures'] - len(r['failures'])} more (results.json lists the first {len(r['failures'])})</li>")
-        parts.append("</ul>")
+        parts.append("</ul></details>")
     # ---- every number
     parts.append("<h2 id='numbers'>All numbers</h2><p class='small'>Met: share of runs meeting the system objective. "
                  "Realized: share of those runs that realized the hidden test objective (guaranteed 100&nbsp;%). "
