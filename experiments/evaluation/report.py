@@ -70,6 +70,10 @@ class TestInfo:
     max_steps: int
     picture: str
     propositions: tuple[tuple[str, str, str], ...] = ()
+    histories: tuple[tuple[str, str], ...] = ()
+    """``(name, meaning)`` of each history the picture has a panel of (``("q2", "saw I1")``):
+    the meanings give the hidden test objective away, so the card shows them behind its
+    "reveal" switch, and the panels only the names."""
 
 
 def file_key(text: str) -> str:
@@ -156,37 +160,57 @@ def column_titles(
 # --------------------------------------------------------------------------- the tests' cards
 
 
-def test_infos(tests: Sequence[NamedEnv | str], out: Path) -> list[TestInfo]:
+def test_infos(tests: Sequence[NamedEnv | str], out: Path, colours: dict[str, tuple[int, int, int]] | None = None) -> list[TestInfo]:
     """Draw each test's restrictions per history (:func:`experiments.plots.plot_artifact`:
     the panels ``flowtest synthesize --plot`` draws, propositions in the legend) to
     ``out/tests/<file_key>.png`` and collect what the report shows of it (problem name,
     kind, objectives, step budget, propositions). A test is the env an evaluation resolved
     (:class:`~experiments.evaluation.episodes.NamedEnv`: its game is drawn, nothing is
-    built) or a name (its env built here)."""
+    built) or a name (its env built here). Every proposition takes its colour from
+    ``colours`` (by name; default one colour per name over these tests,
+    :func:`flowtest_env.render.proposition_colours`), in the pictures and the legends alike."""
     from experiments.outputs import write_atomically
     from experiments.plots import proposition_legend
+    from flowtest_env.render import all_propositions, hex_colour, proposition_colours
 
     from .episodes import NamedEnv, resolve_env
     from .filmstrip import test_picture
 
     (out / "tests").mkdir(parents=True, exist_ok=True)
-    infos = []
+    named_tests = []
     for test in {(t if isinstance(t, str) else t.env_id): t for t in tests}.values():
         if isinstance(test, NamedEnv):
-            named = test
+            named_tests.append(test)
         else:
-            named = resolve_env(test)
-            named.env.close()
+            named_tests.append(resolve_env(test))
+            named_tests[-1].env.close()
+    if colours is None:
+        colours = proposition_colours(name for t in named_tests for name in all_propositions(t.game))
+    hexes = {name: hex_colour(c) for name, c in colours.items()}
+    infos = []
+    for named in named_tests:
         env_id, game = named.env_id, named.game
         name = f"tests/{file_key(env_id)}.png"
-        write_atomically(out / name, partial(test_picture, game))
+        write_atomically(out / name, partial(test_picture, game, colours=hexes))
         art = game.artifact
         infos.append(TestInfo(
             env_id=env_id, problem=str(art.name), kind=str(art.kind),
             system_objective=str(art.objectives.get("system", "")), test_objective=str(art.objectives.get("test", "")),
-            max_steps=named.max_steps, picture=name, propositions=tuple(proposition_legend(art.system)),
+            max_steps=named.max_steps, picture=name, propositions=tuple(proposition_legend(art.system, colours=hexes)),
+            histories=history_meanings(game),
         ))
     return infos
+
+
+def history_meanings(game: Any) -> tuple[tuple[str, str], ...]:
+    """``("q2", "saw I1")`` for every history that closes a door (the panels' neutral names,
+    with what they mean: the report shows the meanings behind its "reveal" switch only)."""
+    from experiments.plots import artifact_view
+
+    view = artifact_view(game.artifact)
+    strategy = game.artifact.strategy
+    reactive = strategy.restrictions & ~strategy.static_obstacles[None, :]
+    return tuple((view.spec.history_name(q), view.spec.describe(q)) for q in range(strategy.n_hist) if reactive[q].any())
 
 
 GLOSSARY: tuple[tuple[str, str], ...] = (
@@ -227,7 +251,7 @@ dl.glossary{display:grid;grid-template-columns:max-content 1fr;gap:.2em 1em;marg
 dl.glossary dt{font-weight:700}dl.glossary dd{margin:0}
 .tests{display:grid;grid-template-columns:repeat(auto-fill,minmax(min(100%,480px),1fr));gap:1em}
 .test{border:1px solid #ddd;padding:.6em;min-width:0}.test h3{margin:.1em 0 .3em;overflow-wrap:anywhere}
-.test img{width:100%;height:auto;border:1px solid #eee}
+.test img{max-width:100%;height:auto;border:1px solid #eee;display:block;margin:0 auto}
 table.props{margin:.2em 0 .6em;font-size:.88em}p.props{margin:.4em 0 0}table.props td{text-align:left;padding:2px 6px}
 table.props td:first-child{font-family:ui-monospace,monospace;white-space:nowrap}
 .swatch{display:inline-block;width:.8em;height:.8em;margin-right:.4em;vertical-align:-.05em;border:1px solid #888}
@@ -312,9 +336,13 @@ def _cell(r: dict[str, Any], anchor: str) -> str:
 
 
 def failure_text(f: dict[str, Any]) -> str:
-    """A failure in words: for a violation the conjunct, step and cell
+    """A failure in words: what the run did (its ``explanation``,
+    :mod:`~experiments.evaluation.explain`), else for a violation the conjunct, step and cell
     (``violated the system objective: broke G !hazard at step 7 in cell (2, 6)``), else its
-    reason. ``f`` is a ``results.json`` failure; its ``violation`` is read if present."""
+    reason. ``f`` is a ``results.json`` failure."""
+    why = f.get("explanation")
+    if isinstance(why, dict) and isinstance(why.get("text"), str) and why["text"]:
+        return str(why["text"])
     v = f.get("violation")
     reason = str(f.get("reason", ""))
     if isinstance(v, dict) and isinstance(v.get("text"), str):
@@ -363,13 +391,14 @@ def _outcome_item(o: dict[str, Any]) -> str:
 
 CAPTIONS: dict[str, str] = {
     "static": "Static test: the black walls stand for the whole run.",
-    "reactive": "Reactive test: one panel per history (what the run has seen so far) that closes doors; a red bar is "
-                "a door closed in that history (one way: the arrow's move is refused).",
+    "reactive": "Reactive test: one panel per history that closes doors (a history is what the run has seen so far, "
+                "named neutrally, q0, q1, ...: the switch below says what each means); an orange bar is a door closed "
+                "in that history (one way: the arrow's move is refused).",
     "mixed": "Mixed test: black walls stand for the whole run, and only in the static area the problem gives them "
-             "(its borders dashed); one panel per history that closes doors, a red bar is a door closed in that "
-             "history (one way: the arrow's move is refused).",
-    "agent": "Agent test: the test agent moves in the blue cells and stands in the way; a red bar is a move it "
-             "blocks in that history (one panel per history).",
+             "(its borders dashed); one panel per history that closes doors (named neutrally; the switch below says "
+             "what each means), an orange bar is a door closed in that history (one way: the arrow's move is refused).",
+    "agent": "Agent test: the test agent moves in the pale blue cells and stands in the way; a blue bar is a move it "
+             "blocks in that history (one panel per history, named neutrally; the switch below says what each means).",
 }
 """What a test card says of its picture, per kind of test."""
 
@@ -382,9 +411,11 @@ def _test_card(env: str, title: str, t: TestInfo | None) -> list[str]:
         parts.append("</div>")
         return parts
     parts.append(
-        f"<p class='small'>{e(t.kind)} test, {t.max_steps} steps per run.</p>"
-        f"<img src='{e(t.picture)}' alt='the restrictions of this test, one panel per history' loading='lazy'>"
-        f"<p class='small'>{e(CAPTIONS.get(t.kind, CAPTIONS['reactive']))} The start is green, the goal gold.</p>"
+        f"<p class='small'>{e(t.kind)} test, a step budget of {t.max_steps} steps a run.</p>"
+        f"<a href='{e(t.picture)}' title='open the picture at full size'>"
+        f"<img src='{e(t.picture)}' alt='the restrictions of this test, one panel per history' loading='lazy'></a>"
+        f"<p class='small'>{e(CAPTIONS.get(t.kind, CAPTIONS['reactive']))} The start is teal, the goal green"
+        f"{', the test agent blue' if t.kind == 'agent' else ''}. Click the picture to open it at full size.</p>"
     )
     if t.propositions:
         squares = any(colour for _, _, colour in t.propositions)
@@ -395,10 +426,14 @@ def _test_card(env: str, title: str, t: TestInfo | None) -> list[str]:
                       if re.fullmatch(r"#[0-9a-fA-F]{6}", colour) else "")
             parts.append(f"<tr><td>{swatch}{e(name)}</td><td>{e(where)}</td></tr>")
         parts.append("</table>")
+    meanings = "".join(f"<tr><td>{e(name)}</td><td>{e(meaning)}</td></tr>" for name, meaning in t.histories)
     parts.append(
         f"<p>System objective (given to the SUT): <code>{e(t.system_objective)}</code></p>"
         f"<details><summary>Reveal the test objective (hidden from the SUT)</summary>"
-        f"<p><code>{e(t.test_objective)}</code></p></details></div>"
+        f"<p><code>{e(t.test_objective)}</code></p>"
+        + (f"<p class='small props'>What each history of the panels has seen:</p><table class='props'>{meanings}</table>"
+           if meanings else "")
+        + "</details></div>"
     )
     return parts
 

@@ -61,14 +61,39 @@ other non-empty folder unless ``--force``
 (:func:`experiments.outputs.prepare_output_folder`)."""
 
 
-def _filmstrip(trace: Trace, path: Path) -> None:
+def _filmstrip_to(trace: Trace, colours: dict[str, tuple[int, int, int]], path: Path) -> None:
+    from .explain import explain
     from .filmstrip import filmstrip
 
     game = game_of_trace(trace)
     v = trace.verdict
-    title = (f"{trace.sut} on {test_title(trace.env_id, str(game.artifact.name))}, seed {trace.seed}: {trace.reason or v['system_objective']} "
-             f"(system objective {v['system_objective']}, {v['steps']} steps)")
-    filmstrip(game, trace.states, trace.actions, title, path)
+    title = (f"{trace.sut} on {test_title(trace.env_id, str(game.artifact.name))}, seed {trace.seed}: "
+             f"system objective {v['system_objective']} after {v['steps']} steps")
+    why = explain(trace, game)
+    filmstrip(game, trace.states, trace.actions, title, path, colours=colours, loop=why.loop,
+              explanation="" if why.what == "violation" else why.text)
+
+
+def _picture(trace: Trace, colours: dict[str, tuple[int, int, int]], path: Path) -> None:
+    from .explain import explain
+
+    trace_picture(trace, path, colours, explain(trace).text if trace.failed else "")
+
+
+def report_colours(cells: Sequence[Cell]) -> dict[str, tuple[int, int, int]]:
+    """One colour per proposition name over every test the cells played
+    (:func:`flowtest_env.render.proposition_colours`): every picture of the report takes
+    it, so a proposition keeps its colour from test to test."""
+    from flowtest_env.render import all_propositions, proposition_colours
+
+    names: set[str] = set()
+    for cell in cells:
+        games = {id(t.game): t.game for t in cell.traces if t.game is not None}
+        if cell.test is not None:
+            games[id(cell.test.game)] = cell.test.game
+        for game in games.values():
+            names.update(all_propositions(game))
+    return proposition_colours(names)
 
 
 def write_report(cells: Sequence[Cell], out: Path, tests: Sequence[TestInfo] | None = None) -> list[dict[str, Any]]:
@@ -96,6 +121,7 @@ def write_report(cells: Sequence[Cell], out: Path, tests: Sequence[TestInfo] | N
     """
     out.mkdir(parents=True, exist_ok=True)
     (out / "traces").mkdir(exist_ok=True)
+    colours = report_colours(cells)
     for cell in cells:
         cell_name = test_name({"env": cell.env_id, "tester": cell.tester})
         typical = next((t for t in cell.traces if not t.failed), None)
@@ -104,14 +130,14 @@ def write_report(cells: Sequence[Cell], out: Path, tests: Sequence[TestInfo] | N
             if tr is None:
                 continue
             name = f"traces/{file_key(cell.sut)}--{file_key(cell_name)}--{label}.png"
-            write_atomically(out / name, partial(trace_picture, tr))
+            write_atomically(out / name, partial(_picture, tr, colours))
             cell.pictures[label] = name
         if failing is not None:
             name = f"traces/{file_key(cell.sut)}--{file_key(cell_name)}--filmstrip.png"
-            write_atomically(out / name, partial(_filmstrip, failing))
+            write_atomically(out / name, partial(_filmstrip_to, failing, colours))
             cell.pictures["filmstrip"] = name
     if tests is None:
-        tests = test_infos(list({c.env_id: c.test or c.env_id for c in cells}.values()), out)
+        tests = test_infos(list({c.env_id: c.test or c.env_id for c in cells}.values()), out, colours)
     records = _write_results(cells, out, tests)
     md, body = _markdown(records), render_html(records, tests, (TESTER_COLUMNS, tester_comparison_rows(records)))
     write_atomically(out / "report.md", lambda tmp: tmp.write_text(md))
@@ -165,7 +191,8 @@ def outcome_lines(records: Sequence[dict[str, Any]]) -> list[str]:
         ways = outcomes_of(r)
         lines += [f"{'':{w_sut}s} {o['line']}" for o in ways[:LISTED_OUTCOMES]]
         if len(ways) > LISTED_OUTCOMES:
-            lines.append(f"{'':{w_sut}s} ... {len(ways) - LISTED_OUTCOMES} more ways of failing: see the report")
+            more = len(ways) - LISTED_OUTCOMES
+            lines.append(f"{'':{w_sut}s} ... {more} more way{'' if more == 1 else 's'} of failing: see the report")
         if r["stopped"]:
             lines.append(f"{'':{w_sut}s} stopped: {r['stopped']}")
     return lines
