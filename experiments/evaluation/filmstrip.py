@@ -227,10 +227,12 @@ def _frame_title(i: int, prev: int, events: Sequence[str], states: Sequence[Any]
     if broke is not None and i == broke.step:
         return f"{head}: {label}\nBROKE {broke.conjunct}\nat {broke.where}"
     if loop is not None and i == loop.start:
-        return f"{head}: {label}\nthe loop begins (a round of {loop.period} step{'s' if loop.period > 1 else ''})"
+        return f"{head}: {label}\n" + ("it stays here from now on" if loop.period == 1 else
+                                       f"the loop begins (a round of {loop.period} steps)")
     if loop is not None and i == len(states) - 1 and i >= loop.start + loop.period:
-        rounds = (i - loop.start) // loop.period
-        return f"{head}: the end\nthe round went {rounds} times, steps {loop.start}-{i}"
+        if loop.period == 1:
+            return f"{head}: the end\nstayed here {i - loop.start} steps, steps {loop.start}-{i}"
+        return f"{head}: the end\nthe round went {(i - loop.start) // loop.period} times, steps {loop.start}-{i}"
     return f"{head}\n{label}"
 
 
