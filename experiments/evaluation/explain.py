@@ -277,7 +277,7 @@ def _moves_toward_goal(game: Any, states: Sequence[Any], loop: Loop, tester: str
     return verdicts
 
 
-def _loop_words(names: Sequence[str]) -> str:
+def _loop_words(names: Sequence[str], noun: str = "cells") -> str:
     """``stays in A``, ``alternates between A and B``, ``goes round A -> B -> C -> A``."""
     if len(set(names)) == 1:
         return f"stays in {names[0]}"
@@ -285,7 +285,7 @@ def _loop_words(names: Sequence[str]) -> str:
         return f"alternates between {names[0]} and {names[1]}"
     if len(names) <= 8:
         return f"goes round {' -> '.join([*names, names[0]])} (every {len(names)} steps)"
-    return f"goes round {len(set(names))} cells, every {len(names)} steps"
+    return f"goes round {len(set(names))} {noun}, every {len(names)} steps"
 
 
 def _loop_explanation(game: Any, states: Sequence[Any], loop: Loop, tester: str) -> Explanation:
@@ -294,12 +294,12 @@ def _loop_explanation(game: Any, states: Sequence[Any], loop: Loop, tester: str)
     first = min(range(len(names)), key=lambda i: (names[i], i)) if len(set(names)) == len(names) else 0
     names = names[first:] + names[:first]
     moves = _moves_toward_goal(game, states, loop, tester)
-    what = f"from {STEPS} on, {_loop_words(names)} until the step budget ran out"
+    what = f"from {STEPS} on, {_loop_words(names, 'cells' if game.is_grid else 'states')} until the step budget ran out"
     listed = [m.text() for m in moves[:LISTED_MOVES]]
     if len(moves) > LISTED_MOVES:
         listed.append(f"{len(moves) - LISTED_MOVES} more moves toward the goal")
     if not moves:
-        listed.append("no move out of these cells leads nearer the goal past the walls")
+        listed.append("no move out of the loop leads nearer the goal past the walls")
     template = "; ".join([what, *listed])
     cells = tuple(dict.fromkeys(names))
     return Explanation("loop", _with_steps(template, f"step {loop.start}"), template, loop.start, loop, cells, tuple(moves))
@@ -311,7 +311,8 @@ def _wander_explanation(game: Any, states: Sequence[Any]) -> Explanation:
     near = min(range(len(ds)), key=lambda i: (ds[i] if ds[i] >= 0 else 1 << 30, i))
     cells = {place_name(game, r.system) for r in states}
     template = "never settled into a loop before the step budget ran out"
-    text = (f"{template}: went through {len(cells)} cells and ended in {place_name(game, states[-1].system)}, "
+    where = "cells" if game.is_grid else "states"
+    text = (f"{template}: went through {len(cells)} {where} and ended in {place_name(game, states[-1].system)}, "
             f"{_moves(ds[-1])} from meeting the system objective past the walls (nearest: {_moves(ds[near])}, "
             f"at step {near} in {place_name(game, states[near].system)})")
     return Explanation("wander", text, template, extra={"nearest": ds[near], "nearest_step": near, "end": ds[-1]})

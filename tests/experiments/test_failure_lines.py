@@ -115,6 +115,15 @@ def test_find_loop_reads_the_end_of_a_run() -> None:
     assert loop is not None and (loop.start, loop.period) == (4, 2)
 
 
+def test_a_loop_is_told_as_it_is_walked() -> None:
+    from experiments.evaluation.explain import _loop_words
+
+    assert _loop_words(["(0, 1)"]) == "stays in (0, 1)"
+    assert _loop_words(["(0, 1)", "(1, 1)"]) == "alternates between (0, 1) and (1, 1)"
+    assert _loop_words(["a", "b", "c"], "states") == "goes round a -> b -> c -> a (every 3 steps)"
+    assert _loop_words([str(i) for i in range(10)], "states") == "goes round 10 states, every 10 steps"
+
+
 def test_runs_alike_are_folded_with_their_seeds_and_steps() -> None:
     assert seed_words([3]) == "seed 3" and seed_words([0, 1, 2, 3]) == "seeds 0-3 (4 runs)"
     assert seed_words([0, 1, 5, 7, 8, 9]) == "seeds 0, 1, 5, 7-9 (6 runs)"
