@@ -54,7 +54,7 @@ def trace_picture(trace: Trace, path: Path, colours: Mapping[str, tuple[int, int
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from experiments.plots import fit_font
+    from experiments.plot_agent import fit_font
     from flowtest_env import render
     from flowtest_env.render import make_renderer
 

@@ -292,7 +292,8 @@ def test_park_labels_stay_inside_their_boxes_and_the_picture(floors: dict[str, A
     label of a panel lies inside its cell, so none runs off the grid."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
-    from experiments.plots import _agent_overlay, _grid_figure, artifact_view, panels_of
+    from experiments.plot_agent import _agent_overlay
+    from experiments.plots import _grid_figure, artifact_view, panels_of
 
     view = artifact_view(floors["ward"].artifact)
     fig = _grid_figure(view, panels_of(view, reveal=False), _agent_overlay(view, None), 2, False)
