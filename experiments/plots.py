@@ -4,23 +4,30 @@
 restrictions can be read at a glance:
 
 * **grid** and **fuel** systems are drawn as cells (blocked cells dark, tokens written
-  in the cells, the start green, the goal cells gold). Static obstacles are thick black
+  in the cells, the start teal, the goal cells green). Static obstacles are thick black
   walls on the border two cells share; a fuel system's moves between the same two
-  cells at any fuel level are one wall. Reactive restrictions are one-way red markers:
-  an arrow from the source cell toward the border, stopped by a bar on the source's
-  side, meaning "from this cell, this way is closed";
+  cells at any fuel level are one wall. Reactive restrictions (doors) are one-way orange
+  markers: an arrow from the source cell toward the border, stopped by a bar on the
+  source's side, meaning "from this cell, this way is closed"; a move a test agent blocks
+  is the same marker in the agent's blue;
 * **graph** systems are node-link pictures in a deterministic layered layout (layers
   are the breadth-first distance from the start, left to right), the start and
-  terminal states highlighted, propositions under the nodes, restricted edges red and
+  terminal states highlighted, propositions under the nodes, restricted edges orange and
   static obstacles black and dashed.
 
+The colours are the roles' of every FlowTest picture (:data:`flowtest_env.render.ROLE_COLOURS`:
+the start teal, the goal green, the test agent blue, walls black, doors orange).
+
 Reactive and mixed tests get one panel per history that restricts something, titled
-with the history's name and what it means; static walls appear in every panel. A
+with the history's name and what it means (``reveal=False``: the name alone, ``q2``, as the
+report shows a test whose objective is hidden); static walls appear in every panel. A
 test whose restrictions are all static gets a single panel.
 
-On grids every proposition gets a colour of its own: a small square in the corner of each
-cell where it holds, and a legend line saying what it is (``H = hazard``, or the cells, or
-the fuel levels at which it holds), so a spill zone reads as a spill zone.
+On grids every proposition gets a colour of its own (``colours``: a report passes one
+mapping to all its pictures, so a proposition keeps its colour from test to test): a small
+square in the corner of each cell where it holds, and a legend line saying what it is
+(``H = hazard``, or the cells, or the fuel levels at which it holds), so a spill zone reads
+as a spill zone.
 
 An optional test-agent overlay shades the agent's cells (and marks its parks); agent
 problems pass it automatically through ``test.agent``.
@@ -51,25 +58,37 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch, Rectangle
 
+from flowtest_env import render as roles
 from synthesis.model.errors import ProblemError
+
+from .plot_agent import _agent_overlay, _cell_of_place, _cell_points, _extent, _Overlay, _park_cells, fit_font, park_tags
 
 #: File formats :func:`plot_test` writes, chosen by the path's suffix.
 FORMATS = ("png", "svg", "pdf")
 
-# colours: one meaning each, the same in every picture
+# colours: one meaning each, the same in every picture (the roles of flowtest_env.render)
 FREE = "#ffffff"
 BLOCKED = "#3a3a3a"
-START = "#b9e6b3"
-GOAL = "#ffd966"
+START = roles.hex_colour(roles.tint(roles.START, 0.6))
+GOAL = roles.hex_colour(roles.tint(roles.GOAL, 0.45))
 GRID_LINE = "#9a9a9a"
 WALL = "#000000"
-RESTRICTED = "#d62728"
+RESTRICTED = roles.hex_colour(roles.DOOR)
+"""A door: a move the test closes in some histories."""
+AGENT_BLOCK = roles.hex_colour(roles.AGENT)
+"""A move the test agent blocks."""
 EDGE = "#9a9a9a"
-AGENT = "#9ecae1"
+AGENT = roles.hex_colour(roles.tint(roles.AGENT, 0.6))
+"""The test agent's cells and parks."""
 TEXT = "#202020"
 PROP = "#1f5fa0"
 #: one colour per proposition (in name order), none of them a colour with a meaning above
-PROP_COLOURS = ("#9467bd", "#ff7f0e", "#17becf", "#e377c2", "#8c564b", "#bcbd22", "#7f7f7f", "#2f4b7c")
+PROP_COLOURS = tuple(roles.hex_colour(c) for c in roles.PALETTE)
+
+
+def proposition_colours(names: Sequence[str]) -> dict[str, str]:
+    """``#rrggbb`` of each proposition (:func:`flowtest_env.render.proposition_colours`)."""
+    return {name: roles.hex_colour(c) for name, c in roles.proposition_colours(names).items()}
 
 Cell = tuple[int, int]
 
@@ -90,8 +109,10 @@ class Panel:
     restricted: np.ndarray  # bool[n_moves], reactive restrictions only
 
 
-def panels_of(test: Any) -> list[Panel]:
-    """One panel per history with reactive restrictions, or one static panel.
+def panels_of(test: Any, reveal: bool = True) -> list[Panel]:
+    """One panel per history with reactive restrictions, or one static panel, titled with
+    the history's name and (``reveal``) what it means, which gives the hidden test objective
+    away (``history q1: saw I1``; else ``history q1``).
 
     Reactive restrictions of history ``q`` are ``C(q)`` minus the static obstacles
     (those are drawn in every panel anyway).
@@ -102,8 +123,8 @@ def panels_of(test: Any) -> list[Panel]:
     panels = []
     for q in range(strategy.n_hist):
         if reactive[q].any():
-            name, meaning = test.spec.history_name(q), test.spec.describe(q)
-            panels.append(Panel(f"history {name}: {meaning}", reactive[q]))
+            name = test.spec.history_name(q)
+            panels.append(Panel(f"history {name}: {test.spec.describe(q)}" if reveal else f"history {name}", reactive[q]))
     if not panels:
         title = "static walls (the whole test)" if static.any() else "no restrictions"
         panels.append(Panel(title, np.zeros_like(static)))
@@ -111,7 +132,7 @@ def panels_of(test: Any) -> list[Panel]:
 
 
 def plot_test(test: Any, path: str | Path, *, agent: Any = None, dpi: int = 110, max_cols: int | None = None,
-              header: bool = True) -> Path:
+              header: bool = True, reveal: bool = True, colours: dict[str, str] | None = None) -> Path:
     """Draw ``test`` (a :class:`~synthesis.pipeline.SynthesizedTest`) to ``path``.
 
     Parameters
@@ -134,6 +155,12 @@ def plot_test(test: Any, path: str | Path, *, agent: Any = None, dpi: int = 110,
     header
         Title the picture with the problem's name, kind, flow, cuts and objectives (the
         report's cards say these in the page, so they leave it out).
+    reveal
+        Title each panel with what its history means (which gives the hidden test objective
+        away); ``False``: its neutral name alone (``history q2``).
+    colours
+        The propositions' colours by name (``#rrggbb``; default :func:`proposition_colours`
+        of the test's own): a report passes one mapping to all its pictures.
 
     Returns
     -------
@@ -143,10 +170,11 @@ def plot_test(test: Any, path: str | Path, *, agent: Any = None, dpi: int = 110,
     path = Path(path)
     fmt = check_plot_format(path)
     ts = test.problem.system
-    panels = panels_of(test)
+    panels = panels_of(test, reveal)
     overlay = _agent_overlay(test, agent)
     if ts.kind in ("grid", "fuel") and ts.layout is not None:
-        fig = _grid_figure(test, panels, overlay, max_cols, header)
+        props = proposition_places(ts)
+        fig = _grid_figure(test, panels, overlay, max_cols, header, {**proposition_colours(list(props)), **(colours or {})})
     else:
         fig = _graph_figure(test, panels, overlay, max_cols, header)
     if header:
@@ -223,7 +251,8 @@ def artifact_view(art: Any) -> Any:
     return _ArtifactTest(problem, routing, art.strategy, _ArtifactSpec(art), art.agent)
 
 
-def plot_artifact(art: Any, path: str | Path, *, dpi: int = 110, max_cols: int | None = 2, header: bool = True) -> Path:
+def plot_artifact(art: Any, path: str | Path, *, dpi: int = 110, max_cols: int | None = 2, header: bool = True,
+                  reveal: bool = True, colours: dict[str, str] | None = None) -> Path:
     """Draw a loaded test artifact as :func:`plot_test` draws its synthesized test: one
     panel per history that restricts something, static walls in every panel, the
     propositions in the legend, the test agent's cells and parks.
@@ -234,7 +263,7 @@ def plot_artifact(art: Any, path: str | Path, *, dpi: int = 110, max_cols: int |
         game = gym.make("FlowTest-SmallReactive-v0").unwrapped.game
         plot_artifact(game.artifact, "small-reactive.png")
     """
-    return plot_test(artifact_view(art), path, dpi=dpi, max_cols=max_cols, header=header)
+    return plot_test(artifact_view(art), path, dpi=dpi, max_cols=max_cols, header=header, reveal=reveal, colours=colours)
 
 
 def proposition_places(ts: Any) -> dict[str, tuple[list[Cell], str]]:
@@ -260,11 +289,12 @@ def proposition_places(ts: Any) -> dict[str, tuple[list[Cell], str]]:
     return out
 
 
-def proposition_legend(ts: Any, limit: int = 4) -> list[tuple[str, str, str]]:
+def proposition_legend(ts: Any, limit: int = 4, colours: dict[str, str] | None = None) -> list[tuple[str, str, str]]:
     """``(proposition, where it holds, colour)`` for a legend: ``("hazard", "cells H",
     "#e377c2")`` when one token names exactly its cells, else its cells (the first
     ``limit``), and the fuel levels when it holds at some levels only; the colour of its
-    squares in the grid pictures. Graph systems: the states, no colour (the pictures
+    squares in the grid pictures (``colours`` by name, default :func:`proposition_colours`
+    of the system's propositions). Graph systems: the states, no colour (the pictures
     write the propositions under the nodes)."""
     out: list[tuple[str, str, str]] = []
     if ts.layout is None:
@@ -279,6 +309,7 @@ def proposition_legend(ts: Any, limit: int = 4) -> list[tuple[str, str, str]]:
         return out
     tokens = ts.layout.tokens
     places = proposition_places(ts)
+    colour_of = {**proposition_colours(list(places)), **(colours or {})}
     for prop, (cells, note) in places.items():
         named = {tokens.get(c) for c in cells}
         token = next(iter(named)) if len(named) == 1 else None
@@ -289,12 +320,8 @@ def proposition_legend(ts: Any, limit: int = 4) -> list[tuple[str, str, str]]:
         else:
             more = f" and {len(cells) - limit} more" if len(cells) > limit else ""
             where = ("cell " if len(cells) == 1 else "cells ") + ", ".join(f"({r}, {c})" for r, c in cells[:limit]) + more
-        out.append((prop, f"{where} at {note}" if note else where, _prop_colour(list(places), prop)))
+        out.append((prop, f"{where} at {note}" if note else where, colour_of[prop]))
     return out
-
-
-def _prop_colour(props: Sequence[str], prop: str) -> str:
-    return PROP_COLOURS[list(props).index(prop) % len(PROP_COLOURS)]
 
 
 # --------------------------------------------------------------------------- shared
@@ -318,116 +345,7 @@ def _header(test: Any) -> str:
     )
 
 
-@dataclass
-class _Park:
-    """A park of the test agent: a state outside T, entered from some places of T."""
-
-    name: str
-    entries: list[int]  # places of T the park is entered from
-    cell: Cell | None = None  # where to draw it, when given explicitly (grids)
-
-
-@dataclass
-class _Overlay:
-    """What the picture shows of a test agent: its places of T and its parks."""
-
-    places: set[int]
-    parks: list[_Park]
-
-
-def _get(obj: Any, name: str) -> Any:
-    if isinstance(obj, dict):
-        return obj.get(name)
-    return getattr(obj, name, None)
-
-
-def _resolve(ts: Any, item: Any) -> tuple[int | None, Cell | None]:
-    """A place of T from a place index, a ``(row, col)`` cell or a state name.
-
-    Returns ``(place, cell)``; a cell outside T gives ``(None, cell)``.
-    """
-    place_index = {p: i for i, p in enumerate(ts.places)}
-    if isinstance(item, (int, np.integer)) and not isinstance(item, bool):
-        return (int(item), None) if 0 <= int(item) < len(ts.places) else (None, None)
-    if isinstance(item, (tuple, list)) and len(item) == 2 and all(isinstance(x, (int, np.integer)) for x in item):
-        cell = (int(item[0]), int(item[1]))
-        return place_index.get(cell), cell
-    if isinstance(item, str) and item in place_index:
-        return place_index[item], None
-    return None, None
-
-
-def _agent_overlay(test: Any, agent: Any) -> _Overlay | None:
-    """Read a duck-typed agent overlay; ``None`` when there is nothing to draw.
-
-    ``cells`` items are places of T (indices into ``ts.places``, which are the state
-    indices on grid and graph systems, as :class:`synthesis.model.agent_system.TestAgent` keeps
-    them), ``(row, col)`` cells or state names. ``parks`` items are objects or
-    mappings with a ``name`` and ``entries`` (indices into ``cells``) or ``from``
-    (cells), or plain places/cells drawn as parks.
-    """
-    ts = test.problem.system
-    candidates = [agent] if agent is not None else [getattr(test, "agent", None), getattr(test.problem, "agent", None)]
-    for cand in candidates:
-        cells = _get(cand, "cells") if cand is not None else None
-        if cells is None:
-            continue
-        cell_places = [_resolve(ts, item)[0] for item in cells]
-        places = {p for p in cell_places if p is not None}
-        parks: list[_Park] = []
-        for k, item in enumerate(_get(cand, "parks") or ()):
-            name, entries = _get(item, "name"), _get(item, "entries")
-            if name is not None or entries is not None or _get(item, "from") is not None:
-                if entries is not None:
-                    ent = [cell_places[int(e)] for e in entries if 0 <= int(e) < len(cell_places)]
-                else:
-                    ent = [_resolve(ts, c)[0] for c in _get(item, "from") or ()]
-                parks.append(_Park(str(name if name is not None else f"park {k}"), [e for e in ent if e is not None]))
-                continue
-            place, cell = _resolve(ts, item)
-            if place is not None:
-                parks.append(_Park("P", [place], None if ts.layout is None else _cell_of_place(ts, place)))
-            elif cell is not None:
-                parks.append(_Park("P", [], cell))
-        if places or parks:
-            return _Overlay(places, parks)
-    return None
-
-
-def _park_cells(ts: Any, parks: Sequence[_Park]) -> list[tuple[_Park, Cell]]:
-    """Where each park is drawn on a grid: its own cell, else beside an entry cell.
-
-    A park beside the grid (just outside an entry cell on the border) reads as "the
-    agent leaves the grid here"; failing that, a blocked neighbour; else nothing.
-    """
-    lay = ts.layout
-    out: list[tuple[_Park, Cell]] = []
-    for park in parks:
-        if park.cell is not None:
-            out.append((park, park.cell))
-            continue
-        outside: list[Cell] = []
-        blocked: list[Cell] = []
-        for e in park.entries:
-            r, c = _cell_of_place(ts, e)
-            for n in ((r - 1, c), (r + 1, c), (r, c - 1), (r, c + 1)):
-                if not (0 <= n[0] < lay.rows and 0 <= n[1] < lay.cols):
-                    outside.append(n)
-                elif n in lay.blocked:
-                    blocked.append(n)
-        taken = {cell for _, cell in out}
-        free = [x for x in outside + blocked if x not in taken]
-        if free:
-            out.append((park, free[0]))
-    return out
-
-
 # --------------------------------------------------------------------------- grids
-
-
-def _cell_of_place(ts: Any, p: int) -> Cell:
-    c = ts.places[p]
-    return int(c[0]), int(c[1])
 
 
 def _place_pairs(ts: Any, mask: np.ndarray) -> set[tuple[int, int]]:
@@ -504,13 +422,16 @@ def _static_area(test: Any) -> set[tuple[int, int]]:
     return {(a, b) for a, b in pairs if _adjacent(_cell_of_place(ts, a), _cell_of_place(ts, b))}
 
 
-def _draw_grid_panel(ax: Axes, test: Any, panel: Panel, overlay: _Overlay | None) -> None:
+def _draw_grid_panel(ax: Axes, test: Any, panel: Panel, overlay: _Overlay | None, colours: dict[str, str],
+                     width_in: float = 3.0) -> None:
     ts = test.problem.system
     lay = ts.layout
     start = _cell_of_place(ts, int(ts.place[ts.initial]))
     goals = {_cell_of_place(ts, int(p)) for p in np.unique(ts.place[ts.terminal])}
     agent_cells = {_cell_of_place(ts, p) for p in overlay.places} if overlay else set()
     parks = _park_cells(ts, overlay.parks) if overlay else []
+    lo_r, lo_c, hi_r, hi_c = _extent(ts, parks)
+    cell_pt = _cell_points(ts, overlay, width_in)
     labels_of: dict[Cell, set[str]] = {}
     if ts.kind == "grid":
         for s in range(ts.n_states):
@@ -532,27 +453,31 @@ def _draw_grid_panel(ax: Axes, test: Any, panel: Panel, overlay: _Overlay | None
             text = lay.tokens.get(cell)
             if cell == start and text is None:
                 text = "start"
-            if text is not None and cell not in lay.blocked:
-                ax.text(c + 0.5, r + 0.5, text, ha="center", va="center", fontsize=13, fontweight="bold", color=TEXT, zorder=3)
-            elif cell not in lay.blocked and labels_of.get(cell):
-                ax.text(c + 0.5, r + 0.5, "\n".join(sorted(labels_of[cell])), ha="center", va="center", fontsize=8,
-                        color=TEXT, zorder=3)
+            if cell in lay.blocked:
+                continue
+            label = text if text is not None else "\n".join(sorted(labels_of.get(cell, ())))
+            size = fit_font(label, cell_pt, 13 if text is not None else 8) if label else None
+            if size is not None:
+                ax.text(c + 0.5, r + 0.5, label, ha="center", va="center", fontsize=size,
+                        fontweight="bold" if text is not None else "normal", color=TEXT, zorder=3)
     places = proposition_places(ts)
     marks: dict[Cell, int] = {}  # squares drawn in a cell so far: several propositions line up
     for prop, (cells, _) in places.items():
-        colour = _prop_colour(list(places), prop)
+        colour = colours[prop]
         for r, c in cells:
             if (r, c) in lay.blocked:
                 continue
             k = marks[(r, c)] = marks.get((r, c), -1) + 1
             ax.add_patch(Rectangle((c + 0.04 + 0.2 * (k % 4), r + 0.04 + 0.2 * (k // 4)), 0.17, 0.17, facecolor=colour,
                                    edgecolor="none", zorder=3))
-    lo_r, lo_c, hi_r, hi_c = 0, 0, lay.rows, lay.cols
+    tags = park_tags(overlay, cell_pt)
     for park, (r, c) in parks:
         ax.add_patch(Rectangle((c + 0.06, r + 0.06), 0.88, 0.88, facecolor=AGENT, alpha=0.55, hatch="//",
                                edgecolor=AGENT, linewidth=1.5, zorder=3))
-        ax.text(c + 0.5, r + 0.5, park.name, ha="center", va="center", fontsize=7, fontweight="bold", color=TEXT, zorder=4)
-        lo_r, lo_c, hi_r, hi_c = min(lo_r, r), min(lo_c, c), max(hi_r, r + 1), max(hi_c, c + 1)
+        size = fit_font(tags[park.name], cell_pt * 0.88, 7)
+        if size is not None:
+            ax.text(c + 0.5, r + 0.5, tags[park.name], ha="center", va="center", fontsize=size, fontweight="bold",
+                    color=TEXT, zorder=4)
     ax.add_patch(Rectangle((0, 0), lay.cols, lay.rows, fill=False, edgecolor=WALL, linewidth=2.5, zorder=4))
     for a, b in sorted(_static_area(test)):  # where a mixed test may put walls, as the user typed it
         (x0, y0), (x1, y1) = _border(_cell_of_place(ts, a), _cell_of_place(ts, b))
@@ -567,10 +492,11 @@ def _draw_grid_panel(ax: Axes, test: Any, panel: Panel, overlay: _Overlay | None
             _draw_wall(ax, ca, cb)  # closed both ways (or the way back does not exist)
         else:
             _draw_restriction(ax, ca, cb, color=WALL)  # a one-way static obstacle
+    blocked_by = _restriction_colour(test)
     for a, b in sorted(_place_pairs(ts, panel.restricted)):
         ca, cb = _cell_of_place(ts, a), _cell_of_place(ts, b)
         if _adjacent(ca, cb):
-            _draw_restriction(ax, ca, cb, _fuel_note(ts, panel.restricted, a, b))
+            _draw_restriction(ax, ca, cb, _fuel_note(ts, panel.restricted, a, b), color=blocked_by)
     ax.set_xlim(lo_c - 0.05, hi_c + 0.05)
     ax.set_ylim(hi_r + 0.05, lo_r - 0.05)  # row 0 at the top
     ax.set_aspect("equal")
@@ -581,8 +507,19 @@ def _draw_grid_panel(ax: Axes, test: Any, panel: Panel, overlay: _Overlay | None
         spine.set_visible(False)
 
 
+def _restriction_colour(test: Any) -> str:
+    """A door's orange, or on an agent test the agent's blue (the moves it blocks)."""
+    return AGENT_BLOCK if getattr(test.problem, "kind", None) == "agent" else RESTRICTED
+
+
+def _restriction_label(test: Any) -> str:
+    if getattr(test.problem, "kind", None) == "agent":
+        return "a move the test agent blocks in this history (one way, toward the bar)"
+    return "door: closed in this history (one way, toward the bar)"
+
+
 def _grid_figure(test: Any, panels: Sequence[Panel], overlay: _Overlay | None, max_cols: int | None = None,
-                 header: bool = True) -> Figure:
+                 header: bool = True, colours: dict[str, str] | None = None) -> Figure:
     lay = test.problem.system.layout
     cell = 0.62 if max(lay.rows, lay.cols) <= 8 else max(0.2, 5.0 / max(lay.rows, lay.cols))
     pw = max(lay.cols * cell, 2.6) + 0.5
@@ -591,8 +528,9 @@ def _grid_figure(test: Any, panels: Sequence[Panel], overlay: _Overlay | None, m
     fig = Figure(figsize=(max(ncols * pw, 6.0), nrows * ph + (1.7 if header else 1.2)), layout="constrained")
     axes = fig.subplots(nrows, ncols, squeeze=False)
     width = max(24, int(pw * 11))
+    colours = colours or proposition_colours(list(proposition_places(test.problem.system)))
     for ax, panel in zip(axes.flat, panels, strict=False):  # spare axes stay blank
-        _draw_grid_panel(ax, test, panel, overlay)
+        _draw_grid_panel(ax, test, panel, overlay, colours, pw - 0.5)
         ax.set_title(_wrap(panel.title, width), fontsize=9)
     for ax in list(axes.flat)[len(panels):]:
         ax.set_visible(False)
@@ -614,15 +552,16 @@ def _grid_figure(test: Any, panels: Sequence[Panel], overlay: _Overlay | None, m
             handles.append(Line2D([], [], color=WALL, linewidth=2, marker=">", markersize=7,
                                   label="one-way static wall"))
     if any(p.restricted.any() for p in panels):
-        handles.append(
-            Line2D([], [], color=RESTRICTED, linewidth=2, marker=">", markersize=7,
-                   label="restricted move (one way, toward the bar)")
-        )
+        handles.append(Line2D([], [], color=_restriction_colour(test), linewidth=2, marker=">", markersize=7,
+                              label=_restriction_label(test)))
     if overlay is not None:
         handles.append(Patch(facecolor=AGENT, alpha=0.55, label="test agent cells"))
         if overlay.parks:
             handles.append(Patch(facecolor=AGENT, alpha=0.55, hatch="//", label="test agent park"))
-    for prop, where, colour in proposition_legend(test.problem.system):
+            cell_pt = _cell_points(test.problem.system, overlay, pw - 0.5)
+            handles += [Patch(facecolor=AGENT, alpha=0.55, hatch="//", label=f"{tag} = park {name}")
+                        for name, tag in park_tags(overlay, cell_pt).items() if tag != name]
+    for prop, where, colour in proposition_legend(test.problem.system, colours=colours):
         handles.append(Patch(facecolor=colour, label=f"{prop}: {where}"))
     fig.legend(handles=handles, loc="outside lower center", ncols=min(len(handles), 2 if max_cols == 2 else 3), fontsize=8,
                frameon=False)
@@ -703,7 +642,7 @@ def _draw_graph_panel(ax: Axes, test: Any, panel: Panel, overlay: _Overlay | Non
         else:
             rad = 0.0
         if (a, b) in restricted:
-            style = {"color": RESTRICTED, "lw": 2.6, "zorder": 4}
+            style = {"color": _restriction_colour(test), "lw": 2.6, "zorder": 4}
         elif (a, b) in static:
             style = {"color": WALL, "lw": 2.4, "zorder": 3, "linestyle": "--"}
         else:
@@ -780,7 +719,7 @@ def _graph_figure(test: Any, panels: Sequence[Panel], overlay: _Overlay | None, 
         Line2D([], [], color=EDGE, linewidth=1.0, label="transition"),
     ]
     if any(p.restricted.any() for p in panels):
-        handles.append(Line2D([], [], color=RESTRICTED, linewidth=2.6, label="restricted under this history"))
+        handles.append(Line2D([], [], color=_restriction_colour(test), linewidth=2.6, label="restricted under this history"))
     if test.strategy.static_obstacles.any():
         handles.append(Line2D([], [], color=WALL, linewidth=2.4, linestyle="--", label="static obstacle"))
     if overlay is not None:

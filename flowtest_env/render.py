@@ -1,11 +1,20 @@
 """Pictures of a test run: numpy tiles for grids, node-link pictures for graphs, text.
 
+Every picture FlowTest draws speaks one visual language (:data:`ROLE_COLOURS`): one colour per
+role (the start teal, the goal green, the system under test red, the test agent blue, walls
+black, doors orange, hidden test cells purple, refuel stations yellow) and one per
+proposition name
+(:func:`proposition_colours`; a report passes one mapping to all its pictures, so a
+proposition keeps its colour from test to test).
+
 Grid frames are assembled from tiles drawn once per tile size and cached (module-level
 cache keyed by kind and size): floor, blocked cell, goal, marks for the system's own
 cells (refuel, drop-off, ...), hidden test cells (test-engineer view only: purple rings;
 on fuel grids pale rings where the test proposition holds only at a lower fuel level),
 the test agent and the system under test; walls (black) and restrictions shown now
-(orange) are bars on the edge of the cell the move leaves. The static background of a
+(orange) are bars on the edge of the cell the move leaves. The engineer's view also draws,
+pale and thin, the doors closed now out of the system's view (out of cells it does not
+stand in): a door closed the whole run stays drawn. The static background of a
 problem is composed once per renderer; a frame is one copy of it plus a few tile blits.
 Static obstacles that hold at some states of a cell only (walls per fuel level) are not
 walls of the map: they are drawn, black, while the system stands at such a state.
@@ -18,6 +27,7 @@ edge is marked on its own arc, so the two directions of a two-way edge stay apar
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Mapping
 from typing import Any
 
 import numpy as np
@@ -32,17 +42,58 @@ RGB = tuple[int, int, int]
 FLOOR: RGB = (236, 236, 231)
 GRID_LINE: RGB = (190, 190, 185)
 BLOCKED: RGB = (70, 70, 75)
+START: RGB = (0, 150, 130)
 GOAL: RGB = (96, 180, 96)
 SYSTEM: RGB = (214, 48, 49)
 AGENT: RGB = (40, 96, 200)
 WALL: RGB = (30, 30, 30)
 DOOR: RGB = (240, 140, 0)
+DOOR_OUT_OF_VIEW: RGB = (245, 188, 120)
 TEST_CELL: RGB = (170, 60, 200)
 TEST_CELL_LATER: RGB = (214, 176, 226)
-PALETTE: tuple[RGB, ...] = ((0, 170, 200), (150, 100, 50), (120, 60, 170), (200, 170, 0), (0, 130, 110), (200, 90, 140))
 REFUEL: RGB = (235, 190, 20)
 STATUS_BG: RGB = (40, 40, 44)
-FUEL_BAR: RGB = (235, 190, 20)
+FUEL_BAR: RGB = REFUEL
+
+ROLE_COLOURS: dict[str, RGB] = {
+    "start": START, "goal": GOAL, "system under test": SYSTEM, "test agent": AGENT, "wall": WALL, "door": DOOR,
+    "door out of view": DOOR_OUT_OF_VIEW, "hidden test cell": TEST_CELL, "hidden test cell later": TEST_CELL_LATER,
+    "refuel": REFUEL, "blocked cell": BLOCKED,
+}
+"""One colour per role, the same in every picture: the frames and filmstrips here, the test
+pictures of :mod:`experiments.plots`, the report's path plots."""
+
+PALETTE: tuple[RGB, ...] = ((23, 190, 207), (227, 119, 194), (140, 86, 75), (127, 127, 127), (120, 40, 100),
+                            (150, 150, 200), (150, 150, 20))
+"""The propositions' colours (cyan, pink, brown, grey, plum, lavender, olive): none of them
+a role's (:data:`ROLE_COLOURS`), nor near one."""
+
+
+def proposition_colours(names: Iterable[str]) -> dict[str, RGB]:
+    """One colour of :data:`PALETTE` per proposition name, in name order (cycling past seven
+    names). Every picture of one report takes the mapping of all its tests' propositions,
+    so a proposition has one colour in all of them.
+
+    >>> proposition_colours(["hazard", "bay"])
+    {'bay': (23, 190, 207), 'hazard': (227, 119, 194)}
+    """
+    return {name: PALETTE[i % len(PALETTE)] for i, name in enumerate(sorted(set(names)))}
+
+
+def hex_colour(color: RGB) -> str:
+    """``#rrggbb`` of a colour (what matplotlib and HTML take)."""
+    return f"#{color[0]:02x}{color[1]:02x}{color[2]:02x}"
+
+
+def tint(color: RGB, amount: float) -> RGB:
+    """``color`` mixed with white (``amount`` 0: the colour, 1: white): a role's pale fill."""
+    r, g, b = (int(round(c + (255 - c) * amount)) for c in color)
+    return r, g, b
+
+
+def all_propositions(game: TestGame) -> list[str]:
+    """Every proposition the test's system labels (name order)."""
+    return sorted(set().union(*game.ts.labels)) if game.ts.n_states else []
 
 _TILES: dict[tuple[Any, ...], np.ndarray] = {}
 
@@ -186,13 +237,19 @@ class GridRenderer:
     tile_size
         Pixels per cell.
     view
-        ``"system"`` (what the SUT may know) or ``"engineer"`` (also the hidden test cells).
+        ``"system"`` (what the SUT may know) or ``"engineer"`` (also the hidden test cells,
+        and the doors closed out of the system's view).
+    colours
+        The propositions' colours by name (default :func:`proposition_colours` of the
+        propositions the view shows: the system objective's, in the engineer's view all).
     """
 
-    def __init__(self, game: TestGame, tile_size: int = 32, view: str = "system") -> None:
+    def __init__(self, game: TestGame, tile_size: int = 32, view: str = "system",
+                 colours: Mapping[str, RGB] | None = None) -> None:
         if view not in ("system", "engineer"):
             raise ValueError(f"unknown view {view!r}; expected 'system' or 'engineer'")
         self.game, self.size, self.view = game, tile_size, view
+        self.colours = _colours_of(game, view, colours)
         ts = game.ts
         lay = ts.layout
         assert lay is not None
@@ -210,10 +267,9 @@ class GridRenderer:
         cells = game.cells
         for p in np.unique(ts.place[ts.terminal]):
             _paint(img, *cells[int(p)], size, shape_mask("goal", size), GOAL)
-        props = system_propositions(game)
-        for i, name in enumerate(props):
+        for name in system_propositions(game):
             for p in marked_places(game, name):
-                _paint(img, *cells[p], size, shape_mask("mark", size), PALETTE[i % len(PALETTE)])
+                _paint(img, *cells[p], size, shape_mask("mark", size), self.colours[name])
         if self.is_fuel:
             fuel = np.array(game.fuel, dtype=np.int64)
             for p in np.unique(ts.place[ts.dst[fuel[ts.dst] == self.max_fuel]]):
@@ -251,6 +307,10 @@ class GridRenderer:
                 _paint(img, *self.cells[p], size, shape_mask("test", size), TEST_CELL_LATER)
             for p in self.test_now.get(fuel, ()):
                 _paint(img, *self.cells[p], size, shape_mask("test", size), TEST_CELL)
+        if self.view == "engineer":
+            for m in doors_out_of_view(g, run):
+                r, c = self.cells[int(ts.place[ts.src[m]])]
+                _edge_bar(img, r, c, size, ts.action[m], DOOR_OUT_OF_VIEW, 0.1)
         for m in g.shown_moves(run):
             if not self.permanent[m]:
                 r, c = self.cells[int(ts.place[ts.src[m]])]
@@ -298,12 +358,35 @@ def _arc_middles(disp: np.ndarray, src: np.ndarray, dst: np.ndarray, rad: float,
     return out
 
 
+def _colours_of(game: TestGame, view: str, colours: Mapping[str, RGB] | None) -> dict[str, RGB]:
+    """The propositions' colours a renderer uses: ``colours`` where they name one, else
+    :func:`proposition_colours` of what the view shows."""
+    shown = all_propositions(game) if view == "engineer" else system_propositions(game)
+    return {**proposition_colours(shown), **(colours or {})}
+
+
+def doors_out_of_view(game: TestGame, run: RunState) -> list[int]:
+    """The doors closed now (reactive restrictions of the run's history) out of the system's
+    view (not among :meth:`~flowtest_env.game.TestGame.shown_moves`): what the engineer's
+    view draws pale, so a door closed the whole run does not seem to open as the system
+    walks away from it. None under another tester (its restrictions hold for one step)."""
+    if run.override is not None:
+        return []
+    closed = np.flatnonzero(game.enforced[run.history] & ~game.artifact.strategy.static_obstacles)
+    if closed.size == 0:
+        return []
+    shown = set(game.shown_moves(run))
+    return [int(m) for m in closed if int(m) not in shown]
+
+
 class GraphRenderer:
     """Node-link frames of a graph problem (see the module docstring)."""
 
-    def __init__(self, game: TestGame, tile_size: int = 32, view: str = "system") -> None:
+    def __init__(self, game: TestGame, tile_size: int = 32, view: str = "system",
+                 colours: Mapping[str, RGB] | None = None) -> None:
         if view not in ("system", "engineer"):
             raise ValueError(f"unknown view {view!r}; expected 'system' or 'engineer'")
+        self.colours = _colours_of(game, view, colours)
         # matplotlib is imported only when a graph is drawn: it costs start-up time to every env
         import matplotlib
 
@@ -378,6 +461,9 @@ class GraphRenderer:
         """``uint8[H, W, 3]``: the run now."""
         g = self.game
         img = self.background.copy()
+        if self.view == "engineer":
+            for m in doors_out_of_view(g, run):
+                self._segment(img, m, DOOR_OUT_OF_VIEW)
         for m in g.shown_moves(run):
             if not self.permanent[m]:
                 self._segment(img, m, WALL if self.static[m] else DOOR)
@@ -391,11 +477,12 @@ Renderer = GridRenderer | GraphRenderer
 """A picture maker of one game (:func:`make_renderer`)."""
 
 
-def make_renderer(game: TestGame, tile_size: int = 32, view: str = "system") -> Renderer:
-    """The renderer of a game's kind."""
+def make_renderer(game: TestGame, tile_size: int = 32, view: str = "system",
+                  colours: Mapping[str, RGB] | None = None) -> Renderer:
+    """The renderer of a game's kind (``colours``: the propositions' colours by name)."""
     if game.is_grid:
-        return GridRenderer(game, tile_size, view)
-    return GraphRenderer(game, tile_size, view)
+        return GridRenderer(game, tile_size, view, colours)
+    return GraphRenderer(game, tile_size, view, colours)
 
 
 def ansi(game: TestGame, run: RunState, view: str = "system") -> str:

@@ -9,7 +9,8 @@ the report.
 The modules, one job each: :mod:`~experiments.evaluation.episodes` (one seeded run, what its
 outcome means), :mod:`~experiments.evaluation.runs` (every pair), :mod:`~experiments.evaluation.results`
 (the files), :mod:`~experiments.evaluation.report` (the HTML page),
-:mod:`~experiments.evaluation.violations` (what broke in a violated run), and the pictures
+:mod:`~experiments.evaluation.violations` (what broke in a violated run),
+:mod:`~experiments.evaluation.explain` (what a failing run did, in one line), and the pictures
 :mod:`~experiments.evaluation.trace_picture` and :mod:`~experiments.evaluation.filmstrip`.
 
 Example::

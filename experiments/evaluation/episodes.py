@@ -210,7 +210,7 @@ def classify(env: Any, verdict: dict[str, Any]) -> tuple[str, str]:
             return "trap", "trapped: the tester closed every way to the goal (an unfair test)"
         if verdict["system_objective"] == "violated":
             return "sut", "violated the system objective"
-        return "sut", f"did not meet the system objective within {verdict['steps']} steps"
+        return "sut", f"did not meet the system objective within the step budget of {verdict['steps']} steps"
     if met and not verdict["test_objective_realized"]:
         return "test", "met the system objective without realizing the test objective"
     if met:
@@ -220,7 +220,7 @@ def classify(env: Any, verdict: dict[str, Any]) -> tuple[str, str]:
         return "test", "trapped: the test's restrictions closed every way to the goal"
     if verdict["system_objective"] == "violated":
         return "sut", "violated the system objective"
-    return "sut", f"did not meet the system objective within {verdict['steps']} steps"
+    return "sut", f"did not meet the system objective within the step budget of {verdict['steps']} steps"
 
 
 _WALL_GAMES: dict[int, Any] = {}

@@ -11,10 +11,12 @@ Layout, for a reader who has never seen FlowTest:
    --plot`` draws: walls in every panel, the doors each history closes), its propositions
    named in a legend, the system objective the SUT is given, and the test objective,
    hidden from the SUT, behind a "reveal" switch.
-3. **Failing runs**: per system and test, the reason (for a violation: the conjunct of the
-   system objective that broke, the step and the cell), a filmstrip of the first failing
-   run (the test agent's moves and the doors as they opened and closed) and the replay
-   command of every listed failure.
+3. **Failing runs**: per system and test, one line per way of failing with its seeds
+   (:mod:`~experiments.evaluation.explain`: the loop an open run ended in and the moves
+   toward the goal the test refused, and why; for a violation the conjunct of the system
+   objective that broke, the step and the cell) and the replay command of its first seed, a
+   filmstrip of the first failing run (a loop shown once), its whole path, and the replay
+   command of every listed failure behind a switch.
 4. **All numbers**: one table per system, as in ``report.md``.
 
 Tests are called by their problem's name (a problem file's ``name``, else its file stem;
@@ -68,6 +70,10 @@ class TestInfo:
     max_steps: int
     picture: str
     propositions: tuple[tuple[str, str, str], ...] = ()
+    histories: tuple[tuple[str, str], ...] = ()
+    """``(name, meaning)`` of each history the picture has a panel of (``("q2", "saw I1")``):
+    the meanings give the hidden test objective away, so the card shows them behind its
+    "reveal" switch, and the panels only the names."""
 
 
 def file_key(text: str) -> str:
@@ -154,37 +160,57 @@ def column_titles(
 # --------------------------------------------------------------------------- the tests' cards
 
 
-def test_infos(tests: Sequence[NamedEnv | str], out: Path) -> list[TestInfo]:
+def test_infos(tests: Sequence[NamedEnv | str], out: Path, colours: dict[str, tuple[int, int, int]] | None = None) -> list[TestInfo]:
     """Draw each test's restrictions per history (:func:`experiments.plots.plot_artifact`:
     the panels ``flowtest synthesize --plot`` draws, propositions in the legend) to
     ``out/tests/<file_key>.png`` and collect what the report shows of it (problem name,
     kind, objectives, step budget, propositions). A test is the env an evaluation resolved
     (:class:`~experiments.evaluation.episodes.NamedEnv`: its game is drawn, nothing is
-    built) or a name (its env built here)."""
+    built) or a name (its env built here). Every proposition takes its colour from
+    ``colours`` (by name; default one colour per name over these tests,
+    :func:`flowtest_env.render.proposition_colours`), in the pictures and the legends alike."""
     from experiments.outputs import write_atomically
     from experiments.plots import proposition_legend
+    from flowtest_env.render import all_propositions, hex_colour, proposition_colours
 
     from .episodes import NamedEnv, resolve_env
     from .filmstrip import test_picture
 
     (out / "tests").mkdir(parents=True, exist_ok=True)
-    infos = []
+    named_tests = []
     for test in {(t if isinstance(t, str) else t.env_id): t for t in tests}.values():
         if isinstance(test, NamedEnv):
-            named = test
+            named_tests.append(test)
         else:
-            named = resolve_env(test)
-            named.env.close()
+            named_tests.append(resolve_env(test))
+            named_tests[-1].env.close()
+    if colours is None:
+        colours = proposition_colours(name for t in named_tests for name in all_propositions(t.game))
+    hexes = {name: hex_colour(c) for name, c in colours.items()}
+    infos = []
+    for named in named_tests:
         env_id, game = named.env_id, named.game
         name = f"tests/{file_key(env_id)}.png"
-        write_atomically(out / name, partial(test_picture, game))
+        write_atomically(out / name, partial(test_picture, game, colours=hexes))
         art = game.artifact
         infos.append(TestInfo(
             env_id=env_id, problem=str(art.name), kind=str(art.kind),
             system_objective=str(art.objectives.get("system", "")), test_objective=str(art.objectives.get("test", "")),
-            max_steps=named.max_steps, picture=name, propositions=tuple(proposition_legend(art.system)),
+            max_steps=named.max_steps, picture=name, propositions=tuple(proposition_legend(art.system, colours=hexes)),
+            histories=history_meanings(game),
         ))
     return infos
+
+
+def history_meanings(game: Any) -> tuple[tuple[str, str], ...]:
+    """``("q2", "saw I1")`` for every history that closes a door (the panels' neutral names,
+    with what they mean: the report shows the meanings behind its "reveal" switch only)."""
+    from experiments.plots import artifact_view
+
+    view = artifact_view(game.artifact)
+    strategy = game.artifact.strategy
+    reactive = strategy.restrictions & ~strategy.static_obstacles[None, :]
+    return tuple((view.spec.history_name(q), view.spec.describe(q)) for q in range(strategy.n_hist) if reactive[q].any())
 
 
 GLOSSARY: tuple[tuple[str, str], ...] = (
@@ -225,15 +251,16 @@ dl.glossary{display:grid;grid-template-columns:max-content 1fr;gap:.2em 1em;marg
 dl.glossary dt{font-weight:700}dl.glossary dd{margin:0}
 .tests{display:grid;grid-template-columns:repeat(auto-fill,minmax(min(100%,480px),1fr));gap:1em}
 .test{border:1px solid #ddd;padding:.6em;min-width:0}.test h3{margin:.1em 0 .3em;overflow-wrap:anywhere}
-.test img{width:100%;height:auto;border:1px solid #eee}
+.test img{max-width:100%;height:auto;border:1px solid #eee;display:block;margin:0 auto}
 table.props{margin:.2em 0 .6em;font-size:.88em}p.props{margin:.4em 0 0}table.props td{text-align:left;padding:2px 6px}
 table.props td:first-child{font-family:ui-monospace,monospace;white-space:nowrap}
 .swatch{display:inline-block;width:.8em;height:.8em;margin-right:.4em;vertical-align:-.05em;border:1px solid #888}
 code{background:#f3f3f3;padding:2px 4px;overflow-wrap:anywhere}
 details summary{cursor:pointer;color:#1a4d8f}
-.broke{background:#fde3e1;border-left:4px solid #b00020;padding:.3em .6em;margin:.4em 0}
+.broke{background:#fde3e1;border-left:4px solid #b00020;padding:.3em .6em;margin:.2em 0}
+ul.outcomes li{margin:.35em 0}
 .film{max-width:100%;border:1px solid #ddd}.traces{display:flex;flex-wrap:wrap;gap:8px}
-.trace{flex:1 1 300px;max-width:560px;min-width:0;border:1px solid #ddd}
+.trace{flex:1 1 300px;max-width:560px;min-width:0}.trace img{width:100%;height:auto;border:1px solid #ddd}
 .bugbox{background:#b00020;color:#fff;padding:1em;font-weight:bold}.bugbox code{color:#222}
 """
 
@@ -309,9 +336,13 @@ def _cell(r: dict[str, Any], anchor: str) -> str:
 
 
 def failure_text(f: dict[str, Any]) -> str:
-    """A failure in words: for a violation the conjunct, step and cell
+    """A failure in words: what the run did (its ``explanation``,
+    :mod:`~experiments.evaluation.explain`), else for a violation the conjunct, step and cell
     (``violated the system objective: broke G !hazard at step 7 in cell (2, 6)``), else its
-    reason. ``f`` is a ``results.json`` failure; its ``violation`` is read if present."""
+    reason. ``f`` is a ``results.json`` failure."""
+    why = f.get("explanation")
+    if isinstance(why, dict) and isinstance(why.get("text"), str) and why["text"]:
+        return str(why["text"])
     v = f.get("violation")
     reason = str(f.get("reason", ""))
     if isinstance(v, dict) and isinstance(v.get("text"), str):
@@ -319,15 +350,55 @@ def failure_text(f: dict[str, Any]) -> str:
     return reason
 
 
+def outcomes_of(r: dict[str, Any]) -> list[dict[str, Any]]:
+    """A record's failing runs, one entry per way of failing (``results.json``'s
+    ``outcomes``: ``line``, ``seeds``, ``kind``, ``replay``, the first run's ``explanation``);
+    a record without them (written by hand, or by an older FlowTest) gets one per listed
+    failure."""
+    if isinstance(r.get("outcomes"), list):
+        return list(r["outcomes"])
+    return [{"kind": f.get("kind", "sut"), "seeds": [f["seed"]], "steps": [], "text": failure_text(f),
+             "line": f"seed {f['seed']}: {failure_text(f)}", "replay": f.get("replay", ""),
+             "explanation": {"violation": f["violation"]} if isinstance(f.get("violation"), dict) else None}
+            for f in r.get("failures", [])]
+
+
+def _outcome_item(o: dict[str, Any]) -> str:
+    """One way of failing as a list item: its runs, what happened, its first run's replay
+    command; a violation says the conjunct, the step and the cell (class ``broke``)."""
+    from .explain import seed_words, steps_words
+
+    e = html.escape
+    seeds = [int(x) for x in o.get("seeds", [])]
+    who = o["line"][: -len(o["text"]) - 2] if o["line"].endswith(o["text"]) else seed_words(seeds)
+    bug = " <b>(FlowTest bug)</b>" if o.get("kind") == "test" else ""
+    v = (o.get("explanation") or {}).get("violation")
+    if isinstance(v, dict) and "conjunct" in v:
+        steps = [int(x) for x in o.get("steps") or [v.get("step", 0)]]
+        body = (f"<p class='broke'>{e(who[:1].upper() + who[1:])} broke <code>{e(str(v['conjunct']))}</code> of the "
+                f"system objective at {e(steps_words(steps))}, {e(where_words(str(v.get('where', ''))))}"
+                + ("" if v.get("alone", True) else " (no conjunct alone: they cannot all hold any more)")
+                + (": from there it can no longer be met" if v.get("kind") in ("visit", "sequenced", "delayed") else "")
+                + ".</p>")
+    else:
+        body = f"<b>{e(who)}</b>: {e(o['text'])}"
+    replay = o.get("replay", "")
+    first = f"seed {seeds[0]}" if seeds else "the first run"
+    more = " (the others: change --seed)" if len(seeds) > 1 else ""
+    tail = f"<span class='small'>Replay {first}{more}:</span> <code>{e(replay)}</code>" if replay else ""
+    return f"<li>{body}{bug}{'' if body.endswith('</p>') else '<br>'}{tail}</li>"
+
+
 CAPTIONS: dict[str, str] = {
     "static": "Static test: the black walls stand for the whole run.",
-    "reactive": "Reactive test: one panel per history (what the run has seen so far) that closes doors; a red bar is "
-                "a door closed in that history (one way: the arrow's move is refused).",
+    "reactive": "Reactive test: one panel per history that closes doors (a history is what the run has seen so far, "
+                "named neutrally, q0, q1, ...: the switch below says what each means); an orange bar is a door closed "
+                "in that history (one way: the arrow's move is refused).",
     "mixed": "Mixed test: black walls stand for the whole run, and only in the static area the problem gives them "
-             "(its borders dashed); one panel per history that closes doors, a red bar is a door closed in that "
-             "history (one way: the arrow's move is refused).",
-    "agent": "Agent test: the test agent moves in the blue cells and stands in the way; a red bar is a move it "
-             "blocks in that history (one panel per history).",
+             "(its borders dashed); one panel per history that closes doors (named neutrally; the switch below says "
+             "what each means), an orange bar is a door closed in that history (one way: the arrow's move is refused).",
+    "agent": "Agent test: the test agent moves in the pale blue cells and stands in the way; a blue bar is a move it "
+             "blocks in that history (one panel per history, named neutrally; the switch below says what each means).",
 }
 """What a test card says of its picture, per kind of test."""
 
@@ -340,9 +411,11 @@ def _test_card(env: str, title: str, t: TestInfo | None) -> list[str]:
         parts.append("</div>")
         return parts
     parts.append(
-        f"<p class='small'>{e(t.kind)} test, {t.max_steps} steps per run.</p>"
-        f"<img src='{e(t.picture)}' alt='the restrictions of this test, one panel per history' loading='lazy'>"
-        f"<p class='small'>{e(CAPTIONS.get(t.kind, CAPTIONS['reactive']))} The start is green, the goal gold.</p>"
+        f"<p class='small'>{e(t.kind)} test, a step budget of {t.max_steps} steps a run.</p>"
+        f"<a href='{e(t.picture)}' title='open the picture at full size'>"
+        f"<img src='{e(t.picture)}' alt='the restrictions of this test, one panel per history' loading='lazy'></a>"
+        f"<p class='small'>{e(CAPTIONS.get(t.kind, CAPTIONS['reactive']))} The start is teal, the goal green"
+        f"{', the test agent blue' if t.kind == 'agent' else ''}. Click the picture to open it at full size.</p>"
     )
     if t.propositions:
         squares = any(colour for _, _, colour in t.propositions)
@@ -353,10 +426,14 @@ def _test_card(env: str, title: str, t: TestInfo | None) -> list[str]:
                       if re.fullmatch(r"#[0-9a-fA-F]{6}", colour) else "")
             parts.append(f"<tr><td>{swatch}{e(name)}</td><td>{e(where)}</td></tr>")
         parts.append("</table>")
+    meanings = "".join(f"<tr><td>{e(name)}</td><td>{e(meaning)}</td></tr>" for name, meaning in t.histories)
     parts.append(
         f"<p>System objective (given to the SUT): <code>{e(t.system_objective)}</code></p>"
         f"<details><summary>Reveal the test objective (hidden from the SUT)</summary>"
-        f"<p><code>{e(t.test_objective)}</code></p></details></div>"
+        f"<p><code>{e(t.test_objective)}</code></p>"
+        + (f"<p class='small props'>What each history of the panels has seen:</p><table class='props'>{meanings}</table>"
+           if meanings else "")
+        + "</details></div>"
     )
     return parts
 
@@ -440,39 +517,35 @@ def render_html(
     if not failing:
         parts.append("<p>No run failed.</p>")
     for r in failing:
-        f0 = r["failures"][0]
         col = test_name(r)
+        ways = outcomes_of(r)
         parts.append(
             f"<h3 id='{failures_anchor(r['sut'], col)}'><span class='sut'>{e(r['sut'])}</span> on "
             f"<a href='#{test_anchor(r['env'])}'>{e(col_titles[col])}</a></h3>"
-            f"<p>{r['n_failures']} of {r['episodes']} runs failed. First failure (seed {f0['seed']}, "
-            f"{'FlowTest bug' if f0['kind'] == 'test' else 'the SUT'}): {e(f0['reason'])}.</p>"
+            f"<p>{r['n_failures']} of {r['episodes']} runs failed"
+            + (f", in {len(ways)} ways" if len(ways) > 1 else "") + ":</p><ul class='outcomes'>"
         )
+        parts += [_outcome_item(o) for o in ways]
+        parts.append("</ul>")
         if r.get("stopped"):
             parts.append(f"<p>Stopped: {e(str(r['stopped']))}.</p>")
-        broken = next((f for f in r["failures"] if isinstance(f.get("violation"), dict)
-                       and "conjunct" in f["violation"]), None)
-        if broken is not None:
-            v = broken["violation"]
-            parts.append(f"<p class='broke'>Seed {broken['seed']} broke <code>{e(str(v['conjunct']))}</code> of the "
-                         f"system objective at step {e(str(v.get('step')))}, {e(where_words(str(v.get('where', ''))))}"
-                         + ("" if v.get("alone", True) else " (no conjunct alone: they cannot all hold any more)")
-                         + (": from there it can no longer be met" if v.get("kind") in ("visit", "sequenced", "delayed")
-                            else "")
-                         + ".</p>")
         pics = r.get("pictures", {})
+        first = r["failures"][0]["seed"] if r["failures"] else None
         if "filmstrip" in pics:
-            parts.append(f"<img class='film' src='{e(pics['filmstrip'])}' alt='filmstrip of the first failing run'>")
+            parts.append(f"<p class='small'>The first failing run (seed {first}), frame by frame; a loop is shown once:</p>"
+                         f"<a href='{e(pics['filmstrip'])}' title='open the picture at full size'>"
+                         f"<img class='film' src='{e(pics['filmstrip'])}' alt='filmstrip of the first failing run'></a>")
         traces = [label for label in ("failing", "typical") if label in pics]
         if traces:
             parts.append("<div class='traces'>")
-            parts += [f"<img class='trace' src='{e(pics[label])}' alt='{label} run, whole path'>" for label in traces]
+            parts += [f"<a class='trace' href='{e(pics[label])}' title='open the picture at full size'>"
+                      f"<img src='{e(pics[label])}' alt='{label} run, whole path'></a>" for label in traces]
             parts.append("</div>")
-        parts.append("<p>Replay a run step by step:</p><ul>")
+        parts.append("<details><summary>Replay commands of every listed run</summary><ul>")
         parts += [f"<li>seed {f['seed']}: {e(failure_text(f))}<br><code>{e(f['replay'])}</code></li>" for f in r["failures"]]
         if r["n_failures"] > len(r["failures"]):
             parts.append(f"<li>… {r['n_failures'] - len(r['failures'])} more (results.json lists the first {len(r['failures'])})</li>")
-        parts.append("</ul>")
+        parts.append("</ul></details>")
     # ---- every number
     parts.append("<h2 id='numbers'>All numbers</h2><p class='small'>Met: share of runs meeting the system objective. "
                  "Realized: share of those runs that realized the hidden test objective (guaranteed 100&nbsp;%). "

@@ -10,14 +10,18 @@ report folder:
   ``test_objective_realized_rate`` (among the runs that met the system objective; ``null`` if
   none did), ``violated``, ``open``, ``mean_restrictions``, ``mean_steps``, ``test_failures``
   and ``failures`` (at most :data:`~experiments.evaluation.runs.MAX_LISTED` listed,
-  ``n_failures`` counts all; each with ``seed``, ``kind``, ``reason``, the ``verdict`` and its
-  ``replay`` command), ``stopped`` (``null``, or why the pair ran fewer episodes: its planner
-  failed), ``tester``, ``trapped``, ``sut_failures``, ``tester_fairness``, and the ``title``
-  the report calls its test.
+  ``n_failures`` counts all; each with ``seed``, ``kind``, ``reason``, the ``verdict``, its
+  ``replay`` command, the ``violation`` (a violated run: conjunct, step, cell) and its
+  ``explanation``: what the run did in the floor's terms, :mod:`~experiments.evaluation.explain`),
+  ``outcomes`` (every failing run, one entry per way of failing: its ``line``, ``seeds``,
+  ``kind`` and the ``replay`` command of its first seed), ``stopped`` (``null``, or why the
+  pair ran fewer episodes: its planner failed), ``tester``, ``trapped``, ``sut_failures``,
+  ``tester_fairness``, and the ``title`` the report calls its test.
 * ``report.html`` — opens with an outcome matrix (systems x tests), then each test's
-  picture and objectives, the failing runs as filmstrips with their replay commands, and
-  every number (:mod:`experiments.evaluation.report`); ``report.md`` — the matrix and one
-  table per SUT, trace pictures and replay commands.
+  picture and objectives, the failing runs (one line per way of failing, with its seeds and a
+  replay command, a filmstrip of the first) and every number
+  (:mod:`experiments.evaluation.report`); ``report.md`` — the matrix and one table per SUT,
+  the failing runs' lines, trace pictures and replay commands.
 * ``traces/*.png`` — the trace pictures and filmstrips; ``tests/*.png`` — each test at
   its start.
 """
@@ -42,6 +46,7 @@ from .report import (
     file_key,
     fold_rows,
     outcome_class,
+    outcomes_of,
     render_html,
     test_infos,
     test_name,
@@ -56,14 +61,39 @@ other non-empty folder unless ``--force``
 (:func:`experiments.outputs.prepare_output_folder`)."""
 
 
-def _filmstrip(trace: Trace, path: Path) -> None:
+def _filmstrip_to(trace: Trace, colours: dict[str, tuple[int, int, int]], path: Path) -> None:
+    from .explain import explain
     from .filmstrip import filmstrip
 
     game = game_of_trace(trace)
     v = trace.verdict
-    title = (f"{trace.sut} on {test_title(trace.env_id, str(game.artifact.name))}, seed {trace.seed}: {trace.reason or v['system_objective']} "
-             f"(system objective {v['system_objective']}, {v['steps']} steps)")
-    filmstrip(game, trace.states, trace.actions, title, path)
+    title = (f"{trace.sut} on {test_title(trace.env_id, str(game.artifact.name))}, seed {trace.seed}: "
+             f"system objective {v['system_objective']} after {v['steps']} steps")
+    why = explain(trace, game)
+    filmstrip(game, trace.states, trace.actions, title, path, colours=colours, loop=why.loop,
+              explanation="" if why.what == "violation" else why.text)
+
+
+def _picture(trace: Trace, colours: dict[str, tuple[int, int, int]], path: Path) -> None:
+    from .explain import explain
+
+    trace_picture(trace, path, colours, explain(trace).text if trace.failed else "")
+
+
+def report_colours(cells: Sequence[Cell]) -> dict[str, tuple[int, int, int]]:
+    """One colour per proposition name over every test the cells played
+    (:func:`flowtest_env.render.proposition_colours`): every picture of the report takes
+    it, so a proposition keeps its colour from test to test."""
+    from flowtest_env.render import all_propositions, proposition_colours
+
+    names: set[str] = set()
+    for cell in cells:
+        games = {id(t.game): t.game for t in cell.traces if t.game is not None}
+        if cell.test is not None:
+            games[id(cell.test.game)] = cell.test.game
+        for game in games.values():
+            names.update(all_propositions(game))
+    return proposition_colours(names)
 
 
 def write_report(cells: Sequence[Cell], out: Path, tests: Sequence[TestInfo] | None = None) -> list[dict[str, Any]]:
@@ -91,6 +121,7 @@ def write_report(cells: Sequence[Cell], out: Path, tests: Sequence[TestInfo] | N
     """
     out.mkdir(parents=True, exist_ok=True)
     (out / "traces").mkdir(exist_ok=True)
+    colours = report_colours(cells)
     for cell in cells:
         cell_name = test_name({"env": cell.env_id, "tester": cell.tester})
         typical = next((t for t in cell.traces if not t.failed), None)
@@ -99,14 +130,14 @@ def write_report(cells: Sequence[Cell], out: Path, tests: Sequence[TestInfo] | N
             if tr is None:
                 continue
             name = f"traces/{file_key(cell.sut)}--{file_key(cell_name)}--{label}.png"
-            write_atomically(out / name, partial(trace_picture, tr))
+            write_atomically(out / name, partial(_picture, tr, colours))
             cell.pictures[label] = name
         if failing is not None:
             name = f"traces/{file_key(cell.sut)}--{file_key(cell_name)}--filmstrip.png"
-            write_atomically(out / name, partial(_filmstrip, failing))
+            write_atomically(out / name, partial(_filmstrip_to, failing, colours))
             cell.pictures["filmstrip"] = name
     if tests is None:
-        tests = test_infos(list({c.env_id: c.test or c.env_id for c in cells}.values()), out)
+        tests = test_infos(list({c.env_id: c.test or c.env_id for c in cells}.values()), out, colours)
     records = _write_results(cells, out, tests)
     md, body = _markdown(records), render_html(records, tests, (TESTER_COLUMNS, tester_comparison_rows(records)))
     write_atomically(out / "report.md", lambda tmp: tmp.write_text(md))
@@ -136,9 +167,15 @@ def write_partial_report(cells: Sequence[Cell], out: Path) -> list[dict[str, Any
     return records
 
 
+LISTED_OUTCOMES = 3
+"""How many ways of failing :func:`outcome_lines` prints under a pair (the report has all)."""
+
+
 def outcome_lines(records: Sequence[dict[str, Any]]) -> list[str]:
     """One line per (system, test) pair: met and realized shares and failures, or why the
-    pair was not run, and why it stopped early; what ``flowtest evaluate`` prints. The
+    pair was not run, and why it stopped early; under a pair with failing runs, what they
+    did, runs alike folded (``seeds 0-9 (10 runs): from step 2 on, alternates between ...``,
+    at most :data:`LISTED_OUTCOMES`); what ``flowtest evaluate`` prints. The
     columns are as wide as the longest system and test name (the tests as given, ``--env``)."""
     names = [test_name(r) for r in records]
     w_sut = max([24, *(len(r["sut"]) for r in records)])
@@ -151,6 +188,11 @@ def outcome_lines(records: Sequence[dict[str, Any]]) -> list[str]:
         trapped = f"  trapped {r['trapped']}" if r["tester"] != "synthesized" else ""
         lines.append(f"{r['sut']:{w_sut}s} {name:{w_test}s} met {percent(r['system_objective_met_rate']):>6s}  "
                      f"realized {percent(r['test_objective_realized_rate']):>6s}  failures {r['n_failures']}{trapped}")
+        ways = outcomes_of(r)
+        lines += [f"{'':{w_sut}s} {o['line']}" for o in ways[:LISTED_OUTCOMES]]
+        if len(ways) > LISTED_OUTCOMES:
+            more = len(ways) - LISTED_OUTCOMES
+            lines.append(f"{'':{w_sut}s} ... {more} more way{'' if more == 1 else 's'} of failing: see the report")
         if r["stopped"]:
             lines.append(f"{'':{w_sut}s} stopped: {r['stopped']}")
     return lines
@@ -265,10 +307,14 @@ def _markdown(records: Sequence[dict[str, Any]], heading: str = "FlowTest evalua
             pics = r["pictures"]
             if r.get("stopped"):
                 lines += [f"**{r['title']}** — stopped: {r['stopped']}", ""]
-            if r["failures"]:
-                f = r["failures"][0]
-                lines += [f"**{r['title']}** — first failure ({f['kind']}): {f['reason']}. Replay:", "",
-                          f"    {f['replay']}", ""]
+            ways = outcomes_of(r)
+            if ways:
+                lines += [f"**{r['title']}** — {r['n_failures']} of {r['episodes']} runs failed"
+                          + (f", in {len(ways)} ways" if len(ways) > 1 else "") + ":", ""]
+                for o in ways:
+                    bug = " (FlowTest bug)" if o.get("kind") == "test" else ""
+                    lines.append(f"- {o['line']}{bug}" + (f" — replay seed {o['seeds'][0]}: `{o['replay']}`" if o.get("replay") else ""))
+                lines.append("")
             for label in ("typical", "failing"):
                 if label in pics:
                     lines.append(f"![{label} run of {sut} on {r['title']}]({pics[label]})")

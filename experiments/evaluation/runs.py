@@ -46,6 +46,7 @@ import numpy as np
 from synthesis.model.errors import ProblemError
 
 from .episodes import NamedEnv, Trace, make_tester_env, resolve_env, run_episode, sut_policy, versus_tester_env
+from .explain import explain, fold
 from .violations import violation_of_trace
 
 MAX_LISTED = 20
@@ -159,6 +160,9 @@ class Cell:
         n = len(self.traces)
         met = [t for t in self.traces if t.verdict["system_objective"] == "met"]
         fails = [t for t in self.traces if t.failed]
+        explained = [explain(t) for t in fails]
+        outcomes = fold([(t.seed, t.kind, e) for t, e in zip(fails, explained, strict=True)], [t.env_id for t in fails])
+        first = {(t.env_id, t.seed): t for t in reversed(fails)}
         return {
             "env": self.env_id,
             "sut": self.sut,
@@ -186,9 +190,11 @@ class Cell:
                     "verdict": t.verdict,
                     "replay": self.replay(t),
                     "violation": violation_of_trace(t),
+                    "explanation": e.to_dict(),
                 }
-                for t in fails[:MAX_LISTED]
+                for t, e in zip(fails[:MAX_LISTED], explained, strict=False)
             ],
+            "outcomes": [{**o.to_dict(), "replay": self.replay(first[(o.tests[0], o.seeds[0])])} for o in outcomes],
             "pictures": self.pictures,
             "seconds": round(self.seconds, 3),
             "error": self.error,

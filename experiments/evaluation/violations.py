@@ -31,11 +31,12 @@ class Violation:
     kind: str = ""
     alone: bool = True
 
-    def text(self) -> str:
+    def text(self, steps: str | None = None) -> str:
         """``broke G !hazard at step 7 in cell (3, 4)``; for a visit, that it can no
-        longer be met from there."""
+        longer be met from there. ``steps`` replaces ``step 7`` (a line that folds several
+        runs writes their steps there)."""
         what = self.conjunct if self.alone else f"{self.conjunct} (no conjunct alone: together)"
-        out = f"broke {what} at step {self.step} {where_words(self.where)}"
+        out = f"broke {what} at {steps if steps is not None else f'step {self.step}'} {where_words(self.where)}"
         if self.kind in ("visit", "sequenced", "delayed") or not self.alone:
             out += " (it can no longer be met from there)"
         return out
