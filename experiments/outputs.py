@@ -13,6 +13,10 @@ that passes through a symbolic link (:func:`check_no_link_below`), and create th
 they need one at a time, checking each. The output folder itself is the user's choice (a
 link the user named is followed). Standard output holds a command's result
 only; with ``--json`` exactly one JSON document (:func:`json_safe`, :func:`print_json`).
+
+Training logs (``--log-dir``) are outputs too: :func:`check_log_dir` checks the folder before
+any work (never a symbolic link, never a file), and :func:`run_log_folder` gives each run a
+new folder inside it, so no run's logs are ever written over another's.
 """
 
 from __future__ import annotations
@@ -20,10 +24,12 @@ from __future__ import annotations
 import json
 import math
 import os
+import shutil
 import sys
 import tempfile
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -212,6 +218,63 @@ def write_atomically(path: Path, write: Callable[[Path], object]) -> None:
         raise ProblemError(f"cannot write {str(path)!r}: {exc.strerror or exc}") from None
     finally:
         tmp.unlink(missing_ok=True)
+
+
+def check_log_dir(log_dir: Path) -> None:
+    """Check a training run's ``--log-dir`` before any work (raises ProblemError): a folder,
+    or a path where one can be created; never a symbolic link (FlowTest never writes
+    through one), never a file, and writable. Nothing is created."""
+    if log_dir.is_symlink():
+        raise ProblemError(f"--log-dir {str(log_dir)!r} is a symbolic link; FlowTest never writes through one: "
+                           "give the folder itself")
+    if log_dir.exists() and not log_dir.is_dir():
+        raise ProblemError(f"--log-dir {str(log_dir)!r} is a file, not a folder")
+    base = _nearest_existing(log_dir)
+    if not base.exists():  # a relative path whose every part is missing: the working folder
+        base = Path(".")
+    if not base.is_dir():
+        raise ProblemError(f"--log-dir {str(log_dir)!r}: {str(base)!r} is a file, not a folder")
+    _probe_folder(base, "log folder", log_dir)
+
+
+def new_run_folder(log_dir: Path, name: str) -> Path:
+    """Create and return a new folder for one run's logs inside ``log_dir`` (created if
+    missing): ``log_dir/name``, or ``name-2``, ``name-3``... when that is taken, so a run
+    never writes into an earlier run's logs (TensorBoard shows each folder as a run).
+    The folder is made by this call (a name already used by anything, a link included, is
+    skipped), never a link (ProblemError on a bad ``log_dir``, see :func:`check_log_dir`)."""
+    check_log_dir(log_dir)
+    try:
+        log_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ProblemError(f"cannot create the log folder {str(log_dir)!r}: {exc.strerror or exc}") from None
+    check_log_dir(log_dir)
+    k = 1
+    while True:
+        run = log_dir / (name if k == 1 else f"{name}-{k}")
+        try:
+            run.mkdir()  # atomic: two runs starting at once get two folders
+        except FileExistsError:
+            k += 1
+            continue
+        except OSError as exc:
+            raise ProblemError(f"cannot create the log folder {str(run)!r}: {exc.strerror or exc}") from None
+        return run
+
+
+@contextmanager
+def run_log_folder(log_dir: Path, name: str) -> Iterator[Path]:
+    """A new folder for one run's logs (:func:`new_run_folder`) for the duration of the run.
+    A run that ends by an exception (Ctrl-C included) before it logged a row leaves nothing
+    behind; one that logged keeps its logs, each file whole (``progress.csv`` is rewritten
+    atomically at every row)."""
+    run = new_run_folder(log_dir, name)
+    try:
+        yield run
+    except BaseException:
+        if not (run / "progress.csv").exists():
+            shutil.rmtree(run, ignore_errors=True)  # a folder this run made, holding only what it wrote
+        raise
 
 
 def json_safe(value: Any) -> Any:

@@ -59,6 +59,7 @@ import multiprocessing
 import os
 import re
 import warnings
+import zlib
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from functools import lru_cache
@@ -289,9 +290,37 @@ def _shipped_seeds(pool_id: str, split: str, mtime_ns: int, size: int) -> tuple[
 
 @lru_cache(maxsize=64)
 def _count_lines(path: str, mtime_ns: int, size: int) -> int:
-    """Lines of a gzipped file (cached per path, modification time and size)."""
-    with gzip.open(path, "rb") as f:
-        return sum(1 for line in f if line.strip())
+    """Lines of a gzipped file (cached per path, modification time and size).
+
+    Raises
+    ------
+    ProblemError
+        If the file is not gzipped or ends early, naming the file and the line.
+    """
+    return len(_read_lines(Path(path)))
+
+
+def _read_lines(path: Path) -> list[str]:
+    """The non-blank lines of a gzipped UTF-8 file.
+
+    Raises
+    ------
+    ProblemError
+        If the file is not gzipped, not UTF-8, or stops in the middle (a truncated copy):
+        ``file, line N: ...``, N the line where it stops.
+    """
+    lines: list[str] = []
+    try:
+        with gzip.open(path, "rt", encoding="utf-8") as f:
+            for line in f:
+                if line.strip():
+                    lines.append(line)
+    except EOFError:
+        raise ProblemError(f"{path}, line {len(lines) + 1}: the file stops in the middle (a truncated copy: {len(lines)} "
+                           "whole lines before it); reinstall FlowTest or copy the file again") from None
+    except (OSError, UnicodeDecodeError, zlib.error) as exc:
+        raise ProblemError(f"{path}, line {len(lines) + 1}: not a gzipped records file ({exc})") from None
+    return lines
 
 
 def read_records(pool: StandardPool, split: str) -> list[dict[str, Any]]:
@@ -307,11 +336,7 @@ def read_records(pool: StandardPool, split: str) -> list[dict[str, Any]]:
     path = pool.path(split)
     if not path.exists():
         return []
-    try:
-        with gzip.open(path, "rt", encoding="utf-8") as f:
-            lines = [line for line in f if line.strip()]
-    except (OSError, EOFError, UnicodeDecodeError) as exc:
-        raise ProblemError(f"{path}: not a gzipped records file ({exc})") from None
+    lines = _read_lines(path)
     base = SPLITS.index(split) * SPLIT_SPAN
     out: list[dict[str, Any]] = []
     for k, text in enumerate(lines):

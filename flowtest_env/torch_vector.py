@@ -80,7 +80,8 @@ from .compiled import OUTCOMES, CompiledPool, potentials
 from .draws import GOLDEN_I64, MAX_TESTS, MIX1_I64, MIX2_I64
 from .encoding import make_encoder
 from .game import TestGame
-from .vector import shaped_rewards
+from .validation import positive_int
+from .vector import available_memory, shaped_rewards
 from .wrappers import DistancePotential, shared_position_slice
 
 AUTORESET_MODES: tuple[str, ...] = ("next_step", "same_step", "disabled")
@@ -653,10 +654,13 @@ class TorchVectorEnv(gym.vector.VectorEnv):
         single_action_space: spaces.Space[Any] | None = None,
     ) -> None:
         mode = autoreset_name(autoreset_mode)
-        if int(num_envs) < 1:
-            raise ValueError(f"num_envs must be at least 1, not {num_envs}")
+        self.num_envs = positive_int("num_envs", num_envs)  # 2.5 refused (not 2), as the NumPy env does
+        per_env = 3 * math.prod(tables.obs_shape) * tables.obs.element_size() + 256  # the spaces' bounds, the buffer, the state
+        have = available_memory()
+        if have is not None and self.num_envs * per_env > have:
+            raise ValueError(f"num_envs={self.num_envs} would need about {self.num_envs * per_env / 2**30:.1f} GiB of memory "
+                             f"({per_env} bytes per env); {have / 2**30:.1f} GiB are available. Use fewer envs.")
         self.tables = tables
-        self.num_envs = int(num_envs)
         self.device = tables.device
         self.mode: str = mode
         self.autoreset_mode = _GYM_MODES[mode]

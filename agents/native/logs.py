@@ -21,7 +21,11 @@ from typing import Any
 
 class Logs:
     """CSV always (``progress.csv``, rewritten atomically at every row), TensorBoard when
-    the ``tensorboard`` package is there (a one-line note on stderr when not)."""
+    the ``tensorboard`` package is there (a one-line note on stderr when not).
+
+    The folder is checked first (ValueError): never a symbolic link, never a file, and never
+    one that already holds an earlier run's ``progress.csv`` (choose a new folder per run;
+    ``flowtest train --log-dir`` makes one inside the folder given)."""
 
     def __init__(self, log_dir: str | Path | None, quiet: bool = False) -> None:
         self.dir = Path(log_dir) if log_dir is not None else None
@@ -29,7 +33,18 @@ class Logs:
         self.writer: Any = None
         if self.dir is None:
             return
-        self.dir.mkdir(parents=True, exist_ok=True)
+        if self.dir.is_symlink():
+            raise ValueError(f"log folder {str(self.dir)!r} is a symbolic link; FlowTest never writes through one")
+        if self.dir.exists() and not self.dir.is_dir():
+            raise ValueError(f"log folder {str(self.dir)!r} is a file, not a folder")
+        csv_path = self.dir / "progress.csv"
+        if csv_path.exists() or csv_path.is_symlink():
+            raise ValueError(f"log folder {str(self.dir)!r} already holds the progress.csv of an earlier run; "
+                             "choose a new folder")
+        try:
+            self.dir.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise ValueError(f"cannot create the log folder {str(self.dir)!r}: {exc.strerror or exc}") from None
         try:
             from torch.utils.tensorboard import SummaryWriter
         except ImportError:

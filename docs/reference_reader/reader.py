@@ -20,6 +20,21 @@ import json
 GRID_ACTIONS = ["N", "S", "E", "W"]  # a grid's action slots; the last action is stay
 
 
+def index(value, size, where):
+    """``value`` if it indexes a list of ``size`` entries. Anything else is refused: Python
+    would read a negative index from the end of the list (a port in C would read memory)."""
+    if type(value) is not int or not 0 <= value < size:
+        raise ValueError(f"{where}: {value!r} is not an index in 0..{size - 1}")
+    return value
+
+
+def indices(values, size, where, length=None):
+    """Every entry of ``values`` checked by :func:`index` (and, given ``length``, their number)."""
+    if length is not None and len(values) != length:
+        raise ValueError(f"{where}: {len(values)} entries, expected {length}")
+    return [index(v, size, f"{where}[{k}]") for k, v in enumerate(values)]
+
+
 class Run:
     """One test run: the system's state, the history (a state of automata.histories), the
     test agent's state and memory (-1 without an agent), and the verdict's counters."""
@@ -39,9 +54,21 @@ class Test:
         self.letter = [letter_of[json.dumps(sorted(lab))] for lab in ts["labels"]]
         hist = doc["automata"]["histories"]
         self.delta, self.h0 = hist["delta"], hist["initial"]
+        # every index the runs read is checked once, here (validate against the schema first)
+        n_hist = len(self.delta)
+        for m, move in enumerate(moves):
+            indices(move, n, f"system.moves[{m}]", 2)
+        for h, row in enumerate(self.delta):  # one entry per letter
+            indices(row, n_hist, f"automata.histories.delta[{h}]", len(doc["letters"]))
+        for field in ("labels", "stay", "place"):  # one entry per state
+            if len(ts[field]) != n:
+                raise ValueError(f"system.{field}: {len(ts[field])} entries, expected {n}")
+        if len(hist["accepting"]) != n_hist:
+            raise ValueError(f"automata.histories.accepting: {len(hist['accepting'])} rows, expected {n_hist}")
+        index(hist["initial"], n_hist, "automata.histories.initial")
         self.sys_accepts = [row[0] == 1 for row in hist["accepting"]]
         self.test_accepts = [row[1] == 1 for row in hist["accepting"]]
-        self.initial, self.place = ts["initial"], ts["place"]
+        self.initial, self.place = index(ts["initial"], n, "system.initial"), ts["place"]
         # action slots: a grid's N S E W by the move's action name, a graph's moves in order
         grid = ts["kind"] in ("grid", "fuel") and ts.get("layout") is not None
         out = [[] for _ in range(n)]
@@ -57,8 +84,10 @@ class Test:
         self.can_stay = [x == 1 for x in ts["stay"]]
         # the restrictions the test enforces itself, per history: its static walls, and
         # its reactive restrictions unless a test agent realizes them by standing in the way
-        static = set(doc["strategy"]["static_obstacles"])
-        reactive = {int(q): set(ms) for q, ms in doc["strategy"]["restrictions"].items()}
+        static = set(indices(doc["strategy"]["static_obstacles"], len(moves), "strategy.static_obstacles"))
+        reactive = {}
+        for q, ms in doc["strategy"]["restrictions"].items():
+            reactive[index(int(q), n_hist, "strategy.restrictions")] = set(indices(ms, len(moves), f"strategy.restrictions.{q}"))
         self.agent = doc["kind"] == "agent"
         self.enforced = [static | (set() if self.agent else reactive.get(h, set())) for h in range(len(self.delta))]
         self.doomed = self._doomed(n, moves)
@@ -66,8 +95,17 @@ class Test:
             c = doc["agent"]["controller"]
             self.ctl = c
             self.agent_place = c["agent_places"]  # place of each agent state, None on a park
+            n_agent = len(self.agent_place)
             self.row_of = {(s, h): i for i, (s, h) in enumerate(c["rows"])}
             t = c["table"]
+            index(c["initial_agent"], n_agent, "agent.controller.initial_agent")
+            indices(t["next_agent"], n_agent, "agent.controller.table.next_agent")
+            if len(c["fallback"]) != n_agent:
+                raise ValueError(f"agent.controller.fallback: {len(c['fallback'])} rows, expected {n_agent}")
+            n_places = len(c["fallback"][0]) if n_agent else 0
+            for a, row in enumerate(c["fallback"]):
+                indices(row, n_agent, f"agent.controller.fallback[{a}]", n_places)
+            indices(c["sys_place"], n_places, "agent.controller.sys_place", n)
             self.answer = {(t["memory"][i], t["row"][i], t["agent"][i]): (t["next_agent"][i], t["next_memory"][i])
                            for i in range(len(t["row"]))}
 
@@ -140,7 +178,9 @@ class Test:
         return run
 
     def step(self, run, action):
-        """The system takes ``action``; a refused or impossible one leaves it in place."""
+        """The system takes ``action`` (an index in 0..stay, as the env's action space; any
+        other is refused); a refused or impossible one leaves it in place."""
+        index(action, self.stay + 1, "action")
         s, refused = run.system, self.restricted(run)
         exists, legal = self._exists(s), self.legal(run)
         if refused & exists:

@@ -13,6 +13,7 @@ configuration and its checks), :mod:`~experiments.benchmark.pool` (the splits),
 :mod:`~experiments.benchmark.scoring` (every system on every split, the generalization curve),
 :mod:`~experiments.benchmark.statistics` (means, intervals, normalized scores),
 :mod:`~experiments.benchmark.table` (``table.json`` and ``table.md``),
+:mod:`~experiments.benchmark.resume` (the stored configuration and the finished runs ``--resume`` keeps),
 :mod:`~experiments.benchmark.plots` (the pictures) and :mod:`~experiments.benchmark.protocol`
 (the whole run).
 
@@ -41,15 +42,17 @@ from .config import (
 )
 from .models import batch_verdicts
 from .pool import Split, games_and_budgets, load_splits
-from .protocol import BENCHMARK_MARKER, OUTPUTS, benchmark, prepare_benchmark_folder, run_benchmark
+from .protocol import BENCHMARK_MARKER, OUTPUTS, benchmark, check_systems, prepare_benchmark_folder, run_benchmark
+from .resume import CONFIG_FILE, config_document
 from .scoring import score_systems, split_metrics
 from .statistics import SystemRuns, mean_ci
 from .table import benchmark_table, table_markdown
 from .training_runs import train_baseline
 
 __all__ = [
-    "BENCHMARK_MARKER", "BENCH_ALGOS", "DEFAULT_SUTS", "OUTPUTS", "POOL_ENV_ID", "RANDOM", "REFERENCES", "SPLIT_NAMES",
-    "BenchmarkConfig", "Split", "SystemRuns", "baseline_settings", "batch_verdicts", "benchmark", "benchmark_table",
-    "check_config", "command_of", "default_counts", "games_and_budgets", "load_splits", "mean_ci", "prepare_benchmark_folder",
-    "run_benchmark", "score_systems", "split_metrics", "table_markdown", "train_baseline",
+    "BENCHMARK_MARKER", "BENCH_ALGOS", "CONFIG_FILE", "DEFAULT_SUTS", "OUTPUTS", "POOL_ENV_ID", "RANDOM",
+    "REFERENCES", "SPLIT_NAMES", "BenchmarkConfig", "Split", "SystemRuns", "baseline_settings", "batch_verdicts",
+    "benchmark", "benchmark_table", "check_config", "check_systems", "config_document", "command_of",
+    "default_counts", "games_and_budgets", "load_splits", "mean_ci", "prepare_benchmark_folder", "run_benchmark",
+    "score_systems", "split_metrics", "table_markdown", "train_baseline",
 ]

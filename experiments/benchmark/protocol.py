@@ -47,6 +47,9 @@ for each choice):
    ``generalization.png`` (:mod:`~experiments.benchmark.plots`), the evaluation report of
    :mod:`experiments.evaluation` on a sample of each split's tests (``report.html``,
    ``report.md``, ``results.json``), the models and the scored tests.
+7. **Stopping and resuming** (:mod:`~experiments.benchmark.resume`): the configuration is
+   stored before any work and every finished training run leaves its model and record, so a
+   stopped benchmark is continued with ``resume`` (``--resume``), to the same table.
 
 Every number is seeded (the tests, training, the sampled runs, the bootstrap), so the same
 configuration gives the same table; only the times differ.
@@ -70,6 +73,7 @@ from synthesis.model.errors import ProblemError
 from .config import REPORT_SPLITS, RUN_SEED, BenchmarkConfig, check_config
 from .plots import plot_generalization, plot_learning_curves
 from .pool import Split, load_splits
+from .resume import CONFIG_FILE, check_same_config, remove_temporaries, write_config
 from .scoring import generalization_curve, score_all
 from .statistics import scale_of
 from .table import benchmark_table, commit, table_markdown
@@ -108,19 +112,32 @@ def _report_label(split: Split, shown: int) -> str:
 
 def run_benchmark(config: BenchmarkConfig, out: Path, say: Callable[[str], None] = lambda _: None,
                   progress_bar: bool = False,
-                  source: Callable[[str, str, int], Sequence[TestArtifact]] | None = None) -> dict[str, Any]:
+                  source: Callable[[str, str, int], Sequence[TestArtifact]] | None = None,
+                  resume: bool = False) -> dict[str, Any]:
     """Run the benchmark (see the module docstring) into the folder ``out`` (created; it
-    is not checked here: the command checks it first) and return ``table.json``'s document.
-    ``source`` loads the pool's tests (default :func:`flowtest_env.pools.load_pool`)."""
+    is not checked here: the command checks it first, :func:`prepare_benchmark_folder`) and
+    return ``table.json``'s document. ``source`` loads the pool's tests (default
+    :func:`flowtest_env.pools.load_pool`). With ``resume``, the training runs an earlier,
+    stopped run of the same configuration finished in ``out`` are kept
+    (:mod:`~experiments.benchmark.resume`); the table is the same as an uninterrupted run's."""
     t_start = time.perf_counter()
     check_config(config)
     code = commit()  # the code this run uses (the tree may move on while it runs)
     out.mkdir(parents=True, exist_ok=True)
+    if resume:
+        started = check_same_config(out, config).get("commit")
+        remove_temporaries(out)
+        if started != code:
+            say(f"warning: resuming a benchmark started with FlowTest commit {started or 'unknown'}, now "
+                f"{code or 'unknown'}: its finished runs are kept as they are")
+    elif not (out / CONFIG_FILE).exists():
+        write_config(out, config, code)
     say(f"loading the pool {config.pool}: {config.train_count} train, {config.validation_count} validation and "
         f"{config.test_count} held-out tests")
     t0 = time.perf_counter()
     splits = load_splits(config, out, progress=progress_bar, source=source)
     pool_seconds = time.perf_counter() - t0
+    check_systems_play(config, splits)
     jobs = [TrainingJob(algo, seed, config.train_count, f"{algo}-seed{seed}")
             for algo in config.baselines() for seed in config.seeds]
     if config.baselines():
@@ -128,7 +145,7 @@ def run_benchmark(config: BenchmarkConfig, out: Path, say: Callable[[str], None]
         jobs += [TrainingJob(first, seed, n, f"curve-{first}-{n}-seed{seed}")
                  for n in config.curve() if n != config.train_count for seed in config.seeds[:config.curve_seeds]]
     t0 = time.perf_counter()
-    trained = train_all(config, jobs, splits, out, say, progress_bar)
+    trained = train_all(config, jobs, splits, out, say, progress_bar, resume)
     train_seconds = time.perf_counter() - t0
     if trained and config.trainer == "native":
         import torch
@@ -184,28 +201,102 @@ OUTPUTS = {"table_md": "table.md", "table_json": "table.json", "curves": "learni
 """The main files a benchmark writes into ``--out``."""
 
 
-def prepare_benchmark_folder(out: Path, force: bool) -> None:
+def prepare_benchmark_folder(out: Path, force: bool, config: BenchmarkConfig | None = None, resume: bool = False) -> None:
     """Make ``out`` a benchmark folder (:data:`BENCHMARK_MARKER`), refusing to overwrite: an
-    existing non-empty ``out`` needs ``force`` (``--force``), whoever wrote it.
+    existing non-empty ``out`` needs ``force`` (``--force``: start over), whoever wrote it, or
+    ``resume`` (``--resume``: continue the benchmark in it, which must have been started with
+    the same ``config``, :func:`~experiments.benchmark.resume.check_same_config`). With
+    ``config``, a new benchmark's configuration is written in it
+    (:data:`~experiments.benchmark.resume.CONFIG_FILE`) before any work.
 
     Raises
     ------
     ProblemError
-        If ``out`` holds files and ``force`` is not given, or cannot be written.
+        If ``out`` holds files and neither ``force`` nor ``resume`` is given, if there is
+        nothing of this configuration to resume, or if ``out`` cannot be written.
     """
-    if out.is_dir() and not force:
+    if force and resume:
+        raise ProblemError("--resume continues the benchmark in --out and --force starts it over: give one of them")
+    used = False
+    if out.is_dir():
         try:
             used = any(out.iterdir())
         except OSError as exc:
             raise ProblemError(f"cannot read the benchmark folder {str(out)!r}: {exc.strerror or exc}") from None
-        if used:
-            what = "an earlier benchmark" if (out / BENCHMARK_MARKER).exists() else "files"
-            raise ProblemError(f"benchmark folder {str(out)!r} already holds {what}; use --force to overwrite, "
-                               "or choose another folder")
+    if used and resume:
+        if config is None:
+            raise ProblemError("--resume needs the configuration to compare with the stored one")
+        if not (out / BENCHMARK_MARKER).exists():
+            raise ProblemError(f"benchmark folder {str(out)!r} holds files FlowTest did not write: there is no benchmark "
+                               "to resume in it; choose another folder")
+        check_same_config(out, config)
+    elif used and not force:
+        if (out / BENCHMARK_MARKER).exists():
+            raise ProblemError(f"benchmark folder {str(out)!r} already holds an earlier benchmark; use --resume to continue "
+                               "it (the same settings), --force to start over, or choose another folder")
+        raise ProblemError(f"benchmark folder {str(out)!r} already holds files; use --force to overwrite, or choose another "
+                           "folder")
     prepare_output_folder(out, BENCHMARK_MARKER, force, "benchmark folder")
+    if config is not None and not (used and resume):
+        write_config(out, config, commit())
 
 
-def benchmark(pool: str | BenchmarkConfig, out: str | Path, *, force: bool = False, say: Callable[[str], None] = lambda _: None,
+def check_systems(config: BenchmarkConfig) -> None:
+    """Load every saved model given as a system (``--sut ppo:PATH``) before any work: a file
+    that is not a model, or a checkpoint that fails its checks, is one error line before the
+    folder is made and the pool loaded, not after minutes of scoring.
+
+    Raises
+    ------
+    ProblemError
+        Naming the system and why it cannot be loaded.
+    """
+    from agents.ppo import load_model
+
+    for sut in config.others():
+        if sut.startswith("ppo:"):
+            try:
+                load_model(sut[4:])
+            except ValueError as exc:  # PolicyError, CheckpointError
+                raise ProblemError(f"--sut {sut}: {exc}") from None
+
+
+def check_systems_play(config: BenchmarkConfig, splits: dict[str, Split]) -> None:
+    """Every saved model and batched ``python:`` policy given as a system plays the pool's
+    first held-out test once, before any training or scoring: a model trained on tests of
+    another observation shape is one error line now, not a traceback after the training runs.
+
+    Raises
+    ------
+    ProblemError
+        Naming the system and what went wrong.
+    """
+    from flowtest_env.game import TestGame
+    from flowtest_env.scoring import play_batch
+
+    from .scoring import batched_system, score_systems
+
+    test = splits["test"]
+    first = Split(test.name, test.label, test.seeds[:1], test.artifacts[:1], test.files[:1])
+    for sut in config.others():
+        if not sut.startswith(("ppo:", "python:")):
+            continue
+        try:
+            policies = batched_system(sut, config.runs)
+            if policies is None:
+                if sut.startswith("ppo:"):
+                    score_systems([sut], first)  # a stable-baselines3 zip through the single env
+                continue
+            for policy in policies.values():
+                play_batch(policy, [TestGame(first.artifacts[0])], 1, RUN_SEED)
+        except ProblemError:
+            raise
+        except Exception as exc:  # the policy's own failure, whatever it is: one line
+            raise ProblemError(f"--sut {sut} cannot play the pool's tests: {type(exc).__name__}: {exc}") from None
+
+
+def benchmark(pool: str | BenchmarkConfig, out: str | Path, *, force: bool = False, resume: bool = False,
+              say: Callable[[str], None] = lambda _: None,
               progress_bar: bool = False, source: Callable[[str, str, int], Sequence[TestArtifact]] | None = None,
               **settings: Any) -> dict[str, Any]:
     """Run the benchmark protocol (see the module docstring) on ``pool`` into the folder
@@ -214,7 +305,9 @@ def benchmark(pool: str | BenchmarkConfig, out: str | Path, *, force: bool = Fal
     ``suts``, ``algos``, ``train_count``, ``steps``, ``seeds``, ...; the split counts not given
     are :meth:`BenchmarkConfig.for_pool`'s, as the command's). ``pool`` may be a whole
     :class:`BenchmarkConfig` instead (then no ``settings``). Everything is checked before any
-    work; ``out`` is refused when it holds files, unless ``force``. ``say`` gets the progress
+    work, every ``ppo:`` model loaded; ``out`` is refused when it holds files, unless ``force``
+    (start over) or ``resume`` (continue a stopped benchmark of the same configuration in
+    it, keeping its finished training runs). ``say`` gets the progress
     lines; ``source(pool, split, count)`` loads the pool's tests (default
     :func:`flowtest_env.pools.load_pool`).
 
@@ -246,5 +339,6 @@ def benchmark(pool: str | BenchmarkConfig, out: str | Path, *, force: bool = Fal
     else:
         config = BenchmarkConfig.for_pool(pool, **settings)
     check_config(config)
-    prepare_benchmark_folder(Path(out), force)
-    return run_benchmark(config, Path(out), say, progress_bar, source)
+    check_systems(config)
+    prepare_benchmark_folder(Path(out), force, config, resume)
+    return run_benchmark(config, Path(out), say, progress_bar, source, resume)

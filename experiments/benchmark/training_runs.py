@@ -1,6 +1,8 @@
 """The benchmark's training runs (protocol step 2, docs/benchmark-protocol.md): each baseline
 per seed (and per generalization-curve size) trained on the pool's train split, several at once
-in their own processes, each with its greedy learning curve."""
+in their own processes, each with its greedy learning curve. Every finished run leaves its
+model and then its record (:mod:`~experiments.benchmark.resume`), so ``--resume`` keeps it
+(:func:`finished_run`) and trains only the rest."""
 
 from __future__ import annotations
 
@@ -20,6 +22,7 @@ from experiments.training.system import make_model, make_training_vec_env
 from .config import CURVE_TRAIN_TESTS, POOL_ENV_ID, BenchmarkConfig, baseline_settings
 from .models import CurveRecorder, ModelBatchPolicy, model_where
 from .pool import Split, games_and_budgets
+from .resume import read_record, write_record
 
 
 @dataclass
@@ -48,19 +51,47 @@ def train_baseline(config: BenchmarkConfig, algo: str, seed: int, splits: dict[s
     """Train one baseline on the first ``train_tests`` (default: all ``train_count``) tests
     of the train split (``config.steps`` time steps, rounded up to whole rollouts),
     recording its greedy learning curve on the first train tests (at most :data:`CURVE_TRAIN_TESTS`) and the validation tests;
-    save it to ``out/models/<name or algo-seedN>.zip``."""
+    save it to ``out/models/<name or algo-seedN>.zip``, then its record (``.json``: what
+    ``--resume`` keeps, :func:`~experiments.benchmark.resume.write_record`)."""
     count = int(train_tests or config.train_count)
-    every = max(1, math.ceil(config.steps / config.curve_points))
-    path = (out / "models" / f"{name or f'{algo}-seed{seed}'}.zip").resolve()
+    path = model_path(out, algo, seed, name)
     if config.trainer == "native":
-        return _train_native_baseline(config, algo, seed, splits, path, every, progress_bar, count)
+        b = _train_native_baseline(config, algo, seed, splits, path, _curve_every(config), progress_bar, count)
+    else:
+        b = _train_sb3_baseline(config, algo, seed, splits, path, progress_bar, count)
+    write_record(path, config, {"algo": b.algo, "seed": b.seed, "train_tests": b.train_tests, "steps": b.steps,
+                                "seconds": b.seconds, "curve_seconds": b.curve_seconds,
+                                "curve": [[step, rates] for step, rates in b.curve]})
+    return b
+
+
+def model_path(out: Path, algo: str, seed: int, name: str | None = None) -> Path:
+    """Where a training run's model goes: ``out/models/<name or algo-seedN>.zip``."""
+    return (out / "models" / f"{name or f'{algo}-seed{seed}'}.zip").resolve()
+
+
+def _curve_every(config: BenchmarkConfig) -> int:
+    return max(1, math.ceil(config.steps / config.curve_points))
+
+
+def _sb3_curve_games(splits: dict[str, Split], count: int) -> dict[str, tuple[list[Any], list[int]]]:
+    """The tests an sb3 baseline's learning curve watches: the first scored train tests (at
+    most :data:`CURVE_TRAIN_TESTS`, and no more than it trains on) and the validation tests."""
+    shown = {"train": games_and_budgets(splits["train"]), "validation": games_and_budgets(splits["validation"])}
+    keep = min(count, CURVE_TRAIN_TESTS)
+    shown["train"] = (shown["train"][0][:keep], shown["train"][1][:keep])
+    return shown
+
+
+def _train_sb3_baseline(config: BenchmarkConfig, algo: str, seed: int, splits: dict[str, Split], path: Path,
+                        progress_bar: bool, count: int) -> TrainedBaseline:
+    """One baseline with stable-baselines3 on the first ``count`` train tests of the pool."""
+    every = _curve_every(config)
     settings = baseline_settings(algo, "sb3")
     pool_options = {"pool": config.pool, "split": "train", "count": count}  # a standard pool: its shipped records
     env = make_training_vec_env(POOL_ENV_ID, seed, settings, pool_options)
     model = make_model(env, settings, seed)
-    shown = {"train": games_and_budgets(splits["train"]), "validation": games_and_budgets(splits["validation"])}
-    keep = min(count, CURVE_TRAIN_TESTS)
-    shown["train"] = (shown["train"][0][:keep], shown["train"][1][:keep])
+    shown = _sb3_curve_games(splits, count)
     recorder = CurveRecorder(every, settings["memory"], shown)
     seconds = learn(model, config.steps, recorder, progress_bar)
     write_atomically(path, lambda tmp: model.save(str(tmp)))
@@ -95,11 +126,60 @@ def _run_job(job: TrainingJob) -> TrainedBaseline:
     return b
 
 
+def finished_run(config: BenchmarkConfig, job: TrainingJob, splits: dict[str, Split], out: Path) -> TrainedBaseline | None:
+    """The run ``job`` as an earlier, stopped run of this benchmark finished it (its record,
+    :func:`~experiments.benchmark.resume.read_record`, and its model with its batched
+    policies), or ``None`` when it has to be trained: no record of this configuration, a model
+    that is not the file recorded, or (``--trainer sb3``) a stable-baselines3 zip this process
+    may not unpickle (kept only with ``--trust-model``)."""
+    path = model_path(out, job.algo, job.seed, job.name)
+    policies: dict[str, Any]
+    rec = read_record(path, config)
+    if rec is None or (rec.get("algo"), rec.get("seed"), rec.get("train_tests")) != (job.algo, job.seed, job.train_tests):
+        return None
+    if config.trainer == "native":
+        from agents.native.checkpoint import load_native
+
+        native = load_native(path)
+        policies = {"greedy": native.batch_policy(True), "sampled": native.batch_policy(False)}
+    else:
+        from agents.checkpoint import pickled_models_trusted
+        from agents.ppo import load_model
+
+        if not pickled_models_trusted():
+            return None
+        model = load_model(path)
+        where = model_where(model, _sb3_curve_games(splits, job.train_tests)["train"][0], baseline_settings(job.algo, "sb3")["memory"])
+        policies = {"greedy": ModelBatchPolicy(model, where, True), "sampled": ModelBatchPolicy(model, where, False)}
+    curve = [(int(step), {k: float(v) for k, v in rates.items()}) for step, rates in rec["curve"]]
+    return TrainedBaseline(job.algo, job.seed, path, int(rec["steps"]), float(rec["seconds"]), float(rec["curve_seconds"]),
+                           curve, job.train_tests, policies)
+
+
 def train_all(config: BenchmarkConfig, jobs: Sequence[TrainingJob], splits: dict[str, Split], out: Path,
-              say: Callable[[str], None], progress_bar: bool = False) -> list[TrainedBaseline]:
+              say: Callable[[str], None], progress_bar: bool = False, resume: bool = False) -> list[TrainedBaseline]:
     """Train every job, in ``config.workers`` processes at once (native trainer; each run
     is seeded and single-threaded, so the models are the same however many run at once),
-    in order otherwise; the results in the jobs' order, each with its batched policies."""
+    in order otherwise; the results in the jobs' order, each with its batched policies. With
+    ``resume``, the runs an earlier, stopped run of the same configuration finished are kept
+    (:func:`finished_run`) and only the others are trained."""
+    kept: dict[str, TrainedBaseline] = {}
+    if resume:
+        for job in jobs:
+            b = finished_run(config, job, splits, out)
+            if b is not None:
+                kept[job.name] = b
+        if kept:
+            say(f"resuming: keeping {len(kept)} finished training run{'s' if len(kept) != 1 else ''} of {len(jobs)} "
+                f"({', '.join(kept)})")
+    todo = [job for job in jobs if job.name not in kept]
+    trained = {job.name: b for job, b in zip(todo, _train_jobs(config, todo, splits, out, say, progress_bar), strict=True)}
+    return [kept.get(job.name) or trained[job.name] for job in jobs]
+
+
+def _train_jobs(config: BenchmarkConfig, jobs: Sequence[TrainingJob], splits: dict[str, Split], out: Path,
+                say: Callable[[str], None], progress_bar: bool = False) -> list[TrainedBaseline]:
+    """Train ``jobs`` (:func:`train_all`'s training, one process per run where it can)."""
     if config.workers <= 1 or config.trainer != "native" or len(jobs) <= 1:
         done = []
         for job in jobs:

@@ -71,8 +71,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                        "runs); native checkpoints never need it")
     p.add_argument("--out", type=Path, required=True,
                    help="output folder (table.md, table.json, learning-curves.png, generalization.png, report.html, "
-                        "models/, pool/); an existing non-empty folder is refused unless --force")
-    p.add_argument("--force", action="store_true", help="overwrite the files of an earlier benchmark in --out")
+                        "models/, pool/, benchmark-config.json); an existing non-empty folder is refused unless --force "
+                        "or --resume")
+    p.add_argument("--force", action="store_true", help="start over: overwrite the files of an earlier benchmark in --out")
+    p.add_argument("--resume", action="store_true",
+                   help="continue a stopped benchmark in --out: its finished training runs are kept, the rest trained "
+                        "and everything scored (the same settings only: they are compared with the stored ones)")
     p.add_argument("--json", action="store_true", help="print table.json's document (only it) on stdout")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
 
@@ -91,7 +95,8 @@ def run(args: argparse.Namespace) -> int:
     )
     apply_trust_model(args)
     library.check_config(config)
-    prepare_benchmark_folder(args.out, args.force)
+    library.check_systems(config)  # every ppo: model loaded before any work
+    prepare_benchmark_folder(args.out, args.force, config, args.resume)
     dropped = config.left_out_curve_sizes()
     if dropped and config.baselines():
         sys.stderr.write(f"flowtest: warning: curve sizes {' '.join(map(str, dropped))} (--curve-sizes) are above "
@@ -103,7 +108,8 @@ def run(args: argparse.Namespace) -> int:
             sys.stderr.flush()
 
     with stdout_guard():  # stdout holds our table or JSON only, whatever a library prints meanwhile
-        doc = library.run_benchmark(config, args.out, say, progress_bar=not args.quiet and sys.stderr.isatty())
+        doc = library.run_benchmark(config, args.out, say, progress_bar=not args.quiet and sys.stderr.isatty(),
+                                    resume=args.resume)
     if args.json:
         print_json(json_safe(doc))
         return EXIT_OK

@@ -37,13 +37,17 @@ from experiments.outputs import prepare_output_folder
 from experiments.progress import say
 from synthesis.model.errors import ProblemError
 
-from .arguments import add_trust_model, apply_trust_model, nonnegative_int, positive_int, seconds_at_most
+from .arguments import add_trust_model, apply_trust_model, int_between, nonnegative_int, seconds_at_most
 from .command import Command
 from .exits import EXIT_CHECK_FAILED, EXIT_OK
 
 DEFAULT_STEP_TIMEOUT, MAX_STEP_TIMEOUT = 10.0, 3600.0
 """``--step-timeout``'s default and largest value (:data:`agents.external.DEFAULT_STEP_TIMEOUT`,
 :data:`agents.external.MAX_STEP_TIMEOUT`, which the command line does not import before it runs)."""
+
+MAX_EPISODES = 100_000
+"""``--episodes``' largest value: every run of a pair is kept for the report, so a count with no
+bound ran until stopped (``--episodes 100000000000000000000``) and grew without limit."""
 
 EXIT_TEST_FAILED = EXIT_CHECK_FAILED
 """A test failure was found (a FlowTest bug), as ``flowtest synthesize``'s failed check."""
@@ -65,7 +69,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--tester", nargs="+", default=["synthesized"], metavar="TESTER",
                    help="who plays the test: synthesized (default), ppo:PATH (a learned tester, flowtest "
                         "train-tester); several give a side-by-side comparison")
-    p.add_argument("--episodes", type=positive_int, default=10, help="runs per SUT and env (default 10)")
+    p.add_argument("--episodes", type=int_between(1, MAX_EPISODES, "a number of runs"), default=10,
+                   help=f"runs per SUT and env (default 10, at most {MAX_EPISODES:,})")
     p.add_argument("--seed", type=nonnegative_int, default=0, help="seed of the first run; run i uses seed+i (default 0)")
     p.add_argument("--out", type=Path, help="report folder (required unless --replay); a folder holding files "
                    "FlowTest did not write is refused unless --force")

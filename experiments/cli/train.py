@@ -15,7 +15,8 @@ on the first ``--count`` tests of a named pool's ``--split``.
   ``cuda``). ``--algo ppo`` (an MLP with the visited-places memory) or
   ``--algo recurrent-ppo`` (a GRU). It evaluates the greedy policy on the env's own tests
   (a pool's train tests) and, with ``--pool``, on ``--heldout-count`` tests of the pool's
-  test split; logs go to ``--log-dir`` (``progress.csv``, and TensorBoard). The model is a
+  test split; logs go to a new folder of the run inside ``--log-dir`` (``progress.csv``, and
+  TensorBoard), named after the model, so no run writes over another's. The model is a
   native checkpoint: tensors and plain settings, loaded without unpickling
   (:mod:`agents.checkpoint`).
 * ``sb3``: today's path, unchanged: sb3-contrib's ``MaskablePPO`` (``--algo
@@ -54,7 +55,7 @@ from pathlib import Path
 from typing import Any
 
 from experiments.evaluation.episodes import env_named
-from experiments.outputs import check_output_path
+from experiments.outputs import check_log_dir, check_output_path
 from experiments.training.rl import require_native
 from experiments.training.settings import ALGOS, DEFAULTS, NATIVE_ALGOS, NATIVE_DEFAULTS, TRAINERS, check_settings, flag_of, native_settings
 from experiments.training.system import heldout_games, train, train_native
@@ -113,7 +114,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--eval-every", type=nonnegative_int, default=250_000,
                    help="native: steps between greedy evaluations (default 250000; 0: at the end only)")
     p.add_argument("--log-dir", type=Path, default=None,
-                   help="native: write progress.csv and TensorBoard logs into this folder")
+                   help="native: write progress.csv and TensorBoard logs into a new folder of this run inside this "
+                        "folder, named after the model (DIR/NAME, or DIR/NAME-2... when taken: an earlier run's logs "
+                        "are never replaced); not a symbolic link")
     p.add_argument("--eval-episodes", type=nonnegative_int, default=None,
                    help="single-env evaluation runs after training (default: sb3 100; native 100, 0 with --pool "
                         "(the greedy evaluation on the tests is the score))")
@@ -183,6 +186,8 @@ def run(args: argparse.Namespace) -> int:
     for path, what in ((model_path, "model"), (model_path.with_suffix(".png"), "curve"),
                        (model_path.with_suffix(".json"), "training summary")):
         check_output_path(path, args.force, what)
+    if args.log_dir is not None:
+        check_log_dir(args.log_dir)
     steps = args.steps if args.steps is not None else (50_000 if args.trainer == "sb3" else 1_500_000)
     shown = " ".join(f"{flag_of(k)} {_shown(v)}" for k, v in settings.items())
     extra = "".join(f" --{k} {v}" for k, v in pool.items())
@@ -221,8 +226,8 @@ def run(args: argparse.Namespace) -> int:
     used = ", ".join(f"{k}={_shown(v)}" for k, v in s["settings"].items())
     lines += [f"settings: {used}", f"model: {s['model']} (use --sut ppo:{s['model']})", f"curve: {s['curve']}",
               f"settings and curve data: {Path(s['model']).with_suffix('.json')}"]
-    if args.log_dir is not None:
-        lines.append(f"logs: {args.log_dir} (progress.csv; tensorboard --logdir {args.log_dir})")
+    if s["log_dir"] is not None:
+        lines.append(f"logs: {s['log_dir']} (progress.csv; tensorboard --logdir {args.log_dir})")
     sys.stdout.write("\n".join(lines) + "\n")
     return EXIT_OK
 

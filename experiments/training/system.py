@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import json
 import os
+from contextlib import AbstractContextManager, nullcontext
 from functools import partial
 from pathlib import Path
 from typing import Any
@@ -28,7 +29,7 @@ import numpy as np
 
 from agents.checkpoint import mark_own_file
 from experiments.evaluation.episodes import env_named, run_episode
-from experiments.outputs import write_atomically
+from experiments.outputs import run_log_folder, write_atomically
 from synthesis.model.errors import ProblemError
 
 from .rl import EpisodeCurve, EpisodeEnd, action_masks_of, learn, make_ppo, moving_average, require_native, require_rl
@@ -223,6 +224,9 @@ def train_native(env_id: str, steps: int, out: str | Path, seed: int = 0, progre
     pool's ``pool``, ``split``, ``count``) for ``steps`` env steps (rounded up to whole
     rollouts); ``heldout``: tests to evaluate on besides the env's own. Saves the native
     checkpoint, its curve and the summary; ``overrides`` replace :data:`NATIVE_DEFAULTS`.
+    With ``log_dir``, the run's logs (``progress.csv``, TensorBoard events) go to a new
+    folder inside it named after the model (``log_dir/policy``, or ``policy-2``... when
+    taken: :func:`experiments.outputs.new_run_folder`), never into an earlier run's.
 
     Example::
 
@@ -236,11 +240,10 @@ def train_native(env_id: str, steps: int, out: str | Path, seed: int = 0, progre
         ``trainer``, ``env``, ``env_options``, ``steps``, ``seed``, ``seconds`` (training,
         evaluations excluded), ``steps_per_second``, ``final`` and ``evaluations`` (greedy met,
         realized and restrictions on the train and held-out tests), ``success_rate`` (over
-        ``eval_episodes`` single-env runs, ``None`` if 0), ``settings``, ``model``, ``curve``.
+        ``eval_episodes`` single-env runs, ``None`` if 0), ``settings``, ``model``, ``curve``,
+        ``log_dir`` (the run's log folder, or ``None``).
     """
     require_native()
-    from agents.native_ppo import train as native_train
-
     if steps < 1:
         raise ProblemError("--steps must be at least 1")
     settings = native_settings(overrides)
@@ -248,6 +251,19 @@ def train_native(env_id: str, steps: int, out: str | Path, seed: int = 0, progre
     args = native_args(settings, vec_id, vec_kwargs, steps, seed, eval_every)
     out = Path(out)
     model_path = out if out.suffix == ".zip" else out.with_suffix(".zip")
+    logs: AbstractContextManager[Path | None] = nullcontext() if log_dir is None else run_log_folder(Path(log_dir), model_path.stem)
+    with logs as run_logs:
+        return _train_native_run(args, settings, env_id, env_kwargs, seed, model_path, heldout, run_logs, progress_bar,
+                                 eval_episodes)
+
+
+def _train_native_run(args: Any, settings: dict[str, Any], env_id: str, env_kwargs: dict[str, Any] | None, seed: int,
+                      model_path: Path, heldout: Any, log_dir: Path | None, progress_bar: bool,
+                      eval_episodes: int) -> dict[str, Any]:
+    """:func:`train_native`'s run, its logs into ``log_dir`` (a new folder of this run):
+    train, save the checkpoint, curve and summary."""
+    from agents.native_ppo import train as native_train
+
     ckpt_tmp = model_path.with_name(f".{model_path.stem}.{os.getpid()}.training.zip")
     try:
         result = native_train(args, out=None, heldout=heldout, log_dir=log_dir, progress_bar=progress_bar)

@@ -181,7 +181,7 @@ def test_flowtest_train_native_writes_every_setting_logs_and_a_safe_checkpoint(
     assert saved["trainer"] == "native" and saved["steps"] == 1024 and saved["settings"]["n_envs"] == 8
     assert saved["native_args"]["num_envs"] == 8 and saved["device"] == "cpu"
     assert model.with_suffix(".png").stat().st_size > 5_000
-    rows = (tmp_path / "logs" / "progress.csv").read_text().splitlines()
+    rows = (tmp_path / "logs" / "m" / "progress.csv").read_text().splitlines()  # the run's own folder, named after the model
     assert rows[0].startswith("step,") and "episode/met" in rows[0] and "eval/train_met" in rows[0]
     assert len(rows) > 4
     # the model file: JSON settings and .npy tensors only, nothing pickled
@@ -229,7 +229,7 @@ def test_ctrl_c_while_training_leaves_nothing_half_written(tmp_path: Path) -> No
         "training with", signal.SIGINT,
     )
     deadline = time.time() + 60
-    while not (out / "logs" / "progress.csv").exists() and time.time() < deadline:
+    while not (out / "logs" / "m" / "progress.csv").exists() and time.time() < deadline:
         time.sleep(0.2)
     proc.send_signal(signal.SIGINT)
     stdout, err = proc.communicate(timeout=60)
@@ -237,8 +237,8 @@ def test_ctrl_c_while_training_leaves_nothing_half_written(tmp_path: Path) -> No
     assert stdout == "" and "Traceback" not in err
     left = sorted(p.name for p in out.iterdir())
     assert left == ["logs"], left  # no model, curve, summary, nor any .tmp
-    assert all(not p.name.startswith(".") for p in (out / "logs").iterdir())
-    rows = (out / "logs" / "progress.csv").read_text().splitlines()
+    assert all(not p.name.startswith(".") for p in (out / "logs" / "m").iterdir())
+    rows = (out / "logs" / "m" / "progress.csv").read_text().splitlines()
     assert rows[0].startswith("step,") and all(r.count(",") == rows[0].count(",") for r in rows)
 
 

@@ -220,3 +220,33 @@ def test_sigterm_while_a_report_is_written_leaves_no_hidden_file(tmp_path: Path)
         assert proc.returncode in (0, 130), err
         assert "Traceback" not in err
         assert _tmp_files(out) == [], (delay, _tmp_files(out))
+
+
+# ------------------------------------------------ a truncated shipped pool file (issue 43)
+
+
+@pytest.mark.parametrize("pool_id", ["reachability1/5x5-v1", "reachability1/5x5-v2"])
+def test_a_truncated_shipped_pool_file_is_one_line_naming_the_file_and_the_line(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], pool_id: str
+) -> None:
+    """A copy of the records cut short was a bare ``EOFError`` traceback (from the line count,
+    for a ``-v1`` pool) or a line without the place; now one ``error:`` line with the file and
+    the line where it stops."""
+    import flowtest_env.standard_pools as sp
+    from tests.testing_pools import REAL_DATA, empty_data
+
+    data = empty_data(tmp_path, monkeypatch)
+    pool = sp.standard_pool(pool_id)
+    raw = (REAL_DATA / pool.slug / "train.jsonl.gz").read_bytes()
+    cut = data / pool.slug / "train.jsonl.gz"
+    cut.parent.mkdir(parents=True)
+    cut.write_bytes(raw[: len(raw) // 3])
+    code = cli_main(["benchmark", "--pool", pool_id, "--sut", "scripted:replanner", "--train-count", "2",
+                     "--validation-count", "2", "--test-count", "2", "--out", str(tmp_path / "b"), "-q"])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and err.startswith("error: ") and f"{cut}, line " in err, err
+    assert "the file stops in the middle" in err and "Traceback" not in err and "EOFError" not in err
+    line = int(err.split(", line ")[1].split(":")[0])
+    assert 1 < line <= 4096  # where the copy stops, inside the file
+    with pytest.raises(ProblemError, match=r"train\.jsonl\.gz, line \d+: the file stops in the middle"):
+        pool.shipped("train")
