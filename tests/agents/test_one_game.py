@@ -63,7 +63,7 @@ def outside_planners() -> list[str]:
 def test_an_outside_planner_plays_exactly_as_scripted_replanner(planners: Path, kind: str) -> None:
     if shutil.which("node") is None:
         pytest.skip("node (Node.js) is not installed: the JavaScript planner cannot run here")
-    from experiments.cli.evaluate import evaluate
+    from experiments.evaluation import evaluate
 
     suts = ["scripted:replanner", *outside_planners()]
     cells = evaluate([TESTS[kind]], suts, 4, seed=11, step_timeout=30)
@@ -107,7 +107,7 @@ class Checker:
 def test_each_step_says_what_is_restricted_and_why(planners: Path, test: str) -> None:
     """A step's ``restricted`` and ``allowed`` cover every move out of the state, once; a
     move is ``wall`` exactly when the hello lists it among the walls."""
-    from experiments.cli.evaluate import evaluate
+    from experiments.evaluation import evaluate
 
     (planners / "checker.py").write_text(CHECKER)
     (cell,) = evaluate([test], ["python:checker:Checker"], 3, step_timeout=30)

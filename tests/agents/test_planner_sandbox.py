@@ -119,14 +119,15 @@ def gone_soon(pid: int, seconds: float = 3.0) -> bool:
 def test_a_planner_that_stops_reading_fails_its_run_at_the_step_timeout(folder: Path) -> None:
     """Issue 43's hang: the planner never reads its input, FlowTest's writes fill the pipe;
     the run that meets the full pipe fails at the step timeout, the other pairs go on."""
-    from experiments.cli.evaluate import evaluate
+    from experiments.evaluation import evaluate
 
     (folder / "deaf.py").write_text(DEAF)
     t0 = time.perf_counter()
-    cells = evaluate(["small-reactive"], ["cmd:python3 deaf.py --small-pipe", "scripted:replanner"], 40, step_timeout=0.5)
+    # 1.5 s: a planner's first answer includes its start, which a loaded machine can slow past a shorter limit
+    cells = evaluate(["small-reactive"], ["cmd:python3 deaf.py --small-pipe", "scripted:replanner"], 40, step_timeout=1.5)
     took = time.perf_counter() - t0
     deaf, good = (c.record() for c in cells)
-    assert deaf["stopped"] and "within 0.5 s (--step-timeout); it was stopped" in deaf["stopped"], deaf["stopped"]
+    assert deaf["stopped"] and "within 1.5 s (--step-timeout); it was stopped" in deaf["stopped"], deaf["stopped"]
     assert "did not read" in deaf["stopped"], deaf["stopped"]
     assert all(t.verdict["system_objective"] == "open" for t in cells[0].traces)
     assert good["episodes"] == 40 and good["system_objective_met_rate"] == 1.0
@@ -182,7 +183,7 @@ def test_ctrl_c_stops_within_a_second_whatever_the_planner_does(folder: Path, si
 def test_background_children_of_a_planner_end_with_it(folder: Path) -> None:
     """The planner runs in its own session; its whole process group is killed at the end,
     so a child it left in the background does not outlive the evaluation."""
-    from experiments.cli.evaluate import evaluate
+    from experiments.evaluation import evaluate
 
     (folder / "planner.py").write_text(answering("print(json.loads(line)['allowed'][-1], flush=True)"))
     (folder / "planners.py").write_text(PYTHON_PLANNERS)
@@ -196,7 +197,7 @@ def test_background_children_of_a_planner_end_with_it(folder: Path) -> None:
 def test_answers_are_read_as_data(folder: Path) -> None:
     """Answers that made ``parse_answer`` raise (``isdigit()`` then ``int()``) or read without
     bound fail their own run with the reason; the other pairs still run."""
-    from experiments.cli.evaluate import evaluate
+    from experiments.evaluation import evaluate
 
     for name, statement in ANSWERS.items():
         (folder / name).write_text(answering(statement))
@@ -240,7 +241,7 @@ def test_python_planners_that_exit_loop_or_swallow_everything_fail_their_own_run
     evaluation with exit 0 and no results), a bare ``except:`` in a loop (which swallowed
     the timer and the Ctrl-C: the run never ended), its own ``KeyboardInterrupt``, a hard
     exit, and answers that are no action each fail that planner's run with the reason."""
-    from experiments.cli.evaluate import evaluate
+    from experiments.evaluation import evaluate
 
     (folder / "planners.py").write_text(PYTHON_PLANNERS)
     expected = {
