@@ -33,6 +33,7 @@ from .command import Command
 from .exits import EXIT_OK
 
 if TYPE_CHECKING:
+    from flowtest_env.sources import StoredTest
     from synthesis.problems.problem import Problem
 
 
@@ -221,7 +222,7 @@ def synthesis_seconds(summary: dict[str, Any]) -> float:
     return float(stats.get("graph_seconds", 0.0)) + float(stats.get("solve_seconds", 0.0))
 
 
-def _stored(args: argparse.Namespace, problem: Problem) -> Any:
+def _stored(args: argparse.Namespace, problem: Problem) -> StoredTest | None:
     """The test at hand that this synthesis would answer (:func:`flowtest_env.sources.stored_test`),
     if it took :data:`STORED_AFTER` seconds or more to synthesize; else ``None``."""
     from flowtest_env.sources import stored_test
@@ -232,7 +233,7 @@ def _stored(args: argparse.Namespace, problem: Problem) -> Any:
     return stored
 
 
-def _show_stored(args: argparse.Namespace, problem: Problem, stored: Any) -> int:
+def _show_stored(args: argparse.Namespace, problem: Problem, stored: StoredTest) -> int:
     """Show a stored test as a synthesis's: say where it comes from (stderr), write ``--out``
     and ``--plot``, print its summary."""
     from synthesis.problems.problem import build_graphs
@@ -243,20 +244,22 @@ def _show_stored(args: argparse.Namespace, problem: Problem, stored: Any) -> int
     made = art.extras.get("made_with", {}) or {"backend": summary.get("stats", {}).get("backend", "?"),
                                                 "version": summary.get("stats", {}).get("solver_version", "?")}
     where = f"the shipped test {stored.path}" if stored.shipped else f"its cached test {stored.path}"
-    progress = StageProgress(enabled=not args.quiet)
-    progress(f"{problem.name}: {where} (proven optimal, every check passed): the test this synthesis gives, "
-             f"not synthesized again; synthesizing it took {took:.0f} s ({made.get('backend')} {made.get('version')}), "
-             "--fresh does it again")
-    if args.out is not None:
-        check_output_path(args.out, args.force, "artifact")
-        write_atomically(args.out, art.save)
-        progress(f"wrote the artifact {args.out}")
-    if args.plot is not None:
-        from experiments.plots import plot_artifact
+    # where the test comes from: one whole line (done(), never cut to a terminal's width); every
+    # line is ended before the summary
+    with StageProgress(enabled=not args.quiet) as progress:
+        progress.done(f"{problem.name}: {where} (proven optimal, every check passed): the test this synthesis gives, "
+                      f"not synthesized again; synthesizing it took {took:.0f} s ({made.get('backend')} {made.get('version')}), "
+                      "--fresh does it again")
+        if args.out is not None:
+            progress(f"writing the artifact {args.out}")
+            check_output_path(args.out, args.force, "artifact")
+            write_atomically(args.out, art.save)
+        if args.plot is not None:
+            from experiments.plots import plot_artifact
 
-        check_output_path(args.plot, args.force, "plot")
-        write_atomically(args.plot, lambda tmp: plot_artifact(art, tmp, max_cols=None))
-        progress(f"drew {args.plot}")
+            progress(f"drawing {args.plot}")
+            check_output_path(args.plot, args.force, "plot")
+            write_atomically(args.plot, lambda tmp: plot_artifact(art, tmp, max_cols=None))
     if args.json:
         print_json(summary)
         return EXIT_OK
