@@ -123,7 +123,7 @@ def human_summary(test: Any, summary: dict[str, Any]) -> str:
     gap_text = "" if summary["status"] == "optimal" or gap is None else f", gap {gap:.2%}"
     loop = stats.get("agent_seconds")
     if loop:  # the counterexample-guided loop: many MILP solves, GR(1) games, the closed-loop check
-        n = len(test.agent.iterations)
+        n = summary.get("agent_strategy", {}).get("iterations", len(getattr(test.agent, "iterations", ())))
         lines.append(
             f"  time         graphs {loop['graphs']:.2f} s, agent loop {loop['total'] - loop['graphs']:.2f} s "
             f"({n} MILP solve(s) {loop['milp']:.2f} s, games and GR(1) {loop['game'] + loop['gr1']:.2f} s, checks "

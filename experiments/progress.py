@@ -1,5 +1,6 @@
 """Progress on standard error: :class:`StageProgress`, the stage lines every command shows,
-and :func:`say`, one line.
+:func:`synthesis_progress`, a synthesis's (its stages and its solver's status), and :func:`say`,
+one line.
 
 The library (:mod:`experiments.evaluation`, :mod:`experiments.benchmark`,
 :mod:`experiments.training`) and the command line share these: a long piece of work says what
@@ -15,8 +16,11 @@ import shutil
 import sys
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from typing import TextIO
+
+from synthesis.routing.solve_status import SolveControl
 
 PROG = "flowtest"
 """The program name every message starts with."""
@@ -188,3 +192,34 @@ class StageProgress:
                     tail = f" | {status}" if status else ""
                     # one clock: the seconds since the command began, on every line
                     self._rewrite(f"{self.PREFIX}{self._message} ... {self.elapsed():.1f} s{tail}")
+
+
+def solver_status(control: SolveControl) -> str | None:
+    """How the running solve stands (best test, bound, gap:
+    :func:`synthesis.routing.solver_control.status_line`), its module imported only when a
+    status is asked for (it loads HiGHS)."""
+    from synthesis.routing.solver_control import status_line
+
+    return status_line(control)
+
+
+@contextmanager
+def synthesis_progress(enabled: bool = True, every: float | None = None,
+                       stream: TextIO | None = None) -> Iterator[tuple[StageProgress, SolveControl]]:
+    """What a synthesis shows on stderr, the same for every command that synthesizes
+    (``flowtest synthesize``, and ``flowtest evaluate`` on a problem file without a cached test):
+    a :class:`StageProgress` for its stages, whose live line on a terminal carries the solver's
+    status (best test, bound, gap), also printed every ``every`` seconds elsewhere
+    (``--progress``), and the :class:`SolveControl` the synthesis shares with it (pass both in
+    :class:`synthesis.SynthesisOptions`). The solver's status lines count on the progress's one
+    clock. Nothing is shown when not ``enabled`` (``--quiet``).
+
+    Example::
+
+        with synthesis_progress() as (progress, control):
+            test = synthesize(problem, SynthesisOptions(progress=progress, control=control))
+    """
+    control = SolveControl()
+    with StageProgress(stream, enabled=enabled, status=lambda: solver_status(control), every=every) as progress:
+        control.started = progress.clock_start  # solver status lines count on the command's one clock
+        yield progress, control

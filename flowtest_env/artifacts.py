@@ -237,27 +237,52 @@ def write_cache_entry(path: Path, art: TestArtifact) -> bool:
             pass
 
 
-@cache
-def load_builtin(name: str) -> TestArtifact:
-    """The artifact of a built-in problem: shipped, else cached, else synthesized now.
+def stored_builtin(name: str) -> tuple[TestArtifact, Path] | None:
+    """The stored test of a built-in problem and its file, without synthesizing: the shipped
+    artifact (its bytes those of :data:`MANIFEST`, every check passed), else this machine's cache
+    entry (:func:`builtin_cache_path`, every check passed; a refused one is said so with a
+    warning); ``None`` when neither is there.
 
     Raises
     ------
     ProblemError
-        If the shipped artifact or the cache entry fails its checks (see module docstring).
+        If ``name`` is not a built-in, or its shipped artifact fails its checks.
+
+    Example
+    -------
+    >>> art, path = stored_builtin("patrolling")      # shipped: no solver runs
+    >>> art.summary["status"], path.name
+    ('optimal', 'patrolling.json')
     """
     if name not in BUILTINS:
         raise ProblemError(f"unknown built-in problem {name!r}; known: {', '.join(sorted(BUILTINS))}")
     expected = problem_source_hash(BUILTINS[name]())
     shipped = artifact_path(name)
     if shipped.exists():
-        return load_shipped(shipped, expected)
+        return load_shipped(shipped, expected), shipped
     cached = builtin_cache_path(name)
     if cached.exists() or cached.is_symlink():
         try:
-            return load_checked(cached, expected, "synthesizing it again")
+            return load_checked(cached, expected, "synthesizing it again"), cached
         except ProblemError as exc:  # FlowTest's own file: refused, said why, rebuilt
             warn_refused_entry(exc)
+    return None
+
+
+@cache
+def load_builtin(name: str) -> TestArtifact:
+    """The artifact of a built-in problem: shipped, else cached (:func:`stored_builtin`), else
+    synthesized now (and cached).
+
+    Raises
+    ------
+    ProblemError
+        If the shipped artifact or the cache entry fails its checks (see module docstring).
+    """
+    stored = stored_builtin(name)
+    if stored is not None:
+        return stored[0]
+    cached = builtin_cache_path(name)
     logger.warn(
         f"no shipped artifact for {name!r}: synthesizing it now (this can take minutes for large problems); "
         f"`python -m experiments.tools.build_artifacts {name}` ships it, the result is cached in {cached}"

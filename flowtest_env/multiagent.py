@@ -103,7 +103,7 @@ from pettingzoo.utils import wrappers
 
 from .config import MULTIAGENT_UNUSED, EnvConfig, config_from, refuse_unused, with_option_signature
 from .encoding import make_encoder
-from .envs import default_max_steps
+from .envs import check_human_rendering, default_max_steps
 from .game import MET, OPEN, VIOLATED, RunState, TestGame
 from .render import Renderer, ansi, make_renderer
 from .sources import TestLike, game_for
@@ -186,7 +186,7 @@ class raw_env(AECEnv):  # type: ignore[misc]  # noqa: N801 - PettingZoo's module
         the single-agent and vector envs' (:func:`~flowtest_env.config.config_from`).
         Those that apply here: ``setting`` (which restrictions are shown), ``max_steps``,
         ``obs_kind`` and ``pad_to`` (the system's observation), ``render_mode``
-        (``"rgb_array"`` or ``"ansi"``), ``view`` (default ``"engineer"``: the picture
+        (``"rgb_array"``, ``"ansi"``, or ``"human"``: a pygame window, with the ``render`` extra), ``view`` (default ``"engineer"``: the picture
         shows the hidden test cells), ``tile_size``, and the system's rewards
         ``step_cost``, ``restricted_penalty`` (also the tester's, for a refused action),
         ``goal_reward`` and ``violation_penalty``. The learner's ``memory``, ``shaping``,
@@ -214,7 +214,7 @@ class raw_env(AECEnv):  # type: ignore[misc]  # noqa: N801 - PettingZoo's module
     """
 
     metadata: dict[str, Any] = {
-        "render_modes": ["rgb_array", "ansi"],
+        "render_modes": ["rgb_array", "ansi", "human"],
         "name": "flowtest_v0",
         "is_parallelizable": True,
         "render_fps": 4,
@@ -238,6 +238,8 @@ class raw_env(AECEnv):  # type: ignore[misc]  # noqa: N801 - PettingZoo's module
         config = config_from("raw_env", config, options, defaults=MULTIAGENT_DEFAULTS)
         refuse_unused("the two-player env", config, MULTIAGENT_UNUSED, "it applies to the single-agent and vector envs")
         one_of("render_mode", config.render_mode, (None, *self.metadata["render_modes"]))
+        if config.render_mode == "human":
+            check_human_rendering()  # pygame, through the render extra: said before anything is built
         if max_cycles is not None:  # PettingZoo's name of the step budget
             max_cycles = positive_int("max_cycles", max_cycles)
             if config.max_steps is not None and config.max_steps != max_cycles:
@@ -298,6 +300,7 @@ class raw_env(AECEnv):  # type: ignore[misc]  # noqa: N801 - PettingZoo's module
             bits = np.arange(n_test)
             self._choice_bits = bits
         self._renderer: Renderer | None = None
+        self._window: HumanWindow | None = None
         self.run: RunState = game.reset(agent_first_move=False)
         self.agents: list[str] = []
 
@@ -421,6 +424,8 @@ class raw_env(AECEnv):  # type: ignore[misc]  # noqa: N801 - PettingZoo's module
         self.infos = {a: self._info(a) for a in self.agents}
         self.agent_selection = self.agents[0]
         self._rounds = 0
+        if self.render_mode == "human":
+            self.render()
 
     def step(self, action: Any) -> None:
         """Play ``action`` for the selected agent (an illegal one is a penalized no-op)."""
@@ -458,8 +463,13 @@ class raw_env(AECEnv):  # type: ignore[misc]  # noqa: N801 - PettingZoo's module
             self.infos[x] = self._info(x)
         self.agent_selection = self.agents[1] if agent == self.agents[0] else self.agents[0]
         self._accumulate_rewards()
+        if self.render_mode == "human":
+            self.render()
 
     def render(self) -> Any:
+        """The run as ``render_mode`` asks: an RGB picture (``rgb_array``), text (``ansi``), or
+        (``human``) that picture in a pygame window at ``render_fps`` frames a second,
+        returning ``None``; in human mode :meth:`reset` and every :meth:`step` draw it too."""
         if self.render_mode is None:
             gymnasium.logger.warn("render() called without a render_mode")
             return None
@@ -467,10 +477,56 @@ class raw_env(AECEnv):  # type: ignore[misc]  # noqa: N801 - PettingZoo's module
             return ansi(self.game, self.run, self.view)
         if self._renderer is None:
             self._renderer = make_renderer(self.game, self.tile_size, self.view)
-        return self._renderer.frame(self.run)
+        frame = self._renderer.frame(self.run)
+        if self.render_mode != "human":
+            return frame
+        if self._window is None:
+            self._window = HumanWindow(f"FlowTest: {self.problem}", int(self.metadata["render_fps"]))
+        self._window.show(frame)
+        return None
 
     def close(self) -> None:
         self._renderer = None
+        if self._window is not None:
+            self._window.close()
+            self._window = None
+
+
+class HumanWindow:
+    """The window of ``render_mode="human"``: each RGB frame shown as it comes, at most
+    ``fps`` a second (pygame, the ``render`` extra; ``SDL_VIDEODRIVER=dummy`` draws without a
+    screen). Opened on the first frame, resized when a frame's size changes, closed by
+    :meth:`close`."""
+
+    def __init__(self, title: str, fps: int) -> None:
+        self.title, self.fps = title, fps
+        self._window: Any = None
+        self._clock: Any = None
+
+    def show(self, frame: np.ndarray) -> None:
+        """Draw ``frame`` (``height x width x 3`` bytes) and let the window's events through."""
+        import pygame
+
+        size = (int(frame.shape[1]), int(frame.shape[0]))
+        if self._window is None:
+            pygame.display.init()
+            pygame.display.set_caption(self.title)
+            self._clock = pygame.time.Clock()
+        if self._window is None or self._window.get_size() != size:
+            self._window = pygame.display.set_mode(size)
+        self._window.blit(pygame.surfarray.make_surface(np.transpose(frame, (1, 0, 2))), (0, 0))
+        pygame.event.pump()
+        self._clock.tick(self.fps)
+        pygame.display.flip()
+
+    def close(self) -> None:
+        """Close the window (nothing to do if none was opened)."""
+        if self._window is None:
+            return
+        import pygame
+
+        pygame.display.quit()
+        self._window = self._clock = None
 
 
 class ParallelFlowTestEnv(ParallelEnv):  # type: ignore[misc]  # pettingzoo ships no type information

@@ -7,6 +7,11 @@ plays every pair, :func:`~experiments.evaluation.write_report` writes ``results.
 :mod:`experiments.evaluation.results` describes them; :func:`~experiments.evaluation.replay`
 prints one run with ``--replay``) and prints one line per pair.
 
+A problem file among ``--env`` gets its cached test (which ``flowtest synthesize`` fills), else is
+synthesized here under ``--time-limit``, with the progress ``flowtest synthesize`` shows (its
+stages on stderr, the solver's status on a terminal's live line or every ``--progress`` seconds):
+no synthesis runs unseen.
+
 Exit codes: 0, or :data:`EXIT_TEST_FAILED` when a test failed its guarantee in a run (a FlowTest
 bug: a run met the system objective without realizing the test objective, or the test trapped
 the system); invalid input (an unknown env or system, a system that can play none of the tests,
@@ -17,7 +22,9 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING, TypeVar
 
 from experiments.evaluation import (
     REPORT_MARKER,
@@ -26,6 +33,7 @@ from experiments.evaluation import (
     check_sut_names,
     check_suts_can_play,
     evaluate,
+    load_problem_files,
     replay,
     resolve_envs,
     test_failure_records,
@@ -34,12 +42,18 @@ from experiments.evaluation import (
 )
 from experiments.evaluation.results import outcome_lines
 from experiments.outputs import prepare_output_folder
-from experiments.progress import say
+from experiments.progress import PROGRESS_EVERY, say, synthesis_progress
 from synthesis.model.errors import ProblemError
+from synthesis.model.option_rules import SECONDS
 
-from .arguments import add_trust_model, apply_trust_model, int_between, nonnegative_int, seconds_at_most
+from .arguments import add_trust_model, apply_trust_model, int_between, nonnegative_int, option_type, positive_seconds, seconds_at_most
 from .command import Command
 from .exits import EXIT_CHECK_FAILED, EXIT_OK
+
+if TYPE_CHECKING:
+    from synthesis.options import SynthesisOptions
+
+T = TypeVar("T")
 
 DEFAULT_STEP_TIMEOUT, MAX_STEP_TIMEOUT = 10.0, 3600.0
 """``--step-timeout``'s default and largest value (:data:`agents.external.DEFAULT_STEP_TIMEOUT`,
@@ -78,6 +92,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--replay", action="store_true", help="print every step of the runs instead of a report")
     add_trust_model(p, "load stable-baselines3 model zips (--sut ppo:PATH, --tester ppo:PATH), which unpickles them: "
                        "code from the file runs; native FlowTest checkpoints never need it")
+    p.add_argument("--time-limit", metavar="S", type=option_type(SECONDS),
+                   help="solver time limit in seconds of a problem file synthesized here (default: the problem's, "
+                        "else none); a test cached by an earlier synthesis needs none")
+    p.add_argument(
+        "--progress", metavar="S", nargs="?", type=positive_seconds, const=PROGRESS_EVERY,
+        help="also when stderr is not a terminal, print the solver's status on stderr every S seconds while a "
+             f"problem file is synthesized (default {PROGRESS_EVERY:g}), as flowtest synthesize --progress",
+    )
     p.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
 
 
@@ -85,6 +107,7 @@ def run(args: argparse.Namespace) -> int:
     """Evaluate (or replay); exit 4 if a test failed its guarantee (a FlowTest bug)."""
     apply_trust_model(args)
     if args.replay:
+        with_synthesis(args, lambda synthesis: load_problem_files(args.env, synthesis))
         bug = False
         for env_id in args.env:
             for tester in args.tester:
@@ -98,12 +121,28 @@ def run(args: argparse.Namespace) -> int:
     # refuse bad IDs and SUTs before any run or any file: a SUT that can play none of the
     # tests is bad input (a missing model, a typo); one that cannot play some is a report row
     check_sut_names(args.sut)
-    tests = resolve_envs(args.env)  # each test built once, here, and handed on
+    tests = with_synthesis(args, lambda synthesis: resolve_envs(args.env, synthesis))  # each test built once, here, and handed on
     try:
         return _evaluate(args, tests)
     finally:
         for test in tests:
             test.env.close()
+
+
+def with_synthesis(args: argparse.Namespace, resolve: Callable[[SynthesisOptions | None], T]) -> T:
+    """``resolve(synthesis)``: where a problem file is among ``--env``, under the options of its
+    synthesis (``--time-limit``) and with the progress ``flowtest synthesize`` shows (its stages,
+    the solver's status on a terminal's live line or every ``--progress`` seconds, the cached
+    test found), whatever a library prints meanwhile kept off stdout; else with none."""
+    from flowtest_env.sources import is_problem_file
+
+    if not any(is_problem_file(env) for env in args.env):
+        return resolve(None)
+    from synthesis.options import SynthesisOptions
+    from synthesis.routing.solver_control import stdout_guard
+
+    with stdout_guard(), synthesis_progress(not args.quiet, args.progress) as (progress, control):
+        return resolve(SynthesisOptions(time_limit=args.time_limit, progress=progress, control=control))
 
 
 def _evaluate(args: argparse.Namespace, tests: list[NamedEnv]) -> int:

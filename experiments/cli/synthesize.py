@@ -13,25 +13,27 @@ import argparse
 import os
 import sys
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from experiments.human_summary import human_summary
 from experiments.outputs import check_output_path, json_safe, print_json, write_atomically
-from experiments.progress import PROGRESS_EVERY, StageProgress
+from experiments.progress import PROGRESS_EVERY, StageProgress, synthesis_progress
 from synthesis import pipeline
 from synthesis.model.errors import ProblemError
 from synthesis.model.option_rules import GAP, SECONDS, THREADS
 from synthesis.problems.limits import MAX_GRAPH_EDGES
 from synthesis.routing.backends.cpsat_pool import close_idle_workers
 from synthesis.routing.backends.rules import AUTO_CPSAT_ROWS
-from synthesis.routing.solver_control import SolveControl, status_line, stdout_guard
+from synthesis.routing.solver_control import SolveControl, stdout_guard
 
 from .arguments import option_type, positive_seconds
 from .command import Command
 from .exits import EXIT_OK
 
 if TYPE_CHECKING:
+    from flowtest_env.sources import StoredTest
     from synthesis.problems.problem import Problem
 
 
@@ -91,6 +93,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--setting", choices=SETTINGS, help="how reactive obstacles are shown (default: the problem's, else instantaneous)")
     p.add_argument("--force", action="store_true", help="overwrite existing --out/--plot files")
+    p.add_argument(
+        "--fresh", action="store_true",
+        help=f"synthesize even when the same test is at hand (a built-in's shipped test, a problem file's cached one) "
+        f"and took {STORED_AFTER:g} s or more to synthesize: it is shown instead by default",
+    )
     p.add_argument("--no-size-limit", action="store_true",
                    help="synthesize even a problem whose product graph may exceed "
                         f"{MAX_GRAPH_EDGES:,} edges (refused by default, with an estimate)")
@@ -160,42 +167,141 @@ def run(args: argparse.Namespace) -> int:
     max_cells = None if args.no_size_limit else MAX_GRID_CELLS
     try:
         problem = _load(lambda name: load_problem(name, max_cells), args.problem)
+        raw = _problem_bytes(args.problem)  # the bytes synthesized, for the cache entry
+        if not args.fresh:
+            stored = _stored(args, problem)
+            if stored is not None:
+                close_idle_workers()  # no solve: the prestarted CP-SAT child is not needed
+                return _show_stored(args, problem, stored)
         if not pipeline.may_use_cpsat(problem, args.backend):
             close_idle_workers()  # started by the console script in case; not needed here
-        return _synthesize(args, problem)
+        return _synthesize(args, problem, raw)
     finally:
         close_idle_workers()  # the CP-SAT child, prestarted or kept after the solve, ends with the command
 
 
-def _synthesize(args: argparse.Namespace, problem: Problem) -> int:
-    """Synthesize ``problem`` as ``args`` ask, then print and write the outputs."""
+STORED_AFTER = 10.0
+"""Seconds of synthesis from which ``flowtest synthesize`` shows the same test at hand (a
+built-in's shipped artifact, a problem file's cache entry: :func:`flowtest_env.sources.stored_test`)
+instead of solving again (``--fresh`` solves anyway): patrolling's shipped test took 146 s, every
+other built-in that ships a proven optimum a few seconds at most (docs/benchmarks/solvers.md)."""
+
+
+def options_of(args: argparse.Namespace, progress: Callable[[str], None] | None = None,
+               control: SolveControl | None = None) -> pipeline.SynthesisOptions:
+    """The synthesis options ``args`` ask for, with the ``progress`` and ``control`` of the run."""
+    return pipeline.SynthesisOptions(
+        time_limit=args.time_limit,
+        after_first=args.after_first,
+        mip_rel_gap=args.gap,
+        threads=args.threads,
+        backend=args.backend,
+        setting=args.setting,
+        progress=progress,
+        control=control,
+        max_graph_edges=None if args.no_size_limit else MAX_GRAPH_EDGES,
+        caps=caps_of_args(args),
+    )
+
+
+def _problem_bytes(name: str) -> bytes | None:
+    """The bytes of a problem file (``None`` for a built-in), which its cache entry is filed under."""
+    from flowtest_env.sources import is_problem_file
+    from synthesis.problems.files import read_limited
+
+    return read_limited(Path(name).expanduser(), "problem file") if is_problem_file(name) else None
+
+
+def synthesis_seconds(summary: dict[str, Any]) -> float:
+    """How long the synthesis of a summary's test took: an agent test's whole loop, else its
+    graphs and its solve."""
+    stats = summary.get("stats", {})
+    loop = stats.get("agent_seconds")
+    if isinstance(loop, dict) and "total" in loop:
+        return float(loop["total"])
+    return float(stats.get("graph_seconds", 0.0)) + float(stats.get("solve_seconds", 0.0))
+
+
+def _stored(args: argparse.Namespace, problem: Problem) -> StoredTest | None:
+    """The test at hand that this synthesis would answer (:func:`flowtest_env.sources.stored_test`),
+    if it took :data:`STORED_AFTER` seconds or more to synthesize; else ``None``."""
+    from flowtest_env.sources import stored_test
+
+    stored = stored_test(args.problem, problem, options_of(args))
+    if stored is None or synthesis_seconds(stored.artifact.summary) < STORED_AFTER:
+        return None
+    return stored
+
+
+def _show_stored(args: argparse.Namespace, problem: Problem, stored: StoredTest) -> int:
+    """Show a stored test as a synthesis's: say where it comes from (stderr), write ``--out``
+    and ``--plot``, print its summary."""
+    from synthesis.problems.problem import build_graphs
+
+    art = stored.artifact
+    summary = json_safe(art.summary)
+    took = synthesis_seconds(summary)
+    made = art.extras.get("made_with", {}) or {"backend": summary.get("stats", {}).get("backend", "?"),
+                                                "version": summary.get("stats", {}).get("solver_version", "?")}
+    where = f"the shipped test {stored.path}" if stored.shipped else f"its cached test {stored.path}"
+    # where the test comes from: one whole line (done(), never cut to a terminal's width); every
+    # line is ended before the summary
+    with StageProgress(enabled=not args.quiet) as progress:
+        progress.done(f"{problem.name}: {where} (proven optimal, every check passed): the test this synthesis gives, "
+                      f"not synthesized again; synthesizing it took {took:.0f} s ({made.get('backend')} {made.get('version')}), "
+                      "--fresh does it again")
+        if args.out is not None:
+            progress(f"writing the artifact {args.out}")
+            check_output_path(args.out, args.force, "artifact")
+            write_atomically(args.out, art.save)
+        if args.plot is not None:
+            from experiments.plots import plot_artifact
+
+            progress(f"drawing {args.plot}")
+            check_output_path(args.plot, args.force, "plot")
+            write_atomically(args.plot, lambda tmp: plot_artifact(art, tmp, max_cols=None))
+    if args.json:
+        print_json(summary)
+        return EXIT_OK
+    spec, products = build_graphs(problem)
+    text = human_summary(StoredView(problem, spec, products, art.strategy, art.agent), summary)
+    sys.stdout.write(f"{text}\n  stored       {where}, synthesized in {took:.1f} s; not synthesized now (--fresh does)\n")
+    sys.stdout.flush()
+    return EXIT_OK
+
+
+@dataclass(frozen=True)
+class StoredView:
+    """A stored test as the parts of a synthesized test that :func:`~experiments.human_summary.human_summary`
+    reads: the problem, its specification product and product graphs (built again: cheap), the
+    stored restrictions and test agent."""
+
+    problem: Problem
+    spec: Any
+    products: Any
+    strategy: Any
+    agent: Any
+
+
+def _synthesize(args: argparse.Namespace, problem: Problem, raw: bytes | None = None) -> int:
+    """Synthesize ``problem`` as ``args`` ask, then print and write the outputs; a problem
+    file's proven optimum (its bytes ``raw``) is filed where ``flowtest evaluate`` looks for it."""
     from synthesis.artifacts.artifact import artifact_of
     from synthesis.artifacts.summary import summary_of
 
-    control = SolveControl()
     every = getattr(args, "progress", None)
     # stdout is ours: whatever a library prints meanwhile (HiGHS's banner, a C printf)
     # goes to /dev/null, and only our summary reaches the real stdout, after
-    with stdout_guard(), StageProgress(enabled=not args.quiet, status=lambda: status_line(control), every=every) as progress:
-        control.started = progress.clock_start  # solver status lines count on the command's one clock
+    with stdout_guard(), synthesis_progress(not args.quiet, every) as (progress, control):
         large = large_problem_note(problem, args)
         if large:
             progress(large)
         progress(f"synthesizing {problem.name} ({problem.kind} test)")
-        options = pipeline.SynthesisOptions(
-            time_limit=args.time_limit,
-            after_first=args.after_first,
-            mip_rel_gap=args.gap,
-            threads=args.threads,
-            backend=args.backend,
-            setting=args.setting,
-            progress=progress,
-            control=control,
-            max_graph_edges=None if args.no_size_limit else MAX_GRAPH_EDGES,
-            caps=caps_of_args(args),
-        )
+        options = options_of(args, progress, control)
         test = pipeline.synthesize(problem, options)
         summary = json_safe(summary_of(test))
+        if raw is not None:
+            _cache(Path(args.problem).expanduser(), raw, test, options, progress)
         if args.out is not None:
             progress(f"writing the artifact {args.out}")
             check_output_path(args.out, args.force, "artifact")
@@ -214,6 +320,22 @@ def _synthesize(args: argparse.Namespace, problem: Problem) -> int:
         sys.stdout.write(human_summary(test, summary) + "\n")
         sys.stdout.flush()
     return EXIT_OK
+
+
+def _cache(path: Path, raw: bytes, test: Any, options: pipeline.SynthesisOptions, progress: Callable[[str], None]) -> None:
+    """File a problem file's test where ``flowtest evaluate --env`` that file looks for it
+    (:func:`flowtest_env.sources.cache_problem_test`), and say so: a proven optimum only."""
+    from flowtest_env.sources import cache_problem_test
+    from synthesis.artifacts.summary import summary_of
+
+    status = summary_of(test).get("status")
+    if status != "optimal":
+        progress(f"not cached: the test is not proven optimal ({status}); "
+                 "flowtest evaluate takes the --out file as it is")
+        return
+    entry = cache_problem_test(path, raw, test, options)
+    if entry is not None:
+        progress(f"cached for flowtest evaluate --env {path}: {entry}")
 
 
 LARGE_EDGES = 5_000

@@ -23,12 +23,12 @@ Example::
 
 from __future__ import annotations
 
-from .episodes import NamedEnv, Trace, env_named, resolve_env, run_episode
+from .episodes import NamedEnv, Trace, env_named, load_problem_files, resolve_env, run_episode
 from .results import REPORT_MARKER, test_failure_records, write_partial_report, write_report
 from .runs import Cell, EvaluationInterrupted, check_sut_names, check_suts_can_play, evaluate, replay, replay_command, resolve_envs
 
 __all__ = [
     "REPORT_MARKER", "Cell", "EvaluationInterrupted", "NamedEnv", "Trace", "check_sut_names", "check_suts_can_play", "env_named",
-    "evaluate", "replay", "replay_command", "resolve_env", "resolve_envs", "run_episode", "test_failure_records",
+    "evaluate", "load_problem_files", "replay", "replay_command", "resolve_env", "resolve_envs", "run_episode", "test_failure_records",
     "write_partial_report", "write_report",
 ]

@@ -31,11 +31,15 @@ whose reason says what happened (``Trace.planner_error``), the run stopped where
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from synthesis.model.errors import InconsistentProblem, ProblemError
+
+if TYPE_CHECKING:
+    from synthesis.options import SynthesisOptions
 
 
 @dataclass
@@ -85,9 +89,12 @@ class NamedEnv:
         return cls(env_id, env, u.game, int(u.max_steps), str(u.game.artifact.name))
 
 
-def resolve_env(env_id: str, among_several: bool = False) -> NamedEnv:
+def resolve_env(env_id: str, among_several: bool = False, synthesis: SynthesisOptions | None = None) -> NamedEnv:
     """:func:`env_named` of ``env_id``, kept with its name; among several envs
     (``among_several``), an inconsistent problem's message says which ``--env`` it was.
+    A problem file's test comes from its cache, else is synthesized under ``synthesis`` (its
+    budgets; its ``progress`` hears the cached test found or the synthesis's stages:
+    :func:`load_problem_files`).
 
     Raises
     ------
@@ -97,11 +104,39 @@ def resolve_env(env_id: str, among_several: bool = False) -> NamedEnv:
         If it names a problem that has no test.
     """
     try:
+        load_problem_files([env_id], synthesis)
         return NamedEnv.of(env_id, env_named(env_id))
     except InconsistentProblem as exc:
         if not among_several:
             raise
         raise InconsistentProblem(exc.reason, str(exc), source=f"--env {env_id}") from None
+
+
+def load_problem_files(env_ids: Sequence[str], synthesis: SynthesisOptions | None = None) -> None:
+    """Load the test of each problem file among ``env_ids`` (a name that is no registered ID,
+    built-in or artifact file, :func:`flowtest_env.sources.is_problem_file`): from its cache
+    entry, which ``flowtest synthesize`` fills too, else synthesized under ``synthesis``
+    (:func:`flowtest_env.sources.load_test`: its time limit, and a ``progress`` that hears the
+    cached test found or every stage of the synthesis, so no synthesis runs unseen). The tests
+    stay in memory, where the envs built from those names (:func:`env_named`) find them; with
+    ``synthesis`` ``None`` there is nothing to say, and the envs load them as they are built.
+
+    Raises
+    ------
+    ProblemError
+        If a problem file is not a valid problem.
+    InconsistentProblem
+        If it has no test.
+    """
+    if synthesis is None:
+        return
+    import gymnasium as gym
+
+    from flowtest_env.sources import is_problem_file, load_test
+
+    for env_id in env_ids:
+        if env_id not in gym.registry and is_problem_file(env_id):
+            load_test(env_id, synthesis)
 
 
 def make_tester_env(env_id: str, tester: str) -> Any:

@@ -39,7 +39,7 @@ import sys
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -48,6 +48,9 @@ from synthesis.model.errors import ProblemError
 from .episodes import NamedEnv, Trace, make_tester_env, resolve_env, run_episode, sut_policy, versus_tester_env
 from .explain import explain, fold
 from .violations import violation_of_trace
+
+if TYPE_CHECKING:
+    from synthesis.options import SynthesisOptions
 
 MAX_LISTED = 20
 """How many failures a results record lists (``n_failures`` counts all)."""
@@ -259,9 +262,13 @@ def check_suts_can_play(tests: Sequence[NamedEnv], suts: Sequence[Any], step_tim
             raise first
 
 
-def resolve_envs(env_ids: Sequence[str | NamedEnv]) -> list[NamedEnv]:
+def resolve_envs(env_ids: Sequence[str | NamedEnv], synthesis: SynthesisOptions | None = None) -> list[NamedEnv]:
     """Each distinct test of ``env_ids`` resolved once (:func:`~experiments.evaluation.episodes.resolve_env`;
-    a :class:`NamedEnv` already resolved is kept as it is), in their order.
+    a :class:`NamedEnv` already resolved is kept as it is), in their order. A problem file's
+    test comes from its cache (which ``flowtest synthesize`` fills), else is synthesized under
+    ``synthesis``: its time limit, and its ``progress`` and ``control``, which hear the cached test
+    found or every stage of the synthesis (``flowtest evaluate`` shows them as ``flowtest
+    synthesize`` does).
 
     Raises
     ------
@@ -269,13 +276,23 @@ def resolve_envs(env_ids: Sequence[str | NamedEnv]) -> list[NamedEnv]:
         If a name stands for no test.
     InconsistentProblem
         If it names a problem without a test (among several, the message says which ``--env``).
+
+    Example
+    -------
+    >>> from experiments.evaluation import resolve_envs
+    >>> from synthesis import SynthesisOptions
+    >>> tests = resolve_envs(["small-reactive", "maze2"], SynthesisOptions(time_limit=60, progress=print))
+    >>> [(t.env_id, t.problem, t.max_steps > 0) for t in tests]
+    [('small-reactive', 'small-reactive', True), ('maze2', 'maze2', True)]
+    >>> for t in tests:
+    ...     t.env.close()
     """
     several = len(env_ids) > 1
     named: dict[str, NamedEnv] = {}
     for e in env_ids:
         key = e.env_id if isinstance(e, NamedEnv) else e
         if key not in named:
-            named[key] = e if isinstance(e, NamedEnv) else resolve_env(e, several)
+            named[key] = e if isinstance(e, NamedEnv) else resolve_env(e, several, synthesis)
     return list(named.values())
 
 
@@ -327,7 +344,10 @@ def evaluate(
     if episodes < 1:
         raise ProblemError("--episodes must be at least 1")
     check_sut_names(suts)
-    tests = resolve_envs(env_ids)
+    from synthesis.options import SynthesisOptions
+
+    # a problem file synthesized here says its stages to the same progress as the runs
+    tests = resolve_envs(env_ids, None if progress is None else SynthesisOptions(progress=progress))
     given = {id(e) for e in env_ids if isinstance(e, NamedEnv)}
     cells: list[Cell] = []
     total = len(tests) * len(suts) * len(testers)

@@ -17,9 +17,13 @@ from typing import Any
 
 from ..model.errors import ProblemError
 from ..model.strategy import SETTINGS
+from ..model.systems import MOVES
 from ..problems.problem import KINDS
 
 SYSTEM_KINDS = ("grid", "fuel", "graph")
+GRID_MOVE_NAMES: tuple[str, ...] = tuple(MOVES)
+"""The move names of a grid (``N``, ``S``, ``E``, ``W``: :data:`synthesis.model.systems.MOVES`), which a grid
+with its map must use (its action slots 0-3, ``flowtest_env.game.GRID_ACTIONS``)."""
 _HEX64 = re.compile(r"[0-9a-f]{64}")
 
 
@@ -149,6 +153,10 @@ def _system(w: _Where, s: Any, path: str) -> tuple[int, int, int]:
             _int(w, t[0], f"{path}.layout.tokens[{i}][0]", 0, rows)
             _int(w, t[1], f"{path}.layout.tokens[{i}][1]", 0, cols)
             _str(w, t[2], f"{path}.layout.tokens[{i}][2]")
+    if kind in ("grid", "fuel") and layout is not None:  # a grid with its map plays the grid's moves
+        for i, a in enumerate(action):
+            if a not in GRID_MOVE_NAMES:
+                raise w.fail(f"{path}.action[{i}]", f"{a!r} is not a move of a grid ({', '.join(GRID_MOVE_NAMES)})")
     fuel = s.get("max_fuel")
     if fuel is not None:
         _int(w, fuel, f"{path}.max_fuel", 0)
@@ -335,16 +343,26 @@ def json_schema() -> dict[str, Any]:
     FlowTest on load and explained in docs/artifact-schema.md. ``docs/artifact-schema.json``
     is this document; ``python -m synthesis.artifacts.schema`` prints it.
 
+    It is written for the strictest readers: Ajv's strict mode (every keyword beside the
+    ``type`` it applies to, no union types, tuples closed with ``items: false``, every
+    ``required`` name declared in the same ``properties``) as well as Python's
+    ``jsonschema`` (tests/synthesis/test_artifact_schema.py runs both).
+
     >>> json_schema()["properties"]["version"]
     {'const': 1}
+    >>> json_schema()["$defs"]["grid_action"]
+    {'enum': ['N', 'S', 'E', 'W']}
     """
     nat = {"type": "integer", "minimum": 0}
     bit = {"enum": [0, 1]}
-    cell = {"type": "array", "items": nat, "minItems": 2, "maxItems": 2}
     hex64 = {"type": "string", "pattern": "^[0-9a-f]{64}$"}
 
     def array(items: dict[str, Any], **more: Any) -> dict[str, Any]:
         return {"type": "array", "items": items, **more}
+
+    def pair(first: dict[str, Any], second: dict[str, Any]) -> dict[str, Any]:
+        """A closed tuple of two: Ajv's strictTuples wants ``items: false`` and both bounds."""
+        return {"type": "array", "prefixItems": [first, second], "items": False, "minItems": 2, "maxItems": 2}
 
     def obj(required: dict[str, Any], optional: dict[str, Any] | None = None, closed: bool = True) -> dict[str, Any]:
         out: dict[str, Any] = {"type": "object", "required": list(required), "properties": {**required, **(optional or {})}}
@@ -352,15 +370,21 @@ def json_schema() -> dict[str, Any]:
             out["additionalProperties"] = False
         return out
 
-    def when(kind: str, states: dict[str, Any]) -> dict[str, Any]:
-        return {"if": {"properties": {"kind": {"const": kind}}}, "then": {"properties": {"states": array(states)}}}
+    def when(condition: dict[str, Any], then: dict[str, Any], otherwise: dict[str, Any] | None = None) -> dict[str, Any]:
+        """``if`` the object's fields match ``condition``, its fields match ``then`` (else ``otherwise``)."""
+        out: dict[str, Any] = {"if": {"type": "object", "properties": condition},
+                               "then": {"type": "object", "properties": then}}
+        if otherwise is not None:
+            out["else"] = {"type": "object", "properties": otherwise}
+        return out
 
-    fuel_state = {"type": "array", "prefixItems": [{"$ref": "#/$defs/cell"}, nat], "minItems": 2, "maxItems": 2}
+    cell = pair(nat, nat)
+    fuel_state = pair({"$ref": "#/$defs/cell"}, nat)
     system = obj({
         "kind": {"enum": list(SYSTEM_KINDS)},
         "states": array({"anyOf": [{"type": "string"}, {"type": "array"}]}, minItems=1),
-        "moves": array(array(nat, minItems=2, maxItems=2)),
-        "action": array({"type": ["string", "integer"]}),
+        "moves": array(pair(nat, nat)),
+        "action": array({"anyOf": [{"type": "string"}, {"type": "integer"}]}),
         "stay": array(bit),
         "initial": nat,
         "labels": array(array({"type": "string"})),
@@ -373,11 +397,19 @@ def json_schema() -> dict[str, Any]:
             "rows": {"type": "integer", "minimum": 1},
             "cols": {"type": "integer", "minimum": 1},
             "blocked": array({"$ref": "#/$defs/cell"}),
-            "tokens": array({"type": "array", "prefixItems": [nat, nat, {"type": "string"}], "minItems": 3, "maxItems": 3}),
+            "tokens": array({"type": "array", "prefixItems": [nat, nat, {"type": "string"}], "items": False,
+                             "minItems": 3, "maxItems": 3}),
         })]},
         "max_fuel": {"anyOf": [{"type": "null"}, nat]},
     })
-    system["allOf"] = [when("grid", {"$ref": "#/$defs/cell"}), when("fuel", fuel_state), when("graph", {"type": "string"})]
+    system["allOf"] = [
+        when({"kind": {"const": "grid"}}, {"states": array({"$ref": "#/$defs/cell"})}),
+        when({"kind": {"const": "fuel"}}, {"states": array(fuel_state)}),
+        when({"kind": {"const": "graph"}}, {"states": array({"type": "string"})}),
+        # a grid with its map plays the grid's moves (action slots 0-3: flowtest_env.game.GRID_ACTIONS)
+        when({"kind": {"enum": ["grid", "fuel"]}, "layout": {"type": "object"}},
+             {"action": array({"$ref": "#/$defs/grid_action"})}),
+    ]
 
     def automaton(components: dict[str, Any]) -> dict[str, Any]:
         return obj({
@@ -398,13 +430,13 @@ def json_schema() -> dict[str, Any]:
         "n_memory": {"type": "integer", "minimum": 1},
         "n_hist": {"type": "integer", "minimum": 1},
         "n_system_states": {"type": "integer", "minimum": 1},
-        "rows": array(array(nat, minItems=2, maxItems=2)),
+        "rows": array(pair(nat, nat)),
         "table": obj({key: array(nat) for key in ("memory", "row", "agent", "next_agent", "next_memory")}),
         "fallback": array(array(nat)),
         "sys_place": array(nat),
     })
     agent = obj({"controller": controller}, {
-        "moves": array(array(nat, minItems=2, maxItems=2)),
+        "moves": array(pair(nat, nat)),
         "names": array({"type": "string"}),
         "cells": array({"$ref": "#/$defs/cell"}),
         "parks": array({"type": "object"}),
@@ -412,6 +444,8 @@ def json_schema() -> dict[str, Any]:
         "first": {"enum": ["system", "agent"]},
         "counterexamples": nat,
     }, closed=False)
+    agent_test = when({"kind": {"const": "agent"}}, {"agent": {"$ref": "#/$defs/agent"}}, {"agent": {"type": "null"}})
+    agent_test["then"]["required"] = ["agent"]
     return {
         "$schema": "https://json-schema.org/draft/2020-12/schema",
         "$id": SCHEMA_ID,
@@ -432,14 +466,14 @@ def json_schema() -> dict[str, Any]:
             "automata": obj({
                 "system": automaton({"anyOf": [{"type": "null"}, array(array(nat))]}),
                 "test": automaton({"anyOf": [{"type": "null"}, array(array(nat))]}),
-                "histories": automaton(array(array(nat, minItems=2, maxItems=2))),
+                "histories": automaton(array(pair(nat, nat))),
             }),
             "strategy": obj({
                 "setting": {"enum": list(SETTINGS)},
                 "n_hist": {"type": "integer", "minimum": 1},
                 "n_moves": nat,
                 "static_obstacles": array(nat),
-                "restrictions": {"type": "object", "propertyNames": {"pattern": "^(0|[1-9][0-9]*)$"},
+                "restrictions": {"type": "object", "propertyNames": {"type": "string", "pattern": "^(0|[1-9][0-9]*)$"},
                                  "additionalProperties": array(nat)},
             }),
             "agent": {"anyOf": [{"type": "null"}, {"$ref": "#/$defs/agent"}]},
@@ -450,13 +484,11 @@ def json_schema() -> dict[str, Any]:
             "digest": obj({"sha256": hex64}),
         },
         "allOf": [
-            {"if": {"properties": {"kind": {"const": "agent"}}},
-             "then": {"required": ["agent"], "properties": {"agent": {"$ref": "#/$defs/agent"}}},
-             "else": {"properties": {"agent": {"type": "null"}}}},
-            {"if": {"properties": {"kind": {"const": "mixed"}}},
-             "else": {"properties": {"extras": {"not": {"required": ["static_moves"]}}}}},
+            agent_test,
+            # only a mixed test carries the static area typed in
+            when({"kind": {"const": "mixed"}}, {}, {"extras": {"type": "object", "properties": {"static_moves": False}}}),
         ],
-        "$defs": {"cell": cell, "system": system, "agent": agent},
+        "$defs": {"cell": cell, "grid_action": {"enum": list(GRID_MOVE_NAMES)}, "system": system, "agent": agent},
     }
 
 

@@ -506,3 +506,39 @@ def test_pettingzoo_api_with_library_options() -> None:
 def test_library_options_refuse_bad_values(kwargs: dict[str, Any], message: str) -> None:
     with pytest.raises(ValueError, match=message):
         multiagent.raw_env(test="small-reactive", **kwargs)
+
+
+def test_pettingzoos_render_test_passes_with_human_rendering(monkeypatch: pytest.MonkeyPatch) -> None:
+    """PettingZoo's own ``render_test``: the env made with ``render_mode="human"`` (a pygame
+    window, here on SDL's dummy driver), then every mode its metadata lists (``human`` among
+    them: ``render()`` draws and returns ``None``; ``rgb_array`` pictures; ``ansi`` text)."""
+    pytest.importorskip("pygame", reason="render_mode='human' needs the render extra (pygame)")
+    from pettingzoo.test import render_test
+
+    monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")
+    assert "human" in multiagent.raw_env.metadata["render_modes"]
+    render_test(lambda render_mode=None: multiagent.env(test="maze2", render_mode=render_mode))
+    shown: list[tuple[int, ...]] = []
+    real = multiagent.HumanWindow.show
+    def show(self: multiagent.HumanWindow, frame: np.ndarray) -> None:
+        shown.append(frame.shape)
+        real(self, frame)
+
+    monkeypatch.setattr(multiagent.HumanWindow, "show", show)
+    e = multiagent.parallel_env(test="small-reactive", render_mode="human")
+    e.reset(seed=0)
+    tester = synthesized_tester(e)
+    e.step({TESTER: tester(), SYSTEM: 0})
+    assert e.render() is None
+    e.close()
+    assert len(shown) >= 3 and all(len(s) == 3 and s[2] == 3 for s in shown)  # reset, the round's steps, render()
+
+
+def test_human_rendering_without_pygame_names_the_extra(monkeypatch: pytest.MonkeyPatch) -> None:
+    import sys
+
+    import gymnasium
+
+    monkeypatch.setitem(sys.modules, "pygame", None)  # import pygame now fails
+    with pytest.raises(gymnasium.error.DependencyNotInstalled, match=r"flowtest\[render\]"):
+        multiagent.raw_env(test="small-reactive", render_mode="human")

@@ -96,6 +96,9 @@ BROKEN: dict[str, tuple[str, Callable[[dict[str, Any]], None]]] = {
     "accepting not a bit": ("small-reactive", _set("automata.test.accepting.0.0", True)),
     "a static area in a reactive test": ("small-reactive", _set("extras.static_moves", [0, 1])),
     "a static area in a static test": ("example1", _set("extras.static_moves", [0])),
+    "a grid move named NE": ("maze2", _set("system.action.0", "NE")),
+    "a fuel grid move named NE": ("refueling", _set("system.action.0", "NE")),
+    "a grid move given as a number": ("small-reactive", _set("system.action.0", 0)),
 }
 
 
@@ -111,6 +114,60 @@ def test_the_schema_refuses_what_the_loader_refuses(case: str) -> None:
     assert list(validator().iter_errors(doc)), f"the schema accepts a broken artifact ({case})"
     with pytest.raises(ProblemError):
         validate_artifact(doc, f"{name}.json", FORMAT, VERSION)
+
+
+def test_the_schema_is_valid_draft_2020_12_and_refuses_a_grid_move_named_ne() -> None:
+    """Draft202012Validator's own check of the file, every shipped artifact valid under it, and the
+    moves of a grid held to its move names: "NE" on maze2 fails (at ``system.action``), while a
+    graph's moves keep any name (beaver-rescue's first move renamed "NE" still validates)."""
+    schema = json.loads(SCHEMA_FILE.read_text())
+    jsonschema.Draft202012Validator.check_schema(schema)
+    check = jsonschema.Draft202012Validator(schema)
+    for path in SHIPPED:
+        assert not list(check.iter_errors(json.loads(path.read_text()))), path.name
+    grid = _doc("maze2")
+    grid["system"]["action"][3] = "NE"
+    errors = list(check.iter_errors(grid))
+    assert errors and any(list(e.absolute_path)[:3] == ["system", "action", 3] for e in errors), errors
+    graph = _doc("beaver-rescue")
+    graph["system"]["action"][0] = "NE"
+    assert not list(check.iter_errors(graph))
+    validate_artifact(graph, "beaver-rescue.json", FORMAT, VERSION)
+
+
+def _doc_blocks() -> list[str]:
+    """The shell blocks of docs/artifact-schema.md."""
+    return re.findall(r"```bash\n(.*?)```", PAGE.read_text(), flags=re.S)
+
+
+def test_the_pages_validation_command_works_after_the_first_install(tmp_path: Path) -> None:
+    """The page's jsonschema command installs what the core lacks (its block starts with ``pip
+    install jsonschema``: the README's first install, ``pip install -e .``, has no validator), then
+    writes the schema with the core and validates: a shipped artifact passes (nothing printed), a
+    grid move named "NE" fails (exit 1, the error named)."""
+    import shlex
+    import subprocess
+    import sys
+
+    block = next(b for b in _doc_blocks() if "jsonschema" in b)
+    lines = [line for line in block.splitlines() if line.strip()]
+    assert lines[0].startswith("pip install") and "jsonschema" in lines[0], lines[0]
+    steps = [shlex.split(line) for line in lines[1:]]
+    assert [step[:1] for step in steps] == [["python"], ["python"]], steps
+    (tmp_path / "test.json").write_text(json.dumps(_doc("maze2")))
+    schema_step, check_step = steps
+    assert schema_step[-2:] == [">", "artifact-schema.json"], schema_step
+    out = subprocess.run([sys.executable, *schema_step[1:-2]], cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    (tmp_path / "artifact-schema.json").write_text(out.stdout)
+    assert json.loads(out.stdout) == json_schema()
+    ok = subprocess.run([sys.executable, *check_step[1:]], cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    assert (ok.returncode, ok.stdout, ok.stderr) == (0, "", "")
+    bad = _doc("maze2")
+    bad["system"]["action"][0] = "NE"
+    (tmp_path / "test.json").write_text(json.dumps(bad))
+    refused = subprocess.run([sys.executable, *check_step[1:]], cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    assert refused.returncode == 1 and "'NE' is not one of" in refused.stderr, refused.stderr[-2000:]
 
 
 def test_the_schema_refuses_an_unknown_field_and_a_malformed_digest() -> None:
