@@ -200,15 +200,20 @@ def _import(module: str) -> Any:
         path = Path(module)
         if not path.is_file():
             raise PolicyError(f"no Python file {module!r} (from {cwd})")
-        spec = importlib.util.spec_from_file_location(path.stem, path.resolve())
+        name = path.stem
+        taken = sys.modules.get(name)
+        if taken is not None and getattr(taken, "__file__", None) != str(path.resolve()):
+            name = f"_flowtest_file_{name}_{abs(hash(str(path.resolve())))}"  # another module has its name
+        spec = importlib.util.spec_from_file_location(name, path.resolve())
         if spec is None or spec.loader is None:
             raise PolicyError(f"cannot load {module!r} as a Python module")
         mod = importlib.util.module_from_spec(spec)
+        sys.modules[name] = mod  # while it runs, as an import does (a dataclass there looks its module up)
         try:
             spec.loader.exec_module(mod)
         except (Exception, SystemExit) as exc:  # the user's file is broken, or raises while it runs
+            sys.modules.pop(name, None)
             raise PolicyError(f"{module!r} could not be loaded: it {_did(exc)}") from None
-        sys.modules.setdefault(path.stem, mod)
         return mod
     if cwd not in sys.path and "" not in sys.path:
         sys.path.insert(0, cwd)
