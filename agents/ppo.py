@@ -12,6 +12,10 @@ Two kinds of file, told apart by their content:
   otherwise :class:`agents.checkpoint.UntrustedModelError` (invalid input) before any
   of it is unpickled.
 
+:class:`PPOPolicy` plays a model through the single env; :class:`ModelBatchPolicy` plays a
+stable-baselines3 model in batches (every test of a split at once, greedy or sampled), as
+``flowtest benchmark`` scores it.
+
 Models are loaded lazily, so FlowTest works without the ``rl`` extra until a ``ppo:``
 policy is asked for. Maskable models (and every native one) are given
 ``info["action_mask"]``, so they never pick a restricted action; a plain PPO model may,
