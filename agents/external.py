@@ -14,6 +14,14 @@ Two names put your own system wherever FlowTest names one (``flowtest evaluate -
     one parameter receives the test's public description (the ``test`` of the
     protocol's ``hello`` message below).
 
+  **Arguments**: ``python:MODULE:NAME(ARGS)`` calls the factory ``NAME`` with ``ARGS``
+  instead, Python literals only (strings, numbers, booleans, ``None``, lists, tuples,
+  dicts; keyword arguments too), never evaluated as code:
+  ``python:planners.py:Bfs(depth=3)``, ``python:mypkg.policies:load("runs/seed0.pt")``. The
+  name with its arguments is the system's name, so a recorded command reruns it as it ran
+  (quote it for the shell). ``flowtest benchmark`` also scores batched policies named
+  this way (:mod:`agents.batched`).
+
 * ``cmd:COMMAND`` — a process in any language (``cmd:"python3 planner.py"``,
   ``cmd:"awk -f planner.awk"``), started in the current directory, speaking the JSON-lines
   protocol below on its standard input and output; its standard error is kept for the
@@ -107,12 +115,14 @@ A planner process that always takes the last allowed action (``stay`` when it ma
 
 from __future__ import annotations
 
+import ast
 import importlib
 import importlib.util
 import inspect
 import json
 import os
 import pickle
+import re
 import shlex
 import shutil
 import signal
@@ -145,7 +155,7 @@ from .planner_protocol import (
 __all__ = [
     "DEFAULT_STEP_TIMEOUT", "MAX_ANSWER", "MAX_STEP_TIMEOUT", "PREFIXES", "PROTOCOL", "PROTOCOL_VERSION", "CommandPlanner",
     "PlannerError", "PythonPlanner", "check_spec", "command_words", "describe_test", "is_planner_function", "make_command",
-    "make_python", "parse_answer", "planner_policy", "resolve", "spec_of",
+    "make_python", "parse_answer", "planner_policy", "python_call", "resolve", "spec_of", "split_call",
 ]
 
 PREFIXES = ("python", "cmd")
@@ -190,15 +200,20 @@ def _import(module: str) -> Any:
         path = Path(module)
         if not path.is_file():
             raise PolicyError(f"no Python file {module!r} (from {cwd})")
-        spec = importlib.util.spec_from_file_location(path.stem, path.resolve())
+        name = path.stem
+        taken = sys.modules.get(name)
+        if taken is not None and getattr(taken, "__file__", None) != str(path.resolve()):
+            name = f"_flowtest_file_{name}_{abs(hash(str(path.resolve())))}"  # another module has its name
+        spec = importlib.util.spec_from_file_location(name, path.resolve())
         if spec is None or spec.loader is None:
             raise PolicyError(f"cannot load {module!r} as a Python module")
         mod = importlib.util.module_from_spec(spec)
+        sys.modules[name] = mod  # while it runs, as an import does (a dataclass there looks its module up)
         try:
             spec.loader.exec_module(mod)
         except (Exception, SystemExit) as exc:  # the user's file is broken, or raises while it runs
+            sys.modules.pop(name, None)
             raise PolicyError(f"{module!r} could not be loaded: it {_did(exc)}") from None
-        sys.modules.setdefault(path.stem, mod)
         return mod
     if cwd not in sys.path and "" not in sys.path:
         sys.path.insert(0, cwd)
@@ -227,6 +242,62 @@ def _raised(exc: BaseException) -> str:
     except Exception:  # an exception whose str fails
         text = ""
     return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+
+
+_CALL_TARGET = re.compile(r"^([^()\"']+:[A-Za-z_][A-Za-z0-9_.]*)\((.*)\)$", re.DOTALL)
+"""``MODULE:NAME(ARGS)``: the target and the text between the parentheses."""
+
+
+def split_call(spec: str) -> tuple[str, tuple[Any, ...], dict[str, Any]] | None:
+    """``MODULE:NAME(ARGS)`` as ``("MODULE:NAME", args, kwargs)`` (``ARGS`` Python literals,
+    read by :func:`ast.literal_eval`, never run); ``None`` for a spec without arguments.
+
+    Example::
+
+        >>> split_call('mypkg.policies:load("runs/seed0.pt", device="cpu")')
+        ('mypkg.policies:load', ('runs/seed0.pt',), {'device': 'cpu'})
+        >>> split_call("planners.py:Bfs") is None
+        True
+
+    Raises
+    ------
+    PolicyError
+        If the arguments are not Python literals (a name, a call, ``*args``).
+    """
+    m = _CALL_TARGET.match(spec.strip())
+    if m is None:
+        return None
+    target, text = m.group(1), m.group(2)
+    try:
+        call = ast.parse(f"f({text})", mode="eval").body
+    except (SyntaxError, ValueError, RecursionError):
+        raise PolicyError(f"python:{target}(...): the arguments {short(text)} are not Python literals separated by commas") from None
+    assert isinstance(call, ast.Call)
+    try:
+        if any(isinstance(a, ast.Starred) for a in call.args) or any(k.arg is None for k in call.keywords):
+            raise ValueError("*args or **kwargs")
+        args = tuple(ast.literal_eval(a) for a in call.args)
+        kwargs = {str(k.arg): ast.literal_eval(k.value) for k in call.keywords}
+    except (ValueError, TypeError, RecursionError):
+        raise PolicyError(f"python:{target}(...): the arguments must be Python literals (strings, numbers, True/False/None, "
+                          f"lists, tuples, dicts), not {short(text)}") from None
+    return target, args, kwargs
+
+
+def python_call(spec: str) -> tuple[Any, tuple[Any, ...], dict[str, Any]]:
+    """The object ``MODULE:NAME`` names and the arguments of ``MODULE:NAME(ARGS)`` (none
+    without them): what ``python:SPEC`` calls.
+
+    Raises
+    ------
+    PolicyError
+        On malformed arguments, a missing module or name.
+    """
+    call = split_call(spec)
+    if call is None:
+        return resolve(spec), (), {}
+    target, args, kwargs = call
+    return resolve(target), args, kwargs
 
 
 def resolve(spec: str) -> Any:
@@ -474,14 +545,23 @@ def _timeout(seconds: float | None) -> float:
 
 
 def make_python(env: Any, arg: str, step_timeout: float | None = None) -> PythonPlanner:
-    """``python:MODULE:NAME``: the planner ``NAME`` of ``MODULE`` for ``env``.
+    """``python:MODULE:NAME``: the planner ``NAME`` of ``MODULE`` for ``env``;
+    ``python:MODULE:NAME(ARGS)``: the planner the factory ``NAME`` returns when called with
+    ``ARGS`` (:func:`split_call`), in the planner's child process.
 
     Raises
     ------
     PolicyError
-        If the module or the name is missing, or the factory fails.
+        If the module or the name is missing, the arguments are not literals, or the factory fails.
     """
-    return PythonPlanner(f"python:{arg}", env, resolve(arg), step_timeout=step_timeout)
+    obj, args, kwargs = python_call(arg)
+    if args or kwargs or split_call(arg) is not None:
+        def factory() -> Any:  # called with exactly the given arguments (not the test's description)
+            return obj(*args, **kwargs)
+
+        factory.__qualname__ = getattr(obj, "__qualname__", "factory")
+        return PythonPlanner(f"python:{arg}", env, factory, step_timeout=step_timeout)
+    return PythonPlanner(f"python:{arg}", env, obj, step_timeout=step_timeout)
 
 
 def planner_policy(obj: Any, env: Any, name: str | None = None, step_timeout: float | None = None) -> PythonPlanner:
@@ -699,6 +779,6 @@ def check_spec(prefix: str, arg: str) -> None:
         Saying what is missing.
     """
     if prefix == "python":
-        resolve(arg)
+        python_call(arg)
     elif prefix == "cmd":
         command_words(arg)

@@ -12,6 +12,10 @@ Two kinds of file, told apart by their content:
   otherwise :class:`agents.checkpoint.UntrustedModelError` (invalid input) before any
   of it is unpickled.
 
+:class:`PPOPolicy` plays a model through the single env; :class:`ModelBatchPolicy` plays a
+stable-baselines3 model in batches (every test of a split at once, greedy or sampled), as
+``flowtest benchmark`` scores it.
+
 Models are loaded lazily, so FlowTest works without the ``rl`` extra until a ``ppo:``
 policy is asked for. Maskable models (and every native one) are given
 ``info["action_mask"]``, so they never pick a restricted action; a plain PPO model may,
@@ -34,6 +38,7 @@ saved model acts exactly as it was trained.
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -298,3 +303,52 @@ def make_ppo(env: Any, arg: str) -> Policy:
     if not arg:
         raise PolicyError("ppo needs a model path: ppo:PATH")
     return PPOPolicy(load_model(arg), f"ppo:{arg}", env)
+
+
+class ModelBatchPolicy:
+    """A saved model (native or stable-baselines3, as :func:`agents.ppo.load_model` gives
+    it) as a batched policy of :mod:`flowtest_env.scoring`: greedy (``deterministic``) or
+    sampled, adding the visited-places memory when the model has it (``where``: the SUT's
+    place in the observation) and carrying a recurrent state. Sampling is seeded by
+    ``reset`` (torch's global generator, which stable-baselines3 samples from)."""
+
+    def __init__(self, model: Any, where: slice | None, deterministic: bool = True) -> None:
+        kind = type(model).__name__
+        self.model, self.where, self.deterministic = model, where, deterministic
+        self.recurrent = bool(getattr(model, "recurrent", kind == "RecurrentPPO"))
+        self.maskable = bool(getattr(model, "maskable", kind == "MaskablePPO"))
+        self.state: Any = None
+        self.seen: np.ndarray | None = None
+
+    def reset(self, num_runs: int, seed: int) -> None:
+        import torch
+
+        torch.manual_seed(int(seed))
+        self.state, self.seen = None, None
+
+    def __call__(self, observations: np.ndarray, masks: np.ndarray) -> np.ndarray:
+        obs = np.asarray(observations, dtype=np.float32)
+        starts = np.full(obs.shape[0], self.seen is None)
+        if self.where is not None:
+            here = obs[:, self.where]
+            self.seen = here.copy() if self.seen is None else np.maximum(self.seen, here)
+            obs = np.concatenate([obs, self.seen], axis=1)
+        elif self.seen is None:
+            self.seen = np.zeros((obs.shape[0], 0), dtype=np.float32)
+        kw: dict[str, Any] = {"deterministic": self.deterministic}
+        if self.maskable:
+            kw["action_masks"] = masks
+        if self.recurrent:
+            kw["state"], kw["episode_start"] = self.state, starts
+        actions, self.state = self.model.predict(obs, **kw)
+        return np.asarray(actions)
+
+
+def model_where(model: Any, games: Sequence[Any], memory: str) -> slice | None:
+    """Where the flat observations of ``games`` hold the SUT's place, for a model with the
+    visited-places ``memory`` (``None`` for another memory)."""
+    from flowtest_env.wrappers import shared_position_slice
+
+    if memory != "visited":
+        return None
+    return shared_position_slice([make_encoder(g, "flat") for g in games])

@@ -11,7 +11,8 @@ Policies are named by plain strings on the command line (:func:`make_policy`):
 ``gr1``                     GR(1)-synthesized controller (:mod:`agents.gr1_sut`)
 ``ppo:PATH``                a saved stable-baselines3 (Maskable)PPO model
 ``python:MODULE:NAME``      your planner in Python: a function ``act(observation, mask)``
-                            or a factory of planners (:mod:`agents.external`)
+                            or a factory of planners (:mod:`agents.external`);
+                            ``python:MODULE:NAME(ARGS)`` calls the factory with literal ARGS
 ``cmd:COMMAND``             your planner as a process in any language, over JSON lines on
                             its standard input and output (:mod:`agents.external`)
 ==========================  ============================================================
@@ -59,7 +60,7 @@ TIMED_FACTORIES: dict[str, Callable[[Any, str, float | None], Policy]] = {
 
 _NAME = re.compile(r"^([a-z0-9_-]+)(?::(.*))?$", re.DOTALL)
 
-KNOWN = "random, scripted:<name>, gr1, ppo:PATH, python:MODULE:NAME, cmd:COMMAND"
+KNOWN = "random, scripted:<name>, gr1, ppo:PATH, python:MODULE:NAME[(ARGS)], cmd:COMMAND"
 """The names, for error messages."""
 
 

@@ -36,7 +36,7 @@ docs/benchmark-protocol.md. This module imports neither torch nor the agents.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass
 from typing import Any, Protocol
 
@@ -85,7 +85,8 @@ def load_tests(pool: str, split: str, count: int, source: PoolSource | None = No
 
 
 def play_batch(policy: Callable[[np.ndarray, np.ndarray], Any], games: Sequence[TestGame], runs: int = 1, seed: int = 0,
-               obs_kind: str = "flat", budgets: Sequence[int] | None = None) -> dict[str, np.ndarray]:
+               obs_kind: str = "flat", budgets: Sequence[int] | None = None,
+               options: Mapping[str, Any] | None = None) -> dict[str, np.ndarray]:
     """Play ``runs`` runs of every test of ``games`` with ``policy``, all at once in one
     :class:`~flowtest_env.vector.PoolVectorEnv`, and return the verdict arrays, each of
     shape ``[runs, n_tests]``: ``system_objective`` (``"met"``, ``"violated"``,
@@ -93,7 +94,9 @@ def play_batch(policy: Callable[[np.ndarray, np.ndarray], Any], games: Sequence[
 
     Each run ends where the single env ends it: at its outcome, or at its test's own step
     budget (``budgets[i]``; by default :func:`flowtest_env.envs.default_max_steps`,
-    ``"open"``). ``policy.reset(n,
+    ``"open"``). ``options``: more env options of the batch's observations, those the
+    policy was trained with (``{"memory": "visited"}``; an ``obs_kind`` there wins).
+    ``policy.reset(n,
     seed)`` is called first when the policy has it; rows keep stepping after their run ended
     (their actions no longer matter) until every run has ended.
 
@@ -112,7 +115,7 @@ def play_batch(policy: Callable[[np.ndarray, np.ndarray], Any], games: Sequence[
     if len(steps) != t:
         raise ValueError(f"{len(steps)} step budgets for {t} tests")
     limit = np.tile(np.asarray(steps, dtype=np.int64), runs)
-    env = batch_env(games, n, obs_kind)  # kept for the next batch of the same tests
+    env = batch_env(games, n, obs_kind, options)  # kept for the next batch of the same tests
     reset = getattr(policy, "reset", None)
     if callable(reset):
         reset(n, seed)
@@ -143,19 +146,22 @@ ENV_CACHE_SIZE = 8
 benchmark plays the same tests with many policies)."""
 
 
-def batch_env(games: Sequence[TestGame], num_envs: int, obs_kind: str = "flat") -> Any:
+def batch_env(games: Sequence[TestGame], num_envs: int, obs_kind: str = "flat", options: Mapping[str, Any] | None = None) -> Any:
     """A :class:`~flowtest_env.vector.PoolVectorEnv` of ``num_envs`` rows playing ``games``
     with ``assignment="fixed"`` (row ``i`` plays test ``i % len(games)``), each row's step
-    budget the largest test's (:func:`play_batch` ends each run at its own). The env is kept
+    budget the largest test's (:func:`play_batch` ends each run at its own), with the env
+    ``options`` given (the observation's: ``memory``, ``pad_to``). The env is kept
     (the last :data:`ENV_CACHE_SIZE`, keyed by the very game objects, which the cache keeps
     alive) and reused: every batch starts with ``reset(seed=...)``, which restarts every row."""
     from .vector import PoolVectorEnv
 
-    key = (tuple(id(g) for g in games), int(num_envs), obs_kind)
+    more = dict(options or {})
+    key = (tuple(id(g) for g in games), int(num_envs), obs_kind, tuple(sorted(more.items())))
     hit = _ENVS.pop(key, None)
     if hit is None:
         budget = max(default_max_steps(g) for g in games)
-        hit = (list(games), PoolVectorEnv(num_envs, list(games), assignment="fixed", max_steps=budget, obs_kind=obs_kind))
+        hit = (list(games), PoolVectorEnv(num_envs, list(games), assignment="fixed", max_steps=budget,
+                                          **{"obs_kind": obs_kind, **more}))
     _ENVS[key] = hit  # the most recent last
     while len(_ENVS) > ENV_CACHE_SIZE:
         _, old = _ENVS.pop(next(iter(_ENVS)))  # the least recently used

@@ -34,6 +34,7 @@ def recipe(name: str) -> ModuleType:
     spec = importlib.util.spec_from_file_location(name, HERE / f"{name}.py")
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module  # as an import does: a dataclass of the recipe looks its module up
     spec.loader.exec_module(module)
     return module
 

@@ -13,10 +13,11 @@ import os
 from dataclasses import dataclass, field
 from typing import Any
 
-from experiments.evaluation import check_sut_names
 from experiments.training.rl import require_native, require_rl
 from experiments.training.settings import ALGOS, DEFAULTS, TRAINERS, check_settings, native_settings
 from synthesis.model.errors import ProblemError
+
+from .systems import SystemSpec, check_systems, parse_systems
 
 POOL_ENV_ID = "FlowTest-RandomGrid-v0"
 """The env the baselines train on (its ``pool``, ``split``, ``count`` options)."""
@@ -102,6 +103,7 @@ class BenchmarkConfig:
     report_tests: int = 20
     bootstrap: int = 2000
     workers: int = field(default_factory=lambda: default_workers())
+    parallel: str = "processes"
 
     @classmethod
     def for_pool(cls, pool: str, **settings: Any) -> BenchmarkConfig:
@@ -129,10 +131,22 @@ class BenchmarkConfig:
         return list(dict.fromkeys(algos + named))
 
     def others(self) -> list[str]:
+        """The names of the systems scored as they are (:meth:`systems`)."""
+        return [s.name for s in self.systems()]
+
+    def systems(self) -> list[SystemSpec]:
         """The systems scored as they are: the floor, the references, and any other
-        (``ppo:PATH``, ``python:M:N``, ...), in that order."""
-        given = [s for s in dict.fromkeys(self.suts) if s != "ppo" and s not in BENCH_ALGOS]
-        return list(dict.fromkeys([RANDOM, *REFERENCES, *given]))
+        (``ppo:PATH``, ``ppo:runs/*.zip``, ``NAME=python:M:F(...)``, ...; one seed per member,
+        :mod:`~experiments.benchmark.systems`), in that order.
+
+        Raises
+        ------
+        ProblemError
+            On a ``NAME=`` that names a system already scored, or a pattern matching no file.
+        """
+        given = [s for s in self.suts if s != "ppo" and s not in BENCH_ALGOS and s not in (RANDOM, *REFERENCES)]
+        fixed = [SystemSpec(RANDOM, "floor", (RANDOM,)), *(SystemSpec(r, "reference", (r,)) for r in REFERENCES)]
+        return fixed + parse_systems(given, reserved=["ppo", RANDOM, *REFERENCES, *BENCH_ALGOS])
 
     def counts(self) -> dict[str, int]:
         """Tests loaded per split."""
@@ -151,6 +165,26 @@ class BenchmarkConfig:
         """The generalization curve's training-set sizes: ``curve_sizes`` below
         ``train_count``, then ``train_count`` (the main runs)."""
         return sorted({n for n in self.curve_sizes if 0 < n < self.train_count} | {self.train_count})
+
+
+PARALLEL: tuple[str, ...] = ("serial", "processes", "ray")
+"""Where the training runs go (``--parallel``): one after another in this process, ``workers``
+local processes at once, or Ray tasks (a local Ray, or the cluster ``RAY_ADDRESS`` names).
+The models, and so the table, do not depend on it."""
+
+
+def require_ray() -> None:
+    """Refuse ``--parallel ray`` without Ray installed, as invalid input.
+
+    Raises
+    ------
+    ProblemError
+        If ``ray`` cannot be imported.
+    """
+    import importlib.util
+
+    if importlib.util.find_spec("ray") is None:
+        raise ProblemError("--parallel ray needs Ray: pip install 'ray[default]'")
 
 
 def runs_text(n: int, what: str = "") -> str:
@@ -186,12 +220,11 @@ def check_config(config: BenchmarkConfig) -> None:
         raise ProblemError(f"--pool {config.pool}: {exc}") from None
     if not config.suts:
         raise ProblemError("no system to benchmark: give --sut ppo and/or a system such as scripted:replanner")
-    check_sut_names(config.others())
-    from agents.ppo import check_trusted
-
-    for sut in config.others():
-        if sut.startswith("ppo:"):
-            check_trusted(sut[4:])  # a pickled model is refused before any work
+    check_systems(config.systems())
+    if config.parallel not in PARALLEL:
+        raise ProblemError(f"unknown --parallel {config.parallel!r}; expected one of {', '.join(PARALLEL)}")
+    if config.parallel == "ray" and config.baselines():
+        require_ray()
     if "ppo" in config.suts and not config.algos:
         raise ProblemError("--sut ppo needs at least one --algo")
     for algo in config.algos:

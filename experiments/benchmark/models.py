@@ -1,5 +1,6 @@
-"""Saved models as batched policies: every test of a split played at once in one vector env,
-greedy or sampled (what the learning curves and the scores of the baselines read)."""
+"""Saved models played in batches: every test of a split at once in one vector env, greedy or
+sampled (what the learning curves and the scores of the baselines read). The batched policy of
+a stable-baselines3 model is :class:`agents.ppo.ModelBatchPolicy`."""
 
 from __future__ import annotations
 
@@ -9,55 +10,11 @@ from typing import Any
 
 import numpy as np
 
+from agents.ppo import ModelBatchPolicy, model_where
+
 from .config import RUN_SEED
 
-
-class ModelBatchPolicy:
-    """A saved model (native or stable-baselines3, as :func:`agents.ppo.load_model` gives
-    it) as a batched policy of :mod:`flowtest_env.scoring`: greedy (``deterministic``) or
-    sampled, adding the visited-places memory when the model has it (``where``: the SUT's
-    place in the observation) and carrying a recurrent state. Sampling is seeded by
-    ``reset`` (torch's global generator, which stable-baselines3 samples from)."""
-
-    def __init__(self, model: Any, where: slice | None, deterministic: bool = True) -> None:
-        kind = type(model).__name__
-        self.model, self.where, self.deterministic = model, where, deterministic
-        self.recurrent = bool(getattr(model, "recurrent", kind == "RecurrentPPO"))
-        self.maskable = bool(getattr(model, "maskable", kind == "MaskablePPO"))
-        self.state: Any = None
-        self.seen: np.ndarray | None = None
-
-    def reset(self, num_runs: int, seed: int) -> None:
-        import torch
-
-        torch.manual_seed(int(seed))
-        self.state, self.seen = None, None
-
-    def __call__(self, observations: np.ndarray, masks: np.ndarray) -> np.ndarray:
-        obs = np.asarray(observations, dtype=np.float32)
-        starts = np.full(obs.shape[0], self.seen is None)
-        if self.where is not None:
-            here = obs[:, self.where]
-            self.seen = here.copy() if self.seen is None else np.maximum(self.seen, here)
-            obs = np.concatenate([obs, self.seen], axis=1)
-        elif self.seen is None:
-            self.seen = np.zeros((obs.shape[0], 0), dtype=np.float32)
-        kw: dict[str, Any] = {"deterministic": self.deterministic}
-        if self.maskable:
-            kw["action_masks"] = masks
-        if self.recurrent:
-            kw["state"], kw["episode_start"] = self.state, starts
-        actions, self.state = self.model.predict(obs, **kw)
-        return np.asarray(actions)
-
-
-def model_where(model: Any, games: Sequence[Any], memory: str) -> slice | None:
-    from flowtest_env.encoding import make_encoder
-    from flowtest_env.wrappers import shared_position_slice
-
-    if memory != "visited":
-        return None
-    return shared_position_slice([make_encoder(g, "flat") for g in games])
+__all__ = ["CurveRecorder", "ModelBatchPolicy", "batch_verdicts", "model_where"]
 
 
 def batch_verdicts(model: Any, games: Sequence[Any], memory: str, budgets: Sequence[int]) -> dict[str, np.ndarray]:

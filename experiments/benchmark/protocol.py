@@ -253,12 +253,17 @@ def check_systems(config: BenchmarkConfig) -> None:
     """
     from agents.ppo import load_model
 
-    for sut in config.others():
+    for sut in _members(config):
         if sut.startswith("ppo:"):
             try:
                 load_model(sut[4:])
             except ValueError as exc:  # PolicyError, CheckpointError
                 raise ProblemError(f"--sut {sut}: {exc}") from None
+
+
+def _members(config: BenchmarkConfig) -> list[str]:
+    """Every SUT the systems given by ``--sut`` stand for (a glob's files one by one)."""
+    return [m for spec in config.systems() if spec.kind == "system" for m in spec.members]
 
 
 def check_systems_play(config: BenchmarkConfig, splits: dict[str, Split]) -> None:
@@ -274,21 +279,23 @@ def check_systems_play(config: BenchmarkConfig, splits: dict[str, Split]) -> Non
     from flowtest_env.game import TestGame
     from flowtest_env.scoring import play_batch
 
-    from .scoring import batched_system, score_systems
+    from .scoring import score_systems
+    from .systems import member_policies
 
     test = splits["test"]
     first = Split(test.name, test.label, test.seeds[:1], test.artifacts[:1], test.files[:1])
-    for sut in config.others():
+    games = [TestGame(first.artifacts[0])]
+    for sut in _members(config):
         if not sut.startswith(("ppo:", "python:")):
             continue
         try:
-            policies = batched_system(sut, config.runs)
-            if policies is None:
+            member = member_policies(sut, games)
+            if member is None:
                 if sut.startswith("ppo:"):
                     score_systems([sut], first)  # a stable-baselines3 zip through the single env
                 continue
-            for policy in policies.values():
-                play_batch(policy, [TestGame(first.artifacts[0])], 1, RUN_SEED)
+            for policy in member.policies.values():
+                play_batch(policy, games, 1, RUN_SEED, options=member.options)
         except ProblemError:
             raise
         except Exception as exc:  # the policy's own failure, whatever it is: one line

@@ -12,9 +12,10 @@ import numpy as np
 from experiments.evaluation import Trace, env_named, run_episode
 from synthesis.model.errors import ProblemError
 
-from .config import RANDOM, REFERENCES, REPORT_SPLITS, RUN_SEED, SPLIT_NAMES, BenchmarkConfig, runs_text
+from .config import RANDOM, REPORT_SPLITS, RUN_SEED, SPLIT_NAMES, BenchmarkConfig, runs_text
 from .pool import Split
 from .statistics import SystemRuns, normalized_summary
+from .systems import member_policies
 from .training_runs import TrainedBaseline
 
 
@@ -61,49 +62,6 @@ def score_systems(suts: Sequence[str], split: Split, limit: int | None = None) -
                 close()
         env.close()
     return traces
-
-
-def batched_system(sut: str, runs: int) -> dict[str, Any] | None:
-    """The batched policies of a system that has them (``{"greedy": policy, "sampled":
-    policy}``, either may be missing), or ``None`` when it plays through the single env:
-    ``random`` (sampled only), a native checkpoint ``ppo:PATH`` (both), and a
-    ``python:MODULE:NAME`` object marked ``batched = True`` (a class is instantiated with
-    no argument; its ``deterministic`` attribute, default true, says whether it is greedy).
-
-    Raises
-    ------
-    ProblemError
-        If the named object cannot be loaded.
-    """
-    from agents.base import PolicyError
-    from flowtest_env.scoring import random_policy
-
-    if sut == RANDOM:
-        return {"sampled": random_policy()}
-    if sut.startswith("ppo:"):
-        from agents.checkpoint import CheckpointError, is_native_checkpoint
-
-        if not is_native_checkpoint(sut[4:]):
-            return None
-        from agents.native.checkpoint import load_native
-
-        try:
-            model = load_native(sut[4:])
-        except CheckpointError as exc:
-            raise ProblemError(f"--sut {sut}: {exc}") from None
-        return {"greedy": model.batch_policy(True), "sampled": model.batch_policy(False)}
-    if sut.startswith("python:"):
-        from agents.external import resolve
-
-        try:
-            obj = resolve(sut[len("python:"):])
-        except PolicyError as exc:
-            raise ProblemError(f"--sut {sut}: {exc}") from None
-        if not getattr(obj, "batched", False):
-            return None
-        policy = obj() if isinstance(obj, type) else obj
-        return {"greedy" if getattr(policy, "deterministic", True) else "sampled": policy}
-    return None
 
 
 def verdict_metrics(v: dict[str, np.ndarray]) -> dict[str, Any]:
@@ -157,14 +115,14 @@ def score_all(config: BenchmarkConfig, splits: dict[str, Split], trained: Sequen
 
     games = {name: [TestGame(a) for a in split.scored] for name, split in splits.items()}
 
-    def batched(policies: dict[str, Any]) -> dict[str, Any]:
+    def batched(policies: dict[str, Any], options: dict[str, Any] | None = None) -> dict[str, Any]:
         row: dict[str, Any] = {}
         for split in SPLIT_NAMES:
             row[split] = {"greedy": None, "sampled": None}
             for mode, policy in policies.items():
                 if mode == "sampled" and "greedy" in policies and split != "test":
                     continue  # a policy with a greedy mode is sampled on the held-out tests only (the time budget)
-                v = play_batch(policy, games[split], 1 if mode == "greedy" else config.runs, RUN_SEED)
+                v = play_batch(policy, games[split], 1 if mode == "greedy" else config.runs, RUN_SEED, options=options)
                 row[split][mode] = verdict_metrics(v)
         return row
 
@@ -176,15 +134,20 @@ def score_all(config: BenchmarkConfig, splits: dict[str, Split], trained: Sequen
             runs.append({"seed": b.seed, "sut": b.sut, **batched(b.policies)})
         systems.append(SystemRuns(algo, "baseline", runs))
     single: list[str] = []
-    for sut in config.others():
-        policies = batched_system(sut, config.runs)
-        kind = "floor" if sut == RANDOM else "reference" if sut in REFERENCES else "system"
-        if policies is None:
-            single.append(sut)
-            systems.append(SystemRuns(sut, kind, []))
-            continue
-        say(f"scoring {sut} in one batch per split")
-        systems.append(SystemRuns(sut, kind, [{"seed": None, "sut": sut, **batched(policies)}]))
+    played_alone: list[dict[str, Any]] = []  # the runs of members that play through the single env, filled below
+    for spec in config.systems():  # one run per member (seed) of each system
+        runs = []
+        for seed, sut in zip(spec.seeds, spec.members, strict=True):
+            member = member_policies(sut, games["train"])
+            if member is None:
+                single.append(sut)
+                played_alone.append({"seed": seed, "sut": sut})
+                runs.append(played_alone[-1])
+                continue
+            say(f"scoring {sut} in one batch per split" + ("" if seed is None else f" ({spec.name} seed {seed})"))
+            runs.append({"seed": seed, "sut": sut, **batched(member.policies, member.options)})
+        systems.append(SystemRuns(spec.name, spec.kind, runs))
+    single = list(dict.fromkeys(single))
     traces: dict[str, dict[str, list[Trace]]] = {}
     report_suts = [RANDOM] + [b.sut for b in _report_models(config, trained)]
     for name, split in splits.items():
@@ -193,10 +156,8 @@ def score_all(config: BenchmarkConfig, splits: dict[str, Split], trained: Sequen
         traces[name] = score_systems(single, split)
         if name in REPORT_SPLITS:
             traces[name].update(score_systems(report_suts, split, config.report_tests))
-    for s in systems:
-        if s.name in single:
-            s.runs.append({"seed": None, "sut": s.name, **{n: {"greedy": verdict_metrics(trace_verdicts(traces[n][s.name])),
-                                                                "sampled": None} for n in SPLIT_NAMES}})
+    for run in played_alone:
+        run.update({n: {"greedy": verdict_metrics(trace_verdicts(traces[n][run["sut"]])), "sampled": None} for n in SPLIT_NAMES})
     return systems, traces
 
 

@@ -1,14 +1,16 @@
 """The benchmark's training runs (protocol step 2, docs/benchmark-protocol.md): each baseline
-per seed (and per generalization-curve size) trained on the pool's train split, several at once
-in their own processes, each with its greedy learning curve. Every finished run leaves its
-model and then its record (:mod:`~experiments.benchmark.resume`), so ``--resume`` keeps it
-(:func:`finished_run`) and trains only the rest."""
+per seed (and per generalization-curve size) trained on the pool's train split, each with its
+greedy learning curve. The runs are independent jobs (:func:`run_job`): :func:`train_all` runs
+them one after another, in local processes or as Ray tasks (``--parallel``), with the same
+models either way. Every finished run leaves its model and then its record
+(:mod:`~experiments.benchmark.resume`), so ``--resume`` keeps it (:func:`finished_run`) and
+trains only the rest."""
 
 from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -59,10 +61,15 @@ def train_baseline(config: BenchmarkConfig, algo: str, seed: int, splits: dict[s
         b = _train_native_baseline(config, algo, seed, splits, path, _curve_every(config), progress_bar, count)
     else:
         b = _train_sb3_baseline(config, algo, seed, splits, path, progress_bar, count)
-    write_record(path, config, {"algo": b.algo, "seed": b.seed, "train_tests": b.train_tests, "steps": b.steps,
-                                "seconds": b.seconds, "curve_seconds": b.curve_seconds,
-                                "curve": [[step, rates] for step, rates in b.curve]})
+    _record(b, config)
     return b
+
+
+def _record(b: TrainedBaseline, config: BenchmarkConfig) -> None:
+    """Write the record of a finished run beside its model (what ``--resume`` keeps)."""
+    write_record(b.path, config, {"algo": b.algo, "seed": b.seed, "train_tests": b.train_tests, "steps": b.steps,
+                                  "seconds": b.seconds, "curve_seconds": b.curve_seconds,
+                                  "curve": [[step, rates] for step, rates in b.curve]})
 
 
 def model_path(out: Path, algo: str, seed: int, name: str | None = None) -> Path:
@@ -97,8 +104,7 @@ def _train_sb3_baseline(config: BenchmarkConfig, algo: str, seed: int, splits: d
     write_atomically(path, lambda tmp: model.save(str(tmp)))
     mark_own_file(path)  # scored below without --trust-model: this run wrote it
     env.close()
-    where = model_where(model, shown["train"][0], settings["memory"])
-    policies = {"greedy": ModelBatchPolicy(model, where, True), "sampled": ModelBatchPolicy(model, where, False)}
+    policies = _sb3_policies(model, splits["train"], count, settings["memory"])
     return TrainedBaseline(algo, seed, path, int(model.num_timesteps), seconds, recorder.seconds, recorder.points, count,
                            policies)
 
@@ -113,17 +119,36 @@ class TrainingJob:
     name: str
 
 
-_JOB_STATE: dict[str, Any] = {}
-"""What a forked training worker reads (the config, the splits, the folder), set before the fork."""
+@dataclass(frozen=True)
+class JobState:
+    """What every training job reads: the configuration and the pool's splits (sent once to
+    the workers: forked with them, or put in Ray's object store)."""
+
+    config: BenchmarkConfig
+    splits: dict[str, Split]
 
 
-def _run_job(job: TrainingJob) -> TrainedBaseline:
-    """A training worker: train one job and return it without its policies (the parent
-    loads them from the saved checkpoint)."""
-    b = train_baseline(_JOB_STATE["config"], job.algo, job.seed, _JOB_STATE["splits"], _JOB_STATE["out"], False,
-                       train_tests=job.train_tests, name=job.name)
+def run_job(state: JobState, job: TrainingJob) -> tuple[TrainedBaseline, bytes]:
+    """One training job, anywhere (this process, a worker process, a Ray worker on another
+    machine): train into a folder of its own and return the run without its policies, with
+    the model file's bytes (the caller writes them into the benchmark's folder and loads
+    the policies from there)."""
+    import tempfile
+
+    with tempfile.TemporaryDirectory(prefix="flowtest-job-") as scratch:
+        b = train_baseline(state.config, job.algo, job.seed, state.splits, Path(scratch), False, train_tests=job.train_tests,
+                           name=job.name)
+        data = b.path.read_bytes()
     b.policies = {}
-    return b
+    return b, data
+
+
+_WORKER_STATE: list[JobState] = []
+"""The state a forked worker process reads (set before the fork)."""
+
+
+def _forked_job(job: TrainingJob) -> tuple[TrainedBaseline, bytes]:
+    return run_job(_WORKER_STATE[0], job)
 
 
 def finished_run(config: BenchmarkConfig, job: TrainingJob, splits: dict[str, Split], out: Path) -> TrainedBaseline | None:
@@ -179,8 +204,18 @@ def train_all(config: BenchmarkConfig, jobs: Sequence[TrainingJob], splits: dict
 
 def _train_jobs(config: BenchmarkConfig, jobs: Sequence[TrainingJob], splits: dict[str, Split], out: Path,
                 say: Callable[[str], None], progress_bar: bool = False) -> list[TrainedBaseline]:
-    """Train ``jobs`` (:func:`train_all`'s training, one process per run where it can)."""
-    if config.workers <= 1 or config.trainer != "native" or len(jobs) <= 1:
+    """Train ``jobs`` (:func:`train_all`'s training) where ``config.parallel`` says: ``serial``
+    (one after another in this process, with the progress bar), ``processes``
+    (``config.workers`` local processes at once) or ``ray`` (Ray tasks: on the cluster
+    ``RAY_ADDRESS`` names, else on a local Ray of ``config.workers`` CPUs). Each run is seeded
+    and single-threaded, so the models, and the table, are the same wherever they ran.
+
+    Example::
+
+        config = BenchmarkConfig.for_pool("reachability1/5x5-v2", parallel="ray", seeds=tuple(range(10)))
+        trained = train_all(config, jobs, splits, Path("bench"), print)
+    """
+    if config.parallel == "serial" or (config.parallel == "processes" and (config.workers <= 1 or len(jobs) <= 1)):
         done = []
         for job in jobs:
             say(f"training {job.algo} seed {job.seed} on {job.train_tests} train tests ({config.steps:,} steps)")
@@ -189,30 +224,96 @@ def _train_jobs(config: BenchmarkConfig, jobs: Sequence[TrainingJob], splits: di
             _say_trained(b, say)
             done.append(b)
         return done
+    algos = ", ".join(dict.fromkeys(j.algo for j in jobs))
+    where = f"{config.workers} processes" if config.parallel == "processes" else "Ray tasks"
+    say(f"training {algos}: {len(jobs)} runs ({config.steps:,} steps each) in {where}")
+    state = JobState(config, splits)
+    finished = _in_processes(state, jobs, config.workers) if config.parallel == "processes" else _on_ray(state, jobs, config.workers)
+    results: list[TrainedBaseline | None] = [None] * len(jobs)
+    for i, (b, data) in finished:
+        kept = results[i] = _keep(b, data, out, config, splits)
+        _say_trained(kept, say)
+    return [b for b in results if b is not None]
+
+
+def _keep(b: TrainedBaseline, data: bytes, out: Path, config: BenchmarkConfig, splits: dict[str, Split]) -> TrainedBaseline:
+    """A finished job's model written into ``out/models`` (by this process: it is loaded
+    without --trust-model) and its batched policies loaded from there."""
+    path = (out / "models" / b.path.name).resolve()
+    write_atomically(path, lambda tmp: tmp.write_bytes(data))
+    b.path = path
+    _record(b, config)  # the model first, then its record
+    if config.trainer == "native":
+        from agents.native.checkpoint import load_native
+
+        native = load_native(path)
+        b.policies = {"greedy": native.batch_policy(True), "sampled": native.batch_policy(False)}
+        return b
+    from agents.ppo import load_model
+
+    mark_own_file(path)
+    b.policies = _sb3_policies(load_model(path), splits["train"], b.train_tests, baseline_settings(b.algo, "sb3")["memory"])
+    return b
+
+
+def _sb3_policies(model: Any, train: Split, count: int, memory: str) -> dict[str, Any]:
+    """A stable-baselines3 model's batched policies, greedy and sampled, with its memory."""
+    from flowtest_env.game import TestGame
+
+    where = model_where(model, [TestGame(a) for a in train.artifacts[:min(count, CURVE_TRAIN_TESTS)]], memory)
+    return {"greedy": ModelBatchPolicy(model, where, True), "sampled": ModelBatchPolicy(model, where, False)}
+
+
+def _in_processes(state: JobState, jobs: Sequence[TrainingJob], workers: int) -> Iterator[tuple[int, tuple[TrainedBaseline, bytes]]]:
+    """``(index, result)`` of each job, run in ``workers`` forked processes, in the jobs' order."""
     import multiprocessing
 
-    from agents.native.checkpoint import load_native
-
-    _JOB_STATE.update(config=config, splits=splits, out=out)
-    algos = ", ".join(dict.fromkeys(j.algo for j in jobs))
-    say(f"training {algos}: {len(jobs)} runs ({config.steps:,} steps each) in {config.workers} processes")
-    results: list[TrainedBaseline] = []
-    pool = multiprocessing.get_context("fork").Pool(config.workers, initializer=_worker_signals)
+    _WORKER_STATE[:] = [state]
+    pool = multiprocessing.get_context("fork").Pool(workers, initializer=_worker_signals)
     try:
-        for b in pool.imap(_run_job, jobs):
-            model = load_native(b.path)
-            b.policies = {"greedy": model.batch_policy(True), "sampled": model.batch_policy(False)}
-            _say_trained(b, say)
-            results.append(b)
+        yield from enumerate(pool.imap(_forked_job, jobs))
     except BaseException:
         pool.terminate()  # stop the runs under way now, not at their end
         raise
     else:
         pool.close()
     finally:
-        _JOB_STATE.clear()
+        _WORKER_STATE.clear()
     pool.join()
-    return results
+
+
+RAY_POLL = 0.2
+"""Seconds between looks at the Ray tasks (so Ctrl-C is taken at once)."""
+
+
+def _on_ray(state: JobState, jobs: Sequence[TrainingJob], workers: int) -> Iterator[tuple[int, tuple[TrainedBaseline, bytes]]]:
+    """``(index, result)`` of each job, run as Ray tasks (one CPU each), in the order they finish."""
+    import os
+
+    import ray  # the optional parallel path: Ray is not a core dependency
+
+    started = not ray.is_initialized()
+    if started:
+        if os.environ.get("RAY_ADDRESS"):
+            ray.init(include_dashboard=False, log_to_driver=False)
+        else:
+            ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False)
+    pending: dict[Any, int] = {}
+    try:
+        remote = ray.remote(num_cpus=1, max_retries=0)(run_job)
+        shared = ray.put(state)
+        pending = {remote.remote(shared, job): i for i, job in enumerate(jobs)}
+        while pending:
+            done, _ = ray.wait(list(pending), num_returns=1, timeout=RAY_POLL)
+            for ref in done:
+                yield pending.pop(ref), ray.get(ref)
+    except BaseException:
+        for ref in pending:
+            ray.cancel(ref, force=True)
+        raise
+    finally:
+        if started:
+            ray.shutdown()
 
 
 def _worker_signals() -> None:

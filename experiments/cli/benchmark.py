@@ -16,6 +16,7 @@ from pathlib import Path
 
 from experiments import benchmark as library
 from experiments.benchmark import BENCH_ALGOS, DEFAULT_SUTS, BenchmarkConfig, prepare_benchmark_folder, table_markdown
+from experiments.benchmark.config import PARALLEL
 from experiments.outputs import json_safe, print_json
 from experiments.training.settings import TRAINERS
 
@@ -31,8 +32,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="the test pool: <family><n>/<size>x<size>[/<world>][/<kind>], e.g. reachability1/5x5 (flowtest_env.pools)")
     p.add_argument("--sut", action="extend", nargs="+", metavar="SYSTEM",
                    help="systems (repeatable): ppo (train the baselines of --algo), maskable-ppo, recurrent-ppo, plr-ppo, "
-                        "scripted:<name>, gr1, ppo:PATH, python:MODULE:NAME (a planner, or a batched policy marked "
-                        "batched = True), cmd:COMMAND; random and the references are always scored "
+                        "scripted:<name>, gr1, ppo:PATH, python:MODULE:NAME[(ARGS)] (a planner, or the loader of a batched "
+                        "policy marked batched = True), cmd:COMMAND; one system with a seed per file: 'ppo:runs/*.zip', "
+                        "'python:MODULE:NAME@runs/*.pt'; NAME=SYSTEM names a system, and NAME= repeated adds a seed per "
+                        "entry (docs/benchmark-protocol.md); random and the references are always scored "
                         f"(default: {' '.join(DEFAULT_SUTS)})")
     p.add_argument("--algo", nargs="+", choices=BENCH_ALGOS, default=list(d.algos),
                    help=f"the baselines --sut ppo trains (default: {' '.join(d.algos)}; plr-ppo: native trainer only)")
@@ -63,8 +66,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--bootstrap", type=positive_int, default=d.bootstrap,
                    help=f"bootstrap replicates of the intervals (default {d.bootstrap})")
     p.add_argument("--workers", type=positive_int, default=d.workers,
-                   help=f"training runs at once, one process each (native trainer; default {d.workers}: one per CPU, "
-                        "at most 2); the models do not depend on it")
+                   help=f"training runs at once with --parallel processes (and the CPUs of a local Ray) (default "
+                        f"{d.workers}: one per CPU, at most 2); the models do not depend on it")
+    p.add_argument("--parallel", choices=PARALLEL, default=d.parallel,
+                   help="where the training runs go: serial (one after another, with a progress bar), processes "
+                        "(--workers local processes; default) or ray (Ray tasks: the cluster RAY_ADDRESS names, else a "
+                        "local Ray); the table is the same either way")
     p.add_argument("--trainer", choices=TRAINERS, default=d.trainer,
                    help="who trains the baselines: native (FlowTest's batched PPO, default) or sb3 (stable-baselines3)")
     add_trust_model(p, "load stable-baselines3 zips given as --sut ppo:PATH, which unpickles them (code from the file "
@@ -92,6 +99,7 @@ def run(args: argparse.Namespace) -> int:
         train_eval_count=args.train_eval_count, steps=args.steps, seeds=tuple(dict.fromkeys(args.seeds)), runs=args.runs,
         curve_sizes=tuple(args.curve_sizes), curve_seeds=args.curve_seeds, curve_points=args.curve_points,
         trainer=args.trainer, report_tests=args.report_tests, bootstrap=args.bootstrap, workers=args.workers,
+        parallel=args.parallel,
     )
     apply_trust_model(args)
     library.check_config(config)

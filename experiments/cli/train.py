@@ -6,7 +6,11 @@ their settings in :mod:`experiments.training.settings`).
 
 ``ENV`` is anything ``flowtest evaluate --env`` takes (a registered ID, a built-in name, a
 problem file, an artifact file); ``--pool NAME`` (with ``FlowTest-RandomGrid-v0``) trains
-on the first ``--count`` tests of a named pool's ``--split``.
+on the first ``--count`` tests of a pool's ``--split``: a standard pool id
+(``reachability1/5x5-v2``: its shipped tests, loaded in seconds) or an on-demand pool name
+(``reachability1/5x5``: built on demand, cached). With ``--pool`` both trainers finish by
+playing the greedy policy on those tests and on ``--heldout-count`` tests of the pool's
+held-out ``test`` split, and print each score beside the random floor of the same tests.
 
 **Two trainers** (``--trainer``):
 
@@ -19,10 +23,10 @@ on the first ``--count`` tests of a named pool's ``--split``.
   TensorBoard), named after the model, so no run writes over another's. The model is a
   native checkpoint: tensors and plain settings, loaded without unpickling
   (:mod:`agents.checkpoint`).
-* ``sb3``: today's path, unchanged: sb3-contrib's ``MaskablePPO`` (``--algo
-  maskable-ppo``) or ``RecurrentPPO`` (``--algo recurrent-ppo``, an LSTM, no masks) on a
-  few single envs in one process; the model is a stable-baselines3 zip, which loading
-  unpickles (so ``ppo:PATH`` loads it only with ``--trust-model``).
+* ``sb3``: sb3-contrib's ``MaskablePPO`` (``--algo maskable-ppo``) or ``RecurrentPPO``
+  (``--algo recurrent-ppo``, an LSTM, no masks) on a few single envs in one process; the
+  model is a stable-baselines3 zip, which loading unpickles (so ``ppo:PATH`` loads it only
+  with ``--trust-model``).
 
 Everything the trainers add to the environment is an env option, printed at the start
 and saved with the model:
@@ -58,7 +62,7 @@ from experiments.evaluation.episodes import env_named
 from experiments.outputs import check_log_dir, check_output_path
 from experiments.training.rl import require_native
 from experiments.training.settings import ALGOS, DEFAULTS, NATIVE_ALGOS, NATIVE_DEFAULTS, TRAINERS, check_settings, flag_of, native_settings
-from experiments.training.system import heldout_games, train, train_native
+from experiments.training.system import FLOOR_RUNS, heldout_games, train, train_native
 from synthesis.model.errors import ProblemError
 
 from .arguments import nonnegative_int, positive_int
@@ -109,7 +113,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="the pool's split to train on (default train)")
     p.add_argument("--count", type=positive_int, default=None, help="tests of the split (default 128)")
     p.add_argument("--heldout-count", type=nonnegative_int, default=None,
-                   help="native, with --pool: held-out tests of the pool's test split evaluated during training "
+                   help="with --pool: held-out tests of the pool's test split evaluated during training "
                         "(default 32; 0: none)")
     p.add_argument("--eval-every", type=nonnegative_int, default=250_000,
                    help="native: steps between greedy evaluations (default 250000; 0: at the end only)")
@@ -118,7 +122,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "folder, named after the model (DIR/NAME, or DIR/NAME-2... when taken: an earlier run's logs "
                         "are never replaced); not a symbolic link")
     p.add_argument("--eval-episodes", type=nonnegative_int, default=None,
-                   help="single-env evaluation runs after training (default: sb3 100; native 100, 0 with --pool "
+                   help="single-env evaluation runs after training (default 100, 0 with --pool "
                         "(the greedy evaluation on the tests is the score))")
     p.add_argument("--force", action="store_true", help="overwrite an existing model, curve or summary")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
@@ -149,17 +153,27 @@ POOL_ENV = "FlowTest-RandomGrid-v0"
 
 
 def _pool_options(args: argparse.Namespace) -> dict[str, Any]:
+    """The env options of ``--pool``: a standard pool id (``reachability1/5x5-v2``: its
+    shipped tests are loaded, nothing synthesized) or an on-demand pool name."""
     if args.pool is None:
         if args.split is not None or args.count is not None or args.heldout_count:
             raise ProblemError("--split, --count and --heldout-count go with --pool")
         return {}
-    from flowtest_env.pools import parse_pool
+    from flowtest_env.pools import parse_pool, pool_seeds
+    from flowtest_env.standard_pools import is_standard, standard_pool
 
+    options = {"pool": args.pool, "split": args.split or "train", "count": args.count or 128}
     try:
-        parse_pool(args.pool)
+        if is_standard(args.pool):
+            standard_pool(args.pool)  # a known id and version
+        else:
+            parse_pool(args.pool)
+        pool_seeds(args.pool, options["split"], options["count"])  # a -v2 pool ships so many tests per split
+        if args.heldout_count != 0:
+            pool_seeds(args.pool, "test", 32 if args.heldout_count is None else args.heldout_count)
     except ValueError as exc:
         raise ProblemError(f"--pool {args.pool}: {exc}") from None
-    return {"pool": args.pool, "split": args.split or "train", "count": args.count or 128}
+    return options
 
 
 def run(args: argparse.Namespace) -> int:
@@ -167,8 +181,8 @@ def run(args: argparse.Namespace) -> int:
     given = {k: getattr(args, k) for k in dict.fromkeys([*NATIVE_DEFAULTS, *DEFAULTS]) if getattr(args, k) is not None}
     pool = _pool_options(args)
     if args.trainer == "sb3":
-        if pool or args.log_dir is not None or args.heldout_count is not None:
-            raise ProblemError("--pool, --log-dir and --heldout-count go with the native trainer (--trainer native)")
+        if args.log_dir is not None:
+            raise ProblemError("--log-dir goes with the native trainer (--trainer native)")
         unknown = set(given) - set(DEFAULTS)
         if unknown:
             raise ProblemError(f"{', '.join(flag_of(k) for k in sorted(unknown))}: a setting of the native trainer, "
@@ -193,43 +207,47 @@ def run(args: argparse.Namespace) -> int:
     extra = "".join(f" --{k} {v}" for k, v in pool.items())
     sys.stderr.write(f"flowtest: training with --trainer {args.trainer} --steps {steps} --seed {args.seed}{extra} {shown}\n")
     sys.stderr.flush()
-    if args.trainer == "sb3":
-        eval_episodes = 100 if args.eval_episodes is None else args.eval_episodes
-        s = train(args.ENV, steps, args.out, args.seed, progress_bar=not args.quiet, eval_episodes=eval_episodes,
-                  **given)
-        rate = "-" if s["success_rate"] is None else f"{100 * s['success_rate']:.0f} %"
-        used = ", ".join(f"{k}={v}" for k, v in s["settings"].items())
-        sys.stdout.write(
-            f"trained {s['steps']} steps in {s['seconds']:.1f} s; system objective met in {rate} of "
-            f"{s['eval_episodes']} evaluation runs\nsettings: {used}\n"
-            f"model: {s['model']} (use --sut ppo:{s['model']})\ncurve: {s['curve']}\n"
-            f"settings and curve data: {Path(s['model']).with_suffix('.json')}\n"
-        )
-        return EXIT_OK
     heldout: list[Any] = []
     if pool:
         n_heldout = 32 if args.heldout_count is None else args.heldout_count
         if n_heldout:
             heldout = heldout_games(pool["pool"], n_heldout, progress=not args.quiet)
     eval_episodes = args.eval_episodes if args.eval_episodes is not None else (0 if pool else 100)
-    s = train_native(args.ENV, steps, args.out, args.seed, progress_bar=not args.quiet, eval_episodes=eval_episodes,
-                     env_kwargs=pool, heldout=heldout, log_dir=args.log_dir, eval_every=args.eval_every, **given)
-    lines = [f"trained {s['steps']} steps in {s['seconds']:.1f} s ({s['steps_per_second']:,.0f} steps/s on "
-             f"{s['device']}, evaluations {s['eval_seconds']:.1f} s more)"]
-    for split, what in (("train", "the train tests" if pool else "the env's tests"), ("heldout", "held-out tests")):
-        if split in s["final"]:
-            r = s["final"][split]
-            lines.append(f"greedy on {what}: system objective met {100 * r['met']:.1f} %, test objective realized "
-                         f"{100 * r['realized']:.1f} %, {r['restrictions']:.1f} restrictions per run")
+    if args.trainer == "sb3":
+        s = train(args.ENV, steps, args.out, args.seed, progress_bar=not args.quiet, eval_episodes=eval_episodes,
+                  env_kwargs=pool, heldout=heldout, **given)
+        lines = [f"trained {s['steps']} steps in {s['seconds']:.1f} s"]
+    else:
+        s = train_native(args.ENV, steps, args.out, args.seed, progress_bar=not args.quiet, eval_episodes=eval_episodes,
+                         env_kwargs=pool, heldout=heldout, log_dir=args.log_dir, eval_every=args.eval_every, **given)
+        lines = [f"trained {s['steps']} steps in {s['seconds']:.1f} s ({s['steps_per_second']:,.0f} steps/s on "
+                 f"{s['device']}, evaluations {s['eval_seconds']:.1f} s more)"]
+    lines += score_lines(s, pool, len(heldout))
     if s["success_rate"] is not None:
         lines.append(f"system objective met in {100 * s['success_rate']:.0f} % of {s['eval_episodes']} evaluation runs")
     used = ", ".join(f"{k}={_shown(v)}" for k, v in s["settings"].items())
-    lines += [f"settings: {used}", f"model: {s['model']} (use --sut ppo:{s['model']})", f"curve: {s['curve']}",
+    trust = " --trust-model" if args.trainer == "sb3" else ""  # an SB3 zip is unpickled when loaded
+    lines += [f"settings: {used}", f"model: {s['model']} (use --sut ppo:{s['model']}{trust})", f"curve: {s['curve']}",
               f"settings and curve data: {Path(s['model']).with_suffix('.json')}"]
-    if s["log_dir"] is not None:
+    if s.get("log_dir") is not None:
         lines.append(f"logs: {s['log_dir']} (progress.csv; tensorboard --logdir {args.log_dir})")
     sys.stdout.write("\n".join(lines) + "\n")
     return EXIT_OK
+
+
+def score_lines(s: dict[str, Any], pool: dict[str, Any], n_heldout: int) -> list[str]:
+    """The greedy scores of a training summary, each beside its tests' random floor: ``greedy
+    on 32 held-out tests: system objective met 46.9 % (random: 21.9 %), ...``."""
+    lines = []
+    for split, what in (("train", f"the {pool['count']} {pool['split']} tests" if pool else "the env's tests"),
+                        ("heldout", f"{n_heldout} held-out tests")):
+        if split in s["final"]:
+            r = s["final"][split]
+            floor = s.get("floor", {}).get(split)
+            beside = "" if floor is None else f" (random: {100 * floor:.1f} %, {FLOOR_RUNS} runs per test)"
+            lines.append(f"greedy on {what}: system objective met {100 * r['met']:.1f} %{beside}, test objective realized "
+                         f"{100 * r['realized']:.1f} %, {r['restrictions']:.1f} restrictions per run")
+    return lines
 
 
 COMMAND = Command("train", "train a PPO system under test against a synthesized test", add_arguments, run)

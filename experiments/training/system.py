@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Sequence
 from contextlib import AbstractContextManager, nullcontext
 from functools import partial
 from pathlib import Path
@@ -132,22 +133,29 @@ def plot_curve(points: list[EpisodeEnd], path: Path, title: str) -> None:
 
 
 def train(env_id: str, steps: int, out: str | Path, seed: int = 0, progress_bar: bool = True,
-          eval_episodes: int = 100, **overrides: Any) -> dict[str, Any]:
+          eval_episodes: int = 100, env_kwargs: dict[str, Any] | None = None, heldout: Sequence[Any] = (),
+          **overrides: Any) -> dict[str, Any]:
     """The ``sb3`` trainer (``flowtest train --trainer sb3``): train MaskablePPO (or
-    RecurrentPPO) on ``env_id`` for ``steps`` time steps (rounded up to whole rollouts of
-    ``n_envs x n_steps``); save model, curve, summary. ``overrides`` replace entries of
+    RecurrentPPO) on ``env_id`` (``env_kwargs``: e.g. a pool's ``pool``, ``split``, ``count``;
+    a standard pool id loads its shipped tests) for ``steps`` time steps (rounded up to whole
+    rollouts of ``n_envs x n_steps``); save model, curve, summary. On a pool the greedy
+    policy then plays its train tests and the ``heldout`` games, all at once, beside the
+    random floor of each (``final``, ``floor``). ``overrides`` replace entries of
     :data:`DEFAULTS`. The native trainer's entry point is :func:`train_native`.
 
     Example::
 
-        s = train("FlowTest-Maze2-v0", 50_000, "maskable-maze2.zip", algo="maskable-ppo")
-        s["success_rate"]    # single-env evaluation runs (greedy) that met the system objective
+        s = train("FlowTest-RandomGrid-v0", 50_000, "maskable.zip",
+                  env_kwargs={"pool": "reachability1/5x5-v2", "split": "train", "count": 128},
+                  heldout=heldout_games("reachability1/5x5-v2", 32))
+        s["final"]["heldout"]["met"], s["floor"]["heldout"]    # greedy met, random's met
 
     Returns
     -------
     dict
-        ``env``, ``steps`` (taken), ``seed``, ``seconds`` (training wall time), ``success_rate``
-        (over ``eval_episodes`` evaluation runs, ``None`` if 0), ``model``, ``curve``.
+        ``env``, ``env_options``, ``steps`` (taken), ``seed``, ``seconds`` (training wall time),
+        ``final`` and ``floor`` (on a pool), ``success_rate`` (over ``eval_episodes`` evaluation
+        runs, ``None`` if 0), ``model``, ``curve``.
     """
     require_rl()
     if steps < 1:
@@ -156,7 +164,7 @@ def train(env_id: str, steps: int, out: str | Path, seed: int = 0, progress_bar:
     check_settings(settings)
     out = Path(out)
     model_path = out if out.suffix == ".zip" else out.with_suffix(".zip")
-    env = make_training_vec_env(env_id, seed, settings)
+    env = make_training_vec_env(env_id, seed, settings, env_kwargs)
     model = make_model(env, settings, seed)
     curve = EpisodeCurve()
     seconds = learn(model, steps, curve, progress_bar)
@@ -165,10 +173,19 @@ def train(env_id: str, steps: int, out: str | Path, seed: int = 0, progress_bar:
     png = model_path.with_suffix(".png")
     algo = "RecurrentPPO" if settings["algo"] == "recurrent-ppo" else "MaskablePPO"
     write_atomically(png, lambda tmp: plot_curve(curve.points, tmp, f"{algo} on {env_id} (seed {seed})"))
-    rate = success_rate(model, env_id, eval_episodes) if eval_episodes else None
+    rate = success_rate(model, env_id, eval_episodes, env_kwargs=env_kwargs) if eval_episodes else None
+    final: dict[str, Any] = {}
+    if env_kwargs and "pool" in env_kwargs:
+        from agents.ppo import ModelBatchPolicy, model_where
+
+        games = {"train": pool_games(env_kwargs), "heldout": list(heldout)}
+        where = model_where(model, games["train"], settings["memory"])
+        final = {name: greedy_rates(ModelBatchPolicy(model, where, True), g) for name, g in games.items() if g}
     summary = {
-        "env": env_id, "steps": int(model.num_timesteps), "seed": seed, "seconds": round(seconds, 2), "success_rate": rate,
-        "eval_episodes": eval_episodes, "settings": settings, "env_options": env_options(settings),
+        "trainer": "sb3", "env": env_id, "steps": int(model.num_timesteps), "seed": seed, "seconds": round(seconds, 2),
+        "success_rate": rate, "eval_episodes": eval_episodes, "settings": settings,
+        "env_options": {**(env_kwargs or {}), **env_options(settings)}, "final": final,
+        "floor": pool_floors(env_kwargs, heldout) if final else {},
         "model": str(model_path), "curve": str(png),
         "episodes": len(curve.points),
         "points": [[p.step, p.met, round(p.ret, 4)] for p in curve.points],
@@ -207,6 +224,51 @@ def plot_native_curve(rows: list[dict[str, Any]], path: Path, title: str) -> Non
     _save_curve(fig, a1, a2, title, path)
 
 
+FLOOR_RUNS = 8
+"""Random runs per test of the floor printed beside a trained policy's score (the
+benchmark's ``--runs``)."""
+
+
+def pool_games(env_kwargs: dict[str, Any], progress: bool = False) -> list[Any]:
+    """The tests a pool's env trains on (its ``pool``, ``split`` and ``count`` options) as games."""
+    from flowtest_env.game import TestGame
+    from flowtest_env.pools import load_pool
+
+    tests = load_pool(env_kwargs["pool"], env_kwargs.get("split", "train"), int(env_kwargs.get("count", 8)), progress=progress)
+    return [TestGame(a) for a in tests]
+
+
+def greedy_rates(policy: Any, games: Sequence[Any]) -> dict[str, float]:
+    """A batched policy playing every test of ``games`` once, all at once
+    (:func:`flowtest_env.scoring.play_batch`): the share met, met and realized, and the mean
+    restrictions per run (the native trainer's evaluation, :func:`agents.native.evaluation.met_rate`)."""
+    from flowtest_env.scoring import play_batch
+
+    v = {k: a[0] for k, a in play_batch(policy, games, 1, 0).items()}
+    met = v["system_objective"] == "met"
+    return {"met": float(met.mean()), "realized": float((met & v["test_objective_realized"]).mean()),
+            "restrictions": float(v["restrictions"].mean())}
+
+
+def random_floor(games: Sequence[Any], runs: int = FLOOR_RUNS) -> float:
+    """The random floor of ``games``: the share of ``runs`` seeded random runs per test that
+    meet the system objective (the benchmark protocol's floor, :func:`flowtest_env.scoring.random_policy`)."""
+    from flowtest_env.scoring import play_batch, random_policy
+
+    return float(np.mean(play_batch(random_policy(), games, runs, 0)["system_objective"] == "met"))
+
+
+def pool_floors(env_kwargs: dict[str, Any] | None, heldout: Sequence[Any]) -> dict[str, float]:
+    """The random floors of a pool's train tests (``env_kwargs``) and of the held-out games,
+    printed beside the trained policy's greedy met; ``{}`` without a pool."""
+    if not env_kwargs or "pool" not in env_kwargs:
+        return {}
+    floors = {"train": random_floor(pool_games(env_kwargs))}
+    if heldout:
+        floors["heldout"] = random_floor(heldout)
+    return floors
+
+
 def heldout_games(pool: str, count: int, progress: bool = False) -> list[Any]:
     """The first ``count`` tests of ``pool``'s held-out ``test`` split as games
     (:func:`flowtest_env.pools.load_pool`): what :func:`train_native` evaluates on besides
@@ -239,7 +301,8 @@ def train_native(env_id: str, steps: int, out: str | Path, seed: int = 0, progre
     dict
         ``trainer``, ``env``, ``env_options``, ``steps``, ``seed``, ``seconds`` (training,
         evaluations excluded), ``steps_per_second``, ``final`` and ``evaluations`` (greedy met,
-        realized and restrictions on the train and held-out tests), ``success_rate`` (over
+        realized and restrictions on the train and held-out tests), ``floor`` (on a pool: the
+        random floor's met on the same train and held-out tests), ``success_rate`` (over
         ``eval_episodes`` single-env runs, ``None`` if 0), ``settings``, ``model``, ``curve``,
         ``log_dir`` (the run's log folder, or ``None``).
     """
@@ -290,7 +353,7 @@ def _train_native_run(args: Any, settings: dict[str, Any], env_id: str, env_kwar
                                                             "shaping": settings["shaping"], "obs_kind": settings["obs_kind"]},
         "steps": result.steps, "seed": seed, "seconds": round(result.seconds, 2),
         "eval_seconds": round(result.eval_seconds, 2), "steps_per_second": round(result.steps_per_second, 1),
-        "device": str(result.settings["trained_on"]), "final": result.final,
+        "device": str(result.settings["trained_on"]), "final": result.final, "floor": pool_floors(env_kwargs, heldout),
         "evaluations": [[step, rates] for step, rates in result.evaluations],
         "success_rate": rate, "eval_episodes": eval_episodes, "settings": settings,
         "native_args": result.settings["training"], "model": str(model_path), "curve": str(png),

@@ -198,7 +198,7 @@ def test_flowtest_train_native_writes_every_setting_logs_and_a_safe_checkpoint(
 @pytest.mark.parametrize("argv, says", [
     (["--lstm-hidden-size", "8"], "a setting of --trainer sb3"),
     (["--trainer", "sb3", "--device", "cpu"], "a setting of the native trainer"),
-    (["--trainer", "sb3", "--pool", "reachability1/5x5"], "go with the native trainer"),
+    (["--trainer", "sb3", "--log-dir", "logs"], "goes with the native trainer"),
     (["--algo", "maskable-ppo", "--trainer", "sb3", "--gru-hidden-size", "4"], "a setting of the native trainer"),
     (["--device", "tpu"], "device"),
     (["--count", "4"], "go with --pool"),

@@ -251,14 +251,16 @@ def test_ctrl_c_during_training(tmp_path: Path) -> None:
 
 def test_a_python_policy_is_scored_by_the_protocol(tmp_path: Path, capsys: pytest.CaptureFixture[str],
                                                    monkeypatch: pytest.MonkeyPatch) -> None:
-    """``--sut python:MODULE:NAME``: an object marked ``batched = True`` plays every test
-    in one batch, a planner function through the single env; both get the protocol's numbers
-    (met, normalized with the split's floor and ceiling)."""
+    """``--sut python:MODULE:NAME``: a batched policy (its loader marked ``batched = True``,
+    agents.batched) plays every test in one batch, a planner function through the single env;
+    both get the protocol's numbers (met, normalized with the split's floor and ceiling)."""
     (tmp_path / "mine.py").write_text(
         "import numpy as np\n\n"
-        "def first_legal(observations, masks):\n"
-        "    return np.argmax(masks, axis=1)\n\n"
-        "first_legal.batched = True\n\n"
+        "class FirstLegal:\n"
+        "    batched = True\n\n"
+        "    def act(self, observations, masks, deterministic):\n"
+        "        return np.argmax(masks, axis=1)\n\n"
+        "first_legal = FirstLegal\n\n"
         "def planner(observation, mask):\n"
         "    return int(np.argmax(mask))\n"
     )
@@ -273,7 +275,12 @@ def test_a_python_policy_is_scored_by_the_protocol(tmp_path: Path, capsys: pytes
                                                    "python:mine:planner"}
     for split in ("train", "validation", "test"):  # the same deterministic choice, batched or one env at a time
         assert batched[split]["greedy"]["met"]["mean"] == single[split]["greedy"]["met"]["mean"]
-        assert batched[split]["greedy"]["runs_per_test"] == 1 and batched[split]["sampled"] is None
+        assert batched[split]["greedy"]["runs_per_test"] == 1
+        if split == "test":  # sampled on the held-out tests, through the same act: a fixed rule samples itself
+            assert batched[split]["sampled"]["runs_per_test"] == 8
+            assert batched[split]["sampled"]["met"]["mean"] == batched[split]["greedy"]["met"]["mean"]
+        else:
+            assert batched[split]["sampled"] is None
         n = batched[split]["greedy"]["normalized"]
         scale = doc["scale"][split]
         want = (batched[split]["met"]["mean"] - scale["floor"]) / (scale["ceiling"] - scale["floor"])
