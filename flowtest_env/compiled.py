@@ -557,6 +557,79 @@ class CompiledPool:
         return t, int(z - self.offset[t])
 
 
+COUNT_SHIFT = 32
+"""Bits of :attr:`StepTables.counts` below the blocked-attempt count (the restrictions count's)."""
+
+
+@dataclass(frozen=True)
+class StepTables:
+    """What one batch step of a pool reads, fused so that each output of the step is one
+    gather by ``flat = z * n_actions + action`` (or by ``z``) over the whole batch
+    (:class:`~flowtest_env.vector.PoolVectorEnv`; :func:`step_tables` builds them).
+
+    Attributes
+    ----------
+    next_z
+        ``intp[n_z * n_actions]``: the next configuration (:attr:`CompiledPool.next_z`,
+        in the index type gathers take without a conversion).
+    reward
+        ``float64[n_z * n_actions]``: the step's reward (shaping included).
+    ends
+        ``bool[n_z * n_actions]``: the step ends the run (``terminated``): the outcome of
+        the next configuration is met or violated.
+    counts
+        ``int64[n_z * n_actions]``: what the step adds to the verdict's counters, both in
+        one word: ``restricted[z] + (refused[flat] << COUNT_SHIFT)`` (one gather and one
+        add a step for the restrictions and the blocked attempts; exact while an episode
+        has fewer than ``2**32`` steps).
+    mask_words
+        ``uint64[n_z, W]``: each configuration's ``int8`` legal-action mask padded with
+        zeros to ``8 * W`` columns and viewed as 8-byte words (a gather of whole words
+        is several times faster than one of 5-byte rows).
+    obs_row
+        ``intp[n_z]`` the observation row of each configuration, or ``None`` where it is
+        the configuration itself (every test without a test agent), which spares a gather.
+    """
+
+    next_z: np.ndarray
+    reward: np.ndarray
+    ends: np.ndarray
+    counts: np.ndarray
+    mask_words: np.ndarray
+    obs_row: np.ndarray | None
+
+    def mask(self, z: np.ndarray, n_actions: int) -> np.ndarray:
+        """``int8[len(z), n_actions]``: the legal-action masks of configurations ``z``,
+        fresh: the first ``n_actions`` columns of the gathered padded rows (a view with a
+        row stride of ``8 * W`` bytes, contiguous when ``n_actions`` is a multiple of 8:
+        making it contiguous would cost more than the gather)."""
+        words = np.take(self.mask_words, z, axis=0) if self.mask_words.shape[1] > 1 else self.mask_words.ravel().take(z)
+        rows: np.ndarray = words.view(np.int8).reshape(z.shape[0], -1)
+        return rows if rows.shape[1] == n_actions else rows[:, :n_actions]
+
+    def rows(self, z: np.ndarray) -> np.ndarray:
+        """The observation rows of configurations ``z``."""
+        return z if self.obs_row is None else self.obs_row.take(z)
+
+
+def step_tables(pool: CompiledPool, reward: np.ndarray) -> StepTables:
+    """The :class:`StepTables` of ``pool`` with the reward table ``reward``
+    (``float64[n_z * n_actions]``, :meth:`CompiledPool.rewards`, shaped or not)."""
+    here = np.repeat(np.arange(pool.n_z, dtype=np.intp), pool.n_actions)
+    width = -(-pool.n_actions // 8) * 8
+    mask = np.zeros((pool.n_z, width), dtype=np.int8)
+    mask[:, : pool.n_actions] = pool.mask
+    identity = bool(np.array_equal(pool.obs_row, np.arange(pool.n_z)))
+    return StepTables(
+        next_z=pool.next_z.astype(np.intp),
+        reward=np.ascontiguousarray(reward, dtype=np.float64),
+        ends=pool.outcome[pool.next_z] != 0,
+        counts=pool.restricted[here].astype(np.int64) + (pool.refused.astype(np.int64) << COUNT_SHIFT),
+        mask_words=mask.view(np.uint64),
+        obs_row=None if identity else pool.obs_row.astype(np.intp),
+    )
+
+
 def potentials(pool: CompiledPool, games: list[TestGame], potential: Callable[[TestGame, RunState], float]) -> np.ndarray:
     """``float64[n_z]``: ``potential(game, run)`` of every configuration of ``pool``.
 

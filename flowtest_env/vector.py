@@ -12,7 +12,12 @@ The ``vector_entry_point`` of every FlowTest ID::
 
 Each test is compiled once into flat tables (:mod:`flowtest_env.compiled`); a step is
 then a handful of array gathers over the whole batch, the same for every env whatever
-test it plays. The trajectories are exactly those of a ``SyncVectorEnv`` of the single
+test it plays: one gather per output over tables fused by (configuration, action)
+(:class:`~flowtest_env.compiled.StepTables`: next configuration, reward, end, the
+verdict's counters), the observation one gather of precomputed rows, the mask one gather
+of 8-byte words (so ``infos["action_mask"]`` is a view of rows padded to 8 bytes, not
+contiguous unless the action count is a multiple of 8), the env's own state updated in
+place. The trajectories are exactly those of a ``SyncVectorEnv`` of the single
 env built with the same options and the same autoreset mode (observations, rewards,
 terminated, truncated and infos: ``system_state``, ``action_mask``, and ``verdict`` with
 its fields at the end of an episode).
@@ -67,7 +72,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from .bulk import gc_paused
-from .compiled import OUTCOMES, CompiledPool, compile_pool, potentials
+from .compiled import COUNT_SHIFT, OUTCOMES, CompiledPool, StepTables, compile_pool, potentials, step_tables
 from .config import EnvConfig, config_from, with_option_signature
 from .draws import draw_tests, key_of_seed
 from .encoding import Encoder, ObservationLayout, Segment, make_encoder
@@ -164,17 +169,21 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         self.single_action_space = spaces.Discrete(p.n_actions)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
-        self._reward = p.rewards(config.step_cost, config.restricted_penalty, config.goal_reward, config.violation_penalty)
+        if self.max_steps >= 2**COUNT_SHIFT:
+            raise ValueError(f"max_steps must be below 2**{COUNT_SHIFT} in the vector env (its verdict counters are 32-bit), not {self.max_steps}")
+        reward = p.rewards(config.step_cost, config.restricted_penalty, config.goal_reward, config.violation_penalty)
         if config.shaping > 0:  # potential-based shaping folded into the reward table
-            self._reward = shaped_rewards(p, self._reward, potentials(p, self.games, DistancePotential(config.shaping)), config.shaping_gamma)
+            reward = shaped_rewards(p, reward, potentials(p, self.games, DistancePotential(config.shaping)), config.shaping_gamma)
+        self._tables: StepTables = step_tables(p, reward)
         self._outcome_names = np.array(OUTCOMES, dtype=object)
         self._state_index = np.concatenate([t.system for t in p.tests]).astype(np.int64)  # numeric_infos' system_state
         self._all = np.ones(self.num_envs, dtype=bool)
-        self._z = np.zeros(self.num_envs, dtype=np.int64)
+        self._z = np.zeros(self.num_envs, dtype=np.intp)
+        self._flat = np.zeros(self.num_envs, dtype=np.intp)  # z * n_actions + action, written in place each step
+        self._added = np.zeros(self.num_envs, dtype=np.int64)  # the step's counts, written in place
         self._test = np.zeros(self.num_envs, dtype=np.int64)
         self._steps = np.zeros(self.num_envs, dtype=np.int64)
-        self._restrictions = np.zeros(self.num_envs, dtype=np.int64)
-        self._blocked = np.zeros(self.num_envs, dtype=np.int64)
+        self._counts = np.zeros(self.num_envs, dtype=np.int64)  # restrictions + (blocked attempts << COUNT_SHIFT)
         self._seen = np.zeros((self.num_envs, mem_size), dtype=np.float32) if self._mem is not None else None
         self._mem_at = int(np.prod(p.obs_shape))
         # accumulative setting: the shown-restriction entries of the states visited under the current history
@@ -232,6 +241,8 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
                 raise ValueError(f"the test chooser must return one test index in [0, {len(self.games)}) for each of the "
                                  f"{envs.size} envs starting an episode, not {tests!r}")
             return tests.astype(np.int64)
+        if len(self.games) == 1:  # what the draw gives (no key to mix)
+            return np.zeros(envs.size, dtype=np.int64)
         if self.assignment == "fixed":
             return envs % len(self.games)
         return draw_tests(self._keys[envs], self._episode[envs], len(self.games))
@@ -243,14 +254,13 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         z = self.pool.initial[tests]
         self._z[envs] = z
         self._steps[envs] = 0
-        self._restrictions[envs] = 0
-        self._blocked[envs] = 0
+        self._counts[envs] = 0
         self._done[envs] = False
 
     def _observe(self, fresh: np.ndarray | None = None) -> np.ndarray:
         """The batch observation now (``fresh``: envs whose episode just started, their
         memory restarts)."""
-        obs: np.ndarray = np.take(self._obs_table, self.pool.obs_row[self._z], axis=0)  # faster than fancy indexing
+        obs: np.ndarray = np.take(self._obs_table, self._tables.rows(self._z), axis=0)  # one gather, faster than fancy indexing
         if self._shown is not None:
             self._accumulate(obs, None, fresh)
         if self._seen is None:
@@ -263,7 +273,7 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
 
     def _observe_envs(self, envs: np.ndarray) -> np.ndarray:
         """The observations of ``envs`` alone, their episodes just started."""
-        obs: np.ndarray = np.take(self._obs_table, self.pool.obs_row[self._z[envs]], axis=0)
+        obs: np.ndarray = np.take(self._obs_table, self._tables.rows(self._z[envs]), axis=0)
         if self._shown is not None:
             self._accumulate(obs, envs, np.arange(envs.size))
         if self._seen is None:
@@ -371,17 +381,18 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
                 "reset(options={'reset_mask': mask})"
             )
         a = self._check(actions)
-        p = self.pool
-        z = self._z
-        flat = z * p.n_actions + a
-        z2 = p.next_z[flat]
-        reward = self._reward[flat]
+        tab, flat = self._tables, self._flat
+        np.multiply(self._z, self.pool.n_actions, out=flat)
+        flat += a
+        # every gather below writes into a fresh output or a buffer of the env ("clip": the
+        # indices are in range by construction, and take buffers an out= array in "raise" mode)
+        tab.next_z.take(flat, out=self._z, mode="clip")
+        reward = tab.reward.take(flat, mode="clip")
+        terminated = tab.ends.take(flat, mode="clip")
+        self._counts += tab.counts.take(flat, out=self._added, mode="clip")
         self._steps += 1
-        self._restrictions += p.restricted[z]
-        self._blocked += p.refused[flat]
-        terminated = p.outcome[z2] != 0
-        truncated = ~terminated & (self._steps >= self.max_steps)
-        self._z = z2
+        truncated = np.greater_equal(self._steps, self.max_steps)
+        np.greater(truncated, terminated, out=truncated)  # and not terminated
         fresh: np.ndarray | None = None
         if mode == AutoresetMode.NEXT_STEP and self._done.any():
             fresh = np.flatnonzero(self._done)
@@ -422,11 +433,11 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
             raise gym.error.InvalidAction(
                 f"actions must be integers of {self.single_action_space}, not {a.dtype} values (booleans and floats are refused)"
             )
-        a = a.astype(np.int64, copy=False)
-        if a.size and (int(a.min()) < 0 or int(a.max()) >= self.pool.n_actions):
+        # one pass: a negative action, seen as unsigned, is as out of range as a large one
+        if a.size and int(a.view(a.dtype.str.replace("i", "u")).max()) >= self.pool.n_actions:
             bad = int(np.flatnonzero((a < 0) | (a >= self.pool.n_actions))[0])
             raise gym.error.InvalidAction(f"env {bad}: action {int(a[bad])} is outside {self.single_action_space}")
-        return a
+        return a if a.dtype.itemsize < 8 or a.dtype.kind == "i" else a.astype(np.intp)  # added to intp in place
 
     def _infos(self, z: np.ndarray, only: np.ndarray | None = None) -> dict[str, Any]:
         """``system_state`` (an object array of the single env's values, gathered from one
@@ -434,40 +445,52 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         those of the envs of ``only`` (``None``/zeros elsewhere, as ``SyncVectorEnv`` lays
         out the infos of some envs)."""
         states = self._state_index if self.config.numeric_infos else self.pool.system_state
+        mask = self._tables.mask(z, self.pool.n_actions)
         if only is None:
             return {
-                "system_state": states[z],
+                "system_state": states.take(z),
                 "_system_state": self._all.copy(),
-                "action_mask": np.take(self.pool.mask, z, axis=0),
+                "action_mask": mask,
                 "_action_mask": self._all.copy(),
             }
+        mask[~only] = 0
+        blank: Any = states.dtype.type(0) if self.config.numeric_infos else None
         return {
-            "system_state": np.where(only, states[z], states.dtype.type(0) if self.config.numeric_infos else None),
+            "system_state": np.where(only, states.take(z), blank),
             "_system_state": only.copy(),
-            "action_mask": np.where(only[:, None], np.take(self.pool.mask, z, axis=0), np.int8(0)),
+            "action_mask": mask,
             "_action_mask": only.copy(),
         }
 
     def _verdict(self, z: np.ndarray, ended: np.ndarray) -> dict[str, Any]:
         """The verdict arrays of the envs that ended (zeros/``None`` elsewhere, as a
         ``SyncVectorEnv`` lays out its infos)."""
-        if self.config.numeric_infos:
-            names: np.ndarray = np.where(ended, self.pool.outcome[z].astype(np.int64), np.int64(0))
-        else:
-            names = np.asarray(np.where(ended, self._outcome_names[self.pool.outcome[z]], None))
-        zero = np.int64(0)
+        idx = np.flatnonzero(ended)  # usually few: the values are scattered into zeros
+        zi, counts = z.take(idx), self._counts.take(idx)
+
+        def scattered(values: np.ndarray, dtype: Any) -> np.ndarray:
+            out = np.zeros(self.num_envs, dtype=dtype) if dtype is not object else np.empty(self.num_envs, dtype=object)  # None-filled
+            out[idx] = values
+            return out
+
+        codes = self.pool.outcome.take(zi)
         return {
-            "system_objective": names,
+            "system_objective": scattered(codes, np.int64) if self.config.numeric_infos else scattered(self._outcome_names.take(codes), object),
             "_system_objective": ended.copy(),
-            "test_objective_realized": self.pool.test_realized[z] & ended,
+            "test_objective_realized": scattered(self.pool.test_realized.take(zi), bool),
             "_test_objective_realized": ended.copy(),
-            "restrictions": np.where(ended, self._restrictions, zero),
+            "restrictions": scattered(counts & ((1 << COUNT_SHIFT) - 1), np.int64),
             "_restrictions": ended.copy(),
-            "blocked_attempts": np.where(ended, self._blocked, zero),
+            "blocked_attempts": scattered(counts >> COUNT_SHIFT, np.int64),
             "_blocked_attempts": ended.copy(),
-            "steps": np.where(ended, self._steps, zero),
+            "steps": scattered(self._steps.take(idx), np.int64),
             "_steps": ended.copy(),
         }
+
+    def _counters(self) -> tuple[np.ndarray, np.ndarray]:
+        """``int64[num_envs]`` each: the restrictions and the blocked attempts of every
+        env's episode so far (unpacked from the one counter a step adds to)."""
+        return self._counts & ((1 << COUNT_SHIFT) - 1), self._counts >> COUNT_SHIFT
 
     # ------------------------------------------------------------------ inspection
 
@@ -507,11 +530,12 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         if not self._started:
             raise gym.error.ResetNeeded("call reset() before verdicts()")
         z = self._z
+        restrictions, blocked = self._counters()
         return {
             "system_objective": self._outcome_names[self.pool.outcome[z]],
-            "test_objective_realized": self.pool.test_realized[z].copy(),
-            "restrictions": self._restrictions.copy(),
-            "blocked_attempts": self._blocked.copy(),
+            "test_objective_realized": self.pool.test_realized[z],
+            "restrictions": restrictions,
+            "blocked_attempts": blocked,
             "steps": self._steps.copy(),
         }
 
@@ -519,7 +543,7 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         """The :class:`~flowtest_env.game.RunState` of env ``i`` now (for pictures)."""
         t, local = self.pool.locate(int(self._z[i]))
         return self.pool.tests[t].run_state(
-            local, int(self._steps[i]), int(self._restrictions[i]), int(self._blocked[i])
+            local, int(self._steps[i]), int(self._counts[i] & ((1 << COUNT_SHIFT) - 1)), int(self._counts[i] >> COUNT_SHIFT)
         )
 
     def render(self) -> tuple[np.ndarray, ...] | None:
@@ -726,7 +750,8 @@ def batch_bytes(num_envs: int, pool: CompiledPool, memory_size: int = 0) -> int:
     per_env = 3 * obs_bytes + 4 * memory_size + 4 * pool.n_actions + 256
     names = ("next_z", "refused", "restricted", "outcome", "test_realized", "mask", "obs_row", "obs", "system_state")
     tables = sum(int(getattr(pool, f).nbytes) for f in names)
-    return tables + 2 * pool.next_z.size * 8 + num_envs * per_env
+    fused = pool.next_z.size * 25 + pool.n_z * 8 * -(-pool.n_actions // 8)  # the step tables (flowtest_env.compiled.StepTables)
+    return tables + fused + num_envs * per_env
 
 
 def check_batch_memory(num_envs: int, pool: CompiledPool, memory_size: int = 0) -> None:
