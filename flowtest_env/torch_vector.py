@@ -267,12 +267,15 @@ def build_tables(
     assignment: str = "random",
     device: str | torch.device = "cpu",
     reward_dtype: torch.dtype = torch.float32,
+    obs_dtype: Any = None,
 ) -> TorchTables:
     """:class:`TorchTables` of a compiled pool (its ``games`` in pool order) with the
     options of :class:`~flowtest_env.envs.FlowTestEnv`: ``memory_slice`` where the flat
     observation holds the SUT's place (the visited-places memory; ``None``: no memory),
     ``shaping`` (0: off) and ``shaping_gamma``; rewards computed in float64 as the single
-    env does, then cast to ``reward_dtype``.
+    env does, then cast to ``reward_dtype``; ``obs_dtype`` the observation table's dtype
+    (``None``: the pool's; ``numpy.uint8`` for a NumPy env made with ``obs_dtype="uint8"``,
+    whose 0/1 entries it keeps).
 
     Example::
 
@@ -296,7 +299,7 @@ def build_tables(
     reward = pool.rewards(step_cost, restricted_penalty, goal_reward, violation_penalty)
     if shaping > 0:
         reward = shaped_rewards(pool, reward, potentials(pool, list(games), DistancePotential(shaping)), shaping_gamma)
-    obs = pool.obs
+    obs = pool.obs if obs_dtype is None else pool.obs.astype(obs_dtype, copy=False)
     if memory_slice is not None:
         row_bits, n_places = _visited_words(pool.obs, memory_slice)
         bits = row_bits[pool.obs_row]
@@ -859,7 +862,7 @@ def outcome_names(codes: torch.Tensor) -> np.ndarray:
 def tables_of(env: Any, device: str | torch.device = "cpu", reward_dtype: torch.dtype = torch.float32) -> TorchTables:
     """:class:`TorchTables` of a NumPy :class:`~flowtest_env.vector.PoolVectorEnv`: its
     pool, step budget, reward weights, memory, shaping and assignment (its
-    :class:`~flowtest_env.config.EnvConfig`)."""
+    :class:`~flowtest_env.config.EnvConfig`) and its observation dtype."""
     env = getattr(env, "unwrapped", env)
     cfg = env.config
     where = None
@@ -869,6 +872,7 @@ def tables_of(env: Any, device: str | torch.device = "cpu", reward_dtype: torch.
         env.pool, env.games, max_steps=env.max_steps, step_cost=cfg.step_cost, restricted_penalty=cfg.restricted_penalty,
         goal_reward=cfg.goal_reward, violation_penalty=cfg.violation_penalty, memory_slice=where, shaping=cfg.shaping,
         shaping_gamma=cfg.shaping_gamma, assignment=env.assignment, device=device, reward_dtype=reward_dtype,
+        obs_dtype=env.single_observation_space.dtype,
     )
 
 

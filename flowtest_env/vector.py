@@ -104,6 +104,16 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         ``i % len(games)`` in every episode.
     autoreset_mode
         ``NEXT_STEP`` (default), ``SAME_STEP`` or ``DISABLED`` (module docstring).
+    obs_dtype
+        ``None`` (default): the observation kind's own dtype (``float32`` for ``flat`` and
+        ``padded``, ``uint8`` for ``grid``). ``"uint8"``: a ``flat`` or ``padded``
+        observation as ``uint8`` ``0``/``1``, the same numbers in a quarter of the bytes
+        (``Box(0, 1, uint8)``; the visited-places memory too), for a consumer that converts
+        it itself (a trainer on a GPU copies a quarter to the device); a step of a large
+        batch gathers and returns a quarter of the memory, about 3x the steps per second
+        of ``float32`` at 16,384 envs (docs/benchmarks/environments.md). Only where every
+        entry is 0 or 1: a test with fuel, whose observation holds the fuel fraction, is
+        refused (``ValueError``). A vector-env option: the single env has ``float32``.
     config, options
         The env options: an :class:`~flowtest_env.config.EnvConfig`, or its fields as
         keyword arguments (``max_steps``, ``obs_kind``, ``memory``, ``shaping``, ...;
@@ -129,10 +139,12 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         assignment: str = "random",
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         config: EnvConfig | None = None,
+        obs_dtype: str | None = None,
         **options: Any,
     ) -> None:
         num_envs = positive_int("num_envs", num_envs)
         one_of("assignment", assignment, ("random", "fixed"))
+        one_of("obs_dtype", obs_dtype, (None, "uint8"))
         self.autoreset_mode = autoreset_mode_of(autoreset_mode)
         config = config_from(type(self).__name__, config, options)
         one_of("render_mode", config.render_mode, (None, *self.metadata["render_modes"]))
@@ -160,12 +172,13 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         self.tile_size = config.tile_size
         mem_size = 0 if self._mem is None else self._mem.stop - self._mem.start
         check_batch_memory(num_envs, p, mem_size)
+        rows = compact_rows(p.obs, self.games) if obs_dtype == "uint8" else p.obs
         if self._mem is not None:
             shape = (int(np.prod(p.obs_shape)) + mem_size,)
-            self.single_observation_space = spaces.Box(0.0, 1.0, shape=shape, dtype=np.float32)
+            self.single_observation_space = spaces.Box(0, 1, shape=shape, dtype=rows.dtype)
         else:
-            high = 1.0 if p.obs.dtype == np.float32 else 255
-            self.single_observation_space = spaces.Box(0, high, shape=p.obs_shape, dtype=p.obs.dtype)
+            high = 255 if self.obs_kind == "grid" else 1
+            self.single_observation_space = spaces.Box(0, high, shape=p.obs_shape, dtype=rows.dtype)
         self.single_action_space = spaces.Discrete(p.n_actions)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
@@ -184,16 +197,16 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         self._test = np.zeros(self.num_envs, dtype=np.int64)
         self._steps = np.zeros(self.num_envs, dtype=np.int64)
         self._counts = np.zeros(self.num_envs, dtype=np.int64)  # restrictions + (blocked attempts << COUNT_SHIFT)
-        self._seen = np.zeros((self.num_envs, mem_size), dtype=np.float32) if self._mem is not None else None
+        self._seen = np.zeros((self.num_envs, mem_size), dtype=rows.dtype) if self._mem is not None else None
         self._mem_at = int(np.prod(p.obs_shape))
         # accumulative setting: the shown-restriction entries of the states visited under the current history
         self._shown: np.ndarray | slice | None = shared_shown_entries(self.encoders) if accumulative else None
         self._history = np.concatenate([t.history for t in p.tests]).astype(np.int64)
         n_shown = 0 if self._shown is None else int(np.zeros(self._mem_at, dtype=np.int8)[self._shown].size)
-        self._shown_now = np.zeros((num_envs, n_shown), dtype=p.obs.dtype)
+        self._shown_now = np.zeros((num_envs, n_shown), dtype=rows.dtype)
         self._shown_h = np.zeros(num_envs, dtype=np.int64)
         # the observation rows, with room for the memory (filled per step) when there is one
-        self._obs_table = p.obs if self._mem is None else np.concatenate([p.obs, np.zeros((p.obs.shape[0], mem_size), np.float32)], axis=1)
+        self._obs_table = rows if self._mem is None else np.concatenate([rows, np.zeros((rows.shape[0], mem_size), rows.dtype)], axis=1)
         self._done = np.zeros(self.num_envs, dtype=bool)  # episodes ended and not reset yet
         self._keys = np.zeros(self.num_envs, dtype=np.uint64)  # the test draws' keys (flowtest_env.draws)
         self._episode = np.zeros(self.num_envs, dtype=np.int64)  # each env's episodes since its key
@@ -570,7 +583,7 @@ class FlowTestVectorEnv(PoolVectorEnv):
     runs of one test (``test``: anything :func:`flowtest_env.sources.load_test` takes;
     ``problem`` is its older name); the options are those of
     :class:`~flowtest_env.envs.FlowTestEnv` (:class:`~flowtest_env.config.EnvConfig`),
-    plus ``autoreset_mode``.
+    plus ``autoreset_mode`` and ``obs_dtype`` (:class:`PoolVectorEnv`).
 
     Example::
 
@@ -579,6 +592,8 @@ class FlowTestVectorEnv(PoolVectorEnv):
         ...                     autoreset_mode="SAME_STEP", memory="visited", shaping=10.0)
         >>> envs.autoreset_mode.name
         'SAME_STEP'
+        >>> gym.make_vec("FlowTest-Maze2-v0", num_envs=8, vectorization_mode="vector_entry_point", obs_dtype="uint8").single_observation_space
+        Box(0, 1, (306,), uint8)
     """
 
     def __init__(
@@ -588,6 +603,7 @@ class FlowTestVectorEnv(PoolVectorEnv):
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         problem: Any = None,
         config: EnvConfig | None = None,
+        obs_dtype: str | None = None,
         **options: Any,
     ) -> None:
         if problem is not None:
@@ -595,7 +611,7 @@ class FlowTestVectorEnv(PoolVectorEnv):
         config = config_from(type(self).__name__, config, options)
         positive_int("num_envs", num_envs)
         game = game_for(test, config.setting)
-        super().__init__(num_envs, [game], autoreset_mode=autoreset_mode, config=config.with_max_steps(default_max_steps(game)))
+        super().__init__(num_envs, [game], autoreset_mode=autoreset_mode, config=config.with_max_steps(default_max_steps(game)), obs_dtype=obs_dtype)
         self.problem = game.artifact.name
 
 
@@ -603,7 +619,7 @@ class FlowTestVectorEnv(PoolVectorEnv):
 class RandomGridVectorEnv(PoolVectorEnv):
     """The vector entry point of ``FlowTest-RandomGrid-v0``: the arguments of
     :class:`~flowtest_env.envs.RandomGridEnv` (checked by the same functions), plus
-    ``autoreset_mode``; each episode draws its test from the pool exactly as the single
+    ``autoreset_mode`` and ``obs_dtype`` (:class:`PoolVectorEnv`); each episode draws its test from the pool exactly as the single
     env does."""
 
     def __init__(
@@ -620,6 +636,7 @@ class RandomGridVectorEnv(PoolVectorEnv):
         world: str = "empty",
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         config: EnvConfig | None = None,
+        obs_dtype: str | None = None,
         **options: Any,
     ) -> None:
         config = config_from(type(self).__name__, config, options)
@@ -627,7 +644,7 @@ class RandomGridVectorEnv(PoolVectorEnv):
         size, family, n, seeds, kind, world = random_grid_pool(size, family, n, seeds, kind, pool, split, count, world)
         tests = random_grid_tests(pool, split, count, size, family, n, seeds, kind, world)
         games = [TestGame(a, config.setting) for a in tests]
-        super().__init__(num_envs, games, autoreset_mode=autoreset_mode, config=config.with_max_steps(4 * size * size))
+        super().__init__(num_envs, games, autoreset_mode=autoreset_mode, config=config.with_max_steps(4 * size * size), obs_dtype=obs_dtype)
         self.problem = f"random-{size}x{size}-{family}{n}" + ("" if world == "empty" else f"-{world}")
 
 
@@ -643,6 +660,26 @@ def shaped_rewards(pool: CompiledPool, reward: np.ndarray, phi: np.ndarray, gamm
     phi_end = np.where(pool.outcome != 0, 0.0, phi)
     here = np.repeat(np.arange(pool.n_z, dtype=np.int64), pool.n_actions)
     out: np.ndarray = reward + (float(gamma) * phi_end[pool.next_z] - phi_end[here])
+    return out
+
+
+def compact_rows(obs: np.ndarray, games: Sequence[TestGame]) -> np.ndarray:
+    """The observation table ``obs`` as ``uint8`` (``obs_dtype="uint8"``): the same
+    numbers where every entry is 0 or 1 (the ``grid`` kind's table, ``uint8`` already, as
+    it is).
+
+    Raises
+    ------
+    ValueError
+        If an entry is neither 0 nor 1 (the fuel fraction of a test with fuel).
+    """
+    if obs.dtype == np.uint8:
+        return obs
+    if not bool(np.all((obs == 0) | (obs == 1))):
+        fuel = [g.artifact.name for g in games if g.ts.kind == "fuel"][:3]
+        raise ValueError("obs_dtype='uint8' needs an observation of 0/1 entries; this pool's holds other values"
+                         + (f" (the fuel fraction of {', '.join(fuel)})" if fuel else "") + ": leave obs_dtype at its default")
+    out: np.ndarray = obs.astype(np.uint8)
     return out
 
 
