@@ -98,7 +98,7 @@ class NativeArgs:
     memory: str = "visited"  # "visited" (places occupied this episode) or "none"
     obs_kind: str = "flat"  # the env's observation: "flat" or "padded"
     shaping: float = 0.0  # env option: potential-based shaping scale (0 = off)
-    env_backend: str = "auto"  # "torch" (flowtest_env.torch_vector, on the device), "numpy" (flowtest_env.vector); "auto": torch
+    env_backend: str = "auto"  # "torch" (flowtest_env.torch_vector, on the device), "numpy" (flowtest_env.vector); "auto": numpy on the CPU, else torch
     seed: int = 0  # seeds the envs, the network and every sample
     device: str = "auto"  # "auto" (cuda when there is one), "cpu", "cuda", "cuda:1", ...
     threads: int = 1  # torch CPU threads (fixed, so a seed gives the same run)
@@ -306,9 +306,9 @@ def make_vec_env(args: NativeArgs) -> tuple[Any, Any, bool]:
     except TypeError as exc:
         raise ValueError(f"{args.env_id}: the vector env does not take these options ({exc})") from None
     device = resolve_device(args.device)
-    if args.env_backend == "torch" or (args.env_backend == "auto" and args.level_sampling != "plr"):
-        from flowtest_env.torch_vector import TorchVectorEnv
+    from flowtest_env.torch_vector import TorchVectorEnv, preferred_backend
 
+    if args.env_backend == "torch" or (args.env_backend == "auto" and args.level_sampling != "plr" and preferred_backend(device) == "torch"):
         return np_env, TorchVectorEnv.from_numpy(np_env, device=device), env_memory
     return np_env, np_env, env_memory
 

@@ -7,7 +7,7 @@ Usage::
     python3 -m venv /tmp/jaxvenv
     /tmp/jaxvenv/bin/pip install jax jaxlib gymnax xminigrid six gymnasium==1.4.0
     .venv/bin/python experiments/lab/bench_jax.py --jax-python /tmp/jaxvenv/bin/python \\
-        [--envs 1024 16384] [--seconds 1.5] [--repeat 5] [--gymnasium] [--out FILE] [--json FILE]
+        [--envs 1024 16384] [--seconds 1.5] [--repeat 5] [--gymnasium] [--before DIR] [--out FILE] [--json FILE]
 
 Every row steps a batch of ``--envs`` envs with uniformly random actions drawn each batch step
 (FlowTest: NumPy's generator in the timed loop; JAX: ``jax.random`` inside the jitted step)
@@ -28,6 +28,10 @@ the step), and counts env steps the same way for every row: batch steps x envs. 
   jitted batch steps whose outputs are returned (as FlowTest's loop is), and one
   ``jax.lax.scan`` over all the run's batch steps (the fused form, every observation summed
   into the carry so that none is optimised away).
+
+``--before DIR`` adds the FlowTest rows of an older checkout (``git worktree add DIR <commit>``
+or ``git archive <commit> | tar -x -C DIR``), run by this Python with ``DIR`` first on its
+path, so that the speed-up is measured in the same run too.
 
 The JAX rows run in a worker process of ``--jax-python`` (this file, ``--worker``), started
 once and compiled before any timing (each row is warmed up and calibrated first); the rows
@@ -173,9 +177,9 @@ def _whole(seconds: float) -> int:
 
 
 def worker() -> int:
-    """The JAX side: JSON requests on stdin, one JSON answer a line on stdout."""
-    jax = importlib.import_module("jax")
-
+    """A worker: the JAX rows (in the throwaway venv) or the FlowTest rows of the checkout on
+    its ``PYTHONPATH`` (``--before``); JSON requests on stdin, one JSON answer a line on
+    stdout."""
     rows: dict[tuple[str, int], tuple[Runner, int]] = {}
     for line in sys.stdin:
         req = json.loads(line)
@@ -184,11 +188,11 @@ def worker() -> int:
             if op == "versions":
                 from importlib import metadata
 
-                ans: dict[str, Any] = {"jax": jax.__version__, "gymnax": metadata.version("gymnax"),
-                                       "xminigrid": metadata.version("xminigrid"), "gymnasium": metadata.version("gymnasium"),
-                                       "devices": [str(d) for d in jax.devices()]}
+                ans: dict[str, Any] = {p: metadata.version(p) for p in req["packages"]}
+                if req.get("flowtest"):
+                    ans["flowtest_env"] = str(Path(importlib.import_module("flowtest_env").__file__ or "").parent)
             elif op == "prepare":
-                run, obs_kind = _jax_rows(name, n)
+                run, obs_kind = _jax_rows(name, n) if name in JAX_ROWS else _flowtest_row(name, n)
                 steps = _calibrate(run, float(req["seconds"]))
                 run(steps)  # the scan form compiles for this length here
                 rows[(name, n)] = (run, steps)
@@ -207,13 +211,16 @@ def worker() -> int:
     return 0
 
 
-class JaxWorker:
-    """The worker process of the throwaway venv's Python."""
+class Worker:
+    """A worker process (:func:`worker`): ``python`` running this file, with ``path`` first
+    on its ``PYTHONPATH`` when given (a checkout to measure)."""
 
-    def __init__(self, python: str) -> None:
+    def __init__(self, python: str, path: str | None = None) -> None:
+        env = {**os.environ, "JAX_PLATFORMS": "cpu"}
+        if path is not None:
+            env["PYTHONPATH"] = os.pathsep.join([path, *filter(None, [os.environ.get("PYTHONPATH")])])
         self.proc = subprocess.Popen(
-            [python, str(Path(__file__).resolve()), "--worker"], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
-            env={**os.environ, "JAX_PLATFORMS": "cpu"},
+            [python, str(Path(__file__).resolve()), "--worker"], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env,
         )
 
     def ask(self, **req: Any) -> dict[str, Any]:
@@ -268,7 +275,8 @@ def _flowtest_row(name: str, n: int) -> tuple[Runner, str]:
         env: Any = PoolVectorEnv(n, load_pool("reachability1/5x5-v2", "train", 64), obs_kind="padded")
     else:
         kind, _, dtype = name.split()[-1].partition("-")
-        env = gym.make_vec("FlowTest-Maze2-v0", n, vectorization_mode="vector_entry_point", obs_kind=kind, obs_dtype=dtype or None)
+        extra: dict[str, Any] = {"obs_dtype": dtype} if dtype else {}  # an older checkout has no obs_dtype
+        env = gym.make_vec("FlowTest-Maze2-v0", n, vectorization_mode="vector_entry_point", obs_kind=kind, **extra)
     obs, _ = env.reset(seed=0)
     n_actions = int(env.single_action_space.n)
 
@@ -319,25 +327,41 @@ def _cpu_model() -> str:
     return platform.processor() or platform.machine()
 
 
+BEFORE = "before: "
+"""Prefix of a row measured on the ``--before`` checkout."""
+
+
 def measure(args: argparse.Namespace) -> dict[str, Any]:
     """Every row at every batch size, round-robin; the figures as a dict."""
     import gymnasium as gym
     import numpy as np
 
     load_before = _load()
-    jw = JaxWorker(args.jax_python) if args.jax_python else None
+    workers: dict[str, Worker] = {}
     try:
+        if args.jax_python:
+            workers["jax"] = Worker(args.jax_python)
+        if args.before:
+            workers["before"] = Worker(sys.executable, args.before)
         versions: dict[str, Any] = {"python": platform.python_version(), "numpy": np.__version__, "gymnasium": gym.__version__}
-        if jw is not None:
-            versions["jax side"] = jw.ask(op="versions")
-        rows = [r for r in FLOWTEST_ROWS if r in args.rows] + ([r for r in JAX_ROWS if r in args.rows] if jw else [])
+        if "jax" in workers:
+            versions["jax side"] = workers["jax"].ask(op="versions", packages=["jax", "jaxlib", "gymnax", "xminigrid", "gymnasium"])
+        if "before" in workers:
+            versions["before"] = workers["before"].ask(op="versions", packages=[], flowtest=True)
+        ours = [r for r in FLOWTEST_ROWS if r in args.rows]
+        rows = ours + [BEFORE + r for r in ours if "before" in workers and "uint8" not in r]
+        rows += [r for r in JAX_ROWS if r in args.rows and "jax" in workers]
+
+        def worker_of(row: str) -> Worker | None:
+            return workers["jax"] if row in JAX_ROWS else workers["before"] if row.startswith(BEFORE) else None
+
         prepared: dict[tuple[str, int], tuple[Runner | None, int, str]] = {}
         for n in args.envs:
             for r in rows:
                 print(f"preparing {r} at {n} envs", file=sys.stderr, flush=True)
-                if r in JAX_ROWS:
-                    assert jw is not None
-                    ans = jw.ask(op="prepare", row=r, envs=n, seconds=args.seconds)
+                w = worker_of(r)
+                if w is not None:
+                    ans = w.ask(op="prepare", row=r.removeprefix(BEFORE), envs=n, seconds=args.seconds)
                     if "error" in ans:
                         print(f"  skipped: {ans['error']}", file=sys.stderr)
                         continue
@@ -348,9 +372,10 @@ def measure(args: argparse.Namespace) -> dict[str, Any]:
         results: dict[tuple[str, int], list[tuple[float, float]]] = {k: [] for k in prepared}
         for rnd in range(args.repeat):
             for (r, n), (prepared_run, steps, _) in prepared.items():
+                w = worker_of(r)
                 if prepared_run is None:
-                    assert jw is not None
-                    ans = jw.ask(op="run", row=r, envs=n)
+                    assert w is not None
+                    ans = w.ask(op="run", row=r.removeprefix(BEFORE), envs=n)
                     rate, cores = float(ans["rate"]), float(ans["cores"])
                 else:
                     wall, cpu = _timed(prepared_run, steps)
@@ -362,19 +387,19 @@ def measure(args: argparse.Namespace) -> dict[str, Any]:
             for n in args.envs:
                 for kind in ("flat", "grid"):
                     neutral[f"FlowTest Maze2 {kind} at {n}"] = _gymnasium_flowtest(kind, n, args.seconds)
-                if jw is not None:
-                    ans = jw.ask(op="gymnasium", envs=n, seconds=args.seconds)
+                if "jax" in workers:
+                    ans = workers["jax"].ask(op="gymnasium", envs=n, seconds=args.seconds)
                     if "rate" in ans:
                         neutral[f"gymnax FourRooms at {n}"] = float(ans["rate"])
     finally:
-        if jw is not None:
-            jw.close()
+        for w in workers.values():
+            w.close()
     return {
-        "machine": f"{_cpu_model()}, {os.cpu_count()} cores, {platform.machine()}", "versions": versions,
+        "machine": f"{_cpu_model()}, {os.cpu_count()} cores, {platform.machine()}", "versions": versions, "before": args.before,
         "load_before": load_before, "load_after": _load(), "seconds": args.seconds, "repeat": args.repeat,
         "rows": [
-            {"row": r, "label": LABELS[r], "envs": n, "obs": prepared[(r, n)][2], "batch_steps": prepared[(r, n)][1],
-             "rates": [x for x, _ in res], "cores": [c for _, c in res]}
+            {"row": r, "label": LABELS[r] if r in LABELS else f"{LABELS[r.removeprefix(BEFORE)]}, before ({args.before})", "envs": n,
+             "obs": prepared[(r, n)][2], "batch_steps": prepared[(r, n)][1], "rates": [x for x, _ in res], "cores": [c for _, c in res]}
             for (r, n), res in results.items()
         ],
         "gymnasium_benchmark_vector_step": neutral,
@@ -411,6 +436,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--rows", nargs="+", default=[*FLOWTEST_ROWS, *JAX_ROWS], choices=[*FLOWTEST_ROWS, *JAX_ROWS], metavar="ROW",
                     help=f"rows to measure (default all: {', '.join(FLOWTEST_ROWS + JAX_ROWS)})")
     ap.add_argument("--gymnasium", action="store_true", help="also Gymnasium's benchmark_vector_step on both sides")
+    ap.add_argument("--before", metavar="DIR", help="also the FlowTest rows of the checkout in DIR (an older commit), in a worker process")
     ap.add_argument("--out", help="also write the Markdown here")
     ap.add_argument("--json", help="also write the figures as JSON here")
     args = ap.parse_args(argv)
@@ -418,6 +444,9 @@ def main(argv: list[str] | None = None) -> int:
         return worker()
     if min(args.envs) < 1 or args.repeat < 1 or args.seconds <= 0:
         print("error: --envs and --repeat must be at least 1 and --seconds positive", file=sys.stderr)
+        return 2
+    if args.before and not (Path(args.before) / "flowtest_env" / "vector.py").is_file():
+        print(f"error: --before {args.before}: not a FlowTest checkout (no flowtest_env/vector.py)", file=sys.stderr)
         return 2
     if args.jax_python and not Path(args.jax_python).is_file():
         print(f"error: --jax-python {args.jax_python}: no such file (make the throwaway venv first: see the module docstring)", file=sys.stderr)
