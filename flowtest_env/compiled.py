@@ -586,9 +586,15 @@ class StepTables:
         ``uint64[n_z, W]``: each configuration's ``int8`` legal-action mask padded with
         zeros to ``8 * W`` columns and viewed as 8-byte words (a gather of whole words
         is several times faster than one of 5-byte rows).
+    obs
+        The pool's distinct observation rows (:attr:`CompiledPool.obs` without the rows
+        that repeat another: configurations that differ in a part the observation does not
+        show, e.g. the history's test part, share one), so that the table a step gathers
+        from is as small as it can be and stays in the cache (781 of 2,469 rows for 64 tests
+        of ``reachability1/5x5-v2``).
     obs_row
-        ``intp[n_z]`` the observation row of each configuration, or ``None`` where it is
-        the configuration itself (every test without a test agent), which spares a gather.
+        ``intp[n_z]``: the row of :attr:`obs` of each configuration, or ``None`` where it
+        is the configuration itself, which spares a gather.
     """
 
     next_z: np.ndarray
@@ -596,6 +602,7 @@ class StepTables:
     ends: np.ndarray
     counts: np.ndarray
     mask_words: np.ndarray
+    obs: np.ndarray
     obs_row: np.ndarray | None
 
     def mask(self, z: np.ndarray, n_actions: int) -> np.ndarray:
@@ -619,15 +626,37 @@ def step_tables(pool: CompiledPool, reward: np.ndarray) -> StepTables:
     width = -(-pool.n_actions // 8) * 8
     mask = np.zeros((pool.n_z, width), dtype=np.int8)
     mask[:, : pool.n_actions] = pool.mask
-    identity = bool(np.array_equal(pool.obs_row, np.arange(pool.n_z)))
+    obs, row_of = distinct_rows(pool.obs)
+    obs_row = row_of[pool.obs_row]
+    identity = bool(np.array_equal(obs_row, np.arange(pool.n_z)))
     return StepTables(
         next_z=pool.next_z.astype(np.intp),
         reward=np.ascontiguousarray(reward, dtype=np.float64),
         ends=pool.outcome[pool.next_z] != 0,
         counts=pool.restricted[here].astype(np.int64) + (pool.refused.astype(np.int64) << COUNT_SHIFT),
         mask_words=mask.view(np.uint64),
-        obs_row=None if identity else pool.obs_row.astype(np.intp),
+        obs=obs,
+        obs_row=None if identity else obs_row,
     )
+
+
+def distinct_rows(table: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The distinct rows of ``table`` in the order they first occur, and for each row of
+    ``table`` its row among them (``intp``): ``distinct[row_of] == table``. The table as it
+    is when no row repeats. One pass keyed by each row's bytes (a dict: only the distinct
+    rows are kept; three times as fast as sorting the rows)."""
+    n = table.shape[0]
+    flat = np.ascontiguousarray(table.reshape(n, -1))
+    seen: dict[bytes, int] = {}
+    first: list[int] = []
+    row_of = np.empty(n, dtype=np.intp)
+    for i, key in enumerate(map(bytes, flat)):
+        j = seen.get(key)
+        if j is None:
+            j = seen[key] = len(first)
+            first.append(i)
+        row_of[i] = j
+    return (table, row_of) if len(first) == n else (table[first], row_of)
 
 
 def potentials(pool: CompiledPool, games: list[TestGame], potential: Callable[[TestGame, RunState], float]) -> np.ndarray:

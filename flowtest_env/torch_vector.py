@@ -81,7 +81,7 @@ import torch
 from gymnasium import spaces
 from gymnasium.vector.utils import batch_space
 
-from .compiled import OUTCOMES, CompiledPool, potentials
+from .compiled import OUTCOMES, CompiledPool, distinct_rows, potentials
 from .draws import GOLDEN_I64, MAX_TESTS, MIX1_I64, MIX2_I64
 from .encoding import make_encoder
 from .game import TestGame
@@ -115,6 +115,10 @@ def autoreset_name(mode: Any) -> str:
 
 WORD = 64
 """Places per packed memory word."""
+
+LARGE = 4 << 20
+"""Bytes of a batch's observations from which the CPU env takes a fresh one from NumPy's
+allocator (:meth:`TorchVectorEnv._out`)."""
 
 
 # ---------------------------------------------------------------- the draw, in int64
@@ -183,9 +187,10 @@ class TorchTables:
     mask
         ``bool[n_z, A]``: the legal actions.
     obs_row, obs
-        ``int64[n_z]``, ``[n_rows, *obs_shape]``: each configuration's observation row
-        (with the memory, its last ``n_places`` entries are zero: a gather then writes the
-        memory bits into them).
+        ``int64[n_z]``, ``[n_rows, *obs_shape]``: each configuration's observation row,
+        the pool's distinct rows only (:func:`~flowtest_env.compiled.distinct_rows`; with the
+        memory, their last ``n_places`` entries are zero: a gather then writes the memory
+        bits into them).
     visited_bits
         ``int64[n_z, W]``: the places the configuration's observation shows the SUT at,
         packed 64 to a word (``W = 0`` without the visited-places memory).
@@ -304,10 +309,12 @@ def build_tables(
     reward = pool.rewards(step_cost, restricted_penalty, goal_reward, violation_penalty)
     if shaping > 0:
         reward = shaped_rewards(pool, reward, potentials(pool, list(games), DistancePotential(shaping)), shaping_gamma)
-    obs = pool.obs if obs_dtype is None else pool.obs.astype(obs_dtype, copy=False)
+    distinct, row_of = distinct_rows(pool.obs)  # the rows that differ: a smaller table to gather from
+    obs_row = row_of[pool.obs_row]
+    obs = distinct if obs_dtype is None else distinct.astype(obs_dtype, copy=False)
     if memory_slice is not None:
-        row_bits, n_places = _visited_words(pool.obs, memory_slice)
-        bits = row_bits[pool.obs_row]
+        row_bits, n_places = _visited_words(distinct, memory_slice)
+        bits = row_bits[obs_row]
         obs = np.concatenate([obs, np.zeros((obs.shape[0], n_places), dtype=obs.dtype)], axis=1)
     else:
         bits, n_places = np.zeros((pool.n_z, 0), dtype=np.int64), 0
@@ -325,7 +332,7 @@ def build_tables(
         test_realized=t(pool.test_realized, torch.bool),
         outcome=t(pool.outcome, torch.int8),
         mask=t(pool.mask != 0, torch.bool),
-        obs_row=t(pool.obs_row, torch.int64),
+        obs_row=t(obs_row, torch.int64),
         obs=torch.as_tensor(np.ascontiguousarray(obs)).to(dev),
         visited_bits=t(bits, torch.int64),
         initial=t(pool.initial, torch.int64),
@@ -802,17 +809,19 @@ class TorchVectorEnv(gym.vector.VectorEnv):
 
     def _out(self) -> torch.Tensor | None:
         """Where the step's observation is gathered to: the one buffer (``copy=False``); with
-        ``copy`` on the CPU a fresh array of NumPy's allocator (torch's gives a large block
-        back to the system when it is freed, so a fresh tensor of a large batch page-faults
-        every step, slower than the gather itself: 1.6 ms against 0.9 ms for 16,384 Maze 2
-        observations); else ``None`` (a fresh tensor)."""
+        ``copy``, for a batch of :data:`LARGE` bytes or more on the CPU, a fresh array of
+        NumPy's allocator (torch's gives a large block back to the system when it is freed,
+        so a fresh tensor of a large batch page-faults every step, slower than the gather
+        itself: 1.6 ms against 0.9 ms for 16,384 Maze 2 observations); else ``None`` (a
+        fresh tensor)."""
         if self.compact:
             return None
         if self.copy:
-            if self.device.type != "cpu":
+            rows = self.tables.obs
+            if self.device.type != "cpu" or self.num_envs * rows[0].nbytes < LARGE:
                 return None
-            rows = self.tables.obs.numpy()  # a view: the tables are on the CPU
-            return torch.from_numpy(np.empty((self.num_envs, *rows.shape[1:]), dtype=rows.dtype))
+            table = rows.numpy()  # a view: the tables are on the CPU
+            return torch.from_numpy(np.empty((self.num_envs, *table.shape[1:]), dtype=table.dtype))
         if self._buffer is None:
             t = self.tables
             self._buffer = torch.empty((self.num_envs, *t.obs_shape), dtype=t.obs.dtype, device=self.device)
@@ -893,7 +902,7 @@ def tables_of(env: Any, device: str | torch.device = "cpu", reward_dtype: torch.
 def preferred_backend(device: str | torch.device) -> str:
     """The env a trainer on ``device`` steps when it is left to choose (``env_backend="auto"``):
     ``"numpy"`` (:mod:`flowtest_env.vector`) on the CPU, where it steps faster than this
-    module's env at every batch size measured (128 to 16,384 envs: 1.3-2.6x,
+    module's env at every batch size measured (128 to 16,384 envs: 1.4-3.9x,
     docs/benchmarks/environments.md) and gives the same runs; ``"torch"`` on any other
     device, where the tables and the batch stay on the device.
 

@@ -114,6 +114,14 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         of ``float32`` at 16,384 envs (docs/benchmarks/environments.md). Only where every
         entry is 0 or 1: a test with fuel, whose observation holds the fuel fraction, is
         refused (``ValueError``). A vector-env option: the single env has ``float32``.
+    copy
+        ``True`` (default): every ``reset`` and ``step`` returns a fresh observation array.
+        ``False``: the observation is gathered into one buffer of the env (``out=``) and
+        that buffer is returned, overwritten by the next ``reset`` or ``step`` (as
+        Gymnasium's ``copy=False`` and the torch env's): copy what you keep. It pays where
+        a fresh array is too large for the allocator to reuse (above 32 MiB glibc maps new
+        pages each time, e.g. 16,384 padded observations of a pool, 59 MB); below that a
+        fresh array costs about the same.
     config, options
         The env options: an :class:`~flowtest_env.config.EnvConfig`, or its fields as
         keyword arguments (``max_steps``, ``obs_kind``, ``memory``, ``shaping``, ...;
@@ -140,9 +148,12 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         config: EnvConfig | None = None,
         obs_dtype: str | None = None,
+        copy: bool = True,
         **options: Any,
     ) -> None:
         num_envs = positive_int("num_envs", num_envs)
+        if not isinstance(copy, (bool, np.bool_)):
+            raise ValueError(f"copy must be True or False, not {copy!r}")
         one_of("assignment", assignment, ("random", "fixed"))
         one_of("obs_dtype", obs_dtype, (None, "uint8"))
         self.autoreset_mode = autoreset_mode_of(autoreset_mode)
@@ -172,7 +183,13 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         self.tile_size = config.tile_size
         mem_size = 0 if self._mem is None else self._mem.stop - self._mem.start
         check_batch_memory(num_envs, p, mem_size)
-        rows = compact_rows(p.obs, self.games) if obs_dtype == "uint8" else p.obs
+        if self.max_steps >= 2**COUNT_SHIFT:
+            raise ValueError(f"max_steps must be below 2**{COUNT_SHIFT} in the vector env (its verdict counters are 32-bit), not {self.max_steps}")
+        reward = p.rewards(config.step_cost, config.restricted_penalty, config.goal_reward, config.violation_penalty)
+        if config.shaping > 0:  # potential-based shaping folded into the reward table
+            reward = shaped_rewards(p, reward, potentials(p, self.games, DistancePotential(config.shaping)), config.shaping_gamma)
+        self._tables: StepTables = step_tables(p, reward)
+        rows = compact_rows(self._tables.obs, self.games) if obs_dtype == "uint8" else self._tables.obs
         if self._mem is not None:
             shape = (int(np.prod(p.obs_shape)) + mem_size,)
             self.single_observation_space = spaces.Box(0, 1, shape=shape, dtype=rows.dtype)
@@ -182,12 +199,6 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         self.single_action_space = spaces.Discrete(p.n_actions)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
-        if self.max_steps >= 2**COUNT_SHIFT:
-            raise ValueError(f"max_steps must be below 2**{COUNT_SHIFT} in the vector env (its verdict counters are 32-bit), not {self.max_steps}")
-        reward = p.rewards(config.step_cost, config.restricted_penalty, config.goal_reward, config.violation_penalty)
-        if config.shaping > 0:  # potential-based shaping folded into the reward table
-            reward = shaped_rewards(p, reward, potentials(p, self.games, DistancePotential(config.shaping)), config.shaping_gamma)
-        self._tables: StepTables = step_tables(p, reward)
         self._outcome_names = np.array(OUTCOMES, dtype=object)
         self._state_index = np.concatenate([t.system for t in p.tests]).astype(np.int64)  # numeric_infos' system_state
         self._all = np.ones(self.num_envs, dtype=bool)
@@ -207,6 +218,7 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         self._shown_h = np.zeros(num_envs, dtype=np.int64)
         # the observation rows, with room for the memory (filled per step) when there is one
         self._obs_table = rows if self._mem is None else np.concatenate([rows, np.zeros((rows.shape[0], mem_size), rows.dtype)], axis=1)
+        self._buffer = None if copy else np.zeros((num_envs, *self._obs_table.shape[1:]), dtype=rows.dtype)  # copy=False: the one output
         self._done = np.zeros(self.num_envs, dtype=bool)  # episodes ended and not reset yet
         self._keys = np.zeros(self.num_envs, dtype=np.uint64)  # the test draws' keys (flowtest_env.draws)
         self._episode = np.zeros(self.num_envs, dtype=np.int64)  # each env's episodes since its key
@@ -273,7 +285,8 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
     def _observe(self, fresh: np.ndarray | None = None) -> np.ndarray:
         """The batch observation now (``fresh``: envs whose episode just started, their
         memory restarts)."""
-        obs: np.ndarray = np.take(self._obs_table, self._tables.rows(self._z), axis=0)  # one gather, faster than fancy indexing
+        # one gather, faster than fancy indexing ("clip": in range by construction; "raise" would buffer an out= array)
+        obs: np.ndarray = np.take(self._obs_table, self._tables.rows(self._z), axis=0, out=self._buffer, mode="clip")
         if self._shown is not None:
             self._accumulate(obs, None, fresh)
         if self._seen is None:
@@ -583,7 +596,7 @@ class FlowTestVectorEnv(PoolVectorEnv):
     runs of one test (``test``: anything :func:`flowtest_env.sources.load_test` takes;
     ``problem`` is its older name); the options are those of
     :class:`~flowtest_env.envs.FlowTestEnv` (:class:`~flowtest_env.config.EnvConfig`),
-    plus ``autoreset_mode`` and ``obs_dtype`` (:class:`PoolVectorEnv`).
+    plus ``autoreset_mode``, ``obs_dtype`` and ``copy`` (:class:`PoolVectorEnv`).
 
     Example::
 
@@ -604,6 +617,7 @@ class FlowTestVectorEnv(PoolVectorEnv):
         problem: Any = None,
         config: EnvConfig | None = None,
         obs_dtype: str | None = None,
+        copy: bool = True,
         **options: Any,
     ) -> None:
         if problem is not None:
@@ -611,7 +625,8 @@ class FlowTestVectorEnv(PoolVectorEnv):
         config = config_from(type(self).__name__, config, options)
         positive_int("num_envs", num_envs)
         game = game_for(test, config.setting)
-        super().__init__(num_envs, [game], autoreset_mode=autoreset_mode, config=config.with_max_steps(default_max_steps(game)), obs_dtype=obs_dtype)
+        super().__init__(num_envs, [game], autoreset_mode=autoreset_mode, config=config.with_max_steps(default_max_steps(game)), obs_dtype=obs_dtype,
+                         copy=copy)
         self.problem = game.artifact.name
 
 
@@ -619,7 +634,7 @@ class FlowTestVectorEnv(PoolVectorEnv):
 class RandomGridVectorEnv(PoolVectorEnv):
     """The vector entry point of ``FlowTest-RandomGrid-v0``: the arguments of
     :class:`~flowtest_env.envs.RandomGridEnv` (checked by the same functions), plus
-    ``autoreset_mode`` and ``obs_dtype`` (:class:`PoolVectorEnv`); each episode draws its test from the pool exactly as the single
+    ``autoreset_mode``, ``obs_dtype`` and ``copy`` (:class:`PoolVectorEnv`); each episode draws its test from the pool exactly as the single
     env does."""
 
     def __init__(
@@ -637,6 +652,7 @@ class RandomGridVectorEnv(PoolVectorEnv):
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         config: EnvConfig | None = None,
         obs_dtype: str | None = None,
+        copy: bool = True,
         **options: Any,
     ) -> None:
         config = config_from(type(self).__name__, config, options)
@@ -644,7 +660,8 @@ class RandomGridVectorEnv(PoolVectorEnv):
         size, family, n, seeds, kind, world = random_grid_pool(size, family, n, seeds, kind, pool, split, count, world)
         tests = random_grid_tests(pool, split, count, size, family, n, seeds, kind, world)
         games = [TestGame(a, config.setting) for a in tests]
-        super().__init__(num_envs, games, autoreset_mode=autoreset_mode, config=config.with_max_steps(4 * size * size), obs_dtype=obs_dtype)
+        super().__init__(num_envs, games, autoreset_mode=autoreset_mode, config=config.with_max_steps(4 * size * size), obs_dtype=obs_dtype,
+                         copy=copy)
         self.problem = f"random-{size}x{size}-{family}{n}" + ("" if world == "empty" else f"-{world}")
 
 

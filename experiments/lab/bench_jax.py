@@ -19,7 +19,7 @@ the step), and counts env steps the same way for every row: batch steps x envs. 
   (``float32[306]``; and ``uint8[306]``, the same 0/1 entries, with ``obs_dtype="uint8"``) and
   the grid one (``uint8[14, 5, 5]``), and on 64 tests of the standard
   pool ``reachability1/5x5-v2`` with the padded observation (``float32[901]``, each episode
-  draws its test);
+  draws its test; also with ``copy=False``, one output buffer, and with ``obs_dtype="uint8"``);
 * FlowTest's torch env on the CPU (:mod:`flowtest_env.torch_vector`, one torch thread) on
   Maze 2, flat and grid;
 * gymnax ``FourRooms-misc`` (its default observation, ``float32[4]``: the agent's and the
@@ -243,20 +243,25 @@ class Worker:
 
 
 def _flowtest_row(name: str, n: int) -> tuple[Runner, str]:
-    """A prepared FlowTest row and its observation."""
+    """A prepared FlowTest row (``"<numpy|pool|torch> <obs_kind>[-uint8][-nocopy]"``) and
+    its observation."""
     import gymnasium as gym
     import numpy as np
 
     import flowtest_env  # noqa: F401 - registers the IDs
 
     rng = np.random.default_rng(0)
+    kind, *flags = name.split()[-1].split("-")
+    extra: dict[str, Any] = {"obs_dtype": "uint8"} if "uint8" in flags else {}  # only where asked: an older checkout has neither
+    if "nocopy" in flags:
+        extra["copy"] = False
     if name.startswith("torch"):
         import torch
 
         from flowtest_env.torch_vector import make_vec
 
         torch.set_num_threads(1)
-        tenv = make_vec("FlowTest-Maze2-v0", n, obs_kind=name.split()[-1])
+        tenv = make_vec("FlowTest-Maze2-v0", n, obs_kind=kind)
         obs, _ = tenv.reset(seed=0)
         gen = torch.Generator().manual_seed(0)
         space = tenv.single_action_space
@@ -272,10 +277,8 @@ def _flowtest_row(name: str, n: int) -> tuple[Runner, str]:
         from flowtest_env.pools import load_pool
         from flowtest_env.vector import PoolVectorEnv
 
-        env: Any = PoolVectorEnv(n, load_pool("reachability1/5x5-v2", "train", 64), obs_kind="padded")
+        env: Any = PoolVectorEnv(n, load_pool("reachability1/5x5-v2", "train", 64), obs_kind=kind, **extra)
     else:
-        kind, _, dtype = name.split()[-1].partition("-")
-        extra: dict[str, Any] = {"obs_dtype": dtype} if dtype else {}  # an older checkout has no obs_dtype
         env = gym.make_vec("FlowTest-Maze2-v0", n, vectorization_mode="vector_entry_point", obs_kind=kind, **extra)
     obs, _ = env.reset(seed=0)
     n_actions = int(env.single_action_space.n)
@@ -287,13 +290,15 @@ def _flowtest_row(name: str, n: int) -> tuple[Runner, str]:
     return run, f"{obs.dtype}{list(obs.shape[1:])}"
 
 
-FLOWTEST_ROWS = ("numpy flat", "numpy flat-uint8", "numpy grid", "pool padded", "torch flat", "torch grid")
+FLOWTEST_ROWS = ("numpy flat", "numpy flat-uint8", "numpy grid", "pool padded", "pool padded-nocopy", "pool padded-uint8", "torch flat", "torch grid")
 JAX_ROWS = ("gymnax loop", "gymnax scan", "xminigrid loop", "xminigrid scan")
 LABELS = {
     "numpy flat": "FlowTest NumPy vector env, `FlowTest-Maze2-v0` flat",
     "numpy flat-uint8": "FlowTest NumPy vector env, `FlowTest-Maze2-v0` flat, `obs_dtype=\"uint8\"`",
     "numpy grid": "FlowTest NumPy vector env, `FlowTest-Maze2-v0` grid",
     "pool padded": "FlowTest NumPy vector env, 64 tests of `reachability1/5x5-v2`, padded",
+    "pool padded-nocopy": "FlowTest NumPy vector env, 64 tests of `reachability1/5x5-v2`, padded, `copy=False`",
+    "pool padded-uint8": "FlowTest NumPy vector env, 64 tests of `reachability1/5x5-v2`, padded, `obs_dtype=\"uint8\"`",
     "torch flat": "FlowTest torch env (CPU, 1 thread), `FlowTest-Maze2-v0` flat",
     "torch grid": "FlowTest torch env (CPU, 1 thread), `FlowTest-Maze2-v0` grid",
     "gymnax loop": "gymnax `FourRooms-misc`, Python loop of jitted batch steps",
@@ -349,7 +354,7 @@ def measure(args: argparse.Namespace) -> dict[str, Any]:
         if "before" in workers:
             versions["before"] = workers["before"].ask(op="versions", packages=[], flowtest=True)
         ours = [r for r in FLOWTEST_ROWS if r in args.rows]
-        rows = ours + [BEFORE + r for r in ours if "before" in workers and "uint8" not in r]
+        rows = ours + [BEFORE + r for r in ours if "before" in workers and "-" not in r]  # an older checkout has neither option
         rows += [r for r in JAX_ROWS if r in args.rows and "jax" in workers]
 
         def worker_of(row: str) -> Worker | None:

@@ -1,7 +1,10 @@
-"""``obs_dtype="uint8"``: the vector env's flat and padded observations as ``uint8`` 0/1, the
-same numbers as the default ``float32`` ones, everything else the same; refused where an
-observation holds another value (the fuel fraction). The torch twin of such an env keeps the
-dtype and steps like it."""
+"""The vector env's output options.
+
+``obs_dtype="uint8"``: the flat and padded observations as ``uint8`` 0/1, the same numbers as
+the default ``float32`` ones, everything else the same; refused where an observation holds
+another value (the fuel fraction). The torch twin of such an env keeps the dtype and steps
+like it. ``copy=False``: every observation written into one buffer, the same values as the
+fresh arrays of ``copy=True``."""
 
 from __future__ import annotations
 
@@ -124,3 +127,36 @@ def test_every_entry_point_takes_the_option(pool_cache: Any) -> None:
     grid = gym.make_vec("FlowTest-RandomGrid-v0", 4, vectorization_mode="vector_entry_point", size=3, seeds=[0, 1], obs_dtype="uint8")
     assert grid.reset(seed=0)[0].dtype == np.uint8
     assert set(flowtest_env.ENV_IDS) == set(NO_FUEL + FUEL + ["FlowTest-RandomGrid-v0"])
+
+
+@pytest.mark.parametrize("mode", ["NEXT_STEP", "SAME_STEP", "DISABLED"])
+@pytest.mark.parametrize("options", [{}, {"memory": "visited", "shaping": 5.0}, {"setting": "accumulative", "memory": "visited"},
+                                     {"obs_kind": "grid"}, {"obs_dtype": "uint8", "memory": "visited"}])
+def test_copy_false_writes_every_observation_into_one_buffer(mode: str, options: dict[str, Any]) -> None:
+    env_id = "FlowTest-SmallReactive-v0" if options.get("setting") else "FlowTest-Maze2-v0"
+
+    def make(copy: bool) -> Any:
+        return gym.make_vec(env_id, 5, vectorization_mode="vector_entry_point", autoreset_mode=mode, max_steps=12, copy=copy, **options)
+
+    reused, fresh = make(False), make(True)
+    o1, i1 = reused.reset(seed=4)
+    o2, i2 = fresh.reset(seed=4)
+    buffer = o1
+    rng = np.random.default_rng(1)
+    ends = 0
+    for t in range(80):
+        assert o1 is buffer and data_equivalence((o1, i1), (o2, i2), exact=True), t
+        a = rng.integers(5, size=5)
+        o1, r1, te1, tr1, i1 = reused.step(a)
+        o2, r2, te2, tr2, i2 = fresh.step(a)
+        assert data_equivalence((r1, te1, tr1), (r2, te2, tr2), exact=True), t
+        ends += int((te1 | tr1).sum())
+        if mode == "DISABLED" and (te1 | tr1).any():
+            o1, i1 = reused.reset(options={"reset_mask": te1 | tr1})
+            o2, i2 = fresh.reset(options={"reset_mask": te2 | tr2})
+    assert ends >= 5
+
+
+def test_copy_must_be_a_bool() -> None:
+    with pytest.raises(ValueError, match="copy must be True or False, not 'no'"):
+        gym.make_vec("FlowTest-Maze2-v0", 2, vectorization_mode="vector_entry_point", copy="no")
