@@ -81,11 +81,11 @@ import torch
 from gymnasium import spaces
 from gymnasium.vector.utils import batch_space
 
-from .compiled import OUTCOMES, CompiledPool, distinct_rows, potentials
+from .compiled import OUTCOMES, CompiledPool, potentials
 from .draws import GOLDEN_I64, MAX_TESTS, MIX1_I64, MIX2_I64
 from .encoding import make_encoder
 from .game import TestGame
-from .vector import shaped_rewards
+from .step_tables import distinct_rows, shaped_rewards
 from .wrappers import DistancePotential, shared_position_slice
 
 AUTORESET_MODES: tuple[str, ...] = ("next_step", "same_step", "disabled")
@@ -188,7 +188,7 @@ class TorchTables:
         ``bool[n_z, A]``: the legal actions.
     obs_row, obs
         ``int64[n_z]``, ``[n_rows, *obs_shape]``: each configuration's observation row,
-        the pool's distinct rows only (:func:`~flowtest_env.compiled.distinct_rows`; with the
+        the pool's distinct rows only (:func:`~flowtest_env.step_tables.distinct_rows`; with the
         memory, their last ``n_places`` entries are zero: a gather then writes the memory
         bits into them).
     visited_bits

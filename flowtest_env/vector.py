@@ -13,7 +13,7 @@ The ``vector_entry_point`` of every FlowTest ID::
 Each test is compiled once into flat tables (:mod:`flowtest_env.compiled`); a step is
 then a handful of array gathers over the whole batch, the same for every env whatever
 test it plays: one gather per output over tables fused by (configuration, action)
-(:class:`~flowtest_env.compiled.StepTables`: next configuration, reward, end, the
+(:class:`~flowtest_env.step_tables.StepTables`: next configuration, reward, end, the
 verdict's counters), the observation one gather of precomputed rows, the mask one gather
 of 8-byte words (so ``infos["action_mask"]`` is a view of rows padded to 8 bytes, not
 contiguous unless the action count is a multiple of 8), the env's own state updated in
@@ -72,7 +72,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from .bulk import gc_paused
-from .compiled import COUNT_SHIFT, OUTCOMES, CompiledPool, StepTables, compile_pool, potentials, step_tables
+from .compiled import OUTCOMES, CompiledPool, compile_pool, potentials
 from .config import EnvConfig, config_from, with_option_signature
 from .draws import draw_tests, key_of_seed
 from .encoding import Encoder, ObservationLayout, Segment, make_encoder
@@ -81,6 +81,7 @@ from .game import RunState, TestGame
 from .pools import random_grid_tests
 from .render import Renderer, make_renderer
 from .sources import game_for
+from .step_tables import COUNT_SHIFT, StepTables, batch_bytes, check_batch_memory, compact_rows, shaped_rewards, step_tables
 from .validation import one_of, positive_int
 from .wrappers import DistancePotential, shared_position_slice
 
@@ -665,41 +666,6 @@ class RandomGridVectorEnv(PoolVectorEnv):
         self.problem = f"random-{size}x{size}-{family}{n}" + ("" if world == "empty" else f"-{world}")
 
 
-def shaped_rewards(pool: CompiledPool, reward: np.ndarray, phi: np.ndarray, gamma: float) -> np.ndarray:
-    """The reward table with potential-based shaping: ``r + (gamma * phi(z') - phi(z))`` for
-    every (configuration ``z``, action), ``phi(z') = 0`` when ``z'`` ends the run.
-
-    The single env adds ``gamma * phi' - phi`` to the step's reward, ``phi`` the potential
-    of the configuration it steps from (0 only after a terminated step, when it does not step
-    again before a reset): a function of the configuration and the action, so it is a table
-    too, summed in the single env's order (the same floats).
-    """
-    phi_end = np.where(pool.outcome != 0, 0.0, phi)
-    here = np.repeat(np.arange(pool.n_z, dtype=np.int64), pool.n_actions)
-    out: np.ndarray = reward + (float(gamma) * phi_end[pool.next_z] - phi_end[here])
-    return out
-
-
-def compact_rows(obs: np.ndarray, games: Sequence[TestGame]) -> np.ndarray:
-    """The observation table ``obs`` as ``uint8`` (``obs_dtype="uint8"``): the same
-    numbers where every entry is 0 or 1 (the ``grid`` kind's table, ``uint8`` already, as
-    it is).
-
-    Raises
-    ------
-    ValueError
-        If an entry is neither 0 nor 1 (the fuel fraction of a test with fuel).
-    """
-    if obs.dtype == np.uint8:
-        return obs
-    if not bool(np.all((obs == 0) | (obs == 1))):
-        fuel = [g.artifact.name for g in games if g.ts.kind == "fuel"][:3]
-        raise ValueError("obs_dtype='uint8' needs an observation of 0/1 entries; this pool's holds other values"
-                         + (f" (the fuel fraction of {', '.join(fuel)})" if fuel else "") + ": leave obs_dtype at its default")
-    out: np.ndarray = obs.astype(np.uint8)
-    return out
-
-
 def autoreset_mode_of(mode: Any) -> AutoresetMode:
     """``mode`` as an :class:`~gymnasium.vector.AutoresetMode`: the enum, its value
     (``"NextStep"``) or its name (``"NEXT_STEP"``, any case).
@@ -778,52 +744,6 @@ def shared_shown_entries(encoders: list[Encoder]) -> np.ndarray | slice:
     if entries.size and np.array_equal(entries, np.arange(entries[0], entries[0] + entries.size)):
         return slice(int(entries[0]), int(entries[0]) + entries.size)  # one block (the usual case): views, no copies
     return entries
-
-
-def available_memory() -> int | None:
-    """Bytes of memory available to a new allocation (Linux ``MemAvailable``, else the
-    physical memory), ``None`` when the system does not say."""
-    try:
-        with open("/proc/meminfo") as f:
-            for line in f:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        pass
-    try:
-        return int(os.sysconf("SC_PHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
-    except (AttributeError, ValueError, OSError):
-        return None
-
-
-def batch_bytes(num_envs: int, pool: CompiledPool, memory_size: int = 0) -> int:
-    """An estimate of the bytes a batch of ``num_envs`` runs of ``pool`` needs: the
-    tables, and per env a step's observation (gathered, with the memory, returned), the
-    memory, the masks and infos and the per-env counters."""
-    obs_bytes = (int(np.prod(pool.obs_shape)) * pool.obs.itemsize) + 4 * memory_size
-    per_env = 3 * obs_bytes + 4 * memory_size + 4 * pool.n_actions + 256
-    names = ("next_z", "refused", "restricted", "outcome", "test_realized", "mask", "obs_row", "obs", "system_state")
-    tables = sum(int(getattr(pool, f).nbytes) for f in names)
-    fused = pool.next_z.size * 25 + pool.n_z * 8 * -(-pool.n_actions // 8)  # the step tables (flowtest_env.compiled.StepTables)
-    return tables + fused + num_envs * per_env
-
-
-def check_batch_memory(num_envs: int, pool: CompiledPool, memory_size: int = 0) -> None:
-    """Refuse a batch that would need more memory than the machine has available.
-
-    Raises
-    ------
-    ValueError
-        Saying how much memory ``num_envs`` runs would need.
-    """
-    need = batch_bytes(num_envs, pool, memory_size)
-    have = available_memory()
-    if have is not None and need > have:
-        per_env = (need - batch_bytes(0, pool, memory_size)) / num_envs
-        raise ValueError(
-            f"num_envs={num_envs} would need about {need / 2**30:.1f} GiB of memory ({per_env:.0f} bytes per env "
-            f"for its observations and infos, plus the test tables); {have / 2**30:.1f} GiB are available. Use fewer envs."
-        )
 
 
 class VectorActionMaskObservation(gym.vector.VectorWrapper):

@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 import flowtest_env.compiled as compiled
+import flowtest_env.step_tables as step_tables
 from flowtest_env.artifacts import builtin_game
 from flowtest_env.compiled import OUTCOMES, CompiledPool, CompiledTest, compile_pool, compile_test
 from flowtest_env.encoding import Encoder, make_encoder
@@ -281,14 +282,14 @@ def test_step_tables_are_the_pool_tables_fused() -> None:
     games = [TestGame(a) for a in SAMPLE if a.system.layout is not None]
     pool = compile_pool(games, [make_encoder(g, "padded", 8) for g in games])
     reward = pool.rewards(0.01, 0.05, 1.0, 1.0)
-    tab = compiled.step_tables(pool, reward)
+    tab = step_tables.step_tables(pool, reward)
     a_n, z = pool.n_actions, np.arange(pool.n_z)
     here = np.repeat(z, a_n)
     assert np.array_equal(tab.next_z, pool.next_z) and tab.next_z.dtype == np.intp
     assert np.array_equal(tab.reward, reward)
     assert np.array_equal(tab.ends, pool.outcome[pool.next_z] != 0)
-    assert np.array_equal(tab.counts & ((1 << compiled.COUNT_SHIFT) - 1), pool.restricted[here])
-    assert np.array_equal(tab.counts >> compiled.COUNT_SHIFT, pool.refused)
+    assert np.array_equal(tab.counts & ((1 << step_tables.COUNT_SHIFT) - 1), pool.restricted[here])
+    assert np.array_equal(tab.counts >> step_tables.COUNT_SHIFT, pool.refused)
     assert np.array_equal(tab.mask(z, a_n), pool.mask) and tab.mask(z, a_n).dtype == np.int8
     assert np.array_equal(tab.obs[tab.rows(z)], pool.obs[pool.obs_row])
     assert tab.obs.shape[0] < pool.obs.shape[0]  # rows repeat (the history's test part is not shown)
@@ -296,8 +297,8 @@ def test_step_tables_are_the_pool_tables_fused() -> None:
 
 def test_distinct_rows_keep_the_first_occurrence_order() -> None:
     table = np.array([[0, 1], [1, 0], [0, 1], [1, 1], [1, 0]], dtype=np.float32)
-    rows, row_of = compiled.distinct_rows(table)
+    rows, row_of = step_tables.distinct_rows(table)
     assert rows.tolist() == [[0, 1], [1, 0], [1, 1]] and row_of.tolist() == [0, 1, 0, 2, 1]
     grid = np.arange(24, dtype=np.uint8).reshape(3, 2, 2, 2)  # no repeats: the table itself
-    same_rows, identity = compiled.distinct_rows(grid)
+    same_rows, identity = step_tables.distinct_rows(grid)
     assert same_rows is grid and identity.tolist() == [0, 1, 2]
