@@ -29,6 +29,12 @@ COUNT_SHIFT = 32
 """Bits of :attr:`StepTables.counts` below the blocked-attempt count (the restrictions count's)."""
 
 
+def split_counts(counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The restrictions and the blocked attempts packed in ``counts`` (sums of
+    :attr:`StepTables.counts`), as ``int64`` arrays."""
+    return counts & ((1 << COUNT_SHIFT) - 1), counts >> COUNT_SHIFT
+
+
 @dataclass(frozen=True)
 class StepTables:
     """What one batch step of a pool reads, fused so that each output of the step is one

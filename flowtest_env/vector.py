@@ -81,7 +81,7 @@ from .game import RunState, TestGame
 from .pools import random_grid_tests
 from .render import Renderer, make_renderer
 from .sources import game_for
-from .step_tables import COUNT_SHIFT, StepTables, batch_bytes, check_batch_memory, compact_rows, shaped_rewards, step_tables
+from .step_tables import COUNT_SHIFT, StepTables, batch_bytes, check_batch_memory, compact_rows, shaped_rewards, split_counts, step_tables
 from .validation import one_of, positive_int
 from .wrappers import DistancePotential, shared_position_slice
 
@@ -501,23 +501,19 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
             return out
 
         codes = self.pool.outcome.take(zi)
+        restrictions, blocked = split_counts(counts)
         return {
             "system_objective": scattered(codes, np.int64) if self.config.numeric_infos else scattered(self._outcome_names.take(codes), object),
             "_system_objective": ended.copy(),
             "test_objective_realized": scattered(self.pool.test_realized.take(zi), bool),
             "_test_objective_realized": ended.copy(),
-            "restrictions": scattered(counts & ((1 << COUNT_SHIFT) - 1), np.int64),
+            "restrictions": scattered(restrictions, np.int64),
             "_restrictions": ended.copy(),
-            "blocked_attempts": scattered(counts >> COUNT_SHIFT, np.int64),
+            "blocked_attempts": scattered(blocked, np.int64),
             "_blocked_attempts": ended.copy(),
             "steps": scattered(self._steps.take(idx), np.int64),
             "_steps": ended.copy(),
         }
-
-    def _counters(self) -> tuple[np.ndarray, np.ndarray]:
-        """``int64[num_envs]`` each: the restrictions and the blocked attempts of every
-        env's episode so far (unpacked from the one counter a step adds to)."""
-        return self._counts & ((1 << COUNT_SHIFT) - 1), self._counts >> COUNT_SHIFT
 
     # ------------------------------------------------------------------ inspection
 
@@ -557,7 +553,7 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         if not self._started:
             raise gym.error.ResetNeeded("call reset() before verdicts()")
         z = self._z
-        restrictions, blocked = self._counters()
+        restrictions, blocked = split_counts(self._counts)
         return {
             "system_objective": self._outcome_names[self.pool.outcome[z]],
             "test_objective_realized": self.pool.test_realized[z],
@@ -569,9 +565,8 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
     def run_state(self, i: int) -> RunState:
         """The :class:`~flowtest_env.game.RunState` of env ``i`` now (for pictures)."""
         t, local = self.pool.locate(int(self._z[i]))
-        return self.pool.tests[t].run_state(
-            local, int(self._steps[i]), int(self._counts[i] & ((1 << COUNT_SHIFT) - 1)), int(self._counts[i] >> COUNT_SHIFT)
-        )
+        restrictions, blocked = split_counts(self._counts[i : i + 1])
+        return self.pool.tests[t].run_state(local, int(self._steps[i]), int(restrictions[0]), int(blocked[0]))
 
     def render(self) -> tuple[np.ndarray, ...] | None:
         """``rgb_array``: one picture per env (drawn one by one; not for the hot loop; in the

@@ -288,8 +288,8 @@ def test_step_tables_are_the_pool_tables_fused() -> None:
     assert np.array_equal(tab.next_z, pool.next_z) and tab.next_z.dtype == np.intp
     assert np.array_equal(tab.reward, reward)
     assert np.array_equal(tab.ends, pool.outcome[pool.next_z] != 0)
-    assert np.array_equal(tab.counts & ((1 << step_tables.COUNT_SHIFT) - 1), pool.restricted[here])
-    assert np.array_equal(tab.counts >> step_tables.COUNT_SHIFT, pool.refused)
+    restrictions, blocked = step_tables.split_counts(tab.counts)
+    assert np.array_equal(restrictions, pool.restricted[here]) and np.array_equal(blocked, pool.refused)
     assert np.array_equal(tab.mask(z, a_n), pool.mask) and tab.mask(z, a_n).dtype == np.int8
     assert np.array_equal(tab.obs[tab.rows(z)], pool.obs[pool.obs_row])
     assert tab.obs.shape[0] < pool.obs.shape[0]  # rows repeat (the history's test part is not shown)
