@@ -60,6 +60,11 @@ no episode ended). Unlike the NumPy env the verdict is always there (knowing whe
 env ended would need a host synchronisation) and ``system_state`` is not (it is a Python
 object: :meth:`TorchVectorEnv.system_states` gathers it on the host).
 
+**Which env where.** On a GPU the torch env keeps the tables and the batch on the device. On
+the CPU the NumPy env is the faster of the two (a torch operation costs several times a
+NumPy one to launch, and a step is some thirty of them), so a trainer's ``"auto"`` takes
+the NumPy env there: :func:`preferred_backend`.
+
 torch is imported here only: ``import flowtest_env`` works without it.
 """
 
@@ -80,8 +85,8 @@ from .compiled import OUTCOMES, CompiledPool, potentials
 from .draws import GOLDEN_I64, MAX_TESTS, MIX1_I64, MIX2_I64
 from .encoding import make_encoder
 from .game import TestGame
+from .step_tables import available_memory, distinct_rows, shaped_rewards
 from .validation import positive_int
-from .vector import available_memory, shaped_rewards
 from .wrappers import DistancePotential, shared_position_slice
 
 AUTORESET_MODES: tuple[str, ...] = ("next_step", "same_step", "disabled")
@@ -111,6 +116,10 @@ def autoreset_name(mode: Any) -> str:
 
 WORD = 64
 """Places per packed memory word."""
+
+LARGE = 4 << 20
+"""Bytes of a batch's observations from which the CPU env takes a fresh one from NumPy's
+allocator (:meth:`TorchVectorEnv._out`)."""
 
 
 # ---------------------------------------------------------------- the draw, in int64
@@ -179,9 +188,10 @@ class TorchTables:
     mask
         ``bool[n_z, A]``: the legal actions.
     obs_row, obs
-        ``int64[n_z]``, ``[n_rows, *obs_shape]``: each configuration's observation row
-        (with the memory, its last ``n_places`` entries are zero: a gather then writes the
-        memory bits into them).
+        ``int64[n_z]``, ``[n_rows, *obs_shape]``: each configuration's observation row,
+        the pool's distinct rows only (:func:`~flowtest_env.step_tables.distinct_rows`; with the
+        memory, their last ``n_places`` entries are zero: a gather then writes the memory
+        bits into them).
     visited_bits
         ``int64[n_z, W]``: the places the configuration's observation shows the SUT at,
         packed 64 to a word (``W = 0`` without the visited-places memory).
@@ -268,12 +278,15 @@ def build_tables(
     assignment: str = "random",
     device: str | torch.device = "cpu",
     reward_dtype: torch.dtype = torch.float32,
+    obs_dtype: Any = None,
 ) -> TorchTables:
     """:class:`TorchTables` of a compiled pool (its ``games`` in pool order) with the
     options of :class:`~flowtest_env.envs.FlowTestEnv`: ``memory_slice`` where the flat
     observation holds the SUT's place (the visited-places memory; ``None``: no memory),
     ``shaping`` (0: off) and ``shaping_gamma``; rewards computed in float64 as the single
-    env does, then cast to ``reward_dtype``.
+    env does, then cast to ``reward_dtype``; ``obs_dtype`` the observation table's dtype
+    (``None``: the pool's; ``numpy.uint8`` for a NumPy env made with ``obs_dtype="uint8"``,
+    whose 0/1 entries it keeps).
 
     Example::
 
@@ -297,10 +310,12 @@ def build_tables(
     reward = pool.rewards(step_cost, restricted_penalty, goal_reward, violation_penalty)
     if shaping > 0:
         reward = shaped_rewards(pool, reward, potentials(pool, list(games), DistancePotential(shaping)), shaping_gamma)
-    obs = pool.obs
+    distinct, row_of = distinct_rows(pool.obs)  # the rows that differ: a smaller table to gather from
+    obs_row = row_of[pool.obs_row]
+    obs = distinct if obs_dtype is None else distinct.astype(obs_dtype, copy=False)
     if memory_slice is not None:
-        row_bits, n_places = _visited_words(pool.obs, memory_slice)
-        bits = row_bits[pool.obs_row]
+        row_bits, n_places = _visited_words(distinct, memory_slice)
+        bits = row_bits[obs_row]
         obs = np.concatenate([obs, np.zeros((obs.shape[0], n_places), dtype=obs.dtype)], axis=1)
     else:
         bits, n_places = np.zeros((pool.n_z, 0), dtype=np.int64), 0
@@ -318,7 +333,7 @@ def build_tables(
         test_realized=t(pool.test_realized, torch.bool),
         outcome=t(pool.outcome, torch.int8),
         mask=t(pool.mask != 0, torch.bool),
-        obs_row=t(pool.obs_row, torch.int64),
+        obs_row=t(obs_row, torch.int64),
         obs=torch.as_tensor(np.ascontiguousarray(obs)).to(dev),
         visited_bits=t(bits, torch.int64),
         initial=t(pool.initial, torch.int64),
@@ -797,9 +812,20 @@ class TorchVectorEnv(gym.vector.VectorEnv):
         return a
 
     def _out(self) -> torch.Tensor | None:
-        """The observation buffer (``copy=False``), else ``None``."""
-        if self.copy or self.compact:
+        """Where the step's observation is gathered to: the one buffer (``copy=False``); with
+        ``copy``, for a batch of :data:`LARGE` bytes or more on the CPU, a fresh array of
+        NumPy's allocator (torch's gives a large block back to the system when it is freed,
+        so a fresh tensor of a large batch page-faults every step, slower than the gather
+        itself: 1.6 ms against 0.9 ms for 16,384 Maze 2 observations); else ``None`` (a
+        fresh tensor)."""
+        if self.compact:
             return None
+        if self.copy:
+            rows = self.tables.obs
+            if self.device.type != "cpu" or self.num_envs * rows[0].nbytes < LARGE:
+                return None
+            table = rows.numpy()  # a view: the tables are on the CPU
+            return torch.from_numpy(np.empty((self.num_envs, *table.shape[1:]), dtype=table.dtype))
         if self._buffer is None:
             t = self.tables
             self._buffer = torch.empty((self.num_envs, *t.obs_shape), dtype=t.obs.dtype, device=self.device)
@@ -863,7 +889,7 @@ def outcome_names(codes: torch.Tensor) -> np.ndarray:
 def tables_of(env: Any, device: str | torch.device = "cpu", reward_dtype: torch.dtype = torch.float32) -> TorchTables:
     """:class:`TorchTables` of a NumPy :class:`~flowtest_env.vector.PoolVectorEnv`: its
     pool, step budget, reward weights, memory, shaping and assignment (its
-    :class:`~flowtest_env.config.EnvConfig`)."""
+    :class:`~flowtest_env.config.EnvConfig`) and its observation dtype."""
     env = getattr(env, "unwrapped", env)
     cfg = env.config
     where = None
@@ -873,7 +899,21 @@ def tables_of(env: Any, device: str | torch.device = "cpu", reward_dtype: torch.
         env.pool, env.games, max_steps=env.max_steps, step_cost=cfg.step_cost, restricted_penalty=cfg.restricted_penalty,
         goal_reward=cfg.goal_reward, violation_penalty=cfg.violation_penalty, memory_slice=where, shaping=cfg.shaping,
         shaping_gamma=cfg.shaping_gamma, assignment=env.assignment, device=device, reward_dtype=reward_dtype,
+        obs_dtype=env.single_observation_space.dtype,
     )
+
+
+def preferred_backend(device: str | torch.device) -> str:
+    """The env a trainer on ``device`` steps when it is left to choose (``env_backend="auto"``):
+    ``"numpy"`` (:mod:`flowtest_env.vector`) on the CPU, where it steps faster than this
+    module's env at every batch size measured (128 to 16,384 envs: 1.4-3.9x,
+    docs/benchmarks/environments.md) and gives the same runs; ``"torch"`` on any other
+    device, where the tables and the batch stay on the device.
+
+    >>> preferred_backend("cpu"), preferred_backend("cuda:0")
+    ('numpy', 'torch')
+    """
+    return "numpy" if torch.device(device).type == "cpu" else "torch"
 
 
 def make_vec(env_id: str, num_envs: int, device: str | torch.device = "cpu", *, autoreset_mode: Any = "next_step",
@@ -913,6 +953,6 @@ def make_tables(env_id: str, device: str | torch.device = "cpu", reward_dtype: t
 __all__ = [
     "AUTORESET_MODES", "EnvState", "StepOutput", "TorchTables", "TorchVectorEnv", "Verdict", "action_mask", "autoreset_name",
     "build_tables", "compact", "compact_of", "draw_tests", "expand", "make_tables", "make_vec", "mix64", "observation_of",
-    "observe", "outcome_names", "reset_state", "restart", "step", "tables_of", "masked_verdict",
+    "observe", "outcome_names", "preferred_backend", "reset_state", "restart", "step", "tables_of", "masked_verdict",
     "unpack_visited",
 ]

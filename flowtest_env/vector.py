@@ -12,7 +12,12 @@ The ``vector_entry_point`` of every FlowTest ID::
 
 Each test is compiled once into flat tables (:mod:`flowtest_env.compiled`); a step is
 then a handful of array gathers over the whole batch, the same for every env whatever
-test it plays. The trajectories are exactly those of a ``SyncVectorEnv`` of the single
+test it plays: one gather per output over tables fused by (configuration, action)
+(:class:`~flowtest_env.step_tables.StepTables`: next configuration, reward, end, the
+verdict's counters), the observation one gather of precomputed rows, the mask one gather
+of 8-byte words (so ``infos["action_mask"]`` is a view of rows padded to 8 bytes, not
+contiguous unless the action count is a multiple of 8), the env's own state updated in
+place. The trajectories are exactly those of a ``SyncVectorEnv`` of the single
 env built with the same options and the same autoreset mode (observations, rewards,
 terminated, truncated and infos: ``system_state``, ``action_mask``, and ``verdict`` with
 its fields at the end of an episode).
@@ -76,6 +81,7 @@ from .game import RunState, TestGame
 from .pools import random_grid_tests
 from .render import Renderer, make_renderer
 from .sources import game_for
+from .step_tables import COUNT_SHIFT, StepTables, batch_bytes, check_batch_memory, compact_rows, shaped_rewards, split_counts, step_tables
 from .validation import one_of, positive_int
 from .wrappers import DistancePotential, shared_position_slice
 
@@ -99,6 +105,24 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         ``i % len(games)`` in every episode.
     autoreset_mode
         ``NEXT_STEP`` (default), ``SAME_STEP`` or ``DISABLED`` (module docstring).
+    obs_dtype
+        ``None`` (default): the observation kind's own dtype (``float32`` for ``flat`` and
+        ``padded``, ``uint8`` for ``grid``). ``"uint8"``: a ``flat`` or ``padded``
+        observation as ``uint8`` ``0``/``1``, the same numbers in a quarter of the bytes
+        (``Box(0, 1, uint8)``; the visited-places memory too), for a consumer that converts
+        it itself (a trainer on a GPU copies a quarter to the device); a step of a large
+        batch gathers and returns a quarter of the memory, about 3x the steps per second
+        of ``float32`` at 16,384 envs (docs/benchmarks/environments.md). Only where every
+        entry is 0 or 1: a test with fuel, whose observation holds the fuel fraction, is
+        refused (``ValueError``). A vector-env option: the single env has ``float32``.
+    copy
+        ``True`` (default): every ``reset`` and ``step`` returns a fresh observation array.
+        ``False``: the observation is gathered into one buffer of the env (``out=``) and
+        that buffer is returned, overwritten by the next ``reset`` or ``step`` (as
+        Gymnasium's ``copy=False`` and the torch env's): copy what you keep. It pays where
+        a fresh array is too large for the allocator to reuse (above 32 MiB glibc maps new
+        pages each time, e.g. 16,384 padded observations of a pool, 59 MB); below that a
+        fresh array costs about the same.
     config, options
         The env options: an :class:`~flowtest_env.config.EnvConfig`, or its fields as
         keyword arguments (``max_steps``, ``obs_kind``, ``memory``, ``shaping``, ...;
@@ -124,10 +148,15 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         assignment: str = "random",
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         config: EnvConfig | None = None,
+        obs_dtype: str | None = None,
+        copy: bool = True,
         **options: Any,
     ) -> None:
         num_envs = positive_int("num_envs", num_envs)
+        if not isinstance(copy, (bool, np.bool_)):
+            raise ValueError(f"copy must be True or False, not {copy!r}")
         one_of("assignment", assignment, ("random", "fixed"))
+        one_of("obs_dtype", obs_dtype, (None, "uint8"))
         self.autoreset_mode = autoreset_mode_of(autoreset_mode)
         config = config_from(type(self).__name__, config, options)
         one_of("render_mode", config.render_mode, (None, *self.metadata["render_modes"]))
@@ -155,36 +184,42 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         self.tile_size = config.tile_size
         mem_size = 0 if self._mem is None else self._mem.stop - self._mem.start
         check_batch_memory(num_envs, p, mem_size)
+        if self.max_steps >= 2**COUNT_SHIFT:
+            raise ValueError(f"max_steps must be below 2**{COUNT_SHIFT} in the vector env (its verdict counters are 32-bit), not {self.max_steps}")
+        reward = p.rewards(config.step_cost, config.restricted_penalty, config.goal_reward, config.violation_penalty)
+        if config.shaping > 0:  # potential-based shaping folded into the reward table
+            reward = shaped_rewards(p, reward, potentials(p, self.games, DistancePotential(config.shaping)), config.shaping_gamma)
+        self._tables: StepTables = step_tables(p, reward)
+        rows = compact_rows(self._tables.obs, self.games) if obs_dtype == "uint8" else self._tables.obs
         if self._mem is not None:
             shape = (int(np.prod(p.obs_shape)) + mem_size,)
-            self.single_observation_space = spaces.Box(0.0, 1.0, shape=shape, dtype=np.float32)
+            self.single_observation_space = spaces.Box(0, 1, shape=shape, dtype=rows.dtype)
         else:
-            high = 1.0 if p.obs.dtype == np.float32 else 255
-            self.single_observation_space = spaces.Box(0, high, shape=p.obs_shape, dtype=p.obs.dtype)
+            high = 255 if self.obs_kind == "grid" else 1
+            self.single_observation_space = spaces.Box(0, high, shape=p.obs_shape, dtype=rows.dtype)
         self.single_action_space = spaces.Discrete(p.n_actions)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
-        self._reward = p.rewards(config.step_cost, config.restricted_penalty, config.goal_reward, config.violation_penalty)
-        if config.shaping > 0:  # potential-based shaping folded into the reward table
-            self._reward = shaped_rewards(p, self._reward, potentials(p, self.games, DistancePotential(config.shaping)), config.shaping_gamma)
         self._outcome_names = np.array(OUTCOMES, dtype=object)
         self._state_index = np.concatenate([t.system for t in p.tests]).astype(np.int64)  # numeric_infos' system_state
         self._all = np.ones(self.num_envs, dtype=bool)
-        self._z = np.zeros(self.num_envs, dtype=np.int64)
+        self._z = np.zeros(self.num_envs, dtype=np.intp)
+        self._flat = np.zeros(self.num_envs, dtype=np.intp)  # z * n_actions + action, written in place each step
+        self._added = np.zeros(self.num_envs, dtype=np.int64)  # the step's counts, written in place
         self._test = np.zeros(self.num_envs, dtype=np.int64)
         self._steps = np.zeros(self.num_envs, dtype=np.int64)
-        self._restrictions = np.zeros(self.num_envs, dtype=np.int64)
-        self._blocked = np.zeros(self.num_envs, dtype=np.int64)
-        self._seen = np.zeros((self.num_envs, mem_size), dtype=np.float32) if self._mem is not None else None
+        self._counts = np.zeros(self.num_envs, dtype=np.int64)  # restrictions + (blocked attempts << COUNT_SHIFT)
+        self._seen = np.zeros((self.num_envs, mem_size), dtype=rows.dtype) if self._mem is not None else None
         self._mem_at = int(np.prod(p.obs_shape))
         # accumulative setting: the shown-restriction entries of the states visited under the current history
         self._shown: np.ndarray | slice | None = shared_shown_entries(self.encoders) if accumulative else None
         self._history = np.concatenate([t.history for t in p.tests]).astype(np.int64)
         n_shown = 0 if self._shown is None else int(np.zeros(self._mem_at, dtype=np.int8)[self._shown].size)
-        self._shown_now = np.zeros((num_envs, n_shown), dtype=p.obs.dtype)
+        self._shown_now = np.zeros((num_envs, n_shown), dtype=rows.dtype)
         self._shown_h = np.zeros(num_envs, dtype=np.int64)
         # the observation rows, with room for the memory (filled per step) when there is one
-        self._obs_table = p.obs if self._mem is None else np.concatenate([p.obs, np.zeros((p.obs.shape[0], mem_size), np.float32)], axis=1)
+        self._obs_table = rows if self._mem is None else np.concatenate([rows, np.zeros((rows.shape[0], mem_size), rows.dtype)], axis=1)
+        self._buffer = None if copy else np.zeros((num_envs, *self._obs_table.shape[1:]), dtype=rows.dtype)  # copy=False: the one output
         self._done = np.zeros(self.num_envs, dtype=bool)  # episodes ended and not reset yet
         self._keys = np.zeros(self.num_envs, dtype=np.uint64)  # the test draws' keys (flowtest_env.draws)
         self._episode = np.zeros(self.num_envs, dtype=np.int64)  # each env's episodes since its key
@@ -232,6 +267,8 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
                 raise ValueError(f"the test chooser must return one test index in [0, {len(self.games)}) for each of the "
                                  f"{envs.size} envs starting an episode, not {tests!r}")
             return tests.astype(np.int64)
+        if len(self.games) == 1:  # what the draw gives (no key to mix)
+            return np.zeros(envs.size, dtype=np.int64)
         if self.assignment == "fixed":
             return envs % len(self.games)
         return draw_tests(self._keys[envs], self._episode[envs], len(self.games))
@@ -243,14 +280,14 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         z = self.pool.initial[tests]
         self._z[envs] = z
         self._steps[envs] = 0
-        self._restrictions[envs] = 0
-        self._blocked[envs] = 0
+        self._counts[envs] = 0
         self._done[envs] = False
 
     def _observe(self, fresh: np.ndarray | None = None) -> np.ndarray:
         """The batch observation now (``fresh``: envs whose episode just started, their
         memory restarts)."""
-        obs: np.ndarray = np.take(self._obs_table, self.pool.obs_row[self._z], axis=0)  # faster than fancy indexing
+        # one gather, faster than fancy indexing ("clip": in range by construction; "raise" would buffer an out= array)
+        obs: np.ndarray = np.take(self._obs_table, self._tables.rows(self._z), axis=0, out=self._buffer, mode="clip")
         if self._shown is not None:
             self._accumulate(obs, None, fresh)
         if self._seen is None:
@@ -263,7 +300,7 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
 
     def _observe_envs(self, envs: np.ndarray) -> np.ndarray:
         """The observations of ``envs`` alone, their episodes just started."""
-        obs: np.ndarray = np.take(self._obs_table, self.pool.obs_row[self._z[envs]], axis=0)
+        obs: np.ndarray = np.take(self._obs_table, self._tables.rows(self._z[envs]), axis=0)
         if self._shown is not None:
             self._accumulate(obs, envs, np.arange(envs.size))
         if self._seen is None:
@@ -371,17 +408,18 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
                 "reset(options={'reset_mask': mask})"
             )
         a = self._check(actions)
-        p = self.pool
-        z = self._z
-        flat = z * p.n_actions + a
-        z2 = p.next_z[flat]
-        reward = self._reward[flat]
+        tab, flat = self._tables, self._flat
+        np.multiply(self._z, self.pool.n_actions, out=flat)
+        flat += a
+        # every gather below writes into a fresh output or a buffer of the env ("clip": the
+        # indices are in range by construction, and take buffers an out= array in "raise" mode)
+        tab.next_z.take(flat, out=self._z, mode="clip")
+        reward = tab.reward.take(flat, mode="clip")
+        terminated = tab.ends.take(flat, mode="clip")
+        self._counts += tab.counts.take(flat, out=self._added, mode="clip")
         self._steps += 1
-        self._restrictions += p.restricted[z]
-        self._blocked += p.refused[flat]
-        terminated = p.outcome[z2] != 0
-        truncated = ~terminated & (self._steps >= self.max_steps)
-        self._z = z2
+        truncated = np.greater_equal(self._steps, self.max_steps)
+        np.greater(truncated, terminated, out=truncated)  # and not terminated
         fresh: np.ndarray | None = None
         if mode == AutoresetMode.NEXT_STEP and self._done.any():
             fresh = np.flatnonzero(self._done)
@@ -422,11 +460,11 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
             raise gym.error.InvalidAction(
                 f"actions must be integers of {self.single_action_space}, not {a.dtype} values (booleans and floats are refused)"
             )
-        a = a.astype(np.int64, copy=False)
-        if a.size and (int(a.min()) < 0 or int(a.max()) >= self.pool.n_actions):
+        # one pass: a negative action, seen as unsigned, is as out of range as a large one
+        if a.size and int(a.view(a.dtype.str.replace("i", "u")).max()) >= self.pool.n_actions:
             bad = int(np.flatnonzero((a < 0) | (a >= self.pool.n_actions))[0])
             raise gym.error.InvalidAction(f"env {bad}: action {int(a[bad])} is outside {self.single_action_space}")
-        return a
+        return a if a.dtype.itemsize < 8 or a.dtype.kind == "i" else a.astype(np.intp)  # added to intp in place
 
     def _infos(self, z: np.ndarray, only: np.ndarray | None = None) -> dict[str, Any]:
         """``system_state`` (an object array of the single env's values, gathered from one
@@ -434,38 +472,46 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         those of the envs of ``only`` (``None``/zeros elsewhere, as ``SyncVectorEnv`` lays
         out the infos of some envs)."""
         states = self._state_index if self.config.numeric_infos else self.pool.system_state
+        mask = self._tables.mask(z, self.pool.n_actions)
         if only is None:
             return {
-                "system_state": states[z],
+                "system_state": states.take(z),
                 "_system_state": self._all.copy(),
-                "action_mask": np.take(self.pool.mask, z, axis=0),
+                "action_mask": mask,
                 "_action_mask": self._all.copy(),
             }
+        mask[~only] = 0
+        blank: Any = states.dtype.type(0) if self.config.numeric_infos else None
         return {
-            "system_state": np.where(only, states[z], states.dtype.type(0) if self.config.numeric_infos else None),
+            "system_state": np.where(only, states.take(z), blank),
             "_system_state": only.copy(),
-            "action_mask": np.where(only[:, None], np.take(self.pool.mask, z, axis=0), np.int8(0)),
+            "action_mask": mask,
             "_action_mask": only.copy(),
         }
 
     def _verdict(self, z: np.ndarray, ended: np.ndarray) -> dict[str, Any]:
         """The verdict arrays of the envs that ended (zeros/``None`` elsewhere, as a
         ``SyncVectorEnv`` lays out its infos)."""
-        if self.config.numeric_infos:
-            names: np.ndarray = np.where(ended, self.pool.outcome[z].astype(np.int64), np.int64(0))
-        else:
-            names = np.asarray(np.where(ended, self._outcome_names[self.pool.outcome[z]], None))
-        zero = np.int64(0)
+        idx = np.flatnonzero(ended)  # usually few: the values are scattered into zeros
+        zi, counts = z.take(idx), self._counts.take(idx)
+
+        def scattered(values: np.ndarray, dtype: Any) -> np.ndarray:
+            out = np.zeros(self.num_envs, dtype=dtype) if dtype is not object else np.empty(self.num_envs, dtype=object)  # None-filled
+            out[idx] = values
+            return out
+
+        codes = self.pool.outcome.take(zi)
+        restrictions, blocked = split_counts(counts)
         return {
-            "system_objective": names,
+            "system_objective": scattered(codes, np.int64) if self.config.numeric_infos else scattered(self._outcome_names.take(codes), object),
             "_system_objective": ended.copy(),
-            "test_objective_realized": self.pool.test_realized[z] & ended,
+            "test_objective_realized": scattered(self.pool.test_realized.take(zi), bool),
             "_test_objective_realized": ended.copy(),
-            "restrictions": np.where(ended, self._restrictions, zero),
+            "restrictions": scattered(restrictions, np.int64),
             "_restrictions": ended.copy(),
-            "blocked_attempts": np.where(ended, self._blocked, zero),
+            "blocked_attempts": scattered(blocked, np.int64),
             "_blocked_attempts": ended.copy(),
-            "steps": np.where(ended, self._steps, zero),
+            "steps": scattered(self._steps.take(idx), np.int64),
             "_steps": ended.copy(),
         }
 
@@ -507,20 +553,20 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         if not self._started:
             raise gym.error.ResetNeeded("call reset() before verdicts()")
         z = self._z
+        restrictions, blocked = split_counts(self._counts)
         return {
             "system_objective": self._outcome_names[self.pool.outcome[z]],
-            "test_objective_realized": self.pool.test_realized[z].copy(),
-            "restrictions": self._restrictions.copy(),
-            "blocked_attempts": self._blocked.copy(),
+            "test_objective_realized": self.pool.test_realized[z],
+            "restrictions": restrictions,
+            "blocked_attempts": blocked,
             "steps": self._steps.copy(),
         }
 
     def run_state(self, i: int) -> RunState:
         """The :class:`~flowtest_env.game.RunState` of env ``i`` now (for pictures)."""
         t, local = self.pool.locate(int(self._z[i]))
-        return self.pool.tests[t].run_state(
-            local, int(self._steps[i]), int(self._restrictions[i]), int(self._blocked[i])
-        )
+        restrictions, blocked = split_counts(self._counts[i : i + 1])
+        return self.pool.tests[t].run_state(local, int(self._steps[i]), int(restrictions[0]), int(blocked[0]))
 
     def render(self) -> tuple[np.ndarray, ...] | None:
         """``rgb_array``: one picture per env (drawn one by one; not for the hot loop; in the
@@ -546,7 +592,7 @@ class FlowTestVectorEnv(PoolVectorEnv):
     runs of one test (``test``: anything :func:`flowtest_env.sources.load_test` takes;
     ``problem`` is its older name); the options are those of
     :class:`~flowtest_env.envs.FlowTestEnv` (:class:`~flowtest_env.config.EnvConfig`),
-    plus ``autoreset_mode``.
+    plus ``autoreset_mode``, ``obs_dtype`` and ``copy`` (:class:`PoolVectorEnv`).
 
     Example::
 
@@ -555,6 +601,8 @@ class FlowTestVectorEnv(PoolVectorEnv):
         ...                     autoreset_mode="SAME_STEP", memory="visited", shaping=10.0)
         >>> envs.autoreset_mode.name
         'SAME_STEP'
+        >>> gym.make_vec("FlowTest-Maze2-v0", num_envs=8, vectorization_mode="vector_entry_point", obs_dtype="uint8").single_observation_space
+        Box(0, 1, (306,), uint8)
     """
 
     def __init__(
@@ -564,6 +612,8 @@ class FlowTestVectorEnv(PoolVectorEnv):
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         problem: Any = None,
         config: EnvConfig | None = None,
+        obs_dtype: str | None = None,
+        copy: bool = True,
         **options: Any,
     ) -> None:
         if problem is not None:
@@ -571,7 +621,8 @@ class FlowTestVectorEnv(PoolVectorEnv):
         config = config_from(type(self).__name__, config, options)
         positive_int("num_envs", num_envs)
         game = game_for(test, config.setting)
-        super().__init__(num_envs, [game], autoreset_mode=autoreset_mode, config=config.with_max_steps(default_max_steps(game)))
+        super().__init__(num_envs, [game], autoreset_mode=autoreset_mode, config=config.with_max_steps(default_max_steps(game)), obs_dtype=obs_dtype,
+                         copy=copy)
         self.problem = game.artifact.name
 
 
@@ -579,7 +630,7 @@ class FlowTestVectorEnv(PoolVectorEnv):
 class RandomGridVectorEnv(PoolVectorEnv):
     """The vector entry point of ``FlowTest-RandomGrid-v0``: the arguments of
     :class:`~flowtest_env.envs.RandomGridEnv` (checked by the same functions), plus
-    ``autoreset_mode``; each episode draws its test from the pool exactly as the single
+    ``autoreset_mode``, ``obs_dtype`` and ``copy`` (:class:`PoolVectorEnv`); each episode draws its test from the pool exactly as the single
     env does."""
 
     def __init__(
@@ -596,6 +647,8 @@ class RandomGridVectorEnv(PoolVectorEnv):
         world: str = "empty",
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         config: EnvConfig | None = None,
+        obs_dtype: str | None = None,
+        copy: bool = True,
         **options: Any,
     ) -> None:
         config = config_from(type(self).__name__, config, options)
@@ -603,23 +656,9 @@ class RandomGridVectorEnv(PoolVectorEnv):
         size, family, n, seeds, kind, world = random_grid_pool(size, family, n, seeds, kind, pool, split, count, world)
         tests = random_grid_tests(pool, split, count, size, family, n, seeds, kind, world)
         games = [TestGame(a, config.setting) for a in tests]
-        super().__init__(num_envs, games, autoreset_mode=autoreset_mode, config=config.with_max_steps(4 * size * size))
+        super().__init__(num_envs, games, autoreset_mode=autoreset_mode, config=config.with_max_steps(4 * size * size), obs_dtype=obs_dtype,
+                         copy=copy)
         self.problem = f"random-{size}x{size}-{family}{n}" + ("" if world == "empty" else f"-{world}")
-
-
-def shaped_rewards(pool: CompiledPool, reward: np.ndarray, phi: np.ndarray, gamma: float) -> np.ndarray:
-    """The reward table with potential-based shaping: ``r + (gamma * phi(z') - phi(z))`` for
-    every (configuration ``z``, action), ``phi(z') = 0`` when ``z'`` ends the run.
-
-    The single env adds ``gamma * phi' - phi`` to the step's reward, ``phi`` the potential
-    of the configuration it steps from (0 only after a terminated step, when it does not step
-    again before a reset): a function of the configuration and the action, so it is a table
-    too, summed in the single env's order (the same floats).
-    """
-    phi_end = np.where(pool.outcome != 0, 0.0, phi)
-    here = np.repeat(np.arange(pool.n_z, dtype=np.int64), pool.n_actions)
-    out: np.ndarray = reward + (float(gamma) * phi_end[pool.next_z] - phi_end[here])
-    return out
 
 
 def autoreset_mode_of(mode: Any) -> AutoresetMode:
@@ -700,51 +739,6 @@ def shared_shown_entries(encoders: list[Encoder]) -> np.ndarray | slice:
     if entries.size and np.array_equal(entries, np.arange(entries[0], entries[0] + entries.size)):
         return slice(int(entries[0]), int(entries[0]) + entries.size)  # one block (the usual case): views, no copies
     return entries
-
-
-def available_memory() -> int | None:
-    """Bytes of memory available to a new allocation (Linux ``MemAvailable``, else the
-    physical memory), ``None`` when the system does not say."""
-    try:
-        with open("/proc/meminfo") as f:
-            for line in f:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        pass
-    try:
-        return int(os.sysconf("SC_PHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
-    except (AttributeError, ValueError, OSError):
-        return None
-
-
-def batch_bytes(num_envs: int, pool: CompiledPool, memory_size: int = 0) -> int:
-    """An estimate of the bytes a batch of ``num_envs`` runs of ``pool`` needs: the
-    tables, and per env a step's observation (gathered, with the memory, returned), the
-    memory, the masks and infos and the per-env counters."""
-    obs_bytes = (int(np.prod(pool.obs_shape)) * pool.obs.itemsize) + 4 * memory_size
-    per_env = 3 * obs_bytes + 4 * memory_size + 4 * pool.n_actions + 256
-    names = ("next_z", "refused", "restricted", "outcome", "test_realized", "mask", "obs_row", "obs", "system_state")
-    tables = sum(int(getattr(pool, f).nbytes) for f in names)
-    return tables + 2 * pool.next_z.size * 8 + num_envs * per_env
-
-
-def check_batch_memory(num_envs: int, pool: CompiledPool, memory_size: int = 0) -> None:
-    """Refuse a batch that would need more memory than the machine has available.
-
-    Raises
-    ------
-    ValueError
-        Saying how much memory ``num_envs`` runs would need.
-    """
-    need = batch_bytes(num_envs, pool, memory_size)
-    have = available_memory()
-    if have is not None and need > have:
-        per_env = (need - batch_bytes(0, pool, memory_size)) / num_envs
-        raise ValueError(
-            f"num_envs={num_envs} would need about {need / 2**30:.1f} GiB of memory ({per_env:.0f} bytes per env "
-            f"for its observations and infos, plus the test tables); {have / 2**30:.1f} GiB are available. Use fewer envs."
-        )
 
 
 class VectorActionMaskObservation(gym.vector.VectorWrapper):

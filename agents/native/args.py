@@ -28,9 +28,9 @@ level's last run) or the mean GAE magnitude."""
 
 ENV_BACKENDS = ("auto", "torch", "numpy")
 """Who steps the tests: the NumPy vector env, or its torch twin on the training device
-(``auto``: the torch env: alone it steps slower than the NumPy env on the CPU, but the two
-train at the same rate within noise there, it spares the NumPy/torch conversions, and on a
-GPU it keeps the tests on the device; both give the same runs)."""
+(``auto``: :func:`flowtest_env.torch_vector.preferred_backend`, the NumPy env on the CPU,
+where it steps faster, and the torch env on any other device, where the tests stay on the
+device; both give the same runs)."""
 
 
 @dataclass
@@ -58,7 +58,7 @@ class NativeArgs:
     memory: str = "visited"  # "visited" (places occupied this episode) or "none"
     obs_kind: str = "flat"  # the env's observation: "flat" or "padded"
     shaping: float = 0.0  # env option: potential-based shaping scale (0 = off)
-    env_backend: str = "auto"  # "torch" (flowtest_env.torch_vector, on the device), "numpy" (flowtest_env.vector); "auto": torch
+    env_backend: str = "auto"  # "torch" (flowtest_env.torch_vector, on the device), "numpy" (flowtest_env.vector); "auto": numpy on the CPU, else torch
     seed: int = 0  # seeds the envs, the network and every sample
     device: str = "auto"  # "auto" (cuda when there is one), "cpu", "cuda", "cuda:1", ...
     threads: int = 1  # torch CPU threads (fixed, so a seed gives the same run)

@@ -50,9 +50,9 @@ def make_vec_env(args: NativeArgs) -> tuple[Any, Any, bool]:
     except TypeError as exc:
         raise ValueError(f"{args.env_id}: the vector env does not take these options ({exc})") from None
     device = resolve_device(args.device)
-    if args.env_backend == "torch" or (args.env_backend == "auto" and args.level_sampling != "plr"):
-        from flowtest_env.torch_vector import TorchVectorEnv
+    from flowtest_env.torch_vector import TorchVectorEnv, preferred_backend
 
+    if args.env_backend == "torch" or (args.env_backend == "auto" and args.level_sampling != "plr" and preferred_backend(device) == "torch"):
         return np_env, TorchVectorEnv.from_numpy(np_env, device=device), env_memory
     return np_env, np_env, env_memory
 

@@ -85,7 +85,7 @@ SETTING_HELP: dict[str, str] = {
     "gru_hidden_size": "GRU width (native recurrent-ppo)", "gae_lambda": "GAE lambda", "clip_range": "PPO ratio clip",
     "vf_coef": "value loss weight", "max_grad_norm": "gradient clip",
     "device": "auto (cuda when torch sees one), cpu, cuda, cuda:N", "threads": "torch CPU threads",
-    "env_backend": "who steps the tests: torch (the torch env on --device), numpy (the NumPy vector env); auto: torch",
+    "env_backend": "who steps the tests: torch (the torch env on --device), numpy (the NumPy vector env); auto: numpy on the CPU, else torch",
     "shaping": "env option: shaping scale, 0 = off",
     "memory": "env option: the SUT's memory, none or visited", "obs_kind": "env option: flat, grid or padded",
     "pad_to": "env option: grid side of obs_kind=padded",

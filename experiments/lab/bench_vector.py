@@ -11,7 +11,7 @@ whole batch at once by the same NumPy code in every row (a random legal action f
 Gymnasium's default next-step autoreset:
 
 * ``FlowTest-Maze2-v0`` through ``gym.make_vec(..., vectorization_mode="vector_entry_point")``
-  (flat and grid observations), ``FlowTest-Patrolling-v0`` (test agent and fuel), a mixed
+  (flat observations, as ``float32`` and with ``obs_dtype="uint8"``, and grid observations), ``FlowTest-Patrolling-v0`` (test agent and fuel), a mixed
   batch of all nine built-ins (:class:`~flowtest_env.vector.PoolVectorEnv`, flat
   observations padded to the largest) and, with ``--random-grid``, a pool of
   ``FlowTest-RandomGrid-v0`` tests;
@@ -87,6 +87,10 @@ def main(argv: list[str] | None = None) -> int:
     vec = "vector_entry_point"
     rows: list[tuple[str, str, Callable[[], Any], int, bool]] = [
         ("`FlowTest-Maze2-v0`", "NumPy vector env, flat obs", lambda: gym.make_vec("FlowTest-Maze2-v0", n, vec), args.steps, True),
+        (
+            "`FlowTest-Maze2-v0`", "NumPy vector env, flat obs, `obs_dtype=\"uint8\"`",
+            lambda: gym.make_vec("FlowTest-Maze2-v0", n, vec, obs_dtype="uint8"), args.steps, True,
+        ),
         (
             "`FlowTest-Maze2-v0`", "NumPy vector env, grid obs",
             lambda: gym.make_vec("FlowTest-Maze2-v0", n, vec, obs_kind="grid"), args.steps, True,

@@ -104,14 +104,14 @@ def test_vector_env_num_envs_must_be_a_positive_integer(num_envs: object) -> Non
 def test_vector_env_num_envs_is_bounded_by_the_memory_it_needs(monkeypatch: pytest.MonkeyPatch) -> None:
     """10**7 maze2 runs need tens of GiB: refused before anything that size is allocated,
     saying how much it would take."""
-    from flowtest_env import vector
+    from flowtest_env import step_tables, vector
 
     with pytest.raises(ValueError, match=r"num_envs=10000000000 would need about \d+\.\d GiB"):  # on any machine
         gym.make_vec("FlowTest-Maze2-v0", num_envs=10**10, vectorization_mode="vector_entry_point")
-    monkeypatch.setattr(vector, "available_memory", lambda: 23 * 2**30)  # the machine that was killed at 23 GB
+    monkeypatch.setattr(step_tables, "available_memory", lambda: 23 * 2**30)  # the machine that was killed at 23 GB
     with pytest.raises(ValueError, match=r"num_envs=10000000 would need about 3\d\.\d GiB"):
         gym.make_vec("FlowTest-Maze2-v0", num_envs=10**7, vectorization_mode="vector_entry_point")
-    monkeypatch.setattr(vector, "available_memory", lambda: 2**30)
+    monkeypatch.setattr(step_tables, "available_memory", lambda: 2**30)
     with pytest.raises(ValueError, match="1.0 GiB are available"):
         vector.FlowTestVectorEnv(10**6, "maze2", memory="visited")
     vector.FlowTestVectorEnv(1000, "maze2", memory="visited")  # 1000 runs fit in 1 GiB

@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 import flowtest_env.compiled as compiled
+import flowtest_env.step_tables as step_tables
 from flowtest_env.artifacts import builtin_game
 from flowtest_env.compiled import OUTCOMES, CompiledPool, CompiledTest, compile_pool, compile_test
 from flowtest_env.encoding import Encoder, make_encoder
@@ -270,3 +271,34 @@ def test_pool_of_many_tests_is_its_tests_one_by_one(helper: str, monkeypatch: py
         assert np.array_equal(pool.next_z.reshape(-1, width)[o : o + n_z], want.next_z + o)
         assert np.array_equal(pool.mask[o : o + n_z], want.mask)
         assert int(pool.initial[t]) == o + want.initial
+
+
+# ------------------------------------------------------------------ the step's fused tables
+
+
+def test_step_tables_are_the_pool_tables_fused() -> None:
+    """Every entry of the fused tables is what the step read from the pool's own tables
+    before: next configuration, reward, end, both counters, mask, observation row."""
+    games = [TestGame(a) for a in SAMPLE if a.system.layout is not None]
+    pool = compile_pool(games, [make_encoder(g, "padded", 8) for g in games])
+    reward = pool.rewards(0.01, 0.05, 1.0, 1.0)
+    tab = step_tables.step_tables(pool, reward)
+    a_n, z = pool.n_actions, np.arange(pool.n_z)
+    here = np.repeat(z, a_n)
+    assert np.array_equal(tab.next_z, pool.next_z) and tab.next_z.dtype == np.intp
+    assert np.array_equal(tab.reward, reward)
+    assert np.array_equal(tab.ends, pool.outcome[pool.next_z] != 0)
+    restrictions, blocked = step_tables.split_counts(tab.counts)
+    assert np.array_equal(restrictions, pool.restricted[here]) and np.array_equal(blocked, pool.refused)
+    assert np.array_equal(tab.mask(z, a_n), pool.mask) and tab.mask(z, a_n).dtype == np.int8
+    assert np.array_equal(tab.obs[tab.rows(z)], pool.obs[pool.obs_row])
+    assert tab.obs.shape[0] < pool.obs.shape[0]  # rows repeat (the history's test part is not shown)
+
+
+def test_distinct_rows_keep_the_first_occurrence_order() -> None:
+    table = np.array([[0, 1], [1, 0], [0, 1], [1, 1], [1, 0]], dtype=np.float32)
+    rows, row_of = step_tables.distinct_rows(table)
+    assert rows.tolist() == [[0, 1], [1, 0], [1, 1]] and row_of.tolist() == [0, 1, 0, 2, 1]
+    grid = np.arange(24, dtype=np.uint8).reshape(3, 2, 2, 2)  # no repeats: the table itself
+    same_rows, identity = step_tables.distinct_rows(grid)
+    assert same_rows is grid and identity.tolist() == [0, 1, 2]
