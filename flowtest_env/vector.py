@@ -19,7 +19,7 @@ its fields at the end of an episode).
 
 **Options.** Every option of the single env (:class:`~flowtest_env.config.EnvConfig`,
 checked by the same validator): ``max_steps``, ``obs_kind``, ``pad_to``, the reward
-weights, ``memory="visited"`` (the places each env's SUT has occupied, one bulk array
+weights, ``memory="visited"`` or ``"counts"`` (the places each env's SUT has occupied, or how often, one bulk array
 update a step), ``shaping``/``shaping_gamma`` (the potential compiled into a
 per-configuration table), ``render_mode="rgb_array"``, ``view``, ``tile_size``;
 ``setting`` (the accumulative setting's restrictions of the states visited under the history
@@ -73,6 +73,7 @@ from .draws import draw_tests, key_of_seed
 from .encoding import Encoder, ObservationLayout, Segment, make_encoder
 from .envs import default_max_steps, random_grid_pool
 from .game import RunState, TestGame
+from .memory import first_memory, increment_of, remember_into
 from .pools import random_grid_tests
 from .render import Renderer, make_renderer
 from .sources import game_for
@@ -141,7 +142,8 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         self.config = config
         with gc_paused():
             self.encoders: list[Encoder] = [make_encoder(g, config.obs_kind, config.pad_to) for g in self.games]
-        self._mem: slice | None = shared_position_slice(self.encoders) if config.memory == "visited" else None
+        self._mem: slice | None = shared_position_slice(self.encoders) if config.memory != "none" else None
+        self._increment = increment_of(config.memory) if self._mem is not None else 1.0  # flowtest_env.memory
         accumulative = settings == {"accumulative"}
         self.pool: CompiledPool = compile_pool(self.games, self.encoders, accumulative)
         p = self.pool
@@ -247,9 +249,10 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         self._blocked[envs] = 0
         self._done[envs] = False
 
-    def _observe(self, fresh: np.ndarray | None = None) -> np.ndarray:
+    def _observe(self, fresh: np.ndarray | None = None, moved: bool = True) -> np.ndarray:
         """The batch observation now (``fresh``: envs whose episode just started, their
-        memory restarts)."""
+        memory restarts; ``moved=False``: a masked reset, the other envs did not move and
+        their memory stays)."""
         obs: np.ndarray = np.take(self._obs_table, self.pool.obs_row[self._z], axis=0)  # faster than fancy indexing
         if self._shown is not None:
             self._accumulate(obs, None, fresh)
@@ -257,7 +260,10 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
             return obs
         if fresh is not None:
             self._seen[fresh] = 0.0
-        np.maximum(self._seen, obs[:, self._mem], out=self._seen)
+        if moved:
+            remember_into(self._seen, obs[:, self._mem], self._increment)
+        else:
+            self._seen[fresh] = first_memory(obs[fresh][:, self._mem], self._increment)
         obs[:, self._mem_at :] = self._seen
         return obs
 
@@ -268,7 +274,7 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
             self._accumulate(obs, envs, np.arange(envs.size))
         if self._seen is None:
             return obs
-        self._seen[envs] = obs[:, self._mem]
+        self._seen[envs] = first_memory(obs[:, self._mem], self._increment)
         obs[:, self._mem_at :] = self._seen[envs]
         return obs
 
@@ -325,7 +331,7 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
             self._episode[envs[given]] = 0
         self._start(envs)
         self._started = True
-        obs = self._observe(envs)
+        obs = self._observe(envs, moved=mask is None)
         infos = self._infos(self._z, mask)
         return obs, infos
 
@@ -489,7 +495,7 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         if lay.kind != "grid" and lay.shape[0] < size:  # a smaller test of the pool: zeros at the end
             pad = Segment("padding", lay.shape[0], size, (size - lay.shape[0],), "zeros: the pool's larger tests use them")
             lay = ObservationLayout(lay.kind, (size,), (*lay.segments, pad), lay.position, lay.grid)
-        return lay if self._mem is None else lay.with_memory(self._mem.stop - self._mem.start)
+        return lay if self._mem is None else lay.with_memory(self._mem.stop - self._mem.start, self.config.memory)
 
     @property
     def test_index(self) -> np.ndarray:
