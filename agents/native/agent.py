@@ -13,6 +13,7 @@ from __future__ import annotations
 import abc
 import math
 from collections.abc import Sequence
+from typing import Any
 
 import torch
 from torch import nn
@@ -63,6 +64,21 @@ class Agent(nn.Module, abc.ABC):
     def __init__(self, obs_size: int, n_actions: int, state_size: int) -> None:
         super().__init__()
         self.obs_size, self.n_actions, self.state_size = int(obs_size), int(n_actions), int(state_size)
+
+    @abc.abstractmethod
+    def settings(self) -> dict[str, Any]:
+        """What rebuilds this network (:func:`agents.native.networks.make_agent`): ``kind``,
+        ``hidden`` widths, ``gru_hidden``."""
+
+    @abc.abstractmethod
+    def input_weights(self) -> list[str]:
+        """The ``state_dict`` names of the weights that multiply the observation (their
+        columns are its entries: :func:`agents.native.inputs.widen`)."""
+
+    def flat_order(self) -> list[tuple[str, nn.Parameter]]:
+        """The parameters in the order of the optimizer's flat buffer
+        (:class:`~agents.native.optim.FlatAdam`); by default their own order."""
+        return list(self.named_parameters())
 
     def initial_state(self, n: int, device: torch.device) -> torch.Tensor:
         """The state of ``n`` envs before anything was seen (``[n, state_size]`` zeros)."""
