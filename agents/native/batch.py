@@ -55,7 +55,9 @@ def minibatch_indices(valid: torch.Tensor, num_minibatches: int, generator: torc
 class Minibatch:
     """The samples of one gradient step: a recurrent network's ``[T, n, ...]`` env
     sequences (``h0``: their states at the rollout's start), or a feed-forward network's
-    ``[B, ...]`` shuffled steps; ``weight`` is 1 for a valid step, 0 for an autoreset step."""
+    ``[B, ...]`` shuffled steps; ``weight`` is 1 for a valid step, 0 for an autoreset step
+    (``all_valid``: every weight is 1, as in a feed-forward minibatch, which holds the
+    valid steps only)."""
 
     obs: torch.Tensor
     masks: torch.Tensor
@@ -66,6 +68,7 @@ class Minibatch:
     weight: torch.Tensor
     h0: torch.Tensor
     starts: torch.Tensor
+    all_valid: bool = False
 
 
 def step_minibatches(r: Rollout, adv: torch.Tensor, returns: torch.Tensor, num_minibatches: int,
@@ -80,7 +83,7 @@ def step_minibatches(r: Rollout, adv: torch.Tensor, returns: torch.Tensor, num_m
         x = flat["obs"][mb]
         yield Minibatch(x, flat["masks"][mb], flat["actions"][mb], flat["logprobs"][mb], flat["adv"][mb], flat["returns"][mb],
                         torch.ones(mb.numel(), dtype=torch.bool, device=x.device), r.h0.new_zeros((mb.numel(), r.h0.shape[1])),
-                        flat["starts"][mb])
+                        flat["starts"][mb], all_valid=True)
 
 
 def env_minibatches(r: Rollout, adv: torch.Tensor, returns: torch.Tensor, num_minibatches: int,

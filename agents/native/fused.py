@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import torch
 
-from .agent import MASKED_LOGIT
+from .agent import MASKED_LOGIT, tanh
 from .args import NativeArgs
 from .batch import Minibatch
 from .mlp import MLPAgent
@@ -75,7 +75,7 @@ class FusedMLP:
     def _forward(self, x: torch.Tensor) -> tuple[torch.Tensor, dict[str, list[torch.Tensor]], dict[str, torch.Tensor]]:
         """The first layers' output, each head's activations (the input of each later layer) and outputs."""
         w, b, _, _ = self.first
-        first = torch.tanh(torch.addmm(b, x, w.t()))
+        first = tanh(torch.addmm(b, x, w.t()))
         h = self.h
         acts: dict[str, list[torch.Tensor]] = {"actor": [first[:, :h]], "critic": [first[:, h:]]}
         outs: dict[str, torch.Tensor] = {}
@@ -86,7 +86,7 @@ class FusedMLP:
                 if k == len(layers) - 1:
                     outs[head] = y
                 else:
-                    a = torch.tanh(y)
+                    a = tanh(y)
                     acts[head].append(a)
         return first, acts, outs
 
@@ -100,27 +100,38 @@ class FusedMLP:
     def _gradient(self, args: NativeArgs, mb: Minibatch, want_info: bool) -> dict[str, torch.Tensor]:
         x = mb.obs
         first, acts, outs = self._forward(x)
-        w = mb.weight.to(x.dtype)
-        n = w.sum().clamp(min=1.0)
-        wn = w / n
+        if mb.all_valid:  # every sample counts once: no weights to apply (a feed-forward minibatch)
+            n: torch.Tensor | float = float(x.shape[0])
+            wn: torch.Tensor | float = 1.0 / x.shape[0]
+            var, mean = torch.var_mean(mb.adv, correction=0)
+            adv = (mb.adv - mean) * torch.rsqrt(var + 1e-8)
+            logits = outs["actor"]
+        else:
+            w = mb.weight.to(x.dtype)
+            n = w.sum().clamp(min=1.0)
+            wn = w / n
+            valid = w > 0
+            mean = (mb.adv * w).sum() / n
+            std = torch.sqrt((((mb.adv - mean) ** 2) * w).sum() / n + 1e-8)
+            adv = torch.where(valid, (mb.adv - mean) / std, torch.zeros_like(mb.adv))
+            logits = outs["actor"]
         legal = mb.masks | ~mb.masks.any(dim=-1, keepdim=True)
-        z = torch.where(legal, outs["actor"], torch.full_like(outs["actor"], MASKED_LOGIT))
+        z = torch.where(legal, logits, MASKED_LOGIT)
         logp_all = torch.log_softmax(z, dim=-1)
         p = logp_all.exp()
-        onehot = torch.nn.functional.one_hot(mb.actions, z.shape[-1]).to(x.dtype)
-        logp = (logp_all * onehot).sum(-1)
-        valid = w > 0
-        mean = (mb.adv * w).sum() / n
-        std = torch.sqrt((((mb.adv - mean) ** 2) * w).sum() / n + 1e-8)
-        adv = torch.where(valid, (mb.adv - mean) / std, torch.zeros_like(mb.adv))
-        ratio = torch.exp(torch.where(valid, logp - mb.logprobs, torch.zeros_like(logp)))
+        logp = logp_all.gather(-1, mb.actions.unsqueeze(-1)).squeeze(-1)
+        delta = logp - mb.logprobs
+        ratio = torch.exp(delta if mb.all_valid else torch.where(valid, delta, torch.zeros_like(delta)))
         unclipped, clipped = -adv * ratio, -adv * torch.clamp(ratio, 1 - args.clip_coef, 1 + args.clip_coef)
-        g_logp = torch.where(unclipped >= clipped, -adv, torch.zeros_like(adv)) * ratio * wn
+        # dL/dlogp, then dL/dz = dL/dlogp (onehot - p) + c_e w/n p (logp + H); an illegal j has p_j = 0
+        # and is not the action, so its entry is 0 (logp_j is finite: -1e8 less the log-sum)
+        g_logp = torch.where(unclipped >= clipped, -adv * ratio, 0.0) * wn
         entropy = -(p * logp_all).sum(-1)
-        g_z = g_logp.unsqueeze(-1) * (onehot - p) + (args.ent_coef * wn).unsqueeze(-1) * p * (logp_all + entropy.unsqueeze(-1))
-        g_z = torch.where(legal, g_z, torch.zeros_like(g_z))
+        g_z = (logp_all + entropy.unsqueeze(-1)).mul_(p).mul_(args.ent_coef * (wn.unsqueeze(-1) if isinstance(wn, torch.Tensor) else wn))
+        g_z.addcmul_(g_logp.unsqueeze(-1), p, value=-1.0)
+        g_z.scatter_add_(-1, mb.actions.unsqueeze(-1), g_logp.unsqueeze(-1))
         values = outs["critic"].squeeze(-1)
-        g_v = (args.vf_coef * wn * (values - mb.returns)).unsqueeze(-1)
+        g_v = ((values - mb.returns) * (wn * args.vf_coef)).unsqueeze(-1)
         g_first = torch.empty_like(first)
         for head, g, part in (("actor", g_z, slice(0, self.h)), ("critic", g_v, slice(self.h, 2 * self.h))):
             layers = self.heads[head]
@@ -129,17 +140,19 @@ class FusedMLP:
                 a_in = acts[head][k]
                 torch.mm(g.t(), a_in, out=gw)
                 torch.sum(g, dim=0, out=gb)
-                g = (g @ wt) * (1 - a_in * a_in)
+                g = g @ wt
+                g = g.addcmul_(g * a_in, a_in, value=-1.0)  # g (1 - a^2): tanh's derivative
             g_first[:, part] = g
         _, _, gw, gb = self.first
         torch.mm(g_first.t(), x, out=gw)
         torch.sum(g_first, dim=0, out=gb)
         if not want_info:
             return {}
-        pg_loss = (torch.maximum(unclipped, clipped) * w).sum() / n
-        v_loss = 0.5 * (((values - mb.returns) ** 2) * w).sum() / n
-        kl = (((ratio - 1) - torch.log(ratio.clamp(min=1e-12))) * w).sum() / n
-        return {"policy_loss": pg_loss, "value_loss": v_loss, "entropy": (entropy * w).sum() / n, "approx_kl": kl}
+        w_all = mb.weight.to(x.dtype)
+        pg_loss = (torch.maximum(unclipped, clipped) * w_all).sum() / n
+        v_loss = 0.5 * (((values - mb.returns) ** 2) * w_all).sum() / n
+        kl = (((ratio - 1) - torch.log(ratio.clamp(min=1e-12))) * w_all).sum() / n
+        return {"policy_loss": pg_loss, "value_loss": v_loss, "entropy": (entropy * w_all).sum() / n, "approx_kl": kl}
 
 
 __all__ = ["FusedMLP"]

@@ -31,12 +31,15 @@ def _minibatch(n: int, d: int, a: int, seed: int, weights: bool = False) -> Mini
     weight = (torch.rand(n, generator=g) < 0.8) if weights else torch.ones(n, dtype=torch.bool)
     return Minibatch(obs=(torch.rand(n, d, generator=g) < 0.3).float(), masks=masks, actions=actions,
                      logprobs=torch.log(torch.rand(n, generator=g) * 0.6 + 0.2), adv=torch.randn(n, generator=g),
-                     returns=torch.randn(n, generator=g), weight=weight, h0=torch.zeros(n, 0), starts=torch.zeros(n, dtype=torch.bool))
+                     returns=torch.randn(n, generator=g), weight=weight, h0=torch.zeros(n, 0), starts=torch.zeros(n, dtype=torch.bool),
+                     all_valid=not weights)
 
 
 @pytest.mark.parametrize("hidden", [(8,), (16, 12), (8, 8, 8)])
 @pytest.mark.parametrize("weights", [False, True])
 def test_the_fused_gradient_is_autograds(hidden: tuple[int, ...], weights: bool) -> None:
+    """Both paths: every sample valid (a feed-forward minibatch: no weights applied) and
+    weighted samples (0 for an autoreset step)."""
     torch.manual_seed(0)
     agent = MLPAgent(20, 5, hidden)
     twin = copy.deepcopy(agent)
