@@ -61,7 +61,9 @@ class MLPAgent(Agent):
     @property
     def first_width(self) -> int:
         """The width of each head's first layer."""
-        return int(self.actor[0].out_features)
+        first = self.actor[0]
+        assert isinstance(first, torch.nn.Linear)
+        return first.out_features
 
     def linear_names(self, head: str) -> list[tuple[str, str]]:
         """The ``(weight, bias)`` names of ``head``'s linear layers (``"actor"`` or

@@ -85,7 +85,7 @@ class FlatAdam:
     def clip_grad_norm(self, max_norm: float) -> torch.Tensor:
         """Scale the gradients to a total 2-norm of at most ``max_norm`` (as
         :func:`torch.nn.utils.clip_grad_norm_`); returns the norm before."""
-        norm = torch.linalg.vector_norm(self.grad)
+        norm: torch.Tensor = torch.linalg.vector_norm(self.grad)
         self.grad.mul_(torch.clamp(max_norm / (norm + 1e-6), max=1.0))
         return norm
 
