@@ -46,7 +46,9 @@ import gymnasium as gym
 import numpy as np
 
 from flowtest_env.encoding import EncodingError, make_encoder
-from flowtest_env.wrappers import MEMORY_KINDS, VisitedMemory, VisitedPlaces, encoder_of
+from flowtest_env.memory import PLACE_MEMORIES, PlaceMemory
+from flowtest_env.wrappers import MEMORY_KINDS, VisitedPlaces, encoder_of
+from flowtest_env.wrappers import VisitedMemory as VisitedMemory  # re-exported: the older place of the visited memory
 from flowtest_env.wrappers import position_slice as _position_slice
 
 from .base import Policy, PolicyError, action_mask_of, game_of
@@ -76,8 +78,8 @@ def with_memory(env: gym.Env, memory: str) -> gym.Env:
     """``env`` wrapped so that its observations carry ``memory`` (one of :data:`MEMORY_KINDS`)."""
     if memory == "none":
         return env
-    if memory == "visited":
-        return VisitedPlaces(env)
+    if memory in PLACE_MEMORIES:
+        return VisitedPlaces(env, memory)
     raise PolicyError(f"unknown memory {memory!r}; known: {', '.join(MEMORY_KINDS)}")
 
 
@@ -217,7 +219,7 @@ class PPOPolicy:
         self.recurrent = bool(getattr(model, "recurrent", kind == "RecurrentPPO"))
         self.memory_kind = str(getattr(model, "flowtest_memory", "none"))
         self.obs = dict(getattr(model, "flowtest_obs", None) or {"obs_kind": "flat", "pad_to": 8})
-        self.memory: VisitedMemory | None = None
+        self.memory: PlaceMemory | None = None
         self.env = env
         self._encoders: dict[int, Any] = {}
         self._state: Any = None
@@ -234,9 +236,9 @@ class PPOPolicy:
         )
         if self.own_encoding:
             enc = self._encoder()
-        if self.memory_kind == "visited":
+        if self.memory_kind in PLACE_MEMORIES:
             try:
-                self.memory = VisitedMemory(_position_slice(enc))
+                self.memory = PlaceMemory(_position_slice(enc), self.memory_kind)
             except ValueError as exc:
                 raise PolicyError(str(exc)) from None
         size = int(enc.space.shape[0]) + (self.memory.size if self.memory else 0)

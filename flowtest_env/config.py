@@ -46,6 +46,7 @@ from typing import Any, TypeVar
 import numpy as np
 
 from .encoding import OBS_KINDS
+from .memory import MEMORY_KINDS as MEMORY_KINDS  # re-exported: what a SUT may remember (flowtest_env.memory)
 from .validation import finite_float, one_of, positive_int
 
 SETTINGS: tuple[None, str, str] = (None, "instantaneous", "accumulative")
@@ -54,9 +55,6 @@ VIEWS = ("system", "engineer")
 """``view``: what a picture shows (``"engineer"`` adds the hidden test cells)."""
 RENDER_MODES: tuple[None, str, str, str] = (None, "rgb_array", "ansi", "human")
 """``render_mode`` values some FlowTest env takes (each env's ``metadata`` lists its own)."""
-MEMORY_KINDS = ("none", "visited")
-"""What a system under test may remember of its own run: nothing, or the places it has
-occupied (:class:`~flowtest_env.wrappers.VisitedPlaces`)."""
 
 
 @dataclass(frozen=True)
@@ -83,8 +81,10 @@ class EnvConfig:
     step_cost, restricted_penalty, goal_reward, violation_penalty
         The reward weights (finite numbers).
     memory
-        ``"none"`` or ``"visited"`` (the SUT's visited places appended to a flat
-        observation).
+        ``"none"``, ``"visited"`` (the places the SUT has occupied this episode, appended
+        to a flat observation) or ``"counts"`` (how often it occupied each, capped at
+        :data:`~flowtest_env.memory.COUNT_CAP` visits and scaled to ``[0, 1]``; a
+        deterministic policy can leave a loop under it: :mod:`flowtest_env.memory`).
     shaping
         ``0`` (off) or the scale of potential-based shaping towards the SUT's objective.
     shaping_gamma
@@ -171,8 +171,8 @@ def validate(config: EnvConfig) -> dict[str, Any]:
     tile_size = positive_int("tile_size", c.tile_size)
     weights = {k: finite_float(k, getattr(c, k)) for k in ("step_cost", "restricted_penalty", "goal_reward", "violation_penalty")}
     one_of("memory", c.memory, MEMORY_KINDS)
-    if c.memory == "visited" and c.obs_kind == "grid":
-        raise ValueError("memory='visited' needs a flat observation (obs_kind='flat' or 'padded'), not obs_kind='grid'")
+    if c.memory != "none" and c.obs_kind == "grid":
+        raise ValueError(f"memory={c.memory!r} needs a flat observation (obs_kind='flat' or 'padded'), not obs_kind='grid'")
     shaping = finite_float("shaping", c.shaping)
     if shaping < 0:
         raise ValueError(f"shaping must be 0 (off) or a positive scale, not {c.shaping!r}")

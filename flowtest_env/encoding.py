@@ -145,12 +145,15 @@ class ObservationLayout:
         """The segment names, in order."""
         return [s.name for s in self.segments]
 
-    def with_memory(self, size: int) -> ObservationLayout:
-        """The layout with the visited-places memory (``size`` entries, laid out as the
-        position segment) appended."""
+    def with_memory(self, size: int, kind: str = "visited") -> ObservationLayout:
+        """The layout with the place memory of ``kind`` (``size`` entries, laid out as the
+        position segment; :mod:`flowtest_env.memory`) appended, as the segment named
+        ``kind`` (``"visited"`` or ``"counts"``)."""
+        from .memory import MEANINGS
+
         pos = self[self.position]
         end = self.segments[-1].stop
-        seg = Segment("visited", end, end + size, pos.shape, "places the SUT has occupied this episode (memory='visited')")
+        seg = Segment(kind, end, end + size, pos.shape, MEANINGS[kind])
         return ObservationLayout(self.kind, (end + size,), (*self.segments, seg), self.position, self.grid)
 
 

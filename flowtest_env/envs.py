@@ -28,11 +28,12 @@ from .config import EnvConfig, config_from, with_option_signature
 from .draws import draw_test
 from .encoding import Encoder, ObservationLayout, make_encoder
 from .game import GRID_ACTIONS, MET, VIOLATED, GameError, RunState, TestGame
+from .memory import PlaceMemory
 from .pools import random_grid_arguments, random_grid_tests
 from .render import Renderer, ansi, make_renderer
 from .sources import TestLike, game_for
 from .validation import action_index, one_of, positive_int
-from .wrappers import DistancePotential, VisitedMemory, shared_position_slice
+from .wrappers import DistancePotential, shared_position_slice
 
 DEFAULT_MAX_STEPS: dict[str, int] = {
     "example1": 50,
@@ -148,8 +149,9 @@ class FlowTestEnv(gym.Env[np.ndarray, np.int64]):
     (``"rgb_array"``, ``"ansi"``; ``"human"`` through Gymnasium's HumanRendering),
     ``view`` (``"system"`` or ``"engineer"``: the picture also shows the hidden test
     cells), ``tile_size`` and the reward weights.
-    ``memory``: ``"none"`` (default) or ``"visited"``, the places the SUT has occupied
-    this episode appended to a flat observation (as the
+    ``memory``: ``"none"`` (default), ``"visited"`` (the places the SUT has occupied
+    this episode) or ``"counts"`` (how often, capped: :mod:`flowtest_env.memory`), appended
+    to a flat observation (as the
     :class:`~flowtest_env.wrappers.VisitedPlaces` wrapper; a reactive test answers the
     run's history, which the observation alone does not show). ``shaping``: 0 (off,
     default) or the scale of potential-based shaping towards the SUT's own objective, with
@@ -197,9 +199,9 @@ class FlowTestEnv(gym.Env[np.ndarray, np.int64]):
         for g, e in zip(games, self.encoders, strict=True):
             if e.space != first or g.n_actions != games[0].n_actions:
                 raise GameError(f"problem {g.artifact.name!r} does not share the pool's observation or action space")
-        self.memory: VisitedMemory | None = None
-        if memory == "visited":
-            self.memory = VisitedMemory(shared_position_slice(self.encoders))
+        self.memory: PlaceMemory | None = None
+        if memory != "none":
+            self.memory = PlaceMemory(shared_position_slice(self.encoders), memory)
             first = spaces.Box(0.0, 1.0, shape=(int(first.shape[0]) + self.memory.size,), dtype=np.float32)
         self._potential = DistancePotential(config.shaping) if config.shaping > 0 else None
         self._phi = 0.0
@@ -311,7 +313,7 @@ class FlowTestEnv(gym.Env[np.ndarray, np.int64]):
         """Which entries of the observation are which (the current test's; see
         :func:`flowtest_env.observation_layout`)."""
         lay = self.encoder.layout()
-        return lay if self.memory is None else lay.with_memory(self.memory.size)
+        return lay if self.memory is None else lay.with_memory(self.memory.size, self.memory.kind)
 
     def action_masks(self) -> np.ndarray:
         """``bool[n_actions]``: the legal actions now (sb3-contrib's MaskablePPO convention)."""

@@ -86,6 +86,7 @@ from .draws import GOLDEN_I64, MAX_TESTS, MIX1_I64, MIX2_I64
 from .encoding import make_encoder
 from .game import TestGame
 from .step_tables import available_memory, distinct_rows, shaped_rewards
+from .torch_memory import BatchPlaceMemory, env_memory
 from .validation import positive_int
 from .wrappers import DistancePotential, shared_position_slice
 
@@ -655,6 +656,10 @@ class TorchVectorEnv(gym.vector.VectorEnv):
         out-of-range action is an indexing error.
     single_observation_space, single_action_space
         The spaces of one env (default: from the tables).
+    memory
+        A place memory the env appends to each observation besides the tables' own
+        (``memory="counts"``: :class:`~flowtest_env.torch_memory.BatchPlaceMemory`;
+        :meth:`from_numpy` sets it from the NumPy env's options).
     """
 
     def __init__(
@@ -667,8 +672,12 @@ class TorchVectorEnv(gym.vector.VectorEnv):
         check_actions: bool | None = None,
         single_observation_space: spaces.Space[Any] | None = None,
         single_action_space: spaces.Space[Any] | None = None,
+        memory: BatchPlaceMemory | None = None,
     ) -> None:
         mode = autoreset_name(autoreset_mode)
+        if memory is not None and compact:
+            raise ValueError(f"compact observations hold the packed visited memory only, not memory={memory.kind!r}")
+        self.memory = memory
         self.num_envs = positive_int("num_envs", num_envs)  # 2.5 refused (not 2), as the NumPy env does
         per_env = 3 * math.prod(tables.obs_shape) * tables.obs.element_size() + 256  # the spaces' bounds, the buffer, the state
         have = available_memory()
@@ -718,6 +727,7 @@ class TorchVectorEnv(gym.vector.VectorEnv):
         env = getattr(env, "unwrapped", env)
         tables = tables_of(env, device=device, reward_dtype=reward_dtype)
         kwargs.setdefault("autoreset_mode", getattr(env, "autoreset_mode", "next_step"))
+        kwargs.setdefault("memory", env_memory(env))
         n = env.num_envs if num_envs is None else num_envs
         return cls(tables, n, single_observation_space=env.single_observation_space, **kwargs)
 
@@ -743,7 +753,8 @@ class TorchVectorEnv(gym.vector.VectorEnv):
             which = torch.ones(n, dtype=torch.bool, device=self.device)
         keys, given = self._keys(seed)
         self.state = restart(self.tables, self.state, which, keys, given)
-        return self._obs(self.state.z, self.state.visited, self._out()), {"action_mask": action_mask(self.tables, self.state)}
+        obs = self._remember(self._obs(self.state.z, self.state.visited, self._out()), which)
+        return obs, {"action_mask": action_mask(self.tables, self.state)}
 
     def _keys(self, seed: int | Sequence[int | None] | None) -> tuple[torch.Tensor | None, torch.Tensor | None]:
         """The keys of a reset's seeds and which envs got one."""
@@ -787,6 +798,8 @@ class TorchVectorEnv(gym.vector.VectorEnv):
         }
         if self.mode == "same_step":
             infos["final_obs"] = self._obs(out.final_z, out.final_visited)
+            if self.memory is not None:
+                infos["final_obs"] = self.memory.peek(infos["final_obs"])
             infos["_final_obs"] = out.ended
             infos["final_info"] = {
                 "action_mask": self.tables.mask.index_select(0, out.final_z),
@@ -795,7 +808,7 @@ class TorchVectorEnv(gym.vector.VectorEnv):
                 "_verdict": infos.pop("_verdict"),
             }
             infos["_final_info"] = out.ended
-        return self._obs(self.state.z, self.state.visited, self._out()), out.reward, out.terminated, out.truncated, infos
+        return self._remember(self._obs(self.state.z, self.state.visited, self._out())), out.reward, out.terminated, out.truncated, infos
 
     def _check(self, actions: Any) -> torch.Tensor:
         a = actions if isinstance(actions, torch.Tensor) else torch.as_tensor(np.asarray(actions))
@@ -835,6 +848,11 @@ class TorchVectorEnv(gym.vector.VectorEnv):
         if self.compact:
             return compact_of(self.tables, z, visited)
         return observation_of(self.tables, z, visited, out)
+
+    def _remember(self, obs: torch.Tensor, rows: torch.Tensor | None = None) -> torch.Tensor:
+        """``obs`` with :attr:`memory` appended (episodes at step 0 restart it; ``rows``: only
+        these envs moved, after a masked reset)."""
+        return obs if self.memory is None else self.memory(obs, self._started().steps == 0, rows)
 
     def expand(self, compact_obs: torch.Tensor) -> torch.Tensor:
         """The full observations of this env's compact ones (:func:`expand`)."""

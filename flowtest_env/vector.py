@@ -24,7 +24,7 @@ its fields at the end of an episode).
 
 **Options.** Every option of the single env (:class:`~flowtest_env.config.EnvConfig`,
 checked by the same validator): ``max_steps``, ``obs_kind``, ``pad_to``, the reward
-weights, ``memory="visited"`` (the places each env's SUT has occupied, one bulk array
+weights, ``memory="visited"`` or ``"counts"`` (the places each env's SUT has occupied, or how often, one bulk array
 update a step), ``shaping``/``shaping_gamma`` (the potential compiled into a
 per-configuration table), ``render_mode="rgb_array"``, ``view``, ``tile_size``;
 ``setting`` (the accumulative setting's restrictions of the states visited under the history
@@ -78,6 +78,7 @@ from .draws import draw_tests, key_of_seed
 from .encoding import Encoder, ObservationLayout, Segment, make_encoder
 from .envs import default_max_steps, random_grid_pool
 from .game import RunState, TestGame
+from .memory import first_memory, increment_of, remember_into
 from .pools import random_grid_tests
 from .render import Renderer, make_renderer
 from .sources import game_for
@@ -159,6 +160,9 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         one_of("obs_dtype", obs_dtype, (None, "uint8"))
         self.autoreset_mode = autoreset_mode_of(autoreset_mode)
         config = config_from(type(self).__name__, config, options)
+        if obs_dtype == "uint8" and config.memory not in ("none", "visited"):
+            raise ValueError(f"obs_dtype='uint8' holds 0/1 entries only; memory={config.memory!r} counts in quarters: "
+                             "use memory='visited' or leave obs_dtype at its default")
         one_of("render_mode", config.render_mode, (None, *self.metadata["render_modes"]))
         with gc_paused():  # many small objects that stay alive: collections would walk them again and again
             self.games: list[TestGame] = pool_games(games, config.setting)
@@ -170,7 +174,8 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         self.config = config
         with gc_paused():
             self.encoders: list[Encoder] = [make_encoder(g, config.obs_kind, config.pad_to) for g in self.games]
-        self._mem: slice | None = shared_position_slice(self.encoders) if config.memory == "visited" else None
+        self._mem: slice | None = shared_position_slice(self.encoders) if config.memory != "none" else None
+        self._increment = increment_of(config.memory) if self._mem is not None else 1.0  # flowtest_env.memory
         accumulative = settings == {"accumulative"}
         self.pool: CompiledPool = compile_pool(self.games, self.encoders, accumulative)
         p = self.pool
@@ -283,9 +288,10 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         self._counts[envs] = 0
         self._done[envs] = False
 
-    def _observe(self, fresh: np.ndarray | None = None) -> np.ndarray:
+    def _observe(self, fresh: np.ndarray | None = None, moved: bool = True) -> np.ndarray:
         """The batch observation now (``fresh``: envs whose episode just started, their
-        memory restarts)."""
+        memory restarts; ``moved=False``: a masked reset, the other envs did not move and
+        their memory stays)."""
         # one gather, faster than fancy indexing ("clip": in range by construction; "raise" would buffer an out= array)
         obs: np.ndarray = np.take(self._obs_table, self._tables.rows(self._z), axis=0, out=self._buffer, mode="clip")
         if self._shown is not None:
@@ -294,7 +300,10 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
             return obs
         if fresh is not None:
             self._seen[fresh] = 0.0
-        np.maximum(self._seen, obs[:, self._mem], out=self._seen)
+        if moved:
+            remember_into(self._seen, obs[:, self._mem], self._increment)
+        else:
+            self._seen[fresh] = first_memory(obs[fresh][:, self._mem], self._increment)
         obs[:, self._mem_at :] = self._seen
         return obs
 
@@ -305,7 +314,7 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
             self._accumulate(obs, envs, np.arange(envs.size))
         if self._seen is None:
             return obs
-        self._seen[envs] = obs[:, self._mem]
+        self._seen[envs] = first_memory(obs[:, self._mem], self._increment)
         obs[:, self._mem_at :] = self._seen[envs]
         return obs
 
@@ -362,7 +371,7 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
             self._episode[envs[given]] = 0
         self._start(envs)
         self._started = True
-        obs = self._observe(envs)
+        obs = self._observe(envs, moved=mask is None)
         infos = self._infos(self._z, mask)
         return obs, infos
 
@@ -535,7 +544,7 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         if lay.kind != "grid" and lay.shape[0] < size:  # a smaller test of the pool: zeros at the end
             pad = Segment("padding", lay.shape[0], size, (size - lay.shape[0],), "zeros: the pool's larger tests use them")
             lay = ObservationLayout(lay.kind, (size,), (*lay.segments, pad), lay.position, lay.grid)
-        return lay if self._mem is None else lay.with_memory(self._mem.stop - self._mem.start)
+        return lay if self._mem is None else lay.with_memory(self._mem.stop - self._mem.start, self.config.memory)
 
     @property
     def test_index(self) -> np.ndarray:

@@ -11,6 +11,7 @@ from gymnasium import spaces
 from .config import MEMORY_KINDS as MEMORY_KINDS  # re-exported: the memory kinds live with the options
 from .encoding import Encoder, ObservationLayout
 from .game import RunState, TestGame
+from .memory import PlaceMemory
 from .system_product import INF, SystemProduct
 
 
@@ -129,7 +130,7 @@ def observation_layout(env: object) -> ObservationLayout:
     TypeError
         If ``env`` is not a FlowTest env.
     """
-    memory = 0
+    memory, kind = 0, "visited"
     obj, seen = env, 0
     while obj is not None and seen < 32:
         if isinstance(obj, Encoder):
@@ -137,6 +138,7 @@ def observation_layout(env: object) -> ObservationLayout:
             break
         if isinstance(obj, VisitedPlaces):
             memory += obj.memory.size
+            kind = obj.memory.kind
         method = getattr(type(obj), "observation_layout", None)
         if callable(method):
             lay = method(obj)
@@ -145,7 +147,7 @@ def observation_layout(env: object) -> ObservationLayout:
         seen += 1
     else:
         lay = encoder_of(env).layout()
-    return lay.with_memory(memory) if memory else lay
+    return lay.with_memory(memory, kind) if memory else lay
 
 
 def position_slice(encoder: Encoder) -> slice:
@@ -175,43 +177,37 @@ def shared_position_slice(encoders: list[Encoder]) -> slice:
     where = {(sl.start, sl.stop) for sl in (position_slice(e) for e in encoders)}
     if len(where) != 1:
         raise ValueError(
-            "memory='visited' needs the pool's tests to show the SUT's place at the same entries; "
+            "a place memory (memory='visited' or 'counts') needs the pool's tests to show the SUT's place at the same entries; "
             "these differ (use obs_kind='padded')"
         )
     start, stop = where.pop()
     return slice(start, stop)
 
 
-class VisitedMemory:
+class VisitedMemory(PlaceMemory):
     """The places the SUT has occupied this episode, as a 0/1 vector appended to a flat
-    observation. Call :meth:`reset` at the start of each episode and :meth:`__call__` on
-    every observation, in order. It reads only the SUT's own position from observations
-    it has seen: never the hidden test objective or the test's history."""
+    observation (:class:`~flowtest_env.memory.PlaceMemory` of kind ``"visited"``). Call
+    :meth:`reset` at the start of each episode and :meth:`__call__` on every observation,
+    in order. It reads only the SUT's own position from observations it has seen: never
+    the hidden test objective or the test's history."""
 
     def __init__(self, where: slice) -> None:
-        self.where = where
-        self.size = where.stop - where.start
-        self._seen: np.ndarray | None = None
-
-    def reset(self) -> None:
-        self._seen = None
-
-    def __call__(self, obs: np.ndarray) -> np.ndarray:
-        obs = np.asarray(obs, dtype=np.float32)
-        here = obs[self.where]
-        self._seen = here.copy() if self._seen is None else np.maximum(self._seen, here)
-        return np.concatenate([obs, self._seen])
+        super().__init__(where, "visited")
 
 
 class VisitedPlaces(gym.ObservationWrapper[np.ndarray, np.int64, np.ndarray], gym.utils.RecordConstructorArgs):
-    """Append the places the SUT has occupied this episode to a flat FlowTest observation.
+    """Append the places the SUT has occupied this episode to a flat FlowTest observation
+    (``memory="counts"``: how often it occupied each, capped; :mod:`flowtest_env.memory`).
 
     **Why.** A reactive test answers the *history* of the run, which the observation
     does not show (the test objective stays hidden), so the observation alone is not
     Markov for the SUT: on ``FlowTest-Maze2-v0`` the SUT must pass some cells twice and
     act differently the second time, and no policy of the observation alone does (a
     plain MaskablePPO never learns it). With this memory it learns the test
-    (docs/benchmarks.md). Same as the env option ``memory="visited"``.
+    (docs/benchmarks.md). Same as the env option ``memory="visited"`` (or ``"counts"``).
+    Under ``"visited"`` the observation repeats once a loop's places are all marked, so a
+    deterministic policy that steps into a loop stays in it; ``"counts"`` changes it on every
+    pass, up to :data:`~flowtest_env.memory.COUNT_CAP` visits, so such a policy can leave.
 
     Usable with any library: ``VisitedPlaces(gymnasium.make("FlowTest-Maze2-v0"))``.
     Masks (``action_masks()``, ``info["action_mask"]``) pass through unchanged.
@@ -235,10 +231,10 @@ class VisitedPlaces(gym.ObservationWrapper[np.ndarray, np.int64, np.ndarray], gy
     (306, 331, (array([4]), array([0])))
     """
 
-    def __init__(self, env: gym.Env[np.ndarray, np.int64]) -> None:
-        gym.utils.RecordConstructorArgs.__init__(self)  # so gymnasium.make(env.spec) rebuilds it
+    def __init__(self, env: gym.Env[np.ndarray, np.int64], memory: str = "visited") -> None:
+        gym.utils.RecordConstructorArgs.__init__(self, memory=memory)  # so gymnasium.make(env.spec) rebuilds it
         super().__init__(env)
-        self.memory = VisitedMemory(position_slice(encoder_of(env)))
+        self.memory = PlaceMemory(position_slice(encoder_of(env)), memory)
         shape = env.observation_space.shape
         if shape is None or len(shape) != 1:
             raise ValueError(f"the visited-places memory needs a flat observation, not shape {shape}")

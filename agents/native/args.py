@@ -15,6 +15,8 @@ from typing import Any
 
 import torch
 
+from flowtest_env.memory import MEMORY_KINDS
+
 ALGOS = ("ppo", "recurrent-ppo")
 """The native algorithms: masked PPO with an MLP, and with a GRU."""
 
@@ -25,6 +27,10 @@ replay (:class:`LevelSampler`)."""
 PLR_SCORES = ("pvl", "gae")
 """PLR's level scores: positive value loss (the mean of the positive GAE advantages of the
 level's last run) or the mean GAE magnitude."""
+
+INPUTS = ("varying", "all")
+"""The observation entries a network trains on (:mod:`agents.native.inputs`): those that
+vary over the train tests' observations (and the memory), or all."""
 
 ENV_BACKENDS = ("auto", "torch", "numpy")
 """Who steps the tests: the NumPy vector env, or its torch twin on the training device
@@ -55,8 +61,9 @@ class NativeArgs:
     max_grad_norm: float = 0.5  # gradient clip
     hidden: tuple[int, ...] = (256, 256)  # MLP widths (the GRU variant: its input layers)
     gru_hidden: int = 128  # GRU width (recurrent-ppo)
-    memory: str = "visited"  # "visited" (places occupied this episode) or "none"
+    memory: str = "visited"  # "visited" (places occupied this episode), "counts" (how often, capped) or "none"
     obs_kind: str = "flat"  # the env's observation: "flat" or "padded"
+    inputs: str = "varying"  # the entries the network trains on: "varying" (those that vary over the train tests, and the memory) or "all"
     shaping: float = 0.0  # env option: potential-based shaping scale (0 = off)
     env_backend: str = "auto"  # "torch" (flowtest_env.torch_vector, on the device), "numpy" (flowtest_env.vector); "auto": numpy on the CPU, else torch
     seed: int = 0  # seeds the envs, the network and every sample
@@ -102,8 +109,10 @@ def check_args(a: NativeArgs) -> None:
             raise ValueError(f"{name} must not be negative, not {getattr(a, name)}")
     if not a.hidden or any(int(w) < 1 for w in a.hidden):
         raise ValueError(f"hidden must be positive layer widths, not {a.hidden}")
-    if a.memory not in ("none", "visited"):
-        raise ValueError(f"unknown memory {a.memory!r}; expected 'none' or 'visited'")
+    if a.memory not in MEMORY_KINDS:
+        raise ValueError(f"unknown memory {a.memory!r}; expected one of {', '.join(MEMORY_KINDS)}")
+    if a.inputs not in INPUTS:
+        raise ValueError(f"unknown inputs {a.inputs!r}; expected one of {', '.join(INPUTS)}")
     if a.env_backend not in ENV_BACKENDS:
         raise ValueError(f"unknown env_backend {a.env_backend!r}; expected one of {', '.join(ENV_BACKENDS)}")
     if a.obs_kind not in ("flat", "padded"):
@@ -141,4 +150,4 @@ def resolve_device(name: str) -> torch.device:
 
 
 
-__all__ = ["ALGOS", "ENV_BACKENDS", "LEVEL_SAMPLING", "PLR_SCORES", "NativeArgs", "check_args", "resolve_device"]
+__all__ = ["ALGOS", "ENV_BACKENDS", "INPUTS", "LEVEL_SAMPLING", "PLR_SCORES", "NativeArgs", "check_args", "resolve_device"]

@@ -73,8 +73,9 @@ MAX_PAD_TO = 1024
 OBS_KINDS = ("flat", "padded")
 """The observations a native network reads."""
 
-MEMORY_KINDS = ("none", "visited")
-"""The memories a native network keeps (``"visited"``: the places the SUT has occupied)."""
+MEMORY_KINDS = ("none", "visited", "counts")
+"""The memories a native network keeps (``"visited"``: the places the SUT has occupied;
+``"counts"``: how often, capped; :mod:`flowtest_env.memory`)."""
 
 
 @dataclass(frozen=True)
@@ -159,7 +160,7 @@ def read_settings(settings: Mapping[str, Any], budget: int = MAX_TENSOR_BYTES) -
         start, stop = _whole(pos[0], "position", 0, seen), _whole(pos[1], "position", 1, seen + 1)
         if start >= stop:
             raise _refuse("position", f"[{start}, {stop}] is empty")
-        position = slice(start, stop) if memory == "visited" else None
+        position = slice(start, stop) if memory != "none" else None
     if env_size is not None:
         width = position.stop - position.start if position is not None else 0
         if obs_size != env_size + width:
@@ -238,7 +239,7 @@ class NativeModel:
     def batch_policy(self, deterministic: bool = True) -> BatchActor:
         """This model as a batched policy of :mod:`flowtest_env.scoring` (greedy, or
         sampled from its masked policy): :class:`BatchActor`."""
-        return BatchActor(self.agent, self.position, deterministic)
+        return BatchActor(self.agent, self.position, deterministic, memory=self.flowtest_memory)
 
     def predict(self, obs: Any, state: Any = None, episode_start: Any = None, deterministic: bool = True,
                 action_masks: Any = None) -> tuple[np.ndarray, Any]:

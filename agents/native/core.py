@@ -24,8 +24,7 @@ Example (the loop of :func:`agents.native_ppo.train`, one iteration)::
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
-from dataclasses import dataclass
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -33,37 +32,17 @@ import torch
 from torch import nn
 
 from flowtest_env.compiled import OUTCOMES
+from flowtest_env.torch_memory import BatchPlaceMemory
 
 from .agent import Agent, masked_logits
 from .args import NativeArgs
-from .envs import VisitedBits
+from .batch import Minibatch, Rollout, env_minibatches, minibatch_indices, step_minibatches
+from .fused import FusedMLP
+from .mlp import MLPAgent
+from .optim import FlatAdam
 
 MET_CODE = OUTCOMES.index("met")
 """The outcome code of ``"met"`` in the torch env's verdicts."""
-
-
-@dataclass
-class Rollout:
-    """``num_steps`` steps of every env (time first: ``[T, N, ...]``).
-
-    ``valid[t, i]`` is false on env ``i``'s autoreset step (its previous step ended an
-    episode: the env reset it and ignored the action); the loss never uses those steps.
-    ``starts[t, i]``: ``obs[t, i]`` is the first observation of an episode.
-    """
-
-    obs: torch.Tensor
-    masks: torch.Tensor
-    actions: torch.Tensor
-    logprobs: torch.Tensor
-    values: torch.Tensor
-    rewards: torch.Tensor
-    terminated: torch.Tensor
-    truncated: torch.Tensor
-    valid: torch.Tensor
-    starts: torch.Tensor
-    h0: torch.Tensor
-    next_value: torch.Tensor
-    levels: np.ndarray | None = None  # int64[T, N]: the test each obs[t, i] belongs to (level sampling only)
 
 
 class EpisodeStats:
@@ -84,23 +63,33 @@ class EpisodeStats:
 
 class Runner:
     """Steps the vector env with the agent and keeps what carries over between rollouts:
-    the last observation, masks, episode flags, the memory, the GRU state, returns."""
+    the last observation, masks, episode flags, the memory, the GRU state, returns.
+    ``where``: the SUT's place in the observation when the runner keeps the place memory
+    of kind ``memory`` itself (``None``: the env appends it, or there is none);
+    ``columns``: the entries of the observation (memory included) the agent reads
+    (:mod:`agents.native.inputs`; ``None``: all)."""
 
     def __init__(self, env: Any, agent: Agent, where: slice | None, device: torch.device, seed: int,
-                 levels: Callable[[], np.ndarray] | None = None) -> None:
+                 levels: Callable[[], np.ndarray] | None = None, memory: str = "visited",
+                 columns: torch.Tensor | None = None) -> None:
         self.env, self.agent, self.device = env, agent, device
         self.levels = levels  # the test each env plays now (recorded per step when given)
         self.n = int(env.num_envs)
         self.torch_env = hasattr(env, "tables")  # flowtest_env.torch_vector: tensors in, tensors out
         obs, infos = env.reset(seed=seed)
-        self.memory = VisitedBits(where)
+        self.memory = BatchPlaceMemory(where, memory) if where is not None else None
+        self.columns = columns
         self.start = torch.ones(self.n, dtype=torch.bool, device=device)
         self.reset_step = torch.zeros(self.n, dtype=torch.bool, device=device)  # the next step is the autoreset step
-        self.x = self.memory(self._tensor(obs), self.start)
+        self.x = self._remember(self._tensor(obs))
         self.mask = self._tensor(infos["action_mask"]).bool()
         self.h = agent.initial_state(self.n, device)
         self.ret = torch.zeros(self.n, dtype=torch.float64, device=device)
         self.stats = EpisodeStats()
+
+    def _remember(self, obs: torch.Tensor) -> torch.Tensor:
+        x = obs if self.memory is None else self.memory(obs, self.start)
+        return x if self.columns is None else x.index_select(1, self.columns)
 
     def _tensor(self, a: Any) -> torch.Tensor:
         return torch.as_tensor(a if isinstance(a, torch.Tensor) else np.asarray(a), device=self.device)
@@ -132,7 +121,7 @@ class Runner:
             self._episode_ends(rewards[t], done, infos)
             self.start = self.reset_step  # the autoreset step's observation is a new episode's first
             self.reset_step = done
-            self.x = self.memory(self._tensor(o), self.start)
+            self.x = self._remember(self._tensor(o))
             self.mask = self._tensor(infos["action_mask"]).bool()
         with torch.no_grad():
             next_value = self.agent.value(self.x, self.h, self.start)
@@ -188,62 +177,11 @@ def advantages(r: Rollout, gamma: float, lam: float) -> tuple[torch.Tensor, torc
     return adv, adv + r.values
 
 
-def minibatch_indices(valid: torch.Tensor, num_minibatches: int, generator: torch.Generator | None = None) -> list[torch.Tensor]:
-    """The flat indices (into ``[T * N]``) of the steps the MLP's loss trains on, in
-    ``num_minibatches`` shuffled minibatches: exactly the valid steps, each once."""
-    idx = torch.nonzero(valid.reshape(-1), as_tuple=False).squeeze(1)
-    perm = idx[torch.randperm(idx.numel(), generator=generator, device="cpu").to(idx.device)]
-    return [chunk for chunk in torch.tensor_split(perm, num_minibatches) if chunk.numel()]
-
-
-
-@dataclass(frozen=True)
-class Minibatch:
-    """The samples of one gradient step: a recurrent network's ``[T, n, ...]`` env
-    sequences (``h0``: their states at the rollout's start), or a feed-forward network's
-    ``[B, ...]`` shuffled steps; ``weight`` is 1 for a valid step, 0 for an autoreset step."""
-
-    obs: torch.Tensor
-    masks: torch.Tensor
-    actions: torch.Tensor
-    logprobs: torch.Tensor
-    adv: torch.Tensor
-    returns: torch.Tensor
-    weight: torch.Tensor
-    h0: torch.Tensor
-    starts: torch.Tensor
-
-
-def step_minibatches(r: Rollout, adv: torch.Tensor, returns: torch.Tensor, num_minibatches: int,
-                     generator: torch.Generator | None = None) -> Iterator[Minibatch]:
-    """The valid steps of ``r`` shuffled into ``num_minibatches`` minibatches
-    (:func:`minibatch_indices`), for a feed-forward network."""
-    T, N = r.rewards.shape
-    flat = {k: v.reshape(T * N, *v.shape[2:]) for k, v in
-            (("obs", r.obs), ("masks", r.masks), ("actions", r.actions), ("logprobs", r.logprobs),
-             ("adv", adv), ("returns", returns), ("starts", r.starts))}
-    for mb in minibatch_indices(r.valid, num_minibatches, generator):
-        x = flat["obs"][mb]
-        yield Minibatch(x, flat["masks"][mb], flat["actions"][mb], flat["logprobs"][mb], flat["adv"][mb], flat["returns"][mb],
-                        torch.ones(mb.numel(), dtype=torch.bool, device=x.device), r.h0.new_zeros((mb.numel(), r.h0.shape[1])),
-                        flat["starts"][mb])
-
-
-def env_minibatches(r: Rollout, adv: torch.Tensor, returns: torch.Tensor, num_minibatches: int,
-                    generator: torch.Generator | None = None) -> Iterator[Minibatch]:
-    """The envs of ``r`` shuffled into ``num_minibatches`` groups, each minibatch their
-    whole sequences (autoreset steps weighed 0), for a recurrent network."""
-    N = r.rewards.shape[1]
-    perm = torch.randperm(N, generator=generator).to(r.obs.device)
-    for envs in torch.tensor_split(perm, num_minibatches):
-        yield Minibatch(r.obs[:, envs], r.masks[:, envs], r.actions[:, envs], r.logprobs[:, envs], adv[:, envs],
-                        returns[:, envs], r.valid[:, envs], r.h0[envs], r.starts[:, envs])
-
-
-def ppo_loss(args: NativeArgs, mb: Minibatch, logits: torch.Tensor, values: torch.Tensor) -> tuple[torch.Tensor, dict[str, float]]:
+def ppo_loss(args: NativeArgs, mb: Minibatch, logits: torch.Tensor, values: torch.Tensor,
+             want_info: bool = True) -> tuple[torch.Tensor, dict[str, float]]:
     """The clipped PPO loss over the samples of ``mb`` (``logits`` and ``values``: the
     network's on them now), each weighted by ``mb.weight``; the advantages normalized
-    over the weighted samples."""
+    over the weighted samples. The loss terms for the log when ``want_info``."""
     w = mb.weight.float()
     n = w.sum().clamp(min=1.0)
     logp_all = torch.log_softmax(masked_logits(logits, mb.masks), dim=-1)
@@ -259,30 +197,51 @@ def ppo_loss(args: NativeArgs, mb: Minibatch, logits: torch.Tensor, values: torc
     entropy = -(logp_all.exp() * logp_all).sum(-1)
     ent = (entropy * w).sum() / n
     loss = pg_loss + args.vf_coef * v_loss - args.ent_coef * ent
+    if not want_info:
+        return loss, {}
     with torch.no_grad():
         kl = (((ratio - 1) - torch.log(ratio.clamp(min=1e-12))) * w).sum() / n
     return loss, {"policy_loss": float(pg_loss.detach()), "value_loss": float(v_loss.detach()), "entropy": float(ent.detach()),
                   "approx_kl": float(kl)}
 
 
-def ppo_update(agent: Agent, optimizer: torch.optim.Optimizer, args: NativeArgs, r: Rollout,
+def ppo_update(agent: Agent, optimizer: torch.optim.Optimizer | FlatAdam, args: NativeArgs, r: Rollout,
                generator: torch.Generator | None = None) -> dict[str, float]:
     """``update_epochs`` passes of minibatch gradient steps over the rollout's valid steps
     (feed-forward: shuffled steps; recurrent: shuffled envs, each replayed from the
-    rollout's start). Returns the last minibatch's loss terms, for the log."""
+    rollout's start). Returns the last minibatch's loss terms, for the log.
+
+    An MLP with the trainer's :class:`~agents.native.optim.FlatAdam` takes its gradient
+    from :class:`~agents.native.fused.FusedMLP` (the same loss, written out by hand, no
+    autograd); any other network or optimizer from autograd on :func:`ppo_loss`."""
     adv, returns = advantages(r, args.gamma, args.gae_lambda)
     minibatches = env_minibatches if agent.recurrent else step_minibatches
-    info: dict[str, float] = {}
-    for _ in range(args.update_epochs):
-        for mb in minibatches(r, adv, returns, args.num_minibatches, generator):
+    fused = FusedMLP(agent, optimizer) if isinstance(optimizer, FlatAdam) and isinstance(agent, MLPAgent) else None
+    info: dict[str, Any] = {}
+    for epoch in range(args.update_epochs):
+        batches = list(minibatches(r, adv, returns, args.num_minibatches, generator))
+        for i, mb in enumerate(batches):
+            last = epoch == args.update_epochs - 1 and i == len(batches) - 1
+            if fused is not None:
+                assert isinstance(optimizer, FlatAdam)
+                info = fused.gradient(args, mb, want_info=last)
+                optimizer.clip_grad_norm(args.max_grad_norm)
+                optimizer.step()
+                continue
             logits, values = agent.replay(mb.obs, mb.h0, mb.starts)
-            loss, info = ppo_loss(args, mb, logits, values)
+            loss, info = ppo_loss(args, mb, logits, values, want_info=last)
             gradient_step(agent, optimizer, loss, args.max_grad_norm)
-    return info
+    return {k: float(v) for k, v in info.items()}
 
 
-def gradient_step(agent: Agent, optimizer: torch.optim.Optimizer, loss: torch.Tensor, max_norm: float) -> None:
+def gradient_step(agent: Agent, optimizer: torch.optim.Optimizer | FlatAdam, loss: torch.Tensor, max_norm: float) -> None:
     """One optimizer step on ``loss``, the gradient clipped to norm ``max_norm``."""
+    if isinstance(optimizer, FlatAdam):  # autograd accumulates into the flat gradient's views
+        optimizer.zero_grad()
+        loss.backward()  # type: ignore[no-untyped-call]
+        optimizer.clip_grad_norm(max_norm)
+        optimizer.step()
+        return
     optimizer.zero_grad(set_to_none=True)
     loss.backward()  # type: ignore[no-untyped-call]
     nn.utils.clip_grad_norm_(agent.parameters(), max_norm)

@@ -1,6 +1,6 @@
 """The env a native run steps (CleanRL's ``make_env``) and the memory the trainer keeps
 beside it: :func:`make_vec_env` (the NumPy vector env, or its torch twin on the training
-device) and :class:`VisitedBits` (the visited-places memory of a batch, in torch).
+device); the place memory of a batch is :class:`flowtest_env.torch_memory.BatchPlaceMemory`.
 
 Example::
 
@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from typing import Any
 
-import torch
+from flowtest_env.memory import PLACE_MEMORIES
 
 from .args import NativeArgs, resolve_device
 
@@ -22,7 +22,7 @@ def make_vec_env(args: NativeArgs) -> tuple[Any, Any, bool]:
     """``args.num_envs`` runs of ``args.env_id`` with the env options of ``args``: the
     NumPy vector env (``vectorization_mode="vector_entry_point"``), and the env to step
     (that one, or with ``env_backend="torch"`` its torch twin on the training device);
-    and whether the env itself appends the visited-places memory (``memory="visited"``).
+    and whether the env itself appends the place memory (``memory="visited"`` or ``"counts"``).
 
     Raises
     ------
@@ -38,8 +38,8 @@ def make_vec_env(args: NativeArgs) -> tuple[Any, Any, bool]:
         kwargs["obs_kind"] = args.obs_kind
     if args.shaping > 0:
         kwargs["shaping"], kwargs["shaping_gamma"] = float(args.shaping), float(args.gamma)
-    env_memory = args.memory == "visited"
-    with_memory: dict[str, Any] = {**kwargs, "memory": "visited"} if env_memory else kwargs
+    env_memory = args.memory in PLACE_MEMORIES
+    with_memory: dict[str, Any] = {**kwargs, "memory": args.memory} if env_memory else kwargs
     try:
         try:
             np_env = gym.make_vec(args.env_id, num_envs=args.num_envs, vectorization_mode="vector_entry_point",
@@ -57,23 +57,4 @@ def make_vec_env(args: NativeArgs) -> tuple[Any, Any, bool]:
     return np_env, np_env, env_memory
 
 
-class VisitedBits:
-    """The visited-places memory of a batch: ``seen |= obs[where]``, restarted from the
-    observation itself at each episode's first observation (``start``)."""
-
-    def __init__(self, where: slice | None) -> None:
-        self.where = where
-        self.seen: torch.Tensor | None = None
-
-    def __call__(self, obs: torch.Tensor, start: torch.Tensor) -> torch.Tensor:
-        if self.where is None:
-            return obs
-        here = obs[:, self.where]
-        if self.seen is None:
-            self.seen = here.clone()
-        else:
-            self.seen = torch.where(start.unsqueeze(-1), here, torch.maximum(self.seen, here))
-        return torch.cat([obs, self.seen], dim=1)
-
-
-__all__ = ["VisitedBits", "make_vec_env"]
+__all__ = ["make_vec_env"]

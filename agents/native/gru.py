@@ -18,6 +18,7 @@ Example::
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 import torch
 from torch import nn
@@ -33,6 +34,7 @@ class GRUAgent(Agent):
 
     def __init__(self, obs_size: int, n_actions: int, hidden: Sequence[int], gru_hidden: int = 128) -> None:
         super().__init__(obs_size, n_actions, gru_hidden)
+        self.hidden = tuple(int(w) for w in hidden)
         layers, n_in = tanh_layers(obs_size, hidden)
         self.encoder = nn.Sequential(*layers)
         self.gru = nn.GRUCell(n_in, self.state_size)
@@ -52,6 +54,12 @@ class GRUAgent(Agent):
                        "actor_head.weight": (n_actions, H), "actor_head.bias": (n_actions,), "critic_head.weight": (1, H),
                        "critic_head.bias": (1,)})
         return shapes
+
+    def settings(self) -> dict[str, Any]:
+        return {"kind": self.kind, "hidden": list(self.hidden), "gru_hidden": self.state_size}
+
+    def input_weights(self) -> list[str]:
+        return ["encoder.0.weight"] if self.hidden else ["gru.weight_ih"]
 
     def step(self, x: torch.Tensor, h: torch.Tensor, start: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         h = h * (~start).to(h.dtype).unsqueeze(-1)

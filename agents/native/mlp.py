@@ -14,6 +14,7 @@ Example::
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 import torch
 from torch import nn
@@ -36,6 +37,7 @@ class MLPAgent(Agent):
 
     def __init__(self, obs_size: int, n_actions: int, hidden: Sequence[int]) -> None:
         super().__init__(obs_size, n_actions, 0)
+        self.hidden = tuple(int(w) for w in hidden)
         self.actor = mlp(obs_size, hidden, n_actions, 0.01)
         self.critic = mlp(obs_size, hidden, 1, 1.0)
 
@@ -49,6 +51,33 @@ class MLPAgent(Agent):
                 shapes[f"{head}.{2 * i}.weight"], shapes[f"{head}.{2 * i}.bias"] = (w, n_in), (w,)
                 n_in = w
         return shapes
+
+    def settings(self) -> dict[str, Any]:
+        return {"kind": self.kind, "hidden": list(self.hidden), "gru_hidden": 0}
+
+    def input_weights(self) -> list[str]:
+        return ["actor.0.weight", "critic.0.weight"]
+
+    @property
+    def first_width(self) -> int:
+        """The width of each head's first layer."""
+        first = self.actor[0]
+        assert isinstance(first, torch.nn.Linear)
+        return first.out_features
+
+    def linear_names(self, head: str) -> list[tuple[str, str]]:
+        """The ``(weight, bias)`` names of ``head``'s linear layers (``"actor"`` or
+        ``"critic"``), input first."""
+        return [(f"{head}.{i}.weight", f"{head}.{i}.bias") for i, m in enumerate(getattr(self, head)) if isinstance(m, nn.Linear)]
+
+    def flat_order(self) -> list[tuple[str, nn.Parameter]]:
+        """The parameters in the order of a flat buffer (:class:`~agents.native.optim.FlatAdam`)
+        where the actor's and the critic's first layers are adjacent (weights, then biases),
+        so one product computes both (:class:`~agents.native.fused.FusedMLP`)."""
+        params = dict(self.named_parameters())
+        (aw, ab), (cw, cb) = self.linear_names("actor")[0], self.linear_names("critic")[0]
+        first = [aw, cw, ab, cb]
+        return [(k, params[k]) for k in first] + [(k, p) for k, p in params.items() if k not in first]
 
     def step(self, x: torch.Tensor, h: torch.Tensor, start: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         return self.actor(x), self.critic(x).squeeze(-1), h

@@ -358,5 +358,6 @@ def _train_native_baseline(config: BenchmarkConfig, algo: str, seed: int, splits
     curve = [(step, {names[k]: v["met"] for k, v in rates.items()}) for step, rates in result.evaluations]
     pos = result.settings.get("position")
     where = slice(int(pos[0]), int(pos[1])) if pos else None
-    policies = {"greedy": BatchActor(result.agent, where, True), "sampled": BatchActor(result.agent, where, False)}
+    policies = {"greedy": BatchActor(result.agent, where, True, memory=args.memory),
+                "sampled": BatchActor(result.agent, where, False, memory=args.memory)}
     return TrainedBaseline(algo, seed, path, result.steps, result.seconds, result.eval_seconds, curve, count, policies)

@@ -87,7 +87,7 @@ SETTING_HELP: dict[str, str] = {
     "device": "auto (cuda when torch sees one), cpu, cuda, cuda:N", "threads": "torch CPU threads",
     "env_backend": "who steps the tests: torch (the torch env on --device), numpy (the NumPy vector env); auto: numpy on the CPU, else torch",
     "shaping": "env option: shaping scale, 0 = off",
-    "memory": "env option: the SUT's memory, none or visited", "obs_kind": "env option: flat, grid or padded",
+    "memory": "env option: the SUT's memory, none, visited or counts (how often, capped)", "obs_kind": "env option: flat, grid or padded",
     "pad_to": "env option: grid side of obs_kind=padded",
 }
 
@@ -138,7 +138,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         elif key == "algo":
             kw["choices"] = tuple(dict.fromkeys([*NATIVE_ALGOS, *ALGOS]))
         elif key in ("memory", "obs_kind", "env_backend"):
-            kw["choices"] = {"memory": ("none", "visited"), "obs_kind": ("flat", "grid", "padded"),
+            kw["choices"] = {"memory": ("none", "visited", "counts"), "obs_kind": ("flat", "grid", "padded"),
                              "env_backend": ("auto", "torch", "numpy")}[key]
         elif key == "device":
             kw["type"] = str

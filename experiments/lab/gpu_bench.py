@@ -24,7 +24,10 @@ its infos), ``torch-cpu`` and ``torch-cuda`` (the functional step of
 measurement repeats steps until ``--seconds`` have passed (after warm-up steps), so the
 run's length does not depend on the machine; a size whose tensors would not fit the device
 is skipped and said so. With ``--train`` (and :mod:`agents.native_ppo` present) it also
-times the native trainer end to end on the pool.
+times the native trainer end to end on the pool (its defaults: the hand-written MLP update,
+the varying observation entries), and with ``--fit`` the seconds until its greedy policy
+meets 95 % of ``reachability1/5x5-v2``'s first 128 train tests (the time-to-score figure of
+``experiments/lab/time_to_score.py``, here on each device).
 
 It prints a table and writes every figure with the machine's description to ``--out``
 (JSON): one row per (case, backend, num_envs) with ``steps_per_s``.
@@ -175,8 +178,7 @@ def fits(tables: tv.TorchTables, num_envs: int) -> bool:
 
 def bench_training(device: torch.device, steps: int, num_envs: int, pool_count: int, threads: int) -> dict[str, Any] | None:
     """End-to-end steps/s of the native trainer (:mod:`agents.native_ppo`, its own env and
-    defaults: MLP 256x2, visited memory) on the pool, training seconds only (None without
-    the trainer)."""
+    defaults) on the pool, training seconds only (None without the trainer)."""
     try:
         from agents import native_ppo
     except ImportError:
@@ -186,7 +188,29 @@ def bench_training(device: torch.device, steps: int, num_envs: int, pool_count: 
         eval_every=0, obs_kind="padded", threads=threads,
     )
     result = native_ppo.train(args, progress_bar=False, evaluate_train=False)
-    return {"steps": result.steps, "seconds": result.seconds, "steps_per_s": result.steps_per_second, "num_envs": num_envs}
+    return {"steps": result.steps, "seconds": result.seconds, "steps_per_s": result.steps_per_second, "num_envs": num_envs,
+            "settings": {"hidden": list(args.hidden), "epochs": args.update_epochs, "minibatches": args.num_minibatches,
+                         "inputs": args.inputs, "memory": args.memory}}
+
+
+FIT_POOL = "reachability1/5x5-v2"
+"""The pool of the time-to-score figure (its first 128 train tests, shipped)."""
+
+
+def bench_fit(device: torch.device, num_envs: int, threads: int, budget: int = 1_500_000, target: float = 0.95) -> dict[str, Any] | None:
+    """Training seconds (evaluations excluded) until the native trainer's greedy policy meets
+    ``target`` of :data:`FIT_POOL`'s first 128 train tests, evaluated every 16,384 steps
+    (None without the trainer; ``seconds`` None when ``budget`` steps do not get there)."""
+    try:
+        from agents import native_ppo
+    except ImportError:
+        return None
+    args = native_ppo.NativeArgs(env_kwargs={"pool": FIT_POOL, "split": "train", "count": 128}, total_steps=budget,
+                                 num_envs=num_envs, device=str(device), eval_every=16_384, threads=threads)
+    result = native_ppo.train(args, progress_bar=False, until=lambda step, rates: rates["train"]["met"] >= target)
+    hit = next(((s, t) for (s, r), t in zip(result.evaluations, result.eval_times, strict=True) if r["train"]["met"] >= target), None)
+    return {"num_envs": num_envs, "target": target, "steps": hit[0] if hit else None, "seconds": round(hit[1], 2) if hit else None,
+            "steps_per_s": result.steps_per_second, "final_met": result.final["train"]["met"]}
 
 
 # ---------------------------------------------------------------- main
@@ -203,6 +227,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--pool-count", type=int, default=512, help="tests of the pool cases")
     p.add_argument("--quick", action="store_true", help="small sizes, 0.3 s per figure, a 16-test pool (a check that it runs)")
     p.add_argument("--train", type=int, default=0, metavar="STEPS", help="also time the native trainer for STEPS env steps")
+    p.add_argument("--fit", action="store_true", help="also time the native trainer to 95 %% greedy met on 128 train tests of " + FIT_POOL)
     p.add_argument("--threads", type=int, default=1, help="torch CPU threads (1: on a busy CPU, OpenMP's spinning threads slow small ops down)")
     p.add_argument("--compile", action="store_true", help="also time the torch step through torch.compile (first call compiles: tens of seconds)")
     a = p.parse_args(argv)
@@ -258,10 +283,22 @@ def main(argv: list[str] | None = None) -> int:
                 break
             training.append({"backend": f"torch-{d}", **t})
             print(f"training  torch-{d:<6} {t['num_envs']:>9} envs  {t['steps_per_s']:>14,.0f} steps/s")
+    fit_rows = []
+    if a.fit:
+        for d in devices:
+            if d == "numpy":
+                continue
+            f = bench_fit(torch.device(d), 1024 if d.startswith("cuda") else 128, a.threads)
+            if f is None:
+                print("(no agents.native_ppo: time to score not measured)")
+                break
+            fit_rows.append({"backend": f"torch-{d}", **f})
+            print(f"fit       torch-{d:<6} {f['num_envs']:>9} envs  {f['seconds']} s to {100 * f['target']:.0f} % ({f['steps']} steps, "
+                  f"{f['steps_per_s']:,.0f} steps/s)")
     doc = {
         "command": "python -m experiments.lab.gpu_bench " + " ".join(argv if argv is not None else sys.argv[1:]),
         "machine": machine(), "pool": POOL, "pool_count": a.pool_count, "seconds_per_figure": a.seconds,
-        "rows": rows, "training": training, "wall_seconds": round(time.perf_counter() - t_start, 1),
+        "rows": rows, "training": training, "fit": fit_rows, "wall_seconds": round(time.perf_counter() - t_start, 1),
     }
     if a.out:
         a.out.write_text(json.dumps(doc, indent=1) + "\n")

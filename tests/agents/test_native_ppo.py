@@ -353,3 +353,71 @@ def test_batch_actor_plays_the_checkpoint_greedy_and_sampled(tmp_path: Path) -> 
     one = play_batch(model.batch_policy(deterministic=False), games, runs=6, seed=3)
     two = play_batch(model.batch_policy(deterministic=False), games, runs=6, seed=3)
     assert (one["steps"] == two["steps"]).all() and (one["system_objective"] == two["system_objective"]).all()
+
+
+def test_a_counts_checkpoint_plays_its_memory_everywhere(tmp_path: Path) -> None:
+    """``memory="counts"``: the trainer's greedy score is the saved file's, played one env at
+    a time (``ppo:PATH``, which rebuilds the counts) and batched (``batch_policy``)."""
+    from agents.native_ppo import load_native
+    from agents.registry import make_policy
+    from experiments.evaluation.episodes import run_episode
+    from flowtest_env.scoring import play_batch
+
+    args = NativeArgs(env_id="FlowTest-SmallReactive-v0", memory="counts", total_steps=512, num_envs=8, num_steps=16,
+                      num_minibatches=2, hidden=(16,), device="cpu", eval_every=0)
+    result = train(args, out=tmp_path / "c.zip", progress_bar=False)
+    model = load_native(tmp_path / "c.zip")
+    assert model.flowtest_memory == "counts" and model.settings["memory"] == "counts"
+    vec: Any = gym.make_vec("FlowTest-SmallReactive-v0", num_envs=1, vectorization_mode="vector_entry_point")
+    greedy = play_batch(model.batch_policy(), list(vec.unwrapped.games), runs=1)
+    assert float(np.mean(greedy["system_objective"] == "met")) == result.final["train"]["met"]
+    env = gym.make("FlowTest-SmallReactive-v0")
+    t = run_episode(env, make_policy(f"ppo:{tmp_path / 'c.zip'}", env), "small-reactive", "ppo", 0, record=False)
+    assert (t.verdict["system_objective"] == "met") == (result.final["train"]["met"] == 1.0)
+    assert int(greedy["steps"][0, 0]) == t.verdict["steps"]
+
+
+def test_the_network_reads_the_varying_entries_and_is_widened_for_play(tmp_path: Path) -> None:
+    """``inputs="varying"`` trains on the observation entries that vary over the train tests
+    (and the memory); the network returned and saved reads the whole observation, with zero
+    weights on the others, and plays exactly as the narrow one did."""
+    from agents.native.inputs import varying_columns, widen
+
+    env: Any = gym.make_vec("FlowTest-SmallReactive-v0", num_envs=1, vectorization_mode="vector_entry_point")
+    table = np.asarray(env.unwrapped.pool.obs)
+    cols = varying_columns(table.reshape(len(table), -1), memory=3)
+    assert cols is not None and len(cols) < table.shape[1] + 3 and list(cols[-3:]) == [table.shape[1] + k for k in range(3)]
+    assert varying_columns(np.array([[0.0, 1.0], [1.0, 0.0]])) is None
+    narrow = make_agent(len(cols), 5, (8,), "mlp")
+    wide = widen(narrow, torch.as_tensor(cols), table.shape[1] + 3)
+    x = torch.rand(6, table.shape[1] + 3)
+    for a, b in zip(narrow.step(x[:, torch.as_tensor(cols)], torch.zeros(6, 0), torch.zeros(6, dtype=torch.bool)),
+                    wide.step(x, torch.zeros(6, 0), torch.zeros(6, dtype=torch.bool)), strict=True):
+        torch.testing.assert_close(a, b)
+    dropped = np.setdiff1d(np.arange(table.shape[1] + 3), cols)
+    assert float(wide.actor[0].weight.detach()[:, dropped].abs().sum()) == 0.0
+    # end to end: the same seed trains "all" and "varying" to networks of the whole observation
+    base = dict(env_id="FlowTest-SmallReactive-v0", total_steps=256, num_envs=8, num_steps=16, num_minibatches=2, hidden=(16,),
+                device="cpu", eval_every=0)
+    narrow_run = train(NativeArgs(**base, inputs="varying"), out=tmp_path / "v.zip", progress_bar=False)
+    full_run = train(NativeArgs(**base, inputs="all"), progress_bar=False)
+    assert narrow_run.agent.obs_size == full_run.agent.obs_size
+    assert load_checkpoint(tmp_path / "v.zip").settings["training"]["inputs"] == "varying"
+
+
+def test_validation_selects_the_checkpoint_and_until_stops_the_run(tmp_path: Path) -> None:
+    args = NativeArgs(env_id="FlowTest-SmallReactive-v0", total_steps=1024, num_envs=8, num_steps=16, num_minibatches=2,
+                      hidden=(16,), device="cpu", eval_every=256)
+    vec: Any = gym.make_vec("FlowTest-SmallReactive-v0", num_envs=1, vectorization_mode="vector_entry_point")
+    games = list(vec.unwrapped.games)
+    result = train(args, out=tmp_path / "s.zip", progress_bar=False, validation=games)
+    val = [(s, r["validation"]["met"]) for s, r in result.evaluations]
+    best = max(m for _, m in val)
+    assert result.selected_step == max(s for s, m in val if m == best)  # the latest of the best
+    saved = load_checkpoint(tmp_path / "s.zip").settings["selected"]
+    assert saved["step"] == result.selected_step and saved["validation_met"] == best
+    assert len(result.eval_times) == len(result.evaluations) and result.eval_times == sorted(result.eval_times)
+    assert any("eval/validation_met" in row for row in result.rows)
+    seen: list[int] = []
+    stopped = train(args, progress_bar=False, until=lambda step, rates: seen.append(step) or step >= 512)
+    assert stopped.steps == 512 and seen == [0, 256, 512] and stopped.final == stopped.evaluations[-1][1]

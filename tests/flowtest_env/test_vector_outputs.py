@@ -160,3 +160,9 @@ def test_copy_false_writes_every_observation_into_one_buffer(mode: str, options:
 def test_copy_must_be_a_bool() -> None:
     with pytest.raises(ValueError, match="copy must be True or False, not 'no'"):
         gym.make_vec("FlowTest-Maze2-v0", 2, vectorization_mode="vector_entry_point", copy="no")
+
+
+def test_uint8_refuses_the_counting_memory() -> None:
+    """The counting memory holds quarters, which ``uint8`` 0/1 entries cannot carry."""
+    with pytest.raises(ValueError, match="memory='counts' counts in quarters"):
+        gym.make_vec("FlowTest-Maze2-v0", 2, vectorization_mode="vector_entry_point", obs_dtype="uint8", memory="counts")
