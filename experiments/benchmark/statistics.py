@@ -156,7 +156,7 @@ def _mode_summary(s: SystemRuns, split: str, mode: str, scale: Scale, reps: int)
         out["normalized"]["defines"] = "floor"  # 0 by definition: its own runs are the floor
     elif s.name == scale.ceiling_from:
         out["normalized"]["defines"] = "ceiling"  # 1 by definition
-    out["tail"] = tail_score(matrix, TAIL_SHARE, reps).to_json()
+    out["tail"] = tail_score(matrix, TAIL_SHARE).to_json()
     return out
 
 

@@ -210,13 +210,11 @@ def interval_text(n: dict[str, Any] | None) -> str:
 
 
 def tail_text(mode: dict[str, Any] | None) -> str:
-    """The tail column of a mode's summary: the mean met share of its hardest 10 % of tests
-    with its interval, ``"65.2 % [61.0, 69.3]"``."""
+    """The tail column of a mode's summary: the mean met share of its hardest 10 % of tests,
+    ``"65.2 %"``."""
     if not mode or not mode.get("tail"):
         return MISSING
-    t = mode["tail"]
-    mark = PRELIMINARY_MARK if t.get("preliminary") else ""
-    return f"{percent(t['point'], 1)} [{100 * t['low']:.1f}, {100 * t['high']:.1f}]{mark}"
+    return percent(mode["tail"]["point"], 1)
 
 
 def _mode(e: dict[str, Any], split: str, mode: str) -> dict[str, Any] | None:
@@ -327,8 +325,8 @@ COLUMNS_NOTE = (
     "seeds): the mean over seeds, [95 % CI] the t interval over the seed means widened by the tests' and the floor's "
     "error. *Sampled* (the headline): {runs} per test drawn from the policy; *greedy*: each test played once by the most "
     "likely action; a deterministic system's headline is its greedy play. *Hardest 10 % (CVaR)*: the mean met share of "
-    "the 10 % of held-out tests the system met least often (each test's share over seeds and runs), with its "
-    "seed-and-test bootstrap interval. *Met*: share of runs whose system objective was met (± 95 % t-interval over "
+    "the 10 % of held-out tests the system met least often (each test's share over seeds and runs; no interval: "
+    "docs/benchmark-protocol.md). *Met*: share of runs whose system objective was met (± 95 % t-interval over "
     "seeds). *Realized (of met)*: share of those that also realized the hidden test objective (the synthesized test "
     "guarantees 100 %). *Held-out gap*: train met minus held-out met per seed, greedy. The per-run scores (seeds x "
     "tests, every system) are in {scores}."

@@ -21,6 +21,7 @@ from experiments import benchmark as bench
 from experiments.benchmark import training_runs
 from experiments.cli.cli import main
 from experiments.evaluation.episodes import Trace
+from flowtest_env.scoring import worst_share_mean
 from synthesis.model.errors import ProblemError
 from tests.testing_processes import start_until
 
@@ -104,7 +105,10 @@ def test_references_meet_every_test_and_random_does_not(tmp_path: Path, capsys: 
     assert len(list((out / "pool" / "train").glob("seed*.json"))) == 6
     md = (out / "table.md").read_text()
     assert ("| scripted:replanner | reference | 1 | 1 (reference) | 1 (reference) | 100.0 % (greedy) | 100.0 % | "
-            "100.0 % [100.0, 100.0]† (greedy) | 100.0 % | 100.0 % | +0.0 pp |") in md
+            "100.0 % (greedy) | 100.0 % | 100.0 % | +0.0 pp |") in md
+    rnd_tail = worst_share_mean(rnd["test"]["sampled"]["per_test"] if "per_test" in rnd["test"]["sampled"] else
+                                rnd["runs"][0]["test"]["sampled"]["per_test"], 0.1)
+    assert f"| random | floor | 1 | 0 (floor) | – | {100 * rnd['test']['met']['mean']:.1f} % | – | {100 * rnd_tail:.1f} % |" in md
     # the header says what ran: nothing trained, the floor and the references scored
     assert doc["ran"]["trained"] == [] and doc["budget"] == {"steps_per_run": None, "training_runs": 0, "training_steps": 0}
     assert "**Trained**: nothing" in md and "1,000,000" not in md
@@ -390,3 +394,35 @@ def test_sb3_trains_on_the_standard_pools_shipped_records(monkeypatch: pytest.Mo
     with pytest.raises(Stop):
         bench.train_baseline(config, "maskable-ppo", 0, {}, tmp_path, train_tests=16)
     assert asked == {"pool": "reachability1/5x5-v1", "split": "train", "count": 16}
+
+
+def test_a_system_of_several_seeds_gets_the_seed_and_test_interval() -> None:
+    """A system given as it is, with one run per seed from any source (say five checkpoints
+    of one method), gets the statistics of a trained baseline: 5 seeds, so the IQM and the
+    seed-and-test bootstrap; it is in the headline, and the header counts its seeds."""
+    config = bench.BenchmarkConfig(POOL, suts=("ppo:runs/*.zip",), train_count=4, validation_count=2, test_count=6,
+                                   bootstrap=200, runs=2)
+    splits = {n: bench.Split(n, n, [10 * i, 10 * i + 5], []) for i, n in enumerate(bench.SPLIT_NAMES)}
+    rng = np.random.default_rng(0)
+
+    def metrics(per_test: list[float], runs: int) -> dict[str, Any]:
+        return {"tests": len(per_test), "runs": runs, "met": float(np.mean(per_test)), "realized": 1.0, "restrictions": 0.0,
+                "steps": 4.0, "violated": 0, "open": 0, "test_failures": 0, "per_test": per_test}
+
+    def row(seed: int | None, greedy: list[float] | None, sampled: list[float] | None) -> dict[str, Any]:
+        return {"seed": seed, "sut": "x", **{s: {"greedy": greedy and metrics(greedy, 1), "sampled": sampled and metrics(sampled, 2)}
+                                             for s in bench.SPLIT_NAMES}}
+
+    mine = [row(k, [float(v) for v in rng.integers(0, 2, 6)], [v / 2 for v in rng.integers(0, 3, 6)]) for k in range(5)]
+    systems = [bench.SystemRuns("ppo:runs/*.zip", "system", mine),
+               bench.SystemRuns("random", "floor", [row(None, None, [0.5, 0.5, 0, 0, 0.5, 0])]),
+               bench.SystemRuns("gr1", "reference", [row(None, [1.0] * 6, None)])]
+    doc = bench.benchmark_table(config, splits, systems, [])
+    n = doc["headline"]["normalized_held_out"]["ppo:runs/*.zip"]["sampled"]
+    assert n["statistic"] == "iqm" and n["interval"] == "seed-and-test bootstrap" and not n["preliminary"] and n["seeds"] == 5
+    assert n["low"] <= n["point"] <= n["high"]
+    assert doc["ran"]["trained"] == [] and doc["ran"]["scored"][0] == {"name": "ppo:runs/*.zip", "kind": "system", "seeds": 5,
+                                                                       "modes": ["greedy", "sampled"], "runs_per_test": 2}
+    md = bench.table_markdown({**doc, "seconds": {}, "outputs": {}})
+    assert "`ppo:runs/*.zip` (5 seeds: greedy and sampled, 2 sampled runs per test)" in md
+    assert "| ppo:runs/*.zip | system | 5 |" in md
