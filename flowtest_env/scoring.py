@@ -28,7 +28,9 @@ of the batch gets ``seed`` through ``reset``); a deterministic (greedy) one need
 :func:`random_policy` is the protocol's floor. The references (the scripted replanner and
 the GR(1) system) are not batched: ``flowtest benchmark`` plays them through the single env.
 
-The statistics (:func:`iqm`, :func:`stratified_bootstrap`, :func:`worst_share_mean`,
+The statistics (:func:`score_interval`: the normalized score with its seed-and-test bootstrap
+or, below :data:`PRELIMINARY_SEEDS` seeds, its t interval; :func:`tail_score`: the CVaR of the
+per-test met shares, a point without an interval; :func:`crossed_draws`, :func:`iqm`, :func:`worst_share_mean`,
 :func:`normalized`) are plain NumPy, seeded, and documented with their choices in
 docs/benchmark-protocol.md. This module imports neither torch nor the agents.
 """
@@ -45,8 +47,9 @@ import numpy as np
 from .envs import default_max_steps
 from .game import TestGame
 
-__all__ = ["BatchPolicy", "PolicyScore", "PoolSource", "iqm", "load_tests", "normalized", "play_batch", "random_policy",
-           "score_policy", "stratified_bootstrap", "summarize", "worst_share_mean"]
+__all__ = ["PRELIMINARY_SEEDS", "TAIL_SHARE", "BatchPolicy", "PolicyScore", "PoolSource", "ScoreInterval", "TailScore",
+           "crossed_draws", "iqm", "load_tests", "normalized", "play_batch", "random_policy", "score_interval", "score_policy",
+           "seed_iqm", "summarize", "tail_score", "worst_share_mean"]
 
 
 class BatchPolicy(Protocol):
@@ -355,35 +358,236 @@ def seed_iqm(scores: np.ndarray) -> float:
     return iqm(np.asarray(scores, dtype=np.float64).mean(axis=1))
 
 
-def stratified_bootstrap(scores: np.ndarray, statistic: Callable[[np.ndarray], float] = seed_iqm, reps: int = 2000,
-                         seed: int = 0, confidence: float = 0.95) -> tuple[float, float, float]:
-    """``(point, low, high)``: ``statistic(scores)`` and its percentile bootstrap interval.
+PRELIMINARY_SEEDS = 5
+"""Below this many seeds a score is *preliminary*: the mean over seeds with a Student-t
+interval (:func:`score_interval`), not the IQM with a bootstrap interval (an IQM of 3 values
+trims nothing, and a bootstrap over 3 seeds resamples 3 values: its interval is about their
+range)."""
 
-    ``scores`` is ``[seeds, tests]`` (one row per training seed; each entry a test's score
-    for that seed). Each of ``reps`` replicates draws the seeds with replacement and, within
-    each drawn seed's stratum, that seed's tests with replacement (a stratified, two-level
-    bootstrap: the interval covers the variation between training seeds and the sampling of
-    the tests); with one seed only the tests are resampled. Seeded: the same inputs give the
-    same interval.
+TAIL_SHARE = 0.1
+"""The share of the hardest tests whose mean met rate is the tail score (:func:`tail_score`)."""
+
+
+def crossed_draws(n_seeds: int, n_tests: int, reps: int, seed: int = 0,
+                  resample_seeds: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """The replicates of the seed-and-test bootstrap, ``(seeds, tests)``: ``seeds[r]`` the
+    ``n_seeds`` seed indices of replicate ``r`` (drawn with replacement; ``0 .. n-1`` when
+    ``resample_seeds`` is false) and ``tests[r, t]`` how often test ``t`` is drawn in replicate
+    ``r`` (``n_tests`` draws with replacement). One test draw per replicate is **shared** by every
+    seed, by the floor and by the ceiling: every seed plays the same tests (a crossed design), so
+    a resample of the tests is one for all of them. Seeded (``numpy.random.default_rng(seed)``:
+    the tests are drawn first, then the seeds)."""
+    rng = np.random.default_rng(seed)
+    idx = rng.integers(0, n_tests, size=(reps, n_tests))
+    counts = np.bincount((idx + n_tests * np.arange(reps)[:, None]).ravel(), minlength=reps * n_tests)
+    who = rng.integers(0, n_seeds, size=(reps, n_seeds)) if resample_seeds else np.tile(np.arange(n_seeds), (reps, 1))
+    return who, counts.reshape(reps, n_tests)
+
+
+@dataclass(frozen=True)
+class ScoreInterval:
+    """A score over seeds and tests with its interval (:func:`score_interval`); JSON by
+    :meth:`to_json`.
+
+    Attributes
+    ----------
+    point, low, high
+        The score and its interval (normalized: 0 = floor, 1 = ceiling, when a scale was given).
+    statistic
+        What ``point`` is: ``"iqm"`` (the interquartile mean over seeds of each seed's mean
+        over tests; :data:`PRELIMINARY_SEEDS` seeds or more) or ``"mean"`` (fewer).
+    interval
+        How ``low`` and ``high`` were found: ``"seed-and-test bootstrap"`` (percentile
+        interval; seeds and tests resampled, one test resample shared by every seed, the
+        floor and the ceiling) or ``"t over seeds and tests"`` (the Student-t interval over
+        the seed means, ``n - 1`` degrees of freedom, widened by the tests', the floor's and
+        the ceiling's error: the two half-widths added in quadrature).
+    preliminary
+        Fewer than :data:`PRELIMINARY_SEEDS` seeds.
+    mean
+        The mean over seeds and tests (whatever ``statistic`` is).
+    seeds, tests, confidence
+        The matrix's shape and the interval's level.
+    seed_se, test_se
+        The t interval's parts (``None`` for the bootstrap; ``seed_se`` ``None`` with one seed):
+        the standard error of the mean of the seed means, and the standard deviation of the
+        normalized mean over the shared test resample with the seeds held.
+    """
+
+    point: float
+    low: float
+    high: float
+    statistic: str
+    interval: str
+    preliminary: bool
+    mean: float
+    seeds: int
+    tests: int
+    confidence: float = 0.95
+    seed_se: float | None = None
+    test_se: float | None = None
+
+    def to_json(self) -> dict[str, Any]:
+        """The fields as a JSON object."""
+        return asdict(self)
+
+
+def _matrix(scores: np.ndarray | Sequence[Sequence[float]]) -> np.ndarray:
+    x = np.asarray(scores, dtype=np.float64)
+    if x.ndim != 2 or x.size == 0:
+        raise ValueError(f"scores must be a non-empty [seeds, tests] matrix, not of shape {x.shape}")
+    return x
+
+
+def _per_test(values: Sequence[float] | np.ndarray | None, n_tests: int, what: str) -> np.ndarray | None:
+    if values is None:
+        return None
+    v = np.asarray(values, dtype=np.float64).ravel()
+    if v.size != n_tests:
+        raise ValueError(f"{what} has {v.size} per-test values for {n_tests} tests")
+    return v
+
+
+def _check_bootstrap(reps: int, confidence: float) -> None:
+    if reps < 2 or not 0 < confidence < 1:
+        raise ValueError(f"reps must be at least 2 and confidence in (0, 1), not {reps} and {confidence}")
+
+
+def _iqm_rows(values: np.ndarray) -> np.ndarray:
+    """:func:`iqm` of each row."""
+    n = values.shape[1]
+    k = int(math.floor(0.25 * n))
+    out: np.ndarray = np.sort(values, axis=1)[:, k:n - k].mean(axis=1)
+    return out
+
+
+def score_interval(scores: np.ndarray | Sequence[Sequence[float]], floor: Sequence[float] | np.ndarray | None = None,
+                   ceiling: Sequence[float] | np.ndarray | None = None, reps: int = 2000, seed: int = 0,
+                   confidence: float = 0.95) -> ScoreInterval | None:
+    """A system's score on a split and its interval, from ``scores`` ``[seeds, tests]`` (each
+    seed's met share on each test: 0/1 for a greedy run, ``k / K`` for ``K`` sampled runs),
+    normalized by the per-test met shares of the ``floor`` (random's, each from its ``K``
+    runs) and of the ``ceiling`` (the reference's) on the **same tests** when given:
+    ``(met - floor) / (ceiling - floor)`` of the means. Without them the raw met share.
+
+    * With :data:`PRELIMINARY_SEEDS` seeds or more: the **IQM over seeds** of each seed's
+      score, and the **seed-and-test bootstrap** percentile interval: each of ``reps``
+      replicates draws the tests with replacement **once** (every seed, the floor and the
+      ceiling get that same draw: :func:`crossed_draws`) and the seeds with replacement,
+      and recomputes the IQM, the floor and the ceiling. So the interval covers the training
+      seeds, the sampling of the tests, and the floor's and ceiling's own sampling error
+      (the floor's per-test shares carry its runs' noise; they are not resampled a second
+      time within a test, which would count that noise twice: docs/benchmark-protocol.md).
+    * With fewer (**preliminary**): the **mean** over seeds and the **Student-t interval over
+      the seed means** (``t(n - 1) * s / sqrt(n)``; none for one seed) widened by the error of
+      the tests, the floor and the ceiling (``t(tests - 1)`` times the standard deviation of
+      the same shared-test bootstrap with the seeds held): the two half-widths added in
+      quadrature. It is never narrower than the t interval over the seed means alone, which
+      leaves the tests and the floor out; a Welch-Satterthwaite pooling would be narrower
+      and undercovers with 2-3 seeds (docs/benchmark-protocol.md).
+
+    ``None`` when the ceiling's mean is not above the floor's (no scale). Seeded: the same
+    inputs give the same interval.
 
     Raises
     ------
     ValueError
-        On an empty score matrix, ``reps < 1`` or a confidence outside (0, 1).
+        On an empty matrix, a floor or ceiling of another length, ``reps < 2`` or a
+        confidence outside (0, 1).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from flowtest_env.scoring import score_interval
+    >>> rng = np.random.default_rng(0)
+    >>> met = rng.binomial(8, 0.8, size=(10, 200)) / 8         # 10 seeds x 200 tests, 8 sampled runs each
+    >>> floor = rng.binomial(8, 0.4, size=200) / 8             # random's per-test met share
+    >>> s = score_interval(met, floor, np.ones(200), reps=500)
+    >>> s.statistic, s.interval, s.low < s.point < s.high
+    ('iqm', 'seed-and-test bootstrap', True)
+    >>> score_interval(met[:3], floor, np.ones(200), reps=500).statistic  # 3 seeds: preliminary
+    'mean'
     """
-    x = np.asarray(scores, dtype=np.float64)
-    if x.ndim != 2 or x.size == 0:
-        raise ValueError(f"scores must be a non-empty [seeds, tests] matrix, not of shape {x.shape}")
-    if reps < 1 or not 0 < confidence < 1:
-        raise ValueError("reps must be at least 1 and confidence in (0, 1)")
+    x = _matrix(scores)
+    _check_bootstrap(reps, confidence)
     s, t = x.shape
-    rng = np.random.default_rng(seed)
-    stats = np.empty(reps)
-    rows = np.arange(s)[:, None]
-    for r in range(reps):
-        who = rng.integers(0, s, size=s) if s > 1 else np.zeros(1, dtype=np.int64)
-        cols = rng.integers(0, t, size=(s, t))
-        stats[r] = statistic(x[who][rows, cols])
+    f = _per_test(floor, t, "the floor")
+    c = _per_test(ceiling, t, "the ceiling")
+    f0 = float(f.mean()) if f is not None else 0.0
+    c0 = float(c.mean()) if c is not None else 1.0
+    if not c0 > f0:
+        return None
+    seed_means = x.mean(axis=1)
+    z_seeds = (seed_means - f0) / (c0 - f0)
+    mean = float(z_seeds.mean())
     alpha = (1 - confidence) / 2
-    low, high = np.quantile(stats, [alpha, 1 - alpha])
-    return float(statistic(x)), float(low), float(high)
+    preliminary = s < PRELIMINARY_SEEDS
+    who, counts = crossed_draws(s, t, reps, seed, resample_seeds=not preliminary)
+    w = counts / t
+    f_r = w @ f if f is not None else np.zeros(reps)
+    c_r = w @ c if c is not None else np.ones(reps)
+    span = c_r - f_r
+    ok = span > 0  # a replicate without a scale (its ceiling not above its floor) is left out
+    if not ok.any():
+        return None
+    if not preliminary:
+        met_r = _iqm_rows(np.take_along_axis(w @ x.T, who, axis=1))
+        z = (met_r[ok] - f_r[ok]) / span[ok]
+        low, high = np.quantile(z, [alpha, 1 - alpha])
+        return ScoreInterval(iqm(z_seeds), float(low), float(high), "iqm", "seed-and-test bootstrap", False, mean, s, t,
+                             confidence)
+    z = ((w @ x.mean(axis=0))[ok] - f_r[ok]) / span[ok]
+    test_se = float(np.std(z, ddof=1)) if z.size > 1 else 0.0
+    seed_se = float(np.std(z_seeds, ddof=1) / math.sqrt(s)) if s > 1 else None
+    from scipy.stats import t as student
+
+    half_seeds = float(student.ppf(1 - alpha, s - 1)) * seed_se if seed_se is not None else 0.0
+    half_tests = float(student.ppf(1 - alpha, max(t - 1, 1))) * test_se
+    half = math.hypot(half_seeds, half_tests)
+    return ScoreInterval(mean, mean - half, mean + half, "mean", "t over seeds and tests", True, mean, s, t, confidence,
+                         seed_se, test_se)
+
+
+@dataclass(frozen=True)
+class TailScore:
+    """The mean met share of the hardest ``share`` of the tests (the CVaR at level ``share``
+    of the per-test met shares, each test's share averaged over seeds and runs:
+    :func:`tail_score`); JSON by :meth:`to_json`. It has no interval: see :func:`tail_score`."""
+
+    share: float
+    point: float
+    seeds: int
+    tests: int
+
+    def to_json(self) -> dict[str, Any]:
+        """The fields as a JSON object."""
+        return asdict(self)
+
+
+def tail_score(scores: np.ndarray | Sequence[Sequence[float]], share: float = TAIL_SHARE) -> TailScore:
+    """The tail of a system's scores ``[seeds, tests]``: each test's met share averaged over
+    the seeds, and the mean of the lowest ``ceil(share * tests)`` of them
+    (:func:`worst_share_mean`: the CVaR of the per-test met shares). With sampled runs a
+    test's share is not 0 or 1, so the tail ranks policies that all fail some test
+    somewhere; of greedy runs it is mostly 0.
+
+    No interval is given: the bootstrap of a tail mean is not trustworthy here. Resampling
+    the seeds changes how noisy each test's averaged share is, which moves the tail itself (a
+    simulation with 5 seeds covered the true tail in 67 % of the cases at 95 %); resampling the
+    tests only leaves the seeds' variation out (81 %); docs/benchmark-protocol.md.
+
+    Raises
+    ------
+    ValueError
+        On an empty matrix or a share outside (0, 1].
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from flowtest_env.scoring import tail_score
+    >>> met = np.array([[1.0, 0.5, 0.25, 1.0], [1.0, 0.75, 0.25, 1.0]])
+    >>> tail_score(met, share=0.25).point          # the hardest test: (0.25 + 0.25) / 2
+    0.25
+    """
+    x = _matrix(scores)
+    return TailScore(share, worst_share_mean(x.mean(axis=0), share), int(x.shape[0]), int(x.shape[1]))

@@ -69,22 +69,26 @@ def plot_learning_curves(doc: dict[str, Any], path: Path) -> None:
 
 
 def plot_generalization(doc: dict[str, Any], path: Path) -> None:
-    """The held-out normalized score (IQM with its 95 % interval) against the number of
-    training tests (log scale), greedy and sampled."""
+    """The held-out normalized score with its 95 % interval against the number of training
+    tests (log scale), sampled (the headline) and greedy; a preliminary point (fewer than 5
+    seeds: the mean with its t interval, not the IQM) is drawn hollow."""
     pts = doc["generalization"]
     fig, ax = _figure(6.5, 4.2)
-    for mode, color in (("greedy", "#1f77b4"), ("sampled", "#ff7f0e")):
-        xs = [p["train_tests"] for p in pts if p[mode]["iqm"] is not None]
-        if not xs:
+    for mode, color in (("sampled", "#ff7f0e"), ("greedy", "#1f77b4")):
+        shown = [p for p in pts if p[mode].get("point") is not None]
+        if not shown:
             continue
-        ys = np.array([p[mode]["iqm"] for p in pts if p[mode]["iqm"] is not None])
-        lo = np.array([p[mode]["low"] for p in pts if p[mode]["iqm"] is not None])
-        hi = np.array([p[mode]["high"] for p in pts if p[mode]["iqm"] is not None])
-        ax.plot(xs, ys, "o-", color=color, lw=2, label=f"{pts[0]['algo']}, {mode}")
+        xs = [p["train_tests"] for p in shown]
+        ys = np.array([p[mode]["point"] for p in shown])
+        lo = np.array([p[mode]["low"] for p in shown])
+        hi = np.array([p[mode]["high"] for p in shown])
+        ax.plot(xs, ys, "-", color=color, lw=2, label=f"{pts[0]['algo']}, {mode}")
         ax.fill_between(xs, lo, hi, color=color, alpha=0.15)
+        for x, y, p in zip(xs, ys, shown, strict=True):
+            ax.plot([x], [y], "o", color=color, mfc="white" if p[mode].get("preliminary") else color)
     ax.axhline(0.0, color="#7f7f7f", lw=1, ls=":", label="random (0)")
     ax.axhline(1.0, color="#2ca02c", lw=1, ls=":", label="reference (1)")
     ax.set_xscale("log", base=2)
     ax.set_xlabel("training tests")
-    ax.set_ylabel("held-out normalized score (IQM, 95 % CI)")
+    ax.set_ylabel("held-out normalized score, 95 % CI\n(IQM; hollow: fewer than 5 seeds, mean)")
     _save(fig, ax, f"{doc['pool']}: generalization ({doc['splits']['test']['count']} held-out tests)", path)

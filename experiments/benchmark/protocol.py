@@ -30,12 +30,15 @@ for each choice):
    spent, so they meet fewer than all tests there: docs/benchmark-protocol.md) and any system
    that is not batched through the single env, once per test. The floor and the ceiling are
    always scored: they define the scale.
-4. **The statistics** (:mod:`~experiments.benchmark.statistics`): per split, the
+4. **The statistics** (:mod:`~experiments.benchmark.statistics`): per split and mode, the
    **normalized score** ``(met - floor) / (ceiling - floor)`` (0 = random, 1 = reference; floor
-   and ceiling are the split's own), its interquartile mean over training seeds with a
-   stratified-bootstrap 95 % interval (seeds resampled, and tests within each seed's stratum),
-   the mean over the worst 10 % of the held-out tests, raw met, test objective realized,
-   restrictions, steps, and the held-out gap (train met minus held-out met).
+   and ceiling are the split's own), with 5 seeds or more its interquartile mean over seeds
+   with the seed-and-test bootstrap's 95 % interval (seeds resampled, the tests resampled once
+   per replicate for every seed, the floor and the reference: a crossed design), with fewer
+   the mean and a t interval (preliminary); the **headline** is the sampled play's
+   (a deterministic system's greedy), greedy beside it; the **tail** (the mean met share of
+   the hardest 10 % of the tests: a CVaR), raw met, test objective realized, restrictions,
+   steps, and the held-out gap (train met minus held-out met, greedy).
 5. **The generalization curve** (:func:`~experiments.benchmark.scoring.generalization_curve`):
    the held-out normalized score of the first baseline trained on the first 16, 64, 256, 1,024
    train tests (``curve_seeds`` seeds each, the same steps) and on all ``train_count`` (the
@@ -43,7 +46,9 @@ for each choice):
    their own processes (:func:`~experiments.benchmark.training_runs.train_all`; the models do
    not depend on it).
 6. **The outputs** in ``OUT``: ``table.md`` and ``table.json`` (the results file,
-   docs/benchmark-protocol.md; :mod:`~experiments.benchmark.table`), ``learning-curves.png``,
+   docs/benchmark-protocol.md; :mod:`~experiments.benchmark.table`), ``scores.npz`` (every
+   system's per-run score matrix, seeds x tests, as rliable reads it:
+   :func:`~experiments.benchmark.statistics.score_matrices`), ``learning-curves.png``,
    ``generalization.png`` (:mod:`~experiments.benchmark.plots`), the evaluation report of
    :mod:`experiments.evaluation` on a sample of each split's tests (``report.html``,
    ``report.md``, ``results.json``), the models and the scored tests.
@@ -75,7 +80,7 @@ from .plots import plot_generalization, plot_learning_curves
 from .pool import Split, load_splits
 from .resume import CONFIG_FILE, check_same_config, remove_temporaries, write_config
 from .scoring import generalization_curve, score_all
-from .statistics import scale_of
+from .statistics import SCORES_FILE, scale_of, score_matrices
 from .table import benchmark_table, commit, table_markdown
 from .training_runs import TrainingJob, train_all
 
@@ -182,6 +187,7 @@ def run_benchmark(config: BenchmarkConfig, out: Path, say: Callable[[str], None]
         write_atomically(out / OUTPUTS["generalization"], lambda tmp: plot_generalization(doc, tmp))
     else:
         doc["outputs"].pop("generalization")
+    write_scores(out / OUTPUTS["scores"], doc)
     write_text(out / OUTPUTS["table_md"], table_markdown(doc))
     write_text(out / OUTPUTS["table_json"], json.dumps(json_safe(doc), indent=1) + "\n")
     return doc
@@ -196,7 +202,21 @@ def write_text(path: Path, text: str) -> None:
     write_atomically(path, write)
 
 
-OUTPUTS = {"table_md": "table.md", "table_json": "table.json", "curves": "learning-curves.png",
+def write_scores(path: Path, doc: dict[str, Any]) -> None:
+    """Write the per-run score matrices of ``doc`` (:func:`~experiments.benchmark.statistics.score_matrices`)
+    to ``path`` as an uncompressed ``.npz``, atomically."""
+    import numpy as np
+
+    matrices: dict[str, Any] = dict(score_matrices(doc))
+
+    def write(tmp: Path) -> None:
+        with open(tmp, "wb") as f:
+            np.savez(f, allow_pickle=False, **matrices)
+
+    write_atomically(path, write)
+
+
+OUTPUTS = {"table_md": "table.md", "table_json": "table.json", "scores": SCORES_FILE, "curves": "learning-curves.png",
            "generalization": "generalization.png", "report": "report.html"}
 """The main files a benchmark writes into ``--out``."""
 

@@ -14,7 +14,7 @@ from synthesis.model.errors import ProblemError
 
 from .config import RANDOM, REPORT_SPLITS, RUN_SEED, SPLIT_NAMES, BenchmarkConfig, runs_text
 from .pool import Split
-from .statistics import SystemRuns, normalized_summary
+from .statistics import Scale, SystemRuns, normalized_summary
 from .systems import member_policies
 from .training_runs import TrainedBaseline
 
@@ -172,7 +172,7 @@ def _report_models(config: BenchmarkConfig, trained: Sequence[TrainedBaseline]) 
 
 
 def generalization_curve(config: BenchmarkConfig, splits: dict[str, Split], trained: list[TrainedBaseline],
-                         main: SystemRuns | None, scale: dict[str, Any], say: Callable[[str], None]) -> list[dict[str, Any]]:
+                         main: SystemRuns | None, scale: Scale, say: Callable[[str], None]) -> list[dict[str, Any]]:
     """The generalization curve (module docstring, step 5): per training-set size, the
     held-out normalized score (greedy and sampled) of the first baseline's runs on that
     many train tests (already trained), and its greedy met on its own training tests."""
@@ -205,8 +205,8 @@ def generalization_curve(config: BenchmarkConfig, splits: dict[str, Split], trai
             continue
         points.append({
             "algo": algo, "train_tests": n, "seeds": seeds,
-            "greedy": normalized_summary([r[0] for r in rows], scale["floor"], scale["ceiling"], config.bootstrap),
-            "sampled": normalized_summary([r[1] for r in rows], scale["floor"], scale["ceiling"], config.bootstrap),
+            "greedy": normalized_summary([r[0] for r in rows], scale, config.bootstrap),
+            "sampled": normalized_summary([r[1] for r in rows], scale, config.bootstrap),
             "train_met": float(np.mean([r[2] for r in rows])),
         })
     return points

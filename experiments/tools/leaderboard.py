@@ -2,17 +2,22 @@
 
 Usage::
 
-    flowtest benchmark --pool reachability1/5x5-v1 --out bench/           # a result: bench/table.json
+    flowtest benchmark --pool reachability1/5x5-v2 --out bench/           # a result: bench/table.json
     python -m experiments.tools.leaderboard --add bench/table.json --label "defaults"
     python -m experiments.tools.leaderboard                               # regenerate only
 
 ``--add`` keeps a summary of a ``table.json`` (docs/benchmark-protocol.md: its format) in
-``docs/leaderboard/`` (the per-test arrays and learning curves left out, every number the
-page shows kept) and regenerates the page from every summary there: per pool, one table per
-result (the baselines' held-out normalized scores with their intervals, greedy and sampled,
-raw met, the worst 10 %, next to the floor and the references), its command, commit,
-machine and times, and the generalization curve when the run has one. The page is only ever
-written by this tool, from these files: no number on it is typed by hand.
+``docs/leaderboard/``: every number the page shows, what the run trained and what it only
+scored, and the held-out per-run score matrices (seeds x tests, greedy and sampled, every
+system: ``scores``, as met-run counts), so the statistics can be recomputed from the summary
+alone (:func:`matrices`); the train and validation per-test arrays and the learning curves are
+left out. It regenerates the page from every summary there: per pool, one table per result
+(the held-out normalized score, sampled as the headline and greedy beside it, with their
+intervals, raw met, the hardest 10 % of the tests, next to the floor and the references), what
+it trained and scored, its command, commit, machine and times, and the generalization curve
+when the run has one. Summaries of the first format (``version`` 1, results before the crossed
+intervals) lack the matrices: they are shown with their old statistics, labelled so. The page
+is only ever written by this tool, from these files: no number on it is typed by hand.
 """
 
 from __future__ import annotations
@@ -25,7 +30,9 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from experiments.benchmark.table import interval_text, worst_text
+import numpy as np
+
+from experiments.benchmark.table import PRELIMINARY_MARK, headline_cell, interval_text, ran_text, scale_words, what_ran
 from experiments.formatting import MISSING, percent
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -33,7 +40,11 @@ RESULTS_DIR = ROOT / "docs" / "leaderboard"
 PAGE = ROOT / "docs" / "leaderboard.md"
 
 ENTRY_FORMAT = "flowtest-leaderboard-entry"
-ENTRY_VERSION = 1
+ENTRY_VERSION = 2
+"""The summary's version: 2 holds the crossed intervals, the tail and the held-out score
+matrices; 1 (results of version 2, before them) the old statistics only."""
+RESULTS_VERSION = 3
+"""The ``table.json`` version ``--add`` takes (docs/benchmark-protocol.md)."""
 KIND_ORDER = {"baseline": 0, "system": 1, "floor": 2, "reference": 3}
 
 
@@ -42,37 +53,64 @@ class LeaderboardError(ValueError):
 
 
 def summarize(doc: dict[str, Any], label: str = "") -> dict[str, Any]:
-    """The leaderboard's summary of a ``table.json`` document: what the page shows, no
-    per-test arrays.
+    """The leaderboard's summary of a ``table.json`` document: what the page shows and the
+    held-out score matrices, no other per-test arrays.
 
     Raises
     ------
     LeaderboardError
-        If ``doc`` is not a ``flowtest-benchmark`` results document of version 2.
+        If ``doc`` is not a ``flowtest-benchmark`` results document of version 3.
     """
-    if doc.get("format") != "flowtest-benchmark" or doc.get("version") != 2:
-        raise LeaderboardError("not a flowtest benchmark result of version 2 (table.json of `flowtest benchmark`)")
+    if doc.get("format") != "flowtest-benchmark":
+        raise LeaderboardError("not a flowtest benchmark result (table.json of `flowtest benchmark`)")
+    if doc.get("version") != RESULTS_VERSION:
+        raise LeaderboardError(f"a flowtest benchmark result of version {doc.get('version')}, not {RESULTS_VERSION}: its "
+                               "statistics are the old ones (docs/benchmark-protocol.md); rerun the benchmark")
 
     def mode(m: dict[str, Any] | None) -> dict[str, Any] | None:
         if not m:
             return None
         return {"met": m["met"]["mean"], "met_ci95": m["met"]["ci95"], "runs_per_test": m["runs_per_test"],
-                "normalized": m["normalized"]}
+                "normalized": m["normalized"], "tail": m.get("tail")}
 
     systems = []
+    scores: dict[str, dict[str, Any]] = {"greedy": {}, "sampled": {}}
     for e in doc["systems"]:
         row: dict[str, Any] = {"name": e["name"], "kind": e["kind"], "seeds": [r["seed"] for r in e["runs"]]}
         for split in ("train", "validation", "test"):
             if split in e:
-                row[split] = {"met": e[split]["met"]["mean"], "greedy": mode(e[split].get("greedy")),
-                              "sampled": mode(e[split].get("sampled"))}
+                row[split] = {"met": e[split]["met"]["mean"], "headline_mode": e[split].get("headline_mode"),
+                              "greedy": mode(e[split].get("greedy")), "sampled": mode(e[split].get("sampled"))}
         systems.append(row)
+        for m in ("greedy", "sampled"):
+            runs = [r["test"][m] for r in e["runs"] if r.get("test") and r["test"].get(m)]
+            if runs:
+                k = int(runs[0]["runs"])
+                scores[m][e["name"]] = {"runs_per_test": k, "seeds": row["seeds"],
+                                        "met_runs": [[int(round(v * k)) for v in r["per_test"]] for r in runs]}
     return {
         "format": ENTRY_FORMAT, "version": ENTRY_VERSION, "label": label,
         "pool": doc["pool"], "command": doc.get("command"), "commit": doc.get("commit"), "machine": doc.get("machine"),
-        "splits": doc["splits"], "config": doc["config"], "budget": doc["budget"], "scale": doc["scale"],
-        "seconds": doc.get("seconds"), "systems": systems, "generalization": doc.get("generalization", []),
+        "splits": doc["splits"], "config": doc["config"], "budget": doc["budget"], "ran": doc["ran"], "scale": doc["scale"],
+        "headline": doc["headline"], "seconds": doc.get("seconds"), "systems": systems,
+        "generalization": doc.get("generalization", []), "scores": {"test": scores},
     }
+
+
+def matrices(entry: dict[str, Any], mode: str = "sampled", split: str = "test") -> dict[str, np.ndarray]:
+    """A summary's held-out per-run score matrices, as rliable reads them: system ->
+    ``float [seeds, tests]`` (each test's met share: met runs / runs per test). Empty for a
+    summary of version 1, which did not keep them."""
+    stored = (entry.get("scores") or {}).get(split, {}).get(mode, {})
+    return {name: np.asarray(m["met_runs"], dtype=np.float64) / m["runs_per_test"] for name, m in stored.items()}
+
+
+def entry_json(entry: dict[str, Any]) -> str:
+    """The summary as indented JSON, each list of numbers on one line (a score matrix is a
+    line per seed, not a line per test)."""
+    text = json.dumps(entry, indent=1)
+    return re.sub(r"\[(?:\s*-?\d+(?:\.\d+)?(?:e-?\d+)?,)*\s*-?\d+(?:\.\d+)?(?:e-?\d+)?\s*\]",
+                  lambda m: "[" + ", ".join(x.strip() for x in m.group(0)[1:-1].split(",")) + "]", text) + "\n"
 
 
 def slug(text: str) -> str:
@@ -98,7 +136,7 @@ def add(path: Path, label: str = "", results: Path = RESULTS_DIR, commit: str | 
     while target.exists():
         target = results / f"{base}-{k}.json"
         k += 1
-    target.write_text(json.dumps(entry, indent=1) + "\n")
+    target.write_text(entry_json(entry))
     return target
 
 
@@ -114,35 +152,84 @@ def load_entries(results: Path = RESULTS_DIR) -> list[dict[str, Any]]:
     return entries
 
 
-COLUMNS = ["system", "kind", "seeds", "held-out normalized, greedy: IQM [95 % CI]", "held-out normalized, sampled",
-           "held-out met, greedy", "held-out met, sampled", "worst 10 % held-out", "train met"]
+COLUMNS = ["system", "kind", "seeds", "held-out normalized, sampled (headline) [95 % CI]", "held-out normalized, greedy",
+           "held-out met, sampled", "held-out met, greedy", "hardest 10 % of held-out tests: met (CVaR)", "train met"]
+
+OLD_COLUMNS = ["system", "kind", "seeds", "held-out normalized, greedy: IQM [old interval]", "sampled: IQM [old interval]",
+               "greedy: mean [t over seed means]", "sampled: mean [t over seed means]", "held-out met, greedy",
+               "held-out met, sampled", "worst 10 % held-out (old)", "train met"]
+
+OLD_NOTE = (
+    "*v1, old statistics*: this result predates the crossed intervals (its summary is of version 1 and kept no per-run "
+    "score matrices, so the new intervals and the tail cannot be recomputed). Its *IQM [old interval]* is the IQM over "
+    "seeds with the old per-seed bootstrap (each seed's tests resampled independently, the floor held fixed): too narrow, "
+    "most of all with 3 seeds. *mean [t over seed means]* is recomputed exactly from the stored mean and t half-width of "
+    "the met share (the floor and the tests held fixed, so it is a lower bound of the new preliminary interval's width). "
+    "The old worst-10 % column is of the greedy play."
+)
+
+
+def _sorted_systems(e: dict[str, Any]) -> list[dict[str, Any]]:
+    return sorted(e["systems"], key=lambda s: (KIND_ORDER.get(s["kind"], 9), s["name"]))
+
+
+def _t_over_seeds(m: dict[str, Any] | None, scale: dict[str, Any]) -> str:
+    """A version-1 row's normalized mean with the t interval over its seed means, from the
+    stored met mean and t half-width (floor and ceiling held at their means)."""
+    f, c = scale.get("floor"), scale.get("ceiling")
+    if not m or m.get("met") is None or m.get("met_ci95") is None or f is None or c is None or not c > f:
+        return MISSING
+    mean, half = (m["met"] - f) / (c - f), m["met_ci95"] / (c - f)
+    return f"{mean:.2f} [{mean - half:.2f}, {mean + half:.2f}]"
+
+
+def _ran(e: dict[str, Any]) -> dict[str, Any]:
+    """What the run trained and scored: stored, or (version 1) from its settings and systems."""
+    if e.get("ran"):
+        return dict(e["ran"])
+    systems = [{"name": s["name"], "kind": s["kind"], "seeds": s["seeds"],
+                "modes": [m for m in ("greedy", "sampled") if (s.get("test") or {}).get(m)]} for s in e["systems"]]
+    return what_ran(e["config"], e["splits"], e["budget"], systems, e.get("generalization", []))
 
 
 def entry_markdown(e: dict[str, Any]) -> list[str]:
-    """One result: its settings line, the table, the curve, where it came from."""
-    cfg, sp, budget = e["config"], e["splits"], e["budget"]
+    """One result: what ran, the scale, the table, the curve, where it came from."""
+    sp, sc = e["splits"], e["scale"]["test"]
+    old = e.get("version", 1) < 2
     title = e["label"] or "run"
-    lines = [f"### {title} ({e['file']})", "",
-             f"Train {sp['train']['count']:,} tests, validation {sp['validation']['count']:,}, held-out test "
-             f"{sp['test']['count']:,}; {len(cfg['seeds'])} training seeds; {cfg['steps']:,} steps per run "
-             f"({budget['training_runs']} runs, {budget['training_steps']:,} steps; trainer {cfg['trainer']}); "
-             f"{cfg['runs']} sampled runs per test; floor (random) / ceiling on the held-out tests: "
-             f"{percent(e['scale']['test']['floor'], 1)} / {percent(e['scale']['test']['ceiling'], 1)}.", "",
-             "| " + " | ".join(COLUMNS) + " |", "|" + "---|" * len(COLUMNS)]
-    for s in sorted(e["systems"], key=lambda s: (KIND_ORDER.get(s["kind"], 9), s["name"])):
+    top = scale_words(sc)
+    lines = [f"### {title} ({e['file']})", ""]
+    if old:
+        lines += [OLD_NOTE, ""]
+    lines += [*ran_text(_ran(e)), "",
+              f"Train {sp['train']['count']:,} tests, validation {sp['validation']['count']:,}, held-out test "
+              f"{sp['test']['count']:,}; {e['config']['runs']} sampled runs per test; floor (random) / {top} on the held-out "
+              f"tests: {percent(sc['floor'], 1)} / {percent(sc['ceiling'], 1)}"
+              + ("" if top == "ceiling" else " (the best reference meets fewer than all tests: not a ceiling)") + ".", ""]
+    columns = OLD_COLUMNS if old else COLUMNS
+    lines += ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
+    for s in _sorted_systems(e):
         te = s.get("test") or {}
         g, sm = te.get("greedy"), te.get("sampled")
-        seeds = str(len(s["seeds"])) if s["kind"] == "baseline" else MISSING
-        lines.append("| " + " | ".join([
-            s["name"], s["kind"], seeds, interval_text(g["normalized"] if g else None),
-            interval_text(sm["normalized"] if sm else None), percent(g["met"] if g else None, 1),
-            percent(sm["met"] if sm else None, 1), worst_text(g or sm), percent((s.get("train") or {}).get("met"), 1)]) + " |")
+        train = percent((s.get("train") or {}).get("met"), 1)
+        if old:
+            worst = g or sm
+            cells = [interval_text(g["normalized"] if g else None), interval_text(sm["normalized"] if sm else None),
+                     _t_over_seeds(g, sc), _t_over_seeds(sm, sc), percent(g["met"] if g else None, 1),
+                     percent(sm["met"] if sm else None, 1),
+                     MISSING if not worst or worst["normalized"].get("worst10") is None else
+                     f"{worst['normalized']['worst10']:.2f} ({percent(worst['normalized']['worst10_met'], 1)} met)", train]
+        else:
+            cells = [headline_cell(s, "normalized"), interval_text(g["normalized"] if g else None),
+                     headline_cell(s, "met", lambda m: percent(m["met"], 1)), percent(g["met"] if g else None, 1),
+                     headline_cell(s, "tail"), train]
+        lines.append("| " + " | ".join([s["name"], s["kind"], str(len(s["seeds"])), *cells]) + " |")
     if e.get("generalization"):
-        lines += ["", "Generalization curve (held-out normalized score, IQM [95 % CI]):", "",
-                  "| training tests | seeds | greedy | sampled | train met |", "|---|---|---|---|---|"]
+        lines += ["", "Generalization curve (held-out normalized score" + (", IQM [old interval]" if old else "") + "):", "",
+                  "| training tests | seeds | sampled | greedy | train met |", "|---|---|---|---|---|"]
         for p in e["generalization"]:
-            lines.append(f"| {p['train_tests']:,} | {len(p['seeds'])} | {interval_text(p['greedy'])} | "
-                         f"{interval_text(p['sampled'])} | {percent(p['train_met'], 1)} |")
+            lines.append(f"| {p['train_tests']:,} | {len(p['seeds'])} | {interval_text(p['sampled'])} | "
+                         f"{interval_text(p['greedy'])} | {percent(p['train_met'], 1)} |")
     m = e.get("machine") or {}
     secs = (e.get("seconds") or {}).get("total")
     lines += ["", f"Command: `{e['command']}`  ", f"Commit: `{(e['commit'] or 'unknown')[:12]}`; machine: "
@@ -152,17 +239,24 @@ def entry_markdown(e: dict[str, Any]) -> list[str]:
     return lines
 
 
-HEADER = """# Leaderboard
+HEADER = f"""# Leaderboard
 
 Generated by `python -m experiments.tools.leaderboard` from the result summaries in
 [docs/leaderboard/](leaderboard/): do not edit by hand. The protocol and every column:
-[benchmark-protocol.md](benchmark-protocol.md). The headline is the **held-out normalized score**
-(0 = a random policy, 1 = the reference: the scripted replanner / GR(1) system, correct systems that
-do not know the test; each table gives the floor and the ceiling, which is below 100 % on the fuel
-grids with doors: [why](benchmark-protocol.md)), summarized by its interquartile mean over training seeds with a stratified-bootstrap
-95 % interval; *greedy* plays each test once by the most likely action, *sampled* draws the actions.
-Each table says the run's settings: a run with fewer seeds, tests or steps than the defaults is
-labelled as such and is not the protocol's default result.
+[benchmark-protocol.md](benchmark-protocol.md). The headline is the **held-out normalized score of
+the sampled play** (0 = a random policy, 1 = the reference: the scripted replanner / GR(1) system,
+correct systems that do not know the test; a deterministic system's is its greedy play; why sampled:
+[the protocol](benchmark-protocol.md#the-headline-sampled-play)), the greedy play's beside it. With 5
+seeds or more it is the interquartile mean over seeds with the **seed-and-test bootstrap** 95 %
+interval (seeds and tests resampled, one test resample shared by every seed, the floor and the
+reference, so the floor's and the reference's own sampling error is in it); a row with fewer seeds is
+**preliminary** ({PRELIMINARY_MARK}): the mean over seeds with the t interval over the seed means, widened by the tests'
+and the floor's error. *Hardest 10 %* is the mean met share of the 10 % of held-out tests a system
+meets least often (a CVaR). Where the best reference meets fewer than all tests it is called the
+reference, not the ceiling: a system can score above 1. Each result says what it trained and what it
+only scored; a run with fewer seeds, tests or steps than the defaults is labelled as such and is not
+the protocol's default result. Results marked *v1, old statistics* predate these intervals and are
+shown as they were computed.
 
 ## How to add a row
 
@@ -172,8 +266,10 @@ python -m experiments.tools.leaderboard --add bench/table.json --label "<what it
 git add docs/leaderboard/ docs/leaderboard.md
 ```
 
-`--add` stores a summary of the result (every number shown here, with its command, commit and
-machine) in docs/leaderboard/ and regenerates this page from all of them.
+`--add` stores a summary of the result (every number shown here, what it trained and scored, its
+command, commit and machine, and the held-out per-run score matrices) in docs/leaderboard/ and
+regenerates this page from all of them. `experiments.tools.leaderboard.matrices(entry)` gives a
+summary's matrices as rliable reads them.
 """
 
 

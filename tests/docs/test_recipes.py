@@ -140,7 +140,7 @@ def test_recipes_save_models_the_benchmark_scores_with_their_seeds(tmp_path: Pat
             assert summary["runs_per_test"] == runs_per_test
             n = summary["normalized"]
             assert (n["seeds"], n["tests"]) == (seeds, 4)  # the seed-and-test interval of the protocol
-            assert n["low"] <= n["iqm"] <= n["high"]
+            assert n["low"] <= n["point"] <= n["high"]
             assert len(summary["met"]["values"]) == seeds and summary["met"]["ci95"] is not None
     first = systems["cleanrl"]["runs"][0]["sut"]
     assert first == f"python:{RECIPES / 'cleanrl_ppo.py'}:load({str(runs / 'cleanrl-seed0.pt')!r})"

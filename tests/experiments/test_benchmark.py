@@ -21,6 +21,7 @@ from experiments import benchmark as bench
 from experiments.benchmark import training_runs
 from experiments.cli.cli import main
 from experiments.evaluation.episodes import Trace
+from flowtest_env.scoring import worst_share_mean
 from synthesis.model.errors import ProblemError
 from tests.testing_processes import start_until
 
@@ -69,11 +70,23 @@ def test_references_meet_every_test_and_random_does_not(tmp_path: Path, capsys: 
     assert min(rnd["train"]["met"]["mean"], rnd["test"]["met"]["mean"]) < 1.0
     assert rnd["test"]["sampled"]["runs_per_test"] == 8 and rnd["test"]["greedy"] is None
     assert doc["headline"]["held_out_gap"] == {}  # no baseline trained
-    # the scale: random is 0, the references 1
+    # the scale: random is 0, the references 1 (the first that meets most defines it), in every replicate
     for split in ("train", "validation", "test"):
         assert doc["scale"][split]["floor"] == rnd[split]["met"]["mean"] and doc["scale"][split]["ceiling"] == 1.0
-        assert _system(doc, "gr1")[split]["greedy"]["normalized"]["iqm"] == 1.0
-        assert rnd[split]["sampled"]["normalized"]["iqm"] == pytest.approx(0.0)
+        assert doc["scale"][split]["ceiling_from"] == "scripted:replanner" and doc["scale"][split]["ceiling_is_bound"]
+        gr1 = _system(doc, "gr1")[split]["greedy"]["normalized"]
+        assert (gr1["point"], gr1["low"], gr1["high"]) == (1.0, 1.0, 1.0) and gr1["preliminary"]
+        assert _system(doc, "scripted:replanner")[split]["greedy"]["normalized"]["defines"] == "ceiling"
+        floor = rnd[split]["sampled"]["normalized"]
+        assert (floor["point"], floor["low"], floor["high"]) == (0.0, 0.0, 0.0) and floor["defines"] == "floor"
+        assert rnd[split]["headline_mode"] == "sampled" and _system(doc, "gr1")[split]["headline_mode"] == "greedy"
+    # the per-run score matrices beside the table, as rliable reads them: one row per run, one column per test
+    scores = np.load(out / "scores.npz")
+    assert sorted(scores.files) == sorted(f"{s}/{m}/{n}" for s in ("train", "validation", "test")
+                                          for m, n in (("sampled", "random"), ("greedy", "scripted:replanner"), ("greedy", "gr1")))
+    assert scores["test/sampled/random"].shape == (1, 6) and scores["validation/greedy/gr1"].shape == (1, 3)
+    assert list(scores["test/sampled/random"][0]) == rnd["runs"][0]["test"]["sampled"]["per_test"]
+    assert scores["test/sampled/random"].mean() == doc["scale"]["test"]["floor"]
     # the references' numbers are those of the report's runs (results.json); random's report runs are its
     # single-env runs (one per test), the table's its batched sampled runs
     records = json.loads((out / "results.json").read_text())
@@ -91,7 +104,14 @@ def test_references_meet_every_test_and_random_does_not(tmp_path: Path, capsys: 
     assert not (out / "learning-curves.png").exists()  # no baseline, no curve
     assert len(list((out / "pool" / "train").glob("seed*.json"))) == 6
     md = (out / "table.md").read_text()
-    assert "| scripted:replanner | reference | – | 1.00 [1.00, 1.00] | – | 100.0 % | – | 1.00 (100.0 % met) | 100.0 % | 100.0 % | +0.0 pp |" in md
+    assert ("| scripted:replanner | reference | 1 | 1 (reference) | 1 (reference) | 100.0 % (greedy) | 100.0 % | "
+            "100.0 % (greedy) | 100.0 % | 100.0 % | +0.0 pp |") in md
+    rnd_tail = worst_share_mean(rnd["test"]["sampled"]["per_test"] if "per_test" in rnd["test"]["sampled"] else
+                                rnd["runs"][0]["test"]["sampled"]["per_test"], 0.1)
+    assert f"| random | floor | 1 | 0 (floor) | – | {100 * rnd['test']['met']['mean']:.1f} % | – | {100 * rnd_tail:.1f} % |" in md
+    # the header says what ran: nothing trained, the floor and the references scored
+    assert doc["ran"]["trained"] == [] and doc["budget"] == {"steps_per_run": None, "training_runs": 0, "training_steps": 0}
+    assert "**Trained**: nothing" in md and "1,000,000" not in md
     assert "matrix" in (out / "report.html").read_text()
 
 
@@ -186,7 +206,7 @@ def test_baselines_train_and_are_scored(tmp_path: Path, capsys: pytest.CaptureFi
                              "--curve-points", "2", "--curve-sizes", "2", "--curve-seeds", "1", "--runs", "2",
                              "--out", str(out), "-q"], capsys)
     assert code == 0, err
-    assert "held-out normalized score (0 = random, 1 = reference): maskable-ppo" in stdout
+    assert "held-out normalized score, sampled (0 = random, 1 = reference): maskable-ppo" in stdout
     doc = json.loads((out / "table.json").read_text())
     e = _system(doc, "maskable-ppo")
     assert e["kind"] == "baseline" and [r["seed"] for r in e["runs"]] == [0, 1]
@@ -195,15 +215,27 @@ def test_baselines_train_and_are_scored(tmp_path: Path, capsys: pytest.CaptureFi
         steps = [p[0] for p in training["curve"]]
         assert steps[0] == 0 and steps[-1] == training["steps"] == 1024
         assert training["curve"][-1][1:] == [run_["train"]["met"], run_["validation"]["met"]]
-        assert run_["gap"] == pytest.approx(run_["train"]["met"] - run_["test"]["met"])
+        assert run_["gap"] == pytest.approx(run_["train"]["greedy"]["met"] - run_["test"]["greedy"]["met"])
         assert run_["test"]["sampled"]["runs"] == 2 and run_["test"]["greedy"]["runs"] == 1
+        assert run_["test"]["headline_mode"] == "sampled" and run_["test"]["met"] == run_["test"]["sampled"]["met"]
+        assert run_["train"]["headline_mode"] == "greedy"  # the train split is played greedily only
     assert e["gap"]["mean"] == pytest.approx(np.mean([r["gap"] for r in e["runs"]]))
     assert doc["headline"]["held_out_gap"]["maskable-ppo"] == e["gap"]
-    assert doc["headline"]["normalized_held_out"]["maskable-ppo"]["greedy"] == e["test"]["greedy"]["normalized"]
+    assert doc["headline"]["mode"] == "sampled"
+    assert doc["headline"]["normalized_held_out"]["maskable-ppo"] == {"headline_mode": "sampled",
+                                                                       "greedy": e["test"]["greedy"]["normalized"],
+                                                                       "sampled": e["test"]["sampled"]["normalized"]}
+    assert doc["headline"]["tail_held_out"]["maskable-ppo"] == e["test"]["sampled"]["tail"]
+    assert e["test"]["sampled"]["normalized"]["preliminary"] and e["test"]["sampled"]["normalized"]["statistic"] == "mean"
     curve = doc["generalization"]
     assert [p["train_tests"] for p in curve] == [2, 4] and [p["seeds"] for p in curve] == [[0], [0, 1]]
     assert curve[-1]["greedy"] == e["test"]["greedy"]["normalized"]  # the last point is the main runs
     assert doc["budget"] == {"steps_per_run": 1024, "training_runs": 3, "training_steps": 3 * 1024}
+    assert doc["ran"]["trained"] == [{"algo": "maskable-ppo", "seeds": [0, 1], "steps": 1024, "train_tests": 4, "trainer": "native"}]
+    assert doc["ran"]["curve"] == [{"train_tests": 2, "seeds": [0]}]
+    md = (out / "table.md").read_text()
+    assert "**Trained**: maskable-ppo, seeds 0, 1 (2 runs), 1,024 time steps each on the first 4 train tests" in md
+    assert np.load(out / "scores.npz")["test/sampled/maskable-ppo"].shape == (2, 3)
     assert (out / "learning-curves.png").stat().st_size > 10_000
     assert (out / "generalization.png").stat().st_size > 10_000
     assert len(list((out / "models").glob("*.zip"))) == 3
@@ -284,7 +316,15 @@ def test_a_python_policy_is_scored_by_the_protocol(tmp_path: Path, capsys: pytes
         n = batched[split]["greedy"]["normalized"]
         scale = doc["scale"][split]
         want = (batched[split]["met"]["mean"] - scale["floor"]) / (scale["ceiling"] - scale["floor"])
-        assert n["iqm"] == pytest.approx(want) and n["low"] <= n["iqm"] <= n["high"]
+        assert n["point"] == pytest.approx(want) and n["low"] <= n["point"] <= n["high"]
+        assert n["preliminary"] and n["statistic"] == "mean" and n["seed_se"] is None  # one seed: the tests' error only
+    # a --sut-only run: its header says that nothing was trained and what was only scored, and how many seeds each
+    assert doc["ran"]["trained"] == [] and doc["budget"]["steps_per_run"] is None
+    assert {s["name"]: s["seeds"] for s in doc["ran"]["scored"]}["python:mine:first_legal"] == 1
+    md = (tmp_path / "b" / "table.md").read_text()
+    assert "**Trained**: nothing" in md and "time steps" not in md
+    assert "`python:mine:first_legal` (1 seed: greedy and sampled, 8 sampled runs per test)" in md and "`python:mine:planner` (1 seed: greedy)" in md
+    assert set(doc["headline"]["normalized_held_out"]) == {"python:mine:first_legal", "python:mine:planner"}
 
 
 def test_a_standard_pool_id_is_accepted_and_the_command_reruns_the_config() -> None:
@@ -361,3 +401,35 @@ def test_sb3_trains_on_the_standard_pools_shipped_records(monkeypatch: pytest.Mo
     with pytest.raises(Stop):
         bench.train_baseline(config, "maskable-ppo", 0, {}, tmp_path, train_tests=16)
     assert asked == {"pool": "reachability1/5x5-v1", "split": "train", "count": 16}
+
+
+def test_a_system_of_several_seeds_gets_the_seed_and_test_interval() -> None:
+    """A system given as it is, with one run per seed from any source (say five checkpoints
+    of one method), gets the statistics of a trained baseline: 5 seeds, so the IQM and the
+    seed-and-test bootstrap; it is in the headline, and the header counts its seeds."""
+    config = bench.BenchmarkConfig(POOL, suts=("ppo:runs/*.zip",), train_count=4, validation_count=2, test_count=6,
+                                   bootstrap=200, runs=2)
+    splits = {n: bench.Split(n, n, [10 * i, 10 * i + 5], []) for i, n in enumerate(bench.SPLIT_NAMES)}
+    rng = np.random.default_rng(0)
+
+    def metrics(per_test: list[float], runs: int) -> dict[str, Any]:
+        return {"tests": len(per_test), "runs": runs, "met": float(np.mean(per_test)), "realized": 1.0, "restrictions": 0.0,
+                "steps": 4.0, "violated": 0, "open": 0, "test_failures": 0, "per_test": per_test}
+
+    def row(seed: int | None, greedy: list[float] | None, sampled: list[float] | None) -> dict[str, Any]:
+        return {"seed": seed, "sut": "x", **{s: {"greedy": greedy and metrics(greedy, 1), "sampled": sampled and metrics(sampled, 2)}
+                                             for s in bench.SPLIT_NAMES}}
+
+    mine = [row(k, [float(v) for v in rng.integers(0, 2, 6)], [v / 2 for v in rng.integers(0, 3, 6)]) for k in range(5)]
+    systems = [bench.SystemRuns("ppo:runs/*.zip", "system", mine),
+               bench.SystemRuns("random", "floor", [row(None, None, [0.5, 0.5, 0, 0, 0.5, 0])]),
+               bench.SystemRuns("gr1", "reference", [row(None, [1.0] * 6, None)])]
+    doc = bench.benchmark_table(config, splits, systems, [])
+    n = doc["headline"]["normalized_held_out"]["ppo:runs/*.zip"]["sampled"]
+    assert n["statistic"] == "iqm" and n["interval"] == "seed-and-test bootstrap" and not n["preliminary"] and n["seeds"] == 5
+    assert n["low"] <= n["point"] <= n["high"]
+    assert doc["ran"]["trained"] == [] and doc["ran"]["scored"][0] == {"name": "ppo:runs/*.zip", "kind": "system", "seeds": 5,
+                                                                       "modes": ["greedy", "sampled"], "runs_per_test": 2}
+    md = bench.table_markdown({**doc, "seconds": {}, "outputs": {}})
+    assert "`ppo:runs/*.zip` (5 seeds: greedy and sampled, 2 sampled runs per test)" in md
+    assert "| ppo:runs/*.zip | system | 5 |" in md

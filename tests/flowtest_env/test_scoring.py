@@ -15,9 +15,9 @@ from flowtest_env.scoring import (
     normalized,
     play_batch,
     random_policy,
+    score_interval,
     score_policy,
     seed_iqm,
-    stratified_bootstrap,
     worst_share_mean,
 )
 
@@ -44,19 +44,20 @@ def test_statistics_by_hand() -> None:
 
 
 def test_bootstrap_is_seeded_and_covers_the_spread() -> None:
+    """The seed-and-test bootstrap (no floor or ceiling given: the raw met share). Its
+    agreement with an independent implementation and its coverage: test_score_intervals.py."""
     rng = np.random.default_rng(1)
     scores = (rng.random((10, 200)) < np.linspace(0.3, 0.7, 10)[:, None]).astype(float)
-    a = stratified_bootstrap(scores, reps=300, seed=4)
-    assert a == stratified_bootstrap(scores, reps=300, seed=4)  # seeded
-    point, low, high = a
-    assert point == seed_iqm(scores) and low < point < high
-    assert 0.3 < low and high < 0.7  # within the seeds' range, not the whole [0, 1]
-    flat = np.full((3, 50), 0.4)
-    assert stratified_bootstrap(flat, reps=50) == pytest.approx((0.4, 0.4, 0.4))  # no spread, no width
-    one_seed = stratified_bootstrap(scores[:1], reps=200, seed=0)  # only the tests are resampled
-    assert one_seed[1] < one_seed[0] < one_seed[2]
+    a = score_interval(scores, reps=300, seed=4)
+    assert a is not None and a == score_interval(scores, reps=300, seed=4)  # seeded
+    assert a.point == seed_iqm(scores) and a.low < a.point < a.high
+    assert 0.3 < a.low and a.high < 0.7  # within the seeds' range, not the whole [0, 1]
+    flat = score_interval(np.full((5, 50), 0.4), reps=50)
+    assert flat is not None and (flat.point, flat.low, flat.high) == pytest.approx((0.4, 0.4, 0.4))  # no spread, no width
+    one_seed = score_interval(scores[:1], reps=200, seed=0)  # only the tests are resampled
+    assert one_seed is not None and one_seed.low < one_seed.point < one_seed.high and one_seed.preliminary
     with pytest.raises(ValueError):
-        stratified_bootstrap(np.zeros((0, 3)))
+        score_interval(np.zeros((0, 3)))
 
 
 def test_random_policy_is_legal_and_seeded(games: list[TestGame]) -> None:
