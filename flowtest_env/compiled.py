@@ -41,7 +41,23 @@ OUTCOMES: tuple[str, str, str] = (OPEN, MET, VIOLATED)
 
 
 @dataclass(frozen=True)
-class CompiledTest:
+class ConfigurationTables:
+    """The tables a batch step reads, one row per configuration: what
+    :class:`CompiledTest` (one test, local numbering) and :class:`CompiledPool` (a pool,
+    global numbering) have in common; their fields are described on :class:`CompiledTest`."""
+
+    next_z: np.ndarray
+    refused: np.ndarray
+    restricted: np.ndarray
+    outcome: np.ndarray
+    test_realized: np.ndarray
+    mask: np.ndarray
+    obs_row: np.ndarray
+    obs: np.ndarray
+
+
+@dataclass(frozen=True)
+class CompiledTest(ConfigurationTables):
     """One test as tables over its reachable configurations (local numbering).
 
     Attributes
@@ -72,14 +88,6 @@ class CompiledTest:
         The reset configuration.
     """
 
-    next_z: np.ndarray
-    refused: np.ndarray
-    restricted: np.ndarray
-    outcome: np.ndarray
-    test_realized: np.ndarray
-    mask: np.ndarray
-    obs_row: np.ndarray
-    obs: np.ndarray
     system: np.ndarray
     history: np.ndarray
     agent: np.ndarray
@@ -501,7 +509,7 @@ def _helper(todo: list[tuple[Encoder, list[RunState], np.ndarray]]) -> None:
 
 
 @dataclass(frozen=True)
-class CompiledPool:
+class CompiledPool(ConfigurationTables):
     """Several compiled tests in one global numbering (see the module docstring).
 
     Attributes
@@ -528,14 +536,6 @@ class CompiledPool:
     offset: np.ndarray
     initial: np.ndarray
     test_of: np.ndarray
-    next_z: np.ndarray
-    refused: np.ndarray
-    restricted: np.ndarray
-    outcome: np.ndarray
-    test_realized: np.ndarray
-    mask: np.ndarray
-    obs_row: np.ndarray
-    obs: np.ndarray
     system_state: np.ndarray
 
     @property

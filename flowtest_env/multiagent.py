@@ -261,15 +261,8 @@ class raw_env(AECEnv):  # type: ignore[misc]  # noqa: N801 - PettingZoo's module
         self.problem = game.artifact.name
         config = config.with_max_steps(default_max_steps(game))
         assert config.max_steps is not None
-        self.config = config
-        self.max_cycles = config.max_steps
-        self.render_mode = config.render_mode
-        self.view = config.view
-        self.tile_size = config.tile_size
-        self.step_cost = config.step_cost
-        self.restricted_penalty = config.restricted_penalty
-        self.goal_reward = config.goal_reward
-        self.violation_penalty = config.violation_penalty
+        self.config: EnvConfig = config  # every option, read where it is used
+        self.render_mode = config.render_mode  # PettingZoo's attribute
         self.encoder = make_encoder(game, config.obs_kind, config.pad_to)
         system_first = game.has_agent and not game.agent_first
         self.possible_agents = [SYSTEM, TESTER] if system_first else [TESTER, SYSTEM]
@@ -441,19 +434,19 @@ class raw_env(AECEnv):  # type: ignore[misc]  # noqa: N801 - PettingZoo's module
         a = action_index(action, int(self._action_spaces[agent].n))
         if agent == TESTER:
             if not self.apply_tester(a):
-                self.rewards[TESTER] -= self.restricted_penalty
+                self.rewards[TESTER] -= self.config.restricted_penalty
         else:
             mask = self.system_mask()
             if not (0 <= a < mask.size and mask[a]):
-                self.rewards[SYSTEM] -= self.restricted_penalty
+                self.rewards[SYSTEM] -= self.config.restricted_penalty
             g.system_step(run, a if 0 <= a < g.n_actions else g.stay_action)
-            self.rewards[SYSTEM] -= self.step_cost
+            self.rewards[SYSTEM] -= self.config.step_cost
             if run.done:
                 if run.outcome == MET:
-                    self.rewards[SYSTEM] += self.goal_reward
+                    self.rewards[SYSTEM] += self.config.goal_reward
                     self.rewards[TESTER] += 1.0 if g.test_accepting[run.history] else -1.0
                 elif run.outcome == VIOLATED:
-                    self.rewards[SYSTEM] -= self.violation_penalty
+                    self.rewards[SYSTEM] -= self.config.violation_penalty
                 self.terminations = {x: True for x in self.agents}
         if agent == self.possible_agents[-1]:
             self._rounds += 1
@@ -466,6 +459,12 @@ class raw_env(AECEnv):  # type: ignore[misc]  # noqa: N801 - PettingZoo's module
         if self.render_mode == "human":
             self.render()
 
+    @property
+    def max_cycles(self) -> int:
+        """Rounds before truncation (PettingZoo's name of ``config.max_steps``)."""
+        assert self.config.max_steps is not None
+        return self.config.max_steps
+
     def render(self) -> Any:
         """The run as ``render_mode`` asks: an RGB picture (``rgb_array``), text (``ansi``), or
         (``human``) that picture in a pygame window at ``render_fps`` frames a second,
@@ -474,9 +473,9 @@ class raw_env(AECEnv):  # type: ignore[misc]  # noqa: N801 - PettingZoo's module
             gymnasium.logger.warn("render() called without a render_mode")
             return None
         if self.render_mode == "ansi":
-            return ansi(self.game, self.run, self.view)
+            return ansi(self.game, self.run, self.config.view)
         if self._renderer is None:
-            self._renderer = make_renderer(self.game, self.tile_size, self.view)
+            self._renderer = make_renderer(self.game, self.config.tile_size, self.config.view)
         frame = self._renderer.frame(self.run)
         if self.render_mode != "human":
             return frame

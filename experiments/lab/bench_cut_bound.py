@@ -34,7 +34,7 @@ from synthesis.routing.certificates import cut_proof
 from synthesis.routing.model import build_model
 from synthesis.routing.phases import phase2_cost
 
-from .bench_flow_bound import instance_arguments, options_of, solve, static_instances
+from .bench_flow_bound import instance_arguments, options_of, print_head, solve, static_instances
 
 
 def cut_bounds(problem: Problem) -> dict[str, Any]:
@@ -68,11 +68,8 @@ def main(argv: list[str] | None = None) -> None:
     families = ["reachability:1", "reachability:2", "reachability:3"]
     args = instance_arguments(__doc__, families, "also solve with and without the cut bound").parse_args(argv)
     options = options_of(args)
-    head = "| instance | rows | heuristic flow | walls' flow bound | per level: cut bound / candidate | s |"
-    if args.solve:
-        head += " with: status, flow, cuts (proof) | CPU s | without: status, flow, cuts | CPU s |"
-    print(head)
-    print("|" + "---|" * (head.count("|") - 1))
+    print_head("| instance | rows | heuristic flow | walls' flow bound | per level: cut bound / candidate | s |",
+               " with: status, flow, cuts (proof) | CPU s | without: status, flow, cuts | CPU s |" if args.solve else "")
     proven = tight = proven_with = proven_without = total = 0
     for name, problem in static_instances(args):
         b = cut_bounds(problem)

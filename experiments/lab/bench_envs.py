@@ -31,6 +31,8 @@ from typing import Any
 
 import gymnasium as gym
 
+from experiments.lab.output import publish
+
 
 def steps_per_second(env_id: str, steps: int, masked: bool, seed: int = 0, **kwargs: Any) -> float:
     """Random-policy steps per second of ``env_id`` (masked by ``info["action_mask"]``)."""
@@ -121,11 +123,7 @@ def main(argv: list[str] | None = None) -> int:
     if have_minigrid:
         imp, make = min(cold_make("MiniGrid-Empty-8x8-v0", "minigrid") for _ in range(args.repeat))
         lines.append(f"| `MiniGrid-Empty-8x8-v0` | {imp:.2f} | {make:.3f} |")
-    text = "\n".join(lines) + "\n"
-    print(text)
-    if args.out:
-        with open(args.out, "w") as fh:
-            fh.write(text)
+    publish("\n".join(lines) + "\n", args.out)
     del flowtest_env
     return 0
 

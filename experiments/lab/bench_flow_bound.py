@@ -93,6 +93,13 @@ def instance_arguments(doc: str, families: list[str], solve_help: str) -> argpar
     return ap
 
 
+def print_head(columns: str, solved: str) -> None:
+    """Print a Markdown table's head: ``columns``, then ``solved`` (the columns of ``--solve``, or empty)."""
+    head = columns + solved
+    print(head)
+    print("|" + "---|" * (head.count("|") - 1))
+
+
 def options_of(args: argparse.Namespace) -> SynthesisOptions:
     """The solve options the command line asks for."""
     return SynthesisOptions(backend=args.backend, work_limit=args.work_limit, node_limit=args.node_limit, time_limit=args.time_limit)
@@ -111,11 +118,8 @@ def static_instances(args: argparse.Namespace) -> Iterator[tuple[str, Problem]]:
 def main(argv: list[str] | None = None) -> None:
     args = instance_arguments(__doc__, list(DEFAULT_FAMILIES), "also solve with and without the bound").parse_args(argv)
     options = options_of(args)
-    head = "| instance | rows | heuristic flow | heuristic bound | walls' bound |"
-    if args.solve:
-        head += " with bound: status, flow, cuts | CPU s | without: status, flow, cuts | CPU s |"
-    print(head)
-    print("|" + "---|" * (head.count("|") - 1))
+    print_head("| instance | rows | heuristic flow | heuristic bound | walls' bound |",
+               " with bound: status, flow, cuts | CPU s | without: status, flow, cuts | CPU s |" if args.solve else "")
     lower = settled = total = 0
     for name, problem in static_instances(args):
         b = bounds(problem)

@@ -37,6 +37,8 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from experiments.lab.output import publish
+
 
 def masked_random(rng: np.random.Generator, mask: np.ndarray) -> np.ndarray:
     """One random legal action per row of ``mask`` (``int8[n_envs, n_actions]``)."""
@@ -142,11 +144,7 @@ def main(argv: list[str] | None = None) -> int:
             f"NumPy Maze 2 (flat) over MiniGrid's `SyncVectorEnv`: {max(results[0]) / max(results[-1]):,.0f}x (best), "
             f"{statistics.median(results[0]) / statistics.median(results[-1]):,.0f}x (median)."
         )
-    text = "\n".join(lines) + "\n"
-    print(text)
-    if args.out:
-        with open(args.out, "w") as fh:
-            fh.write(text)
+    publish("\n".join(lines) + "\n", args.out)
     del flowtest_env
     return 0
 
