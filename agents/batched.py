@@ -96,8 +96,7 @@ def declared_options(policy: Any) -> dict[str, Any]:
         raise PolicyError(f"env_options must be a dict of env options, not a {type(options).__name__}")
     other = sorted(str(k) for k in options if k not in OBSERVATION_OPTIONS)
     if other:
-        raise PolicyError(f"env_options {other}: a batched policy declares only the options of its observation "
-                          f"({', '.join(OBSERVATION_OPTIONS)})")
+        raise PolicyError(f"env_options {other}: a batched policy declares only the options of its observation ({', '.join(OBSERVATION_OPTIONS)})")
     try:
         EnvConfig(**dict(options))
     except (TypeError, ValueError) as exc:
@@ -114,8 +113,10 @@ def check_batched(policy: Any, where: str) -> None:
         Saying what the interface is.
     """
     if not callable(getattr(policy, "act", None)):
-        raise PolicyError(f"{where} returned a {type(policy).__name__}, not a batched policy: an object with "
-                          "act(observations, masks, deterministic) -> actions (agents.batched)")
+        raise PolicyError(
+            f"{where} returned a {type(policy).__name__}, not a batched policy: an object with "
+            "act(observations, masks, deterministic) -> actions (agents.batched)"
+        )
     declared_options(policy)
 
 

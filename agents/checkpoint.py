@@ -85,8 +85,10 @@ FLOAT32 = np.dtype("<f4")
 MAX_DIM = 1 << 31
 """A tensor dimension is below this."""
 
-_NPY_HEADER = re.compile(r"\{'descr': '(?P<descr>[^']{0,16})', 'fortran_order': (?P<fortran>False|True), "
-                         r"'shape': \((?P<shape>(?:[0-9]{1,19}, )*(?:[0-9]{1,19},?)?)\), \} *\n")
+_NPY_HEADER = re.compile(
+    r"\{'descr': '(?P<descr>[^']{0,16})', 'fortran_order': (?P<fortran>False|True), "
+    r"'shape': \((?P<shape>(?:[0-9]{1,19}, )*(?:[0-9]{1,19},?)?)\), \} *\n"
+)
 """The header numpy writes for a plain array (its dict's keys in order, then spaces and a
 newline): the only one read. Nothing of it is evaluated."""
 
@@ -146,8 +148,9 @@ def is_own_file(path: str | Path) -> bool:
 
 def warn_pickled(path: str | Path) -> None:
     """The one warning line printed when a trusted SB3 zip is loaded."""
-    sys.stderr.write(f"flowtest: warning: loading {str(path)!r} unpickles it (a stable-baselines3 model runs code "
-                     "stored in the file); trusted with --trust-model\n")
+    sys.stderr.write(
+        f"flowtest: warning: loading {str(path)!r} unpickles it (a stable-baselines3 model runs code stored in the file); trusted with --trust-model\n"
+    )
     sys.stderr.flush()
 
 
@@ -200,8 +203,7 @@ def save_checkpoint(path: str | Path, settings: Mapping[str, Any], tensors: Mapp
     for name in arrays:
         if not _plain_name(name):
             raise CheckpointError(f"tensor name {name!r} is not plain (letters, digits, '_' and '.')")
-    doc = {**dict(settings), "format": FORMAT, "version": VERSION,
-           "tensors": {n: {"shape": list(a.shape), "dtype": "float32"} for n, a in arrays.items()}}
+    doc = {**dict(settings), "format": FORMAT, "version": VERSION, "tensors": {n: {"shape": list(a.shape), "dtype": "float32"} for n, a in arrays.items()}}
     try:
         text = json.dumps(doc, indent=1, sort_keys=True, allow_nan=False)
     except (TypeError, ValueError) as exc:
@@ -249,8 +251,7 @@ def _read_settings(z: zipfile.ZipFile, info: zipfile.ZipInfo) -> dict[str, Any]:
         raise CheckpointError(f"{SETTINGS_NAME} does not name the format {FORMAT!r}", "format")
     version = doc.get("version")
     if type(version) is not int or not 1 <= version <= VERSION:
-        raise CheckpointError(f"settings field 'version': checkpoint format version {version!r}; this FlowTest reads 1..{VERSION}",
-                              "version")
+        raise CheckpointError(f"settings field 'version': checkpoint format version {version!r}; this FlowTest reads 1..{VERSION}", "version")
     return doc
 
 
@@ -281,8 +282,7 @@ def declared_tensors(settings: Mapping[str, Any], budget: int = MAX_TENSOR_BYTES
         shapes[name] = tuple(shape)
         total += FLOAT32.itemsize * math.prod(shape)
     if total > budget:
-        raise CheckpointError(f"settings field 'tensors': the tensors declare {total:,} bytes, more than the budget of {budget:,}",
-                              "tensors")
+        raise CheckpointError(f"settings field 'tensors': the tensors declare {total:,} bytes, more than the budget of {budget:,}", "tensors")
     return shapes
 
 
@@ -298,15 +298,13 @@ def _read_npy_header(f: Any, member: str) -> tuple[tuple[int, ...], int]:
         more = f.read(2)
         (length,), used = struct.unpack("<I", start[8:10] + more), 12
     if length > MAX_NPY_HEADER_BYTES:
-        raise CheckpointError(f"{member}: not a plain .npy array (a header of {length:,} bytes, more than {MAX_NPY_HEADER_BYTES})",
-                              member)
+        raise CheckpointError(f"{member}: not a plain .npy array (a header of {length:,} bytes, more than {MAX_NPY_HEADER_BYTES})", member)
     raw = f.read(length)
     m = _NPY_HEADER.fullmatch(raw.decode("latin1")) if len(raw) == length else None
     if m is None:
         raise CheckpointError(f"{member}: not a plain .npy array (its header is not the plain header numpy writes)", member)
     if m["descr"] != FLOAT32.str or m["fortran"] != "False":
-        raise CheckpointError(f"{member}: not a plain .npy array of float32 (dtype {m['descr']!r}, fortran_order {m['fortran']})",
-                              member)
+        raise CheckpointError(f"{member}: not a plain .npy array of float32 (dtype {m['descr']!r}, fortran_order {m['fortran']})", member)
     return tuple(int(d) for d in m["shape"].replace(",", " ").split()), used + length
 
 
@@ -318,11 +316,9 @@ def _read_tensor(z: zipfile.ZipFile, info: zipfile.ZipInfo, name: str, shape: tu
     with z.open(info) as f:
         header_shape, header_bytes = _read_npy_header(f, member)
         if header_shape != shape:
-            raise CheckpointError(f"{member}: tensor {name!r} has the shape {list(header_shape)} in its header, settings say "
-                                  f"float32{list(shape)}", member)
+            raise CheckpointError(f"{member}: tensor {name!r} has the shape {list(header_shape)} in its header, settings say float32{list(shape)}", member)
         if info.file_size != header_bytes + nbytes:
-            raise CheckpointError(f"{member}: tensor {name!r} has {info.file_size - header_bytes:,} bytes of data, its shape "
-                                  f"{list(shape)} {nbytes:,}", member)
+            raise CheckpointError(f"{member}: tensor {name!r} has {info.file_size - header_bytes:,} bytes of data, its shape {list(shape)} {nbytes:,}", member)
         array = np.empty(shape, dtype=FLOAT32)
         raw = array.reshape(-1).view(np.uint8)  # the array's own bytes: filled in place, 1 MiB at a time
         done = 0
@@ -330,7 +326,7 @@ def _read_tensor(z: zipfile.ZipFile, info: zipfile.ZipInfo, name: str, shape: tu
             chunk = f.read(min(1 << 20, nbytes - done))
             if not chunk:
                 break
-            raw[done:done + len(chunk)] = np.frombuffer(chunk, dtype=np.uint8)
+            raw[done : done + len(chunk)] = np.frombuffer(chunk, dtype=np.uint8)
             done += len(chunk)
         if done != nbytes or f.read(1):
             raise CheckpointError(f"{member}: tensor {name!r}: its data is not the {nbytes:,} bytes its header declares", member)
@@ -395,7 +391,21 @@ def _load(path: str | Path, check: Callable[[dict[str, Any]], None] | None) -> C
 
 
 __all__ = [
-    "Checkpoint", "CheckpointError", "UntrustedModelError", "FORMAT", "VERSION", "MAX_DIM", "MAX_TENSOR_BYTES", "declared_tensors", "is_native_checkpoint",
-    "load_checkpoint", "save_checkpoint", "trust_pickled_models", "pickled_models_trusted", "warn_pickled",
-    "refuse_pickled", "mark_own_file", "is_own_file",
+    "Checkpoint",
+    "CheckpointError",
+    "UntrustedModelError",
+    "FORMAT",
+    "VERSION",
+    "MAX_DIM",
+    "MAX_TENSOR_BYTES",
+    "declared_tensors",
+    "is_native_checkpoint",
+    "load_checkpoint",
+    "save_checkpoint",
+    "trust_pickled_models",
+    "pickled_models_trusted",
+    "warn_pickled",
+    "refuse_pickled",
+    "mark_own_file",
+    "is_own_file",
 ]

@@ -153,9 +153,27 @@ from .planner_protocol import (
 )
 
 __all__ = [
-    "DEFAULT_STEP_TIMEOUT", "MAX_ANSWER", "MAX_STEP_TIMEOUT", "PREFIXES", "PROTOCOL", "PROTOCOL_VERSION", "CommandPlanner",
-    "PlannerError", "PythonPlanner", "check_spec", "command_words", "describe_test", "is_planner_function", "make_command",
-    "make_python", "parse_answer", "planner_policy", "python_call", "resolve", "spec_of", "split_call",
+    "DEFAULT_STEP_TIMEOUT",
+    "MAX_ANSWER",
+    "MAX_STEP_TIMEOUT",
+    "PREFIXES",
+    "PROTOCOL",
+    "PROTOCOL_VERSION",
+    "CommandPlanner",
+    "PlannerError",
+    "PythonPlanner",
+    "check_spec",
+    "command_words",
+    "describe_test",
+    "is_planner_function",
+    "make_command",
+    "make_python",
+    "parse_answer",
+    "planner_policy",
+    "python_call",
+    "resolve",
+    "spec_of",
+    "split_call",
 ]
 
 PREFIXES = ("python", "cmd")
@@ -279,8 +297,9 @@ def split_call(spec: str) -> tuple[str, tuple[Any, ...], dict[str, Any]] | None:
         args = tuple(ast.literal_eval(a) for a in call.args)
         kwargs = {str(k.arg): ast.literal_eval(k.value) for k in call.keywords}
     except (ValueError, TypeError, RecursionError):
-        raise PolicyError(f"python:{target}(...): the arguments must be Python literals (strings, numbers, True/False/None, "
-                          f"lists, tuples, dicts), not {short(text)}") from None
+        raise PolicyError(
+            f"python:{target}(...): the arguments must be Python literals (strings, numbers, True/False/None, lists, tuples, dicts), not {short(text)}"
+        ) from None
     return target, args, kwargs
 
 
@@ -338,7 +357,8 @@ def _accepts_one(fn: Any) -> bool:
         return False
     params = list(sig.parameters.values())
     return any(p.kind == inspect.Parameter.VAR_POSITIONAL for p in params) or any(
-        p.kind in (inspect.Parameter.POSITIONAL_ONLY, inspect.Parameter.POSITIONAL_OR_KEYWORD) for p in params)
+        p.kind in (inspect.Parameter.POSITIONAL_ONLY, inspect.Parameter.POSITIONAL_OR_KEYWORD) for p in params
+    )
 
 
 def is_planner_function(obj: Any) -> bool:
@@ -556,6 +576,7 @@ def make_python(env: Any, arg: str, step_timeout: float | None = None) -> Python
     """
     obj, args, kwargs = python_call(arg)
     if args or kwargs or split_call(arg) is not None:
+
         def factory() -> Any:  # called with exactly the given arguments (not the test's description)
             return obj(*args, **kwargs)
 
@@ -608,7 +629,7 @@ def command_words(arg: str) -> list[str]:
     except ValueError as exc:
         raise PolicyError(f"cannot split the command ({exc})") from None
     if not words:
-        raise PolicyError("cmd: needs a command, e.g. cmd:\"python3 planner.py\"")
+        raise PolicyError('cmd: needs a command, e.g. cmd:"python3 planner.py"')
     prog = words[0]
     if os.sep in prog or (os.altsep and os.altsep in prog):
         if not Path(prog).is_file():
@@ -668,8 +689,7 @@ class CommandPlanner:
             self.running.wire.send(data, deadline)
         except WireTimeout:
             self._drop()
-            raise PlannerError(f"{where}: the planner did not read its input within {self.timeout:g} s (--step-timeout); "
-                               "it was stopped") from None
+            raise PlannerError(f"{where}: the planner did not read its input within {self.timeout:g} s (--step-timeout); it was stopped") from None
         except WireClosed:
             raise self._crashed(where) from None
         except BaseException:
@@ -682,14 +702,12 @@ class CommandPlanner:
             return self.running.wire.line(deadline)
         except WireTimeout:
             self._drop()
-            raise PlannerError(f"{where}: the planner sent no answer within {self.timeout:g} s "
-                               "(--step-timeout); it was stopped") from None
+            raise PlannerError(f"{where}: the planner sent no answer within {self.timeout:g} s (--step-timeout); it was stopped") from None
         except WireClosed:
             raise self._crashed(where) from None
         except WireTooLong:
             self._drop()
-            raise PlannerError(f"{where}: the planner answered a line longer than {MAX_ANSWER} bytes, which is not an action"
-                               + LOGS_HINT) from None
+            raise PlannerError(f"{where}: the planner answered a line longer than {MAX_ANSWER} bytes, which is not an action" + LOGS_HINT) from None
         except BaseException:
             self._drop()
             raise
@@ -722,8 +740,9 @@ class CommandPlanner:
         if early:
             self._drop()
             first = early.decode("utf-8", "replace").split("\n")[0]
-            raise PlannerError(f"{where}: the planner wrote {short(first)} before it was asked (one line per step "
-                               "on standard output; write logs to standard error)")
+            raise PlannerError(
+                f"{where}: the planner wrote {short(first)} before it was asked (one line per step on standard output; write logs to standard error)"
+            )
         if ended:
             raise self._crashed(where)
         self._send(msg, where, deadline)
@@ -744,8 +763,7 @@ class CommandPlanner:
             self.running.wire.send(data, time.monotonic() + self.timeout)
         except WireTimeout:
             self._drop()
-            self._unread = (f"reset: the planner did not read the end of the last run within {self.timeout:g} s "
-                            "(--step-timeout); it was stopped")
+            self._unread = f"reset: the planner did not read the end of the last run within {self.timeout:g} s (--step-timeout); it was stopped"
         except WireClosed:
             self._drop()
         except BaseException:

@@ -126,9 +126,17 @@ def input_columns(args: NativeArgs, env: Any, games: Sequence[Any], memory: int,
     return None if cols is None else torch.as_tensor(cols, device=device)
 
 
-def train(args: NativeArgs, out: str | Path | None = None, heldout: Sequence[Any] = (), log_dir: str | Path | None = None,
-          progress_bar: bool = True, evaluate_train: bool | int = True, env: Any = None,
-          validation: Sequence[Any] = (), until: Callable[[int, dict[str, dict[str, float]]], bool] | None = None) -> TrainResult:
+def train(
+    args: NativeArgs,
+    out: str | Path | None = None,
+    heldout: Sequence[Any] = (),
+    log_dir: str | Path | None = None,
+    progress_bar: bool = True,
+    evaluate_train: bool | int = True,
+    env: Any = None,
+    validation: Sequence[Any] = (),
+    until: Callable[[int, dict[str, dict[str, float]]], bool] | None = None,
+) -> TrainResult:
     """Train a masked PPO agent (see the module docstring), evaluating it greedily on the
     env's own tests (the train tests; with ``evaluate_train=N`` the first ``N`` of them), on
     ``heldout`` games and on ``validation`` games every ``args.eval_every`` steps and at the
@@ -176,8 +184,7 @@ def train(args: NativeArgs, out: str | Path | None = None, heldout: Sequence[Any
     net = network_settings(args)
     full_size = obs_size + mem_size
     columns = input_columns(args, inner, games, mem_size, device)
-    agent = make_agent(full_size if columns is None else int(columns.numel()), n_actions, net["hidden"], net["kind"],
-                       net["gru_hidden"]).to(device)
+    agent = make_agent(full_size if columns is None else int(columns.numel()), n_actions, net["hidden"], net["kind"], net["gru_hidden"]).to(device)
 
     def whole() -> Agent:  # the network on the whole observation (inputs.widen), the global RNG untouched
         if columns is None:
@@ -188,10 +195,17 @@ def train(args: NativeArgs, out: str | Path | None = None, heldout: Sequence[Any
     optimizer = FlatAdam(agent.flat_order(), lr=args.learning_rate, eps=1e-5)
     generator = torch.Generator().manual_seed(args.seed)
     sampler = level_sampler(args, inner, len(games))
-    runner = Runner(env, agent, None if env_memory else where, device, args.seed,
-                    levels=(lambda: np.asarray(inner.test_index)) if sampler is not None else None, memory=args.memory,
-                    columns=columns)
-    shown = games if evaluate_train is True else games[:int(evaluate_train)]
+    runner = Runner(
+        env,
+        agent,
+        None if env_memory else where,
+        device,
+        args.seed,
+        levels=(lambda: np.asarray(inner.test_index)) if sampler is not None else None,
+        memory=args.memory,
+        columns=columns,
+    )
+    shown = games if evaluate_train is True else games[: int(evaluate_train)]
     splits = {"train": (shown, _budgets(shown))} if evaluate_train and games else {}
     if heldout:
         splits["heldout"] = (list(heldout), _budgets(heldout))
@@ -249,9 +263,16 @@ def train(args: NativeArgs, out: str | Path | None = None, heldout: Sequence[Any
             step += num_steps * args.num_envs
             episode = runner.stats.take()
             elapsed = time.perf_counter() - t0 - eval_seconds
-            logs.add(step, {"train/steps_per_second": step / max(elapsed, 1e-9), "train/lr": optimizer.param_groups[0]["lr"],
-                            **{f"episode/{k}": v for k, v in episode.items()}, **{f"loss/{k}": v for k, v in info.items()},
-                            **info_plr})
+            logs.add(
+                step,
+                {
+                    "train/steps_per_second": step / max(elapsed, 1e-9),
+                    "train/lr": optimizer.param_groups[0]["lr"],
+                    **{f"episode/{k}": v for k, v in episode.items()},
+                    **{f"loss/{k}": v for k, v in info.items()},
+                    **info_plr,
+                },
+            )
             if bar is not None:
                 bar.update(num_steps * args.num_envs)
                 if "met" in episode:
@@ -271,8 +292,7 @@ def train(args: NativeArgs, out: str | Path | None = None, heldout: Sequence[Any
     if best is not None:
         agent.load_state_dict(best[2])
         selected = best[1]
-        settings["selected"] = {"by": "greedy met on the validation tests", "step": best[1], "validation_met": best[0],
-                                "validation_tests": len(validation)}
+        settings["selected"] = {"by": "greedy met on the validation tests", "step": best[1], "validation_met": best[0], "validation_tests": len(validation)}
     agent = whole()
     path = None
     if out is not None:
@@ -281,7 +301,26 @@ def train(args: NativeArgs, out: str | Path | None = None, heldout: Sequence[Any
     return TrainResult(args, step, seconds, eval_seconds, evaluations, final, path, agent, settings, logs.rows, eval_times, selected)
 
 
-
-__all__ = ["ALGOS", "NativeArgs", "Agent", "BatchActor", "LevelSampler", "Rollout", "Runner", "TrainResult", "NativeModel", "advantages",
-           "batch_verdicts", "check_args", "collect_rollout", "load_native", "make_agent", "masked_logits", "minibatch_indices",
-           "ppo_update", "resolve_device", "save_policy", "train"]
+__all__ = [
+    "ALGOS",
+    "NativeArgs",
+    "Agent",
+    "BatchActor",
+    "LevelSampler",
+    "Rollout",
+    "Runner",
+    "TrainResult",
+    "NativeModel",
+    "advantages",
+    "batch_verdicts",
+    "check_args",
+    "collect_rollout",
+    "load_native",
+    "make_agent",
+    "masked_logits",
+    "minibatch_indices",
+    "ppo_update",
+    "resolve_device",
+    "save_policy",
+    "train",
+]

@@ -99,7 +99,7 @@ class Wire:
         view = memoryview(data)
         while view:
             try:
-                view = view[os.write(self.write_fd, view):]
+                view = view[os.write(self.write_fd, view) :]
                 continue
             except BlockingIOError:
                 pass
@@ -120,7 +120,7 @@ class Wire:
             end = self.inbox.find(b"\n")
             if end >= 0:
                 line = bytes(self.inbox[:end])
-                del self.inbox[:end + 1]
+                del self.inbox[: end + 1]
                 return line
             self._need_more(deadline)
 
@@ -129,8 +129,8 @@ class Wire:
         while len(self.inbox) < 4 or len(self.inbox) < 4 + struct.unpack("!I", self.inbox[:4])[0]:
             self._need_more(deadline)
         n = struct.unpack("!I", self.inbox[:4])[0]
-        body = bytes(self.inbox[4:4 + n])
-        del self.inbox[:4 + n]
+        body = bytes(self.inbox[4 : 4 + n])
+        del self.inbox[: 4 + n]
         return pickle.loads(body)
 
     def unasked(self) -> tuple[bytes, bool]:
@@ -309,8 +309,7 @@ def start_command(words: list[str], cwd: str, limit: int) -> Running:
     OSError
         If it cannot be started.
     """
-    proc = subprocess.Popen(words, cwd=cwd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            bufsize=0, start_new_session=True)
+    proc = subprocess.Popen(words, cwd=cwd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, bufsize=0, start_new_session=True)
     assert proc.stdin is not None and proc.stdout is not None and proc.stderr is not None
 
     def reap(seconds: float) -> int | None:

@@ -178,7 +178,7 @@ def plain_answer(answer: Any) -> Any:
         return Shown(repr(bool(answer)))
     if isinstance(answer, (int, np.integer)):
         value = int(answer)
-        return value if -(10 ** 9) < value < 10 ** 9 else Shown(f"an integer of {value.bit_length()} bits")
+        return value if -(10**9) < value < 10**9 else Shown(f"an integer of {value.bit_length()} bits")
     if isinstance(answer, str):
         return answer[:200]
     if isinstance(answer, dict):
@@ -202,7 +202,7 @@ def decode_line(line: str) -> Any:
     text = line.strip()
     if _INDEX.fullmatch(text):
         return int(text)
-    if text[:1] in ('{', '"'):
+    if text[:1] in ("{", '"'):
         try:
             return json.loads(text, parse_int=_small_int, parse_constant=_no_constant)
         except (ValueError, RecursionError):
@@ -228,7 +228,7 @@ def parse_answer(answer: Any, game: TestGame, state: int, mask: np.ndarray, step
         answer = decode_line(answer)
     if isinstance(answer, dict):
         if "action" not in answer:
-            raise PlannerError(f"step {step}: answered {short(raw)}, an object without \"action\"{hint}")
+            raise PlannerError(f'step {step}: answered {short(raw)}, an object without "action"{hint}')
         answer = answer["action"]
     names = [game.action_name(state, a) for a in range(game.n_actions)]
     action: int | None = None
@@ -243,12 +243,12 @@ def parse_answer(answer: Any, game: TestGame, state: int, mask: np.ndarray, step
         elif not game.is_grid and f"-> {word}" in names:
             action = names.index(f"-> {word}")
     if action is None:
-        raise PlannerError(f"step {step}: answered {short(raw)}, which is not an action "
-                           f"(expected an index 0..{game.n_actions - 1} or one of: {', '.join(names)}){hint}")
+        raise PlannerError(
+            f"step {step}: answered {short(raw)}, which is not an action (expected an index 0..{game.n_actions - 1} or one of: {', '.join(names)}){hint}"
+        )
     if not mask[action]:
         allowed = ", ".join(names[a] for a in np.flatnonzero(mask))
-        raise PlannerError(f"step {step}: chose {names[action]!r}, which the test does not allow now "
-                           f"(allowed: {allowed})")
+        raise PlannerError(f"step {step}: chose {names[action]!r}, which the test does not allow now (allowed: {allowed})")
     return action
 
 

@@ -83,9 +83,7 @@ class Tracked:
         assert self.game is not None
         return self.game, s, q, action_mask_of(observation, info)
 
-    def _situation(
-        self, observation: Any, info: dict[str, Any]
-    ) -> tuple[TestGame, SystemProduct, int, np.ndarray, set[tuple[int, int]]]:
+    def _situation(self, observation: Any, info: dict[str, Any]) -> tuple[TestGame, SystemProduct, int, np.ndarray, set[tuple[int, int]]]:
         """What a product-graph SUT knows before it acts: the game, its product graph,
         its node there, the legal-action mask and the restrictions active now (also
         remembered, see :meth:`_remember`)."""

@@ -231,9 +231,7 @@ class PPOPolicy:
                 raise PolicyError(f"model {name!r} remembers visited places: PPOPolicy needs the env")
             return
         enc = encoder_of(env)
-        self.own_encoding = (enc.obs_kind, getattr(enc, "pad_to", self.obs["pad_to"])) != (
-            self.obs["obs_kind"], self.obs["pad_to"]
-        )
+        self.own_encoding = (enc.obs_kind, getattr(enc, "pad_to", self.obs["pad_to"])) != (self.obs["obs_kind"], self.obs["pad_to"])
         if self.own_encoding:
             enc = self._encoder()
         if self.memory_kind in PLACE_MEMORIES:
@@ -277,14 +275,10 @@ class PPOPolicy:
             obs = self.memory(obs)
         if self.recurrent and self.maskable:  # a native GRU policy: its state and the masks
             mask = action_mask_of(observation, info).astype(bool)
-            action, self._state = self.model.predict(
-                obs, state=self._state, episode_start=np.array([self._start]), deterministic=True, action_masks=mask
-            )
+            action, self._state = self.model.predict(obs, state=self._state, episode_start=np.array([self._start]), deterministic=True, action_masks=mask)
             self._start = False
         elif self.recurrent:
-            action, self._state = self.model.predict(
-                obs, state=self._state, episode_start=np.array([self._start]), deterministic=True
-            )
+            action, self._state = self.model.predict(obs, state=self._state, episode_start=np.array([self._start]), deterministic=True)
             self._start = False
         elif self.maskable:
             mask = action_mask_of(observation, info).astype(bool)

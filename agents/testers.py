@@ -172,8 +172,7 @@ class TesterView(gym.Env[np.ndarray, np.int64]):
     metadata: dict[str, Any] = {"render_modes": []}
     __test__ = False  # not a pytest class
 
-    def __init__(self, problem: str, system: str = "scripted:replanner", max_cycles: int | None = None,
-                 trap_penalty: float = 0.0) -> None:
+    def __init__(self, problem: str, system: str = "scripted:replanner", max_cycles: int | None = None, trap_penalty: float = 0.0) -> None:
         self.ma = raw_env(problem=problem, max_cycles=max_cycles)
         self.problem = problem
         self.game: TestGame = self.ma.game
@@ -241,8 +240,9 @@ class VersusTesterEnv(gym.Env[np.ndarray, np.int64]):
 
     metadata: dict[str, Any] = {"render_modes": ["rgb_array", "ansi"], "render_fps": 4}
 
-    def __init__(self, problem: str, tester: str | Tester, max_steps: int | None = None, obs_kind: str = "flat",
-                 render_mode: str | None = None, view: str = "system") -> None:
+    def __init__(
+        self, problem: str, tester: str | Tester, max_steps: int | None = None, obs_kind: str = "flat", render_mode: str | None = None, view: str = "system"
+    ) -> None:
         self.ma = raw_env(problem=problem, max_cycles=max_steps, obs_kind=obs_kind, render_mode=render_mode, view=view)
         self.problem = problem
         self.game: TestGame = self.ma.game
@@ -302,6 +302,12 @@ class VersusTesterEnv(gym.Env[np.ndarray, np.int64]):
 
 
 __all__ = [
-    "PPOTester", "SynthesizedTester", "Tester", "TesterView", "VersusTesterEnv", "make_tester", "problem_of",
+    "PPOTester",
+    "SynthesizedTester",
+    "Tester",
+    "TesterView",
+    "VersusTesterEnv",
+    "make_tester",
+    "problem_of",
     "TESTER_ROLE",
 ]

@@ -79,8 +79,7 @@ def run_evaluation_demo(out_dir: str | Path, episodes: int = 5, progress: Callab
     if not model.exists() and rl_installed():
         if progress is not None:
             progress(f"training a PPO system under test on FlowTest-Maze2-v0 ({DEMO_PPO_STEPS} steps)")
-        train_native("FlowTest-Maze2-v0", DEMO_PPO_STEPS, model, seed=0, progress_bar=False, eval_episodes=0,
-                     eval_every=0, **DEMO_PPO_SETTINGS)
+        train_native("FlowTest-Maze2-v0", DEMO_PPO_STEPS, model, seed=0, progress_bar=False, eval_episodes=0, eval_every=0, **DEMO_PPO_SETTINGS)
     if model.exists():
         suts.append(f"ppo:{model}")
     cells = evaluate(["FlowTest-Maze2-v0"], suts, episodes, 0, progress)
@@ -118,8 +117,9 @@ class DemoResult:
     report: Path | None
 
 
-def run_demo(out: Path, problems: Sequence[Problem], episodes: int = 5, evaluation: bool = True,
-             progress: Callable[[str], None] = lambda _: None) -> DemoResult:
+def run_demo(
+    out: Path, problems: Sequence[Problem], episodes: int = 5, evaluation: bool = True, progress: Callable[[str], None] = lambda _: None
+) -> DemoResult:
     """Synthesize each of ``problems`` (loaded, every input checked before), write its
     picture, artifact and a summary into the demo folder ``out`` (created, or one the demo
     created before), then, with ``evaluation``, the evaluation report of the systems under
@@ -165,10 +165,7 @@ def run_demo(out: Path, problems: Sequence[Problem], episodes: int = 5, evaluati
         "|---|---|---|---|---|---|---|---|",
     ]
     for name, kind, s, seconds in rows:
-        lines.append(
-            f"| {name} | {kind} | {s['status']} | {s['flow']} | {s['n_cuts']} | {s['bypass_flow']} "
-            f"| {seconds:.2f} | [{name}.png]({name}.png) |"
-        )
+        lines.append(f"| {name} | {kind} | {s['status']} | {s['flow']} | {s['n_cuts']} | {s['bypass_flow']} | {seconds:.2f} | [{name}.png]({name}.png) |")
     write_atomically(out / "summary.md", lambda tmp: tmp.write_text("\n".join(lines) + "\n"))
     write_atomically(out / "summary.json", lambda tmp: tmp.write_text(json.dumps([s for _, _, s, _ in rows], indent=1) + "\n"))
     return DemoResult(tuple(lines), report)

@@ -93,8 +93,7 @@ def human_summary(test: Any, summary: dict[str, Any]) -> str:
     one_way = summary.get("physical", {}).get("one_way_walls", [])
     if one_way:
         lines.append(
-            f"  one-way      {len(one_way)} wall(s) block one way only (a move back stays open): "
-            f"{_limited([_pair_text(ts, a, b) for a, b in one_way])}"
+            f"  one-way      {len(one_way)} wall(s) block one way only (a move back stays open): {_limited([_pair_text(ts, a, b) for a, b in one_way])}"
         )
     reactive = strategy.restrictions & ~strategy.static_obstacles[None, :]
     histories = [q for q in range(strategy.n_hist) if reactive[q].any()]

@@ -95,9 +95,7 @@ def check_no_link_below(path: Path, root: Path | None = None) -> None:
         if part == rp or rp not in part.parents:
             break
         if part.is_symlink():
-            raise ProblemError(
-                f"{str(part)!r} inside the output folder {str(rp)!r} is a symbolic link; FlowTest never writes through one"
-            )
+            raise ProblemError(f"{str(part)!r} inside the output folder {str(rp)!r} is a symbolic link; FlowTest never writes through one")
 
 
 def _make_folders(folder: Path) -> None:
@@ -170,9 +168,7 @@ def prepare_output_folder(folder: Path, marker: str, force: bool, what: str, hin
         except OSError as exc:
             raise ProblemError(f"cannot read the {what} {str(folder)!r}: {exc.strerror or exc}") from None
         if foreign and not force:
-            raise ProblemError(
-                f"{what} {str(folder)!r} already holds files FlowTest did not write; {hint} or choose another folder"
-            )
+            raise ProblemError(f"{what} {str(folder)!r} already holds files FlowTest did not write; {hint} or choose another folder")
     else:
         base = _nearest_existing(folder.parent)
         if base.exists() and not base.is_dir():
@@ -185,8 +181,9 @@ def prepare_output_folder(folder: Path, marker: str, force: bool, what: str, hin
     _OUTPUT_ROOTS.add(str(_absolute(folder)))
     for sub in folder.iterdir():  # a link inside is refused now, before any work
         if sub.is_symlink():
-            raise ProblemError(f"{str(sub)!r} inside the {what} {str(folder)!r} is a symbolic link; FlowTest never writes "
-                               "through one: remove it or choose another folder")
+            raise ProblemError(
+                f"{str(sub)!r} inside the {what} {str(folder)!r} is a symbolic link; FlowTest never writes through one: remove it or choose another folder"
+            )
     mark = folder / marker
     if mark.is_symlink():
         raise ProblemError(f"{str(mark)!r} is a symbolic link; FlowTest never replaces one")
@@ -225,8 +222,7 @@ def check_log_dir(log_dir: Path) -> None:
     or a path where one can be created; never a symbolic link (FlowTest never writes
     through one), never a file, and writable. Nothing is created."""
     if log_dir.is_symlink():
-        raise ProblemError(f"--log-dir {str(log_dir)!r} is a symbolic link; FlowTest never writes through one: "
-                           "give the folder itself")
+        raise ProblemError(f"--log-dir {str(log_dir)!r} is a symbolic link; FlowTest never writes through one: give the folder itself")
     if log_dir.exists() and not log_dir.is_dir():
         raise ProblemError(f"--log-dir {str(log_dir)!r} is a file, not a folder")
     base = _nearest_existing(log_dir)

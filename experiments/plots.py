@@ -90,6 +90,7 @@ def proposition_colours(names: Sequence[str]) -> dict[str, str]:
     """``#rrggbb`` of each proposition (:func:`flowtest_env.render.proposition_colours`)."""
     return {name: roles.hex_colour(c) for name, c in roles.proposition_colours(names).items()}
 
+
 Cell = tuple[int, int]
 
 
@@ -131,8 +132,17 @@ def panels_of(test: Any, reveal: bool = True) -> list[Panel]:
     return panels
 
 
-def plot_test(test: Any, path: str | Path, *, agent: Any = None, dpi: int = 110, max_cols: int | None = None,
-              header: bool = True, reveal: bool = True, colours: dict[str, str] | None = None) -> Path:
+def plot_test(
+    test: Any,
+    path: str | Path,
+    *,
+    agent: Any = None,
+    dpi: int = 110,
+    max_cols: int | None = None,
+    header: bool = True,
+    reveal: bool = True,
+    colours: dict[str, str] | None = None,
+) -> Path:
     """Draw ``test`` (a :class:`~synthesis.pipeline.SynthesizedTest`) to ``path``.
 
     Parameters
@@ -243,16 +253,20 @@ def artifact_view(art: Any) -> Any:
     history meanings, test agent, a mixed test's static area)."""
     summary = art.summary or {}
     problem = _ArtifactProblem(
-        str(art.name), str(art.kind), art.system, _Objective(str(art.objectives.get("system", ""))),
-        _Objective(str(art.objectives.get("test", ""))), static_moves=getattr(art, "static_area", None),
+        str(art.name),
+        str(art.kind),
+        art.system,
+        _Objective(str(art.objectives.get("system", ""))),
+        _Objective(str(art.objectives.get("test", ""))),
+        static_moves=getattr(art, "static_area", None),
     )
-    routing = _ArtifactRouting(int(summary.get("flow", 0)), np.zeros(int(summary.get("n_cuts", 0))),
-                               str(summary.get("status", "unknown")))
+    routing = _ArtifactRouting(int(summary.get("flow", 0)), np.zeros(int(summary.get("n_cuts", 0))), str(summary.get("status", "unknown")))
     return _ArtifactTest(problem, routing, art.strategy, _ArtifactSpec(art), art.agent)
 
 
-def plot_artifact(art: Any, path: str | Path, *, dpi: int = 110, max_cols: int | None = 2, header: bool = True,
-                  reveal: bool = True, colours: dict[str, str] | None = None) -> Path:
+def plot_artifact(
+    art: Any, path: str | Path, *, dpi: int = 110, max_cols: int | None = 2, header: bool = True, reveal: bool = True, colours: dict[str, str] | None = None
+) -> Path:
     """Draw a loaded test artifact as :func:`plot_test` draws its synthesized test: one
     panel per history that restricts something, static walls in every panel, the
     propositions in the legend, the test agent's cells and parks.
@@ -402,9 +416,7 @@ def _fuel_note(ts: Any, mask: np.ndarray, a: int, b: int) -> str | None:
     m = np.flatnonzero(mask)
     m = m[(ts.place[ts.src[m]] == a) & (ts.place[ts.dst[m]] == b)]
     levels = sorted({int(ts.states[int(s)][1]) for s in ts.src[m]})
-    all_levels = {
-        int(ts.states[int(s)][1]) for s in ts.src[(ts.place[ts.src] == a) & (ts.place[ts.dst] == b)]
-    }
+    all_levels = {int(ts.states[int(s)][1]) for s in ts.src[(ts.place[ts.src] == a) & (ts.place[ts.dst] == b)]}
     if set(levels) == all_levels:
         return None
     return "fuel " + ",".join(map(str, levels))
@@ -422,8 +434,7 @@ def _static_area(test: Any) -> set[tuple[int, int]]:
     return {(a, b) for a, b in pairs if _adjacent(_cell_of_place(ts, a), _cell_of_place(ts, b))}
 
 
-def _draw_grid_panel(ax: Axes, test: Any, panel: Panel, overlay: _Overlay | None, colours: dict[str, str],
-                     width_in: float = 3.0) -> None:
+def _draw_grid_panel(ax: Axes, test: Any, panel: Panel, overlay: _Overlay | None, colours: dict[str, str], width_in: float = 3.0) -> None:
     ts = test.problem.system
     lay = ts.layout
     start = _cell_of_place(ts, int(ts.place[ts.initial]))
@@ -458,8 +469,9 @@ def _draw_grid_panel(ax: Axes, test: Any, panel: Panel, overlay: _Overlay | None
             label = text if text is not None else "\n".join(sorted(labels_of.get(cell, ())))
             size = fit_font(label, cell_pt, 13 if text is not None else 8) if label else None
             if size is not None:
-                ax.text(c + 0.5, r + 0.5, label, ha="center", va="center", fontsize=size,
-                        fontweight="bold" if text is not None else "normal", color=TEXT, zorder=3)
+                ax.text(
+                    c + 0.5, r + 0.5, label, ha="center", va="center", fontsize=size, fontweight="bold" if text is not None else "normal", color=TEXT, zorder=3
+                )
     places = proposition_places(ts)
     marks: dict[Cell, int] = {}  # squares drawn in a cell so far: several propositions line up
     for prop, (cells, _) in places.items():
@@ -468,16 +480,13 @@ def _draw_grid_panel(ax: Axes, test: Any, panel: Panel, overlay: _Overlay | None
             if (r, c) in lay.blocked:
                 continue
             k = marks[(r, c)] = marks.get((r, c), -1) + 1
-            ax.add_patch(Rectangle((c + 0.04 + 0.2 * (k % 4), r + 0.04 + 0.2 * (k // 4)), 0.17, 0.17, facecolor=colour,
-                                   edgecolor="none", zorder=3))
+            ax.add_patch(Rectangle((c + 0.04 + 0.2 * (k % 4), r + 0.04 + 0.2 * (k // 4)), 0.17, 0.17, facecolor=colour, edgecolor="none", zorder=3))
     tags = park_tags(overlay, cell_pt)
     for park, (r, c) in parks:
-        ax.add_patch(Rectangle((c + 0.06, r + 0.06), 0.88, 0.88, facecolor=AGENT, alpha=0.55, hatch="//",
-                               edgecolor=AGENT, linewidth=1.5, zorder=3))
+        ax.add_patch(Rectangle((c + 0.06, r + 0.06), 0.88, 0.88, facecolor=AGENT, alpha=0.55, hatch="//", edgecolor=AGENT, linewidth=1.5, zorder=3))
         size = fit_font(tags[park.name], cell_pt * 0.88, 7)
         if size is not None:
-            ax.text(c + 0.5, r + 0.5, tags[park.name], ha="center", va="center", fontsize=size, fontweight="bold",
-                    color=TEXT, zorder=4)
+            ax.text(c + 0.5, r + 0.5, tags[park.name], ha="center", va="center", fontsize=size, fontweight="bold", color=TEXT, zorder=4)
     ax.add_patch(Rectangle((0, 0), lay.cols, lay.rows, fill=False, edgecolor=WALL, linewidth=2.5, zorder=4))
     for a, b in sorted(_static_area(test)):  # where a mixed test may put walls, as the user typed it
         (x0, y0), (x1, y1) = _border(_cell_of_place(ts, a), _cell_of_place(ts, b))
@@ -518,8 +527,9 @@ def _restriction_label(test: Any) -> str:
     return "door: closed in this history (one way, toward the bar)"
 
 
-def _grid_figure(test: Any, panels: Sequence[Panel], overlay: _Overlay | None, max_cols: int | None = None,
-                 header: bool = True, colours: dict[str, str] | None = None) -> Figure:
+def _grid_figure(
+    test: Any, panels: Sequence[Panel], overlay: _Overlay | None, max_cols: int | None = None, header: bool = True, colours: dict[str, str] | None = None
+) -> Figure:
     lay = test.problem.system.layout
     cell = 0.62 if max(lay.rows, lay.cols) <= 8 else max(0.2, 5.0 / max(lay.rows, lay.cols))
     pw = max(lay.cols * cell, 2.6) + 0.5
@@ -532,7 +542,7 @@ def _grid_figure(test: Any, panels: Sequence[Panel], overlay: _Overlay | None, m
     for ax, panel in zip(axes.flat, panels, strict=False):  # spare axes stay blank
         _draw_grid_panel(ax, test, panel, overlay, colours, pw - 0.5)
         ax.set_title(_wrap(panel.title, width), fontsize=9)
-    for ax in list(axes.flat)[len(panels):]:
+    for ax in list(axes.flat)[len(panels) :]:
         ax.set_visible(False)
     handles: list[Artist] = [
         Patch(facecolor=START, edgecolor=GRID_LINE, label="start"),
@@ -541,30 +551,27 @@ def _grid_figure(test: Any, panels: Sequence[Panel], overlay: _Overlay | None, m
     if lay.blocked:
         handles.append(Patch(facecolor=BLOCKED, label="blocked cell"))
     if _static_area(test):
-        handles.append(Line2D([], [], color=WALL, linewidth=1.2, linestyle=(0, (2, 2)), alpha=0.6,
-                              label="static area (walls only here)"))
+        handles.append(Line2D([], [], color=WALL, linewidth=1.2, linestyle=(0, (2, 2)), alpha=0.6, label="static area (walls only here)"))
     if test.strategy.static_obstacles.any():
         handles.append(Line2D([], [], color=WALL, linewidth=5, label="static wall"))
         ts = test.problem.system
         static = _place_pairs(ts, test.strategy.static_obstacles)
         moves = _place_pairs(ts, np.ones(ts.n_moves, dtype=bool))
         if any((b, a) in moves and (b, a) not in static for a, b in static):
-            handles.append(Line2D([], [], color=WALL, linewidth=2, marker=">", markersize=7,
-                                  label="one-way static wall"))
+            handles.append(Line2D([], [], color=WALL, linewidth=2, marker=">", markersize=7, label="one-way static wall"))
     if any(p.restricted.any() for p in panels):
-        handles.append(Line2D([], [], color=_restriction_colour(test), linewidth=2, marker=">", markersize=7,
-                              label=_restriction_label(test)))
+        handles.append(Line2D([], [], color=_restriction_colour(test), linewidth=2, marker=">", markersize=7, label=_restriction_label(test)))
     if overlay is not None:
         handles.append(Patch(facecolor=AGENT, alpha=0.55, label="test agent cells"))
         if overlay.parks:
             handles.append(Patch(facecolor=AGENT, alpha=0.55, hatch="//", label="test agent park"))
             cell_pt = _cell_points(test.problem.system, overlay, pw - 0.5)
-            handles += [Patch(facecolor=AGENT, alpha=0.55, hatch="//", label=f"{tag} = park {name}")
-                        for name, tag in park_tags(overlay, cell_pt).items() if tag != name]
+            handles += [
+                Patch(facecolor=AGENT, alpha=0.55, hatch="//", label=f"{tag} = park {name}") for name, tag in park_tags(overlay, cell_pt).items() if tag != name
+            ]
     for prop, where, colour in proposition_legend(test.problem.system, colours=colours):
         handles.append(Patch(facecolor=colour, label=f"{prop}: {where}"))
-    fig.legend(handles=handles, loc="outside lower center", ncols=min(len(handles), 2 if max_cols == 2 else 3), fontsize=8,
-               frameon=False)
+    fig.legend(handles=handles, loc="outside lower center", ncols=min(len(handles), 2 if max_cols == 2 else 3), fontsize=8, frameon=False)
     return fig
 
 
@@ -674,11 +681,9 @@ def _draw_graph_panel(ax: Axes, test: Any, panel: Panel, overlay: _Overlay | Non
         ax.scatter([x], [y], s=(2 * radius_pt) ** 2, c=color, edgecolors=edge, linewidths=3.0 if p in agent_places else 1.2, zorder=5)
         name = str(ts.places[p])
         props = sorted(set().union(*(ts.labels[s] for s in np.flatnonzero(ts.place == p))))
-        ax.text(x, y + (0.07 if props else 0.0), name, ha="center", va="center", fontsize=7 if len(name) <= 6 else 6,
-                color=TEXT, zorder=6)
+        ax.text(x, y + (0.07 if props else 0.0), name, ha="center", va="center", fontsize=7 if len(name) <= 6 else 6, color=TEXT, zorder=6)
         if props:
-            ax.text(x, y - 0.11, ",".join(props), ha="center", va="center", fontsize=6.5, fontstyle="italic",
-                    color=PROP, zorder=6)
+            ax.text(x, y - 0.11, ",".join(props), ha="center", va="center", fontsize=6.5, fontstyle="italic", color=PROP, zorder=6)
     xs = [x for x, _ in pos.values()]
     ys = [y for _, y in pos.values()]
     for k, park in enumerate(overlay.parks if overlay else []):
@@ -689,8 +694,16 @@ def _draw_graph_panel(ax: Axes, test: Any, panel: Panel, overlay: _Overlay | Non
         px, py = ex + 0.3, ey + 0.55 + 0.25 * k
         for e in park.entries:
             ax.plot([pos[e][0], px], [pos[e][1], py], color=AGENT, linestyle=":", linewidth=1.5, zorder=1)
-        ax.text(px, py, park.name, ha="center", va="center", fontsize=7, zorder=6,
-                bbox={"boxstyle": "square,pad=0.3", "facecolor": AGENT, "edgecolor": AGENT, "hatch": "//", "alpha": 0.7})
+        ax.text(
+            px,
+            py,
+            park.name,
+            ha="center",
+            va="center",
+            fontsize=7,
+            zorder=6,
+            bbox={"boxstyle": "square,pad=0.3", "facecolor": AGENT, "edgecolor": AGENT, "hatch": "//", "alpha": 0.7},
+        )
         ys.append(py)
         xs.append(px)
     ax.set_xlim(min(xs) - 0.6, max(xs) + 0.6)
@@ -698,8 +711,7 @@ def _draw_graph_panel(ax: Axes, test: Any, panel: Panel, overlay: _Overlay | Non
     ax.set_axis_off()
 
 
-def _graph_figure(test: Any, panels: Sequence[Panel], overlay: _Overlay | None, max_cols: int | None = None,
-                  header: bool = True) -> Figure:
+def _graph_figure(test: Any, panels: Sequence[Panel], overlay: _Overlay | None, max_cols: int | None = None, header: bool = True) -> Figure:
     ts = test.problem.system
     pos = layered_positions(ts)
     n_layers = len({x for x, _ in pos.values()})
@@ -711,7 +723,7 @@ def _graph_figure(test: Any, panels: Sequence[Panel], overlay: _Overlay | None, 
     for ax, panel in zip(axes.flat, panels, strict=False):  # spare axes stay blank
         _draw_graph_panel(ax, test, panel, overlay, pos)
         ax.set_title(_wrap(panel.title, max(26, int(pw * 10))), fontsize=9)
-    for ax in list(axes.flat)[len(panels):]:
+    for ax in list(axes.flat)[len(panels) :]:
         ax.set_visible(False)
     handles: list[Artist] = [
         Line2D([], [], linestyle="", marker="o", markersize=10, markerfacecolor=START, markeredgecolor="#505050", label="start"),
@@ -723,8 +735,9 @@ def _graph_figure(test: Any, panels: Sequence[Panel], overlay: _Overlay | None, 
     if test.strategy.static_obstacles.any():
         handles.append(Line2D([], [], color=WALL, linewidth=2.4, linestyle="--", label="static obstacle"))
     if overlay is not None:
-        handles.append(Line2D([], [], linestyle="", marker="o", markersize=10, markerfacecolor=FREE,
-                              markeredgecolor=AGENT, markeredgewidth=3, label="test agent state"))
+        handles.append(
+            Line2D([], [], linestyle="", marker="o", markersize=10, markerfacecolor=FREE, markeredgecolor=AGENT, markeredgewidth=3, label="test agent state")
+        )
         if overlay.parks:
             handles.append(Patch(facecolor=AGENT, alpha=0.7, hatch="//", label="test agent park"))
     handles.append(Line2D([], [], linestyle="", marker="$p$", color=PROP, label="propositions (blue italic)"))

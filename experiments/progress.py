@@ -25,6 +25,7 @@ from synthesis.routing.solve_status import SolveControl
 PROG = "flowtest"
 """The program name every message starts with."""
 
+
 def say(line: str) -> None:
     """One line on stderr, best effort (stderr may be closed)."""
     try:
@@ -204,8 +205,7 @@ def solver_status(control: SolveControl) -> str | None:
 
 
 @contextmanager
-def synthesis_progress(enabled: bool = True, every: float | None = None,
-                       stream: TextIO | None = None) -> Iterator[tuple[StageProgress, SolveControl]]:
+def synthesis_progress(enabled: bool = True, every: float | None = None, stream: TextIO | None = None) -> Iterator[tuple[StageProgress, SolveControl]]:
     """What a synthesis shows on stderr, the same for every command that synthesizes
     (``flowtest synthesize``, and ``flowtest evaluate`` on a problem file without a cached test):
     a :class:`StageProgress` for its stages, whose live line on a terminal carries the solver's

@@ -109,7 +109,20 @@ def make_env(test: TestLike, **options: Any) -> FlowTestEnv:
 
 
 __all__ = [
-    "ANY_TEST_ID", "ENV_IDS", "REGISTRATIONS", "ActionMaskObservation", "EnvConfig", "FlowTestEnv", "GameError",
-    "ObservationLayout", "RandomGridEnv", "RunState", "Segment", "TestGame", "TestLike", "load_test", "make_env",
+    "ANY_TEST_ID",
+    "ENV_IDS",
+    "REGISTRATIONS",
+    "ActionMaskObservation",
+    "EnvConfig",
+    "FlowTestEnv",
+    "GameError",
+    "ObservationLayout",
+    "RandomGridEnv",
+    "RunState",
+    "Segment",
+    "TestGame",
+    "TestLike",
+    "load_test",
+    "make_env",
     "observation_layout",
 ]

@@ -46,8 +46,7 @@ def can_fork() -> bool:
     thread, and a lock one of them held would stay held in the helper) and may have
     children (a multiprocessing pool's worker, one of a trainer's runs, is daemonic and
     may not)."""
-    return (sys.platform.startswith("linux") and threading.active_count() == 1
-            and not multiprocessing.current_process().daemon)
+    return sys.platform.startswith("linux") and threading.active_count() == 1 and not multiprocessing.current_process().daemon
 
 
 def free_cores() -> int:

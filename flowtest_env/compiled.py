@@ -103,8 +103,14 @@ class CompiledTest(ConfigurationTables):
         """The :class:`RunState` of configuration ``z`` (for rendering and inspection)."""
         s = int(self.system[z])
         return RunState(
-            system=s, history=int(self.history[z]), agent=int(self.agent[z]), memory=int(self.memory[z]),
-            visited={s}, steps=steps, restrictions=restrictions, blocked_attempts=blocked_attempts,
+            system=s,
+            history=int(self.history[z]),
+            agent=int(self.agent[z]),
+            memory=int(self.memory[z]),
+            visited={s},
+            steps=steps,
+            restrictions=restrictions,
+            blocked_attempts=blocked_attempts,
             outcome=OUTCOMES[int(self.outcome[z])],
         )
 
@@ -143,7 +149,13 @@ def _transitions(game: TestGame, n_actions: int) -> dict[str, np.ndarray]:
     succ = np.repeat(np.arange(n, dtype=np.int64)[:, None], n_actions, axis=1)
     succ[:, : game.n_slots] = game.successor
     S, H, A, M, X = np.meshgrid(
-        np.arange(n), np.arange(nh), np.arange(na), np.arange(nm), np.arange(n_actions), indexing="ij", sparse=True,
+        np.arange(n),
+        np.arange(nh),
+        np.arange(na),
+        np.arange(nm),
+        np.arange(n_actions),
+        indexing="ij",
+        sparse=True,
     )
     r = rbits[H, S] | abits[S, A]  # [s, h, a, 1, 1]
     ex = exists[S]
@@ -302,8 +314,15 @@ def _batch_tables(games: list[TestGame], n_actions: int) -> list[_Unencoded]:
         mask = ((legal_z[:, None] >> X) & 1).astype(np.int8)
         mask[ended] = 0
         return {
-            "next_z": next_z, "refused": refused | invalid, "restricted": (rb & ex) != 0, "outcome": outcome,
-            "test_realized": test_acc[at_h], "mask": mask, "system": S, "history": H, "game": gi,
+            "next_z": next_z,
+            "refused": refused | invalid,
+            "restricted": (rb & ex) != 0,
+            "outcome": outcome,
+            "test_realized": test_acc[at_h],
+            "mask": mask,
+            "system": S,
+            "history": H,
+            "game": gi,
         }
 
     # the configurations reached from every game's reset configuration, layer by layer
@@ -335,10 +354,17 @@ def _batch_tables(games: list[TestGame], n_actions: int) -> list[_Unencoded]:
     for i, (lo, c) in enumerate(zip(koff.tolist(), counts.tolist(), strict=True)):
         hi = lo + c
         fields = {
-            "next_z": k_next[lo:hi], "refused": k_refused[lo:hi], "restricted": k_restricted[lo:hi],
-            "outcome": k_outcome[lo:hi], "test_realized": k_test[lo:hi], "mask": k_mask[lo:hi],
-            "obs_row": np.arange(c, dtype=np.int64), "system": k_sys[lo:hi], "history": k_hist[lo:hi],
-            "agent": np.full(c, -1, dtype=np.int64), "memory": np.full(c, -1, dtype=np.int64),
+            "next_z": k_next[lo:hi],
+            "refused": k_refused[lo:hi],
+            "restricted": k_restricted[lo:hi],
+            "outcome": k_outcome[lo:hi],
+            "test_realized": k_test[lo:hi],
+            "mask": k_mask[lo:hi],
+            "obs_row": np.arange(c, dtype=np.int64),
+            "system": k_sys[lo:hi],
+            "history": k_hist[lo:hi],
+            "agent": np.full(c, -1, dtype=np.int64),
+            "memory": np.full(c, -1, dtype=np.int64),
             "initial": int(renum[starts[i]]),
         }
         out.append(_Unencoded(fields, runs[lo:hi]))
@@ -383,8 +409,12 @@ def compile_test(game: TestGame, encoder: Encoder, n_actions: int | None = None,
     rows = []
     for z in keep[first]:
         run = RunState(
-            system=int(t["system"][z]), history=int(t["history"][z]), agent=int(t["agent"][z]),
-            memory=int(t["memory"][z]), visited={int(t["system"][z])}, outcome=OUTCOMES[int(t["outcome"][z])],
+            system=int(t["system"][z]),
+            history=int(t["history"][z]),
+            agent=int(t["agent"][z]),
+            memory=int(t["memory"][z]),
+            visited={int(t["system"][z])},
+            outcome=OUTCOMES[int(t["outcome"][z])],
         )
         rows.append(encoder.encode(run))
     return CompiledTest(
@@ -454,7 +484,7 @@ class _RowWriter:
     (Ctrl-C) stops it."""
 
     def __init__(self, todo: list[tuple[Encoder, list[RunState], np.ndarray]], helper: bool) -> None:
-        self.mine, self.theirs = todo, todo[len(todo):]
+        self.mine, self.theirs = todo, todo[len(todo) :]
         self.proc: Any = None
         if helper and len(todo) >= 2:
             sizes = np.cumsum([len(runs) for _, runs, _ in todo])
@@ -620,8 +650,7 @@ def _compile_pool(games: list[TestGame], encoders: list[Encoder], accumulative: 
     row_sizes = np.array([done[k].obs.shape[0] if k in done else len(pending[k].rows) for k in range(len(games))], dtype=np.int64)
     row_offset = np.concatenate([[0], np.cumsum(row_sizes)[:-1]]).astype(np.int64)
     obs, shared = _obs_table(int(row_sizes.sum()), obs_shape, dtypes.pop(), shared=helpers(len(pending)) > 0)
-    view = {k: obs[(slice(int(row_offset[k]), int(row_offset[k] + row_sizes[k])), *(slice(0, w) for w in shapes[k]))]
-            for k in range(len(games))}
+    view = {k: obs[(slice(int(row_offset[k]), int(row_offset[k] + row_sizes[k])), *(slice(0, w) for w in shapes[k]))] for k in range(len(games))}
     for k, ct in done.items():
         view[k][...] = ct.obs
     for k, row in first.items():
@@ -633,8 +662,13 @@ def _compile_pool(games: list[TestGame], encoders: list[Encoder], accumulative: 
 
 
 def _assemble(
-    games: list[TestGame], done: dict[int, CompiledTest], pending: dict[int, _Unencoded], view: dict[int, np.ndarray],
-    n_actions: int, obs_shape: tuple[int, ...], obs: np.ndarray,
+    games: list[TestGame],
+    done: dict[int, CompiledTest],
+    pending: dict[int, _Unencoded],
+    view: dict[int, np.ndarray],
+    n_actions: int,
+    obs_shape: tuple[int, ...],
+    obs: np.ndarray,
 ) -> CompiledPool:
     """The pool of the compiled tests (``done``) and of those compiled but for their rows
     (``pending``, rows in ``view``, which may still be being written)."""

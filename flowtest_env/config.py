@@ -183,9 +183,17 @@ def validate(config: EnvConfig) -> dict[str, Any]:
         raise ValueError(f"numeric_infos must be True or False, not {c.numeric_infos!r}")
     return {
         "numeric_infos": bool(c.numeric_infos),
-        "setting": c.setting, "max_steps": max_steps, "obs_kind": c.obs_kind, "pad_to": pad_to,
-        "render_mode": c.render_mode, "view": c.view, "tile_size": tile_size, **weights, "memory": c.memory,
-        "shaping": shaping, "shaping_gamma": gamma,
+        "setting": c.setting,
+        "max_steps": max_steps,
+        "obs_kind": c.obs_kind,
+        "pad_to": pad_to,
+        "render_mode": c.render_mode,
+        "view": c.view,
+        "tile_size": tile_size,
+        **weights,
+        "memory": c.memory,
+        "shaping": shaping,
+        "shaping_gamma": gamma,
     }
 
 
@@ -263,7 +271,8 @@ def with_option_signature(exclude: tuple[str, ...] = (), **defaults: Any) -> Cal
         hints = {f.name: f.type for f in dataclasses.fields(EnvConfig)}
         params += [
             inspect.Parameter(name, inspect.Parameter.KEYWORD_ONLY, default=defaults.get(name, DEFAULTS[name]), annotation=hints[name])
-            for name in FIELDS if name not in exclude and name not in taken
+            for name in FIELDS
+            if name not in exclude and name not in taken
         ]
         init.__signature__ = sig.replace(parameters=params)
         return cls
@@ -272,6 +281,16 @@ def with_option_signature(exclude: tuple[str, ...] = (), **defaults: Any) -> Cal
 
 
 __all__ = [
-    "DEFAULTS", "EnvConfig", "FIELDS", "MEMORY_KINDS", "MULTIAGENT_UNUSED", "RENDER_MODES", "SETTINGS", "VIEWS", "config_from",
-    "refuse_unused", "validate", "with_option_signature",
+    "DEFAULTS",
+    "EnvConfig",
+    "FIELDS",
+    "MEMORY_KINDS",
+    "MULTIAGENT_UNUSED",
+    "RENDER_MODES",
+    "SETTINGS",
+    "VIEWS",
+    "config_from",
+    "refuse_unused",
+    "validate",
+    "with_option_signature",
 ]

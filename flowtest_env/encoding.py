@@ -186,7 +186,7 @@ def _meaning(channel: str) -> str:
     if channel in CHANNEL_MEANINGS:
         return CHANNEL_MEANINGS[channel]
     if channel.startswith("objective_"):
-        return f"constant plane: the system objective's automaton is in state {channel[len('objective_'):]}"
+        return f"constant plane: the system objective's automaton is in state {channel[len('objective_') :]}"
     return f"cells where the system objective's proposition {channel!r} holds at the current fuel level"
 
 
@@ -284,13 +284,9 @@ class GridEncoder(Encoder):
         self.hw = hw
         self.flat_base = base[: self.n_spatial].ravel().astype(np.float32) / 255.0
         n_props = len(self.sys_props)
-        self.flat_props = (
-            prop_planes.reshape(levels, n_props * hw).astype(np.float32) / 255.0 if n_props else None
-        )
+        self.flat_props = prop_planes.reshape(levels, n_props * hw).astype(np.float32) / 255.0 if n_props else None
         self.flat_cell = (self.cell_r * W + self.cell_c).tolist()
-        self.move_flat = np.where(
-            self.permanent, -1, self.shown_plane * hw + self.move_cell[:, 0] * W + self.move_cell[:, 1]
-        ).tolist()
+        self.move_flat = np.where(self.permanent, -1, self.shown_plane * hw + self.move_cell[:, 0] * W + self.move_cell[:, 1]).tolist()
         self.tail_size = self.n_slots + (1 if self.is_fuel else 0) + self.n_qsys
         if obs_kind == "grid":
             self.space = spaces.Box(0, 255, shape=base.shape, dtype=np.uint8)
@@ -380,7 +376,14 @@ class GridEncoder(Encoder):
 
 
 PADDED_CHANNELS = (
-    "free", *(f"wall_{d}" for d in DIRS), *(f"door_{d}" for d in DIRS), "test_agent", "system", "goal", "subgoal", "refuel",
+    "free",
+    *(f"wall_{d}" for d in DIRS),
+    *(f"door_{d}" for d in DIRS),
+    "test_agent",
+    "system",
+    "goal",
+    "subgoal",
+    "refuel",
 )
 """The channels of ``obs_kind="padded"``: the same for every grid test."""
 
@@ -403,10 +406,7 @@ class PaddedEncoder(Encoder):
         self.obs_kind = "padded"
         size = int(pad_to)
         if self.inner.rows > size or self.inner.cols > size:
-            raise EncodingError(
-                f"problem {game.artifact.name!r} is a {self.inner.rows}x{self.inner.cols} grid: larger than "
-                f"pad_to={size}"
-            )
+            raise EncodingError(f"problem {game.artifact.name!r} is a {self.inner.rows}x{self.inner.cols} grid: larger than pad_to={size}")
         self.pad_to = size
         self.hw = size * size
         ch = self.inner.ch
@@ -454,9 +454,7 @@ class GraphEncoder(Encoder):
 
     def __init__(self, game: TestGame, obs_kind: str = "flat") -> None:
         if obs_kind != "flat":
-            raise EncodingError(
-                f"problem {game.artifact.name!r} is a graph: only obs_kind='flat' is available, not {obs_kind!r}"
-            )
+            raise EncodingError(f"problem {game.artifact.name!r} is a graph: only obs_kind='flat' is available, not {obs_kind!r}")
         self.game = game
         self.obs_kind = obs_kind
         ts = game.ts
@@ -487,8 +485,11 @@ class GraphEncoder(Encoder):
 
     def layout(self) -> ObservationLayout:
         P = self.n_places
-        parts: list[Part] = [("system", P, (P,), "one-hot: the SUT's place"), ("test_agent", P, (P,), "one-hot: the test agent's place"),
-                 ("goal", P, (P,), "the goal (terminal) places")]
+        parts: list[Part] = [
+            ("system", P, (P,), "one-hot: the SUT's place"),
+            ("test_agent", P, (P,), "one-hot: the test agent's place"),
+            ("goal", P, (P,), "the goal (terminal) places"),
+        ]
         parts += [(f"prop_{p}", P, (P,), _meaning(p)) for p in self.sys_props]
         parts.append(("shown_restriction", self.n_moves, (self.n_moves,), "per move of the system: a restriction shown now"))
         parts.append(("restricted_now", self.n_slots, (self.n_slots,), "per action slot: restricted now"))

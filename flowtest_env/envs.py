@@ -666,7 +666,15 @@ class PatrollingEnv(FlowTestEnv):
 
 
 def random_grid_pool(
-    size: Any, family: Any, n: Any, seeds: Any, kind: Any, pool: str | None, split: str, count: int, world: Any,
+    size: Any,
+    family: Any,
+    n: Any,
+    seeds: Any,
+    kind: Any,
+    pool: str | None,
+    split: str,
+    count: int,
+    world: Any,
 ) -> tuple[int, str, int, tuple[int, ...], str, str]:
     """The checked ``(size, family, n, seeds, kind, world)`` of a random-grid pool: the
     explicit arguments, or the named ``pool``'s ``split`` (shared by the single and the
@@ -691,7 +699,11 @@ def random_grid_pool(
         count = positive_int("count", count)
         # n=1 passes: specs of earlier versions listed it next to a pool
         defaults: dict[str, tuple[Any, ...]] = {
-            "size": (5,), "family": ("reachability",), "n": (None, 1), "seeds": (tuple(range(8)),), "kind": ("reactive",),
+            "size": (5,),
+            "family": ("reachability",),
+            "n": (None, 1),
+            "seeds": (tuple(range(8)),),
+            "kind": ("reactive",),
             "world": ("empty",),
         }
         given = {"size": size, "family": family, "n": n, "seeds": seeds, "kind": kind, "world": world}

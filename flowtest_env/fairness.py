@@ -98,8 +98,13 @@ class FairnessReport:
     def summary(self) -> dict[str, object]:
         """A JSON-ready summary."""
         return {
-            "nodes": self.nodes, "fair": self.fair, "traps": self.traps, "trap_path": self.trap_path,
-            "guaranteed": self.guaranteed, "bypasses": self.bypasses, "bypass_path": self.bypass_path,
+            "nodes": self.nodes,
+            "fair": self.fair,
+            "traps": self.traps,
+            "trap_path": self.trap_path,
+            "guaranteed": self.guaranteed,
+            "bypasses": self.bypasses,
+            "bypass_path": self.bypass_path,
             "illegal": self.illegal,
         }
 
@@ -202,9 +207,7 @@ def _path(parent: list[tuple[int, int]], node: int) -> list[int]:
     return out[::-1]
 
 
-def can_still_meet(
-    env: raw_env, choose: TesterChoice, run: RunState, tester_next: bool, max_nodes: int = DEFAULT_MAX_NODES
-) -> bool:
+def can_still_meet(env: raw_env, choose: TesterChoice, run: RunState, tester_next: bool, max_nodes: int = DEFAULT_MAX_NODES) -> bool:
     """Whether some sequence of legal system moves from ``run`` meets the system objective
     against the tester ``choose``: ``run`` waits for the tester's answer when
     ``tester_next``, else it is at the system's turn (the tester's restrictions of this

@@ -126,8 +126,16 @@ class RunState:
     def copy(self) -> RunState:
         """An independent copy (for search over runs)."""
         return RunState(
-            self.system, self.history, self.agent, self.memory, set(self.visited), self.steps,
-            self.restrictions, self.blocked_attempts, self.outcome, self.override,
+            self.system,
+            self.history,
+            self.agent,
+            self.memory,
+            set(self.visited),
+            self.steps,
+            self.restrictions,
+            self.blocked_attempts,
+            self.outcome,
+            self.override,
         )
 
     def key(self) -> tuple[int, int, int, int]:
@@ -337,9 +345,7 @@ class TestGame:
         self.test_accepting: list[bool] = artifact.histories.accepting[:, 1].tolist()
         self.external_tester = external_tester
         walls = np.broadcast_to(strat.static_obstacles[None, :], strat.blocked.shape)
-        self.doomed_array: np.ndarray = ~_coreachable_to_acceptance(
-            artifact, walls if external_tester else self.enforced, self.next_history_array
-        )
+        self.doomed_array: np.ndarray = ~_coreachable_to_acceptance(artifact, walls if external_tester else self.enforced, self.next_history_array)
         """``bool[n_hist, n_states]``: :attr:`doomed` as an array."""
         self.slot_list: list[list[int]] = self.slot_move.tolist()
         self.place_list: list[int] = ts.place.tolist()

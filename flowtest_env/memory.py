@@ -122,5 +122,4 @@ class PlaceMemory:
         return np.concatenate([obs, self._seen])
 
 
-__all__ = ["COUNT_CAP", "MEANINGS", "MEMORY_KINDS", "PLACE_MEMORIES", "PlaceMemory", "first_memory", "increment_of", "remember",
-           "remember_into"]
+__all__ = ["COUNT_CAP", "MEANINGS", "MEMORY_KINDS", "PLACE_MEMORIES", "PlaceMemory", "first_memory", "increment_of", "remember", "remember_into"]

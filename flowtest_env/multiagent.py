@@ -286,8 +286,7 @@ class raw_env(AECEnv):  # type: ignore[misc]  # noqa: N801 - PettingZoo's module
             n_by_agent = {a: max(n_by_agent.values()) for a in n_by_agent}
         self._action_spaces: dict[str, spaces.Discrete] = {a: spaces.Discrete(n) for a, n in n_by_agent.items()}
         self._observation_spaces: dict[str, spaces.Dict] = {
-            a: spaces.Dict({obs_key: obs_by_agent[a], mask_key: spaces.Box(0, 1, (n_by_agent[a],), dtype=np.int8)})
-            for a in (TESTER, SYSTEM)
+            a: spaces.Dict({obs_key: obs_by_agent[a], mask_key: spaces.Box(0, 1, (n_by_agent[a],), dtype=np.int8)}) for a in (TESTER, SYSTEM)
         }
         if not game.has_agent:
             bits = np.arange(n_test)
@@ -556,9 +555,7 @@ class ParallelFlowTestEnv(ParallelEnv):  # type: ignore[misc]  # pettingzoo ship
         self.agents = list(self.aec_env.agents)
         return {a: self.aec_env.observe(a) for a in self.agents}, {a: dict(self.aec_env.infos[a]) for a in self.agents}
 
-    def step(
-        self, actions: dict[str, Any]
-    ) -> tuple[dict[str, Any], dict[str, float], dict[str, bool], dict[str, bool], dict[str, Any]]:
+    def step(self, actions: dict[str, Any]) -> tuple[dict[str, Any], dict[str, float], dict[str, bool], dict[str, bool], dict[str, Any]]:
         aec = self.aec_env
         if not self.agents:
             raise gymnasium.error.ResetNeeded("call reset() before step(): no agent is live (not reset, or the run has ended)")
@@ -699,6 +696,15 @@ class SynthesizedTester:
 
 
 __all__ = [
-    "env", "raw_env", "parallel_env", "ParallelFlowTestEnv", "synthesized_tester", "SynthesizedTester", "TESTER", "SYSTEM",
-    "INFO_KINDS", "NUMERIC_INFO_KEYS", "OUTCOME_CODES",
+    "env",
+    "raw_env",
+    "parallel_env",
+    "ParallelFlowTestEnv",
+    "synthesized_tester",
+    "SynthesizedTester",
+    "TESTER",
+    "SYSTEM",
+    "INFO_KINDS",
+    "NUMERIC_INFO_KEYS",
+    "OUTCOME_CODES",
 ]

@@ -43,7 +43,15 @@ from .random_grid import SPLIT_SPAN, SPLITS, PoolName, build_pool, parse_pool, r
 from .standard_pools import is_standard, load_standard_pool, standard_pool
 
 __all__ = [
-    "SPLITS", "SPLIT_SPAN", "PoolName", "load_pool", "parse_pool", "pool_seeds", "random_grid_arguments", "random_grid_tests", "split_seeds",
+    "SPLITS",
+    "SPLIT_SPAN",
+    "PoolName",
+    "load_pool",
+    "parse_pool",
+    "pool_seeds",
+    "random_grid_arguments",
+    "random_grid_tests",
+    "split_seeds",
 ]
 
 
@@ -89,9 +97,7 @@ def load_pool(
         return tests
     pool = parse_pool(name)
     seeds = split_seeds(split, count, start)
-    return build_pool(
-        pool.size, pool.family, pool.n, seeds, pool.kind, parallel=parallel, workers=workers, progress=progress, world=pool.world
-    )
+    return build_pool(pool.size, pool.family, pool.n, seeds, pool.kind, parallel=parallel, workers=workers, progress=progress, world=pool.world)
 
 
 def pool_seeds(name: str, split: str, count: int, start: int = 0) -> list[int]:

@@ -159,7 +159,7 @@ def parse_pool(name: str) -> PoolName:
         raise ValueError(f"pool name {name!r}: {FORM}")
     spec, grid, extra = parts[0], parts[1], parts[2:]
     family = spec.rstrip("0123456789")
-    digits = spec[len(family):]
+    digits = spec[len(family) :]
     if family not in FAMILIES or not digits:
         raise ValueError(f"pool name {name!r}: unknown family {spec!r}; expected one of {', '.join(FAMILIES)} with a size n; {FORM}")
     rows, x, cols = grid.partition("x")
@@ -169,10 +169,7 @@ def parse_pool(name: str) -> PoolName:
     kinds = [p for p in extra if p in POOL_KINDS]
     unknown = [p for p in extra if p not in WORLDS and p not in POOL_KINDS]
     if unknown:
-        raise ValueError(
-            f"pool name {name!r}: unknown part {unknown[0]!r}; expected a world ({', '.join(WORLDS)}) "
-            f"and/or a kind ({', '.join(POOL_KINDS)})"
-        )
+        raise ValueError(f"pool name {name!r}: unknown part {unknown[0]!r}; expected a world ({', '.join(WORLDS)}) and/or a kind ({', '.join(POOL_KINDS)})")
     if len(worlds) > 1 or len(kinds) > 1:
         twice = "world" if len(worlds) > 1 else "kind"
         raise ValueError(f"pool name {name!r}: more than one {twice} ({', '.join(worlds if twice == 'world' else kinds)}); {FORM}")
@@ -415,9 +412,7 @@ class BuildProgress:
     """Tests the rate is measured over (a build whose first tests came from a cache, or
     whose tests slow down, shows the time left at the current pace)."""
 
-    def __init__(
-        self, total: int, initial: int, desc: str, enabled: bool = True, every: float = 10.0, stream: Any = None
-    ) -> None:
+    def __init__(self, total: int, initial: int, desc: str, enabled: bool = True, every: float = 10.0, stream: Any = None) -> None:
         self.total, self.n, self.desc, self.enabled, self.every = int(total), int(initial), desc, enabled, float(every)
         self.stream = stream if stream is not None else sys.stderr
         self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
@@ -608,8 +603,14 @@ def stored_records(
 
 
 def synthesize_records(
-    size: int, family: str, n: int, seeds: list[int], kind: str = "reactive", world: str = "empty",
-    parallel: str | None = None, workers: int | None = None,
+    size: int,
+    family: str,
+    n: int,
+    seeds: list[int],
+    kind: str = "reactive",
+    world: str = "empty",
+    parallel: str | None = None,
+    workers: int | None = None,
 ) -> Iterator[tuple[int, dict[str, Any]]]:
     """``(seed, record)`` of every seed, synthesized in process or as Ray tasks
     (``parallel="ray"``), in the order they finish."""

@@ -56,15 +56,22 @@ STATUS_BG: RGB = (40, 40, 44)
 FUEL_BAR: RGB = REFUEL
 
 ROLE_COLOURS: dict[str, RGB] = {
-    "start": START, "goal": GOAL, "system under test": SYSTEM, "test agent": AGENT, "wall": WALL, "door": DOOR,
-    "door out of view": DOOR_OUT_OF_VIEW, "hidden test cell": TEST_CELL, "hidden test cell later": TEST_CELL_LATER,
-    "refuel": REFUEL, "blocked cell": BLOCKED,
+    "start": START,
+    "goal": GOAL,
+    "system under test": SYSTEM,
+    "test agent": AGENT,
+    "wall": WALL,
+    "door": DOOR,
+    "door out of view": DOOR_OUT_OF_VIEW,
+    "hidden test cell": TEST_CELL,
+    "hidden test cell later": TEST_CELL_LATER,
+    "refuel": REFUEL,
+    "blocked cell": BLOCKED,
 }
 """One colour per role, the same in every picture: the frames and filmstrips here, the test
 pictures of :mod:`experiments.plots`, the report's path plots."""
 
-PALETTE: tuple[RGB, ...] = ((23, 190, 207), (227, 119, 194), (140, 86, 75), (127, 127, 127), (120, 40, 100),
-                            (150, 150, 200), (150, 150, 20))
+PALETTE: tuple[RGB, ...] = ((23, 190, 207), (227, 119, 194), (140, 86, 75), (127, 127, 127), (120, 40, 100), (150, 150, 200), (150, 150, 20))
 """The propositions' colours (cyan, pink, brown, grey, plum, lavender, olive): none of them
 a role's (:data:`ROLE_COLOURS`), nor near one."""
 
@@ -94,6 +101,7 @@ def tint(color: RGB, amount: float) -> RGB:
 def all_propositions(game: TestGame) -> list[str]:
     """Every proposition the test's system labels (name order)."""
     return sorted(set().union(*game.ts.labels)) if game.ts.n_states else []
+
 
 _TILES: dict[tuple[Any, ...], np.ndarray] = {}
 
@@ -244,8 +252,7 @@ class GridRenderer:
         propositions the view shows: the system objective's, in the engineer's view all).
     """
 
-    def __init__(self, game: TestGame, tile_size: int = 32, view: str = "system",
-                 colours: Mapping[str, RGB] | None = None) -> None:
+    def __init__(self, game: TestGame, tile_size: int = 32, view: str = "system", colours: Mapping[str, RGB] | None = None) -> None:
         if view not in ("system", "engineer"):
             raise ValueError(f"unknown view {view!r}; expected 'system' or 'engineer'")
         self.game, self.size, self.view = game, tile_size, view
@@ -382,8 +389,7 @@ def doors_out_of_view(game: TestGame, run: RunState) -> list[int]:
 class GraphRenderer:
     """Node-link frames of a graph problem (see the module docstring)."""
 
-    def __init__(self, game: TestGame, tile_size: int = 32, view: str = "system",
-                 colours: Mapping[str, RGB] | None = None) -> None:
+    def __init__(self, game: TestGame, tile_size: int = 32, view: str = "system", colours: Mapping[str, RGB] | None = None) -> None:
         if view not in ("system", "engineer"):
             raise ValueError(f"unknown view {view!r}; expected 'system' or 'engineer'")
         self.colours = _colours_of(game, view, colours)
@@ -413,16 +419,24 @@ class GraphRenderer:
         fig.patch.set_facecolor(_unit_rgb(FLOOR))
         for a, b in zip(ts.src.tolist(), ts.dst.tolist(), strict=True):
             ax.annotate(
-                "", xy=xy[b], xytext=xy[a],
-                arrowprops={"arrowstyle": "-|>", "color": "0.55", "lw": 1.2, "shrinkA": 14, "shrinkB": 14,
-                            "connectionstyle": f"arc3,rad={ARC_RAD}"},
+                "",
+                xy=xy[b],
+                xytext=xy[a],
+                arrowprops={"arrowstyle": "-|>", "color": "0.55", "lw": 1.2, "shrinkA": 14, "shrinkB": 14, "connectionstyle": f"arc3,rad={ARC_RAD}"},
             )
         test_props = hidden_propositions(game) if view == "engineer" else set()
         for s in range(ts.n_states):
             face = _unit_rgb(GOAL) if ts.terminal[s] else "white"
             edge = _unit_rgb(TEST_CELL) if ts.labels[s] & test_props else "0.3"
-            ax.scatter([xy[s, 0]], [xy[s, 1]], s=520, c=[face] if not isinstance(face, str) else face,
-                       edgecolors=[edge] if not isinstance(edge, str) else edge, linewidths=2.5, zorder=3)
+            ax.scatter(
+                [xy[s, 0]],
+                [xy[s, 1]],
+                s=520,
+                c=[face] if not isinstance(face, str) else face,
+                edgecolors=[edge] if not isinstance(edge, str) else edge,
+                linewidths=2.5,
+                zorder=3,
+            )
             ax.text(xy[s, 0], xy[s, 1] - 0.13, printable(str(ts.states[s])), ha="center", va="top", fontsize=8, zorder=4)
         # matplotlib ships no type hints for backend_agg (FigureCanvasAgg's methods are untyped)
         canvas.draw()  # type: ignore[no-untyped-call]
@@ -477,8 +491,7 @@ Renderer = GridRenderer | GraphRenderer
 """A picture maker of one game (:func:`make_renderer`)."""
 
 
-def make_renderer(game: TestGame, tile_size: int = 32, view: str = "system",
-                  colours: Mapping[str, RGB] | None = None) -> Renderer:
+def make_renderer(game: TestGame, tile_size: int = 32, view: str = "system", colours: Mapping[str, RGB] | None = None) -> Renderer:
     """The renderer of a game's kind (``colours``: the propositions' colours by name)."""
     if game.is_grid:
         return GridRenderer(game, tile_size, view, colours)

@@ -94,8 +94,7 @@ def describe(game: TestGame, max_steps: int | None) -> dict[str, Any]:
     hidden_cells = [game.ts.places[p] for p in hidden_places]
     system["labels"] = [[p for p in lab if p in visible] for lab in labels]
     if system.get("layout"):
-        system["layout"] = {**system["layout"], "tokens": [
-            t for t in system["layout"]["tokens"] if (t[0], t[1]) not in hidden_cells]}
+        system["layout"] = {**system["layout"], "tokens": [t for t in system["layout"]["tokens"] if (t[0], t[1]) not in hidden_cells]}
     dba = art.system_automaton
     letter = game.ts.letter_of_state(art.letters)
     return {
@@ -103,8 +102,7 @@ def describe(game: TestGame, max_steps: int | None) -> dict[str, Any]:
         "kind": art.kind,
         "objective": art.objectives.get("system", ""),
         "system": system,
-        "automaton": {"initial": int(dba.initial), "accepting": [bool(a) for a in dba.accepting[:, 0]],
-                      "next": dba.delta[:, letter].tolist()},
+        "automaton": {"initial": int(dba.initial), "accepting": [bool(a) for a in dba.accepting[:, 0]], "next": dba.delta[:, letter].tolist()},
         "actions": [*GRID_ACTIONS, "stay"] if game.is_grid else None,
         "max_steps": max_steps,
         "agent": game.has_agent,
@@ -127,8 +125,11 @@ def restricted_moves(game: TestGame, run: RunState) -> list[dict[str, Any]]:
     ``to`` (the state it leads to) and ``by`` (:func:`refused_by`), in action order."""
     s = run.system
     bits = game.restricted_bits_of(run) & game.exists_bits[s]
-    return [{"action": game.action_name(s, k), "to": game.state_json(game.succ_list[s][k]), "by": refused_by(game, run, k)}
-            for k in range(game.n_slots) if bits >> k & 1]
+    return [
+        {"action": game.action_name(s, k), "to": game.state_json(game.succ_list[s][k]), "by": refused_by(game, run, k)}
+        for k in range(game.n_slots)
+        if bits >> k & 1
+    ]
 
 
 def state_of(game: TestGame, state: Any) -> int:
@@ -147,8 +148,7 @@ def state_of(game: TestGame, state: Any) -> int:
                 raise TypeError
             key: Any = (_int(state[0]), _int(state[1]))
         elif ts.kind == "fuel":
-            if not (isinstance(state, (list, tuple)) and len(state) == 2 and isinstance(state[0], (list, tuple))
-                    and len(state[0]) == 2):
+            if not (isinstance(state, (list, tuple)) and len(state) == 2 and isinstance(state[0], (list, tuple)) and len(state[0]) == 2):
                 raise TypeError
             key = ((_int(state[0][0]), _int(state[0][1])), _int(state[1]))
         else:
@@ -158,8 +158,7 @@ def state_of(game: TestGame, state: Any) -> int:
         return ts.index(key)
     except (TypeError, KeyError):
         shape = {"grid": "[row, col]", "fuel": "[[row, col], fuel]"}.get(ts.kind, "a state name")
-        raise RuntimeRefused(f"{_show(state)} is not a state of {game.artifact.name!r} (expected {shape})",
-                             "not_a_state") from None
+        raise RuntimeRefused(f"{_show(state)} is not a state of {game.artifact.name!r} (expected {shape})", "not_a_state") from None
 
 
 def _int(x: Any) -> int:
@@ -296,8 +295,7 @@ class TestRuntime:
                 if text in names:
                     return names.index(text)
         known = ", ".join(g.action_name(s, a) for a in range(g.n_actions))
-        raise RuntimeRefused(f"{_show(action)} is not an action here (an index 0..{g.n_actions - 1} or one of: {known})",
-                             "not_an_action")
+        raise RuntimeRefused(f"{_show(action)} is not an action here (an index 0..{g.n_actions - 1} or one of: {known})", "not_an_action")
 
     def _action_to(self, state: Any) -> int:
         g, run = self.game, self.run
@@ -315,8 +313,7 @@ class TestRuntime:
                 return k
         by = refused_by(g, run, slots[0])
         who = {"wall": "a wall", "door": "the test", "agent": "the test agent"}[by]
-        raise RuntimeRefused(f"the move {_show(g.state_json(s))} -> {_show(g.state_json(t))} is restricted now (by {who})",
-                             "restricted")
+        raise RuntimeRefused(f"the move {_show(g.state_json(s))} -> {_show(g.state_json(t))} is restricted now (by {who})", "restricted")
 
     # ------------------------------------------------------------------ what the test says
 
@@ -350,8 +347,7 @@ class TestRuntime:
         if g.has_agent and g.agent_controller is not None:
             place = g.agent_place[run.agent]
             p = g.ts.places[place] if place >= 0 else None
-            agent = {"state": run.agent, "name": g.agent_controller.agent_names[run.agent],
-                     "place": list(p) if isinstance(p, tuple) else p}
+            agent = {"state": run.agent, "name": g.agent_controller.agent_names[run.agent], "place": list(p) if isinstance(p, tuple) else p}
         return {
             "state": g.state_json(s),
             "step": run.steps,

@@ -47,9 +47,27 @@ import numpy as np
 from .envs import default_max_steps
 from .game import TestGame
 
-__all__ = ["PRELIMINARY_SEEDS", "TAIL_SHARE", "BatchPolicy", "PolicyScore", "PoolSource", "ScoreInterval", "TailScore",
-           "crossed_draws", "iqm", "load_tests", "normalized", "play_batch", "random_policy", "score_interval", "score_policy",
-           "seed_iqm", "summarize", "tail_score", "worst_share_mean"]
+__all__ = [
+    "PRELIMINARY_SEEDS",
+    "TAIL_SHARE",
+    "BatchPolicy",
+    "PolicyScore",
+    "PoolSource",
+    "ScoreInterval",
+    "TailScore",
+    "crossed_draws",
+    "iqm",
+    "load_tests",
+    "normalized",
+    "play_batch",
+    "random_policy",
+    "score_interval",
+    "score_policy",
+    "seed_iqm",
+    "summarize",
+    "tail_score",
+    "worst_share_mean",
+]
 
 
 class BatchPolicy(Protocol):
@@ -87,9 +105,15 @@ def load_tests(pool: str, split: str, count: int, source: PoolSource | None = No
 # --------------------------------------------------------------------------- playing
 
 
-def play_batch(policy: Callable[[np.ndarray, np.ndarray], Any], games: Sequence[TestGame], runs: int = 1, seed: int = 0,
-               obs_kind: str = "flat", budgets: Sequence[int] | None = None,
-               options: Mapping[str, Any] | None = None) -> dict[str, np.ndarray]:
+def play_batch(
+    policy: Callable[[np.ndarray, np.ndarray], Any],
+    games: Sequence[TestGame],
+    runs: int = 1,
+    seed: int = 0,
+    obs_kind: str = "flat",
+    budgets: Sequence[int] | None = None,
+    options: Mapping[str, Any] | None = None,
+) -> dict[str, np.ndarray]:
     """Play ``runs`` runs of every test of ``games`` with ``policy``, all at once in one
     :class:`~flowtest_env.vector.PoolVectorEnv`, and return the verdict arrays, each of
     shape ``[runs, n_tests]``: ``system_objective`` (``"met"``, ``"violated"``,
@@ -163,8 +187,7 @@ def batch_env(games: Sequence[TestGame], num_envs: int, obs_kind: str = "flat", 
     hit = _ENVS.pop(key, None)
     if hit is None:
         budget = max(default_max_steps(g) for g in games)
-        hit = (list(games), PoolVectorEnv(num_envs, list(games), assignment="fixed", max_steps=budget,
-                                          **{"obs_kind": obs_kind, **more}))
+        hit = (list(games), PoolVectorEnv(num_envs, list(games), assignment="fixed", max_steps=budget, **{"obs_kind": obs_kind, **more}))
     _ENVS[key] = hit  # the most recent last
     while len(_ENVS) > ENV_CACHE_SIZE:
         _, old = _ENVS.pop(next(iter(_ENVS)))  # the least recently used
@@ -248,19 +271,30 @@ def summarize(verdicts: dict[str, np.ndarray], seed: int = 0) -> PolicyScore:
     n_met = int(met.sum())
     realized = np.asarray(verdicts["test_objective_realized"], dtype=bool)
     return PolicyScore(
-        tests=int(t), runs=int(runs), seed=int(seed),
+        tests=int(t),
+        runs=int(runs),
+        seed=int(seed),
         met=float(met.mean()),
         realized=float((realized & met).sum() / n_met) if n_met else None,
         restrictions=float(np.mean(verdicts["restrictions"])),
         steps=float(np.asarray(verdicts["steps"])[met].mean()) if n_met else None,
-        violated=int((so == "violated").sum()), open=int((so == "open").sum()),
+        violated=int((so == "violated").sum()),
+        open=int((so == "open").sum()),
         per_test_met=tuple(float(x) for x in met.mean(axis=0)),
     )
 
 
-def score_policy(policy: Callable[[np.ndarray, np.ndarray], Any], pool: str | None = None, split: str = "test",
-                 count: int = 1000, runs: int = 1, seed: int = 0, tests: Sequence[Any] | None = None,
-                 source: PoolSource | None = None, obs_kind: str = "flat") -> PolicyScore:
+def score_policy(
+    policy: Callable[[np.ndarray, np.ndarray], Any],
+    pool: str | None = None,
+    split: str = "test",
+    count: int = 1000,
+    runs: int = 1,
+    seed: int = 0,
+    tests: Sequence[Any] | None = None,
+    source: PoolSource | None = None,
+    obs_kind: str = "flat",
+) -> PolicyScore:
     """Score a batched policy (module docstring) on the first ``count`` tests of a pool's
     split, or on ``tests`` (artifacts or games) when given, playing each test ``runs``
     times in one batch (:func:`play_batch`).
@@ -332,7 +366,7 @@ def iqm(values: Sequence[float] | np.ndarray) -> float:
     if x.size == 0:
         raise ValueError("iqm of no value")
     k = int(math.floor(0.25 * x.size))
-    return float(x[k:x.size - k].mean())
+    return float(x[k : x.size - k].mean())
 
 
 def worst_share_mean(per_test: Sequence[float] | np.ndarray, share: float = 0.1) -> float:
@@ -368,8 +402,7 @@ TAIL_SHARE = 0.1
 """The share of the hardest tests whose mean met rate is the tail score (:func:`tail_score`)."""
 
 
-def crossed_draws(n_seeds: int, n_tests: int, reps: int, seed: int = 0,
-                  resample_seeds: bool = True) -> tuple[np.ndarray, np.ndarray]:
+def crossed_draws(n_seeds: int, n_tests: int, reps: int, seed: int = 0, resample_seeds: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """The replicates of the seed-and-test bootstrap, ``(seeds, tests)``: ``seeds[r]`` the
     ``n_seeds`` seed indices of replicate ``r`` (drawn with replacement; ``0 .. n-1`` when
     ``resample_seeds`` is false) and ``tests[r, t]`` how often test ``t`` is drawn in replicate
@@ -457,13 +490,18 @@ def _iqm_rows(values: np.ndarray) -> np.ndarray:
     """:func:`iqm` of each row."""
     n = values.shape[1]
     k = int(math.floor(0.25 * n))
-    out: np.ndarray = np.sort(values, axis=1)[:, k:n - k].mean(axis=1)
+    out: np.ndarray = np.sort(values, axis=1)[:, k : n - k].mean(axis=1)
     return out
 
 
-def score_interval(scores: np.ndarray | Sequence[Sequence[float]], floor: Sequence[float] | np.ndarray | None = None,
-                   ceiling: Sequence[float] | np.ndarray | None = None, reps: int = 2000, seed: int = 0,
-                   confidence: float = 0.95) -> ScoreInterval | None:
+def score_interval(
+    scores: np.ndarray | Sequence[Sequence[float]],
+    floor: Sequence[float] | np.ndarray | None = None,
+    ceiling: Sequence[float] | np.ndarray | None = None,
+    reps: int = 2000,
+    seed: int = 0,
+    confidence: float = 0.95,
+) -> ScoreInterval | None:
     """A system's score on a split and its interval, from ``scores`` ``[seeds, tests]`` (each
     seed's met share on each test: 0/1 for a greedy run, ``k / K`` for ``K`` sampled runs),
     normalized by the per-test met shares of the ``floor`` (random's, each from its ``K``
@@ -534,8 +572,7 @@ def score_interval(scores: np.ndarray | Sequence[Sequence[float]], floor: Sequen
         met_r = _iqm_rows(np.take_along_axis(w @ x.T, who, axis=1))
         z = (met_r[ok] - f_r[ok]) / span[ok]
         low, high = np.quantile(z, [alpha, 1 - alpha])
-        return ScoreInterval(iqm(z_seeds), float(low), float(high), "iqm", "seed-and-test bootstrap", False, mean, s, t,
-                             confidence)
+        return ScoreInterval(iqm(z_seeds), float(low), float(high), "iqm", "seed-and-test bootstrap", False, mean, s, t, confidence)
     z = ((w @ x.mean(axis=0))[ok] - f_r[ok]) / span[ok]
     test_se = float(np.std(z, ddof=1)) if z.size > 1 else 0.0
     seed_se = float(np.std(z_seeds, ddof=1) / math.sqrt(s)) if s > 1 else None
@@ -544,8 +581,7 @@ def score_interval(scores: np.ndarray | Sequence[Sequence[float]], floor: Sequen
     half_seeds = float(student.ppf(1 - alpha, s - 1)) * seed_se if seed_se is not None else 0.0
     half_tests = float(student.ppf(1 - alpha, max(t - 1, 1))) * test_se
     half = math.hypot(half_seeds, half_tests)
-    return ScoreInterval(mean, mean - half, mean + half, "mean", "t over seeds and tests", True, mean, s, t, confidence,
-                         seed_se, test_se)
+    return ScoreInterval(mean, mean - half, mean + half, "mean", "t over seeds and tests", True, mean, s, t, confidence, seed_se, test_se)
 
 
 @dataclass(frozen=True)

@@ -92,9 +92,14 @@ def answer_options(options: SynthesisOptions | None = None) -> dict[str, Any]:
     """
     o = options if options is not None else SynthesisOptions()
     return {
-        "mip_rel_gap": float(o.mip_rel_gap), "threads": 1 if o.threads is None else int(o.threads),
-        "random_seed": int(o.random_seed), "backend": str(o.backend), "closed_loop": bool(o.closed_loop),
-        "setting": o.setting, "agent_iterations": o.agent_iterations, "caps": dict(sorted((o.caps or {}).items())),
+        "mip_rel_gap": float(o.mip_rel_gap),
+        "threads": 1 if o.threads is None else int(o.threads),
+        "random_seed": int(o.random_seed),
+        "backend": str(o.backend),
+        "closed_loop": bool(o.closed_loop),
+        "setting": o.setting,
+        "agent_iterations": o.agent_iterations,
+        "caps": dict(sorted((o.caps or {}).items())),
     }
 
 
@@ -125,8 +130,7 @@ def is_problem_file(test: object) -> bool:
     return path.suffix.lower() != ".json" and path.is_file()
 
 
-def _synthesized_artifact(problem: Problem, origin: dict[str, Any] | None = None,
-                          options: SynthesisOptions | None = None) -> TestArtifact:
+def _synthesized_artifact(problem: Problem, origin: dict[str, Any] | None = None, options: SynthesisOptions | None = None) -> TestArtifact:
     """Synthesize ``problem`` under ``options`` (the solvers are imported here, on the first
     test that needs them: playing a shipped or cached test loads none) and make its artifact;
     with a ``progress`` callback among the options, the synthesis is said first."""
@@ -149,8 +153,7 @@ def _cached_entry(cached: Path, problem: Problem, origin: dict[str, Any]) -> Tes
     try:
         art = TestArtifact.load(cached, verify=False, require_digest=True)
         if art.extras.get("origin") != origin:
-            raise ProblemError(f"cache entry {str(cached)!r} was made from another problem file, or under other options, "
-                               "than the one asked for")
+            raise ProblemError(f"cache entry {str(cached)!r} was made from another problem file, or under other options, than the one asked for")
         verify_artifact(art, str(cached), problem_source_hash(problem))
     except ProblemError as exc:
         warn_refused_entry(ProblemError(f"{exc}; synthesizing it again"))  # a damaged, edited or foreign entry
@@ -287,17 +290,14 @@ def load_test(test: TestLike, options: SynthesisOptions | None = None) -> TestAr
         return _synthesized_artifact(test, options=options)
     if not isinstance(test, (str, os.PathLike)):
         raise ProblemError(
-            f"test must be a built-in name, a problem or artifact file, a Problem, a SynthesizedTest or a "
-            f"TestArtifact, not {type(test).__name__}"
+            f"test must be a built-in name, a problem or artifact file, a Problem, a SynthesizedTest or a TestArtifact, not {type(test).__name__}"
         )
     text = os.fspath(test)
     if isinstance(test, str) and text in builtin_names():
         return load_builtin(text)
     path = Path(text).expanduser()
     if not path.exists():
-        raise ProblemError(
-            f"test {text!r} is neither a built-in ({', '.join(builtin_names())}) nor an existing file"
-        )
+        raise ProblemError(f"test {text!r} is neither a built-in ({', '.join(builtin_names())}) nor an existing file")
     check_file_size(path, "test file", MAX_FILE_BYTES)  # its size checked before it is read
     raw = read_limited(path, "test file")
     json_file = path.suffix.lower() == ".json"
@@ -328,4 +328,3 @@ def game_for(test: TestLike, setting: str | None = None, external_tester: bool =
     game = TestGame(art, setting, external_tester)
     _GAMES[key] = (art, game)
     return game
-

@@ -204,12 +204,10 @@ class StandardPool:
 
 
 _FAMILIES: tuple[tuple[str, str, bool], ...] = (
-    ("reachability1/5x5", "the paper's empty 5x5 grid, one hidden goal, reactive doors; the continuity pool (a random policy meets about half)",
-     False),
+    ("reachability1/5x5", "the paper's empty 5x5 grid, one hidden goal, reactive doors; the continuity pool (a random policy meets about half)", False),
     ("safety2/5x5/fuel", "5x5 fuel grid (capacity 5, refuel cells, never run empty), a goal and a cell to avoid, reactive doors", False),
     ("safety2/5x5/fuel/static", "the same fuel grids with static walls (the whole test) instead of doors", False),
-    ("reachability1/5x5/blocked/agent", "5x5 grid, a fifth of the cells blocked, a test agent patrolling one column (a GR(1) strategy)",
-     True),
+    ("reachability1/5x5/blocked/agent", "5x5 grid, a fifth of the cells blocked, a test agent patrolling one column (a GR(1) strategy)", True),
     ("reachability2/7x7/blocked", "7x7 grid, a fifth of the cells blocked, two hidden goals, reactive doors", False),
 )
 """The families of the standard pools: on-demand pool, what it exercises, slow to build."""
@@ -277,9 +275,13 @@ def warn_superseded(pool: StandardPool) -> None:
     if pool.superseded_by is None or pool.id in _WARNED:
         return
     _WARNED.add(pool.id)
-    warnings.warn(SupersededPoolWarning(
-        f"{pool.id} is superseded by {pool.superseded_by}: its splits have disjoint seeds but share tests by content "
-        f"(docs/pools.md); it stays loadable to compare with results reported on it"), stacklevel=3)
+    warnings.warn(
+        SupersededPoolWarning(
+            f"{pool.id} is superseded by {pool.superseded_by}: its splits have disjoint seeds but share tests by content "
+            f"(docs/pools.md); it stays loadable to compare with results reported on it"
+        ),
+        stacklevel=3,
+    )
 
 
 @lru_cache(maxsize=64)
@@ -316,8 +318,10 @@ def _read_lines(path: Path) -> list[str]:
                 if line.strip():
                     lines.append(line)
     except EOFError:
-        raise ProblemError(f"{path}, line {len(lines) + 1}: the file stops in the middle (a truncated copy: {len(lines)} "
-                           "whole lines before it); reinstall FlowTest or copy the file again") from None
+        raise ProblemError(
+            f"{path}, line {len(lines) + 1}: the file stops in the middle (a truncated copy: {len(lines)} "
+            "whole lines before it); reinstall FlowTest or copy the file again"
+        ) from None
     except (OSError, UnicodeDecodeError, zlib.error) as exc:
         raise ProblemError(f"{path}, line {len(lines) + 1}: not a gzipped records file ({exc})") from None
     return lines
@@ -348,9 +352,7 @@ def read_records(pool: StandardPool, split: str) -> list[dict[str, Any]]:
         if pool.draw == "content":
             low = out[-1]["seed"] + 1 if out else base
             if isinstance(seed, bool) or not isinstance(seed, int) or not low <= seed < base + SPLIT_SPAN:
-                raise ProblemError(
-                    f"{path}, line {k + 1}: expected the record of a seed in {low}..{base + SPLIT_SPAN - 1} (the split's seeds, increasing)"
-                )
+                raise ProblemError(f"{path}, line {k + 1}: expected the record of a seed in {low}..{base + SPLIT_SPAN - 1} (the split's seeds, increasing)")
         elif seed != base + k:
             raise ProblemError(f"{path}, line {k + 1}: expected the record of seed {base + k} (the split's seeds in order)")
         out.append(rec)
@@ -438,8 +440,11 @@ def load_standard_pool(
     if count < 1 or start + count > len(records):
         raise ValueError(
             f"{pool.id} ships {len(records)} tests of its {split!r} split; asked for tests {start}..{start + count - 1} "
-            + ("(flowtest_env.pools.load_pool builds the ones beyond on demand)" if pool.draw == "seeds" else
-               "(a pool disjoint by content is its shipped tests: python -m experiments.tools.build_pools builds more)")
+            + (
+                "(flowtest_env.pools.load_pool builds the ones beyond on demand)"
+                if pool.draw == "seeds"
+                else "(a pool disjoint by content is its shipped tests: python -m experiments.tools.build_pools builds more)"
+            )
         )
     if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
         raise ValueError(f"workers must be a positive integer or None, got {workers!r}")
@@ -496,13 +501,9 @@ class _Job:
         """
         p = self.pool.name
         try:
-            return rebuild_artifact(
-                self.records[k], p.size, p.family, p.n, p.world, p.kind, {"provenance": self.provenance}, check=self.check
-            )
+            return rebuild_artifact(self.records[k], p.size, p.family, p.n, p.world, p.kind, {"provenance": self.provenance}, check=self.check)
         except ProblemError as exc:
-            raise ProblemError(
-                f"{self.pool.path(self.split)}, line {self.start + k + 1}: {exc}; the shipped pool {self.pool.id} is refused"
-            ) from None
+            raise ProblemError(f"{self.pool.path(self.split)}, line {self.start + k + 1}: {exc}; the shipped pool {self.pool.id} is refused") from None
 
 
 def _chunk_tests(job: _Job, c: int) -> tuple[list[TestArtifact], str | None]:

@@ -162,8 +162,11 @@ def compact_rows(obs: np.ndarray, games: Sequence[TestGame]) -> np.ndarray:
         return obs
     if not bool(np.all((obs == 0) | (obs == 1))):
         fuel = [g.artifact.name for g in games if g.ts.kind == "fuel"][:3]
-        raise ValueError("obs_dtype='uint8' needs an observation of 0/1 entries; this pool's holds other values"
-                         + (f" (the fuel fraction of {', '.join(fuel)})" if fuel else "") + ": leave obs_dtype at its default")
+        raise ValueError(
+            "obs_dtype='uint8' needs an observation of 0/1 entries; this pool's holds other values"
+            + (f" (the fuel fraction of {', '.join(fuel)})" if fuel else "")
+            + ": leave obs_dtype at its default"
+        )
     out: np.ndarray = obs.astype(np.uint8)
     return out
 

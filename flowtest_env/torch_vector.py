@@ -427,9 +427,7 @@ def start_configurations(tables: TorchTables, key: torch.Tensor, episode: torch.
     return tables.initial.index_select(0, draw_tests(key, episode, tables.n_tests))
 
 
-def reset_state(
-    tables: TorchTables, num_envs: int, seed: int | Sequence[int] | torch.Tensor | None = None, episode: torch.Tensor | None = None
-) -> EnvState:
+def reset_state(tables: TorchTables, num_envs: int, seed: int | Sequence[int] | torch.Tensor | None = None, episode: torch.Tensor | None = None) -> EnvState:
     """A fresh state of ``num_envs`` runs. ``seed``: an int gives env ``i`` the key
     ``seed + i`` (as ``SyncVectorEnv`` seeds its envs), a sequence or an int64 tensor one
     key per env, ``None`` fresh entropy. ``episode``: the episode counters (default 0)."""
@@ -459,14 +457,19 @@ def reset_state(
     z = start_configurations(tables, keys, ep, home).contiguous()
     zero = torch.zeros(n, dtype=torch.int64, device=dev)
     return EnvState(
-        z=z, steps=zero, restrictions=zero.clone(), blocked=zero.clone(), key=keys, episode=ep, home=home,
-        done=torch.zeros(n, dtype=torch.bool, device=dev), visited=tables.visited_bits.index_select(0, z),
+        z=z,
+        steps=zero,
+        restrictions=zero.clone(),
+        blocked=zero.clone(),
+        key=keys,
+        episode=ep,
+        home=home,
+        done=torch.zeros(n, dtype=torch.bool, device=dev),
+        visited=tables.visited_bits.index_select(0, z),
     )
 
 
-def restart(
-    tables: TorchTables, state: EnvState, which: torch.Tensor, new_key: torch.Tensor | None = None, reseed: torch.Tensor | None = None
-) -> EnvState:
+def restart(tables: TorchTables, state: EnvState, which: torch.Tensor, new_key: torch.Tensor | None = None, reseed: torch.Tensor | None = None) -> EnvState:
     """Start a new episode in the envs ``which`` (``bool[N]``) and keep the others. The
     episode counter of a restarted env goes one on, or back to 0 with its key from
     ``new_key`` where ``reseed`` (``bool[N]``, default ``which`` when ``new_key`` is given:
@@ -682,8 +685,10 @@ class TorchVectorEnv(gym.vector.VectorEnv):
         per_env = 3 * math.prod(tables.obs_shape) * tables.obs.element_size() + 256  # the spaces' bounds, the buffer, the state
         have = available_memory()
         if have is not None and self.num_envs * per_env > have:
-            raise ValueError(f"num_envs={self.num_envs} would need about {self.num_envs * per_env / 2**30:.1f} GiB of memory "
-                             f"({per_env} bytes per env); {have / 2**30:.1f} GiB are available. Use fewer envs.")
+            raise ValueError(
+                f"num_envs={self.num_envs} would need about {self.num_envs * per_env / 2**30:.1f} GiB of memory "
+                f"({per_env} bytes per env); {have / 2**30:.1f} GiB are available. Use fewer envs."
+            )
         self.tables = tables
         self.device = tables.device
         self.mode: str = mode
@@ -701,9 +706,7 @@ class TorchVectorEnv(gym.vector.VectorEnv):
         self.full_observation_space = single_observation_space
         if self.compact:
             high_c = np.iinfo(np.int64).max
-            single_observation_space = spaces.Box(
-                np.iinfo(np.int64).min, high_c, shape=(1 + tables.n_words,), dtype=np.int64
-            )
+            single_observation_space = spaces.Box(np.iinfo(np.int64).min, high_c, shape=(1 + tables.n_words,), dtype=np.int64)
         self.single_observation_space = single_observation_space
         self.single_action_space = single_action_space or spaces.Discrete(tables.n_actions)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
@@ -733,9 +736,7 @@ class TorchVectorEnv(gym.vector.VectorEnv):
 
     # ------------------------------------------------------------------ API
 
-    def reset(
-        self, *, seed: int | Sequence[int | None] | None = None, options: dict[str, Any] | None = None
-    ) -> tuple[torch.Tensor, dict[str, Any]]:
+    def reset(self, *, seed: int | Sequence[int | None] | None = None, options: dict[str, Any] | None = None) -> tuple[torch.Tensor, dict[str, Any]]:
         """Start a run in every env (or, with ``options={"reset_mask": bool[N]}``, in the
         masked envs only), as the NumPy env: ``seed`` an int gives env ``i`` the key
         ``seed + i`` and episode 0, a list one seed per env (``None``: that env's episode
@@ -914,9 +915,19 @@ def tables_of(env: Any, device: str | torch.device = "cpu", reward_dtype: torch.
     if cfg.memory == "visited":
         where = shared_position_slice([make_encoder(g, cfg.obs_kind, cfg.pad_to) for g in env.games])
     return build_tables(
-        env.pool, env.games, max_steps=env.max_steps, step_cost=cfg.step_cost, restricted_penalty=cfg.restricted_penalty,
-        goal_reward=cfg.goal_reward, violation_penalty=cfg.violation_penalty, memory_slice=where, shaping=cfg.shaping,
-        shaping_gamma=cfg.shaping_gamma, assignment=env.assignment, device=device, reward_dtype=reward_dtype,
+        env.pool,
+        env.games,
+        max_steps=env.max_steps,
+        step_cost=cfg.step_cost,
+        restricted_penalty=cfg.restricted_penalty,
+        goal_reward=cfg.goal_reward,
+        violation_penalty=cfg.violation_penalty,
+        memory_slice=where,
+        shaping=cfg.shaping,
+        shaping_gamma=cfg.shaping_gamma,
+        assignment=env.assignment,
+        device=device,
+        reward_dtype=reward_dtype,
         obs_dtype=env.single_observation_space.dtype,
     )
 
@@ -934,9 +945,18 @@ def preferred_backend(device: str | torch.device) -> str:
     return "numpy" if torch.device(device).type == "cpu" else "torch"
 
 
-def make_vec(env_id: str, num_envs: int, device: str | torch.device = "cpu", *, autoreset_mode: Any = "next_step",
-             compact: bool = False, copy: bool = True, check_actions: bool | None = None,
-             reward_dtype: torch.dtype = torch.float32, **options: Any) -> TorchVectorEnv:
+def make_vec(
+    env_id: str,
+    num_envs: int,
+    device: str | torch.device = "cpu",
+    *,
+    autoreset_mode: Any = "next_step",
+    compact: bool = False,
+    copy: bool = True,
+    check_actions: bool | None = None,
+    reward_dtype: torch.dtype = torch.float32,
+    **options: Any,
+) -> TorchVectorEnv:
     """A :class:`TorchVectorEnv` of a registered FlowTest ID with the NumPy vector env's
     ``options`` (``memory``, ``shaping``, ``max_steps``, ``pool``...), on ``device``; on a
     GPU, e.g. ``make_vec("FlowTest-RandomGrid-v0", 65536, device="cuda", pool="reachability1/5x5", obs_kind="padded")``.
@@ -956,8 +976,14 @@ def make_vec(env_id: str, num_envs: int, device: str | torch.device = "cpu", *, 
     """
     np_env = gym.make_vec(env_id, num_envs=1, vectorization_mode="vector_entry_point", **options)
     return TorchVectorEnv.from_numpy(
-        np_env, num_envs=num_envs, device=device, reward_dtype=reward_dtype, autoreset_mode=autoreset_mode,
-        compact=compact, copy=copy, check_actions=check_actions,
+        np_env,
+        num_envs=num_envs,
+        device=device,
+        reward_dtype=reward_dtype,
+        autoreset_mode=autoreset_mode,
+        compact=compact,
+        copy=copy,
+        check_actions=check_actions,
     )
 
 
@@ -969,8 +995,30 @@ def make_tables(env_id: str, device: str | torch.device = "cpu", reward_dtype: t
 
 
 __all__ = [
-    "AUTORESET_MODES", "EnvState", "StepOutput", "TorchTables", "TorchVectorEnv", "Verdict", "action_mask", "autoreset_name",
-    "build_tables", "compact", "compact_of", "draw_tests", "expand", "make_tables", "make_vec", "mix64", "observation_of",
-    "observe", "outcome_names", "preferred_backend", "reset_state", "restart", "step", "tables_of", "masked_verdict",
+    "AUTORESET_MODES",
+    "EnvState",
+    "StepOutput",
+    "TorchTables",
+    "TorchVectorEnv",
+    "Verdict",
+    "action_mask",
+    "autoreset_name",
+    "build_tables",
+    "compact",
+    "compact_of",
+    "draw_tests",
+    "expand",
+    "make_tables",
+    "make_vec",
+    "mix64",
+    "observation_of",
+    "observe",
+    "outcome_names",
+    "preferred_backend",
+    "reset_state",
+    "restart",
+    "step",
+    "tables_of",
+    "masked_verdict",
     "unpack_visited",
 ]

@@ -161,8 +161,9 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         self.autoreset_mode = autoreset_mode_of(autoreset_mode)
         config = config_from(type(self).__name__, config, options)
         if obs_dtype == "uint8" and config.memory not in ("none", "visited"):
-            raise ValueError(f"obs_dtype='uint8' holds 0/1 entries only; memory={config.memory!r} counts in quarters: "
-                             "use memory='visited' or leave obs_dtype at its default")
+            raise ValueError(
+                f"obs_dtype='uint8' holds 0/1 entries only; memory={config.memory!r} counts in quarters: use memory='visited' or leave obs_dtype at its default"
+            )
         one_of("render_mode", config.render_mode, (None, *self.metadata["render_modes"]))
         with gc_paused():  # many small objects that stay alive: collections would walk them again and again
             self.games: list[TestGame] = pool_games(games, config.setting)
@@ -267,10 +268,10 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         (:func:`flowtest_env.draws.draw_tests`)."""
         if self._chooser is not None:
             tests = np.asarray(self._chooser(envs))
-            if tests.shape != envs.shape or tests.dtype.kind not in "iu" or (
-                    tests.size and (int(tests.min()) < 0 or int(tests.max()) >= len(self.games))):
-                raise ValueError(f"the test chooser must return one test index in [0, {len(self.games)}) for each of the "
-                                 f"{envs.size} envs starting an episode, not {tests!r}")
+            if tests.shape != envs.shape or tests.dtype.kind not in "iu" or (tests.size and (int(tests.min()) < 0 or int(tests.max()) >= len(self.games))):
+                raise ValueError(
+                    f"the test chooser must return one test index in [0, {len(self.games)}) for each of the {envs.size} envs starting an episode, not {tests!r}"
+                )
             return tests.astype(np.int64)
         if len(self.games) == 1:  # what the draw gives (no key to mix)
             return np.zeros(envs.size, dtype=np.int64)
@@ -342,9 +343,7 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
 
     # ------------------------------------------------------------------ API
 
-    def reset(
-        self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
-    ) -> tuple[np.ndarray, dict[str, Any]]:
+    def reset(self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
         """Start a run in every env, or in the envs of ``options["reset_mask"]`` (a
         ``bool[num_envs]`` array with at least one ``True``) only. ``seed``: an int seeds
         env ``i`` with ``seed + i`` (as ``SyncVectorEnv``), a list one seed per env
@@ -413,8 +412,7 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         if mode == AutoresetMode.DISABLED and self._done.any():
             ended = np.flatnonzero(self._done)[:8].tolist()
             raise gym.error.ResetNeeded(
-                f"envs {ended} ended their episodes; with autoreset_mode DISABLED reset them first: "
-                "reset(options={'reset_mask': mask})"
+                f"envs {ended} ended their episodes; with autoreset_mode DISABLED reset them first: reset(options={{'reset_mask': mask}})"
             )
         a = self._check(actions)
         tab, flat = self._tables, self._flat
@@ -466,9 +464,7 @@ class PoolVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         if a.shape != (self.num_envs,):
             raise gym.error.InvalidAction(f"expected {self.num_envs} actions, got an array of shape {a.shape}")
         if a.dtype.kind not in "iu":
-            raise gym.error.InvalidAction(
-                f"actions must be integers of {self.single_action_space}, not {a.dtype} values (booleans and floats are refused)"
-            )
+            raise gym.error.InvalidAction(f"actions must be integers of {self.single_action_space}, not {a.dtype} values (booleans and floats are refused)")
         # one pass: a negative action, seen as unsigned, is as out of range as a large one
         if a.size and int(a.view(a.dtype.str.replace("i", "u")).max()) >= self.pool.n_actions:
             bad = int(np.flatnonzero((a < 0) | (a >= self.pool.n_actions))[0])
@@ -630,8 +626,7 @@ class FlowTestVectorEnv(PoolVectorEnv):
         config = config_from(type(self).__name__, config, options)
         positive_int("num_envs", num_envs)
         game = game_for(test, config.setting)
-        super().__init__(num_envs, [game], autoreset_mode=autoreset_mode, config=config.with_max_steps(default_max_steps(game)), obs_dtype=obs_dtype,
-                         copy=copy)
+        super().__init__(num_envs, [game], autoreset_mode=autoreset_mode, config=config.with_max_steps(default_max_steps(game)), obs_dtype=obs_dtype, copy=copy)
         self.problem = game.artifact.name
 
 
@@ -665,8 +660,7 @@ class RandomGridVectorEnv(PoolVectorEnv):
         size, family, n, seeds, kind, world = random_grid_pool(size, family, n, seeds, kind, pool, split, count, world)
         tests = random_grid_tests(pool, split, count, size, family, n, seeds, kind, world)
         games = [TestGame(a, config.setting) for a in tests]
-        super().__init__(num_envs, games, autoreset_mode=autoreset_mode, config=config.with_max_steps(4 * size * size), obs_dtype=obs_dtype,
-                         copy=copy)
+        super().__init__(num_envs, games, autoreset_mode=autoreset_mode, config=config.with_max_steps(4 * size * size), obs_dtype=obs_dtype, copy=copy)
         self.problem = f"random-{size}x{size}-{family}{n}" + ("" if world == "empty" else f"-{world}")
 
 
@@ -736,14 +730,11 @@ def shared_shown_entries(encoders: list[Encoder]) -> np.ndarray | slice:
         lay = enc.layout()
         plane = int(np.prod(lay.grid)) if lay.kind == "grid" and lay.grid is not None else 1
         idx = [
-            np.arange(seg.start * plane, seg.stop * plane)
-            for seg in lay.segments
-            if seg.name.startswith(("wall_", "door_")) or seg.name == "shown_restriction"
+            np.arange(seg.start * plane, seg.stop * plane) for seg in lay.segments if seg.name.startswith(("wall_", "door_")) or seg.name == "shown_restriction"
         ]
         found.add(tuple(np.concatenate(idx).tolist()) if idx else ())
     if len(found) != 1:
-        raise ValueError("the accumulative setting needs the pool's tests to show restrictions at the same entries; "
-                         "these differ (use obs_kind='padded')")
+        raise ValueError("the accumulative setting needs the pool's tests to show restrictions at the same entries; these differ (use obs_kind='padded')")
     entries = np.array(found.pop(), dtype=np.int64)
     if entries.size and np.array_equal(entries, np.arange(entries[0], entries[0] + entries.size)):
         return slice(int(entries[0]), int(entries[0]) + entries.size)  # one block (the usual case): views, no copies
@@ -762,9 +753,7 @@ class VectorActionMaskObservation(gym.vector.VectorWrapper):
         if not isinstance(env.single_action_space, spaces.Discrete):
             raise TypeError(f"VectorActionMaskObservation needs a Discrete action space, not {env.single_action_space}")
         n = int(env.single_action_space.n)
-        self.single_observation_space = spaces.Dict(
-            {"observation": env.single_observation_space, "action_mask": spaces.Box(0, 1, shape=(n,), dtype=np.int8)}
-        )
+        self.single_observation_space = spaces.Dict({"observation": env.single_observation_space, "action_mask": spaces.Box(0, 1, shape=(n,), dtype=np.int8)})
         self.observation_space = batch_space(self.single_observation_space, env.num_envs)
         self._last: np.ndarray | None = None
 
@@ -774,9 +763,7 @@ class VectorActionMaskObservation(gym.vector.VectorWrapper):
         mode: AutoresetMode = self.env.autoreset_mode  # type: ignore[attr-defined]
         return mode
 
-    def reset(
-        self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
-    ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    def reset(self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         # gymnasium's annotations type VectorEnv.reset's seed as int | None; its vector envs and ours take a list too
         obs, infos = self.env.reset(seed=seed, options=options)  # type: ignore[arg-type]
         return {"observation": obs, "action_mask": self._mask(infos)}, infos
@@ -802,6 +789,11 @@ class VectorActionMaskObservation(gym.vector.VectorWrapper):
 
 
 __all__ = [
-    "PoolVectorEnv", "FlowTestVectorEnv", "RandomGridVectorEnv", "VectorActionMaskObservation", "autoreset_mode_of", "batch_bytes",
+    "PoolVectorEnv",
+    "FlowTestVectorEnv",
+    "RandomGridVectorEnv",
+    "VectorActionMaskObservation",
+    "autoreset_mode_of",
+    "batch_bytes",
     "check_batch_memory",
 ]

@@ -40,9 +40,7 @@ def _flowtest_env(env: gym.Env[np.ndarray, np.int64]) -> PlaysTestGame:
     return inner
 
 
-class ActionMaskObservation(
-    gym.Wrapper[dict[str, np.ndarray], np.int64, np.ndarray, np.int64], gym.utils.RecordConstructorArgs
-):
+class ActionMaskObservation(gym.Wrapper[dict[str, np.ndarray], np.int64, np.ndarray, np.int64], gym.utils.RecordConstructorArgs):
     """Put the legal-action mask into the observation.
 
     The observation becomes a ``Dict`` with ``"observation"`` (the wrapped env's
@@ -80,8 +78,6 @@ class ActionMaskObservation(
 
 
 # ---------------------------------------------------------------- the SUT's memory
-
-
 
 
 def encoder_of(env: object) -> Encoder:

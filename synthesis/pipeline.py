@@ -264,7 +264,10 @@ def found_reserve(time_limit: float | None) -> float:
 
 
 def capped_timeout(
-    milp: MilpOptions, exc: TimeoutError, bounds: dict[str, int], products: Products | None = None,
+    milp: MilpOptions,
+    exc: TimeoutError,
+    bounds: dict[str, int],
+    products: Products | None = None,
     deadline: float | None = None,
 ) -> TimeoutError:
     """A time limit that ended a capped solve before any test: ``exc`` with what is known of
@@ -399,7 +402,7 @@ def synthesize_agent_test(
             products,
             agent,
             milp,
-        problem.static_moves,
+            problem.static_moves,
             setting=options.setting or problem.extras.get("setting", "instantaneous"),
             bound=bound,
             prefilter=prefilter,
@@ -413,6 +416,14 @@ def synthesize_agent_test(
     check_caps_held(problem, outcome.strategy, milp.caps)
     timings = outcome.solution.timings
     return SynthesizedTest(
-        problem, spec, products, outcome.routing, outcome.strategy, outcome.checks, graph_seconds,
-        agent=outcome.solution, extra_stats={"agent_seconds": dict(timings)}, caps=milp.caps,
+        problem,
+        spec,
+        products,
+        outcome.routing,
+        outcome.strategy,
+        outcome.checks,
+        graph_seconds,
+        agent=outcome.solution,
+        extra_stats={"agent_seconds": dict(timings)},
+        caps=milp.caps,
     )

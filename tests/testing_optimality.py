@@ -54,6 +54,7 @@ def exact(backend: str) -> SynthesisOptions:
     """:data:`METHOD_EXACT` on one solver backend."""
     return replace(METHOD_EXACT, backend=backend)
 
+
 # ----------------------------------------------------------------------- plain views
 
 
@@ -317,9 +318,7 @@ def feasible_static(v: View, blocked: frozenset[tuple[int, int]]) -> bool:
     return all(sys_reaches_goal(v, w, blocked) for entries in v.entries.values() for w in entries)
 
 
-def static_optimum(
-    v: View, ts: TransitionSystem, bidirectional: bool, require_feasible: bool = False
-) -> tuple[Optimum | None, int]:
+def static_optimum(v: View, ts: TransitionSystem, bidirectional: bool, require_feasible: bool = False) -> tuple[Optimum | None, int]:
     """Enumerate every wall set; return the optimum (``None`` if no valid set) and the count of sets.
 
     Valid: no bypass and max flow at least 1 (method.md §5: statically, feasibility is
@@ -363,11 +362,7 @@ def static_optimum(
 
 def outside_ei_restrictable(v: View) -> list[int]:
     """Edges of G outside ``E(I)`` whose move the harness may restrict."""
-    return [
-        e
-        for e in range(v.m)
-        if v.src[e] not in v.inter and v.dst[e] not in v.inter and v.restrictable_move[v.move[e]]
-    ]
+    return [e for e in range(v.m) if v.src[e] not in v.inter and v.dst[e] not in v.inter and v.restrictable_move[v.move[e]]]
 
 
 def h_reachable(v: View) -> set[int]:
@@ -680,5 +675,3 @@ def assert_proven_optimal(res: SynthesizedTest) -> None:
     """A solve that ran to the end reports ``optimal`` with gap 0."""
     assert res.routing.status == "optimal", res.routing.status
     assert res.routing.mip_gap == 0.0
-
-

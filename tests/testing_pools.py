@@ -22,9 +22,7 @@ def empty_data(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     return folder
 
 
-def copy_split(
-    pool: sp.StandardPool, split: str, data: Path, count: int, edit: Callable[[list[dict[str, Any]]], Any] | None = None
-) -> Path:
+def copy_split(pool: sp.StandardPool, split: str, data: Path, count: int, edit: Callable[[list[dict[str, Any]]], Any] | None = None) -> Path:
     """The first ``count`` shipped records of a split, copied (``edit(records)`` first) into ``data``."""
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(sp, "DATA_DIR", REAL_DATA)

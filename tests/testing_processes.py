@@ -15,8 +15,7 @@ def start_until(argv: list[str], marker: str, sig: signal.Signals = signal.SIGIN
     """Start ``argv`` (stdout and stderr piped, ``sig`` at its default action even if our
     caller ignores it) and read its standard error until a line holds ``marker``: the
     moment a test sends it a signal. Fails the test if the process ends first."""
-    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            preexec_fn=lambda: signal.signal(sig, signal.SIG_DFL))
+    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=lambda: signal.signal(sig, signal.SIG_DFL))
     assert proc.stderr is not None
     seen = []
     for line in proc.stderr:

@@ -94,8 +94,7 @@ def check_args(a: NativeArgs) -> None:
         if int(getattr(a, name)) < 1:
             raise ValueError(f"{name} must be at least 1, not {getattr(a, name)}")
     if a.algo == "recurrent-ppo" and a.num_envs % a.num_minibatches:
-        raise ValueError(f"recurrent-ppo splits envs into minibatches: num_envs {a.num_envs} must be a multiple of "
-                         f"num_minibatches {a.num_minibatches}")
+        raise ValueError(f"recurrent-ppo splits envs into minibatches: num_envs {a.num_envs} must be a multiple of num_minibatches {a.num_minibatches}")
     if a.algo == "ppo" and a.batch_size() < a.num_minibatches:
         raise ValueError("num_envs x num_steps must be at least num_minibatches")
     for name in ("learning_rate", "clip_coef", "max_grad_norm"):
@@ -147,7 +146,6 @@ def resolve_device(name: str) -> torch.device:
     if dev.type not in ("cpu", "cuda"):
         raise ValueError(f"device {name!r}: expected cpu, cuda or auto")
     return dev
-
 
 
 __all__ = ["ALGOS", "ENV_BACKENDS", "INPUTS", "LEVEL_SAMPLING", "PLR_SCORES", "NativeArgs", "check_args", "resolve_device"]

@@ -50,7 +50,6 @@ def minibatch_indices(valid: torch.Tensor, num_minibatches: int, generator: torc
     return [chunk for chunk in torch.tensor_split(perm, num_minibatches) if chunk.numel()]
 
 
-
 @dataclass(frozen=True)
 class Minibatch:
     """The samples of one gradient step: a recurrent network's ``[T, n, ...]`` env
@@ -71,30 +70,59 @@ class Minibatch:
     all_valid: bool = False
 
 
-def step_minibatches(r: Rollout, adv: torch.Tensor, returns: torch.Tensor, num_minibatches: int,
-                     generator: torch.Generator | None = None) -> Iterator[Minibatch]:
+def step_minibatches(
+    r: Rollout, adv: torch.Tensor, returns: torch.Tensor, num_minibatches: int, generator: torch.Generator | None = None
+) -> Iterator[Minibatch]:
     """The valid steps of ``r`` shuffled into ``num_minibatches`` minibatches
     (:func:`minibatch_indices`), for a feed-forward network."""
     T, N = r.rewards.shape
-    flat = {k: v.reshape(T * N, *v.shape[2:]) for k, v in
-            (("obs", r.obs), ("masks", r.masks), ("actions", r.actions), ("logprobs", r.logprobs),
-             ("adv", adv), ("returns", returns), ("starts", r.starts))}
+    flat = {
+        k: v.reshape(T * N, *v.shape[2:])
+        for k, v in (
+            ("obs", r.obs),
+            ("masks", r.masks),
+            ("actions", r.actions),
+            ("logprobs", r.logprobs),
+            ("adv", adv),
+            ("returns", returns),
+            ("starts", r.starts),
+        )
+    }
     for mb in minibatch_indices(r.valid, num_minibatches, generator):
         x = flat["obs"][mb]
-        yield Minibatch(x, flat["masks"][mb], flat["actions"][mb], flat["logprobs"][mb], flat["adv"][mb], flat["returns"][mb],
-                        torch.ones(mb.numel(), dtype=torch.bool, device=x.device), r.h0.new_zeros((mb.numel(), r.h0.shape[1])),
-                        flat["starts"][mb], all_valid=True)
+        yield Minibatch(
+            x,
+            flat["masks"][mb],
+            flat["actions"][mb],
+            flat["logprobs"][mb],
+            flat["adv"][mb],
+            flat["returns"][mb],
+            torch.ones(mb.numel(), dtype=torch.bool, device=x.device),
+            r.h0.new_zeros((mb.numel(), r.h0.shape[1])),
+            flat["starts"][mb],
+            all_valid=True,
+        )
 
 
-def env_minibatches(r: Rollout, adv: torch.Tensor, returns: torch.Tensor, num_minibatches: int,
-                    generator: torch.Generator | None = None) -> Iterator[Minibatch]:
+def env_minibatches(
+    r: Rollout, adv: torch.Tensor, returns: torch.Tensor, num_minibatches: int, generator: torch.Generator | None = None
+) -> Iterator[Minibatch]:
     """The envs of ``r`` shuffled into ``num_minibatches`` groups, each minibatch their
     whole sequences (autoreset steps weighed 0), for a recurrent network."""
     N = r.rewards.shape[1]
     perm = torch.randperm(N, generator=generator).to(r.obs.device)
     for envs in torch.tensor_split(perm, num_minibatches):
-        yield Minibatch(r.obs[:, envs], r.masks[:, envs], r.actions[:, envs], r.logprobs[:, envs], adv[:, envs],
-                        returns[:, envs], r.valid[:, envs], r.h0[envs], r.starts[:, envs])
+        yield Minibatch(
+            r.obs[:, envs],
+            r.masks[:, envs],
+            r.actions[:, envs],
+            r.logprobs[:, envs],
+            adv[:, envs],
+            returns[:, envs],
+            r.valid[:, envs],
+            r.h0[envs],
+            r.starts[:, envs],
+        )
 
 
 __all__ = ["Minibatch", "Rollout", "env_minibatches", "minibatch_indices", "step_minibatches"]

@@ -30,22 +30,24 @@ from .evaluation import BatchActor, GreedyActor
 from .networks import NETWORK_KINDS, make_agent, network_settings, network_shapes
 
 
-def checkpoint_settings(args: NativeArgs, env: Any, obs_size: int, n_actions: int, where: slice | None,
-                        steps: int) -> dict[str, Any]:
+def checkpoint_settings(args: NativeArgs, env: Any, obs_size: int, n_actions: int, where: slice | None, steps: int) -> dict[str, Any]:
     """The plain settings saved next to the tensors (:mod:`agents.checkpoint`)."""
     import flowtest_env
 
     training = asdict(args)
     training["hidden"] = list(args.hidden)
     return {
-        "algo": args.algo, "network": network_settings(args),
+        "algo": args.algo,
+        "network": network_settings(args),
         "obs": {"obs_kind": args.obs_kind, "pad_to": 8, "size": obs_size},
-        "memory": args.memory, "position": [where.start, where.stop] if where else None,
-        "obs_size": obs_size + (where.stop - where.start if where else 0), "n_actions": n_actions,
+        "memory": args.memory,
+        "position": [where.start, where.stop] if where else None,
+        "obs_size": obs_size + (where.stop - where.start if where else 0),
+        "n_actions": n_actions,
         "env": {"id": args.env_id, "options": dict(args.env_kwargs), "problem": str(getattr(env, "problem", ""))},
-        "training": training, "steps": steps,
-        "versions": {"flowtest": getattr(flowtest_env, "__version__", _flowtest_version()), "torch": torch.__version__,
-                     "numpy": np.__version__},
+        "training": training,
+        "steps": steps,
+        "versions": {"flowtest": getattr(flowtest_env, "__version__", _flowtest_version()), "torch": torch.__version__, "numpy": np.__version__},
     }
 
 
@@ -164,13 +166,15 @@ def read_settings(settings: Mapping[str, Any], budget: int = MAX_TENSOR_BYTES) -
     if env_size is not None:
         width = position.stop - position.start if position is not None else 0
         if obs_size != env_size + width:
-            raise _refuse("obs_size", f"{obs_size}, but the observation (obs.size {env_size}) and the memory ({width}) make "
-                                      f"{env_size + width}")
+            raise _refuse("obs_size", f"{obs_size}, but the observation (obs.size {env_size}) and the memory ({width}) make {env_size + width}")
     out = NativeSettings(kind, widths, gru_hidden, obs_size, n_actions, obs_kind, pad_to, memory, position)
     nbytes = 4 * sum(math.prod(shape) for shape in out.shapes().values())
     if nbytes > budget:
-        raise _refuse("network", f"a {kind} of widths {list(widths)} on {obs_size} inputs and {n_actions} actions holds "
-                                 f"{nbytes:,} bytes of tensors, more than the budget of {budget:,}")
+        raise _refuse(
+            "network",
+            f"a {kind} of widths {list(widths)} on {obs_size} inputs and {n_actions} actions holds "
+            f"{nbytes:,} bytes of tensors, more than the budget of {budget:,}",
+        )
     return out
 
 
@@ -241,8 +245,7 @@ class NativeModel:
         sampled from its masked policy): :class:`BatchActor`."""
         return BatchActor(self.agent, self.position, deterministic, memory=self.flowtest_memory)
 
-    def predict(self, obs: Any, state: Any = None, episode_start: Any = None, deterministic: bool = True,
-                action_masks: Any = None) -> tuple[np.ndarray, Any]:
+    def predict(self, obs: Any, state: Any = None, episode_start: Any = None, deterministic: bool = True, action_masks: Any = None) -> tuple[np.ndarray, Any]:
         """The most likely legal action for one observation or a batch (``state``: the
         GRU state returned by the previous call; ``episode_start``: which rows begin an
         episode). Sampling is not offered: FlowTest plays its policies greedily."""
@@ -277,5 +280,15 @@ def load_native(path: str | Path) -> NativeModel:
         raise CheckpointError(f"{str(path)!r} is not a valid FlowTest policy checkpoint: {exc}", exc.field) from None
 
 
-__all__ = ["MAX_LAYERS", "MAX_PAD_TO", "NativeModel", "NativeSettings", "agent_from_checkpoint", "check_settings", "checkpoint_settings",
-           "load_native", "read_settings", "save_policy"]
+__all__ = [
+    "MAX_LAYERS",
+    "MAX_PAD_TO",
+    "NativeModel",
+    "NativeSettings",
+    "agent_from_checkpoint",
+    "check_settings",
+    "checkpoint_settings",
+    "load_native",
+    "read_settings",
+    "save_policy",
+]

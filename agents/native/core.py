@@ -57,8 +57,14 @@ class EpisodeStats:
         if not rows:
             return {}
         r = np.array(rows, dtype=np.float64)
-        return {"episodes": float(len(rows)), "return": float(r[:, 0].mean()), "met": float(r[:, 1].mean()),
-                "realized": float(r[:, 2].mean()), "restrictions": float(r[:, 3].mean()), "length": float(r[:, 4].mean())}
+        return {
+            "episodes": float(len(rows)),
+            "return": float(r[:, 0].mean()),
+            "met": float(r[:, 1].mean()),
+            "realized": float(r[:, 2].mean()),
+            "restrictions": float(r[:, 3].mean()),
+            "length": float(r[:, 4].mean()),
+        }
 
 
 class Runner:
@@ -69,9 +75,17 @@ class Runner:
     ``columns``: the entries of the observation (memory included) the agent reads
     (:mod:`agents.native.inputs`; ``None``: all)."""
 
-    def __init__(self, env: Any, agent: Agent, where: slice | None, device: torch.device, seed: int,
-                 levels: Callable[[], np.ndarray] | None = None, memory: str = "visited",
-                 columns: torch.Tensor | None = None) -> None:
+    def __init__(
+        self,
+        env: Any,
+        agent: Agent,
+        where: slice | None,
+        device: torch.device,
+        seed: int,
+        levels: Callable[[], np.ndarray] | None = None,
+        memory: str = "visited",
+        columns: torch.Tensor | None = None,
+    ) -> None:
         self.env, self.agent, self.device = env, agent, device
         self.levels = levels  # the test each env plays now (recorded per step when given)
         self.n = int(env.num_envs)
@@ -125,8 +139,7 @@ class Runner:
             self.mask = self._tensor(infos["action_mask"]).bool()
         with torch.no_grad():
             next_value = self.agent.value(self.x, self.h, self.start)
-        return Rollout(obs, masks, actions, logprobs, values, rewards, terminated, truncated, valid, starts, h0, next_value,
-                       levels)
+        return Rollout(obs, masks, actions, logprobs, values, rewards, terminated, truncated, valid, starts, h0, next_value, levels)
 
     def _episode_ends(self, r: torch.Tensor, done: torch.Tensor, infos: dict[str, Any]) -> None:
         self.ret += r
@@ -177,8 +190,7 @@ def advantages(r: Rollout, gamma: float, lam: float) -> tuple[torch.Tensor, torc
     return adv, adv + r.values
 
 
-def ppo_loss(args: NativeArgs, mb: Minibatch, logits: torch.Tensor, values: torch.Tensor,
-             want_info: bool = True) -> tuple[torch.Tensor, dict[str, float]]:
+def ppo_loss(args: NativeArgs, mb: Minibatch, logits: torch.Tensor, values: torch.Tensor, want_info: bool = True) -> tuple[torch.Tensor, dict[str, float]]:
     """The clipped PPO loss over the samples of ``mb`` (``logits`` and ``values``: the
     network's on them now), each weighted by ``mb.weight``; the advantages normalized
     over the weighted samples. The loss terms for the log when ``want_info``."""
@@ -201,12 +213,12 @@ def ppo_loss(args: NativeArgs, mb: Minibatch, logits: torch.Tensor, values: torc
         return loss, {}
     with torch.no_grad():
         kl = (((ratio - 1) - torch.log(ratio.clamp(min=1e-12))) * w).sum() / n
-    return loss, {"policy_loss": float(pg_loss.detach()), "value_loss": float(v_loss.detach()), "entropy": float(ent.detach()),
-                  "approx_kl": float(kl)}
+    return loss, {"policy_loss": float(pg_loss.detach()), "value_loss": float(v_loss.detach()), "entropy": float(ent.detach()), "approx_kl": float(kl)}
 
 
-def ppo_update(agent: Agent, optimizer: torch.optim.Optimizer | FlatAdam, args: NativeArgs, r: Rollout,
-               generator: torch.Generator | None = None) -> dict[str, float]:
+def ppo_update(
+    agent: Agent, optimizer: torch.optim.Optimizer | FlatAdam, args: NativeArgs, r: Rollout, generator: torch.Generator | None = None
+) -> dict[str, float]:
     """``update_epochs`` passes of minibatch gradient steps over the rollout's valid steps
     (feed-forward: shuffled steps; recurrent: shuffled envs, each replayed from the
     rollout's start). Returns the last minibatch's loss terms, for the log.
@@ -248,5 +260,19 @@ def gradient_step(agent: Agent, optimizer: torch.optim.Optimizer | FlatAdam, los
     optimizer.step()
 
 
-__all__ = ["MET_CODE", "EpisodeStats", "Minibatch", "Rollout", "Runner", "advantages", "collect_rollout", "env_minibatches",
-           "gradient_step", "minibatch_indices", "ppo_loss", "ppo_update", "sample", "step_minibatches"]
+__all__ = [
+    "MET_CODE",
+    "EpisodeStats",
+    "Minibatch",
+    "Rollout",
+    "Runner",
+    "advantages",
+    "collect_rollout",
+    "env_minibatches",
+    "gradient_step",
+    "minibatch_indices",
+    "ppo_loss",
+    "ppo_update",
+    "sample",
+    "step_minibatches",
+]

@@ -42,8 +42,7 @@ def make_vec_env(args: NativeArgs) -> tuple[Any, Any, bool]:
     with_memory: dict[str, Any] = {**kwargs, "memory": args.memory} if env_memory else kwargs
     try:
         try:
-            np_env = gym.make_vec(args.env_id, num_envs=args.num_envs, vectorization_mode="vector_entry_point",
-                                  **with_memory)
+            np_env = gym.make_vec(args.env_id, num_envs=args.num_envs, vectorization_mode="vector_entry_point", **with_memory)
         except TypeError:  # a vector env without the memory option: the trainer keeps it
             env_memory = False
             np_env = gym.make_vec(args.env_id, num_envs=args.num_envs, vectorization_mode="vector_entry_point", **kwargs)

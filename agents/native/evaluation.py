@@ -28,8 +28,9 @@ BatchAct = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
 starts) -> actions``; it keeps its own recurrent state."""
 
 
-def batch_verdicts(act: BatchAct, games: Sequence[Any], budgets: Sequence[int], where: slice | None,
-                   obs_kind: str = "flat", seed: int = 0, memory: str = "visited") -> dict[str, np.ndarray]:
+def batch_verdicts(
+    act: BatchAct, games: Sequence[Any], budgets: Sequence[int], where: slice | None, obs_kind: str = "flat", seed: int = 0, memory: str = "visited"
+) -> dict[str, np.ndarray]:
     """Let a deterministic policy play every test of ``games`` once, all at once in one
     :class:`~flowtest_env.vector.PoolVectorEnv` (env ``i`` plays test ``i``), and return
     the verdict arrays: ``system_objective`` (``"met"``, ``"violated"``, ``"open"``),
@@ -107,8 +108,7 @@ class BatchActor:
                                count=1000, runs=8)
     """
 
-    def __init__(self, agent: Agent, where: slice | None, deterministic: bool = True, device: str | torch.device = "cpu",
-                 memory: str = "visited") -> None:
+    def __init__(self, agent: Agent, where: slice | None, deterministic: bool = True, device: str | torch.device = "cpu", memory: str = "visited") -> None:
         self.agent, self.where, self.deterministic, self.memory_kind = agent, where, deterministic, memory
         self.device = torch.device(device)
         self.memory = self._new_memory()
@@ -146,17 +146,16 @@ class BatchActor:
             return out
 
 
-def met_rate(agent: Agent, games: Sequence[Any], budgets: Sequence[int], where: slice | None, obs_kind: str,
-             device: torch.device, memory: str = "visited") -> dict[str, float]:
+def met_rate(
+    agent: Agent, games: Sequence[Any], budgets: Sequence[int], where: slice | None, obs_kind: str, device: torch.device, memory: str = "visited"
+) -> dict[str, float]:
     """Greedy play of every test once: the share met and realized (of all tests), mean restrictions."""
     was = agent.training
     agent.eval()
     v = batch_verdicts(GreedyActor(agent, device), games, budgets, where, obs_kind, memory=memory)
     agent.train(was)
     met = v["system_objective"] == "met"
-    return {"met": float(met.mean()), "realized": float((met & v["test_objective_realized"]).mean()),
-            "restrictions": float(v["restrictions"].mean())}
-
+    return {"met": float(met.mean()), "realized": float((met & v["test_objective_realized"]).mean()), "restrictions": float(v["restrictions"].mean())}
 
 
 __all__ = ["BatchAct", "BatchActor", "GreedyActor", "WithVisited", "batch_verdicts", "met_rate"]

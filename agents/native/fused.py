@@ -61,16 +61,19 @@ class FusedMLP:
         names = {head: agent.linear_names(head) for head in ("actor", "critic")}
         weights = [names["actor"][0][0], names["critic"][0][0]]
         biases = [names["actor"][0][1], names["critic"][0][1]]
-        self.first: Layer = (opt.view(weights, (2 * h, d)), opt.view(biases, (2 * h,)),
-                             opt.view(weights, (2 * h, d), grad=True), opt.view(biases, (2 * h,), grad=True))
+        self.first: Layer = (
+            opt.view(weights, (2 * h, d)),
+            opt.view(biases, (2 * h,)),
+            opt.view(weights, (2 * h, d), grad=True),
+            opt.view(biases, (2 * h,), grad=True),
+        )
         params = dict(agent.named_parameters())
         self.heads: dict[str, list[Layer]] = {}
         for head, layers in names.items():
             self.heads[head] = []
             for wname, bname in layers[1:]:
                 wt, bs = params[wname], params[bname]
-                self.heads[head].append((wt, bs, opt.view([wname], tuple(wt.shape), grad=True),
-                                         opt.view([bname], tuple(bs.shape), grad=True)))
+                self.heads[head].append((wt, bs, opt.view([wname], tuple(wt.shape), grad=True), opt.view([bname], tuple(bs.shape), grad=True)))
 
     def _forward(self, x: torch.Tensor) -> tuple[torch.Tensor, dict[str, list[torch.Tensor]], dict[str, torch.Tensor]]:
         """The first layers' output, each head's activations (the input of each later layer) and outputs."""

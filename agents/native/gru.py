@@ -50,9 +50,18 @@ class GRUAgent(Agent):
             shapes[f"encoder.{2 * i}.weight"], shapes[f"encoder.{2 * i}.bias"] = (w, n_in), (w,)
             n_in = w
         H = gru_hidden
-        shapes.update({"gru.weight_ih": (3 * H, n_in), "gru.weight_hh": (3 * H, H), "gru.bias_ih": (3 * H,), "gru.bias_hh": (3 * H,),
-                       "actor_head.weight": (n_actions, H), "actor_head.bias": (n_actions,), "critic_head.weight": (1, H),
-                       "critic_head.bias": (1,)})
+        shapes.update(
+            {
+                "gru.weight_ih": (3 * H, n_in),
+                "gru.weight_hh": (3 * H, H),
+                "gru.bias_ih": (3 * H,),
+                "gru.bias_hh": (3 * H,),
+                "actor_head.weight": (n_actions, H),
+                "actor_head.bias": (n_actions,),
+                "critic_head.weight": (1, H),
+                "critic_head.bias": (1,),
+            }
+        )
         return shapes
 
     def settings(self) -> dict[str, Any]:

@@ -39,8 +39,7 @@ class Logs:
             raise ValueError(f"log folder {str(self.dir)!r} is a file, not a folder")
         csv_path = self.dir / "progress.csv"
         if csv_path.exists() or csv_path.is_symlink():
-            raise ValueError(f"log folder {str(self.dir)!r} already holds the progress.csv of an earlier run; "
-                             "choose a new folder")
+            raise ValueError(f"log folder {str(self.dir)!r} already holds the progress.csv of an earlier run; choose a new folder")
         try:
             self.dir.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
@@ -49,8 +48,7 @@ class Logs:
             from torch.utils.tensorboard import SummaryWriter
         except ImportError:
             if not quiet:
-                sys.stderr.write("flowtest: TensorBoard logs need the tensorboard package (pip install 'flowtest[rl]'); "
-                                 "writing progress.csv only\n")
+                sys.stderr.write("flowtest: TensorBoard logs need the tensorboard package (pip install 'flowtest[rl]'); writing progress.csv only\n")
             return
         self.writer = SummaryWriter(str(self.dir))
 

@@ -54,8 +54,7 @@ def network_shapes(kind: str, obs_size: int, n_actions: int, hidden: Sequence[in
 
 def network_settings(args: NativeArgs) -> dict[str, Any]:
     """What rebuilds the network: its kind and widths."""
-    return {"kind": "gru" if args.algo == "recurrent-ppo" else "mlp", "hidden": [int(w) for w in args.hidden],
-            "gru_hidden": int(args.gru_hidden)}
+    return {"kind": "gru" if args.algo == "recurrent-ppo" else "mlp", "hidden": [int(w) for w in args.hidden], "gru_hidden": int(args.gru_hidden)}
 
 
 __all__ = ["NETWORK_KINDS", "make_agent", "network_settings", "network_shapes"]

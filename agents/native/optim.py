@@ -32,8 +32,7 @@ class FlatAdam:
     buffer (a network can put the layers it multiplies together next to each other:
     :meth:`view` then returns them as one matrix)."""
 
-    def __init__(self, named_params: Iterable[tuple[str, nn.Parameter]], lr: float, eps: float = 1e-8,
-                 betas: tuple[float, float] = (0.9, 0.999)) -> None:
+    def __init__(self, named_params: Iterable[tuple[str, nn.Parameter]], lr: float, eps: float = 1e-8, betas: tuple[float, float] = (0.9, 0.999)) -> None:
         params = list(named_params)
         if not params:
             raise ValueError("FlatAdam needs parameters")
@@ -45,9 +44,9 @@ class FlatAdam:
         at = 0
         for name, p in params:
             n = p.numel()
-            self.flat[at:at + n].copy_(p.detach().reshape(-1))
-            p.data = self.flat[at:at + n].view_as(p)
-            p.grad = self.grad[at:at + n].view_as(p)
+            self.flat[at : at + n].copy_(p.detach().reshape(-1))
+            p.data = self.flat[at : at + n].view_as(p)
+            p.grad = self.grad[at : at + n].view_as(p)
             self.offsets[name] = (at, n)
             at += n
         self.params = [p for _, p in params]
@@ -96,7 +95,7 @@ class FlatAdam:
         lr = self.param_groups[0]["lr"]
         self.m.lerp_(self.grad, 1 - b1)
         self.v.mul_(b2).addcmul_(self.grad, self.grad, value=1 - b2)
-        bc1, bc2 = 1 - b1 ** self.steps, 1 - b2 ** self.steps
+        bc1, bc2 = 1 - b1**self.steps, 1 - b2**self.steps
         denom = (self.v.sqrt() / math.sqrt(bc2)).add_(self.eps)
         self.flat.addcdiv_(self.m, denom, value=-lr / bc1)
 

@@ -43,8 +43,7 @@ class LevelSampler:
     levels.
     """
 
-    def __init__(self, n_levels: int, score: str = "pvl", temperature: float = 0.1, staleness: float = 0.1,
-                 seed: int = 0) -> None:
+    def __init__(self, n_levels: int, score: str = "pvl", temperature: float = 0.1, staleness: float = 0.1, seed: int = 0) -> None:
         if n_levels < 1:
             raise ValueError("level sampling needs at least one level")
         if score not in PLR_SCORES:
@@ -115,8 +114,11 @@ class LevelSampler:
     def stats(self) -> dict[str, float]:
         """For the log: levels seen, the share of replays, the mean score of the seen levels."""
         seen = int(self.seen.sum())
-        return {"levels_seen": float(seen), "replay_share": self.replays / max(1, self.episodes),
-                "mean_score": float(self.scores[self.seen].mean()) if seen else 0.0}
+        return {
+            "levels_seen": float(seen),
+            "replay_share": self.replays / max(1, self.episodes),
+            "mean_score": float(self.scores[self.seen].mean()) if seen else 0.0,
+        }
 
 
 def level_sampler(args: NativeArgs, env: Any, n_levels: int) -> LevelSampler | None:

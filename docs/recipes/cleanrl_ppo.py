@@ -116,8 +116,7 @@ def env_options(args: Args) -> dict[str, Any]:
 def make_env(args: Args) -> gym.vector.VectorEnv:
     """Change 1: FlowTest's batched vector env by its id and options (``SAME_STEP`` autoreset)."""
     env_id = "FlowTest-RandomGrid-v0" if args.pool else args.env_id
-    envs = gym.make_vec(env_id, num_envs=args.num_envs, vectorization_mode="vector_entry_point", autoreset_mode="SAME_STEP",
-                        **env_options(args))
+    envs = gym.make_vec(env_id, num_envs=args.num_envs, vectorization_mode="vector_entry_point", autoreset_mode="SAME_STEP", **env_options(args))
     return gym.wrappers.vector.RecordEpisodeStatistics(envs)
 
 
@@ -131,11 +130,17 @@ class Agent(nn.Module):
     def __init__(self, obs_size: int, n_actions: int) -> None:
         super().__init__()
         self.critic = nn.Sequential(
-            layer_init(nn.Linear(obs_size, 64)), nn.Tanh(), layer_init(nn.Linear(64, 64)), nn.Tanh(),
+            layer_init(nn.Linear(obs_size, 64)),
+            nn.Tanh(),
+            layer_init(nn.Linear(64, 64)),
+            nn.Tanh(),
             layer_init(nn.Linear(64, 1), std=1.0),
         )
         self.actor = nn.Sequential(
-            layer_init(nn.Linear(obs_size, 64)), nn.Tanh(), layer_init(nn.Linear(64, 64)), nn.Tanh(),
+            layer_init(nn.Linear(obs_size, 64)),
+            nn.Tanh(),
+            layer_init(nn.Linear(64, 64)),
+            nn.Tanh(),
             layer_init(nn.Linear(64, n_actions), std=0.01),
         )
 
@@ -143,8 +148,9 @@ class Agent(nn.Module):
         out: torch.Tensor = self.critic(x)
         return out
 
-    def get_action_and_value(self, x: torch.Tensor, mask: torch.Tensor, action: torch.Tensor | None = None
-                             ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    def get_action_and_value(
+        self, x: torch.Tensor, mask: torch.Tensor, action: torch.Tensor | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
         logits = self.actor(x).masked_fill(~mask, -torch.inf)  # change 2: never an illegal action
         probs = Categorical(logits=logits)
         if action is None:
@@ -252,7 +258,7 @@ def train(args: Args) -> dict[str, float]:
         for _epoch in range(args.update_epochs):
             np.random.shuffle(b_inds)
             for start in range(0, batch_size, minibatch_size):
-                mb_inds = b_inds[start:start + minibatch_size]
+                mb_inds = b_inds[start : start + minibatch_size]
 
                 _, newlogprob, entropy, newvalue = agent.get_action_and_value(b_obs[mb_inds], b_masks[mb_inds], b_actions[mb_inds])
                 logratio = newlogprob - b_logprobs[mb_inds]
@@ -265,8 +271,7 @@ def train(args: Args) -> dict[str, float]:
                     mb_advantages = (mb_advantages - mb_advantages.mean()) / (mb_advantages.std() + 1e-8)
 
                 # Policy loss
-                pg_loss = torch.max(-mb_advantages * ratio,
-                                    -mb_advantages * torch.clamp(ratio, 1 - args.clip_coef, 1 + args.clip_coef)).mean()
+                pg_loss = torch.max(-mb_advantages * ratio, -mb_advantages * torch.clamp(ratio, 1 - args.clip_coef, 1 + args.clip_coef)).mean()
 
                 # Value loss
                 newvalue = newvalue.view(-1)
@@ -300,8 +305,7 @@ def save(agent: Agent, args: Args, obs_size: int, n_actions: int) -> None:
     assert args.save_model
     Path(args.save_model).parent.mkdir(parents=True, exist_ok=True)
     options = {k: v for k, v in env_options(args).items() if k in OBSERVATION_OPTIONS}
-    torch.save({"agent": agent.state_dict(), "obs_size": obs_size, "n_actions": n_actions, "env_options": options},
-               args.save_model)
+    torch.save({"agent": agent.state_dict(), "obs_size": obs_size, "n_actions": n_actions, "env_options": options}, args.save_model)
 
 
 def load(path: str) -> LogitsPolicy:

@@ -84,12 +84,18 @@ def runs() -> dict[str, Callable[[], dict[str, Any]]]:
         "numpy_vector_env": lambda: {"env_alone": vector_alone(64, 64 * 500), "env_alone_1024": vector_alone(1024, 1024 * 100)},
         "sb3_maskable_ppo": lambda: {**recipe("sb3_maskable_ppo").main(num_envs=16, steps=4096), "env_alone": sb3_adapter_alone(64, 64 * 300)},
         "cleanrl_ppo": lambda: recipe("cleanrl_ppo").main(num_envs=16, steps=4096),
-        "torchrl_vector SAME_STEP": lambda: {**recipe("torchrl_vector").main(mode="SAME_STEP", num_envs=16, steps=2048),
-                                             "env_alone": torchrl_vector_alone("SAME_STEP", 64, 64 * 50)},
-        "torchrl_vector DISABLED": lambda: {**recipe("torchrl_vector").main(mode="DISABLED", num_envs=16, steps=2048),
-                                            "env_alone": torchrl_vector_alone("DISABLED", 64, 64 * 50)},
-        "torchrl_pettingzoo parallel": lambda: {**recipe("torchrl_pettingzoo").main(api="parallel", steps=512),
-                                                "env_alone": torchrl_pettingzoo_alone("parallel", 200)},
+        "torchrl_vector SAME_STEP": lambda: {
+            **recipe("torchrl_vector").main(mode="SAME_STEP", num_envs=16, steps=2048),
+            "env_alone": torchrl_vector_alone("SAME_STEP", 64, 64 * 50),
+        },
+        "torchrl_vector DISABLED": lambda: {
+            **recipe("torchrl_vector").main(mode="DISABLED", num_envs=16, steps=2048),
+            "env_alone": torchrl_vector_alone("DISABLED", 64, 64 * 50),
+        },
+        "torchrl_pettingzoo parallel": lambda: {
+            **recipe("torchrl_pettingzoo").main(api="parallel", steps=512),
+            "env_alone": torchrl_pettingzoo_alone("parallel", 200),
+        },
         "torchrl_pettingzoo aec": lambda: {**recipe("torchrl_pettingzoo").main(api="aec", steps=512), "env_alone": torchrl_pettingzoo_alone("aec", 200)},
         "tianshou_aec": lambda: recipe("tianshou_aec").main(steps=1024, num_envs=8),
     }

@@ -68,10 +68,14 @@ def main(test: str = "small-reactive", steps: int = 4096, seed: int = 0) -> dict
             policy_mapping_fn=lambda agent_id, *args, **kwargs: "system" if agent_id == multiagent.SYSTEM else "tester",
             policies_to_train=["system"],
         )
-        .rl_module(rl_module_spec=MultiRLModuleSpec(rl_module_specs={
-            "system": RLModuleSpec(module_class=ActionMaskingTorchRLModule, model_config={"head_fcnet_hiddens": [64]}),
-            "tester": RLModuleSpec(module_class=SynthesizedTesterRLM, model_config={"test": test}),
-        }))
+        .rl_module(
+            rl_module_spec=MultiRLModuleSpec(
+                rl_module_specs={
+                    "system": RLModuleSpec(module_class=ActionMaskingTorchRLModule, model_config={"head_fcnet_hiddens": [64]}),
+                    "tester": RLModuleSpec(module_class=SynthesizedTesterRLM, model_config={"test": test}),
+                }
+            )
+        )
         .training(train_batch_size_per_learner=256, minibatch_size=64, num_epochs=2, lr=3e-3)
         .debugging(seed=seed)
     )

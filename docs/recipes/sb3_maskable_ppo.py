@@ -44,8 +44,17 @@ class Ends(BaseCallback):
         return True
 
 
-def main(env_id: str = "FlowTest-SmallReactive-v0", num_envs: int = 16, steps: int = 8192, seed: int = 0, pool: str | None = None,
-         count: int = 128, save: str | None = None, threads: int = 1, **options: Any) -> dict[str, float]:
+def main(
+    env_id: str = "FlowTest-SmallReactive-v0",
+    num_envs: int = 16,
+    steps: int = 8192,
+    seed: int = 0,
+    pool: str | None = None,
+    count: int = 128,
+    save: str | None = None,
+    threads: int = 1,
+    **options: Any,
+) -> dict[str, float]:
     """Train for ``steps`` env steps; ``pool``: a pool's train tests (``FlowTest-RandomGrid-v0``);
     ``options`` go to the env (``memory``, default ``"visited"``, ``shaping``, ...); ``save``:
     where to write the model. Returns what happened."""
@@ -64,9 +73,14 @@ def main(env_id: str = "FlowTest-SmallReactive-v0", num_envs: int = 16, steps: i
         model.flowtest_obs = {"obs_kind": options.get("obs_kind", "flat"), "pad_to": int(options.get("pad_to", 8))}
         model.save(save)
     returns = [e["r"] for e in model.ep_info_buffer or []]
-    return {"steps": float(model.num_timesteps), "episodes": float(ends.episodes), "met": float(ends.met),
-            "mean_return_last_100": float(np.mean(returns)) if returns else float("nan"),
-            "seconds": seconds, "steps_per_s": model.num_timesteps / seconds}
+    return {
+        "steps": float(model.num_timesteps),
+        "episodes": float(ends.episodes),
+        "met": float(ends.met),
+        "mean_return_last_100": float(np.mean(returns)) if returns else float("nan"),
+        "seconds": seconds,
+        "steps_per_s": model.num_timesteps / seconds,
+    }
 
 
 if __name__ == "__main__":

@@ -61,9 +61,12 @@ def main(test: str = "small-reactive", steps: int = 8192, num_envs: int = 8, see
     n_obs = int(np.prod(env.observation_space["observation"].shape))
     n_act = int(env.action_space.n)
     learner = DQN(
-        policy=DiscreteQLearningPolicy(model=Net(state_shape=n_obs, action_shape=n_act, hidden_sizes=[64, 64]),
-                                       action_space=env.action_space, eps_training=0.1),
-        optim=AdamOptimizerFactory(lr=1e-3), gamma=0.99, target_update_freq=100,
+        policy=DiscreteQLearningPolicy(
+            model=Net(state_shape=n_obs, action_shape=n_act, hidden_sizes=[64, 64]), action_space=env.action_space, eps_training=0.1
+        ),
+        optim=AdamOptimizerFactory(lr=1e-3),
+        gamma=0.99,
+        target_update_freq=100,
     )
     fixed = FixedTester(env.action_space, tester)
     by_agent = {multiagent.TESTER: fixed, multiagent.SYSTEM: learner}

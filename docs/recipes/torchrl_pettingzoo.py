@@ -56,13 +56,26 @@ def main(test: str = "small-reactive", api: str = "parallel", steps: int = 8192,
     n_act = env.full_action_spec["system", "action"].space.n
     fixed = TensorDictModule(FixedTester(tester), in_keys=[("tester", "observation", "observation")], out_keys=[("tester", "action")])
     logits = TensorDictModule(nn.Sequential(nn.Linear(n_obs, 64), nn.Tanh(), nn.Linear(64, n_act)), in_keys=[obs_key], out_keys=[("system", "logits")])
-    actor = ProbabilisticActor(logits, in_keys={"logits": ("system", "logits"), "mask": ("system", "action_mask")}, out_keys=[("system", "action")],
-                               distribution_class=MaskedCategorical, return_log_prob=True, log_prob_key=("system", "action_log_prob"))
+    actor = ProbabilisticActor(
+        logits,
+        in_keys={"logits": ("system", "logits"), "mask": ("system", "action_mask")},
+        out_keys=[("system", "action")],
+        distribution_class=MaskedCategorical,
+        return_log_prob=True,
+        log_prob_key=("system", "action_log_prob"),
+    )
     value = ValueOperator(nn.Sequential(nn.Linear(n_obs, 64), nn.Tanh(), nn.Linear(64, 1)), in_keys=[obs_key], out_keys=[("system", "state_value")])
     loss = ClipPPOLoss(actor, value, entropy_coeff=0.01)
-    loss.set_keys(action=("system", "action"), sample_log_prob=("system", "action_log_prob"), value=("system", "state_value"),
-                  reward=("system", "reward"), done=("system", "done"), terminated=("system", "terminated"),
-                  advantage=("system", "advantage"), value_target=("system", "value_target"))
+    loss.set_keys(
+        action=("system", "action"),
+        sample_log_prob=("system", "action_log_prob"),
+        value=("system", "state_value"),
+        reward=("system", "reward"),
+        done=("system", "done"),
+        terminated=("system", "terminated"),
+        advantage=("system", "advantage"),
+        value_target=("system", "value_target"),
+    )
     loss.make_value_estimator(ValueEstimators.GAE, gamma=0.99, lmbda=0.95)
     optim = torch.optim.Adam(loss.parameters(), lr=3e-3)
     collector = Collector(env, TensorDictSequential(fixed, actor), frames_per_batch=frames_per_batch, total_frames=steps)

@@ -39,8 +39,7 @@ from agents.batched import OBSERVATION_OPTIONS, LogitsPolicy
 
 def make_env(env_id: str, num_envs: int, mode: str, seed: int, **options: Any) -> Any:
     """The vector env as a TorchRL env (batch size ``[num_envs]``): ``numeric_infos=True``, no adapter."""
-    venv = gym.make_vec(env_id, num_envs=num_envs, vectorization_mode="vector_entry_point", autoreset_mode=mode,
-                        numeric_infos=True, **options)
+    venv = gym.make_vec(env_id, num_envs=num_envs, vectorization_mode="vector_entry_point", autoreset_mode=mode, numeric_infos=True, **options)
     base = GymWrapper(venv, categorical_action_encoding=True)
     if mode == "DISABLED":
         base.auto_register_info_dict()  # GymWrapper reads the infos by itself only in SAME_STEP mode
@@ -53,9 +52,19 @@ def actor_net(n_obs: int, n_act: int) -> nn.Sequential:
     return nn.Sequential(nn.Linear(n_obs, 64), nn.Tanh(), nn.Linear(64, n_act))
 
 
-def main(env_id: str = "FlowTest-SmallReactive-v0", mode: str = "SAME_STEP", num_envs: int = 16, steps: int = 8192,
-         frames_per_batch: int = 512, seed: int = 0, pool: str | None = None, count: int = 128, save: str | None = None,
-         threads: int = 1, **options: Any) -> dict[str, float]:
+def main(
+    env_id: str = "FlowTest-SmallReactive-v0",
+    mode: str = "SAME_STEP",
+    num_envs: int = 16,
+    steps: int = 8192,
+    frames_per_batch: int = 512,
+    seed: int = 0,
+    pool: str | None = None,
+    count: int = 128,
+    save: str | None = None,
+    threads: int = 1,
+    **options: Any,
+) -> dict[str, float]:
     """Train PPO for ``steps`` env steps; ``pool``: a pool's train tests (``FlowTest-RandomGrid-v0``);
     ``options`` go to the env (``memory``, default ``"visited"``, ``shaping``); ``save``: where
     to write the actor. Returns what happened: steps, episodes, the actions taken that the
@@ -69,8 +78,14 @@ def main(env_id: str = "FlowTest-SmallReactive-v0", mode: str = "SAME_STEP", num
     n_obs, n_act = env.observation_spec["observation"].shape[-1], env.action_spec.space.n
     net = actor_net(n_obs, n_act)
     logits = TensorDictModule(net, in_keys=["observation"], out_keys=["logits"])
-    policy = ProbabilisticActor(logits, in_keys={"logits": "logits", "mask": "action_mask"}, out_keys=["action"],
-                                distribution_class=MaskedCategorical, return_log_prob=True, spec=env.action_spec)
+    policy = ProbabilisticActor(
+        logits,
+        in_keys={"logits": "logits", "mask": "action_mask"},
+        out_keys=["action"],
+        distribution_class=MaskedCategorical,
+        return_log_prob=True,
+        spec=env.action_spec,
+    )
     value = ValueOperator(nn.Sequential(nn.Linear(n_obs, 64), nn.Tanh(), nn.Linear(64, 1)), in_keys=["observation"])
     loss = ClipPPOLoss(policy, value, entropy_coeff=0.01)
     advantage = GAE(gamma=0.99, lmbda=0.95, value_network=value)
@@ -127,5 +142,4 @@ if __name__ == "__main__":
     ap.add_argument("--threads", type=int, default=1, help="torch CPU threads (one: fastest for small nets on small CPUs)")
     ap.add_argument("--save", default=None, help="actor file (.pt) for flowtest benchmark --sut python:...:load@FILES")
     a = ap.parse_args()
-    print(main(a.env, a.mode, a.num_envs, a.steps, seed=a.seed, pool=a.pool, count=a.count, save=a.save, threads=a.threads,
-               memory=a.memory, shaping=a.shaping))
+    print(main(a.env, a.mode, a.num_envs, a.steps, seed=a.seed, pool=a.pool, count=a.count, save=a.save, threads=a.threads, memory=a.memory, shaping=a.shaping))

@@ -106,8 +106,7 @@ class Test:
             for a, row in enumerate(c["fallback"]):
                 indices(row, n_agent, f"agent.controller.fallback[{a}]", n_places)
             indices(c["sys_place"], n_places, "agent.controller.sys_place", n)
-            self.answer = {(t["memory"][i], t["row"][i], t["agent"][i]): (t["next_agent"][i], t["next_memory"][i])
-                           for i in range(len(t["row"]))}
+            self.answer = {(t["memory"][i], t["row"][i], t["agent"][i]): (t["next_agent"][i], t["next_memory"][i]) for i in range(len(t["row"]))}
 
     def _doomed(self, n, moves):
         """doomed[h][s]: no run from state s with history h that respects the enforced
@@ -197,5 +196,10 @@ class Test:
             self.respond(run)
 
     def verdict(self, run):
-        return {"system_objective": run.outcome, "test_objective_realized": self.test_accepts[run.history],
-                "restrictions": run.restrictions, "blocked_attempts": run.blocked_attempts, "steps": run.steps}
+        return {
+            "system_objective": run.outcome,
+            "test_objective_realized": self.test_accepts[run.history],
+            "restrictions": run.restrictions,
+            "blocked_attempts": run.blocked_attempts,
+            "steps": run.steps,
+        }

@@ -309,8 +309,18 @@ def command_of(config: BenchmarkConfig, out: str = "OUT") -> str:
         words += ["--sut", *config.suts]
     if config.algos != d.algos:
         words += ["--algo", *config.algos]
-    for name in ("train_count", "validation_count", "test_count", "train_eval_count", "steps", "runs", "curve_seeds",
-                 "curve_points", "report_tests", "bootstrap"):
+    for name in (
+        "train_count",
+        "validation_count",
+        "test_count",
+        "train_eval_count",
+        "steps",
+        "runs",
+        "curve_seeds",
+        "curve_points",
+        "report_tests",
+        "bootstrap",
+    ):
         if getattr(config, name) != getattr(d, name):
             words += [f"--{name.replace('_', '-')}", str(getattr(config, name))]
     if config.seeds != d.seeds:

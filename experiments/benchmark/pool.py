@@ -30,11 +30,12 @@ class Split:
     @property
     def scored(self) -> list[TestArtifact]:
         """The tests this split is scored on."""
-        return self.artifacts[:len(self.files)]
+        return self.artifacts[: len(self.files)]
 
 
-def load_splits(config: BenchmarkConfig, out: Path, progress: bool | None = None,
-                source: Callable[[str, str, int], Sequence[TestArtifact]] | None = None) -> dict[str, Split]:
+def load_splits(
+    config: BenchmarkConfig, out: Path, progress: bool | None = None, source: Callable[[str, str, int], Sequence[TestArtifact]] | None = None
+) -> dict[str, Split]:
     """The train, validation and test splits of the pool (``source(pool, split, count)``;
     default :func:`flowtest_env.pools.load_pool`, built on demand and cached), each scored
     test written to ``out/pool/<split>/seed<N>.json``.
@@ -59,7 +60,7 @@ def load_splits(config: BenchmarkConfig, out: Path, progress: bool | None = None
             raise ProblemError(f"--pool {config.pool}: its {name} split has {len(arts)} tests, fewer than the {count} asked")
         what = "held-out tests" if name == "test" else "tests"
         split = Split(name, f"{config.pool} {name} ({config.scored(name)} of {count} {what})", seeds, arts[:count])
-        for seed, art in zip(seeds[:config.scored(name)], split.artifacts, strict=False):
+        for seed, art in zip(seeds[: config.scored(name)], split.artifacts, strict=False):
             path = (out / "pool" / name / f"seed{seed}.json").resolve()
             write_atomically(path, art.save)
             split.files.append(path)

@@ -103,11 +103,17 @@ def _split_infos(splits: dict[str, Split], out: Path, shown: int) -> list[TestIn
         game = TestGame(art)
         picture = f"tests/{split.name}-split-first.png"
         write_atomically(out / picture, partial(start_picture, game))
-        infos.append(TestInfo(
-            env_id=_report_label(split, shown), problem=f"{art.name} (the first of {len(split.seeds)})", kind=str(art.kind),
-            system_objective=str(art.objectives.get("system", "")), test_objective=str(art.objectives.get("test", "")),
-            max_steps=default_max_steps(game), picture=picture,
-        ))
+        infos.append(
+            TestInfo(
+                env_id=_report_label(split, shown),
+                problem=f"{art.name} (the first of {len(split.seeds)})",
+                kind=str(art.kind),
+                system_objective=str(art.objectives.get("system", "")),
+                test_objective=str(art.objectives.get("test", "")),
+                max_steps=default_max_steps(game),
+                picture=picture,
+            )
+        )
     return infos
 
 
@@ -115,10 +121,14 @@ def _report_label(split: Split, shown: int) -> str:
     return f"{split.label.rsplit(' (', 1)[0]} (report: the first {min(shown, len(split.files))} tests)"
 
 
-def run_benchmark(config: BenchmarkConfig, out: Path, say: Callable[[str], None] = lambda _: None,
-                  progress_bar: bool = False,
-                  source: Callable[[str, str, int], Sequence[TestArtifact]] | None = None,
-                  resume: bool = False) -> dict[str, Any]:
+def run_benchmark(
+    config: BenchmarkConfig,
+    out: Path,
+    say: Callable[[str], None] = lambda _: None,
+    progress_bar: bool = False,
+    source: Callable[[str, str, int], Sequence[TestArtifact]] | None = None,
+    resume: bool = False,
+) -> dict[str, Any]:
     """Run the benchmark (see the module docstring) into the folder ``out`` (created; it
     is not checked here: the command checks it first, :func:`prepare_benchmark_folder`) and
     return ``table.json``'s document. ``source`` loads the pool's tests (default
@@ -133,22 +143,26 @@ def run_benchmark(config: BenchmarkConfig, out: Path, say: Callable[[str], None]
         started = check_same_config(out, config).get("commit")
         remove_temporaries(out)
         if started != code:
-            say(f"warning: resuming a benchmark started with FlowTest commit {started or 'unknown'}, now "
-                f"{code or 'unknown'}: its finished runs are kept as they are")
+            say(
+                f"warning: resuming a benchmark started with FlowTest commit {started or 'unknown'}, now "
+                f"{code or 'unknown'}: its finished runs are kept as they are"
+            )
     elif not (out / CONFIG_FILE).exists():
         write_config(out, config, code)
-    say(f"loading the pool {config.pool}: {config.train_count} train, {config.validation_count} validation and "
-        f"{config.test_count} held-out tests")
+    say(f"loading the pool {config.pool}: {config.train_count} train, {config.validation_count} validation and {config.test_count} held-out tests")
     t0 = time.perf_counter()
     splits = load_splits(config, out, progress=progress_bar, source=source)
     pool_seconds = time.perf_counter() - t0
     check_systems_play(config, splits)
-    jobs = [TrainingJob(algo, seed, config.train_count, f"{algo}-seed{seed}")
-            for algo in config.baselines() for seed in config.seeds]
+    jobs = [TrainingJob(algo, seed, config.train_count, f"{algo}-seed{seed}") for algo in config.baselines() for seed in config.seeds]
     if config.baselines():
         first = config.baselines()[0]
-        jobs += [TrainingJob(first, seed, n, f"curve-{first}-{n}-seed{seed}")
-                 for n in config.curve() if n != config.train_count for seed in config.seeds[:config.curve_seeds]]
+        jobs += [
+            TrainingJob(first, seed, n, f"curve-{first}-{n}-seed{seed}")
+            for n in config.curve()
+            if n != config.train_count
+            for seed in config.seeds[: config.curve_seeds]
+        ]
     t0 = time.perf_counter()
     trained = train_all(config, jobs, splits, out, say, progress_bar, resume)
     train_seconds = time.perf_counter() - t0
@@ -171,13 +185,17 @@ def run_benchmark(config: BenchmarkConfig, out: Path, say: Callable[[str], None]
     for name in REPORT_SPLITS:
         label = _report_label(splits[name], config.report_tests)
         for sut, runs in traces[name].items():
-            cells.append(Cell(label, sut, runs[:config.report_tests], RUN_SEED, 0.0))
+            cells.append(Cell(label, sut, runs[: config.report_tests], RUN_SEED, 0.0))
     cells.sort(key=lambda c: c.sut)
     write_report(cells, out, _split_infos(splits, out, config.report_tests))
-    doc["seconds"] = {"pool": round(pool_seconds, 1), "training": round(train_seconds, 1),
-                      "training_cpu": round(sum(b.seconds for b in trained), 1),
-                      "scoring": round(score_seconds, 1), "generalization": round(curve_seconds, 1),
-                      "total": round(time.perf_counter() - t_start, 1)}
+    doc["seconds"] = {
+        "pool": round(pool_seconds, 1),
+        "training": round(train_seconds, 1),
+        "training_cpu": round(sum(b.seconds for b in trained), 1),
+        "scoring": round(score_seconds, 1),
+        "generalization": round(curve_seconds, 1),
+        "total": round(time.perf_counter() - t_start, 1),
+    }
     doc["outputs"] = {k: str((out / v).resolve()) for k, v in OUTPUTS.items()}
     if any(e["kind"] == "baseline" and e.get("training") for e in doc["systems"]):
         write_atomically(out / OUTPUTS["curves"], lambda tmp: plot_learning_curves(doc, tmp))
@@ -216,8 +234,14 @@ def write_scores(path: Path, doc: dict[str, Any]) -> None:
     write_atomically(path, write)
 
 
-OUTPUTS = {"table_md": "table.md", "table_json": "table.json", "scores": SCORES_FILE, "curves": "learning-curves.png",
-           "generalization": "generalization.png", "report": "report.html"}
+OUTPUTS = {
+    "table_md": "table.md",
+    "table_json": "table.json",
+    "scores": SCORES_FILE,
+    "curves": "learning-curves.png",
+    "generalization": "generalization.png",
+    "report": "report.html",
+}
 """The main files a benchmark writes into ``--out``."""
 
 
@@ -247,15 +271,17 @@ def prepare_benchmark_folder(out: Path, force: bool, config: BenchmarkConfig | N
         if config is None:
             raise ProblemError("--resume needs the configuration to compare with the stored one")
         if not (out / BENCHMARK_MARKER).exists():
-            raise ProblemError(f"benchmark folder {str(out)!r} holds files FlowTest did not write: there is no benchmark "
-                               "to resume in it; choose another folder")
+            raise ProblemError(
+                f"benchmark folder {str(out)!r} holds files FlowTest did not write: there is no benchmark to resume in it; choose another folder"
+            )
         check_same_config(out, config)
     elif used and not force:
         if (out / BENCHMARK_MARKER).exists():
-            raise ProblemError(f"benchmark folder {str(out)!r} already holds an earlier benchmark; use --resume to continue "
-                               "it (the same settings), --force to start over, or choose another folder")
-        raise ProblemError(f"benchmark folder {str(out)!r} already holds files; use --force to overwrite, or choose another "
-                           "folder")
+            raise ProblemError(
+                f"benchmark folder {str(out)!r} already holds an earlier benchmark; use --resume to continue "
+                "it (the same settings), --force to start over, or choose another folder"
+            )
+        raise ProblemError(f"benchmark folder {str(out)!r} already holds files; use --force to overwrite, or choose another folder")
     prepare_output_folder(out, BENCHMARK_MARKER, force, "benchmark folder")
     if config is not None and not (used and resume):
         write_config(out, config, commit())
@@ -322,10 +348,17 @@ def check_systems_play(config: BenchmarkConfig, splits: dict[str, Split]) -> Non
             raise ProblemError(f"--sut {sut} cannot play the pool's tests: {type(exc).__name__}: {exc}") from None
 
 
-def benchmark(pool: str | BenchmarkConfig, out: str | Path, *, force: bool = False, resume: bool = False,
-              say: Callable[[str], None] = lambda _: None,
-              progress_bar: bool = False, source: Callable[[str, str, int], Sequence[TestArtifact]] | None = None,
-              **settings: Any) -> dict[str, Any]:
+def benchmark(
+    pool: str | BenchmarkConfig,
+    out: str | Path,
+    *,
+    force: bool = False,
+    resume: bool = False,
+    say: Callable[[str], None] = lambda _: None,
+    progress_bar: bool = False,
+    source: Callable[[str, str, int], Sequence[TestArtifact]] | None = None,
+    **settings: Any,
+) -> dict[str, Any]:
     """Run the benchmark protocol (see the module docstring) on ``pool`` into the folder
     ``out`` and return ``table.json``'s document: what ``flowtest benchmark --pool POOL --out
     OUT`` does, with ``settings`` as its options (any field of :class:`BenchmarkConfig`:

@@ -63,8 +63,7 @@ def write_config(out: Path, config: BenchmarkConfig, commit: str | None) -> None
     """Write ``out/benchmark-config.json`` (whole or not at all)."""
     from .config import command_of
 
-    doc = {"format": CONFIG_FORMAT, "version": FORMAT_VERSION, "config": config_document(config),
-           "command": command_of(config, str(out)), "commit": commit}
+    doc = {"format": CONFIG_FORMAT, "version": FORMAT_VERSION, "config": config_document(config), "command": command_of(config, str(out)), "commit": commit}
     write_atomically(out / CONFIG_FILE, lambda tmp: tmp.write_text(json.dumps(doc, indent=1) + "\n"))
 
 
@@ -78,8 +77,9 @@ def stored_config(out: Path) -> dict[str, Any]:
     """
     path = out / CONFIG_FILE
     if path.is_symlink() or not path.is_file():
-        raise ProblemError(f"--resume: the benchmark folder {str(out)!r} holds no configuration ({CONFIG_FILE}) to "
-                           "resume; use --force to start over, or choose another folder")
+        raise ProblemError(
+            f"--resume: the benchmark folder {str(out)!r} holds no configuration ({CONFIG_FILE}) to resume; use --force to start over, or choose another folder"
+        )
     try:
         doc = json.loads(path.read_text())
     except (OSError, UnicodeDecodeError, ValueError) as exc:
@@ -102,10 +102,11 @@ def check_same_config(out: Path, config: BenchmarkConfig) -> dict[str, Any]:
     stored, now = doc["config"], config_document(config)
     differ = [k for k in dict.fromkeys([*stored, *now]) if stored.get(k) != now.get(k)]
     if differ:
-        shown = "; ".join(f"{_FLAGS.get(k, '--' + k.replace('_', '-'))} {_shown(stored.get(k))} there, "
-                          f"{_shown(now.get(k))} here" for k in differ)
-        raise ProblemError(f"--resume: the benchmark in {str(out)!r} was started with other settings ({shown}); "
-                           "give the same settings to continue it, or --force to start over")
+        shown = "; ".join(f"{_FLAGS.get(k, '--' + k.replace('_', '-'))} {_shown(stored.get(k))} there, {_shown(now.get(k))} here" for k in differ)
+        raise ProblemError(
+            f"--resume: the benchmark in {str(out)!r} was started with other settings ({shown}); "
+            "give the same settings to continue it, or --force to start over"
+        )
     return doc
 
 
@@ -126,8 +127,7 @@ def write_record(model: Path, config: BenchmarkConfig, run: dict[str, Any]) -> N
     """Record a finished training run: ``run`` (plain data: algo, seed, train tests, steps,
     times, curve) with the configuration's digest and the model file's SHA-256, written whole
     after the model."""
-    doc = {"format": RECORD_FORMAT, "version": FORMAT_VERSION, "config": config_digest(config),
-           "model": model.name, "sha256": _sha256(model), **run}
+    doc = {"format": RECORD_FORMAT, "version": FORMAT_VERSION, "config": config_digest(config), "model": model.name, "sha256": _sha256(model), **run}
     write_atomically(record_path(model), lambda tmp: tmp.write_text(json.dumps(json_safe(doc)) + "\n"))
 
 
@@ -142,8 +142,13 @@ def read_record(model: Path, config: BenchmarkConfig) -> dict[str, Any] | None:
         doc = json.loads(path.read_text())
     except (OSError, UnicodeDecodeError, ValueError):
         return None
-    if (not isinstance(doc, dict) or doc.get("format") != RECORD_FORMAT or doc.get("version") != FORMAT_VERSION
-            or doc.get("config") != config_digest(config) or doc.get("model") != model.name):
+    if (
+        not isinstance(doc, dict)
+        or doc.get("format") != RECORD_FORMAT
+        or doc.get("version") != FORMAT_VERSION
+        or doc.get("config") != config_digest(config)
+        or doc.get("model") != model.name
+    ):
         return None
     try:
         if doc.get("sha256") != _sha256(model):

@@ -76,15 +76,26 @@ def verdict_metrics(v: dict[str, np.ndarray]) -> dict[str, Any]:
     s = summarize(v)
     met = np.asarray(v["system_objective"]) == "met"
     realized = np.asarray(v["test_objective_realized"], dtype=bool)
-    return {"tests": s.tests, "runs": s.runs, "met": s.met, "realized": s.realized, "restrictions": s.restrictions,
-            "steps": s.steps, "violated": s.violated, "open": s.open, "test_failures": int((met & ~realized).sum()),
-            "per_test": list(s.per_test_met)}
+    return {
+        "tests": s.tests,
+        "runs": s.runs,
+        "met": s.met,
+        "realized": s.realized,
+        "restrictions": s.restrictions,
+        "steps": s.steps,
+        "violated": s.violated,
+        "open": s.open,
+        "test_failures": int((met & ~realized).sum()),
+        "per_test": list(s.per_test_met),
+    }
 
 
 def trace_verdicts(traces: Sequence[Trace]) -> dict[str, np.ndarray]:
     """The verdict arrays ``[1, tests]`` of single-env runs."""
-    return {k: np.array([[t.verdict[k] for t in traces]], dtype=object if k == "system_objective" else None)
-            for k in ("system_objective", "test_objective_realized", "restrictions", "steps")}
+    return {
+        k: np.array([[t.verdict[k] for t in traces]], dtype=object if k == "system_objective" else None)
+        for k in ("system_objective", "test_objective_realized", "restrictions", "steps")
+    }
 
 
 def split_metrics(traces: Sequence[Trace]) -> dict[str, Any]:
@@ -106,8 +117,9 @@ def split_metrics(traces: Sequence[Trace]) -> dict[str, Any]:
     }
 
 
-def score_all(config: BenchmarkConfig, splits: dict[str, Split], trained: Sequence[TrainedBaseline],
-              say: Callable[[str], None]) -> tuple[list[SystemRuns], dict[str, dict[str, list[Trace]]]]:
+def score_all(
+    config: BenchmarkConfig, splits: dict[str, Split], trained: Sequence[TrainedBaseline], say: Callable[[str], None]
+) -> tuple[list[SystemRuns], dict[str, dict[str, list[Trace]]]]:
     """Score every system on every split (module docstring, step 3); return the systems'
     runs and the single-env traces (for the report)."""
     from flowtest_env.game import TestGame
@@ -151,8 +163,10 @@ def score_all(config: BenchmarkConfig, splits: dict[str, Split], trained: Sequen
     traces: dict[str, dict[str, list[Trace]]] = {}
     report_suts = [RANDOM] + [b.sut for b in _report_models(config, trained)]
     for name, split in splits.items():
-        say(f"scoring {', '.join(single) or 'no system'} through the single env on the {len(split.files)} {name} tests"
-            + (" and the report's sample" if name in REPORT_SPLITS else ""))
+        say(
+            f"scoring {', '.join(single) or 'no system'} through the single env on the {len(split.files)} {name} tests"
+            + (" and the report's sample" if name in REPORT_SPLITS else "")
+        )
         traces[name] = score_systems(single, split)
         if name in REPORT_SPLITS:
             traces[name].update(score_systems(report_suts, split, config.report_tests))
@@ -171,8 +185,9 @@ def _report_models(config: BenchmarkConfig, trained: Sequence[TrainedBaseline]) 
     return out
 
 
-def generalization_curve(config: BenchmarkConfig, splits: dict[str, Split], trained: list[TrainedBaseline],
-                         main: SystemRuns | None, scale: Scale, say: Callable[[str], None]) -> list[dict[str, Any]]:
+def generalization_curve(
+    config: BenchmarkConfig, splits: dict[str, Split], trained: list[TrainedBaseline], main: SystemRuns | None, scale: Scale, say: Callable[[str], None]
+) -> list[dict[str, Any]]:
     """The generalization curve (module docstring, step 5): per training-set size, the
     held-out normalized score (greedy and sampled) of the first baseline's runs on that
     many train tests (already trained), and its greedy met on its own training tests."""
@@ -186,14 +201,13 @@ def generalization_curve(config: BenchmarkConfig, splits: dict[str, Split], trai
     points = []
     for n in config.curve():
         if n == config.train_count:
-            rows = [(r["test"]["greedy"]["per_test"], r["test"]["sampled"]["per_test"], r["train"]["greedy"]["met"])
-                    for r in main.runs]
+            rows = [(r["test"]["greedy"]["per_test"], r["test"]["sampled"]["per_test"], r["train"]["greedy"]["met"]) for r in main.runs]
             seeds = [int(r["seed"]) for r in main.runs]
         else:
             rows = []
             runs = [b for b in trained if b.algo == algo and b.train_tests == n]
             seeds = [b.seed for b in runs]
-            own = [TestGame(a) for a in splits["train"].artifacts[:min(n, config.scored("train"))]]
+            own = [TestGame(a) for a in splits["train"].artifacts[: min(n, config.scored("train"))]]
             if runs:
                 say(f"generalization curve: scoring {len(runs)} runs of {algo} on {n} train tests")
             for b in runs:
@@ -203,10 +217,14 @@ def generalization_curve(config: BenchmarkConfig, splits: dict[str, Split], trai
                 rows.append((verdict_metrics(g)["per_test"], verdict_metrics(s)["per_test"], verdict_metrics(tr)["met"]))
         if not rows:
             continue
-        points.append({
-            "algo": algo, "train_tests": n, "seeds": seeds,
-            "greedy": normalized_summary([r[0] for r in rows], scale, config.bootstrap),
-            "sampled": normalized_summary([r[1] for r in rows], scale, config.bootstrap),
-            "train_met": float(np.mean([r[2] for r in rows])),
-        })
+        points.append(
+            {
+                "algo": algo,
+                "train_tests": n,
+                "seeds": seeds,
+                "greedy": normalized_summary([r[0] for r in rows], scale, config.bootstrap),
+                "sampled": normalized_summary([r[1] for r in rows], scale, config.bootstrap),
+                "train_met": float(np.mean([r[2] for r in rows])),
+            }
+        )
     return points

@@ -67,8 +67,7 @@ class Scale:
         below 100 % it is a reference a system can beat)."""
         f = None if self.floor is None else float(self.floor.mean())
         c = None if self.ceiling is None else float(self.ceiling.mean())
-        return {"floor": f, "ceiling": c, "ceiling_from": self.ceiling_from, "floor_runs": self.floor_runs,
-                "ceiling_is_bound": None if c is None else c >= 1.0}
+        return {"floor": f, "ceiling": c, "ceiling_from": self.ceiling_from, "floor_runs": self.floor_runs, "ceiling_is_bound": None if c is None else c >= 1.0}
 
 
 def normalized_summary(per_seed_tests: Sequence[Sequence[float]], scale: Scale, reps: int, seed: int = 0) -> dict[str, Any]:
@@ -85,8 +84,17 @@ def normalized_summary(per_seed_tests: Sequence[Sequence[float]], scale: Scale, 
     if scale.floor is not None and scale.ceiling is not None:
         got = score_interval(m, scale.floor, scale.ceiling, reps=reps, seed=seed)
     if got is None:
-        return {"point": None, "low": None, "high": None, "statistic": None, "interval": None, "mean": None,
-                "preliminary": m.shape[0] < PRELIMINARY_SEEDS, "seeds": int(m.shape[0]), "tests": int(m.shape[1])}
+        return {
+            "point": None,
+            "low": None,
+            "high": None,
+            "statistic": None,
+            "interval": None,
+            "mean": None,
+            "preliminary": m.shape[0] < PRELIMINARY_SEEDS,
+            "seeds": int(m.shape[0]),
+            "tests": int(m.shape[1]),
+        }
     return got.to_json()
 
 
@@ -115,9 +123,12 @@ def scale_of(systems: Sequence[SystemRuns]) -> dict[str, Scale]:
                 mine = r.runs[0][split]["greedy"]
                 if best is None or mine["met"] > best["met"]:
                     best, who = mine, r.name
-        scale[split] = Scale(None if f is None else np.asarray(f["per_test"], dtype=np.float64),
-                             None if best is None else np.asarray(best["per_test"], dtype=np.float64), who,
-                             None if f is None else int(f["runs"]))
+        scale[split] = Scale(
+            None if f is None else np.asarray(f["per_test"], dtype=np.float64),
+            None if best is None else np.asarray(best["per_test"], dtype=np.float64),
+            who,
+            None if f is None else int(f["runs"]),
+        )
     return scale
 
 

@@ -151,13 +151,12 @@ def member_policies(sut: str, games: Sequence[Any]) -> MemberPolicies | None:
         if sut.startswith("ppo:"):
             return _model_policies(sut[4:], games)
         if sut.startswith("python:"):
-            policy = load_batched(sut[len("python:"):])
+            policy = load_batched(sut[len("python:") :])
             if policy is None:
                 return None
             from agents.batched import ModePolicy, declared_options
 
-            return MemberPolicies({"greedy": ModePolicy(policy, True), "sampled": ModePolicy(policy, False)},
-                                  declared_options(policy))
+            return MemberPolicies({"greedy": ModePolicy(policy, True), "sampled": ModePolicy(policy, False)}, declared_options(policy))
     except PolicyError as exc:
         raise ProblemError(f"--sut {sut}: {exc}") from None
     return None
@@ -198,8 +197,7 @@ def _model_policies(path: str, games: Sequence[Any]) -> MemberPolicies | None:
     model = load_model(path)
     obs = dict(getattr(model, "flowtest_obs", None) or {"obs_kind": "flat", "pad_to": 8})
     if is_native_checkpoint(path):
-        return MemberPolicies({"greedy": model.batch_policy(True), "sampled": model.batch_policy(False)},
-                              {"obs_kind": obs["obs_kind"]})
+        return MemberPolicies({"greedy": model.batch_policy(True), "sampled": model.batch_policy(False)}, {"obs_kind": obs["obs_kind"]})
     if obs.get("obs_kind", "flat") != "flat":
         return None  # PPOPolicy encodes each test with the model's own encoder, through the single env
     where = model_where(model, games, str(getattr(model, "flowtest_memory", "none")))
@@ -227,6 +225,6 @@ def check_systems(specs: Sequence[SystemSpec]) -> None:
             check_trusted(sut[4:])  # a pickled model is refused before any work
         elif sut.startswith("python:"):
             try:
-                load_batched(sut[len("python:"):])
+                load_batched(sut[len("python:") :])
             except PolicyError as exc:
                 raise ProblemError(f"--sut {sut}: {exc}") from None

@@ -37,12 +37,22 @@ def machine() -> dict[str, Any]:
         load = [round(x, 2) for x in os.getloadavg()]
     except OSError:
         load = None
-    return {"platform": platform.platform(), "processor": platform.processor() or platform.machine(),
-            "cpus": os.cpu_count(), "load_average": load, "python": platform.python_version()}
+    return {
+        "platform": platform.platform(),
+        "processor": platform.processor() or platform.machine(),
+        "cpus": os.cpu_count(),
+        "load_average": load,
+        "python": platform.python_version(),
+    }
 
 
-def benchmark_table(config: BenchmarkConfig, splits: dict[str, Split], systems: Sequence[SystemRuns],
-                    trained: Sequence[TrainedBaseline], curve: list[dict[str, Any]] | None = None) -> dict[str, Any]:
+def benchmark_table(
+    config: BenchmarkConfig,
+    splits: dict[str, Split],
+    systems: Sequence[SystemRuns],
+    trained: Sequence[TrainedBaseline],
+    curve: list[dict[str, Any]] | None = None,
+) -> dict[str, Any]:
     """The benchmark's results document (``table.json``; docs/benchmark-protocol.md)."""
     scales = scale_of(systems)
     entries = [system_entry(s, scales, config.bootstrap) for s in systems]
@@ -52,38 +62,67 @@ def benchmark_table(config: BenchmarkConfig, splits: dict[str, Split], systems: 
         mine = [b for b in trained if b.algo == e["name"] and b.train_tests == config.train_count]
         e["settings"] = baseline_settings(e["name"], config.trainer)
         e["training"] = [
-            {"seed": b.seed, "steps": b.steps, "seconds": round(b.seconds, 1), "curve_seconds": round(b.curve_seconds, 1),
-             "model": str(b.path), "curve": [[step, rates.get("train"), rates.get("validation")] for step, rates in b.curve]}
+            {
+                "seed": b.seed,
+                "steps": b.steps,
+                "seconds": round(b.seconds, 1),
+                "curve_seconds": round(b.curve_seconds, 1),
+                "model": str(b.path),
+                "curve": [[step, rates.get("train"), rates.get("validation")] for step, rates in b.curve],
+            }
             for b in mine
         ]
     contenders = [e for e in entries if e["kind"] in CONTENDERS]
     headline = {
         "mode": HEADLINE_MODE,
-        "normalized_held_out": {e["name"]: {"headline_mode": e["test"]["headline_mode"],
-                                            **{m: (e["test"][m] or {}).get("normalized") for m in ("greedy", "sampled")}}
-                                for e in contenders if "test" in e},
+        "normalized_held_out": {
+            e["name"]: {"headline_mode": e["test"]["headline_mode"], **{m: (e["test"][m] or {}).get("normalized") for m in ("greedy", "sampled")}}
+            for e in contenders
+            if "test" in e
+        },
         "tail_held_out": {e["name"]: (e["test"][e["test"]["headline_mode"]] or {}).get("tail") for e in contenders if "test" in e},
         "held_out_gap": {e["name"]: e["gap"] for e in contenders},
     }
-    split_doc = {s: {"count": len(sp.artifacts), "scored": len(sp.files), "seeds": [sp.seeds[0], sp.seeds[-1]]}
-                 for s, sp in splits.items()}
-    cfg = {"steps": config.steps, "seeds": list(config.seeds), "algos": config.baselines(), "trainer": config.trainer,
-           "runs": config.runs, "curve_points": config.curve_points, "curve_sizes": config.curve(),
-           "curve_seeds": config.curve_seeds, "suts": list(config.suts), "bootstrap": config.bootstrap,
-           "train_eval_count": config.train_eval_count, "report_tests": config.report_tests}
-    budget = {"steps_per_run": config.steps if trained else None, "training_runs": len(trained),
-              "training_steps": int(sum(b.steps for b in trained))}
+    split_doc = {s: {"count": len(sp.artifacts), "scored": len(sp.files), "seeds": [sp.seeds[0], sp.seeds[-1]]} for s, sp in splits.items()}
+    cfg = {
+        "steps": config.steps,
+        "seeds": list(config.seeds),
+        "algos": config.baselines(),
+        "trainer": config.trainer,
+        "runs": config.runs,
+        "curve_points": config.curve_points,
+        "curve_sizes": config.curve(),
+        "curve_seeds": config.curve_seeds,
+        "suts": list(config.suts),
+        "bootstrap": config.bootstrap,
+        "train_eval_count": config.train_eval_count,
+        "report_tests": config.report_tests,
+    }
+    budget = {"steps_per_run": config.steps if trained else None, "training_runs": len(trained), "training_steps": int(sum(b.steps for b in trained))}
     return {
-        "format": RESULTS_FORMAT, "version": RESULTS_VERSION,
+        "format": RESULTS_FORMAT,
+        "version": RESULTS_VERSION,
         "pool": config.pool,
         "command": command_of(config),
         "splits": split_doc,
         "config": cfg,
         "budget": budget,
-        "ran": what_ran(cfg, split_doc, budget, [{"name": e["name"], "kind": e["kind"], "seeds": [r["seed"] for r in e["runs"]],
-                                                  "modes": _modes(e), "trained": [{"seed": t["seed"], "steps": t["steps"]}
-                                                                                  for t in e.get("training", [])]}
-                                                 for e in entries], curve or []),
+        "ran": what_ran(
+            cfg,
+            split_doc,
+            budget,
+            [
+                {
+                    "name": e["name"],
+                    "kind": e["kind"],
+                    "seeds": [r["seed"] for r in e["runs"]],
+                    "modes": _modes(e),
+                    "trained": [{"seed": t["seed"], "steps": t["steps"]} for t in e.get("training", [])],
+                }
+                for e in entries
+            ],
+            curve or [],
+        ),
         "scale": {split: sc.to_json() for split, sc in scales.items()},
         "headline": headline,
         "systems": entries,
@@ -104,8 +143,9 @@ def _modes(e: dict[str, Any]) -> list[str]:
     return [m for m in ("greedy", "sampled") if test.get(m)]
 
 
-def what_ran(config: dict[str, Any], splits: dict[str, Any], budget: dict[str, Any], systems: Sequence[dict[str, Any]],
-             curve: Sequence[dict[str, Any]] = ()) -> dict[str, Any]:
+def what_ran(
+    config: dict[str, Any], splits: dict[str, Any], budget: dict[str, Any], systems: Sequence[dict[str, Any]], curve: Sequence[dict[str, Any]] = ()
+) -> dict[str, Any]:
     """What a benchmark trained and what it only scored (``table.json``'s ``ran``), from its
     ``config``, ``splits``, ``budget``, its systems (each ``name``, ``kind``, ``seeds``: one per
     run, ``modes``, and for a baseline ``trained``: ``[{"seed", "steps"}]`` of its training runs
@@ -122,15 +162,22 @@ def what_ran(config: dict[str, Any], splits: dict[str, Any], budget: dict[str, A
         if runs is None and s["kind"] == "baseline":
             runs = [{"seed": seed, "steps": config["steps"]} for seed in s["seeds"]]
         if runs:
-            trained.append({"algo": s["name"], "seeds": [r["seed"] for r in runs], "steps": max(r["steps"] for r in runs),
-                            "train_tests": train_tests, "trainer": config["trainer"]})
+            trained.append(
+                {
+                    "algo": s["name"],
+                    "seeds": [r["seed"] for r in runs],
+                    "steps": max(r["steps"] for r in runs),
+                    "train_tests": train_tests,
+                    "trainer": config["trainer"],
+                }
+            )
             continue
         modes = list(s.get("modes") or [])
-        scored.append({"name": s["name"], "kind": s["kind"], "seeds": len(s["seeds"]), "modes": modes,
-                       "runs_per_test": config["runs"] if "sampled" in modes else 1})
+        scored.append(
+            {"name": s["name"], "kind": s["kind"], "seeds": len(s["seeds"]), "modes": modes, "runs_per_test": config["runs"] if "sampled" in modes else 1}
+        )
     extra = [{"train_tests": p["train_tests"], "seeds": list(p["seeds"])} for p in curve if p["train_tests"] != train_tests]
-    return {"trained": trained, "curve": extra, "training_runs": budget["training_runs"],
-            "training_steps": budget["training_steps"], "scored": scored}
+    return {"trained": trained, "curve": extra, "training_runs": budget["training_runs"], "training_steps": budget["training_steps"], "scored": scored}
 
 
 def seeds_text(seeds: Sequence[Any]) -> str:
@@ -147,16 +194,21 @@ def ran_text(ran: dict[str, Any]) -> list[str]:
     seeds or runs each), so that a run that trained nothing says so."""
     trained = ran["trained"]
     if trained:
-        parts = [f"{t['algo']}, seeds {seeds_text(t['seeds'])} ({len(t['seeds'])} run{'s' if len(t['seeds']) != 1 else ''}), "
-                 f"{t['steps']:,} time steps each on the first {t['train_tests']:,} train tests (trainer {t['trainer']})"
-                 for t in trained]
+        parts = [
+            f"{t['algo']}, seeds {seeds_text(t['seeds'])} ({len(t['seeds'])} run{'s' if len(t['seeds']) != 1 else ''}), "
+            f"{t['steps']:,} time steps each on the first {t['train_tests']:,} train tests (trainer {t['trainer']})"
+            for t in trained
+        ]
         text = "**Trained**: " + "; ".join(parts)
         if ran["curve"]:
-            text += ("; for the generalization curve " + trained[0]["algo"] + " on the first "
-                     + ", ".join(f"{p['train_tests']:,} ({len(p['seeds'])} seed{'s' if len(p['seeds']) != 1 else ''})"
-                                 for p in ran["curve"]) + " train tests")
-        text += (f"; {ran['training_runs']} runs, {ran['training_steps']:,} time steps in all. The final model of every run "
-                 "is scored (no model selection).")
+            text += (
+                "; for the generalization curve "
+                + trained[0]["algo"]
+                + " on the first "
+                + ", ".join(f"{p['train_tests']:,} ({len(p['seeds'])} seed{'s' if len(p['seeds']) != 1 else ''})" for p in ran["curve"])
+                + " train tests"
+            )
+        text += f"; {ran['training_runs']} runs, {ran['training_steps']:,} time steps in all. The final model of every run is scored (no model selection)."
     else:
         text = "**Trained**: nothing (no baseline was trained in this run: `--sut` named none)."
     given = [s for s in ran["scored"] if s["kind"] not in ("floor", "reference")]
@@ -243,9 +295,20 @@ def headline_cell(e: dict[str, Any], what: str, met_text: Callable[[dict[str, An
     return text + (" (greedy)" if mode != HEADLINE_MODE and text != MISSING else "")
 
 
-TABLE_COLUMNS = ["system", "kind", "seeds", "held-out normalized, sampled (headline) [95 % CI]", "held-out normalized, greedy",
-                 "held-out met, sampled", "held-out met, greedy", "hardest 10 % of held-out tests: met (CVaR)",
-                 "validation met", "train met", "held-out gap (greedy)", "held-out realized (of met)"]
+TABLE_COLUMNS = [
+    "system",
+    "kind",
+    "seeds",
+    "held-out normalized, sampled (headline) [95 % CI]",
+    "held-out normalized, greedy",
+    "held-out met, sampled",
+    "held-out met, greedy",
+    "hardest 10 % of held-out tests: met (CVaR)",
+    "validation met",
+    "train met",
+    "held-out gap (greedy)",
+    "held-out realized (of met)",
+]
 
 
 def table_rows(doc: dict[str, Any]) -> list[list[str]]:
@@ -253,12 +316,22 @@ def table_rows(doc: dict[str, Any]) -> list[list[str]]:
     rows = []
     for e in doc["systems"]:
         g = _mode(e, "test", "greedy")
-        rows.append([e["name"], e["kind"], str(len(e["runs"])), headline_cell(e, "normalized"),
-                     interval_text(g["normalized"] if g else None), headline_cell(e, "met"),
-                     mean_text(g["met"] if g else None), headline_cell(e, "tail"),
-                     mean_text(e["validation"]["met"] if "validation" in e else None),
-                     mean_text(e["train"]["met"] if "train" in e else None),
-                     _gap(e["gap"]), mean_text(e["test"]["realized"] if "test" in e else None)])
+        rows.append(
+            [
+                e["name"],
+                e["kind"],
+                str(len(e["runs"])),
+                headline_cell(e, "normalized"),
+                interval_text(g["normalized"] if g else None),
+                headline_cell(e, "met"),
+                mean_text(g["met"] if g else None),
+                headline_cell(e, "tail"),
+                mean_text(e["validation"]["met"] if "validation" in e else None),
+                mean_text(e["train"]["met"] if "train" in e else None),
+                _gap(e["gap"]),
+                mean_text(e["test"]["realized"] if "test" in e else None),
+            ]
+        )
     return rows
 
 
@@ -272,8 +345,9 @@ def headline_text(doc: dict[str, Any]) -> str:
         if mode != "greedy" and modes.get("greedy"):
             text += f" ({interval_text(modes.get('greedy'))} greedy)"
         parts.append(text)
-    return ("held-out normalized score, sampled (0 = random, 1 = reference): "
-            + ("; ".join(parts) if parts else "no system besides the floor and the references"))
+    return "held-out normalized score, sampled (0 = random, 1 = reference): " + (
+        "; ".join(parts) if parts else "no system besides the floor and the references"
+    )
 
 
 def scale_words(scale: dict[str, Any]) -> str:
@@ -289,28 +363,40 @@ def table_markdown(doc: dict[str, Any]) -> str:
     tops = ", ".join(f"{s} {percent(sc[s]['ceiling'], 1)}" for s in SPLIT_NAMES)
     bound = all(scale_words(sc[s]) == "ceiling" for s in SPLIT_NAMES)
     lines = [
-        f"# FlowTest benchmark: {doc['pool']}", "",
-        f"**{headline_text(doc)}**", "",
-        *ran_text(doc["ran"]), "",
+        f"# FlowTest benchmark: {doc['pool']}",
+        "",
+        f"**{headline_text(doc)}**",
+        "",
+        *ran_text(doc["ran"]),
+        "",
         f"Splits: train {sp['train']['count']} tests (the first {sp['train']['scored']} scored), validation "
         f"{sp['validation']['count']}, held-out test {sp['test']['count']} (never seen in training). "
         f"Scale per split (met): floor = random ({runs_text(cfg['runs'])} per test) "
         + ", ".join(f"{s} {percent(sc[s]['floor'], 1)}" for s in SPLIT_NAMES)
-        + ("; ceiling = the best reference " + tops if bound else
-           "; reference = the best reference " + tops + " (below 100 %: the reference is not a ceiling, a system can score above 1)")
-        + ".", "",
-        "| " + " | ".join(TABLE_COLUMNS) + " |", "|" + "---|" * len(TABLE_COLUMNS),
+        + (
+            "; ceiling = the best reference " + tops
+            if bound
+            else "; reference = the best reference " + tops + " (below 100 %: the reference is not a ceiling, a system can score above 1)"
+        )
+        + ".",
+        "",
+        "| " + " | ".join(TABLE_COLUMNS) + " |",
+        "|" + "---|" * len(TABLE_COLUMNS),
     ]
     lines += ["| " + " | ".join(row) + " |" for row in table_rows(doc)]
     if doc["generalization"]:
-        lines += ["", "## Generalization curve (held-out normalized score against training tests)", "",
-                  "| training tests | seeds | sampled [95 % CI] | greedy [95 % CI] | train met (greedy) |",
-                  "|---|---|---|---|---|"]
+        lines += [
+            "",
+            "## Generalization curve (held-out normalized score against training tests)",
+            "",
+            "| training tests | seeds | sampled [95 % CI] | greedy [95 % CI] | train met (greedy) |",
+            "|---|---|---|---|---|",
+        ]
         for p in doc["generalization"]:
-            lines.append(f"| {p['train_tests']:,} | {len(p['seeds'])} | {interval_text(p['sampled'])} | {interval_text(p['greedy'])} | "
-                         f"{percent(p['train_met'], 1)} |")
-    lines += ["", COLUMNS_NOTE.format(bootstrap=cfg["bootstrap"], runs=runs_text(cfg["runs"], "seeded "),
-                                      scores=SCORES_FILE)]
+            lines.append(
+                f"| {p['train_tests']:,} | {len(p['seeds'])} | {interval_text(p['sampled'])} | {interval_text(p['greedy'])} | {percent(p['train_met'], 1)} |"
+            )
+    lines += ["", COLUMNS_NOTE.format(bootstrap=cfg["bootstrap"], runs=runs_text(cfg["runs"], "seeded "), scores=SCORES_FILE)]
     bugs = [e["name"] for e in doc["systems"] if any(e.get(s, {}).get("test_failures") for s in SPLIT_NAMES)]
     if bugs:
         lines += ["", f"**FLOWTEST BUG: a test failed its guarantee for {', '.join(bugs)}; see report.html.**"]

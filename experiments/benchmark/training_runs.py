@@ -48,8 +48,16 @@ class TrainedBaseline:
         return f"ppo:{self.path}"
 
 
-def train_baseline(config: BenchmarkConfig, algo: str, seed: int, splits: dict[str, Split], out: Path,
-                   progress_bar: bool = False, train_tests: int | None = None, name: str | None = None) -> TrainedBaseline:
+def train_baseline(
+    config: BenchmarkConfig,
+    algo: str,
+    seed: int,
+    splits: dict[str, Split],
+    out: Path,
+    progress_bar: bool = False,
+    train_tests: int | None = None,
+    name: str | None = None,
+) -> TrainedBaseline:
     """Train one baseline on the first ``train_tests`` (default: all ``train_count``) tests
     of the train split (``config.steps`` time steps, rounded up to whole rollouts),
     recording its greedy learning curve on the first train tests (at most :data:`CURVE_TRAIN_TESTS`) and the validation tests;
@@ -67,9 +75,19 @@ def train_baseline(config: BenchmarkConfig, algo: str, seed: int, splits: dict[s
 
 def _record(b: TrainedBaseline, config: BenchmarkConfig) -> None:
     """Write the record of a finished run beside its model (what ``--resume`` keeps)."""
-    write_record(b.path, config, {"algo": b.algo, "seed": b.seed, "train_tests": b.train_tests, "steps": b.steps,
-                                  "seconds": b.seconds, "curve_seconds": b.curve_seconds,
-                                  "curve": [[step, rates] for step, rates in b.curve]})
+    write_record(
+        b.path,
+        config,
+        {
+            "algo": b.algo,
+            "seed": b.seed,
+            "train_tests": b.train_tests,
+            "steps": b.steps,
+            "seconds": b.seconds,
+            "curve_seconds": b.curve_seconds,
+            "curve": [[step, rates] for step, rates in b.curve],
+        },
+    )
 
 
 def model_path(out: Path, algo: str, seed: int, name: str | None = None) -> Path:
@@ -90,8 +108,7 @@ def _sb3_curve_games(splits: dict[str, Split], count: int) -> dict[str, tuple[li
     return shown
 
 
-def _train_sb3_baseline(config: BenchmarkConfig, algo: str, seed: int, splits: dict[str, Split], path: Path,
-                        progress_bar: bool, count: int) -> TrainedBaseline:
+def _train_sb3_baseline(config: BenchmarkConfig, algo: str, seed: int, splits: dict[str, Split], path: Path, progress_bar: bool, count: int) -> TrainedBaseline:
     """One baseline with stable-baselines3 on the first ``count`` train tests of the pool."""
     every = _curve_every(config)
     settings = baseline_settings(algo, "sb3")
@@ -105,8 +122,7 @@ def _train_sb3_baseline(config: BenchmarkConfig, algo: str, seed: int, splits: d
     mark_own_file(path)  # scored below without --trust-model: this run wrote it
     env.close()
     policies = _sb3_policies(model, splits["train"], count, settings["memory"])
-    return TrainedBaseline(algo, seed, path, int(model.num_timesteps), seconds, recorder.seconds, recorder.points, count,
-                           policies)
+    return TrainedBaseline(algo, seed, path, int(model.num_timesteps), seconds, recorder.seconds, recorder.points, count, policies)
 
 
 @dataclass(frozen=True)
@@ -136,8 +152,7 @@ def run_job(state: JobState, job: TrainingJob) -> tuple[TrainedBaseline, bytes]:
     import tempfile
 
     with tempfile.TemporaryDirectory(prefix="flowtest-job-") as scratch:
-        b = train_baseline(state.config, job.algo, job.seed, state.splits, Path(scratch), False, train_tests=job.train_tests,
-                           name=job.name)
+        b = train_baseline(state.config, job.algo, job.seed, state.splits, Path(scratch), False, train_tests=job.train_tests, name=job.name)
         data = b.path.read_bytes()
     b.policies = {}
     return b, data
@@ -177,12 +192,18 @@ def finished_run(config: BenchmarkConfig, job: TrainingJob, splits: dict[str, Sp
         where = model_where(model, _sb3_curve_games(splits, job.train_tests)["train"][0], baseline_settings(job.algo, "sb3")["memory"])
         policies = {"greedy": ModelBatchPolicy(model, where, True), "sampled": ModelBatchPolicy(model, where, False)}
     curve = [(int(step), {k: float(v) for k, v in rates.items()}) for step, rates in rec["curve"]]
-    return TrainedBaseline(job.algo, job.seed, path, int(rec["steps"]), float(rec["seconds"]), float(rec["curve_seconds"]),
-                           curve, job.train_tests, policies)
+    return TrainedBaseline(job.algo, job.seed, path, int(rec["steps"]), float(rec["seconds"]), float(rec["curve_seconds"]), curve, job.train_tests, policies)
 
 
-def train_all(config: BenchmarkConfig, jobs: Sequence[TrainingJob], splits: dict[str, Split], out: Path,
-              say: Callable[[str], None], progress_bar: bool = False, resume: bool = False) -> list[TrainedBaseline]:
+def train_all(
+    config: BenchmarkConfig,
+    jobs: Sequence[TrainingJob],
+    splits: dict[str, Split],
+    out: Path,
+    say: Callable[[str], None],
+    progress_bar: bool = False,
+    resume: bool = False,
+) -> list[TrainedBaseline]:
     """Train every job, in ``config.workers`` processes at once (native trainer; each run
     is seeded and single-threaded, so the models are the same however many run at once),
     in order otherwise; the results in the jobs' order, each with its batched policies. With
@@ -195,15 +216,15 @@ def train_all(config: BenchmarkConfig, jobs: Sequence[TrainingJob], splits: dict
             if b is not None:
                 kept[job.name] = b
         if kept:
-            say(f"resuming: keeping {len(kept)} finished training run{'s' if len(kept) != 1 else ''} of {len(jobs)} "
-                f"({', '.join(kept)})")
+            say(f"resuming: keeping {len(kept)} finished training run{'s' if len(kept) != 1 else ''} of {len(jobs)} ({', '.join(kept)})")
     todo = [job for job in jobs if job.name not in kept]
     trained = {job.name: b for job, b in zip(todo, _train_jobs(config, todo, splits, out, say, progress_bar), strict=True)}
     return [kept.get(job.name) or trained[job.name] for job in jobs]
 
 
-def _train_jobs(config: BenchmarkConfig, jobs: Sequence[TrainingJob], splits: dict[str, Split], out: Path,
-                say: Callable[[str], None], progress_bar: bool = False) -> list[TrainedBaseline]:
+def _train_jobs(
+    config: BenchmarkConfig, jobs: Sequence[TrainingJob], splits: dict[str, Split], out: Path, say: Callable[[str], None], progress_bar: bool = False
+) -> list[TrainedBaseline]:
     """Train ``jobs`` (:func:`train_all`'s training) where ``config.parallel`` says: ``serial``
     (one after another in this process, with the progress bar), ``processes``
     (``config.workers`` local processes at once) or ``ray`` (Ray tasks: on the cluster
@@ -219,8 +240,7 @@ def _train_jobs(config: BenchmarkConfig, jobs: Sequence[TrainingJob], splits: di
         done = []
         for job in jobs:
             say(f"training {job.algo} seed {job.seed} on {job.train_tests} train tests ({config.steps:,} steps)")
-            b = train_baseline(config, job.algo, job.seed, splits, out, progress_bar, train_tests=job.train_tests,
-                               name=job.name)
+            b = train_baseline(config, job.algo, job.seed, splits, out, progress_bar, train_tests=job.train_tests, name=job.name)
             _say_trained(b, say)
             done.append(b)
         return done
@@ -260,7 +280,7 @@ def _sb3_policies(model: Any, train: Split, count: int, memory: str) -> dict[str
     """A stable-baselines3 model's batched policies, greedy and sampled, with its memory."""
     from flowtest_env.game import TestGame
 
-    where = model_where(model, [TestGame(a) for a in train.artifacts[:min(count, CURVE_TRAIN_TESTS)]], memory)
+    where = model_where(model, [TestGame(a) for a in train.artifacts[: min(count, CURVE_TRAIN_TESTS)]], memory)
     return {"greedy": ModelBatchPolicy(model, where, True), "sampled": ModelBatchPolicy(model, where, False)}
 
 
@@ -326,12 +346,15 @@ def _worker_signals() -> None:
 
 def _say_trained(b: TrainedBaseline, say: Callable[[str], None]) -> None:
     final = b.curve[-1][1]
-    say(f"  {b.algo} seed {b.seed} on {b.train_tests} tests: {b.seconds:.0f} s; greedy: met "
-        f"{100 * final['train']:.0f} % of train, {100 * final['validation']:.0f} % of validation tests")
+    say(
+        f"  {b.algo} seed {b.seed} on {b.train_tests} tests: {b.seconds:.0f} s; greedy: met "
+        f"{100 * final['train']:.0f} % of train, {100 * final['validation']:.0f} % of validation tests"
+    )
 
 
-def _train_native_baseline(config: BenchmarkConfig, algo: str, seed: int, splits: dict[str, Split], path: Path,
-                           every: int, progress_bar: bool, count: int) -> TrainedBaseline:
+def _train_native_baseline(
+    config: BenchmarkConfig, algo: str, seed: int, splits: dict[str, Split], path: Path, every: int, progress_bar: bool, count: int
+) -> TrainedBaseline:
     """One baseline with the native trainer on the first ``count`` train tests (a
     :class:`~flowtest_env.vector.PoolVectorEnv` of exactly the loaded tests), its greedy
     curve measured by the trainer on the scored train tests and the validation tests."""
@@ -349,8 +372,7 @@ def _train_native_baseline(config: BenchmarkConfig, algo: str, seed: int, splits
     env = PoolVectorEnv(args.num_envs, [TestGame(a) for a in splits["train"].artifacts[:count]], obs_kind=args.obs_kind)
     monitor = [TestGame(a) for a in splits["validation"].scored]
     try:
-        result = native_train(args, heldout=monitor, progress_bar=progress_bar,
-                              evaluate_train=min(count, config.scored("train"), CURVE_TRAIN_TESTS), env=env)
+        result = native_train(args, heldout=monitor, progress_bar=progress_bar, evaluate_train=min(count, config.scored("train"), CURVE_TRAIN_TESTS), env=env)
     finally:
         env.close()
     write_atomically(path, lambda tmp: save_policy(tmp, result.agent, result.settings))
@@ -358,6 +380,5 @@ def _train_native_baseline(config: BenchmarkConfig, algo: str, seed: int, splits
     curve = [(step, {names[k]: v["met"] for k, v in rates.items()}) for step, rates in result.evaluations]
     pos = result.settings.get("position")
     where = slice(int(pos[0]), int(pos[1])) if pos else None
-    policies = {"greedy": BatchActor(result.agent, where, True, memory=args.memory),
-                "sampled": BatchActor(result.agent, where, False, memory=args.memory)}
+    policies = {"greedy": BatchActor(result.agent, where, True, memory=args.memory), "sampled": BatchActor(result.agent, where, False, memory=args.memory)}
     return TrainedBaseline(algo, seed, path, result.steps, result.seconds, result.eval_seconds, curve, count, policies)

@@ -71,18 +71,15 @@ def _terminated(signum: int, frame: FrameType | None) -> None:
 def terminate_as_interrupt() -> None:
     """Make SIGTERM raise :class:`KeyboardInterrupt` in this (main) thread, unless the
     caller set its own handler or ignores it."""
-    if threading.current_thread() is threading.main_thread() and signal.getsignal(signal.SIGTERM) in (
-        signal.SIG_DFL, None
-    ):
+    if threading.current_thread() is threading.main_thread() and signal.getsignal(signal.SIGTERM) in (signal.SIG_DFL, None):
         signal.signal(signal.SIGTERM, _terminated)
 
 
-def one_line_warning(message: Warning | str, category: type[Warning], filename: str, lineno: int,
-                     file: object = None, line: str | None = None) -> None:
+def one_line_warning(message: Warning | str, category: type[Warning], filename: str, lineno: int, file: object = None, line: str | None = None) -> None:
     """Show a warning as one plain line on stderr, ``flowtest: warning: ...`` (no source
     line, no colours; gymnasium's ``WARN:`` prefix dropped)."""
     text = _ANSI.sub("", str(message))
-    text = text[len("WARN: "):] if text.startswith("WARN: ") else text
+    text = text[len("WARN: ") :] if text.startswith("WARN: ") else text
     say(f"{PROG}: warning: " + " ".join(text.split()))
 
 

@@ -5,6 +5,7 @@ module says what the demo synthesizes, trains and evaluates) and prints the tabl
 files are. The output folder is the demo's own (a marker file); ``--trust-model`` lets it play a
 stable-baselines3 ``ppo-maze2.zip`` found there.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -23,13 +24,14 @@ from .exits import EXIT_OK
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Declare ``flowtest demo``'s arguments."""
     p.add_argument("--out", type=Path, default=Path("flowtest-demo"), help="output folder (default: flowtest-demo)")
-    p.add_argument(
-        "--problems", nargs="+", default=list(DEMO_PROBLEMS), metavar="NAME", help="problems to synthesize"
-    )
+    p.add_argument("--problems", nargs="+", default=list(DEMO_PROBLEMS), metavar="NAME", help="problems to synthesize")
     p.add_argument("--episodes", type=positive_int, default=5, help="evaluation episodes per system (default 5)")
     p.add_argument("--no-evaluation", action="store_true", help="only synthesize and draw, run no system under test")
-    add_trust_model(p, "play a stable-baselines3 ppo-maze2.zip found in the folder, which unpickles it (code from the "
-                       "file runs); the demo's own model is a native checkpoint and never needs it")
+    add_trust_model(
+        p,
+        "play a stable-baselines3 ppo-maze2.zip found in the folder, which unpickles it (code from the "
+        "file runs); the demo's own model is a native checkpoint and never needs it",
+    )
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines on stderr")
 
 

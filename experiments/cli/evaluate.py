@@ -18,6 +18,7 @@ the system); invalid input (an unknown env or system, a system that can play non
 an ``--out`` folder holding other files without ``--force``) is exit 2 before any run. On Ctrl-C
 the pairs played to the end are kept in ``results.json`` and ``report.md``, at once.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -69,36 +70,66 @@ EXIT_TEST_FAILED = EXIT_CHECK_FAILED
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Declare ``flowtest evaluate``'s arguments."""
-    p.add_argument("--env", nargs="+", required=True, metavar="ENV",
-                   help="environments: registered IDs (FlowTest-Maze2-v0), built-in names (maze2), problem files "
-                        "(mine.toml, synthesized once and cached) or artifact files (flowtest synthesize --out)")
-    p.add_argument("--sut", nargs="+", required=True, metavar="POLICY",
-                   help="systems under test: scripted:replanner, scripted:committed, scripted:fuel-blind, "
-                        "scripted:greedy, random, gr1, ppo:PATH; your own planner: python:MODULE:NAME (a function "
-                        "act(observation, mask) or a factory, found from the current directory) or "
-                        "cmd:\"COMMAND\" (a process speaking JSON lines; docs/runtime.md)")
-    p.add_argument("--step-timeout", type=seconds_at_most(MAX_STEP_TIMEOUT), default=None, metavar="SECONDS",
-                   help="how long a cmd: or python: planner may take to answer one step (default "
-                        f"{DEFAULT_STEP_TIMEOUT:g}, at most {MAX_STEP_TIMEOUT:g}; a cmd: planner's first answer includes its start)")
-    p.add_argument("--tester", nargs="+", default=["synthesized"], metavar="TESTER",
-                   help="who plays the test: synthesized (default), ppo:PATH (a learned tester, flowtest "
-                        "train-tester); several give a side-by-side comparison")
-    p.add_argument("--episodes", type=int_between(1, MAX_EPISODES, "a number of runs"), default=10,
-                   help=f"runs per SUT and env (default 10, at most {MAX_EPISODES:,})")
+    p.add_argument(
+        "--env",
+        nargs="+",
+        required=True,
+        metavar="ENV",
+        help="environments: registered IDs (FlowTest-Maze2-v0), built-in names (maze2), problem files "
+        "(mine.toml, synthesized once and cached) or artifact files (flowtest synthesize --out)",
+    )
+    p.add_argument(
+        "--sut",
+        nargs="+",
+        required=True,
+        metavar="POLICY",
+        help="systems under test: scripted:replanner, scripted:committed, scripted:fuel-blind, "
+        "scripted:greedy, random, gr1, ppo:PATH; your own planner: python:MODULE:NAME (a function "
+        "act(observation, mask) or a factory, found from the current directory) or "
+        'cmd:"COMMAND" (a process speaking JSON lines; docs/runtime.md)',
+    )
+    p.add_argument(
+        "--step-timeout",
+        type=seconds_at_most(MAX_STEP_TIMEOUT),
+        default=None,
+        metavar="SECONDS",
+        help="how long a cmd: or python: planner may take to answer one step (default "
+        f"{DEFAULT_STEP_TIMEOUT:g}, at most {MAX_STEP_TIMEOUT:g}; a cmd: planner's first answer includes its start)",
+    )
+    p.add_argument(
+        "--tester",
+        nargs="+",
+        default=["synthesized"],
+        metavar="TESTER",
+        help="who plays the test: synthesized (default), ppo:PATH (a learned tester, flowtest train-tester); several give a side-by-side comparison",
+    )
+    p.add_argument(
+        "--episodes", type=int_between(1, MAX_EPISODES, "a number of runs"), default=10, help=f"runs per SUT and env (default 10, at most {MAX_EPISODES:,})"
+    )
     p.add_argument("--seed", type=nonnegative_int, default=0, help="seed of the first run; run i uses seed+i (default 0)")
-    p.add_argument("--out", type=Path, help="report folder (required unless --replay); a folder holding files "
-                   "FlowTest did not write is refused unless --force")
+    p.add_argument("--out", type=Path, help="report folder (required unless --replay); a folder holding files FlowTest did not write is refused unless --force")
     p.add_argument("--force", action="store_true", help="write into an --out folder that holds other files")
     p.add_argument("--replay", action="store_true", help="print every step of the runs instead of a report")
-    add_trust_model(p, "load stable-baselines3 model zips (--sut ppo:PATH, --tester ppo:PATH), which unpickles them: "
-                       "code from the file runs; native FlowTest checkpoints never need it")
-    p.add_argument("--time-limit", metavar="S", type=option_type(SECONDS),
-                   help="solver time limit in seconds of a problem file synthesized here (default: the problem's, "
-                        "else none); a test cached by an earlier synthesis needs none")
+    add_trust_model(
+        p,
+        "load stable-baselines3 model zips (--sut ppo:PATH, --tester ppo:PATH), which unpickles them: "
+        "code from the file runs; native FlowTest checkpoints never need it",
+    )
     p.add_argument(
-        "--progress", metavar="S", nargs="?", type=positive_seconds, const=PROGRESS_EVERY,
+        "--time-limit",
+        metavar="S",
+        type=option_type(SECONDS),
+        help="solver time limit in seconds of a problem file synthesized here (default: the problem's, "
+        "else none); a test cached by an earlier synthesis needs none",
+    )
+    p.add_argument(
+        "--progress",
+        metavar="S",
+        nargs="?",
+        type=positive_seconds,
+        const=PROGRESS_EVERY,
         help="also when stderr is not a terminal, print the solver's status on stderr every S seconds while a "
-             f"problem file is synthesized (default {PROGRESS_EVERY:g}), as flowtest synthesize --progress",
+        f"problem file is synthesized (default {PROGRESS_EVERY:g}), as flowtest synthesize --progress",
     )
     p.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
 
@@ -156,18 +187,18 @@ def _evaluate(args: argparse.Namespace, tests: list[NamedEnv]) -> int:
             sys.stderr.flush()
 
     try:
-        cells = evaluate(tests, args.sut, args.episodes, args.seed, progress, testers=args.tester,
-                         step_timeout=args.step_timeout)
+        cells = evaluate(tests, args.sut, args.episodes, args.seed, progress, testers=args.tester, step_timeout=args.step_timeout)
     except EvaluationInterrupted as stop:
         # keep the pairs played: results.json and report.md at once (no pictures); none played,
         # they say so (an earlier run's files would otherwise look current)
         write_partial_report(stop.cells, args.out)
         if stop.cells:
-            say(f"flowtest: {len(stop.cells)} of {stop.total} (system, test) pairs were played to the end; "
-                f"{args.out / 'results.json'} and report.md hold them (no pictures, no report.html)")
+            say(
+                f"flowtest: {len(stop.cells)} of {stop.total} (system, test) pairs were played to the end; "
+                f"{args.out / 'results.json'} and report.md hold them (no pictures, no report.html)"
+            )
         else:
-            say(f"flowtest: no (system, test) pair was played to the end; {args.out / 'results.json'} and report.md "
-                "say so")
+            say(f"flowtest: no (system, test) pair was played to the end; {args.out / 'results.json'} and report.md say so")
         raise
     progress("drawing trace pictures")
     records = write_report(cells, args.out)

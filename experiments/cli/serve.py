@@ -107,7 +107,7 @@ def answer(runtime: Any, request: Any) -> tuple[dict[str, Any], str]:
     from flowtest_env.runtime import RuntimeRefused
 
     if not isinstance(request, dict):
-        return _refused("not_an_object", "a request is a JSON object, e.g. {\"op\": \"reset\"}"), "more"
+        return _refused("not_an_object", 'a request is a JSON object, e.g. {"op": "reset"}'), "more"
     ident = _ident(request)
     if ident is None:
         return _refused("bad_id", "an id is a string (at most 256 characters), a number or null"), "more"
@@ -197,8 +197,7 @@ class SessionServer(socketserver.ThreadingTCPServer):
         if full:
             try:
                 request.settimeout(1.0)
-                request.sendall(encode(_refused("busy", f"every session is taken ({self.max_clients}, --max-clients); "
-                                                        "try again later")).encode())
+                request.sendall(encode(_refused("busy", f"every session is taken ({self.max_clients}, --max-clients); try again later")).encode())
             except OSError:
                 pass
             self.shutdown_request(request)
@@ -221,8 +220,9 @@ class SessionServer(socketserver.ThreadingTCPServer):
             self.open_sessions -= 1
 
 
-def make_server(artifact: Any, port: int, max_steps: int | None = None, reveal: bool = False,
-                idle_timeout: float = IDLE_TIMEOUT, max_clients: int = MAX_CLIENTS) -> SessionServer:
+def make_server(
+    artifact: Any, port: int, max_steps: int | None = None, reveal: bool = False, idle_timeout: float = IDLE_TIMEOUT, max_clients: int = MAX_CLIENTS
+) -> SessionServer:
     """A TCP server on 127.0.0.1:``port`` (0: a free port); each connection a session with
     its own runtime of ``artifact``, served at the same time as the others (see the module
     docstring); ``shutdown`` from any session ends it."""
@@ -245,8 +245,7 @@ def make_server(artifact: Any, port: int, max_steps: int | None = None, reveal: 
                 then = serve_lines(runtime, read_line, write)
             except TimeoutError:
                 try:
-                    write(encode(_refused("idle", f"no request within {idle_timeout:g} s (--idle-timeout); "
-                                                  "the connection is closed")))
+                    write(encode(_refused("idle", f"no request within {idle_timeout:g} s (--idle-timeout); the connection is closed")))
                 except OSError:
                     pass
                 return
@@ -260,19 +259,28 @@ def make_server(artifact: Any, port: int, max_steps: int | None = None, reveal: 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Declare ``flowtest serve``'s arguments."""
-    p.add_argument("test", metavar="ARTIFACT",
-                   help="the test: an artifact file (flowtest synthesize --out), a built-in name or a problem file")
-    p.add_argument("--port", type=int_between(0, 65535, "a port"), default=None,
-                   help="serve on 127.0.0.1:PORT instead of standard input and output (0: a free port, printed)")
-    p.add_argument("--max-steps", type=int_between(1, 10 ** 9, "a step budget"), default=None,
-                   help="the step budget of a run (default: the environment's)")
-    p.add_argument("--reveal", action="store_true",
-                   help="name the histories by what the test saw (gives the hidden test objective away; default: q0, q1, ...)")
-    p.add_argument("--idle-timeout", type=seconds_at_most(MAX_IDLE_TIMEOUT), default=IDLE_TIMEOUT, metavar="SECONDS",
-                   help=f"close a socket session that sends no request for this long (default {IDLE_TIMEOUT:g}, "
-                        f"at most {MAX_IDLE_TIMEOUT:g})")
-    p.add_argument("--max-clients", type=int_between(1, 1024, "a number of sessions"), default=MAX_CLIENTS,
-                   help=f"sessions served at once on a socket; one more is answered busy (default {MAX_CLIENTS})")
+    p.add_argument("test", metavar="ARTIFACT", help="the test: an artifact file (flowtest synthesize --out), a built-in name or a problem file")
+    p.add_argument(
+        "--port",
+        type=int_between(0, 65535, "a port"),
+        default=None,
+        help="serve on 127.0.0.1:PORT instead of standard input and output (0: a free port, printed)",
+    )
+    p.add_argument("--max-steps", type=int_between(1, 10**9, "a step budget"), default=None, help="the step budget of a run (default: the environment's)")
+    p.add_argument("--reveal", action="store_true", help="name the histories by what the test saw (gives the hidden test objective away; default: q0, q1, ...)")
+    p.add_argument(
+        "--idle-timeout",
+        type=seconds_at_most(MAX_IDLE_TIMEOUT),
+        default=IDLE_TIMEOUT,
+        metavar="SECONDS",
+        help=f"close a socket session that sends no request for this long (default {IDLE_TIMEOUT:g}, at most {MAX_IDLE_TIMEOUT:g})",
+    )
+    p.add_argument(
+        "--max-clients",
+        type=int_between(1, 1024, "a number of sessions"),
+        default=MAX_CLIENTS,
+        help=f"sessions served at once on a socket; one more is answered busy (default {MAX_CLIENTS})",
+    )
 
 
 def run(args: argparse.Namespace) -> int:

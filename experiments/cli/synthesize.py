@@ -78,39 +78,53 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--plot", metavar="PNG", type=Path, help="draw the test (PNG, SVG or PDF by the file's suffix)")
     p.add_argument("--time-limit", metavar="S", type=option_type(SECONDS), help="solver time limit in seconds (default: the problem's, else none)")
     p.add_argument(
-        "--after-first", metavar="S", type=option_type(SECONDS),
-        help="stop S seconds after the first test is found (--time-limit then bounds the time to it; "
-        "the paper's budget: --time-limit 600 --after-first 60)",
+        "--after-first",
+        metavar="S",
+        type=option_type(SECONDS),
+        help="stop S seconds after the first test is found (--time-limit then bounds the time to it; the paper's budget: --time-limit 600 --after-first 60)",
     )
     p.add_argument("--gap", metavar="G", type=option_type(GAP), default=0.0, help="relative MIP gap at which to stop (default 0: prove optimality)")
     p.add_argument(
-        "--threads", metavar="N", type=machine_threads,
+        "--threads",
+        metavar="N",
+        type=machine_threads,
         help="solver threads (default 1: the same answer on every machine; at most the machine's CPUs)",
     )
     p.add_argument(
-        "--backend", choices=BACKENDS, default="auto",
+        "--backend",
+        choices=BACKENDS,
+        default="auto",
         help=f"the solver of the routing model: highs, cpsat (OR-Tools CP-SAT) or auto (default: {auto_rule()})",
     )
     p.add_argument("--setting", choices=SETTINGS, help="how reactive obstacles are shown (default: the problem's, else instantaneous)")
     p.add_argument("--force", action="store_true", help="overwrite existing --out/--plot files")
     p.add_argument(
-        "--fresh", action="store_true",
+        "--fresh",
+        action="store_true",
         help=f"synthesize even when the same test is at hand (a built-in's shipped test, a problem file's cached one) "
         f"and took {STORED_AFTER:g} s or more to synthesize: it is shown instead by default",
     )
-    p.add_argument("--no-size-limit", action="store_true",
-                   help="synthesize even a problem whose product graph may exceed "
-                        f"{MAX_GRAPH_EDGES:,} edges (refused by default, with an estimate)")
-    for cap, what in (("walls", "walls (static restrictions)"), ("doors", "doors (reactive restrictions)"),
-                      ("restrictions", "walls and doors together")):
+    p.add_argument(
+        "--no-size-limit",
+        action="store_true",
+        help=f"synthesize even a problem whose product graph may exceed {MAX_GRAPH_EDGES:,} edges (refused by default, with an estimate)",
+    )
+    for cap, what in (("walls", "walls (static restrictions)"), ("doors", "doors (reactive restrictions)"), ("restrictions", "walls and doors together")):
         p.add_argument(
-            f"--max-{cap}", metavar="N", type=cap_count, dest=f"max_{cap}",
+            f"--max-{cap}",
+            metavar="N",
+            type=cap_count,
+            dest=f"max_{cap}",
             help=f"at most N {what}, each a move between two places counted once (replaces the problem's "
             f"max_{cap}); no test within it: exit 3 with the fewest that would do",
         )
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines on stderr")
     p.add_argument(
-        "--progress", metavar="S", nargs="?", type=positive_seconds, const=PROGRESS_EVERY,
+        "--progress",
+        metavar="S",
+        nargs="?",
+        type=positive_seconds,
+        const=PROGRESS_EVERY,
         help="also when stderr is not a terminal (a log, a pipe), print the solver's status (best "
         f"test, bound, gap) on stderr every S seconds (default {PROGRESS_EVERY:g}); on a terminal "
         "the live line always shows it",
@@ -187,8 +201,7 @@ instead of solving again (``--fresh`` solves anyway): patrolling's shipped test 
 other built-in that ships a proven optimum a few seconds at most (docs/benchmarks/solvers.md)."""
 
 
-def options_of(args: argparse.Namespace, progress: Callable[[str], None] | None = None,
-               control: SolveControl | None = None) -> pipeline.SynthesisOptions:
+def options_of(args: argparse.Namespace, progress: Callable[[str], None] | None = None, control: SolveControl | None = None) -> pipeline.SynthesisOptions:
     """The synthesis options ``args`` ask for, with the ``progress`` and ``control`` of the run."""
     return pipeline.SynthesisOptions(
         time_limit=args.time_limit,
@@ -241,15 +254,19 @@ def _show_stored(args: argparse.Namespace, problem: Problem, stored: StoredTest)
     art = stored.artifact
     summary = json_safe(art.summary)
     took = synthesis_seconds(summary)
-    made = art.extras.get("made_with", {}) or {"backend": summary.get("stats", {}).get("backend", "?"),
-                                                "version": summary.get("stats", {}).get("solver_version", "?")}
+    made = art.extras.get("made_with", {}) or {
+        "backend": summary.get("stats", {}).get("backend", "?"),
+        "version": summary.get("stats", {}).get("solver_version", "?"),
+    }
     where = f"the shipped test {stored.path}" if stored.shipped else f"its cached test {stored.path}"
     # where the test comes from: one whole line (done(), never cut to a terminal's width); every
     # line is ended before the summary
     with StageProgress(enabled=not args.quiet) as progress:
-        progress.done(f"{problem.name}: {where} (proven optimal, every check passed): the test this synthesis gives, "
-                      f"not synthesized again; synthesizing it took {took:.0f} s ({made.get('backend')} {made.get('version')}), "
-                      "--fresh does it again")
+        progress.done(
+            f"{problem.name}: {where} (proven optimal, every check passed): the test this synthesis gives, "
+            f"not synthesized again; synthesizing it took {took:.0f} s ({made.get('backend')} {made.get('version')}), "
+            "--fresh does it again"
+        )
         if args.out is not None:
             progress(f"writing the artifact {args.out}")
             check_output_path(args.out, args.force, "artifact")
@@ -330,8 +347,7 @@ def _cache(path: Path, raw: bytes, test: Any, options: pipeline.SynthesisOptions
 
     status = summary_of(test).get("status")
     if status != "optimal":
-        progress(f"not cached: the test is not proven optimal ({status}); "
-                 "flowtest evaluate takes the --out file as it is")
+        progress(f"not cached: the test is not proven optimal ({status}); flowtest evaluate takes the --out file as it is")
         return
     entry = cache_problem_test(path, raw, test, options)
     if entry is not None:
@@ -357,13 +373,17 @@ def large_problem_note(problem: Problem, args: argparse.Namespace) -> str | None
     if est.edges < LARGE_EDGES:
         return None
     limit = args.time_limit if args.time_limit is not None else problem.time_limit
-    bound = (f"the time limit of {limit:g} s bounds it (the best test by then, with its gap)" if limit is not None
-             else "no time limit set: --time-limit S bounds it (the best test by then, with its gap)")
+    bound = (
+        f"the time limit of {limit:g} s bounds it (the best test by then, with its gap)"
+        if limit is not None
+        else "no time limit set: --time-limit S bounds it (the best test by then, with its gap)"
+    )
     caps = {**problem.caps, **caps_of_args(args)}
-    capped = ("caps " + ", ".join(f"{k} = {v}" for k, v in caps.items()) if caps
-              else "--max-walls/--max-doors/--max-restrictions N bound what the test may use")
-    return (f"{problem.name} is large (T: {est.states:,} states, {est.moves:,} moves; up to {est.edges:,} product-graph "
-            f"edges): the solve may run for minutes; {bound}; {capped}")
+    capped = "caps " + ", ".join(f"{k} = {v}" for k, v in caps.items()) if caps else "--max-walls/--max-doors/--max-restrictions N bound what the test may use"
+    return (
+        f"{problem.name} is large (T: {est.states:,} states, {est.moves:,} moves; up to {est.edges:,} product-graph "
+        f"edges): the solve may run for minutes; {bound}; {capped}"
+    )
 
 
 def _load(load_problem: Callable[[str], Any], name: str) -> Any:

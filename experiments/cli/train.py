@@ -50,7 +50,6 @@ Needs the ``rl`` extra (``pip install 'flowtest[rl]'``: torch, stable-baselines3
 sb3-contrib, tensorboard).
 """
 
-
 from __future__ import annotations
 
 import argparse
@@ -79,15 +78,26 @@ def _net_arch(text: str) -> list[int]:
 
 SETTING_HELP: dict[str, str] = {
     "algo": f"algorithm: native {', '.join(NATIVE_ALGOS)}; sb3 {', '.join(ALGOS)}",
-    "n_envs": "envs stepped together", "n_steps": "rollout steps per env", "batch_size": "minibatch size (steps)",
-    "learning_rate": "learning rate", "gamma": "discount", "ent_coef": "entropy bonus", "n_epochs": "epochs per rollout",
-    "net_arch": "hidden layer widths, comma-separated", "lstm_hidden_size": "LSTM width (sb3 recurrent-ppo only)",
-    "gru_hidden_size": "GRU width (native recurrent-ppo)", "gae_lambda": "GAE lambda", "clip_range": "PPO ratio clip",
-    "vf_coef": "value loss weight", "max_grad_norm": "gradient clip",
-    "device": "auto (cuda when torch sees one), cpu, cuda, cuda:N", "threads": "torch CPU threads",
+    "n_envs": "envs stepped together",
+    "n_steps": "rollout steps per env",
+    "batch_size": "minibatch size (steps)",
+    "learning_rate": "learning rate",
+    "gamma": "discount",
+    "ent_coef": "entropy bonus",
+    "n_epochs": "epochs per rollout",
+    "net_arch": "hidden layer widths, comma-separated",
+    "lstm_hidden_size": "LSTM width (sb3 recurrent-ppo only)",
+    "gru_hidden_size": "GRU width (native recurrent-ppo)",
+    "gae_lambda": "GAE lambda",
+    "clip_range": "PPO ratio clip",
+    "vf_coef": "value loss weight",
+    "max_grad_norm": "gradient clip",
+    "device": "auto (cuda when torch sees one), cpu, cuda, cuda:N",
+    "threads": "torch CPU threads",
     "env_backend": "who steps the tests: torch (the torch env on --device), numpy (the NumPy vector env); auto: numpy on the CPU, else torch",
     "shaping": "env option: shaping scale, 0 = off",
-    "memory": "env option: the SUT's memory, none, visited or counts (how often, capped)", "obs_kind": "env option: flat, grid or padded",
+    "memory": "env option: the SUT's memory, none, visited or counts (how often, capped)",
+    "obs_kind": "env option: flat, grid or padded",
     "pad_to": "env option: grid side of obs_kind=padded",
 }
 
@@ -98,32 +108,40 @@ def _shown(value: Any) -> str:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Declare ``flowtest train``'s arguments."""
-    p.add_argument("ENV", help="environment: a registered ID (FlowTest-Maze2-v0), a built-in name (maze2), a problem "
-                               "file (mine.toml) or an artifact file")
-    p.add_argument("--trainer", choices=TRAINERS, default="native",
-                   help="native: FlowTest's batched masked PPO (default; a native checkpoint); sb3: stable-baselines3 "
-                        "(an SB3 zip, which loading unpickles)")
-    p.add_argument("--steps", type=positive_int, default=None,
-                   help="training time steps (default: native 1500000, sb3 50000)")
+    p.add_argument("ENV", help="environment: a registered ID (FlowTest-Maze2-v0), a built-in name (maze2), a problem file (mine.toml) or an artifact file")
+    p.add_argument(
+        "--trainer",
+        choices=TRAINERS,
+        default="native",
+        help="native: FlowTest's batched masked PPO (default; a native checkpoint); sb3: stable-baselines3 (an SB3 zip, which loading unpickles)",
+    )
+    p.add_argument("--steps", type=positive_int, default=None, help="training time steps (default: native 1500000, sb3 50000)")
     p.add_argument("--out", type=Path, required=True, help="model file (.zip); the curve goes next to it (.png)")
     p.add_argument("--seed", type=nonnegative_int, default=0, help="seed (default 0)")
-    p.add_argument("--pool", metavar="NAME", default=None,
-                   help="train on a named pool's tests (FlowTest-RandomGrid-v0), e.g. reachability1/5x5")
-    p.add_argument("--split", choices=("train", "validation", "test"), default=None,
-                   help="the pool's split to train on (default train)")
+    p.add_argument("--pool", metavar="NAME", default=None, help="train on a named pool's tests (FlowTest-RandomGrid-v0), e.g. reachability1/5x5")
+    p.add_argument("--split", choices=("train", "validation", "test"), default=None, help="the pool's split to train on (default train)")
     p.add_argument("--count", type=positive_int, default=None, help="tests of the split (default 128)")
-    p.add_argument("--heldout-count", type=nonnegative_int, default=None,
-                   help="with --pool: held-out tests of the pool's test split evaluated during training "
-                        "(default 32; 0: none)")
-    p.add_argument("--eval-every", type=nonnegative_int, default=250_000,
-                   help="native: steps between greedy evaluations (default 250000; 0: at the end only)")
-    p.add_argument("--log-dir", type=Path, default=None,
-                   help="native: write progress.csv and TensorBoard logs into a new folder of this run inside this "
-                        "folder, named after the model (DIR/NAME, or DIR/NAME-2... when taken: an earlier run's logs "
-                        "are never replaced); not a symbolic link")
-    p.add_argument("--eval-episodes", type=nonnegative_int, default=None,
-                   help="single-env evaluation runs after training (default 100, 0 with --pool "
-                        "(the greedy evaluation on the tests is the score))")
+    p.add_argument(
+        "--heldout-count",
+        type=nonnegative_int,
+        default=None,
+        help="with --pool: held-out tests of the pool's test split evaluated during training (default 32; 0: none)",
+    )
+    p.add_argument("--eval-every", type=nonnegative_int, default=250_000, help="native: steps between greedy evaluations (default 250000; 0: at the end only)")
+    p.add_argument(
+        "--log-dir",
+        type=Path,
+        default=None,
+        help="native: write progress.csv and TensorBoard logs into a new folder of this run inside this "
+        "folder, named after the model (DIR/NAME, or DIR/NAME-2... when taken: an earlier run's logs "
+        "are never replaced); not a symbolic link",
+    )
+    p.add_argument(
+        "--eval-episodes",
+        type=nonnegative_int,
+        default=None,
+        help="single-env evaluation runs after training (default 100, 0 with --pool (the greedy evaluation on the tests is the score))",
+    )
     p.add_argument("--force", action="store_true", help="overwrite an existing model, curve or summary")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     g = p.add_argument_group("settings (printed at the start and saved in the .json; defaults per trainer)")
@@ -138,8 +156,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         elif key == "algo":
             kw["choices"] = tuple(dict.fromkeys([*NATIVE_ALGOS, *ALGOS]))
         elif key in ("memory", "obs_kind", "env_backend"):
-            kw["choices"] = {"memory": ("none", "visited", "counts"), "obs_kind": ("flat", "grid", "padded"),
-                             "env_backend": ("auto", "torch", "numpy")}[key]
+            kw["choices"] = {"memory": ("none", "visited", "counts"), "obs_kind": ("flat", "grid", "padded"), "env_backend": ("auto", "torch", "numpy")}[key]
         elif key == "device":
             kw["type"] = str
         else:
@@ -185,20 +202,20 @@ def run(args: argparse.Namespace) -> int:
             raise ProblemError("--log-dir goes with the native trainer (--trainer native)")
         unknown = set(given) - set(DEFAULTS)
         if unknown:
-            raise ProblemError(f"{', '.join(flag_of(k) for k in sorted(unknown))}: a setting of the native trainer, "
-                               "not of --trainer sb3")
+            raise ProblemError(f"{', '.join(flag_of(k) for k in sorted(unknown))}: a setting of the native trainer, not of --trainer sb3")
         settings = {**DEFAULTS, **given}
         check_settings(settings)
     else:
         require_native()
         settings = native_settings(given)
     if pool and args.ENV != POOL_ENV:
-        raise ProblemError(f"--pool trains on a named pool's tests through {POOL_ENV}, not {args.ENV}: "
-                           f"flowtest train {POOL_ENV} --pool {args.pool} ... (or drop --pool to train on {args.ENV})")
+        raise ProblemError(
+            f"--pool trains on a named pool's tests through {POOL_ENV}, not {args.ENV}: "
+            f"flowtest train {POOL_ENV} --pool {args.pool} ... (or drop --pool to train on {args.ENV})"
+        )
     env_named(args.ENV, **pool).close()  # a bad environment is refused before anything else
     model_path = args.out if args.out.suffix == ".zip" else args.out.with_suffix(".zip")
-    for path, what in ((model_path, "model"), (model_path.with_suffix(".png"), "curve"),
-                       (model_path.with_suffix(".json"), "training summary")):
+    for path, what in ((model_path, "model"), (model_path.with_suffix(".png"), "curve"), (model_path.with_suffix(".json"), "training summary")):
         check_output_path(path, args.force, what)
     if args.log_dir is not None:
         check_log_dir(args.log_dir)
@@ -214,21 +231,37 @@ def run(args: argparse.Namespace) -> int:
             heldout = heldout_games(pool["pool"], n_heldout, progress=not args.quiet)
     eval_episodes = args.eval_episodes if args.eval_episodes is not None else (0 if pool else 100)
     if args.trainer == "sb3":
-        s = train(args.ENV, steps, args.out, args.seed, progress_bar=not args.quiet, eval_episodes=eval_episodes,
-                  env_kwargs=pool, heldout=heldout, **given)
+        s = train(args.ENV, steps, args.out, args.seed, progress_bar=not args.quiet, eval_episodes=eval_episodes, env_kwargs=pool, heldout=heldout, **given)
         lines = [f"trained {s['steps']} steps in {s['seconds']:.1f} s"]
     else:
-        s = train_native(args.ENV, steps, args.out, args.seed, progress_bar=not args.quiet, eval_episodes=eval_episodes,
-                         env_kwargs=pool, heldout=heldout, log_dir=args.log_dir, eval_every=args.eval_every, **given)
-        lines = [f"trained {s['steps']} steps in {s['seconds']:.1f} s ({s['steps_per_second']:,.0f} steps/s on "
-                 f"{s['device']}, evaluations {s['eval_seconds']:.1f} s more)"]
+        s = train_native(
+            args.ENV,
+            steps,
+            args.out,
+            args.seed,
+            progress_bar=not args.quiet,
+            eval_episodes=eval_episodes,
+            env_kwargs=pool,
+            heldout=heldout,
+            log_dir=args.log_dir,
+            eval_every=args.eval_every,
+            **given,
+        )
+        lines = [
+            f"trained {s['steps']} steps in {s['seconds']:.1f} s ({s['steps_per_second']:,.0f} steps/s on "
+            f"{s['device']}, evaluations {s['eval_seconds']:.1f} s more)"
+        ]
     lines += score_lines(s, pool, len(heldout))
     if s["success_rate"] is not None:
         lines.append(f"system objective met in {100 * s['success_rate']:.0f} % of {s['eval_episodes']} evaluation runs")
     used = ", ".join(f"{k}={_shown(v)}" for k, v in s["settings"].items())
     trust = " --trust-model" if args.trainer == "sb3" else ""  # an SB3 zip is unpickled when loaded
-    lines += [f"settings: {used}", f"model: {s['model']} (use --sut ppo:{s['model']}{trust})", f"curve: {s['curve']}",
-              f"settings and curve data: {Path(s['model']).with_suffix('.json')}"]
+    lines += [
+        f"settings: {used}",
+        f"model: {s['model']} (use --sut ppo:{s['model']}{trust})",
+        f"curve: {s['curve']}",
+        f"settings and curve data: {Path(s['model']).with_suffix('.json')}",
+    ]
     if s.get("log_dir") is not None:
         lines.append(f"logs: {s['log_dir']} (progress.csv; tensorboard --logdir {args.log_dir})")
     sys.stdout.write("\n".join(lines) + "\n")
@@ -239,14 +272,15 @@ def score_lines(s: dict[str, Any], pool: dict[str, Any], n_heldout: int) -> list
     """The greedy scores of a training summary, each beside its tests' random floor: ``greedy
     on 32 held-out tests: system objective met 46.9 % (random: 21.9 %), ...``."""
     lines = []
-    for split, what in (("train", f"the {pool['count']} {pool['split']} tests" if pool else "the env's tests"),
-                        ("heldout", f"{n_heldout} held-out tests")):
+    for split, what in (("train", f"the {pool['count']} {pool['split']} tests" if pool else "the env's tests"), ("heldout", f"{n_heldout} held-out tests")):
         if split in s["final"]:
             r = s["final"][split]
             floor = s.get("floor", {}).get(split)
             beside = "" if floor is None else f" (random: {100 * floor:.1f} %, {FLOOR_RUNS} runs per test)"
-            lines.append(f"greedy on {what}: system objective met {100 * r['met']:.1f} %{beside}, test objective realized "
-                         f"{100 * r['realized']:.1f} %, {r['restrictions']:.1f} restrictions per run")
+            lines.append(
+                f"greedy on {what}: system objective met {100 * r['met']:.1f} %{beside}, test objective realized "
+                f"{100 * r['realized']:.1f} %, {r['restrictions']:.1f} restrictions per run"
+            )
     return lines
 
 

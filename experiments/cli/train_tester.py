@@ -7,6 +7,7 @@ writes the model (``PATH``, a ``.zip``, usable as ``--tester ppo:PATH``), its tr
 (``.png``) and a summary (``.json``); an existing one is refused unless ``--force``. Needs the
 ``rl`` extra.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -24,16 +25,15 @@ from .exits import EXIT_OK
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Declare ``flowtest train-tester``'s arguments."""
-    p.add_argument("PROBLEM", help="a built-in problem with a test agent or reactive doors (maze2, small-reactive, ...) "
-                                   "or its env ID")
-    p.add_argument("--against", default="scripted:replanner", metavar="POLICY",
-                   help="the fixed system the tester trains against (default scripted:replanner)")
+    p.add_argument("PROBLEM", help="a built-in problem with a test agent or reactive doors (maze2, small-reactive, ...) or its env ID")
+    p.add_argument("--against", default="scripted:replanner", metavar="POLICY", help="the fixed system the tester trains against (default scripted:replanner)")
     p.add_argument("--steps", type=positive_int, default=20_000, help="tester steps (default 20000)")
     p.add_argument("--out", type=Path, required=True, help="model file (.zip); curve (.png) and summary (.json) next to it")
     p.add_argument("--seed", type=nonnegative_int, default=0, help="seed (default 0)")
     p.add_argument("--eval-episodes", type=nonnegative_int, default=10, help="runs against --against after training (default 10)")
-    p.add_argument("--trap-penalty", type=float, default=0.0,
-                   help="reward when the system's objective is still open at the end (default 0: not asked to be fair)")
+    p.add_argument(
+        "--trap-penalty", type=float, default=0.0, help="reward when the system's objective is still open at the end (default 0: not asked to be fair)"
+    )
     p.add_argument("--force", action="store_true", help="overwrite an existing model, curve or summary")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
 
@@ -47,8 +47,16 @@ def run(args: argparse.Namespace) -> int:
     for path, what in ((out, "model"), (out.with_suffix(".png"), "curve"), (out.with_suffix(".json"), "training summary")):
         check_output_path(path, args.force, what)
     try:
-        s = train_tester(args.PROBLEM, args.steps, out, args.against, args.seed, progress_bar=not args.quiet,
-                         eval_episodes=args.eval_episodes, trap_penalty=args.trap_penalty)
+        s = train_tester(
+            args.PROBLEM,
+            args.steps,
+            out,
+            args.against,
+            args.seed,
+            progress_bar=not args.quiet,
+            eval_episodes=args.eval_episodes,
+            trap_penalty=args.trap_penalty,
+        )
     except PolicyError as exc:
         raise ProblemError(f"--against {args.against}: {exc}") from None
     f = s["fairness"]
@@ -64,5 +72,4 @@ def run(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-COMMAND = Command("train-tester", "train a PPO tester (tester_0 of the PettingZoo game) against a fixed system",
-                  add_arguments, run)
+COMMAND = Command("train-tester", "train a PPO tester (tester_0 of the PettingZoo game) against a fixed system", add_arguments, run)

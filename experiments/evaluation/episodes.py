@@ -65,7 +65,6 @@ class Trace:
         return self.kind != "pass"
 
 
-
 @dataclass(frozen=True)
 class NamedEnv:
     """One test as a name resolved it, once (:func:`resolve_env`): the name (``--env``), the
@@ -209,9 +208,7 @@ def env_named(env_id: str, **options: Any) -> Any:
         if Path(env_id).suffix or Path(env_id).exists():
             raise
         known = ", ".join(flowtest_env.ENV_IDS)
-        raise ProblemError(
-            f"unknown environment {env_id!r}: not a registered ID ({known}), a built-in name or a file"
-        ) from exc
+        raise ProblemError(f"unknown environment {env_id!r}: not a registered ID ({known}), a built-in name or a file") from exc
 
 
 def game_of_trace(trace: Trace) -> Any:
@@ -273,8 +270,7 @@ def _reachable_past_walls(game: Any, history: int, state: int) -> bool:
     return not walls.doomed[history][state]
 
 
-def run_episode(env: Any, policy: Any, env_id: str, sut: str, seed: int, record: bool = True,
-                tester: str = "synthesized") -> Trace:
+def run_episode(env: Any, policy: Any, env_id: str, sut: str, seed: int, record: bool = True, tester: str = "synthesized") -> Trace:
     """Play one seeded episode; the trace keeps copies of the run states when ``record``.
 
     A planner that fails (:class:`agents.external.PlannerError`: it crashed, hung or

@@ -73,8 +73,7 @@ def _periodic_tail(seq: Sequence[Any], min_rounds: int, min_steps: int, max_peri
     return best
 
 
-def find_loop(systems: Sequence[int], keys: Sequence[Any] | None = None, min_rounds: int = 3, min_steps: int = 8,
-              max_period: int = 64) -> Loop | None:
+def find_loop(systems: Sequence[int], keys: Sequence[Any] | None = None, min_rounds: int = 3, min_steps: int = 8, max_period: int = 64) -> Loop | None:
     """The loop a run ended in, from the system's states (at reset, then after every step):
     the earliest step from which the run repeats itself to the end, for at least
     ``min_rounds`` rounds and ``min_steps`` steps (a few steps alike at the end of a
@@ -121,8 +120,15 @@ class MoveVerdict:
         return f"{move} was refused on {self.refused} of {self.visits} visits{why}, and never taken when allowed"
 
     def to_dict(self) -> dict[str, Any]:
-        return {"from": self.source, "to": self.target, "action": self.action, "visits": self.visits,
-                "refused": self.refused, "causes": list(self.causes), "text": self.text()}
+        return {
+            "from": self.source,
+            "to": self.target,
+            "action": self.action,
+            "visits": self.visits,
+            "refused": self.refused,
+            "causes": list(self.causes),
+            "text": self.text(),
+        }
 
 
 @dataclass(frozen=True)
@@ -144,8 +150,7 @@ class Explanation:
         """What ``results.json`` keeps of it (a failure's ``explanation``)."""
         out: dict[str, Any] = {"what": self.what, "text": self.text, "step": self.step, **self.extra}
         if self.loop is not None:
-            out["loop"] = {"from_step": self.loop.start, "period": self.loop.period, "cells": list(self.cells),
-                           "rounds": round(self.loop.rounds, 1)}
+            out["loop"] = {"from_step": self.loop.start, "period": self.loop.period, "cells": list(self.cells), "rounds": round(self.loop.rounds, 1)}
         if self.moves:
             out["moves"] = [m.to_dict() for m in self.moves]
         return out
@@ -185,8 +190,9 @@ def goal_distances(game: Any) -> np.ndarray:
     stays = np.flatnonzero(ts.stay)
     q = np.arange(nq)[:, None]
     src = np.concatenate([(q * n + ts.src[open_moves][None, :]).ravel(), (q * n + stays[None, :]).ravel()])
-    dst = np.concatenate([(dba.delta[:, letter[ts.dst[open_moves]]] * n + ts.dst[open_moves][None, :]).ravel(),
-                          (dba.delta[:, letter[stays]] * n + stays[None, :]).ravel()])
+    dst = np.concatenate(
+        [(dba.delta[:, letter[ts.dst[open_moves]]] * n + ts.dst[open_moves][None, :]).ravel(), (dba.delta[:, letter[stays]] * n + stays[None, :]).ravel()]
+    )
     dist = np.where(np.repeat(dba.accepting[:, 0], n), 0, -1).astype(np.int64)
     d = 0
     while True:
@@ -271,8 +277,7 @@ def _moves_toward_goal(game: Any, states: Sequence[Any], loop: Loop, tester: str
     verdicts = []
     for (s, slot), (visits, refused, causes) in seen.items():
         t = s if slot == game.stay_action else int(game.ts.dst[game.slot_list[s][slot]])
-        verdicts.append(MoveVerdict(place_name(game, s), place_name(game, t), game.action_name(s, slot), visits, refused,
-                                    _causes_words(causes)))
+        verdicts.append(MoveVerdict(place_name(game, s), place_name(game, t), game.action_name(s, slot), visits, refused, _causes_words(causes)))
     verdicts.sort(key=lambda v: (-v.refused / max(v.visits, 1), v.source, v.target))
     return verdicts
 
@@ -312,9 +317,11 @@ def _wander_explanation(game: Any, states: Sequence[Any]) -> Explanation:
     cells = {place_name(game, r.system) for r in states}
     template = "never settled into a loop before the step budget ran out"
     where = "cells" if game.is_grid else "states"
-    text = (f"{template}: went through {len(cells)} {where} and ended in {place_name(game, states[-1].system)}, "
-            f"{_moves(ds[-1])} from meeting the system objective past the walls (nearest: {_moves(ds[near])}, "
-            f"at step {near} in {place_name(game, states[near].system)})")
+    text = (
+        f"{template}: went through {len(cells)} {where} and ended in {place_name(game, states[-1].system)}, "
+        f"{_moves(ds[-1])} from meeting the system objective past the walls (nearest: {_moves(ds[near])}, "
+        f"at step {near} in {place_name(game, states[near].system)})"
+    )
     return Explanation("wander", text, template, extra={"nearest": ds[near], "nearest_step": near, "end": ds[-1]})
 
 
@@ -340,8 +347,7 @@ def explain(trace: Any, game: Any = None) -> Explanation:
         if v is None:
             return Explanation("reason", reason, reason)
         template = f"{reason}: {v.text(STEPS)}"
-        return Explanation("violation", _with_steps(template, f"step {v.step}"), template, v.step,
-                           extra={"violation": v.to_dict()})
+        return Explanation("violation", _with_steps(template, f"step {v.step}"), template, v.step, extra={"violation": v.to_dict()})
     if outcome != "open":
         return Explanation("reason", reason, reason)
     loop = find_loop([r.system for r in trace.states], [(r.system, r.history, r.agent) for r in trace.states])
@@ -385,9 +391,16 @@ class Outcome:
         return f"{self.runs_words()}: {self.text}"
 
     def to_dict(self) -> dict[str, Any]:
-        return {"kind": self.kind, "what": self.what, "text": self.text, "seeds": list(self.seeds), "runs": len(self.seeds),
-                "steps": list(self.steps), "line": self.line(),
-                "explanation": None if self.first is None else self.first.to_dict()}
+        return {
+            "kind": self.kind,
+            "what": self.what,
+            "text": self.text,
+            "seeds": list(self.seeds),
+            "runs": len(self.seeds),
+            "steps": list(self.steps),
+            "line": self.line(),
+            "explanation": None if self.first is None else self.first.to_dict(),
+        }
 
 
 def seed_words(seeds: Sequence[int]) -> str:
@@ -430,7 +443,6 @@ def fold(runs: Sequence[tuple[int, str, Explanation]], tests: Sequence[str] = ()
             text = first.text
         else:
             text = _with_steps(template, steps_words(steps)) if steps else template
-        out.append(Outcome(kind, first.what, text, tuple(runs[i][0] for i in members),
-                           tuple(tests[i] for i in members) if tests else (), tuple(steps), first))
+        out.append(Outcome(kind, first.what, text, tuple(runs[i][0] for i in members), tuple(tests[i] for i in members) if tests else (), tuple(steps), first))
     order = {id(o): i for i, o in enumerate(out)}
     return sorted(out, key=lambda o: (-len(o.seeds), order[id(o)]))

@@ -96,8 +96,9 @@ def symbol_legend(game: Any, colours: Mapping[str, tuple[int, int, int]] | None 
     handles: list[Any] = [
         Line2D([], [], marker="o", color=rgb(render.SYSTEM), label="system under test", linestyle="", markersize=9),
         Patch(facecolor=rgb(render.GOAL), label="goal"),
-        Line2D([], [], marker="o", markerfacecolor="none", markeredgewidth=2, color=rgb(render.TEST_CELL),
-               label="hidden test cell", linestyle="", markersize=9),
+        Line2D(
+            [], [], marker="o", markerfacecolor="none", markeredgewidth=2, color=rgb(render.TEST_CELL), label="hidden test cell", linestyle="", markersize=9
+        ),
     ]
     if game.ts.layout is not None and game.ts.layout.blocked:
         handles.append(Patch(facecolor=rgb(render.BLOCKED), label="blocked cell"))
@@ -117,8 +118,7 @@ def symbol_legend(game: Any, colours: Mapping[str, tuple[int, int, int]] | None 
     return handles
 
 
-def frames_to_show(game: Any, states: Sequence[Any], limit: int = MAX_FRAMES, keep_step: int | None = None,
-                   loop: Any = None) -> list[int]:
+def frames_to_show(game: Any, states: Sequence[Any], limit: int = MAX_FRAMES, keep_step: int | None = None, loop: Any = None) -> list[int]:
     """Indices of the states a filmstrip shows: the start, every step where the system or
     the test agent moved, a door on the floor closed or opened or an action was refused,
     the end; a run that ended in ``loop`` (:class:`~experiments.evaluation.explain.Loop`)
@@ -129,9 +129,7 @@ def frames_to_show(game: Any, states: Sequence[Any], limit: int = MAX_FRAMES, ke
     keep = [0]
     for k in range(1, upto + 1):
         a, b = states[k - 1], states[k]
-        if (b.system, b.agent, b.blocked_attempts) != (a.system, a.agent, a.blocked_attempts) or (
-            floor_doors(game, a) != floor_doors(game, b)
-        ):
+        if (b.system, b.agent, b.blocked_attempts) != (a.system, a.agent, a.blocked_attempts) or (floor_doors(game, a) != floor_doors(game, b)):
             keep.append(k)
     if loop is not None:
         keep += [k for k in range(loop.start, upto + 1) if k not in keep]
@@ -148,8 +146,17 @@ def frames_to_show(game: Any, states: Sequence[Any], limit: int = MAX_FRAMES, ke
     return sorted(set(keep))
 
 
-def filmstrip(game: Any, states: Sequence[Any], actions: Sequence[int], title: str, path: Path, tile: int = 40,
-              colours: Mapping[str, tuple[int, int, int]] | None = None, loop: Any = None, explanation: str = "") -> None:
+def filmstrip(
+    game: Any,
+    states: Sequence[Any],
+    actions: Sequence[int],
+    title: str,
+    path: Path,
+    tile: int = 40,
+    colours: Mapping[str, tuple[int, int, int]] | None = None,
+    loop: Any = None,
+    explanation: str = "",
+) -> None:
     """Draw the filmstrip of a run (``states`` after reset and every step) to ``path``:
     ``title`` and ``explanation`` (what the run did, in one line) above the frames, a
     ``loop`` the run ended in shown once (:func:`frames_to_show`), the propositions in
@@ -206,8 +213,14 @@ def filmstrip(game: Any, states: Sequence[Any], actions: Sequence[int], title: s
     if handles:
         fig.legend(handles=handles, loc="lower center", ncol=min(5, len(handles)), fontsize=8, frameon=False)
     frame_h = fw * h / w
-    fig.subplots_adjust(left=0.01, right=0.99, bottom=(bottom + 0.05) / height, top=1 - (top + frame_titles) / height,
-                        wspace=0.06 * n_cols / max(n_cols - 1, 1), hspace=frame_titles / frame_h)
+    fig.subplots_adjust(
+        left=0.01,
+        right=0.99,
+        bottom=(bottom + 0.05) / height,
+        top=1 - (top + frame_titles) / height,
+        wspace=0.06 * n_cols / max(n_cols - 1, 1),
+        hspace=frame_titles / frame_h,
+    )
     fig.savefig(path, dpi=100)
     plt.close(fig)
 
@@ -227,8 +240,7 @@ def _frame_title(i: int, prev: int, events: Sequence[str], states: Sequence[Any]
     if broke is not None and i == broke.step:
         return f"{head}: {label}\nBROKE {broke.conjunct}\nat {broke.where}"
     if loop is not None and i == loop.start:
-        return f"{head}: {label}\n" + ("it stays here from now on" if loop.period == 1 else
-                                       f"the loop begins (a round of {loop.period} steps)")
+        return f"{head}: {label}\n" + ("it stays here from now on" if loop.period == 1 else f"the loop begins (a round of {loop.period} steps)")
     if loop is not None and i == len(states) - 1 and i >= loop.start + loop.period:
         if loop.period == 1:
             return f"{head}: the end\nstayed here {i - loop.start} steps, steps {loop.start}-{i}"
@@ -254,8 +266,7 @@ def test_picture(game: Any, path: Path, colours: Mapping[str, str] | None = None
     suffix (``.png``, ``.svg``, ``.pdf``)."""
     from experiments.plots import plot_artifact
 
-    plot_artifact(game.artifact, path, dpi=90, header=False, max_cols=panels_per_row(game), reveal=False,
-                  colours=dict(colours) if colours else None)
+    plot_artifact(game.artifact, path, dpi=90, header=False, max_cols=panels_per_row(game), reveal=False, colours=dict(colours) if colours else None)
 
 
 def panels_per_row(game: Any) -> int:
@@ -265,6 +276,8 @@ def panels_per_row(game: Any) -> int:
     if not game.is_grid:
         return 1
     return 2 if game.ts.layout.cols <= 8 else 1
+
+
 def start_picture(game: Any, path: Path, tile: int = 48) -> None:
     """The test at its start, engineer's view (hidden test cells shown), to ``path`` (PNG)."""
     import matplotlib.image

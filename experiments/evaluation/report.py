@@ -144,9 +144,7 @@ def test_titles(env_ids: Sequence[str], infos: Sequence[TestInfo] = (), problems
     return titles
 
 
-def column_titles(
-    records: Sequence[dict[str, Any]], infos: Sequence[TestInfo] = (), problems: dict[str, str] | None = None
-) -> dict[str, str]:
+def column_titles(records: Sequence[dict[str, Any]], infos: Sequence[TestInfo] = (), problems: dict[str, str] | None = None) -> dict[str, str]:
     """What each matrix column (:func:`test_name`) is called: :func:`test_titles` of its
     test, with the tester when it is not the synthesized one."""
     titles = test_titles([r["env"] for r in records], infos, problems)
@@ -193,12 +191,19 @@ def test_infos(tests: Sequence[NamedEnv | str], out: Path, colours: dict[str, tu
         name = f"tests/{file_key(env_id)}.png"
         write_atomically(out / name, partial(test_picture, game, colours=hexes))
         art = game.artifact
-        infos.append(TestInfo(
-            env_id=env_id, problem=str(art.name), kind=str(art.kind),
-            system_objective=str(art.objectives.get("system", "")), test_objective=str(art.objectives.get("test", "")),
-            max_steps=named.max_steps, picture=name, propositions=tuple(proposition_legend(art.system, colours=hexes)),
-            histories=history_meanings(game),
-        ))
+        infos.append(
+            TestInfo(
+                env_id=env_id,
+                problem=str(art.name),
+                kind=str(art.kind),
+                system_objective=str(art.objectives.get("system", "")),
+                test_objective=str(art.objectives.get("test", "")),
+                max_steps=named.max_steps,
+                picture=name,
+                propositions=tuple(proposition_legend(art.system, colours=hexes)),
+                histories=history_meanings(game),
+            )
+        )
     return infos
 
 
@@ -214,16 +219,20 @@ def history_meanings(game: Any) -> tuple[tuple[str, str], ...]:
 
 
 GLOSSARY: tuple[tuple[str, str], ...] = (
-    ("met", "the run reached the <b>system objective</b>, the task the system under test (SUT) is given, "
-            "within the step budget"),
-    ("realized", "the run also satisfied the <b>test objective</b>, hidden from the SUT; the synthesized "
-                 "test guarantees it for every run that meets the system objective, so anything below 100&nbsp;% "
-                 "there is a FlowTest bug (a learned tester, --tester ppo:PATH, guarantees nothing)"),
-    ("violated", "the run made the system objective impossible (fuel ran out, the wrong goal, an unsafe "
-                 "state): the SUT's failure"),
-    ("open", "the step budget ran out with the system objective neither met nor violated: the SUT's "
-             "failure, unless the test closed every way (then it is marked a FlowTest bug; against a learned "
-             "tester, a trapped run: an unfair test)"),
+    ("met", "the run reached the <b>system objective</b>, the task the system under test (SUT) is given, within the step budget"),
+    (
+        "realized",
+        "the run also satisfied the <b>test objective</b>, hidden from the SUT; the synthesized "
+        "test guarantees it for every run that meets the system objective, so anything below 100&nbsp;% "
+        "there is a FlowTest bug (a learned tester, --tester ppo:PATH, guarantees nothing)",
+    ),
+    ("violated", "the run made the system objective impossible (fuel ran out, the wrong goal, an unsafe state): the SUT's failure"),
+    (
+        "open",
+        "the step budget ran out with the system objective neither met nor violated: the SUT's "
+        "failure, unless the test closed every way (then it is marked a FlowTest bug; against a learned "
+        "tester, a trapped run: an unfair test)",
+    ),
 )
 
 OUTCOME_CLASSES: tuple[tuple[str, str], ...] = (
@@ -291,8 +300,7 @@ def outcome_class(r: dict[str, Any]) -> str:
 
 def _signature(r: dict[str, Any]) -> tuple[Any, ...]:
     met = round((r["system_objective_met_rate"] or 0) * r["episodes"])
-    return (r["episodes"], met, r["test_objective_realized_rate"], r["violated"], r["open"], r["test_failures"], r["n_failures"],
-            r.get("error"))
+    return (r["episodes"], met, r["test_objective_realized_rate"], r["violated"], r["open"], r["test_failures"], r["n_failures"], r.get("error"))
 
 
 def fold_rows(records: Sequence[dict[str, Any]], envs: Sequence[str]) -> list[list[str]]:
@@ -309,8 +317,7 @@ def fold_rows(records: Sequence[dict[str, Any]], envs: Sequence[str]) -> list[li
 
 def _cell(r: dict[str, Any], anchor: str) -> str:
     if r.get("error"):
-        return f"<td class='notrun' title='{html.escape(r['error'], quote=True)}'><span class='small'>not run: " \
-               f"{html.escape(r['error'])}</span></td>"
+        return f"<td class='notrun' title='{html.escape(r['error'], quote=True)}'><span class='small'>not run: {html.escape(r['error'])}</span></td>"
     n = r["episodes"]
     met = round((r["system_objective_met_rate"] or 0) * n)
     cls = outcome_class(r)
@@ -357,10 +364,18 @@ def outcomes_of(r: dict[str, Any]) -> list[dict[str, Any]]:
     failure."""
     if isinstance(r.get("outcomes"), list):
         return list(r["outcomes"])
-    return [{"kind": f.get("kind", "sut"), "seeds": [f["seed"]], "steps": [], "text": failure_text(f),
-             "line": f"seed {f['seed']}: {failure_text(f)}", "replay": f.get("replay", ""),
-             "explanation": {"violation": f["violation"]} if isinstance(f.get("violation"), dict) else None}
-            for f in r.get("failures", [])]
+    return [
+        {
+            "kind": f.get("kind", "sut"),
+            "seeds": [f["seed"]],
+            "steps": [],
+            "text": failure_text(f),
+            "line": f"seed {f['seed']}: {failure_text(f)}",
+            "replay": f.get("replay", ""),
+            "explanation": {"violation": f["violation"]} if isinstance(f.get("violation"), dict) else None,
+        }
+        for f in r.get("failures", [])
+    ]
 
 
 def _outcome_item(o: dict[str, Any]) -> str:
@@ -375,11 +390,13 @@ def _outcome_item(o: dict[str, Any]) -> str:
     v = (o.get("explanation") or {}).get("violation")
     if isinstance(v, dict) and "conjunct" in v:
         steps = [int(x) for x in o.get("steps") or [v.get("step", 0)]]
-        body = (f"<p class='broke'>{e(who[:1].upper() + who[1:])} broke <code>{e(str(v['conjunct']))}</code> of the "
-                f"system objective at {e(steps_words(steps))}, {e(where_words(str(v.get('where', ''))))}"
-                + ("" if v.get("alone", True) else " (no conjunct alone: they cannot all hold any more)")
-                + (": from there it can no longer be met" if v.get("kind") in ("visit", "sequenced", "delayed") else "")
-                + ".</p>")
+        body = (
+            f"<p class='broke'>{e(who[:1].upper() + who[1:])} broke <code>{e(str(v['conjunct']))}</code> of the "
+            f"system objective at {e(steps_words(steps))}, {e(where_words(str(v.get('where', ''))))}"
+            + ("" if v.get("alone", True) else " (no conjunct alone: they cannot all hold any more)")
+            + (": from there it can no longer be met" if v.get("kind") in ("visit", "sequenced", "delayed") else "")
+            + ".</p>"
+        )
     else:
         body = f"<b>{e(who)}</b>: {e(o['text'])}"
     replay = o.get("replay", "")
@@ -392,13 +409,13 @@ def _outcome_item(o: dict[str, Any]) -> str:
 CAPTIONS: dict[str, str] = {
     "static": "Static test: the black walls stand for the whole run.",
     "reactive": "Reactive test: one panel per history that closes doors (a history is what the run has seen so far, "
-                "named neutrally, q0, q1, ...: the switch below says what each means); an orange bar is a door closed "
-                "in that history (one way: the arrow's move is refused).",
+    "named neutrally, q0, q1, ...: the switch below says what each means); an orange bar is a door closed "
+    "in that history (one way: the arrow's move is refused).",
     "mixed": "Mixed test: black walls stand for the whole run, and only in the static area the problem gives them "
-             "(its borders dashed); one panel per history that closes doors (named neutrally; the switch below says "
-             "what each means), an orange bar is a door closed in that history (one way: the arrow's move is refused).",
+    "(its borders dashed); one panel per history that closes doors (named neutrally; the switch below says "
+    "what each means), an orange bar is a door closed in that history (one way: the arrow's move is refused).",
     "agent": "Agent test: the test agent moves in the pale blue cells and stands in the way; a blue bar is a move it "
-             "blocks in that history (one panel per history, named neutrally; the switch below says what each means).",
+    "blocks in that history (one panel per history, named neutrally; the switch below says what each means).",
 }
 """What a test card says of its picture, per kind of test."""
 
@@ -419,11 +436,9 @@ def _test_card(env: str, title: str, t: TestInfo | None) -> list[str]:
     )
     if t.propositions:
         squares = any(colour for _, _, colour in t.propositions)
-        parts.append("<p class='small props'>Propositions" + (" (the coloured squares in the cells)" if squares else "")
-                     + ":</p><table class='props'>")
+        parts.append("<p class='small props'>Propositions" + (" (the coloured squares in the cells)" if squares else "") + ":</p><table class='props'>")
         for name, where, colour in t.propositions:
-            swatch = (f"<span class='swatch' style='background:{e(colour)}'></span>"
-                      if re.fullmatch(r"#[0-9a-fA-F]{6}", colour) else "")
+            swatch = f"<span class='swatch' style='background:{e(colour)}'></span>" if re.fullmatch(r"#[0-9a-fA-F]{6}", colour) else ""
             parts.append(f"<tr><td>{swatch}{e(name)}</td><td>{e(where)}</td></tr>")
         parts.append("</table>")
     meanings = "".join(f"<tr><td>{e(name)}</td><td>{e(meaning)}</td></tr>" for name, meaning in t.histories)
@@ -431,8 +446,7 @@ def _test_card(env: str, title: str, t: TestInfo | None) -> list[str]:
         f"<p>System objective (given to the SUT): <code>{e(t.system_objective)}</code></p>"
         f"<details><summary>Reveal the test objective (hidden from the SUT)</summary>"
         f"<p><code>{e(t.test_objective)}</code></p>"
-        + (f"<p class='small props'>What each history of the panels has seen:</p><table class='props'>{meanings}</table>"
-           if meanings else "")
+        + (f"<p class='small props'>What each history of the panels has seen:</p><table class='props'>{meanings}</table>" if meanings else "")
         + "</details></div>"
     )
     return parts
@@ -471,20 +485,20 @@ def render_html(
     ]
     bugs = [r for r in records if r["test_failures"]]
     if bugs:
-        parts.append("<div class='bugbox'>FLOWTEST BUG: a test failed its guarantee (a run met the system objective "
-                     "without realizing the test objective, or the test trapped the system). Please report it with the "
-                     "replay commands:<ul>")
+        parts.append(
+            "<div class='bugbox'>FLOWTEST BUG: a test failed its guarantee (a run met the system objective "
+            "without realizing the test objective, or the test trapped the system). Please report it with the "
+            "replay commands:<ul>"
+        )
         for r in bugs:
             for f in r["failures"]:
                 if f["kind"] == "test":
-                    parts.append(f"<li>{e(r['sut'])} on {e(col_titles[test_name(r)])}: {e(failure_text(f))} — "
-                                 f"<code>{e(f['replay'])}</code></li>")
+                    parts.append(f"<li>{e(r['sut'])} on {e(col_titles[test_name(r)])}: {e(failure_text(f))} — <code>{e(f['replay'])}</code></li>")
         parts.append("</ul></div>")
     # ---- the matrix
     parts.append("<h2 id='matrix'>Outcomes</h2><div class='scroll'><table class='matrix'><tr><th>system under test</th>")
     for col in columns:
-        parts.append(f"<th><a href='#{test_anchor(env_of[col])}' title='the test and its objectives'>"
-                     f"{e(col_titles[col])}</a></th>")
+        parts.append(f"<th><a href='#{test_anchor(env_of[col])}' title='the test and its objectives'>{e(col_titles[col])}</a></th>")
     parts.append("</tr>")
     for group in fold_rows(records, columns):
         label = "<br>".join(f"<span class='sut'>{e(s)}</span>" for s in group)
@@ -502,8 +516,7 @@ def render_html(
     parts.append("</dl>")
     if comparison is not None and comparison[1]:
         head, table = comparison
-        parts.append("<h2 id='testers'>Testers side by side</h2><div class='scroll'><table><tr>"
-                     + "".join(f"<th>{e(c)}</th>" for c in head) + "</tr>")
+        parts.append("<h2 id='testers'>Testers side by side</h2><div class='scroll'><table><tr>" + "".join(f"<th>{e(c)}</th>" for c in head) + "</tr>")
         parts += ["<tr>" + "".join(f"<td>{e(c)}</td>" for c in row) + "</tr>" for row in table]
         parts.append("</table></div>")
     # ---- the tests
@@ -522,8 +535,7 @@ def render_html(
         parts.append(
             f"<h3 id='{failures_anchor(r['sut'], col)}'><span class='sut'>{e(r['sut'])}</span> on "
             f"<a href='#{test_anchor(r['env'])}'>{e(col_titles[col])}</a></h3>"
-            f"<p>{r['n_failures']} of {r['episodes']} runs failed"
-            + (f", in {len(ways)} ways" if len(ways) > 1 else "") + ":</p><ul class='outcomes'>"
+            f"<p>{r['n_failures']} of {r['episodes']} runs failed" + (f", in {len(ways)} ways" if len(ways) > 1 else "") + ":</p><ul class='outcomes'>"
         )
         parts += [_outcome_item(o) for o in ways]
         parts.append("</ul>")
@@ -532,14 +544,18 @@ def render_html(
         pics = r.get("pictures", {})
         first = r["failures"][0]["seed"] if r["failures"] else None
         if "filmstrip" in pics:
-            parts.append(f"<p class='small'>The first failing run (seed {first}), frame by frame; a loop is shown once:</p>"
-                         f"<a href='{e(pics['filmstrip'])}' title='open the picture at full size'>"
-                         f"<img class='film' src='{e(pics['filmstrip'])}' alt='filmstrip of the first failing run'></a>")
+            parts.append(
+                f"<p class='small'>The first failing run (seed {first}), frame by frame; a loop is shown once:</p>"
+                f"<a href='{e(pics['filmstrip'])}' title='open the picture at full size'>"
+                f"<img class='film' src='{e(pics['filmstrip'])}' alt='filmstrip of the first failing run'></a>"
+            )
         traces = [label for label in ("failing", "typical") if label in pics]
         if traces:
             parts.append("<div class='traces'>")
-            parts += [f"<a class='trace' href='{e(pics[label])}' title='open the picture at full size'>"
-                      f"<img src='{e(pics[label])}' alt='{label} run, whole path'></a>" for label in traces]
+            parts += [
+                f"<a class='trace' href='{e(pics[label])}' title='open the picture at full size'><img src='{e(pics[label])}' alt='{label} run, whole path'></a>"
+                for label in traces
+            ]
             parts.append("</div>")
         parts.append("<details><summary>Replay commands of every listed run</summary><ul>")
         parts += [f"<li>seed {f['seed']}: {e(failure_text(f))}<br><code>{e(f['replay'])}</code></li>" for f in r["failures"]]
@@ -547,17 +563,23 @@ def render_html(
             parts.append(f"<li>… {r['n_failures'] - len(r['failures'])} more (results.json lists the first {len(r['failures'])})</li>")
         parts.append("</ul></details>")
     # ---- every number
-    parts.append("<h2 id='numbers'>All numbers</h2><p class='small'>Met: share of runs meeting the system objective. "
-                 "Realized: share of those runs that realized the hidden test objective (guaranteed 100&nbsp;%). "
-                 "Restrictions: mean number of decisions taken while a move was restricted.</p>")
+    parts.append(
+        "<h2 id='numbers'>All numbers</h2><p class='small'>Met: share of runs meeting the system objective. "
+        "Realized: share of those runs that realized the hidden test objective (guaranteed 100&nbsp;%). "
+        "Restrictions: mean number of decisions taken while a move was restricted.</p>"
+    )
     for sut in suts:
         rows = [r for r in records if r["sut"] == sut]
-        parts.append(f"<h3 class='sut'>{e(sut)}</h3><div class='scroll'><table><tr><th>test</th><th>runs</th><th>met</th>"
-                     "<th>realized</th><th>violated</th><th>open</th><th>restrictions</th><th>steps</th><th>failures</th></tr>")
+        parts.append(
+            f"<h3 class='sut'>{e(sut)}</h3><div class='scroll'><table><tr><th>test</th><th>runs</th><th>met</th>"
+            "<th>realized</th><th>violated</th><th>open</th><th>restrictions</th><th>steps</th><th>failures</th></tr>"
+        )
         for r in rows:
             if r.get("error"):
-                parts.append(f"<tr class='notrun'><td>{e(col_titles[test_name(r)])}</td><td>0</td>"
-                             f"<td colspan='7' style='text-align:left'>not run: {e(r['error'])}</td></tr>")
+                parts.append(
+                    f"<tr class='notrun'><td>{e(col_titles[test_name(r)])}</td><td>0</td>"
+                    f"<td colspan='7' style='text-align:left'>not run: {e(r['error'])}</td></tr>"
+                )
                 continue
             parts.append(
                 f"<tr class='{outcome_class(r) if r['n_failures'] else ''}'><td>{e(col_titles[test_name(r)])}</td>"

@@ -67,11 +67,12 @@ def _filmstrip_to(trace: Trace, colours: dict[str, tuple[int, int, int]], path: 
 
     game = game_of_trace(trace)
     v = trace.verdict
-    title = (f"{trace.sut} on {test_title(trace.env_id, str(game.artifact.name))}, seed {trace.seed}: "
-             f"system objective {v['system_objective']} after {v['steps']} steps")
+    title = (
+        f"{trace.sut} on {test_title(trace.env_id, str(game.artifact.name))}, seed {trace.seed}: "
+        f"system objective {v['system_objective']} after {v['steps']} steps"
+    )
     why = explain(trace, game)
-    filmstrip(game, trace.states, trace.actions, title, path, colours=colours, loop=why.loop,
-              explanation="" if why.what == "violation" else why.text)
+    filmstrip(game, trace.states, trace.actions, title, path, colours=colours, loop=why.loop, explanation="" if why.what == "violation" else why.text)
 
 
 def _picture(trace: Trace, colours: dict[str, tuple[int, int, int]], path: Path) -> None:
@@ -160,8 +161,11 @@ def write_partial_report(cells: Sequence[Cell], out: Path) -> list[dict[str, Any
     """``results.json`` and ``report.md`` of the pairs an interrupted evaluation played, at
     once: no pictures and no ``report.html``, whose drawing would outlast a Ctrl-C."""
     records = _write_results(cells, out, interrupted=True)
-    md = (_markdown(records, "FlowTest evaluation (interrupted: the pairs played)") if records
-          else "# FlowTest evaluation (interrupted before any pair was played to the end)\n")
+    md = (
+        _markdown(records, "FlowTest evaluation (interrupted: the pairs played)")
+        if records
+        else "# FlowTest evaluation (interrupted before any pair was played to the end)\n"
+    )
     write_atomically(out / "report.md", lambda tmp: tmp.write_text(md))
     (out / "report.html").unlink(missing_ok=True)  # an earlier run's, which would now disagree with them
     return records
@@ -186,8 +190,10 @@ def outcome_lines(records: Sequence[dict[str, Any]]) -> list[str]:
             lines.append(f"{r['sut']:{w_sut}s} {name:{w_test}s} not run: {r['error']}")
             continue
         trapped = f"  trapped {r['trapped']}" if r["tester"] != "synthesized" else ""
-        lines.append(f"{r['sut']:{w_sut}s} {name:{w_test}s} met {percent(r['system_objective_met_rate']):>6s}  "
-                     f"realized {percent(r['test_objective_realized_rate']):>6s}  failures {r['n_failures']}{trapped}")
+        lines.append(
+            f"{r['sut']:{w_sut}s} {name:{w_test}s} met {percent(r['system_objective_met_rate']):>6s}  "
+            f"realized {percent(r['test_objective_realized_rate']):>6s}  failures {r['n_failures']}{trapped}"
+        )
         ways = outcomes_of(r)
         lines += [f"{'':{w_sut}s} {o['line']}" for o in ways[:LISTED_OUTCOMES]]
         if len(ways) > LISTED_OUTCOMES:
@@ -222,16 +228,35 @@ def tester_comparison_rows(records: Sequence[dict[str, Any]]) -> list[list[str]]
     for r in records:
         f = r.get("tester_fairness")
         guaranteed = "–" if f is None else ("yes" if f["guaranteed"] else "no")
-        rows.append([
-            r["env"], r.get("tester", "synthesized"), r["sut"], str(r["episodes"]),
-            percent(r["test_objective_realized_rate"]), str(r.get("trapped", 0)), str(r.get("sut_failures", 0)),
-            f"{r['mean_restrictions']:.1f}", _fair_text(f), guaranteed,
-        ])
+        rows.append(
+            [
+                r["env"],
+                r.get("tester", "synthesized"),
+                r["sut"],
+                str(r["episodes"]),
+                percent(r["test_objective_realized_rate"]),
+                str(r.get("trapped", 0)),
+                str(r.get("sut_failures", 0)),
+                f"{r['mean_restrictions']:.1f}",
+                _fair_text(f),
+                guaranteed,
+            ]
+        )
     return rows
 
 
-TESTER_COLUMNS = ["test", "tester", "system", "runs", "realized (among met)", "trapped runs", "faults caught",
-                  "restrictions", "fairness (exhaustive)", "guaranteed (exhaustive)"]
+TESTER_COLUMNS = [
+    "test",
+    "tester",
+    "system",
+    "runs",
+    "realized (among met)",
+    "trapped runs",
+    "faults caught",
+    "restrictions",
+    "fairness (exhaustive)",
+    "guaranteed (exhaustive)",
+]
 
 
 def tester_comparison_markdown(records: Sequence[dict[str, Any]]) -> list[str]:
@@ -239,12 +264,17 @@ def tester_comparison_markdown(records: Sequence[dict[str, Any]]) -> list[str]:
     rows = tester_comparison_rows(records)
     if not rows:
         return []
-    lines = ["## Testers side by side", "",
-             "Realized: share of the runs meeting the system objective that realized the test objective. Trapped: "
-             "runs that ended where no system play could still meet the objective against the tester (an unfair "
-             "test). Faults caught: runs the system failed by itself. Fairness and guarantee are decided by an "
-             "exhaustive search over the tester's choices and all system moves (`flowtest_env.fairness`).", "",
-             "| " + " | ".join(TESTER_COLUMNS) + " |", "|" + "---|" * len(TESTER_COLUMNS)]
+    lines = [
+        "## Testers side by side",
+        "",
+        "Realized: share of the runs meeting the system objective that realized the test objective. Trapped: "
+        "runs that ended where no system play could still meet the objective against the tester (an unfair "
+        "test). Faults caught: runs the system failed by itself. Fairness and guarantee are decided by an "
+        "exhaustive search over the tester's choices and all system moves (`flowtest_env.fairness`).",
+        "",
+        "| " + " | ".join(TESTER_COLUMNS) + " |",
+        "|" + "---|" * len(TESTER_COLUMNS),
+    ]
     lines += ["| " + " | ".join(row) + " |" for row in rows]
     return lines + [""]
 
@@ -253,9 +283,12 @@ def _markdown(records: Sequence[dict[str, Any]], heading: str = "FlowTest evalua
     lines = [f"# {heading}", ""]
     bugs = test_failure_records(records)
     if bugs:
-        lines += ["> **FLOWTEST BUG: a test failed its guarantee.** A run met the system objective without "
-                  "realizing the test objective, or the test trapped the system. Please report it with the "
-                  "replay commands below.", ""]
+        lines += [
+            "> **FLOWTEST BUG: a test failed its guarantee.** A run met the system objective without "
+            "realizing the test objective, or the test trapped the system. Please report it with the "
+            "replay commands below.",
+            "",
+        ]
         for r in bugs:
             for f in r["failures"]:
                 if f["kind"] == "test":
@@ -289,8 +322,12 @@ def _markdown(records: Sequence[dict[str, Any]], heading: str = "FlowTest evalua
     ]
     lines += tester_comparison_markdown(records)
     for sut in dict.fromkeys(r["sut"] for r in records):
-        lines += [f"## {sut}", "", "| test | runs | met | realized | violated | open | restrictions | steps | failures |",
-                  "|---|---|---|---|---|---|---|---|---|"]
+        lines += [
+            f"## {sut}",
+            "",
+            "| test | runs | met | realized | violated | open | restrictions | steps | failures |",
+            "|---|---|---|---|---|---|---|---|---|",
+        ]
         rows = [r for r in records if r["sut"] == sut]
         for r in rows:
             if r["error"]:
@@ -309,8 +346,10 @@ def _markdown(records: Sequence[dict[str, Any]], heading: str = "FlowTest evalua
                 lines += [f"**{r['title']}** — stopped: {r['stopped']}", ""]
             ways = outcomes_of(r)
             if ways:
-                lines += [f"**{r['title']}** — {r['n_failures']} of {r['episodes']} runs failed"
-                          + (f", in {len(ways)} ways" if len(ways) > 1 else "") + ":", ""]
+                lines += [
+                    f"**{r['title']}** — {r['n_failures']} of {r['episodes']} runs failed" + (f", in {len(ways)} ways" if len(ways) > 1 else "") + ":",
+                    "",
+                ]
                 for o in ways:
                     bug = " (FlowTest bug)" if o.get("kind") == "test" else ""
                     lines.append(f"- {o['line']}{bug}" + (f" — replay seed {o['seeds'][0]}: `{o['replay']}`" if o.get("replay") else ""))
@@ -320,5 +359,3 @@ def _markdown(records: Sequence[dict[str, Any]], heading: str = "FlowTest evalua
                     lines.append(f"![{label} run of {sut} on {r['title']}]({pics[label]})")
             lines.append("")
     return "\n".join(lines) + "\n"
-
-

@@ -68,9 +68,9 @@ class EvaluationInterrupted(KeyboardInterrupt):
         self.cells, self.total = cells, total
 
 
-
-def replay_command(env_id: str, sut: str, seed: int, tester: str = "synthesized", step_timeout: float | None = None,
-                   cwd: str | None = None, trust_model: bool = False) -> str:
+def replay_command(
+    env_id: str, sut: str, seed: int, tester: str = "synthesized", step_timeout: float | None = None, cwd: str | None = None, trust_model: bool = False
+) -> str:
     """The command that replays one run exactly (shell-quoted: a model path may hold spaces).
 
     A ``python:`` or ``cmd:`` planner is found from the directory the evaluation ran in
@@ -81,8 +81,7 @@ def replay_command(env_id: str, sut: str, seed: int, tester: str = "synthesized"
     against = "" if tester == "synthesized" else f" --tester {shlex.quote(tester)}"
     timeout = f" --step-timeout {step_timeout:g}" if step_timeout is not None and sut.startswith(("cmd:", "python:")) else ""
     trust = " --trust-model" if trust_model and (sut.startswith("ppo:") or tester.startswith("ppo:")) else ""
-    command = (f"flowtest evaluate --env {shlex.quote(env_id)} --sut {shlex.quote(sut)}{against}{timeout}{trust} "
-               f"--episodes 1 --seed {seed} --replay")
+    command = f"flowtest evaluate --env {shlex.quote(env_id)} --sut {shlex.quote(sut)}{against}{timeout}{trust} --episodes 1 --seed {seed} --replay"
     if sut.startswith(EXTERNAL_PREFIXES):
         return f"cd {shlex.quote(cwd or os.getcwd())} && {command}"
     return command
@@ -95,8 +94,7 @@ def _models_trusted() -> bool:
     return pickled_models_trusted()
 
 
-NOT_REPLAYABLE = ("# no replay command: this system was given to evaluate() as a Python object; "
-                  "name it python:MODULE:NAME to get one")
+NOT_REPLAYABLE = "# no replay command: this system was given to evaluate() as a Python object; name it python:MODULE:NAME to get one"
 
 
 def sut_label(sut: Any) -> str:
@@ -155,8 +153,7 @@ class Cell:
         """The replay command of one of this cell's runs."""
         if not self.replayable:
             return NOT_REPLAYABLE
-        return replay_command(trace.env_id, self.sut, trace.seed, self.tester, self.step_timeout, self.cwd,
-                              self.trust_model)
+        return replay_command(trace.env_id, self.sut, trace.seed, self.tester, self.step_timeout, self.cwd, self.trust_model)
 
     def record(self) -> dict[str, Any]:
         """The ``results.json`` record (``error`` says why a pair has no runs)."""
@@ -172,9 +169,7 @@ class Cell:
             "episodes": n,
             "seed": self.seed,
             "system_objective_met_rate": len(met) / n if n else None,
-            "test_objective_realized_rate": (
-                sum(t.verdict["test_objective_realized"] for t in met) / len(met) if met else None
-            ),
+            "test_objective_realized_rate": (sum(t.verdict["test_objective_realized"] for t in met) / len(met) if met else None),
             "violated": sum(t.verdict["system_objective"] == "violated" for t in self.traces),
             "open": sum(t.verdict["system_objective"] == "open" for t in self.traces),
             "mean_restrictions": float(np.mean([t.verdict["restrictions"] for t in self.traces])) if n else None,
@@ -233,8 +228,6 @@ def check_sut_names(suts: Sequence[Any]) -> None:
             check_spec(prefix, arg)
         except PolicyError as exc:
             raise ProblemError(f"--sut {sut}: {exc}") from None
-
-
 
 
 def check_suts_can_play(tests: Sequence[NamedEnv], suts: Sequence[Any], step_timeout: float | None = None) -> None:
@@ -362,8 +355,17 @@ def evaluate(
     return cells
 
 
-def _play(tests: Sequence[NamedEnv], suts: Sequence[Any], testers: Sequence[str], episodes: int, seed: int,
-          progress: Callable[[str], None] | None, step_timeout: float | None, cells: list[Cell], total: int) -> None:
+def _play(
+    tests: Sequence[NamedEnv],
+    suts: Sequence[Any],
+    testers: Sequence[str],
+    episodes: int,
+    seed: int,
+    progress: Callable[[str], None] | None,
+    step_timeout: float | None,
+    cells: list[Cell],
+    total: int,
+) -> None:
     """:func:`evaluate`'s loop: each pair played to the end is appended to ``cells``. The
     synthesized tester plays each test's own env; another tester its own
     :func:`~experiments.evaluation.episodes.versus_tester_env`, closed after its pairs."""
@@ -383,8 +385,9 @@ def _play(tests: Sequence[NamedEnv], suts: Sequence[Any], testers: Sequence[str]
                 k += 1
                 label = sut_label(sut)
                 replayable = isinstance(sut, str) or (label.startswith("python:") and label == spec_of(sut))
-                cell = Cell(env_id, label, [], seed, 0.0, tester=tester, fairness=fairness, replayable=replayable,
-                            step_timeout=step_timeout, problem=problem, test=test)
+                cell = Cell(
+                    env_id, label, [], seed, 0.0, tester=tester, fairness=fairness, replayable=replayable, step_timeout=step_timeout, problem=problem, test=test
+                )
                 t0 = time.perf_counter()
                 try:
                     policy = make_policy(sut, env, step_timeout=step_timeout)
@@ -399,11 +402,11 @@ def _play(tests: Sequence[NamedEnv], suts: Sequence[Any], testers: Sequence[str]
                         trace = run_episode(env, policy, env_id, label, seed + i, tester=tester)
                         cell.traces.append(trace)
                         if trace.planner_error:
-                            cell.stopped = (f"the planner failed in run {i + 1} of {episodes} (seed {seed + i}); "
-                                            f"the other runs were not played: {trace.planner_error}")
+                            cell.stopped = (
+                                f"the planner failed in run {i + 1} of {episodes} (seed {seed + i}); the other runs were not played: {trace.planner_error}"
+                            )
                             if progress is not None:
-                                progress(f"[{k}/{total}] {label} on {env_id}{against}: the planner failed: "
-                                         f"{trace.planner_error}")
+                                progress(f"[{k}/{total}] {label} on {env_id}{against}: the planner failed: {trace.planner_error}")
                             break
                         if progress is not None and (i + 1 == episodes or (i + 1) % max(1, episodes // 10) == 0):
                             progress(f"[{k}/{total}] {label} on {env_id}{against}: {i + 1}/{episodes} episodes")
@@ -417,10 +420,7 @@ def _play(tests: Sequence[NamedEnv], suts: Sequence[Any], testers: Sequence[str]
                 env.close()
 
 
-
-
-def replay(env_id: str, sut: str, seed: int, stream: Any = None, tester: str = "synthesized",
-           step_timeout: float | None = None) -> Trace:
+def replay(env_id: str, sut: str, seed: int, stream: Any = None, tester: str = "synthesized", step_timeout: float | None = None) -> Trace:
     """Replay one run and print it step by step (state, legal actions, action, verdict)
     to ``stream`` (standard output by default): what ``flowtest evaluate --replay`` prints.
 
@@ -460,5 +460,3 @@ def replay(env_id: str, sut: str, seed: int, stream: Any = None, tester: str = "
     stream.write(f"outcome: {trace.kind}{': ' + trace.reason if trace.reason else ''}\n")
     env.close()
     return trace
-
-

@@ -41,8 +41,7 @@ def step_labels(cells: Sequence[tuple[int, int]], limit: int = 3) -> dict[tuple[
     return out
 
 
-def trace_picture(trace: Trace, path: Path, colours: Mapping[str, tuple[int, int, int]] | None = None,
-                  explanation: str = "") -> None:
+def trace_picture(trace: Trace, path: Path, colours: Mapping[str, tuple[int, int, int]] | None = None, explanation: str = "") -> None:
     """Draw a run: on grids the engineer's view (walls, hidden test cells) at the end of
     the run with the SUT's path, each cell labelled once with the steps it was entered at
     (:func:`step_labels`); on graphs a strip of frames. The title names the test by its
@@ -96,9 +95,17 @@ def trace_picture(trace: Trace, path: Path, colours: Mapping[str, tuple[int, int
         cell_pt = side * 72
         for (r, c), text in step_labels(cells).items():
             size = fit_font(text, cell_pt, 8, 4.0) or 4.0  # inside its cell, however large the floor
-            ax.annotate(text, ((c + 0.5) * tile, (r + 0.05) * tile), color="black", fontsize=size, ha="center", va="top",
-                        zorder=5, linespacing=1.0,
-                        bbox={"boxstyle": "round,pad=0.1", "fc": "white", "ec": "none", "alpha": 0.85})
+            ax.annotate(
+                text,
+                ((c + 0.5) * tile, (r + 0.05) * tile),
+                color="black",
+                fontsize=size,
+                ha="center",
+                va="top",
+                zorder=5,
+                linespacing=1.0,
+                bbox={"boxstyle": "round,pad=0.1", "fc": "white", "ec": "none", "alpha": 0.85},
+            )
         fig.legend(handles=_trace_legend(ax, game, colours), loc="lower center", ncol=3, fontsize=8, frameon=False)
         ax.set_axis_off()
         fig.suptitle(title, fontsize=9, y=1 - 0.1 / fh, va="top")

@@ -42,8 +42,7 @@ class Violation:
         return out
 
     def to_dict(self) -> dict[str, Any]:
-        return {"conjunct": self.conjunct, "kind": self.kind, "step": self.step, "where": self.where,
-                "alone": self.alone, "text": self.text()}
+        return {"conjunct": self.conjunct, "kind": self.kind, "step": self.step, "where": self.where, "alone": self.alone, "text": self.text()}
 
 
 def where_words(where: str) -> str:
@@ -94,8 +93,7 @@ def _doomed(ts: Any, walls: np.ndarray, dba: Any, letter: np.ndarray) -> np.ndar
     st = np.flatnonzero(ts.stay)
     q = np.arange(nq)[:, None]
     src = np.concatenate([(q * n + ts.src[mm][None, :]).ravel(), (q * n + st[None, :]).ravel()])
-    dst = np.concatenate([(dba.delta[:, letter[ts.dst[mm]]] * n + ts.dst[mm][None, :]).ravel(),
-                          (dba.delta[:, letter[st]] * n + st[None, :]).ravel()])
+    dst = np.concatenate([(dba.delta[:, letter[ts.dst[mm]]] * n + ts.dst[mm][None, :]).ravel(), (dba.delta[:, letter[st]] * n + st[None, :]).ravel()])
     can = np.repeat(dba.accepting[:, 0], n)
     while True:
         grow = src[can[dst] & ~can[src]]

@@ -96,8 +96,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     slow = [str(r["problem"]) for r in rows if float(r["end_to_end"]) >= END_TO_END_TARGET]
     slow_gr1 = [str(r["problem"]) for r in rows if float(r["gr1_final"]) >= GR1_TARGET]
     print()
-    print(f"targets: end to end < {END_TO_END_TARGET} s: {'met' if not slow else 'missed by ' + ', '.join(slow)}; "
-          f"GR(1) < {GR1_TARGET} s: {'met' if not slow_gr1 else 'missed by ' + ', '.join(slow_gr1)}")
+    print(
+        f"targets: end to end < {END_TO_END_TARGET} s: {'met' if not slow else 'missed by ' + ', '.join(slow)}; "
+        f"GR(1) < {GR1_TARGET} s: {'met' if not slow_gr1 else 'missed by ' + ', '.join(slow_gr1)}"
+    )
     return 0
 
 

@@ -58,7 +58,9 @@ def _cli_seconds(path: str) -> tuple[float, dict[str, Any]]:
     t0 = time.perf_counter()
     out = subprocess.run(
         [sys.executable, "-m", "experiments", "synthesize", path, "--json", "-q"],
-        check=True, capture_output=True, text=True,
+        check=True,
+        capture_output=True,
+        text=True,
     )
     return time.perf_counter() - t0, json.loads(out.stdout)
 
@@ -99,8 +101,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     rows = [bench(name) for name in args.problems]
     print(markdown(rows))
     slow = [r["problem"] for r in rows if r["cli"] and r["cli"][0] >= TARGET_SECONDS]
-    print(f"\ntarget (< {TARGET_SECONDS:.0f} s from flowtest synthesize FILE --json): "
-          + ("met" if not slow else f"missed by {', '.join(slow)}"))
+    print(f"\ntarget (< {TARGET_SECONDS:.0f} s from flowtest synthesize FILE --json): " + ("met" if not slow else f"missed by {', '.join(slow)}"))
     return 0
 
 

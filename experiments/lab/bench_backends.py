@@ -94,9 +94,7 @@ def parse_family(token: str) -> tuple[str, int]:
     return family, int(n) if n else 2
 
 
-def cases(
-    builtins: list[str], sizes: list[int], families: list[str], seeds: int, kinds: tuple[str, ...] = KINDS
-) -> list[tuple[str, str, Problem]]:
+def cases(builtins: list[str], sizes: list[int], families: list[str], seeds: int, kinds: tuple[str, ...] = KINDS) -> list[tuple[str, str, Problem]]:
     """``(group, label, problem)`` of every problem benchmarked. The random grids are the
     random grid study's instances (:mod:`experiments.lab.random_grid_study`: seed = instance)."""
     out = [("built-in", name, load_problem(name)) for name in builtins]
@@ -124,12 +122,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", type=int, default=3, help="random instances per (size, kind, family) (default 3)")
     ap.add_argument("--builtins", nargs="*", default=list(BUILTINS))
     ap.add_argument("--sizes", nargs="*", type=int, default=[5, 10])
-    ap.add_argument("--families", nargs="*", default=["reachability", "reaction"], metavar="FAMILY[:N]",
-                    help="random grid spec families, N as in the study (default 2): reachability:3 is |AP| = 4")
+    ap.add_argument(
+        "--families",
+        nargs="*",
+        default=["reachability", "reaction"],
+        metavar="FAMILY[:N]",
+        help="random grid spec families, N as in the study (default 2): reachability:3 is |AP| = 4",
+    )
     ap.add_argument("--kinds", nargs="*", default=list(KINDS), choices=KINDS, help="random grids' kinds (default both)")
     ap.add_argument("--backends", nargs="*", default=list(BACKENDS), choices=CHOICES)
-    ap.add_argument("--work-limit", type=float, default=None,
-                    help="CP-SAT's deterministic seconds per phase (SynthesisOptions.work_limit; default none)")
+    ap.add_argument("--work-limit", type=float, default=None, help="CP-SAT's deterministic seconds per phase (SynthesisOptions.work_limit; default none)")
     ap.add_argument("--json", type=Path, default=None, help="write the rows here as JSON")
     args = ap.parse_args(argv)
     if "cpsat" in args.backends:

@@ -113,14 +113,18 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--json", type=Path, help="also write the rows (with every run's figures) here")
     args = parser.parse_args(argv)
     rows = [bench(name, args.runs, args.source) for name in args.names]
-    print("| problem | answer | backend | runs | median wall s | min | max | routing | of which: waiting for the child | CP-SAT search | "
-          "outside routing | CPU s reaped (process + children) | child CPU s |")
+    print(
+        "| problem | answer | backend | runs | median wall s | min | max | routing | of which: waiting for the child | CP-SAT search | "
+        "outside routing | CPU s reaped (process + children) | child CPU s |"
+    )
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
-        print(f"| {r['problem']} | {r['status']}, flow {r['flow']}, {r['n_cuts']} cuts | {r['backend']} | {r['runs']} | "
-              f"{r['median_wall_s']:.2f} | {r['min_wall_s']:.2f} | {r['max_wall_s']:.2f} | {r['median_routing_s']:.2f} | "
-              f"{r['median_child_wait_s']:.2f} | {r['median_search_s']:.2f} | {r['median_outside_routing_s']:.2f} | "
-              f"{r['median_cpu_s']:.2f} | {r['median_child_cpu_s']:.2f} |")
+        print(
+            f"| {r['problem']} | {r['status']}, flow {r['flow']}, {r['n_cuts']} cuts | {r['backend']} | {r['runs']} | "
+            f"{r['median_wall_s']:.2f} | {r['min_wall_s']:.2f} | {r['max_wall_s']:.2f} | {r['median_routing_s']:.2f} | "
+            f"{r['median_child_wait_s']:.2f} | {r['median_search_s']:.2f} | {r['median_outside_routing_s']:.2f} | "
+            f"{r['median_cpu_s']:.2f} | {r['median_child_cpu_s']:.2f} |"
+        )
     print(f"load average at the end: {', '.join(f'{x:.1f}' for x in os.getloadavg())}")
     if args.json is not None:
         args.json.write_text(json.dumps(rows, indent=1) + "\n")

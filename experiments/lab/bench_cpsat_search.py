@@ -59,16 +59,24 @@ def main(argv: list[str] | None = None) -> int:
     cost[rm.cols.flow[rm.out_src]] = 1.0
     a = rm.model.matrix().tocsr()
     col_lo, col_hi, row_lo, row_hi = rm.model.bounds()
-    print(f"{args.problem}: {rm.model.n_row} rows, heuristic flow {guess.flow}, flow upper bound {guess.upper_bound}; "
-          f"ortools {cpsat.ortools_version()}\n")
+    print(f"{args.problem}: {rm.model.n_row} rows, heuristic flow {guess.flow}, flow upper bound {guess.upper_bound}; ortools {cpsat.ortools_version()}\n")
     print("| search | seed | outcome | deterministic s | CPU s |")
     print("|---|---|---|---|---|", flush=True)
     with cpsat.CpSatSession(cpsat.ModelArrays(a, row_lo, row_hi, col_lo, col_hi)) as session:
         for name in args.searches:
             for seed in args.seeds:
                 ans = session.solve(
-                    cost, True, hint, seconds=None, after_first=None, work_limit=args.work_limit, rel_gap=0.0,
-                    random_seed=seed, phase="phase 1 (maximum flow)", search=SEARCHES[name], reach=guess.upper_bound,
+                    cost,
+                    True,
+                    hint,
+                    seconds=None,
+                    after_first=None,
+                    work_limit=args.work_limit,
+                    rel_gap=0.0,
+                    random_seed=seed,
+                    phase="phase 1 (maximum flow)",
+                    search=SEARCHES[name],
+                    reach=guess.upper_bound,
                 )
                 outcome = "found" if ans.x is not None else ans.status
                 print(f"| {name} | {seed} | {outcome} | {ans.stats['deterministic_time']:.2f} | {ans.stats['cpu_seconds']:.2f} |", flush=True)

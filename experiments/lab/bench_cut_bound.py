@@ -59,17 +59,17 @@ def cut_bounds(problem: Problem) -> dict[str, Any]:
 def _levels_text(levels: dict[int, tuple[float, float | None]]) -> str:
     if not levels:
         return "-"
-    return "; ".join(
-        f"F={f}: {b:g} / {'-' if c is None else f'{c:g}'}" if np.isfinite(b) else f"F={f}: none" for f, (b, c) in levels.items()
-    )
+    return "; ".join(f"F={f}: {b:g} / {'-' if c is None else f'{c:g}'}" if np.isfinite(b) else f"F={f}: none" for f, (b, c) in levels.items())
 
 
 def main(argv: list[str] | None = None) -> None:
     families = ["reachability:1", "reachability:2", "reachability:3"]
     args = instance_arguments(__doc__, families, "also solve with and without the cut bound").parse_args(argv)
     options = options_of(args)
-    print_head("| instance | rows | heuristic flow | walls' flow bound | per level: cut bound / candidate | s |",
-               " with: status, flow, cuts (proof) | CPU s | without: status, flow, cuts | CPU s |" if args.solve else "")
+    print_head(
+        "| instance | rows | heuristic flow | walls' flow bound | per level: cut bound / candidate | s |",
+        " with: status, flow, cuts (proof) | CPU s | without: status, flow, cuts | CPU s |" if args.solve else "",
+    )
     proven = tight = proven_with = proven_without = total = 0
     for name, problem in static_instances(args):
         b = cut_bounds(problem)

@@ -66,9 +66,7 @@ print(json.dumps([t1 - t0, t2 - t1]))
 
 def cold_make(env_id: str, module: str) -> tuple[float, float]:
     """``(import seconds, make + reset seconds)`` in a fresh interpreter."""
-    out = subprocess.run(
-        [sys.executable, "-c", COLD.format(module=module, env_id=env_id)], capture_output=True, text=True, check=True
-    )
+    out = subprocess.run([sys.executable, "-c", COLD.format(module=module, env_id=env_id)], capture_output=True, text=True, check=True)
     imp, make = json.loads(out.stdout.strip().splitlines()[-1])
     return float(imp), float(make)
 

@@ -74,8 +74,15 @@ def solve(problem: Problem, with_bound: bool, options: SynthesisOptions, **flags
     checks = check_test(products, strategy, flow)
     assert checks.bypass_flow == 0 and checks.ok, checks
     cpsat.close_idle_workers()  # reaped: its CPU seconds count in RUSAGE_CHILDREN
-    return {"status": routing.status, "flow": flow, "cuts": int(routing.cut_edges.size), "wall_s": wall,
-            "cpu_s": _cpu() - cpu0, "backend": routing.stats["backend"], "cut_bound": routing.stats.get("cut_bound")}
+    return {
+        "status": routing.status,
+        "flow": flow,
+        "cuts": int(routing.cut_edges.size),
+        "wall_s": wall,
+        "cpu_s": _cpu() - cpu0,
+        "backend": routing.stats["backend"],
+        "cut_bound": routing.stats.get("cut_bound"),
+    }
 
 
 def instance_arguments(doc: str, families: list[str], solve_help: str) -> argparse.ArgumentParser:
@@ -118,8 +125,10 @@ def static_instances(args: argparse.Namespace) -> Iterator[tuple[str, Problem]]:
 def main(argv: list[str] | None = None) -> None:
     args = instance_arguments(__doc__, list(DEFAULT_FAMILIES), "also solve with and without the bound").parse_args(argv)
     options = options_of(args)
-    print_head("| instance | rows | heuristic flow | heuristic bound | walls' bound |",
-               " with bound: status, flow, cuts | CPU s | without: status, flow, cuts | CPU s |" if args.solve else "")
+    print_head(
+        "| instance | rows | heuristic flow | heuristic bound | walls' bound |",
+        " with bound: status, flow, cuts | CPU s | without: status, flow, cuts | CPU s |" if args.solve else "",
+    )
     lower = settled = total = 0
     for name, problem in static_instances(args):
         b = bounds(problem)

@@ -28,8 +28,7 @@ from synthesis.problems.random_grid import first_consistent, paper_ap
 from synthesis.routing.edges import model_edges
 from synthesis.routing.groups import cut_groups
 
-DEFAULT_CELLS = ["reaction:2:5", "reaction:3:5", "reaction:4:5", "reaction:2:10", "reaction:3:10", "reaction:4:10",
-                 "reaction:4:20"]
+DEFAULT_CELLS = ["reaction:2:5", "reaction:3:5", "reaction:4:5", "reaction:2:10", "reaction:3:10", "reaction:4:10", "reaction:4:20"]
 
 
 def guesses(size: int, family: str, n: int, seed: int) -> tuple[tuple[int, int, float], tuple[int, int, float]]:
@@ -47,12 +46,13 @@ def guesses(size: int, family: str, n: int, seed: int) -> tuple[tuple[int, int, 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m experiments.lab.bench_heuristic", description=__doc__.split("\n")[0])
-    ap.add_argument("--cells", nargs="*", default=DEFAULT_CELLS, metavar="FAMILY:N:SIZE",
-                    help="study cells (family, spec size n as in random_grid, grid size)")
+    ap.add_argument("--cells", nargs="*", default=DEFAULT_CELLS, metavar="FAMILY:N:SIZE", help="study cells (family, spec size n as in random_grid, grid size)")
     ap.add_argument("--instances", type=int, default=20, help="seeds 0..N-1 per cell (default 20)")
     args = ap.parse_args(argv)
-    print("| spec | \\|AP\\| | grid | first test: greedy alone | first test: with route seed "
-          "| flow bound reached: alone / seeded | seeded heuristic s (mean, max) |")
+    print(
+        "| spec | \\|AP\\| | grid | first test: greedy alone | first test: with route seed "
+        "| flow bound reached: alone / seeded | seeded heuristic s (mean, max) |"
+    )
     print("|---|---|---|---|---|---|---|")
     for cell in args.cells:
         family, n_text, size_text = cell.split(":")
@@ -64,8 +64,11 @@ def main(argv: list[str] | None = None) -> int:
         bound_b = sum(b[0] == b[1] for _, b in rows)
         secs = [b[2] for _, b in rows]
         k = args.instances
-        print(f"| {family} | {paper_ap(family, n)} | {size}x{size} | {alone}/{k} | {seeded}/{k} | {bound_a} / {bound_b} "
-              f"| {np.mean(secs):.2f}, {np.max(secs):.2f} |", flush=True)
+        print(
+            f"| {family} | {paper_ap(family, n)} | {size}x{size} | {alone}/{k} | {seeded}/{k} | {bound_a} / {bound_b} "
+            f"| {np.mean(secs):.2f}, {np.max(secs):.2f} |",
+            flush=True,
+        )
     return 0
 
 

@@ -63,8 +63,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     family, n = args.family.split(":")
     print(
-        "| instance | free groups | fewest cuts | proven | bound | rounds | rows cover / flow | master det. s | "
-        "master CPU s | separation s | wall s | load |"
+        "| instance | free groups | fewest cuts | proven | bound | rounds | rows cover / flow | master det. s | master CPU s | separation s | wall s | load |"
     )
     print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     for instance in args.instances:

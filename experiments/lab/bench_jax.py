@@ -220,7 +220,11 @@ class Worker:
         if path is not None:
             env["PYTHONPATH"] = os.pathsep.join([path, *filter(None, [os.environ.get("PYTHONPATH")])])
         self.proc = subprocess.Popen(
-            [python, str(Path(__file__).resolve()), "--worker"], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env,
+            [python, str(Path(__file__).resolve()), "--worker"],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            text=True,
+            env=env,
         )
 
     def ask(self, **req: Any) -> dict[str, Any]:
@@ -294,11 +298,11 @@ FLOWTEST_ROWS = ("numpy flat", "numpy flat-uint8", "numpy grid", "pool padded", 
 JAX_ROWS = ("gymnax loop", "gymnax scan", "xminigrid loop", "xminigrid scan")
 LABELS = {
     "numpy flat": "FlowTest NumPy vector env, `FlowTest-Maze2-v0` flat",
-    "numpy flat-uint8": "FlowTest NumPy vector env, `FlowTest-Maze2-v0` flat, `obs_dtype=\"uint8\"`",
+    "numpy flat-uint8": 'FlowTest NumPy vector env, `FlowTest-Maze2-v0` flat, `obs_dtype="uint8"`',
     "numpy grid": "FlowTest NumPy vector env, `FlowTest-Maze2-v0` grid",
     "pool padded": "FlowTest NumPy vector env, 64 tests of `reachability1/5x5-v2`, padded",
     "pool padded-nocopy": "FlowTest NumPy vector env, 64 tests of `reachability1/5x5-v2`, padded, `copy=False`",
-    "pool padded-uint8": "FlowTest NumPy vector env, 64 tests of `reachability1/5x5-v2`, padded, `obs_dtype=\"uint8\"`",
+    "pool padded-uint8": 'FlowTest NumPy vector env, 64 tests of `reachability1/5x5-v2`, padded, `obs_dtype="uint8"`',
     "torch flat": "FlowTest torch env (CPU, 1 thread), `FlowTest-Maze2-v0` flat",
     "torch grid": "FlowTest torch env (CPU, 1 thread), `FlowTest-Maze2-v0` grid",
     "gymnax loop": "gymnax `FourRooms-misc`, Python loop of jitted batch steps",
@@ -400,11 +404,23 @@ def measure(args: argparse.Namespace) -> dict[str, Any]:
         for w in workers.values():
             w.close()
     return {
-        "machine": f"{_cpu_model()}, {os.cpu_count()} cores, {platform.machine()}", "versions": versions, "before": args.before,
-        "load_before": load_before, "load_after": _load(), "seconds": args.seconds, "repeat": args.repeat,
+        "machine": f"{_cpu_model()}, {os.cpu_count()} cores, {platform.machine()}",
+        "versions": versions,
+        "before": args.before,
+        "load_before": load_before,
+        "load_after": _load(),
+        "seconds": args.seconds,
+        "repeat": args.repeat,
         "rows": [
-            {"row": r, "label": LABELS[r] if r in LABELS else f"{LABELS[r.removeprefix(BEFORE)]}, before ({args.before})", "envs": n,
-             "obs": prepared[(r, n)][2], "batch_steps": prepared[(r, n)][1], "rates": [x for x, _ in res], "cores": [c for _, c in res]}
+            {
+                "row": r,
+                "label": LABELS[r] if r in LABELS else f"{LABELS[r.removeprefix(BEFORE)]}, before ({args.before})",
+                "envs": n,
+                "obs": prepared[(r, n)][2],
+                "batch_steps": prepared[(r, n)][1],
+                "rates": [x for x, _ in res],
+                "cores": [c for _, c in res],
+            }
             for (r, n), res in results.items()
         ],
         "gymnasium_benchmark_vector_step": neutral,
@@ -413,13 +429,20 @@ def measure(args: argparse.Namespace) -> dict[str, Any]:
 
 def markdown(fig: dict[str, Any]) -> str:
     """The figures as Markdown tables, one per batch size."""
-    lines = [f"Machine: {fig['machine']}; {json.dumps(fig['versions'])}; {fig['repeat']} rounds of about {fig['seconds']} s a run; "
-             f"1-min load average {fig['load_before']:.2f} before, {fig['load_after']:.2f} after.", ""]
+    lines = [
+        f"Machine: {fig['machine']}; {json.dumps(fig['versions'])}; {fig['repeat']} rounds of about {fig['seconds']} s a run; "
+        f"1-min load average {fig['load_before']:.2f} before, {fig['load_after']:.2f} after.",
+        "",
+    ]
     for n in sorted({r["envs"] for r in fig["rows"]}):
         rows = [r for r in fig["rows"] if r["envs"] == n]
         jax_bar = max((statistics.median(r["rates"]) for r in rows if r["row"].startswith("gymnax")), default=float("nan"))
-        lines += [f"**{n:,} envs**", "", "| row | observation | median steps/s | best steps/s | cores used | median / gymnax |",
-                  "| --- | --- | ---: | ---: | ---: | ---: |"]
+        lines += [
+            f"**{n:,} envs**",
+            "",
+            "| row | observation | median steps/s | best steps/s | cores used | median / gymnax |",
+            "| --- | --- | ---: | ---: | ---: | ---: |",
+        ]
         for r in rows:
             med = statistics.median(r["rates"])
             ratio = f"{med / jax_bar:.2f}x" if jax_bar == jax_bar else "-"  # nan: no gymnax row
@@ -438,8 +461,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--envs", type=int, nargs="+", default=[1024, 16384], help="batch sizes")
     ap.add_argument("--seconds", type=float, default=1.5, help="about this long a run")
     ap.add_argument("--repeat", type=int, default=5, help="rounds (median and best reported)")
-    ap.add_argument("--rows", nargs="+", default=[*FLOWTEST_ROWS, *JAX_ROWS], choices=[*FLOWTEST_ROWS, *JAX_ROWS], metavar="ROW",
-                    help=f"rows to measure (default all: {', '.join(FLOWTEST_ROWS + JAX_ROWS)})")
+    ap.add_argument(
+        "--rows",
+        nargs="+",
+        default=[*FLOWTEST_ROWS, *JAX_ROWS],
+        choices=[*FLOWTEST_ROWS, *JAX_ROWS],
+        metavar="ROW",
+        help=f"rows to measure (default all: {', '.join(FLOWTEST_ROWS + JAX_ROWS)})",
+    )
     ap.add_argument("--gymnasium", action="store_true", help="also Gymnasium's benchmark_vector_step on both sides")
     ap.add_argument("--before", metavar="DIR", help="also the FlowTest rows of the checkout in DIR (an older commit), in a worker process")
     ap.add_argument("--out", help="also write the Markdown here")

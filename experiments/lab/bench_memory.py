@@ -29,9 +29,11 @@ def grid_toml(n: int) -> str:
         if r == n - 1:
             row[0], row[-1] = "S", "I2"
         rows.append(" ".join(row))
-    return (f'name = "empty-{n}x{n}"\n[system]\ngrid = """\n' + "\n".join(rows) + '\n"""\nstart = "S"\nterminal = ["T"]\n'
-            '[labels]\ngoal = ["T"]\nI1 = ["I1"]\nI2 = ["I2"]\n[objectives]\nsystem = "F goal"\ntest = "F I1 & F I2"\n'
-            '[environment]\nkind = "reactive"\n')
+    return (
+        f'name = "empty-{n}x{n}"\n[system]\ngrid = """\n' + "\n".join(rows) + '\n"""\nstart = "S"\nterminal = ["T"]\n'
+        '[labels]\ngoal = ["T"]\nI1 = ["I1"]\nI2 = ["I2"]\n[objectives]\nsystem = "F goal"\ntest = "F I1 & F I2"\n'
+        '[environment]\nkind = "reactive"\n'
+    )
 
 
 def measure(n: int) -> tuple[int, float]:
@@ -40,8 +42,9 @@ def measure(n: int) -> tuple[int, float]:
         path = Path(tmp) / "grid.toml"
         path.write_text(grid_toml(n))
         before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
-        out = subprocess.run([sys.executable, "-m", "experiments", "synthesize", str(path), "--json", "-q",
-                              "--time-limit", "60"], capture_output=True, text=True, check=True)
+        out = subprocess.run(
+            [sys.executable, "-m", "experiments", "synthesize", str(path), "--json", "-q", "--time-limit", "60"], capture_output=True, text=True, check=True
+        )
         peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
     edges = int(json.loads(out.stdout)["stats"]["graph"]["edges"])
     return edges, max(peak, before) / 1024

@@ -87,10 +87,7 @@ def markdown(rows: Sequence[dict[str, Any]]) -> str:
         "|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
-        lines.append(
-            f"| {r['backend']} | {r['outcome']} | {r['flow']} | {r['cuts']} | {r['rounds']} | {r['verdicts']} | "
-            f"{r['seconds']:.1f} | {r['cpu']:.1f} |"
-        )
+        lines.append(f"| {r['backend']} | {r['outcome']} | {r['flow']} | {r['cuts']} | {r['rounds']} | {r['verdicts']} | {r['seconds']:.1f} | {r['cpu']:.1f} |")
     return "\n".join(lines)
 
 

@@ -66,8 +66,10 @@ def phase1(problem: Problem, name: str, work_limit: float) -> str:
             outcome, flow = err.reason, "-"
     wall = time.perf_counter() - t0
     dets = [float(r["deterministic_time"]) for r in runs]
-    return (f"| {name} | {rm.model.n_row} | {guess.flow}, {guess.upper_bound} | {outcome} | {flow} | "
-            f"{', '.join(f'{d:.2f}' for d in dets)} | {sum(dets):.2f} | {wall:.1f} |")
+    return (
+        f"| {name} | {rm.model.n_row} | {guess.flow}, {guess.upper_bound} | {outcome} | {flow} | "
+        f"{', '.join(f'{d:.2f}' for d in dets)} | {sum(dets):.2f} | {wall:.1f} |"
+    )
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -44,8 +44,7 @@ WRAPPERS: dict[str, Callable[[gym.Env], gym.Env]] = {
 
 HYPERPARAMETERS: dict[str, dict[str, Any]] = {
     "defaults": {},
-    "small": {"n_steps": 128, "batch_size": 256, "learning_rate": 1e-3, "ent_coef": 0.01,
-              "policy_kwargs": {"net_arch": [64, 64]}},
+    "small": {"n_steps": 128, "batch_size": 256, "learning_rate": 1e-3, "ent_coef": 0.01, "policy_kwargs": {"net_arch": [64, 64]}},
 }
 """MaskablePPO keyword arguments: sb3-contrib's defaults, or short rollouts, a larger step
 size and a small network (the settings ``flowtest train`` uses, written as plain SB3 keywords)."""
@@ -71,8 +70,9 @@ def success_rate(model: Any, env_id: str, wrappers: str, episodes: int, seed: in
     return met / episodes
 
 
-def run(env_id: str, wrappers: str, seed: int, chunk: int, max_steps: int, episodes: int, n_envs: int,
-        out_csv: Path | None, hparams: str = "defaults") -> list[dict[str, Any]]:
+def run(
+    env_id: str, wrappers: str, seed: int, chunk: int, max_steps: int, episodes: int, n_envs: int, out_csv: Path | None, hparams: str = "defaults"
+) -> list[dict[str, Any]]:
     """Train and evaluate in rounds; return (and write) one row per round."""
     import torch
     from sb3_contrib import MaskablePPO
@@ -88,10 +88,18 @@ def run(env_id: str, wrappers: str, seed: int, chunk: int, max_steps: int, episo
         model.learn(total_timesteps=chunk, reset_num_timesteps=False)
         train_s += time.perf_counter() - t0
         rate = success_rate(model, env_id, wrappers, episodes)
-        rows.append({"env": env_id, "wrappers": wrappers, "hparams": hparams, "seed": seed, "steps": model.num_timesteps,
-                     "train_seconds": round(train_s, 2), "met_rate": rate})
-        print(f"{wrappers:16s} {hparams:8s} seed {seed}  {model.num_timesteps:7d} steps  {train_s:7.1f} s  met {100 * rate:5.1f} %",
-              flush=True)
+        rows.append(
+            {
+                "env": env_id,
+                "wrappers": wrappers,
+                "hparams": hparams,
+                "seed": seed,
+                "steps": model.num_timesteps,
+                "train_seconds": round(train_s, 2),
+                "met_rate": rate,
+            }
+        )
+        print(f"{wrappers:16s} {hparams:8s} seed {seed}  {model.num_timesteps:7d} steps  {train_s:7.1f} s  met {100 * rate:5.1f} %", flush=True)
     if out_csv is not None:
         out_csv.parent.mkdir(parents=True, exist_ok=True)
         with out_csv.open("w", newline="") as f:
@@ -108,8 +116,14 @@ def plot(csvs: list[Path], path: Path, title: str) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    colors = {"none, defaults": "#d62728", "visited, defaults": "#9467bd", "visited+shaping, defaults": "#ff7f0e",
-              "visited, small": "#1f77b4", "visited+shaping, small": "#2ca02c", "none, small": "#8c564b"}
+    colors = {
+        "none, defaults": "#d62728",
+        "visited, defaults": "#9467bd",
+        "visited+shaping, defaults": "#ff7f0e",
+        "visited, small": "#1f77b4",
+        "visited+shaping, small": "#2ca02c",
+        "none, small": "#8c564b",
+    }
     fig, ax = plt.subplots(figsize=(7, 4))
     labelled: set[str] = set()
     for c in csvs:

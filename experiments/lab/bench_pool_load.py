@@ -72,13 +72,25 @@ def main(argv: list[str] | None = None) -> int:
     env.reset(seed=0)
     compile_s, compile_cpu = time.perf_counter() - t, time.process_time() - c
     total = time.perf_counter() - wall
-    print(json.dumps({
-        "tests": len(tests), "rounds": rounds, "per_pool": per_pool, "check": args.check, "load_s": round(load_s, 2),
-        "compile_s": round(compile_s, 2), "total_s": round(total, 2), "ms_per_test": round(1000 * total / len(tests), 2),
-        "cpu_s": round(time.process_time() - cpu, 2), "load_cpu_s": round(load_cpu, 2), "compile_cpu_s": round(compile_cpu, 2),
-        "helpers_cpu_s": round(os.times().children_user + os.times().children_system - children.children_user - children.children_system, 2),
-        "load_average": [round(load_before, 2), round(os.getloadavg()[0], 2)],
-    }))
+    print(
+        json.dumps(
+            {
+                "tests": len(tests),
+                "rounds": rounds,
+                "per_pool": per_pool,
+                "check": args.check,
+                "load_s": round(load_s, 2),
+                "compile_s": round(compile_s, 2),
+                "total_s": round(total, 2),
+                "ms_per_test": round(1000 * total / len(tests), 2),
+                "cpu_s": round(time.process_time() - cpu, 2),
+                "load_cpu_s": round(load_cpu, 2),
+                "compile_cpu_s": round(compile_cpu, 2),
+                "helpers_cpu_s": round(os.times().children_user + os.times().children_system - children.children_user - children.children_system, 2),
+                "load_average": [round(load_before, 2), round(os.getloadavg()[0], 2)],
+            }
+        )
+    )
     return 0
 
 

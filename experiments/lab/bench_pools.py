@@ -91,8 +91,15 @@ def main(argv: list[str] | None = None) -> int:
         try:
             t, c = time.perf_counter(), time.process_time()
             pool = rg.build_pool(
-                args.size, args.family, args.n, seeds, args.kind,
-                parallel="ray" if args.ray else None, workers=args.workers, progress=True, world=args.world,
+                args.size,
+                args.family,
+                args.n,
+                seeds,
+                args.kind,
+                parallel="ray" if args.ray else None,
+                workers=args.workers,
+                progress=True,
+                world=args.world,
             )
             wall, cpu = time.perf_counter() - t, time.process_time() - c
         finally:

@@ -28,10 +28,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--max-steps", type=int, default=200_000)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--episodes", type=int, default=100, help="evaluation runs after each round (default 100)")
-    p.add_argument("--out", type=Path, default=Path(tempfile.gettempdir()) / "flowtest-bench-ppo.zip",
-                   help="where the model that reached the target is saved")
-    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                   help="override one training setting (JSON value), e.g. --set n_envs=1")
+    p.add_argument("--out", type=Path, default=Path(tempfile.gettempdir()) / "flowtest-bench-ppo.zip", help="where the model that reached the target is saved")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override one training setting (JSON value), e.g. --set n_envs=1")
     args = p.parse_args(argv)
 
     from experiments.training.settings import DEFAULTS
@@ -57,8 +55,7 @@ def main(argv: list[str] | None = None) -> int:
         t1 = time.perf_counter()
         rate = success_rate(model, args.env, args.episodes)
         steps = model.num_timesteps
-        print(f"{steps:7d} steps  {train_s:7.1f} s training  success {100 * rate:5.1f} % "
-              f"({args.episodes} runs, {time.perf_counter() - t1:.1f} s)", flush=True)
+        print(f"{steps:7d} steps  {train_s:7.1f} s training  success {100 * rate:5.1f} % ({args.episodes} runs, {time.perf_counter() - t1:.1f} s)", flush=True)
         if rate >= args.target:
             model.save(str(args.out))
             print(f"reached {100 * rate:.0f} % after {steps} steps, {train_s:.1f} s training wall time; model {args.out}")

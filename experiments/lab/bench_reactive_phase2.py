@@ -93,7 +93,13 @@ def root_bound(h: highspy.Highs) -> float:
 
 
 def run(
-    size: int, family: str, n: int, instance: int, variants: list[str], time_limit: float | None, node_limit: int | None,
+    size: int,
+    family: str,
+    n: int,
+    instance: int,
+    variants: list[str],
+    time_limit: float | None,
+    node_limit: int | None,
     flow_rows: str = "edge",
 ) -> None:
     attempt, _, _ = first_consistent(size, family, n, instance)
@@ -136,8 +142,12 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--variants", nargs="+", choices=VARIANTS, default=["continuous", "binary-flows"])
     ap.add_argument("--time-limit", type=float, default=None, help="wall seconds per run")
     ap.add_argument("--node-limit", type=int, default=None, help="HiGHS nodes per run (deterministic)")
-    ap.add_argument("--flow-rows", choices=("edge", "cut"), default="edge",
-                    help="the feasibility flows' closing rows per flow edge or per cut column (MilpOptions.flow_rows)")
+    ap.add_argument(
+        "--flow-rows",
+        choices=("edge", "cut"),
+        default="edge",
+        help="the feasibility flows' closing rows per flow edge or per cut column (MilpOptions.flow_rows)",
+    )
     args = ap.parse_args(argv)
     family, _, n = args.family.partition(":")
     print("| instance | rows | F (settled by) | variant | root LP | best | bound | nodes | CPU s | wall s | status |")

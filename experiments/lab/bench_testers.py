@@ -108,13 +108,11 @@ def seed_study(out: Path, seeds: list[int], steps: int, trap_penalty: float = 0.
     checks: how much of what a learned tester is depends on its seed."""
     from experiments.training.tester import train_tester
 
-    lines = ["| problem | " + " | ".join(f"seed {s}: trap states / bypass moves" for s in seeds) + " |",
-             "|---|" + "---|" * len(seeds)]
+    lines = ["| problem | " + " | ".join(f"seed {s}: trap states / bypass moves" for s in seeds) + " |", "|---|" + "---|" * len(seeds)]
     for problem in PROBLEMS:
         cells = []
         for seed in seeds:
-            s = train_tester(problem, steps, out / f"seed{seed}" / f"{problem}.zip", seed=seed, progress_bar=False,
-                             eval_episodes=0, trap_penalty=trap_penalty)
+            s = train_tester(problem, steps, out / f"seed{seed}" / f"{problem}.zip", seed=seed, progress_bar=False, eval_episodes=0, trap_penalty=trap_penalty)
             f = s["fairness"]
             cells.append(f"{f['traps']} / {f['bypasses']} (of {f['nodes']})")
             print(f"{problem} seed {seed}: {cells[-1]}", flush=True)
@@ -124,16 +122,19 @@ def seed_study(out: Path, seeds: list[int], steps: int, trap_penalty: float = 0.
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--out", type=Path, default=Path(tempfile.gettempdir()) / "flowtest-bench-testers",
-                   help="where models, reports and pictures go (default: the temporary folder)")
+    p.add_argument(
+        "--out",
+        type=Path,
+        default=Path(tempfile.gettempdir()) / "flowtest-bench-testers",
+        help="where models, reports and pictures go (default: the temporary folder)",
+    )
     p.add_argument("--steps", type=int, default=20_480, help="tester training steps per problem (default 20480)")
     p.add_argument("--sut-steps", type=int, default=16_384, help="PPO system training steps per env (default 16384)")
     p.add_argument("--episodes", type=int, default=20, help="runs per system, tester and env (default 20)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--figures", type=Path, default=None, help="copy the witness pictures here (e.g. docs/images)")
     p.add_argument("--pictures-only", action="store_true", help="only draw, from the testers already in --out")
-    p.add_argument("--seeds", type=int, nargs="+", metavar="SEED",
-                   help="instead: train testers with these seeds and tabulate their exhaustive checks")
+    p.add_argument("--seeds", type=int, nargs="+", metavar="SEED", help="instead: train testers with these seeds and tabulate their exhaustive checks")
     p.add_argument("--trap-penalty", type=float, default=0.0, help="with --seeds: the testers' trap penalty")
     args = p.parse_args(argv)
     if args.seeds:
@@ -156,15 +157,17 @@ def main(argv: list[str] | None = None) -> int:
     testers.mkdir(parents=True, exist_ok=True)
     summaries = {}
     for problem in PROBLEMS:
-        s = train_tester(problem, args.steps, testers / f"{problem}.zip", seed=args.seed, progress_bar=False,
-                         eval_episodes=args.episodes)
+        s = train_tester(problem, args.steps, testers / f"{problem}.zip", seed=args.seed, progress_bar=False, eval_episodes=args.episodes)
         s.pop("points")
         summaries[problem] = s
         f = s["fairness"]
-        print(f"{problem:18s} trained {s['steps']} steps in {s['seconds']:6.1f} s; vs replanner realized before goal "
-              f"{100 * s['realized_before_goal_rate']:.0f} %; exhaustive: {f['nodes']} states, "
-              f"{'fair' if f['fair'] else str(f['traps']) + ' trap states'}, "
-              f"{'guaranteed' if f['guaranteed'] else 'not guaranteed'}, illegal {f['illegal']}", flush=True)
+        print(
+            f"{problem:18s} trained {s['steps']} steps in {s['seconds']:6.1f} s; vs replanner realized before goal "
+            f"{100 * s['realized_before_goal_rate']:.0f} %; exhaustive: {f['nodes']} states, "
+            f"{'fair' if f['fair'] else str(f['traps']) + ' trap states'}, "
+            f"{'guaranteed' if f['guaranteed'] else 'not guaranteed'}, illegal {f['illegal']}",
+            flush=True,
+        )
     (out / "testers.json").write_text(json.dumps(summaries, indent=1) + "\n")
     tester = f"ppo:{testers}"
     all_records = []
@@ -172,8 +175,7 @@ def main(argv: list[str] | None = None) -> int:
         model = out / f"ppo-sut-{problem_of(env_id)[0]}.zip"
         s = train(env_id, args.sut_steps, model, seed=args.seed, progress_bar=False, eval_episodes=0)
         print(f"PPO system on {env_id}: {s['steps']} steps in {s['seconds']:.1f} s", flush=True)
-        cells = evaluate([env_id], SUTS + [f"ppo:{model}"], args.episodes, args.seed, None,
-                         testers=["synthesized", tester])
+        cells = evaluate([env_id], SUTS + [f"ppo:{model}"], args.episodes, args.seed, None, testers=["synthesized", tester])
         records = write_report(cells, out / f"evaluate-{env_id}")
         all_records += records
     (out / "comparison.json").write_text(json.dumps(all_records, indent=1, default=str) + "\n")

@@ -50,13 +50,23 @@ def native_row(name: str, pool: dict[str, Any], steps: int, net: list[int], back
     """The native trainer's steps per second (training loop; no evaluation)."""
     from agents.native_ppo import NativeArgs, train
 
-    args = NativeArgs(env_id=POOL_ENV_ID, env_kwargs=pool, total_steps=steps, hidden=tuple(net), device="cpu",
-                      eval_every=0, env_backend=backend)
+    args = NativeArgs(env_id=POOL_ENV_ID, env_kwargs=pool, total_steps=steps, hidden=tuple(net), device="cpu", eval_every=0, env_backend=backend)
     r = train(args, progress_bar=False, evaluate_train=False)
-    return {"row": name, "kind": "training", "steps": r.steps, "seconds": round(r.seconds, 2),
-            "steps_per_second": round(r.steps_per_second, 1),
-            "settings": {"n_envs": args.num_envs, "n_steps": args.num_steps, "minibatch": args.batch_size() // args.num_minibatches,
-                         "epochs": args.update_epochs, "net_arch": net, "env": backend}}
+    return {
+        "row": name,
+        "kind": "training",
+        "steps": r.steps,
+        "seconds": round(r.seconds, 2),
+        "steps_per_second": round(r.steps_per_second, 1),
+        "settings": {
+            "n_envs": args.num_envs,
+            "n_steps": args.num_steps,
+            "minibatch": args.batch_size() // args.num_minibatches,
+            "epochs": args.update_epochs,
+            "net_arch": net,
+            "env": backend,
+        },
+    }
 
 
 def sb3_row(name: str, pool: dict[str, Any], steps: int, net: list[int], settings: dict[str, Any]) -> dict[str, Any]:
@@ -71,10 +81,21 @@ def sb3_row(name: str, pool: dict[str, Any], steps: int, net: list[int], setting
     model.learn(total_timesteps=steps)
     seconds = time.perf_counter() - t0
     env.close()
-    return {"row": name, "kind": "training", "steps": int(model.num_timesteps), "seconds": round(seconds, 2),
-            "steps_per_second": round(model.num_timesteps / seconds, 1),
-            "settings": {"n_envs": s["n_envs"], "n_steps": s["n_steps"], "minibatch": s["batch_size"],
-                         "epochs": s["n_epochs"], "net_arch": net, "env": "single envs (DummyVecEnv)"}}
+    return {
+        "row": name,
+        "kind": "training",
+        "steps": int(model.num_timesteps),
+        "seconds": round(seconds, 2),
+        "steps_per_second": round(model.num_timesteps / seconds, 1),
+        "settings": {
+            "n_envs": s["n_envs"],
+            "n_steps": s["n_steps"],
+            "minibatch": s["batch_size"],
+            "epochs": s["n_epochs"],
+            "net_arch": net,
+            "env": "single envs (DummyVecEnv)",
+        },
+    }
 
 
 def numpy_env_row(pool: dict[str, Any], n: int, steps: int) -> dict[str, Any]:
@@ -91,8 +112,14 @@ def numpy_env_row(pool: dict[str, Any], n: int, steps: int) -> dict[str, Any]:
         a = np.argmax(infos["action_mask"] * rng.random(infos["action_mask"].shape), axis=1)
         _, _, _, _, infos = env.step(a)
     seconds = time.perf_counter() - t0
-    return {"row": "env: numpy vector env (CPU)", "kind": "env", "steps": n * steps, "seconds": round(seconds, 2),
-            "steps_per_second": round(n * steps / seconds, 1), "settings": {"num_envs": n, "memory": "visited"}}
+    return {
+        "row": "env: numpy vector env (CPU)",
+        "kind": "env",
+        "steps": n * steps,
+        "seconds": round(seconds, 2),
+        "steps_per_second": round(n * steps / seconds, 1),
+        "settings": {"num_envs": n, "memory": "visited"},
+    }
 
 
 def torch_env_row(pool: dict[str, Any], n: int, steps: int, device: str) -> dict[str, Any]:
@@ -119,8 +146,14 @@ def torch_env_row(pool: dict[str, Any], n: int, steps: int, device: str) -> dict
     if device.startswith("cuda"):
         torch.cuda.synchronize()
     seconds = time.perf_counter() - t0
-    return {"row": f"env: torch env ({device})", "kind": "env", "steps": n * steps, "seconds": round(seconds, 2),
-            "steps_per_second": round(n * steps / seconds, 1), "settings": {"num_envs": n, "memory": "visited"}}
+    return {
+        "row": f"env: torch env ({device})",
+        "kind": "env",
+        "steps": n * steps,
+        "seconds": round(seconds, 2),
+        "steps_per_second": round(n * steps / seconds, 1),
+        "settings": {"num_envs": n, "memory": "visited"},
+    }
 
 
 def table(rows: list[dict[str, Any]], base: float | None) -> str:
@@ -155,13 +188,11 @@ def main(argv: list[str] | None = None) -> int:
 
     def add(row: dict[str, Any]) -> None:
         rows.append(row)
-        print(f"{row['row']}: {row['steps_per_second']:,.0f} steps/s ({row['steps']:,} steps in {row['seconds']} s)",
-              file=sys.stderr, flush=True)
+        print(f"{row['row']}: {row['steps_per_second']:,.0f} steps/s ({row['steps']:,} steps in {row['seconds']} s)", file=sys.stderr, flush=True)
 
     if not args.skip_sb3:
         add(sb3_row("sb3 MaskablePPO (flowtest defaults)", pool, args.sb3_steps, net, {}))
-        add(sb3_row("sb3 MaskablePPO (native's PPO settings)", pool, args.sb3_steps, net,
-                    {"n_envs": 128, "n_steps": 32, "batch_size": 1024, "n_epochs": 2}))
+        add(sb3_row("sb3 MaskablePPO (native's PPO settings)", pool, args.sb3_steps, net, {"n_envs": 128, "n_steps": 32, "batch_size": 1024, "n_epochs": 2}))
     add(native_row("native (torch env on the CPU, the default)", pool, args.native_steps, net, "torch"))
     add(native_row("native (numpy env)", pool, args.native_steps, net, "numpy"))
     add(numpy_env_row(pool, args.env_envs, args.env_steps))
@@ -173,10 +204,17 @@ def main(argv: list[str] | None = None) -> int:
     print(md)
     doc = {
         "command": "python -m experiments.lab.bench_training " + " ".join(argv if argv is not None else sys.argv[1:]),
-        "machine": {"cpus": os.cpu_count(), "processor": platform.processor() or platform.machine(),
-                    "torch": torch.__version__, "torch_threads": torch.get_num_threads(),
-                    "cuda": torch.cuda.get_device_name(0) if torch.cuda.is_available() else None},
-        "load_before": load_before, "load_after": _load(), "rows": rows, "table": md,
+        "machine": {
+            "cpus": os.cpu_count(),
+            "processor": platform.processor() or platform.machine(),
+            "torch": torch.__version__,
+            "torch_threads": torch.get_num_threads(),
+            "cuda": torch.cuda.get_device_name(0) if torch.cuda.is_available() else None,
+        },
+        "load_before": load_before,
+        "load_after": _load(),
+        "rows": rows,
+        "table": md,
     }
     if args.out is not None:
         args.out.write_text(json.dumps(doc, indent=1) + "\n")

@@ -90,18 +90,26 @@ def main(argv: list[str] | None = None) -> int:
     rows: list[tuple[str, str, Callable[[], Any], int, bool]] = [
         ("`FlowTest-Maze2-v0`", "NumPy vector env, flat obs", lambda: gym.make_vec("FlowTest-Maze2-v0", n, vec), args.steps, True),
         (
-            "`FlowTest-Maze2-v0`", "NumPy vector env, flat obs, `obs_dtype=\"uint8\"`",
-            lambda: gym.make_vec("FlowTest-Maze2-v0", n, vec, obs_dtype="uint8"), args.steps, True,
+            "`FlowTest-Maze2-v0`",
+            'NumPy vector env, flat obs, `obs_dtype="uint8"`',
+            lambda: gym.make_vec("FlowTest-Maze2-v0", n, vec, obs_dtype="uint8"),
+            args.steps,
+            True,
         ),
         (
-            "`FlowTest-Maze2-v0`", "NumPy vector env, grid obs",
-            lambda: gym.make_vec("FlowTest-Maze2-v0", n, vec, obs_kind="grid"), args.steps, True,
+            "`FlowTest-Maze2-v0`",
+            "NumPy vector env, grid obs",
+            lambda: gym.make_vec("FlowTest-Maze2-v0", n, vec, obs_kind="grid"),
+            args.steps,
+            True,
         ),
         ("`FlowTest-Patrolling-v0`", "NumPy vector env, flat obs", lambda: gym.make_vec("FlowTest-Patrolling-v0", n, vec), args.steps, True),
         (
-            "all 9 built-ins in one batch", "NumPy `PoolVectorEnv`, flat obs (padded)",
+            "all 9 built-ins in one batch",
+            "NumPy `PoolVectorEnv`, flat obs (padded)",
             lambda: PoolVectorEnv(n, [builtin_game(p, "instantaneous") for p in BUILTIN_ENVS], assignment="fixed"),
-            args.steps, True,
+            args.steps,
+            True,
         ),
     ]
     if args.random_grid:
@@ -137,8 +145,11 @@ def main(argv: list[str] | None = None) -> int:
     for (name, how, _, _, _), res in zip(rows, results, strict=True):
         lines.append(f"| {name} | {how} | {max(res):,.0f} | {statistics.median(res):,.0f} |")
     sync_best = max(results[[h for _, h, _, _, _ in rows].index("`SyncVectorEnv` of the single env, flat obs")])
-    lines += ["", f"NumPy Maze 2 (flat) over the `SyncVectorEnv` of the same env: {max(results[0]) / sync_best:,.0f}x (best), "
-              f"{statistics.median(results[0]) / statistics.median(results[-2 if have_minigrid else -1]):,.0f}x (median)."]
+    lines += [
+        "",
+        f"NumPy Maze 2 (flat) over the `SyncVectorEnv` of the same env: {max(results[0]) / sync_best:,.0f}x (best), "
+        f"{statistics.median(results[0]) / statistics.median(results[-2 if have_minigrid else -1]):,.0f}x (median).",
+    ]
     if have_minigrid:
         lines.append(
             f"NumPy Maze 2 (flat) over MiniGrid's `SyncVectorEnv`: {max(results[0]) / max(results[-1]):,.0f}x (best), "

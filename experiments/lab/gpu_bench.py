@@ -68,8 +68,12 @@ POOL = "reachability1/5x5"
 def machine() -> dict[str, Any]:
     """What the figures were measured on."""
     out: dict[str, Any] = {
-        "python": platform.python_version(), "torch": torch.__version__, "numpy": np.__version__,
-        "platform": platform.platform(), "cpu_count": os.cpu_count(), "torch_threads": torch.get_num_threads(),
+        "python": platform.python_version(),
+        "torch": torch.__version__,
+        "numpy": np.__version__,
+        "platform": platform.platform(),
+        "cpu_count": os.cpu_count(),
+        "torch_threads": torch.get_num_threads(),
         "load_average": list(os.getloadavg()) if hasattr(os, "getloadavg") else None,
     }
     if torch.cuda.is_available():
@@ -184,13 +188,28 @@ def bench_training(device: torch.device, steps: int, num_envs: int, pool_count: 
     except ImportError:
         return None
     args = native_ppo.NativeArgs(
-        env_kwargs={"pool": POOL, "count": pool_count}, total_steps=steps, num_envs=num_envs, device=str(device),
-        eval_every=0, obs_kind="padded", threads=threads,
+        env_kwargs={"pool": POOL, "count": pool_count},
+        total_steps=steps,
+        num_envs=num_envs,
+        device=str(device),
+        eval_every=0,
+        obs_kind="padded",
+        threads=threads,
     )
     result = native_ppo.train(args, progress_bar=False, evaluate_train=False)
-    return {"steps": result.steps, "seconds": result.seconds, "steps_per_s": result.steps_per_second, "num_envs": num_envs,
-            "settings": {"hidden": list(args.hidden), "epochs": args.update_epochs, "minibatches": args.num_minibatches,
-                         "inputs": args.inputs, "memory": args.memory}}
+    return {
+        "steps": result.steps,
+        "seconds": result.seconds,
+        "steps_per_s": result.steps_per_second,
+        "num_envs": num_envs,
+        "settings": {
+            "hidden": list(args.hidden),
+            "epochs": args.update_epochs,
+            "minibatches": args.num_minibatches,
+            "inputs": args.inputs,
+            "memory": args.memory,
+        },
+    }
 
 
 FIT_POOL = "reachability1/5x5-v2"
@@ -205,12 +224,24 @@ def bench_fit(device: torch.device, num_envs: int, threads: int, budget: int = 1
         from agents import native_ppo
     except ImportError:
         return None
-    args = native_ppo.NativeArgs(env_kwargs={"pool": FIT_POOL, "split": "train", "count": 128}, total_steps=budget,
-                                 num_envs=num_envs, device=str(device), eval_every=16_384, threads=threads)
+    args = native_ppo.NativeArgs(
+        env_kwargs={"pool": FIT_POOL, "split": "train", "count": 128},
+        total_steps=budget,
+        num_envs=num_envs,
+        device=str(device),
+        eval_every=16_384,
+        threads=threads,
+    )
     result = native_ppo.train(args, progress_bar=False, until=lambda step, rates: rates["train"]["met"] >= target)
     hit = next(((s, t) for (s, r), t in zip(result.evaluations, result.eval_times, strict=True) if r["train"]["met"] >= target), None)
-    return {"num_envs": num_envs, "target": target, "steps": hit[0] if hit else None, "seconds": round(hit[1], 2) if hit else None,
-            "steps_per_s": result.steps_per_second, "final_met": result.final["train"]["met"]}
+    return {
+        "num_envs": num_envs,
+        "target": target,
+        "steps": hit[0] if hit else None,
+        "seconds": round(hit[1], 2) if hit else None,
+        "steps_per_s": result.steps_per_second,
+        "final_met": result.final["train"]["met"],
+    }
 
 
 # ---------------------------------------------------------------- main
@@ -293,12 +324,20 @@ def main(argv: list[str] | None = None) -> int:
                 print("(no agents.native_ppo: time to score not measured)")
                 break
             fit_rows.append({"backend": f"torch-{d}", **f})
-            print(f"fit       torch-{d:<6} {f['num_envs']:>9} envs  {f['seconds']} s to {100 * f['target']:.0f} % ({f['steps']} steps, "
-                  f"{f['steps_per_s']:,.0f} steps/s)")
+            print(
+                f"fit       torch-{d:<6} {f['num_envs']:>9} envs  {f['seconds']} s to {100 * f['target']:.0f} % ({f['steps']} steps, "
+                f"{f['steps_per_s']:,.0f} steps/s)"
+            )
     doc = {
         "command": "python -m experiments.lab.gpu_bench " + " ".join(argv if argv is not None else sys.argv[1:]),
-        "machine": machine(), "pool": POOL, "pool_count": a.pool_count, "seconds_per_figure": a.seconds,
-        "rows": rows, "training": training, "fit": fit_rows, "wall_seconds": round(time.perf_counter() - t_start, 1),
+        "machine": machine(),
+        "pool": POOL,
+        "pool_count": a.pool_count,
+        "seconds_per_figure": a.seconds,
+        "rows": rows,
+        "training": training,
+        "fit": fit_rows,
+        "wall_seconds": round(time.perf_counter() - t_start, 1),
     }
     if a.out:
         a.out.write_text(json.dumps(doc, indent=1) + "\n")

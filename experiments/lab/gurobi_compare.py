@@ -147,9 +147,7 @@ def _answer_of(x: np.ndarray, model: CapturedModel) -> tuple[int, int]:
     return flow, n_cuts
 
 
-def solve_gurobi(
-    mps: Path, model: CapturedModel, time_limit: float | None, threads: int | None
-) -> SolverAnswer:
+def solve_gurobi(mps: Path, model: CapturedModel, time_limit: float | None, threads: int | None) -> SolverAnswer:
     """Solve the MPS file with Gurobi; a model over the license's size limit is reported as such."""
     import gurobipy as gp
 
@@ -182,9 +180,7 @@ def solve_gurobi(
         return SolverAnswer("gurobi", "error", None, None, 0.0, str(exc))
 
 
-def solve_highs_combined(
-    mps: Path, model: CapturedModel, time_limit: float | None, threads: int | None
-) -> SolverAnswer:
+def solve_highs_combined(mps: Path, model: CapturedModel, time_limit: float | None, threads: int | None) -> SolverAnswer:
     """Solve the same MPS file on HiGHS in one phase (no heuristic, no two-phase split)."""
     h = highspy.Highs()
     h.setOptionValue("output_flag", False)
@@ -204,15 +200,11 @@ def solve_highs_combined(
         return SolverAnswer("highs-combined", "timeout", None, None, seconds)
     x = np.asarray(h.getSolution().col_value, dtype=float)
     flow, n_cuts = _answer_of(x, model)
-    optimal = h.getModelStatus() == highspy.HighsModelStatus.kOptimal and abs(
-        info.objective_function_value - info.mip_dual_bound
-    ) < 1.0 - 1e-6
+    optimal = h.getModelStatus() == highspy.HighsModelStatus.kOptimal and abs(info.objective_function_value - info.mip_dual_bound) < 1.0 - 1e-6
     return SolverAnswer("highs-combined", "optimal" if optimal else "feasible", flow, n_cuts, seconds)
 
 
-def compare_on(
-    model: CapturedModel, n_edges: int, time_limit: float | None, threads: int | None, highs_too: bool = True
-) -> list[SolverAnswer]:
+def compare_on(model: CapturedModel, n_edges: int, time_limit: float | None, threads: int | None, highs_too: bool = True) -> list[SolverAnswer]:
     """Write the combined model once and solve it on Gurobi (and on HiGHS in one phase)."""
     lp = combined_model(model, n_edges)
     with tempfile.TemporaryDirectory(prefix="flowtest-mps-") as d:

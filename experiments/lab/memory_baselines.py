@@ -119,8 +119,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     from flowtest_env.scoring import random_policy, score_policy
 
     torch.set_num_threads(1)
-    doc: dict[str, Any] = {"command": " ".join([sys.executable, "-m", "experiments.lab.memory_baselines", *(argv or sys.argv[1:])]),
-                           "machine": machine(), "load_before": load_now(), "runs": []}
+    doc: dict[str, Any] = {
+        "command": " ".join([sys.executable, "-m", "experiments.lab.memory_baselines", *(argv or sys.argv[1:])]),
+        "machine": machine(),
+        "load_before": load_now(),
+        "runs": [],
+    }
     validation = [TestGame(x) for x in load_pool(a.pool, "validation", a.validation_count)]
     held = [TestGame(x) for x in load_pool(a.pool, "test", a.test_count)]
     floor = float(score_policy(random_policy(), tests=held, runs=a.runs, seed=0).met)
@@ -129,23 +133,32 @@ def main(argv: Sequence[str] | None = None) -> int:
     for seed in a.seeds:
         for memory in a.memories:
             settings = native_settings({**native_overrides(a.native_set), "memory": memory})
-            args = native_args(settings, POOL_ENV_ID, {"pool": a.pool, "split": "train", "count": a.train_count}, a.steps, seed,
-                               eval_every=a.eval_every)
+            args = native_args(settings, POOL_ENV_ID, {"pool": a.pool, "split": "train", "count": a.train_count}, a.steps, seed, eval_every=a.eval_every)
             wall = time.perf_counter()
             result = train(args, validation=validation, progress_bar=False, evaluate_train=256)
             pos = result.settings["position"]
             scores = score((result.agent, slice(int(pos[0]), int(pos[1]))), memory, held, a.runs, floor, a.ceiling)
-            row = {"seed": seed, "memory": memory, "steps": result.steps, "seconds": round(result.seconds, 1),
-                   "steps_per_second": round(result.steps_per_second, 1), "wall_seconds": round(time.perf_counter() - wall, 1),
-                   "selected_step": result.selected_step,
-                   "curve": [[s, r.get("train", {}).get("met"), r["validation"]["met"]] for s, r in result.evaluations],
-                   "heldout": scores, "settings": settings}
+            row = {
+                "seed": seed,
+                "memory": memory,
+                "steps": result.steps,
+                "seconds": round(result.seconds, 1),
+                "steps_per_second": round(result.steps_per_second, 1),
+                "wall_seconds": round(time.perf_counter() - wall, 1),
+                "selected_step": result.selected_step,
+                "curve": [[s, r.get("train", {}).get("met"), r["validation"]["met"]] for s, r in result.evaluations],
+                "heldout": scores,
+                "settings": settings,
+            }
             doc["runs"].append(row)
             g, s = scores["greedy"], scores["sampled"]
-            print(f"[{time.perf_counter() - t0:6.0f} s] seed {seed} {memory:8s}: {result.steps} steps in {result.seconds:.0f} s, kept step "
-                  f"{result.selected_step}; held-out greedy {100 * g['met']:.1f} % ({g['normalized']:+.2f}), sampled {100 * s['met']:.1f} % "
-                  f"({s['normalized']:+.2f}); greedy failures {g['failures']}, in a loop {g['failures_in_a_loop']}; load {load_now()}",
-                  file=sys.stderr, flush=True)
+            print(
+                f"[{time.perf_counter() - t0:6.0f} s] seed {seed} {memory:8s}: {result.steps} steps in {result.seconds:.0f} s, kept step "
+                f"{result.selected_step}; held-out greedy {100 * g['met']:.1f} % ({g['normalized']:+.2f}), sampled {100 * s['met']:.1f} % "
+                f"({s['normalized']:+.2f}); greedy failures {g['failures']}, in a loop {g['failures_in_a_loop']}; load {load_now()}",
+                file=sys.stderr,
+                flush=True,
+            )
             if a.out is not None:
                 a.out.write_text(json.dumps(doc, indent=1) + "\n")
     doc["load_after"] = load_now()
@@ -155,8 +168,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         for mode in ("greedy", "sampled"):
             vals = [r["heldout"][mode]["normalized"] for r in rows]
             mets = [r["heldout"][mode]["met"] for r in rows]
-            print(f"{memory:8s} {mode:8s} held-out met {100 * np.mean(mets):.1f} % (seeds: {[round(100 * m, 1) for m in mets]}), "
-                  f"normalized {np.mean(vals):+.3f}")
+            print(
+                f"{memory:8s} {mode:8s} held-out met {100 * np.mean(mets):.1f} % (seeds: {[round(100 * m, 1) for m in mets]}), normalized {np.mean(vals):+.3f}"
+            )
         fails = sum(r["heldout"]["greedy"]["failures"] for r in rows)
         looped = sum(r["heldout"]["greedy"]["failures_in_a_loop"] for r in rows)
         print(f"{memory:8s} greedy failures ending in a two-step loop: {looped} of {fails}")

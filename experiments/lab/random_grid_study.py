@@ -110,7 +110,14 @@ class Task:
     def key(self) -> tuple[Any, ...]:
         """Identifies the task's record (for ``--resume`` and for ordering)."""
         return (
-            self.family, self.n, self.size, self.instance, self.milp, self.time_limit, self.gurobi, self.after_first,
+            self.family,
+            self.n,
+            self.size,
+            self.instance,
+            self.milp,
+            self.time_limit,
+            self.gurobi,
+            self.after_first,
             self.backend,
         )
 
@@ -118,8 +125,15 @@ class Task:
 def record_key(rec: dict[str, Any]) -> tuple[Any, ...]:
     """The :attr:`Task.key` of a record."""
     return (
-        rec["family"], rec["n"], rec["size"], rec["instance"], rec["milp"], rec["time_limit"], rec["gurobi"],
-        rec.get("after_first"), rec.get("backend"),
+        rec["family"],
+        rec["n"],
+        rec["size"],
+        rec["instance"],
+        rec["milp"],
+        rec["time_limit"],
+        rec["gurobi"],
+        rec.get("after_first"),
+        rec.get("backend"),
     )
 
 
@@ -200,9 +214,7 @@ def run_task(task: Task) -> dict[str, Any]:
             stamps.setdefault("check", time.perf_counter())
 
     backend: dict[str, Any] = {} if task.backend is None else {"backend": task.backend}
-    options = SynthesisOptions(
-        time_limit=task.time_limit, after_first=task.after_first, threads=task.threads, progress=progress, **backend
-    )
+    options = SynthesisOptions(time_limit=task.time_limit, after_first=task.after_first, threads=task.threads, progress=progress, **backend)
     capture_ctx = None
     if task.gurobi:
         from .gurobi_compare import capture_models
@@ -289,9 +301,7 @@ def run_in_process(tasks: list[Task], on_done: Callable[[dict[str, Any]], None])
         on_done(run_task(t))
 
 
-def run_on_ray(
-    tasks: list[Task], on_done: Callable[[dict[str, Any]], None], address: str | None = None, workers: int | None = None
-) -> None:
+def run_on_ray(tasks: list[Task], on_done: Callable[[dict[str, Any]], None], address: str | None = None, workers: int | None = None) -> None:
     """Run every task as a Ray task (one CPU each) and hand each record over as it finishes.
 
     ``address`` ``None`` starts a local Ray runtime with ``workers`` CPUs (Ray's default:
@@ -327,10 +337,18 @@ def run_on_ray(
 def run_task_failed(task: Task, message: str) -> dict[str, Any]:
     """The record of a task whose worker died."""
     return {
-        "family": task.family, "n": task.n, "ap": paper_ap(task.family, task.n), "size": task.size,
-        "instance": task.instance, "milp": task.milp, "time_limit": task.time_limit,
-        "after_first": task.after_first, "gurobi": task.gurobi, "backend": task.backend,
-        "outcome": "error", "message": message,
+        "family": task.family,
+        "n": task.n,
+        "ap": paper_ap(task.family, task.n),
+        "size": task.size,
+        "instance": task.instance,
+        "milp": task.milp,
+        "time_limit": task.time_limit,
+        "after_first": task.after_first,
+        "gurobi": task.gurobi,
+        "backend": task.backend,
+        "outcome": "error",
+        "message": message,
     }
 
 
@@ -424,8 +442,17 @@ def gurobi_table(records: list[dict[str, Any]]) -> str:
     recs = [r for r in records if r.get("gurobi")]
     cells = sorted({(r["size"], r["family"], r["n"]) for r in recs}, key=lambda c: (c[0], FAMILIES.index(c[1]), c[2]))
     head = [
-        "grid", "spec", r"\|AP\|", "instances", "model cols/rows (mean)", "FlowTest (HiGHS) s", "Gurobi s",
-        "HiGHS one-phase s", "both proven optimal", "identical optima", "Gurobi / FlowTest time (both optimal)",
+        "grid",
+        "spec",
+        r"\|AP\|",
+        "instances",
+        "model cols/rows (mean)",
+        "FlowTest (HiGHS) s",
+        "Gurobi s",
+        "HiGHS one-phase s",
+        "both proven optimal",
+        "identical optima",
+        "Gurobi / FlowTest time (both optimal)",
         "Gurobi not run",
     ]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
@@ -448,12 +475,26 @@ def gurobi_table(records: list[dict[str, Any]]) -> str:
                 skipped[o] = skipped.get(o, 0) + 1
         cols = [r["model_cols"] for r in rs if r.get("model_cols")]
         rows = [r["model_rows"] for r in rs if r.get("model_rows")]
-        lines.append("| " + " | ".join([
-            f"{size}x{size}", fam, str(paper_ap(fam, n)), str(len(rs)),
-            f"{np.mean(cols):.0f}/{np.mean(rows):.0f}" if cols else "—",
-            _mean_std(ours), _mean_std(gur), _mean_std(h1), str(len(proven)), f"{len(same)}/{len(proven)}", ratio,
-            ", ".join(f"{k} {v}" for k, v in sorted(skipped.items())) or "0",
-        ]) + " |")
+        lines.append(
+            "| "
+            + " | ".join(
+                [
+                    f"{size}x{size}",
+                    fam,
+                    str(paper_ap(fam, n)),
+                    str(len(rs)),
+                    f"{np.mean(cols):.0f}/{np.mean(rows):.0f}" if cols else "—",
+                    _mean_std(ours),
+                    _mean_std(gur),
+                    _mean_std(h1),
+                    str(len(proven)),
+                    f"{len(same)}/{len(proven)}",
+                    ratio,
+                    ", ".join(f"{k} {v}" for k, v in sorted(skipped.items())) or "0",
+                ]
+            )
+            + " |"
+        )
     return "\n".join(lines)
 
 
@@ -461,6 +502,7 @@ def compare_table(records: list[dict[str, Any]], baseline: list[dict[str, Any]])
     """Per cell of ``records``: the share solved and proven optimal, per MILP, next to the
     same cell of ``baseline`` (earlier records, e.g. a ``results.csv`` under another budget or
     backend); cells of ``records`` only, and a cell counts only its finished instances."""
+
     def shares(recs: list[dict[str, Any]], cell: tuple[Any, ...], milp: str) -> str:
         rs = [r for r in recs if (r["family"], int(r["n"]), int(r["size"])) == cell and r["milp"] == milp]
         if not rs:
@@ -494,11 +536,49 @@ def read_csv_records(path: Path) -> list[dict[str, Any]]:
 
 
 CSV_FIELDS = [
-    "family", "n", "ap", "size", "instance", "milp", "time_limit", "after_first", "backend", "solver_backend", "attempt", "outcome", "status", "flow", "n_cuts",
-    "cut_digest", "graph_s", "solve_s", "check_s", "total_s", "g_nodes", "g_edges", "bpi_states", "binary_vars",
-    "continuous_vars", "constraints", "feasibility_rounds", "mip_gap", "load1", "host", "gurobi", "model_cols",
-    "model_rows", "gurobi_model_rounds", "gurobi_outcome", "gurobi_flow", "gurobi_n_cuts", "gurobi_s", "highs1_outcome", "highs1_flow",
-    "highs1_n_cuts", "highs1_s", "message",
+    "family",
+    "n",
+    "ap",
+    "size",
+    "instance",
+    "milp",
+    "time_limit",
+    "after_first",
+    "backend",
+    "solver_backend",
+    "attempt",
+    "outcome",
+    "status",
+    "flow",
+    "n_cuts",
+    "cut_digest",
+    "graph_s",
+    "solve_s",
+    "check_s",
+    "total_s",
+    "g_nodes",
+    "g_edges",
+    "bpi_states",
+    "binary_vars",
+    "continuous_vars",
+    "constraints",
+    "feasibility_rounds",
+    "mip_gap",
+    "load1",
+    "host",
+    "gurobi",
+    "model_cols",
+    "model_rows",
+    "gurobi_model_rounds",
+    "gurobi_outcome",
+    "gurobi_flow",
+    "gurobi_n_cuts",
+    "gurobi_s",
+    "highs1_outcome",
+    "highs1_flow",
+    "highs1_n_cuts",
+    "highs1_s",
+    "message",
 ]
 
 
@@ -559,8 +639,15 @@ def parse_specs(tokens: Iterable[str] | None) -> list[tuple[str, int]]:
 
 
 def make_tasks(
-    specs: list[tuple[str, int]], sizes: list[int], instances: int, milps: list[str], time_limit: float | None,
-    threads: int | None, gurobi: bool, after_first: float | None = None, backend: str | None = None,
+    specs: list[tuple[str, int]],
+    sizes: list[int],
+    instances: int,
+    milps: list[str],
+    time_limit: float | None,
+    threads: int | None,
+    gurobi: bool,
+    after_first: float | None = None,
+    backend: str | None = None,
 ) -> list[Task]:
     """Every (spec, size, instance, MILP), small grids first so the table fills from the top."""
     return [
@@ -601,7 +688,8 @@ class Progress:
         tally = " ".join(f"{k}:{v}" for k, v in sorted(self.counts.items()))
         print(
             f"[{self.done}/{self.total} {el / 60:.1f}min, ~{eta / 60:.0f}min left] {what}: {res}  ({tally})",
-            file=sys.stderr, flush=True,
+            file=sys.stderr,
+            flush=True,
         )
 
 
@@ -616,17 +704,23 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--instances", type=int, default=20, help="seeded instances per cell (seeds 0..N-1; default 20)")
     ap.add_argument("--milps", nargs="*", choices=MILPS, help="default: both (with --gurobi: static)")
     ap.add_argument(
-        "--time-limit", type=float, default=None,
+        "--time-limit",
+        type=float,
+        default=None,
         help="seconds per solve, 0 for none; with --after-first: seconds to a first test (default: the paper's "
         f"budget, {PAPER_FIRST_LIMIT:.0f} s to a first test, then {PAPER_AFTER_FIRST:.0f} s more)",
     )
     ap.add_argument(
-        "--after-first", type=float, default=None,
+        "--after-first",
+        type=float,
+        default=None,
         help="seconds of improvement once a first test is found (default: the paper's budget, see --time-limit)",
     )
     ap.add_argument("--threads", type=int, default=1, help="solver threads per instance (default 1)")
     ap.add_argument(
-        "--backend", default=None, metavar="NAME",
+        "--backend",
+        default=None,
+        metavar="NAME",
         help="routing solver backend (SynthesisOptions.backend: auto, highs, cover, cpsat; default: FlowTest's default)",
     )
     ap.add_argument("--out", type=Path, default=Path("random-grid-study"), help="output directory")
@@ -636,16 +730,22 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--workers", type=int, default=None, help="CPUs of a local Ray runtime (default: every core)")
     ap.add_argument("--gurobi", action="store_true", help="also solve the paper's MILP-static formulation on Gurobi")
     ap.add_argument(
-        "--graphs-only", action="store_true",
+        "--graphs-only",
+        action="store_true",
         help="only draw the instances and time their graph construction (no MILP)",
     )
     ap.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
     ap.add_argument(
-        "--report", nargs="+", type=Path, metavar="DIR",
+        "--report",
+        nargs="+",
+        type=Path,
+        metavar="DIR",
         help="run nothing: print the tables of the records in these output directories together",
     )
     ap.add_argument(
-        "--compare-to", type=Path, metavar="CSV",
+        "--compare-to",
+        type=Path,
+        metavar="CSV",
         help="with --report: also the shares proven optimal per cell next to those of this earlier results.csv",
     )
     args = ap.parse_args(argv)
@@ -703,9 +803,15 @@ def main(argv: list[str] | None = None) -> int:
     use_ray = args.ray or args.ray_address is not None
     config = {
         "command": "python -m experiments.lab.random_grid_study " + " ".join(argv if argv is not None else sys.argv[1:]),
-        "specs": specs, "sizes": sizes, "instances": args.instances, "milps": milps, "time_limit": time_limit,
-        "after_first": after_first, "backend": args.backend,
-        "threads": args.threads, "dispatch": ("ray " + (args.ray_address or "local")) if use_ray else "in-process",
+        "specs": specs,
+        "sizes": sizes,
+        "instances": args.instances,
+        "milps": milps,
+        "time_limit": time_limit,
+        "after_first": after_first,
+        "backend": args.backend,
+        "threads": args.threads,
+        "dispatch": ("ray " + (args.ray_address or "local")) if use_ray else "in-process",
         "machine": {"cpus": os.cpu_count(), "load_at_start": os.getloadavg(), "python": platform.python_version()},
     }
     progress = Progress(len(tasks), args.quiet)

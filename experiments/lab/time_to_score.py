@@ -103,8 +103,14 @@ def machine() -> dict[str, Any]:
         pass
     import torch
 
-    return {"cpu_model": model, "cpu_count": os.cpu_count(), "python": platform.python_version(), "torch": torch.__version__,
-            "numpy": np.__version__, "platform": platform.platform()}
+    return {
+        "cpu_model": model,
+        "cpu_count": os.cpu_count(),
+        "python": platform.python_version(),
+        "torch": torch.__version__,
+        "numpy": np.__version__,
+        "platform": platform.platform(),
+    }
 
 
 # ---------------------------------------------------------------- evaluation
@@ -124,8 +130,9 @@ class Splits:
 
         out = {}
         for name, games in self.games.items():
-            v = batch_verdicts(act, games, [default_max_steps(g) for g in games], self.where if memory != "none" else None,
-                               memory=memory if memory != "none" else "visited")
+            v = batch_verdicts(
+                act, games, [default_max_steps(g) for g in games], self.where if memory != "none" else None, memory=memory if memory != "none" else "visited"
+            )
             out[name] = float(np.mean(v["system_objective"] == "met"))
         return out
 
@@ -151,8 +158,16 @@ def random_floor(pool: str, count: int) -> float:
 # ---------------------------------------------------------------- the trainers
 
 
-def run_native(seed: int, phase: str, pool_options: dict[str, Any], splits: Splits, every: int, budget: int,
-               until: Callable[[dict[str, float]], bool], overrides: dict[str, Any]) -> Run:
+def run_native(
+    seed: int,
+    phase: str,
+    pool_options: dict[str, Any],
+    splits: Splits,
+    every: int,
+    budget: int,
+    until: Callable[[dict[str, float]], bool],
+    overrides: dict[str, Any],
+) -> Run:
     """The native trainer with ``flowtest train``'s settings (and ``overrides``)."""
     from agents.native_ppo import train
     from experiments.training.settings import native_args, native_settings
@@ -179,8 +194,7 @@ def run_native(seed: int, phase: str, pool_options: dict[str, Any], splits: Spli
     return run
 
 
-def run_sb3(seed: int, phase: str, pool_options: dict[str, Any], splits: Splits, every: int, budget: int,
-            until: Callable[[dict[str, float]], bool]) -> Run:
+def run_sb3(seed: int, phase: str, pool_options: dict[str, Any], splits: Splits, every: int, budget: int, until: Callable[[dict[str, float]], bool]) -> Run:
     """MaskablePPO with ``flowtest train --trainer sb3``'s settings; evaluated from a callback
     every ``every`` steps (its time excluded)."""
     from stable_baselines3.common.callbacks import BaseCallback
@@ -262,8 +276,9 @@ def cleanrl_actor(saved: dict[str, Any]) -> Callable[[Any], Any]:
     return actor
 
 
-def run_cleanrl(recipe: Any, seed: int, phase: str, pool: str, count: int, splits: Splits, budgets: Sequence[int],
-                until: Callable[[dict[str, float]], bool]) -> Run:
+def run_cleanrl(
+    recipe: Any, seed: int, phase: str, pool: str, count: int, splits: Splits, budgets: Sequence[int], until: Callable[[dict[str, float]], bool]
+) -> Run:
     """The recipe once per budget (smallest first), each from scratch; each saved model one point."""
     import torch
 
@@ -325,9 +340,12 @@ def summarize(runs: list[Run], target: float, held: str, n_held: int, points: in
         if fit:
             hits = [first_time(r, "train", target) for r in fit]
             out["fit"][trainer] = {
-                "seconds": [h.seconds if h else None for h in hits], "cpu": [h.cpu if h else None for h in hits],
-                "steps": [h.steps if h else None for h in hits], "steps_per_second": [r.steps_per_second for r in fit],
-                "setup": [r.setup for r in fit], "seeds": [r.seed for r in fit],
+                "seconds": [h.seconds if h else None for h in hits],
+                "cpu": [h.cpu if h else None for h in hits],
+                "steps": [h.steps if h else None for h in hits],
+                "steps_per_second": [r.steps_per_second for r in fit],
+                "setup": [r.setup for r in fit],
+                "seeds": [r.seed for r in fit],
             }
     held_runs = {t: [r for r in runs if r.trainer == t and r.phase == "heldout"] for t in TRAINERS}
     plateaus = {t: [plateau(r, held, points, n_held) for r in rs] for t, rs in held_runs.items() if rs}
@@ -340,12 +358,15 @@ def summarize(runs: list[Run], target: float, held: str, n_held: int, points: in
         own = [next((p for p in r.points if p.met[held] >= pl["low"] - 1e-12), None) for r, pl in zip(rs, ps, strict=True)]
         to_common = [first_time(r, held, common) if common is not None else None for r in rs]
         out["heldout"][trainer] = {
-            "plateau_met": [round(p["met"], 4) for p in ps], "plateau_normalized": [round((p["met"] - floor) / (ceiling - floor), 4) for p in ps],
-            "seconds_to_plateau": [h.seconds if h else None for h in own], "cpu_to_plateau": [h.cpu if h else None for h in own],
+            "plateau_met": [round(p["met"], 4) for p in ps],
+            "plateau_normalized": [round((p["met"] - floor) / (ceiling - floor), 4) for p in ps],
+            "seconds_to_plateau": [h.seconds if h else None for h in own],
+            "cpu_to_plateau": [h.cpu if h else None for h in own],
             "steps_to_plateau": [h.steps if h else None for h in own],
             "seconds_to_sb3_plateau": [h.seconds if h else None for h in to_common],
             "steps_to_sb3_plateau": [h.steps if h else None for h in to_common],
-            "steps_per_second": [r.steps_per_second for r in rs], "seeds": [r.seed for r in rs],
+            "steps_per_second": [r.steps_per_second for r in rs],
+            "seeds": [r.seed for r in rs],
         }
     out["heldout_target"] = {"sb3_plateau_low_met": common, "floor": floor, "ceiling": ceiling}
     return out
@@ -366,8 +387,10 @@ def print_table(summary: dict[str, Any]) -> None:
         print(f"  {t:8s} {_median(s['seconds']):>24s} s   cpu {_median(s['cpu']):>10s}   {_median(s['steps_per_second'])} steps/s")
     print("held-out: seconds to the own plateau, to sb3's plateau; plateau met (normalized)")
     for t, s in summary["heldout"].items():
-        print(f"  {t:8s} {_median(s['seconds_to_plateau']):>12s} s  {_median(s['seconds_to_sb3_plateau']):>12s} s   "
-              f"met {[round(100 * x, 1) for x in s['plateau_met']]} norm {s['plateau_normalized']}")
+        print(
+            f"  {t:8s} {_median(s['seconds_to_plateau']):>12s} s  {_median(s['seconds_to_sb3_plateau']):>12s} s   "
+            f"met {[round(100 * x, 1) for x in s['plateau_met']]} norm {s['plateau_normalized']}"
+        )
 
 
 # ---------------------------------------------------------------- the command
@@ -392,8 +415,13 @@ def parse(argv: Sequence[str] | None) -> argparse.Namespace:
     ap.add_argument("--cleanrl-recipe", type=Path, default=Path(__file__).resolve().parents[2] / "docs" / "recipes" / "cleanrl_ppo.py")
     ap.add_argument("--cleanrl-fit-budgets", type=int, nargs="+", default=[65_536, 131_072, 262_144, 524_288, 1_048_576])
     ap.add_argument("--cleanrl-budgets", type=int, nargs="+", default=[131_072, 262_144, 524_288, 1_048_576])
-    ap.add_argument("--native-set", action="append", default=[], metavar="KEY=VALUE",
-                    help="a native setting (flowtest train's names: n_epochs=4, net_arch=64,64, memory=counts)")
+    ap.add_argument(
+        "--native-set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="a native setting (flowtest train's names: n_epochs=4, net_arch=64,64, memory=counts)",
+    )
     ap.add_argument("--out", type=Path, default=None)
     return ap.parse_args(argv)
 
@@ -422,8 +450,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     import torch
 
     torch.set_num_threads(1)
-    doc: dict[str, Any] = {"command": " ".join([sys.executable, "-m", "experiments.lab.time_to_score", *(argv or sys.argv[1:])]),
-                           "machine": machine(), "load_before": load_now(), "runs": []}
+    doc: dict[str, Any] = {
+        "command": " ".join([sys.executable, "-m", "experiments.lab.time_to_score", *(argv or sys.argv[1:])]),
+        "machine": machine(),
+        "load_before": load_now(),
+        "runs": [],
+    }
     recipe = cleanrl_recipe(a.cleanrl_recipe) if "cleanrl" in a.trainers else None
     trainers = [t for t in a.trainers if t != "cleanrl" or recipe is not None]
     if "cleanrl" in a.trainers and recipe is None:
@@ -440,6 +472,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
             def until(met: dict[str, float]) -> bool:
                 return bool(met["train"] >= a.target)
+
             budgets = {"native": a.fit_budget[0], "sb3": a.fit_budget[1]}
             every = a.fit_every
             cleanrl_budgets = a.cleanrl_fit_budgets
@@ -448,6 +481,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
             def until(met: dict[str, float]) -> bool:
                 return False
+
             budgets = {"native": a.budget[0], "sb3": a.budget[1]}
             every = a.eval_every
             cleanrl_budgets = a.cleanrl_budgets
@@ -465,9 +499,12 @@ def main(argv: Sequence[str] | None = None) -> int:
                     run = run_cleanrl(recipe, seed, phase, a.pool, count, splits, cleanrl_budgets, until)
                 runs.append(run)
                 last = run.points[-1]
-                print(f"[{time.perf_counter() - t0:7.0f} s] {phase} {trainer} seed {seed}: {last.steps} steps in {last.seconds:.1f} s "
-                      f"({run.steps_per_second:.0f} steps/s), met {last.met}; wall {time.perf_counter() - t:.0f} s, load {load_now()}",
-                      file=sys.stderr, flush=True)
+                print(
+                    f"[{time.perf_counter() - t0:7.0f} s] {phase} {trainer} seed {seed}: {last.steps} steps in {last.seconds:.1f} s "
+                    f"({run.steps_per_second:.0f} steps/s), met {last.met}; wall {time.perf_counter() - t:.0f} s, load {load_now()}",
+                    file=sys.stderr,
+                    flush=True,
+                )
                 doc["runs"] = [asdict(r) for r in runs]
                 if a.out is not None:
                     a.out.write_text(json.dumps(doc, indent=1) + "\n")

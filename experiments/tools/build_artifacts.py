@@ -77,7 +77,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--force", action="store_true", help="overwrite existing artifacts")
     ap.add_argument("--out", type=Path, default=ARTIFACT_DIR, help=f"output folder (default {ARTIFACT_DIR})")
     ap.add_argument(
-        "--node-limit", type=int, default=None, metavar="N",
+        "--node-limit",
+        type=int,
+        default=None,
+        metavar="N",
         help=f"branch-and-bound nodes per HiGHS run (default {ARTIFACT_NODE_LIMIT}, or the built-in's entry of "
         f"ARTIFACT_NODE_LIMITS: {ARTIFACT_NODE_LIMITS}; a deterministic budget: "
         "the answer may then be feasible, not proven optimal)",

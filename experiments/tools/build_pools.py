@@ -58,8 +58,14 @@ ORDER = sp.DRAW_ORDER
 
 
 def _meta(pool: sp.StandardPool) -> dict[str, Any]:
-    return {"id": pool.id, "pool": pool.pool, "version": pool.version, "params": pool.params(), "splits": dict(pool.splits),
-            **({"draw": {"order": list(sp.DRAW_ORDER)}} if pool.draw == "content" else {})}
+    return {
+        "id": pool.id,
+        "pool": pool.pool,
+        "version": pool.version,
+        "params": pool.params(),
+        "splits": dict(pool.splits),
+        **({"draw": {"order": list(sp.DRAW_ORDER)}} if pool.draw == "content" else {}),
+    }
 
 
 def check_meta(pool: sp.StandardPool) -> None:
@@ -84,8 +90,13 @@ def check_meta(pool: sp.StandardPool) -> None:
 
 
 def build_split(
-    pool: sp.StandardPool, split: str, count: int, flush_every: float = 30.0, reuse_cache: bool = True,
-    parallel: str | None = None, workers: int | None = None,
+    pool: sp.StandardPool,
+    split: str,
+    count: int,
+    flush_every: float = 30.0,
+    reuse_cache: bool = True,
+    parallel: str | None = None,
+    workers: int | None = None,
 ) -> int:
     """Extend ``split``'s shipped records to ``count`` tests (seed order), flushing every
     ``flush_every`` seconds; returns the number of tests in the file at the end. Ctrl-C
@@ -133,8 +144,9 @@ def build_split(
         except ProblemError:
             if synthesized:
                 raise
-            cert = certify(pool_record(p.size, p.family, p.n, seed, p.kind, p.world), p.size, p.family, p.n, p.world, p.kind,
-                           content=taken is not None)  # a stale or damaged reused record: synthesized again
+            cert = certify(
+                pool_record(p.size, p.family, p.n, seed, p.kind, p.world), p.size, p.family, p.n, p.world, p.kind, content=taken is not None
+            )  # a stale or damaged reused record: synthesized again
         key = record_content_key(cert)
         if taken is not None and key in taken:
             skipped += 1
@@ -247,16 +259,23 @@ def draws(pool: sp.StandardPool) -> dict[str, Any]:
         seeds = pool.seeds(split)
         base = SPLITS.index(split) * SPLIT_SPAN
         drawn = seeds[-1] - base + 1 if seeds else 0
-        splits[split] = {"tests": len(seeds), "seeds_drawn": drawn, "seeds_skipped": drawn - len(seeds),
-                         "first_seed": seeds[0] if seeds else None, "last_seed": seeds[-1] if seeds else None}
+        splits[split] = {
+            "tests": len(seeds),
+            "seeds_drawn": drawn,
+            "seeds_skipped": drawn - len(seeds),
+            "first_seed": seeds[0] if seeds else None,
+            "last_seed": seeds[-1] if seeds else None,
+        }
     return {
         "order": list(sp.DRAW_ORDER),
         "layouts": layouts,
         "layouts_how": "exact: start, goal and proposition cells in order, the test agent's column and start row, "
-                       "the blocked or refuel cells as a set (synthesis.problems.random_worlds.layout_count)",
-        "birthday": {"repeats": {k: _sig(v) for k, v in bound["repeats"].items()},
-                     "shared": {k: _sig(v) for k, v in bound["shared"].items()},
-                     "any_collision": _sig(bound["any_collision"])},
+        "the blocked or refuel cells as a set (synthesis.problems.random_worlds.layout_count)",
+        "birthday": {
+            "repeats": {k: _sig(v) for k, v in bound["repeats"].items()},
+            "shared": {k: _sig(v) for k, v in bound["shared"].items()},
+            "any_collision": _sig(bound["any_collision"]),
+        },
         "splits": splits,
     }
 
@@ -326,8 +345,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--parallel", choices=("ray",), default=None, help="synthesize as Ray tasks")
     ap.add_argument("--workers", type=int, default=None, help="Ray CPUs (default: all)")
     ap.add_argument("--list", action="store_true", help="show what is shipped and exit")
-    ap.add_argument("--overlaps", action="store_true",
-                    help="compare the shipped splits by content (repeats, tests shared) and exit (default: all pools)")
+    ap.add_argument("--overlaps", action="store_true", help="compare the shipped splits by content (repeats, tests shared) and exit (default: all pools)")
     args = ap.parse_args(argv)
     if args.list or not (args.pools or args.overlaps):
         print(listing())
@@ -353,8 +371,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         for pool in pools:
             for split in splits:
-                build_split(pool, split, args.count or pool.splits[split], args.flush_every, not args.no_cache,
-                            args.parallel, args.workers)
+                build_split(pool, split, args.count or pool.splits[split], args.flush_every, not args.no_cache, args.parallel, args.workers)
     except KeyboardInterrupt:
         print("interrupted: the records built so far are written; run again to resume", file=sys.stderr)
         return 130

@@ -64,14 +64,21 @@ def summarize(doc: dict[str, Any], label: str = "") -> dict[str, Any]:
     if doc.get("format") != "flowtest-benchmark":
         raise LeaderboardError("not a flowtest benchmark result (table.json of `flowtest benchmark`)")
     if doc.get("version") != RESULTS_VERSION:
-        raise LeaderboardError(f"a flowtest benchmark result of version {doc.get('version')}, not {RESULTS_VERSION}: its "
-                               "statistics are the old ones (docs/benchmark-protocol.md); rerun the benchmark")
+        raise LeaderboardError(
+            f"a flowtest benchmark result of version {doc.get('version')}, not {RESULTS_VERSION}: its "
+            "statistics are the old ones (docs/benchmark-protocol.md); rerun the benchmark"
+        )
 
     def mode(m: dict[str, Any] | None) -> dict[str, Any] | None:
         if not m:
             return None
-        return {"met": m["met"]["mean"], "met_ci95": m["met"]["ci95"], "runs_per_test": m["runs_per_test"],
-                "normalized": m["normalized"], "tail": m.get("tail")}
+        return {
+            "met": m["met"]["mean"],
+            "met_ci95": m["met"]["ci95"],
+            "runs_per_test": m["runs_per_test"],
+            "normalized": m["normalized"],
+            "tail": m.get("tail"),
+        }
 
     systems = []
     scores: dict[str, dict[str, Any]] = {"greedy": {}, "sampled": {}}
@@ -79,21 +86,36 @@ def summarize(doc: dict[str, Any], label: str = "") -> dict[str, Any]:
         row: dict[str, Any] = {"name": e["name"], "kind": e["kind"], "seeds": [r["seed"] for r in e["runs"]]}
         for split in ("train", "validation", "test"):
             if split in e:
-                row[split] = {"met": e[split]["met"]["mean"], "headline_mode": e[split].get("headline_mode"),
-                              "greedy": mode(e[split].get("greedy")), "sampled": mode(e[split].get("sampled"))}
+                row[split] = {
+                    "met": e[split]["met"]["mean"],
+                    "headline_mode": e[split].get("headline_mode"),
+                    "greedy": mode(e[split].get("greedy")),
+                    "sampled": mode(e[split].get("sampled")),
+                }
         systems.append(row)
         for m in ("greedy", "sampled"):
             runs = [r["test"][m] for r in e["runs"] if r.get("test") and r["test"].get(m)]
             if runs:
                 k = int(runs[0]["runs"])
-                scores[m][e["name"]] = {"runs_per_test": k, "seeds": row["seeds"],
-                                        "met_runs": [[int(round(v * k)) for v in r["per_test"]] for r in runs]}
+                scores[m][e["name"]] = {"runs_per_test": k, "seeds": row["seeds"], "met_runs": [[int(round(v * k)) for v in r["per_test"]] for r in runs]}
     return {
-        "format": ENTRY_FORMAT, "version": ENTRY_VERSION, "label": label,
-        "pool": doc["pool"], "command": doc.get("command"), "commit": doc.get("commit"), "machine": doc.get("machine"),
-        "splits": doc["splits"], "config": doc["config"], "budget": doc["budget"], "ran": doc["ran"], "scale": doc["scale"],
-        "headline": doc["headline"], "seconds": doc.get("seconds"), "systems": systems,
-        "generalization": doc.get("generalization", []), "scores": {"test": scores},
+        "format": ENTRY_FORMAT,
+        "version": ENTRY_VERSION,
+        "label": label,
+        "pool": doc["pool"],
+        "command": doc.get("command"),
+        "commit": doc.get("commit"),
+        "machine": doc.get("machine"),
+        "splits": doc["splits"],
+        "config": doc["config"],
+        "budget": doc["budget"],
+        "ran": doc["ran"],
+        "scale": doc["scale"],
+        "headline": doc["headline"],
+        "seconds": doc.get("seconds"),
+        "systems": systems,
+        "generalization": doc.get("generalization", []),
+        "scores": {"test": scores},
     }
 
 
@@ -109,8 +131,14 @@ def entry_json(entry: dict[str, Any]) -> str:
     """The summary as indented JSON, each list of numbers on one line (a score matrix is a
     line per seed, not a line per test)."""
     text = json.dumps(entry, indent=1)
-    return re.sub(r"\[(?:\s*-?\d+(?:\.\d+)?(?:e-?\d+)?,)*\s*-?\d+(?:\.\d+)?(?:e-?\d+)?\s*\]",
-                  lambda m: "[" + ", ".join(x.strip() for x in m.group(0)[1:-1].split(",")) + "]", text) + "\n"
+    return (
+        re.sub(
+            r"\[(?:\s*-?\d+(?:\.\d+)?(?:e-?\d+)?,)*\s*-?\d+(?:\.\d+)?(?:e-?\d+)?\s*\]",
+            lambda m: "[" + ", ".join(x.strip() for x in m.group(0)[1:-1].split(",")) + "]",
+            text,
+        )
+        + "\n"
+    )
 
 
 def slug(text: str) -> str:
@@ -152,12 +180,31 @@ def load_entries(results: Path = RESULTS_DIR) -> list[dict[str, Any]]:
     return entries
 
 
-COLUMNS = ["system", "kind", "seeds", "held-out normalized, sampled (headline) [95 % CI]", "held-out normalized, greedy",
-           "held-out met, sampled", "held-out met, greedy", "hardest 10 % of held-out tests: met (CVaR)", "train met"]
+COLUMNS = [
+    "system",
+    "kind",
+    "seeds",
+    "held-out normalized, sampled (headline) [95 % CI]",
+    "held-out normalized, greedy",
+    "held-out met, sampled",
+    "held-out met, greedy",
+    "hardest 10 % of held-out tests: met (CVaR)",
+    "train met",
+]
 
-OLD_COLUMNS = ["system", "kind", "seeds", "held-out normalized, greedy: IQM [old interval]", "sampled: IQM [old interval]",
-               "greedy: mean [t over seed means]", "sampled: mean [t over seed means]", "held-out met, greedy",
-               "held-out met, sampled", "worst 10 % held-out (old)", "train met"]
+OLD_COLUMNS = [
+    "system",
+    "kind",
+    "seeds",
+    "held-out normalized, greedy: IQM [old interval]",
+    "sampled: IQM [old interval]",
+    "greedy: mean [t over seed means]",
+    "sampled: mean [t over seed means]",
+    "held-out met, greedy",
+    "held-out met, sampled",
+    "worst 10 % held-out (old)",
+    "train met",
+]
 
 OLD_NOTE = (
     "*v1, old statistics*: this result predates the crossed intervals (its summary is of version 1 and kept no per-run "
@@ -187,8 +234,10 @@ def _ran(e: dict[str, Any]) -> dict[str, Any]:
     """What the run trained and scored: stored, or (version 1) from its settings and systems."""
     if e.get("ran"):
         return dict(e["ran"])
-    systems = [{"name": s["name"], "kind": s["kind"], "seeds": s["seeds"],
-                "modes": [m for m in ("greedy", "sampled") if (s.get("test") or {}).get(m)]} for s in e["systems"]]
+    systems = [
+        {"name": s["name"], "kind": s["kind"], "seeds": s["seeds"], "modes": [m for m in ("greedy", "sampled") if (s.get("test") or {}).get(m)]}
+        for s in e["systems"]
+    ]
     return what_ran(e["config"], e["splits"], e["budget"], systems, e.get("generalization", []))
 
 
@@ -201,11 +250,16 @@ def entry_markdown(e: dict[str, Any]) -> list[str]:
     lines = [f"### {title} ({e['file']})", ""]
     if old:
         lines += [OLD_NOTE, ""]
-    lines += [*ran_text(_ran(e)), "",
-              f"Train {sp['train']['count']:,} tests, validation {sp['validation']['count']:,}, held-out test "
-              f"{sp['test']['count']:,}; {e['config']['runs']} sampled runs per test; floor (random) / {top} on the held-out "
-              f"tests: {percent(sc['floor'], 1)} / {percent(sc['ceiling'], 1)}"
-              + ("" if top == "ceiling" else " (the best reference meets fewer than all tests: not a ceiling)") + ".", ""]
+    lines += [
+        *ran_text(_ran(e)),
+        "",
+        f"Train {sp['train']['count']:,} tests, validation {sp['validation']['count']:,}, held-out test "
+        f"{sp['test']['count']:,}; {e['config']['runs']} sampled runs per test; floor (random) / {top} on the held-out "
+        f"tests: {percent(sc['floor'], 1)} / {percent(sc['ceiling'], 1)}"
+        + ("" if top == "ceiling" else " (the best reference meets fewer than all tests: not a ceiling)")
+        + ".",
+        "",
+    ]
     columns = OLD_COLUMNS if old else COLUMNS
     lines += ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
     for s in _sorted_systems(e):
@@ -214,28 +268,51 @@ def entry_markdown(e: dict[str, Any]) -> list[str]:
         train = percent((s.get("train") or {}).get("met"), 1)
         if old:
             worst = g or sm
-            cells = [interval_text(g["normalized"] if g else None), interval_text(sm["normalized"] if sm else None),
-                     _t_over_seeds(g, sc), _t_over_seeds(sm, sc), percent(g["met"] if g else None, 1),
-                     percent(sm["met"] if sm else None, 1),
-                     MISSING if not worst or worst["normalized"].get("worst10") is None else
-                     f"{worst['normalized']['worst10']:.2f} ({percent(worst['normalized']['worst10_met'], 1)} met)", train]
+            cells = [
+                interval_text(g["normalized"] if g else None),
+                interval_text(sm["normalized"] if sm else None),
+                _t_over_seeds(g, sc),
+                _t_over_seeds(sm, sc),
+                percent(g["met"] if g else None, 1),
+                percent(sm["met"] if sm else None, 1),
+                MISSING
+                if not worst or worst["normalized"].get("worst10") is None
+                else f"{worst['normalized']['worst10']:.2f} ({percent(worst['normalized']['worst10_met'], 1)} met)",
+                train,
+            ]
         else:
-            cells = [headline_cell(s, "normalized"), interval_text(g["normalized"] if g else None),
-                     headline_cell(s, "met", lambda m: percent(m["met"], 1)), percent(g["met"] if g else None, 1),
-                     headline_cell(s, "tail"), train]
+            cells = [
+                headline_cell(s, "normalized"),
+                interval_text(g["normalized"] if g else None),
+                headline_cell(s, "met", lambda m: percent(m["met"], 1)),
+                percent(g["met"] if g else None, 1),
+                headline_cell(s, "tail"),
+                train,
+            ]
         lines.append("| " + " | ".join([s["name"], s["kind"], str(len(s["seeds"])), *cells]) + " |")
     if e.get("generalization"):
-        lines += ["", "Generalization curve (held-out normalized score" + (", IQM [old interval]" if old else "") + "):", "",
-                  "| training tests | seeds | sampled | greedy | train met |", "|---|---|---|---|---|"]
+        lines += [
+            "",
+            "Generalization curve (held-out normalized score" + (", IQM [old interval]" if old else "") + "):",
+            "",
+            "| training tests | seeds | sampled | greedy | train met |",
+            "|---|---|---|---|---|",
+        ]
         for p in e["generalization"]:
-            lines.append(f"| {p['train_tests']:,} | {len(p['seeds'])} | {interval_text(p['sampled'])} | "
-                         f"{interval_text(p['greedy'])} | {percent(p['train_met'], 1)} |")
+            lines.append(
+                f"| {p['train_tests']:,} | {len(p['seeds'])} | {interval_text(p['sampled'])} | {interval_text(p['greedy'])} | {percent(p['train_met'], 1)} |"
+            )
     m = e.get("machine") or {}
     secs = (e.get("seconds") or {}).get("total")
-    lines += ["", f"Command: `{e['command']}`  ", f"Commit: `{(e['commit'] or 'unknown')[:12]}`; machine: "
-              f"{m.get('processor', '?')}, {m.get('cpus', '?')} CPUs, load average at the end "
-              f"{', '.join(map(str, m.get('load_average') or [])) or '?'}; total time "
-              f"{'?' if secs is None else f'{secs:,.0f} s'}.", ""]
+    lines += [
+        "",
+        f"Command: `{e['command']}`  ",
+        f"Commit: `{(e['commit'] or 'unknown')[:12]}`; machine: "
+        f"{m.get('processor', '?')}, {m.get('cpus', '?')} CPUs, load average at the end "
+        f"{', '.join(map(str, m.get('load_average') or [])) or '?'}; total time "
+        f"{'?' if secs is None else f'{secs:,.0f} s'}.",
+        "",
+    ]
     return lines
 
 
@@ -303,8 +380,7 @@ def page(entries: Sequence[dict[str, Any]], standard: Sequence[str] = ()) -> str
 def main(argv: Sequence[str] | None = None) -> int:
     """The command line (module docstring)."""
     p = argparse.ArgumentParser(prog="python -m experiments.tools.leaderboard", description=__doc__.split("\n")[0])
-    p.add_argument("--add", type=Path, action="append", default=[], metavar="TABLE_JSON",
-                   help="a benchmark's table.json to add (repeatable)")
+    p.add_argument("--add", type=Path, action="append", default=[], metavar="TABLE_JSON", help="a benchmark's table.json to add (repeatable)")
     p.add_argument("--label", default="", help="what the added run is (e.g. 'defaults', 'small: 3 seeds, 100k steps')")
     p.add_argument("--commit", default=None, help="the commit the added run used (where its file recorded a later one)")
     p.add_argument("--results", type=Path, default=RESULTS_DIR, help="the folder of summaries (default docs/leaderboard/)")

@@ -72,7 +72,10 @@ def main(argv: list[str] | None = None) -> int:
         env = {**os.environ, "XDG_CACHE_HOME": str(cache)}
         tested = subprocess.run(
             [str(venv / "bin" / "python"), "-m", "pytest", "-q", "-n", "2", "-p", "no:cacheprovider", *args.tests],
-            cwd=ROOT, text=True, capture_output=True, env=env,
+            cwd=ROOT,
+            text=True,
+            capture_output=True,
+            env=env,
         )
         elapsed = time.perf_counter() - t0
     closing = [line for line in tested.stdout.splitlines() if line.strip()][-1:] or ["(no output)"]

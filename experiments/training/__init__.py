@@ -25,6 +25,15 @@ from .system import success_rate, train, train_native
 from .tester import train_tester
 
 __all__ = [
-    "DEFAULTS", "NATIVE_DEFAULTS", "TRAINERS", "native_settings", "require_native", "require_rl", "rl_installed",
-    "success_rate", "train", "train_native", "train_tester",
+    "DEFAULTS",
+    "NATIVE_DEFAULTS",
+    "TRAINERS",
+    "native_settings",
+    "require_native",
+    "require_rl",
+    "rl_installed",
+    "success_rate",
+    "train",
+    "train_native",
+    "train_tester",
 ]

@@ -59,7 +59,6 @@ def require_native() -> None:
         raise ProblemError("training needs the rl extra: pip install 'flowtest[rl]'") from None
 
 
-
 def make_ppo(env: Any, settings: dict[str, Any], seed: int, recurrent: bool = False) -> Any:
     """A ``MaskablePPO`` (MLP policy, action masks) or, with ``recurrent``, a
     ``RecurrentPPO`` (LSTM policy) on ``env`` with the algorithm's ``settings``
@@ -76,9 +75,17 @@ def make_ppo(env: Any, settings: dict[str, Any], seed: int, recurrent: bool = Fa
     if recurrent:
         policy_kwargs["lstm_hidden_size"] = int(settings["lstm_hidden_size"])
     return cls(
-        policy, env, seed=seed, verbose=0, device="cpu",
-        n_steps=settings["n_steps"], batch_size=settings["batch_size"], learning_rate=settings["learning_rate"],
-        gamma=settings["gamma"], ent_coef=settings["ent_coef"], n_epochs=settings["n_epochs"],
+        policy,
+        env,
+        seed=seed,
+        verbose=0,
+        device="cpu",
+        n_steps=settings["n_steps"],
+        batch_size=settings["batch_size"],
+        learning_rate=settings["learning_rate"],
+        gamma=settings["gamma"],
+        ent_coef=settings["ent_coef"],
+        n_epochs=settings["n_epochs"],
         policy_kwargs=policy_kwargs,
     )
 
@@ -118,10 +125,14 @@ class EpisodeCurve:
                 self.ret += rewards
                 for i in np.flatnonzero(dones):
                     verdict = infos[i].get("verdict", {})
-                    points.append(EpisodeEnd(
-                        step=self.num_timesteps, met=verdict.get("system_objective") == "met",
-                        realized=bool(verdict.get("test_objective_realized")), ret=float(self.ret[i]),
-                    ))
+                    points.append(
+                        EpisodeEnd(
+                            step=self.num_timesteps,
+                            met=verdict.get("system_objective") == "met",
+                            realized=bool(verdict.get("test_objective_realized")),
+                            ret=float(self.ret[i]),
+                        )
+                    )
                     self.ret[i] = 0.0
                 return True
 

@@ -47,13 +47,14 @@ ENV_OPTION_KEYS = ("memory", "shaping", "obs_kind", "pad_to")
 def env_options(settings: dict[str, Any]) -> dict[str, Any]:
     """The env options of ``settings`` (keyword arguments of :class:`flowtest_env.FlowTestEnv`)."""
     opts: dict[str, Any] = {
-        "memory": settings["memory"], "shaping": float(settings["shaping"]), "shaping_gamma": float(settings["gamma"]),
+        "memory": settings["memory"],
+        "shaping": float(settings["shaping"]),
+        "shaping_gamma": float(settings["gamma"]),
         "obs_kind": settings["obs_kind"],
     }
     if settings["obs_kind"] == "padded":
         opts["pad_to"] = int(settings["pad_to"])
     return opts
-
 
 
 def check_settings(settings: dict[str, Any]) -> None:
@@ -80,7 +81,6 @@ def check_settings(settings: dict[str, Any]) -> None:
         raise ProblemError("--shaping must be 0 (off) or a positive scale")
     if not settings["net_arch"] or any(int(w) < 1 for w in settings["net_arch"]):
         raise ProblemError("--net-arch must be positive layer widths, e.g. 64,64")
-
 
 
 TRAINERS = ("native", "sb3")
@@ -151,8 +151,7 @@ def native_settings(overrides: dict[str, Any]) -> dict[str, Any]:
     return settings
 
 
-def native_args(settings: dict[str, Any], env_id: str, env_kwargs: dict[str, Any], steps: int, seed: int,
-                eval_every: int = 0) -> Any:
+def native_args(settings: dict[str, Any], env_id: str, env_kwargs: dict[str, Any], steps: int, seed: int, eval_every: int = 0) -> Any:
     """The :class:`agents.native_ppo.NativeArgs` of ``settings`` (flag names as the sb3
     trainer's: ``n_envs``, ``n_steps``, ``batch_size`` (a minibatch), ``n_epochs``, ``net_arch``)."""
     from agents.native.args import NativeArgs
@@ -164,17 +163,32 @@ def native_args(settings: dict[str, Any], env_id: str, env_kwargs: dict[str, Any
         while n_envs % minibatches:
             minibatches -= 1
     return NativeArgs(
-        env_id=env_id, env_kwargs=dict(env_kwargs), algo=settings["algo"], total_steps=int(steps), num_envs=n_envs,
-        num_steps=n_steps, num_minibatches=minibatches, update_epochs=int(settings["n_epochs"]),
-        learning_rate=float(settings["learning_rate"]), gamma=float(settings["gamma"]),
-        gae_lambda=float(settings["gae_lambda"]), clip_coef=float(settings["clip_range"]),
-        ent_coef=float(settings["ent_coef"]), vf_coef=float(settings["vf_coef"]),
-        max_grad_norm=float(settings["max_grad_norm"]), hidden=tuple(int(w) for w in settings["net_arch"]),
-        gru_hidden=int(settings["gru_hidden_size"]), memory=settings["memory"], obs_kind=settings["obs_kind"],
-        shaping=float(settings["shaping"]), seed=int(seed), device=str(settings["device"]),
-        threads=int(settings["threads"]), eval_every=int(eval_every), env_backend=str(settings["env_backend"]),
+        env_id=env_id,
+        env_kwargs=dict(env_kwargs),
+        algo=settings["algo"],
+        total_steps=int(steps),
+        num_envs=n_envs,
+        num_steps=n_steps,
+        num_minibatches=minibatches,
+        update_epochs=int(settings["n_epochs"]),
+        learning_rate=float(settings["learning_rate"]),
+        gamma=float(settings["gamma"]),
+        gae_lambda=float(settings["gae_lambda"]),
+        clip_coef=float(settings["clip_range"]),
+        ent_coef=float(settings["ent_coef"]),
+        vf_coef=float(settings["vf_coef"]),
+        max_grad_norm=float(settings["max_grad_norm"]),
+        hidden=tuple(int(w) for w in settings["net_arch"]),
+        gru_hidden=int(settings["gru_hidden_size"]),
+        memory=settings["memory"],
+        obs_kind=settings["obs_kind"],
+        shaping=float(settings["shaping"]),
+        seed=int(seed),
+        device=str(settings["device"]),
+        threads=int(settings["threads"]),
+        eval_every=int(eval_every),
+        env_backend=str(settings["env_backend"]),
     )
-
 
 
 def flag_of(key: str) -> str:

@@ -52,7 +52,6 @@ def make_training_env(env_id: str, seed: int, settings: dict[str, Any], env_kwar
     return ActionMasker(env, action_masks_of)
 
 
-
 def make_training_vec_env(env_id: str, seed: int, settings: dict[str, Any], env_kwargs: dict[str, Any] | None = None) -> Any:
     """``settings["n_envs"]`` training envs (seeds ``seed``, ``seed + 1``, ...; ``env_kwargs``
     as for :func:`make_training_env`) in one
@@ -66,7 +65,6 @@ def make_training_vec_env(env_id: str, seed: int, settings: dict[str, Any], env_
     return DummyVecEnv([partial(make_training_env, env_id, seed + i, settings, env_kwargs) for i in range(n)])
 
 
-
 def make_model(env: Any, settings: dict[str, Any], seed: int) -> Any:
     """A ``MaskablePPO`` or ``RecurrentPPO`` on ``env`` with ``settings`` (see
     :data:`DEFAULTS`), on the CPU, one torch thread, seeded; it records the env options it
@@ -77,8 +75,7 @@ def make_model(env: Any, settings: dict[str, Any], seed: int) -> Any:
     return model
 
 
-def success_rate(model: Any, env_id: str, episodes: int = 100, seed: int = 10_000,
-                 env_kwargs: dict[str, Any] | None = None) -> float:
+def success_rate(model: Any, env_id: str, episodes: int = 100, seed: int = 10_000, env_kwargs: dict[str, Any] | None = None) -> float:
     """Share of ``episodes`` seeded runs (deterministic policy) that meet the system
     objective, each through the single env (``env_kwargs``: e.g. a named pool's options)."""
     from agents.ppo import PPOPolicy
@@ -132,9 +129,17 @@ def plot_curve(points: list[EpisodeEnd], path: Path, title: str) -> None:
     _save_curve(fig, a1, a2, title, path)
 
 
-def train(env_id: str, steps: int, out: str | Path, seed: int = 0, progress_bar: bool = True,
-          eval_episodes: int = 100, env_kwargs: dict[str, Any] | None = None, heldout: Sequence[Any] = (),
-          **overrides: Any) -> dict[str, Any]:
+def train(
+    env_id: str,
+    steps: int,
+    out: str | Path,
+    seed: int = 0,
+    progress_bar: bool = True,
+    eval_episodes: int = 100,
+    env_kwargs: dict[str, Any] | None = None,
+    heldout: Sequence[Any] = (),
+    **overrides: Any,
+) -> dict[str, Any]:
     """The ``sb3`` trainer (``flowtest train --trainer sb3``): train MaskablePPO (or
     RecurrentPPO) on ``env_id`` (``env_kwargs``: e.g. a pool's ``pool``, ``split``, ``count``;
     a standard pool id loads its shipped tests) for ``steps`` time steps (rounded up to whole
@@ -182,17 +187,24 @@ def train(env_id: str, steps: int, out: str | Path, seed: int = 0, progress_bar:
         where = model_where(model, games["train"], settings["memory"])
         final = {name: greedy_rates(ModelBatchPolicy(model, where, True), g) for name, g in games.items() if g}
     summary = {
-        "trainer": "sb3", "env": env_id, "steps": int(model.num_timesteps), "seed": seed, "seconds": round(seconds, 2),
-        "success_rate": rate, "eval_episodes": eval_episodes, "settings": settings,
-        "env_options": {**(env_kwargs or {}), **env_options(settings)}, "final": final,
+        "trainer": "sb3",
+        "env": env_id,
+        "steps": int(model.num_timesteps),
+        "seed": seed,
+        "seconds": round(seconds, 2),
+        "success_rate": rate,
+        "eval_episodes": eval_episodes,
+        "settings": settings,
+        "env_options": {**(env_kwargs or {}), **env_options(settings)},
+        "final": final,
         "floor": pool_floors(env_kwargs, heldout) if final else {},
-        "model": str(model_path), "curve": str(png),
+        "model": str(model_path),
+        "curve": str(png),
         "episodes": len(curve.points),
         "points": [[p.step, p.met, round(p.ret, 4)] for p in curve.points],
     }
     write_atomically(model_path.with_suffix(".json"), lambda tmp: tmp.write_text(json.dumps(summary) + "\n"))
     return summary
-
 
 
 def vector_env_id(env_id: str, env_kwargs: dict[str, Any]) -> tuple[str, dict[str, Any]]:
@@ -212,11 +224,9 @@ def plot_native_curve(rows: list[dict[str, Any]], path: Path, title: str) -> Non
     fig, (a1, a2) = _curve_axes()
     ep = [r for r in rows if "episode/met" in r]
     if ep:
-        a1.plot([r["step"] for r in ep], [100 * r["episode/met"] for r in ep], color="#2ca02c", lw=1,
-                label="training episodes (sampled)")
+        a1.plot([r["step"] for r in ep], [100 * r["episode/met"] for r in ep], color="#2ca02c", lw=1, label="training episodes (sampled)")
         a2.plot([r["step"] for r in ep], [r["episode/return"] for r in ep], color="#1f77b4")
-    for key, label, color in (("eval/train_met", "train tests (greedy)", "#000000"),
-                              ("eval/heldout_met", "held-out tests (greedy)", "#d62728")):
+    for key, label, color in (("eval/train_met", "train tests (greedy)", "#000000"), ("eval/heldout_met", "held-out tests (greedy)", "#d62728")):
         ev = [r for r in rows if key in r]
         if ev:
             a1.plot([r["step"] for r in ev], [100 * r[key] for r in ev], "o-", color=color, lw=1.5, label=label)
@@ -246,8 +256,7 @@ def greedy_rates(policy: Any, games: Sequence[Any]) -> dict[str, float]:
 
     v = {k: a[0] for k, a in play_batch(policy, games, 1, 0).items()}
     met = v["system_objective"] == "met"
-    return {"met": float(met.mean()), "realized": float((met & v["test_objective_realized"]).mean()),
-            "restrictions": float(v["restrictions"].mean())}
+    return {"met": float(met.mean()), "realized": float((met & v["test_objective_realized"]).mean()), "restrictions": float(v["restrictions"].mean())}
 
 
 def random_floor(games: Sequence[Any], runs: int = FLOOR_RUNS) -> float:
@@ -279,9 +288,19 @@ def heldout_games(pool: str, count: int, progress: bool = False) -> list[Any]:
     return [TestGame(a) for a in load_pool(pool, "test", count, progress=progress)]
 
 
-def train_native(env_id: str, steps: int, out: str | Path, seed: int = 0, progress_bar: bool = True,
-                 eval_episodes: int = 100, env_kwargs: dict[str, Any] | None = None, heldout: Any = (),
-                 log_dir: str | Path | None = None, eval_every: int = 250_000, **overrides: Any) -> dict[str, Any]:
+def train_native(
+    env_id: str,
+    steps: int,
+    out: str | Path,
+    seed: int = 0,
+    progress_bar: bool = True,
+    eval_episodes: int = 100,
+    env_kwargs: dict[str, Any] | None = None,
+    heldout: Any = (),
+    log_dir: str | Path | None = None,
+    eval_every: int = 250_000,
+    **overrides: Any,
+) -> dict[str, Any]:
     """The native trainer (:mod:`agents.native_ppo`) on ``env_id`` (``env_kwargs``: e.g. a
     pool's ``pool``, ``split``, ``count``) for ``steps`` env steps (rounded up to whole
     rollouts); ``heldout``: tests to evaluate on besides the env's own. Saves the native
@@ -316,13 +335,21 @@ def train_native(env_id: str, steps: int, out: str | Path, seed: int = 0, progre
     model_path = out if out.suffix == ".zip" else out.with_suffix(".zip")
     logs: AbstractContextManager[Path | None] = nullcontext() if log_dir is None else run_log_folder(Path(log_dir), model_path.stem)
     with logs as run_logs:
-        return _train_native_run(args, settings, env_id, env_kwargs, seed, model_path, heldout, run_logs, progress_bar,
-                                 eval_episodes)
+        return _train_native_run(args, settings, env_id, env_kwargs, seed, model_path, heldout, run_logs, progress_bar, eval_episodes)
 
 
-def _train_native_run(args: Any, settings: dict[str, Any], env_id: str, env_kwargs: dict[str, Any] | None, seed: int,
-                      model_path: Path, heldout: Any, log_dir: Path | None, progress_bar: bool,
-                      eval_episodes: int) -> dict[str, Any]:
+def _train_native_run(
+    args: Any,
+    settings: dict[str, Any],
+    env_id: str,
+    env_kwargs: dict[str, Any] | None,
+    seed: int,
+    model_path: Path,
+    heldout: Any,
+    log_dir: Path | None,
+    progress_bar: bool,
+    eval_episodes: int,
+) -> dict[str, Any]:
     """:func:`train_native`'s run, its logs into ``log_dir`` (a new folder of this run):
     train, save the checkpoint, curve and summary."""
     from agents.native_ppo import train as native_train
@@ -349,16 +376,26 @@ def _train_native_run(args: Any, settings: dict[str, Any], env_id: str, env_kwar
 
         rate = success_rate(load_model(model_path), env_id, eval_episodes, env_kwargs=env_kwargs)
     summary = {
-        "trainer": "native", "env": env_id, "env_options": {**(env_kwargs or {}), "memory": settings["memory"],
-                                                            "shaping": settings["shaping"], "obs_kind": settings["obs_kind"]},
-        "steps": result.steps, "seed": seed, "seconds": round(result.seconds, 2),
-        "eval_seconds": round(result.eval_seconds, 2), "steps_per_second": round(result.steps_per_second, 1),
-        "device": str(result.settings["trained_on"]), "final": result.final, "floor": pool_floors(env_kwargs, heldout),
+        "trainer": "native",
+        "env": env_id,
+        "env_options": {**(env_kwargs or {}), "memory": settings["memory"], "shaping": settings["shaping"], "obs_kind": settings["obs_kind"]},
+        "steps": result.steps,
+        "seed": seed,
+        "seconds": round(result.seconds, 2),
+        "eval_seconds": round(result.eval_seconds, 2),
+        "steps_per_second": round(result.steps_per_second, 1),
+        "device": str(result.settings["trained_on"]),
+        "final": result.final,
+        "floor": pool_floors(env_kwargs, heldout),
         "evaluations": [[step, rates] for step, rates in result.evaluations],
-        "success_rate": rate, "eval_episodes": eval_episodes, "settings": settings,
-        "native_args": result.settings["training"], "model": str(model_path), "curve": str(png),
-        "log_dir": None if log_dir is None else str(log_dir), "log": rows,
+        "success_rate": rate,
+        "eval_episodes": eval_episodes,
+        "settings": settings,
+        "native_args": result.settings["training"],
+        "model": str(model_path),
+        "curve": str(png),
+        "log_dir": None if log_dir is None else str(log_dir),
+        "log": rows,
     }
     write_atomically(model_path.with_suffix(".json"), lambda tmp: tmp.write_text(json.dumps(summary) + "\n"))
     return summary
-

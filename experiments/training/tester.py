@@ -99,9 +99,8 @@ def plot_tester_curve(points: list[EpisodeEnd], path: Path, title: str) -> None:
         steps = np.array([p.step for p in points])
         realized = moving_average([float(p.met and p.realized) for p in points])
         unfinished = moving_average([float(not p.met) for p in points])
-        for share, label, color in ((realized, "met, test objective realized", "#2ca02c"),
-                                    (unfinished, "not met (stalled or trapped)", "#d62728")):
-            ax.plot(steps[len(steps) - len(share):], 100 * share, color=color, label=label)
+        for share, label, color in ((realized, "met, test objective realized", "#2ca02c"), (unfinished, "not met (stalled or trapped)", "#d62728")):
+            ax.plot(steps[len(steps) - len(share) :], 100 * share, color=color, label=label)
     ax.set_ylabel("share of episodes (%)")
     ax.set_xlabel("time steps")
     ax.set_ylim(-5, 105)
@@ -139,8 +138,16 @@ def assess(model_path: str | Path, problem: str, system: str, episodes: int, see
     return out
 
 
-def train_tester(problem: str, steps: int, out: str | Path, system: str = "scripted:replanner", seed: int = 0,
-                 progress_bar: bool = True, eval_episodes: int = 10, **overrides: Any) -> dict[str, Any]:
+def train_tester(
+    problem: str,
+    steps: int,
+    out: str | Path,
+    system: str = "scripted:replanner",
+    seed: int = 0,
+    progress_bar: bool = True,
+    eval_episodes: int = 10,
+    **overrides: Any,
+) -> dict[str, Any]:
     """Train a tester on ``problem`` against ``system`` for ``steps`` tester steps (rounded
     up to whole rollouts); save model, curve and summary (see the module docstring).
 
@@ -177,12 +184,17 @@ def train_tester(problem: str, steps: int, out: str | Path, system: str = "scrip
     png = model_path.with_suffix(".png")
     write_atomically(png, lambda tmp: plot_tester_curve(curve.points, tmp, f"learned tester on {problem} vs {system} (seed {seed})"))
     summary = {
-        "problem": problem, "system": system, "steps": int(model.num_timesteps), "seed": seed,
-        "seconds": round(seconds, 2), "settings": settings, "model": str(model_path), "curve": str(png),
+        "problem": problem,
+        "system": system,
+        "steps": int(model.num_timesteps),
+        "seed": seed,
+        "seconds": round(seconds, 2),
+        "settings": settings,
+        "model": str(model_path),
+        "curve": str(png),
         "episodes": len(curve.points),
         **assess(model_path, problem, system, eval_episodes),
         "points": [[p.step, p.met and p.realized, not p.met] for p in curve.points],
     }
     write_atomically(model_path.with_suffix(".json"), lambda tmp: tmp.write_text(json.dumps(summary) + "\n"))
     return summary
-

@@ -127,8 +127,10 @@ def _walk_plain(x: Any, path: str, source: str, names: bool = True) -> None:
             continue
         elif isinstance(v, int):
             if not -MAX_INT < v < MAX_INT:
-                raise ProblemError(f"artifact {source}: field {at}: an integer of about {int(v.bit_length() * 0.30103) + 1} digits is out of "
-                                   f"range (at most {MAX_INT} in magnitude)")
+                raise ProblemError(
+                    f"artifact {source}: field {at}: an integer of about {int(v.bit_length() * 0.30103) + 1} digits is out of "
+                    f"range (at most {MAX_INT} in magnitude)"
+                )
         elif isinstance(v, float):
             continue
         elif isinstance(v, dict):
@@ -171,8 +173,7 @@ def _check_declared_sizes(d: dict[str, Any], source: str) -> None:
     big = MAX_TABLE_CELLS
 
     def refuse(what: str, value: int) -> None:
-        raise ProblemTooLarge(f"{where} declares {what} = {value} table cells, above the limit of {big}; "
-                              "FlowTest builds no tables this large")
+        raise ProblemTooLarge(f"{where} declares {what} = {value} table cells, above the limit of {big}; FlowTest builds no tables this large")
 
     if nh * m > big:
         refuse(f"{nh} histories x {m} moves", nh * m)
@@ -210,16 +211,14 @@ def _check_declared_sizes(d: dict[str, Any], source: str) -> None:
 def source_hash(system: dict[str, Any], objectives: dict[str, Any], kind: str) -> str:
     """SHA-256 of what a test is synthesized from: the transition system (as the artifact
     writes it), the two objective texts and the environment kind, as canonical JSON."""
-    doc = {"format": FORMAT, "system": system, "objectives": {"system": objectives["system"], "test": objectives["test"]},
-           "kind": kind}
+    doc = {"format": FORMAT, "system": system, "objectives": {"system": objectives["system"], "test": objectives["test"]}, "kind": kind}
     text = json.dumps(doc, sort_keys=True, separators=(",", ":"), ensure_ascii=True)
     return hashlib.sha256(text.encode("ascii")).hexdigest()
 
 
 def problem_source_hash(problem: Problem) -> str:
     """:func:`source_hash` of a :class:`~synthesis.problems.problem.Problem` (before synthesis)."""
-    return source_hash(problem.system.to_dict(),
-                       {"system": problem.system_objective.text, "test": problem.test_objective.text}, problem.kind)
+    return source_hash(problem.system.to_dict(), {"system": problem.system_objective.text, "test": problem.test_objective.text}, problem.kind)
 
 
 def dba_to_dict(dba: DBA) -> dict[str, Any]:
@@ -327,30 +326,30 @@ class TestArtifact:
 
     def to_dict(self) -> dict[str, Any]:
         """The artifact's plain data, with its :data:`DIGEST_KEY` last."""
-        return with_digest({
-            "format": FORMAT,
-            "version": VERSION,
-            "name": self.name,
-            "kind": self.kind,
-            "objectives": self.objectives,
-            "system": self.system.to_dict(),
-            "letters": [sorted(a) for a in self.letters],
-            "automata": {
-                "system": dba_to_dict(self.system_automaton),
-                "test": dba_to_dict(self.test_automaton),
-                "histories": dba_to_dict(self.histories),
-            },
-            "strategy": self.strategy.to_dict(),
-            "agent": self.agent,
-            "summary": self.summary,
-            "extras": self.extras,
-            "source": {"sha256": self.source or source_hash(self.system.to_dict(), self.objectives, self.kind)},
-        })
+        return with_digest(
+            {
+                "format": FORMAT,
+                "version": VERSION,
+                "name": self.name,
+                "kind": self.kind,
+                "objectives": self.objectives,
+                "system": self.system.to_dict(),
+                "letters": [sorted(a) for a in self.letters],
+                "automata": {
+                    "system": dba_to_dict(self.system_automaton),
+                    "test": dba_to_dict(self.test_automaton),
+                    "histories": dba_to_dict(self.histories),
+                },
+                "strategy": self.strategy.to_dict(),
+                "agent": self.agent,
+                "summary": self.summary,
+                "extras": self.extras,
+                "source": {"sha256": self.source or source_hash(self.system.to_dict(), self.objectives, self.kind)},
+            }
+        )
 
     @classmethod
-    def from_dict(
-        cls, d: dict[str, Any], source: str = "<artifact>", verify: bool = True, require_digest: bool = False
-    ) -> TestArtifact:
+    def from_dict(cls, d: dict[str, Any], source: str = "<artifact>", verify: bool = True, require_digest: bool = False) -> TestArtifact:
         """Build an artifact from its plain data, checked first (see the module docstring).
 
         A document whose digest is missing or wrong is checked in full whatever ``verify``
@@ -396,9 +395,12 @@ class TestArtifact:
         if edited and require_digest:  # it passes every check, but it is not the file FlowTest wrote
             raise ProblemError(f"artifact {source} was changed after FlowTest wrote it (its digest is {how})")
         if edited:
-            warnings.warn(EditedArtifactWarning(
-                f"artifact {source} was changed after FlowTest wrote it (its digest is {how}): it passed every check "
-                "again and is used as edited"), stacklevel=2)
+            warnings.warn(
+                EditedArtifactWarning(
+                    f"artifact {source} was changed after FlowTest wrote it (its digest is {how}): it passed every check again and is used as edited"
+                ),
+                stacklevel=2,
+            )
         return art
 
     def save(self, path: str | Path) -> None:
@@ -444,9 +446,7 @@ def _same_dba(a: DBA, b: DBA) -> bool:
     )
 
 
-def verify_artifact(
-    art: TestArtifact, source: str = "<artifact>", expected_source: str | None = None, restrictions: bool = True
-) -> None:
+def verify_artifact(art: TestArtifact, source: str = "<artifact>", expected_source: str | None = None, restrictions: bool = True) -> None:
     """Check what an artifact means against what it claims (cheap: graph searches and max flows).
 
     * its ``source`` hash equals the hash of its own system, objectives and kind (and
@@ -484,28 +484,29 @@ def verify_artifact(
     area = art.static_area
     if area is not None and bool((art.strategy.static_obstacles & ~area).any()):
         m = int(np.flatnonzero(art.strategy.static_obstacles & ~area)[0])
-        raise ProblemError(f"{where}: field strategy.static_obstacles: move {m} is a wall outside the static area of "
-                           "extras.static_moves (the file was edited)")
+        raise ProblemError(f"{where}: field strategy.static_obstacles: move {m} is a wall outside the static area of extras.static_moves (the file was edited)")
     if art.letters != art.system.letters():
         raise ProblemError(f"{where}: field letters is not the alphabet of its system's labels")
     # the automata derived again are compared with those the file declares: no larger product is explored
-    bound = min(64 * max(art.histories.n_states, art.system_automaton.n_states, art.test_automaton.n_states),
-                MAX_EXPLORED_STATES)
+    bound = min(64 * max(art.histories.n_states, art.system_automaton.n_states, art.test_automaton.n_states), MAX_EXPLORED_STATES)
     try:
         spec = specification_product(
-            parse_objective(art.objectives["system"], "system"), parse_objective(art.objectives["test"], "test"), art.letters,
+            parse_objective(art.objectives["system"], "system"),
+            parse_objective(art.objectives["test"], "test"),
+            art.letters,
             max_states=bound,
         )
     except ProblemTooLarge:
-        raise ProblemError(f"{where}: field automata is not the automaton of its objectives (these need more than "
-                           f"{bound} states)") from None
+        raise ProblemError(f"{where}: field automata is not the automaton of its objectives (these need more than {bound} states)") from None
     except ProblemError as exc:
         raise ProblemError(f"{where}: field objectives: {exc}") from None
-    for field_name, mine, derived in (("system", art.system_automaton, spec.sys), ("test", art.test_automaton, spec.test),
-                                      ("histories", art.histories, spec.dba)):
+    for field_name, mine, derived in (
+        ("system", art.system_automaton, spec.sys),
+        ("test", art.test_automaton, spec.test),
+        ("histories", art.histories, spec.dba),
+    ):
         if not _same_dba(mine, derived):
-            raise ProblemError(f"{where}: field automata.{field_name} is not the automaton of its objectives "
-                               "(edited, or another problem's automata)")
+            raise ProblemError(f"{where}: field automata.{field_name} is not the automaton of its objectives (edited, or another problem's automata)")
     if not restrictions:
         return
     products = build_products(art.system, spec)
@@ -539,13 +540,9 @@ def artifact_agent(art: TestArtifact, where: str | None = None) -> tuple[TestAge
         cells = places_of_cells(ts, d["cells"], f"{where}: field agent.cells")
         names = [str(x) for x in d["names"]]
         state_of = {p: i for i, p in enumerate(cells)}
-        parks = [
-            Park(str(p["name"]), tuple(state_of[q] for q in places_of_cells(ts, p["from"], f"{where}: field agent.parks")))
-            for p in d["parks"]
-        ]
+        parks = [Park(str(p["name"]), tuple(state_of[q] for q in places_of_cells(ts, p["from"], f"{where}: field agent.parks"))) for p in d["parks"]]
         moves = np.asarray(d["moves"], dtype=np.int64).reshape(-1, 2)
-        agent = TestAgent(cells=np.asarray(cells, dtype=np.int32), parks=parks, start=names.index(d["start"]), moves=moves,
-                          first=str(d["first"]), names=names)
+        agent = TestAgent(cells=np.asarray(cells, dtype=np.int32), parks=parks, start=names.index(d["start"]), moves=moves, first=str(d["first"]), names=names)
     except (KeyError, TypeError, ValueError, IndexError) as exc:
         raise ProblemError(f"{where}: field agent is malformed ({type(exc).__name__}: {exc})") from None
     n_states = agent.n_states
@@ -554,10 +551,10 @@ def artifact_agent(art: TestArtifact, where: str | None = None) -> tuple[TestAge
     if moves.size and (int(moves.min()) < 0 or int(moves.max()) >= n_states):
         raise ProblemError(f"{where}: field agent.moves: a move between agent states outside 0..{n_states - 1}")
     places = [None if p < 0 else int(p) for p in agent.place_of_state]
-    if (controller.agent_names != names or controller.agent_places != places or controller.first != agent.first
-            or controller.initial_agent != agent.start):
-        raise ProblemError(f"{where}: field agent.controller does not belong to the test agent described beside it "
-                           "(names, places, start or first mover differ)")
+    if controller.agent_names != names or controller.agent_places != places or controller.first != agent.first or controller.initial_agent != agent.start:
+        raise ProblemError(
+            f"{where}: field agent.controller does not belong to the test agent described beside it (names, places, start or first mover differ)"
+        )
     return agent, controller
 
 

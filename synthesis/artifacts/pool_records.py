@@ -124,9 +124,7 @@ def certificate_of(products: Products, strategy: TestStrategy, flow: int) -> dic
     return {"sha256": h.hexdigest()}
 
 
-def certify(
-    record: dict[str, Any], size: int, family: str, n: int, world: str, kind: str, content: bool = False
-) -> dict[str, Any]:
+def certify(record: dict[str, Any], size: int, family: str, n: int, world: str, kind: str, content: bool = False) -> dict[str, Any]:
     """A record with its certificate: the test rebuilt and fully checked
     (:func:`rebuild_artifact`), then the certificate of what passed (and, with ``content``,
     the content key of the test, :func:`synthesis.artifacts.content.content_key`), and the
@@ -278,11 +276,9 @@ def _rebuild(
 ) -> tuple[TestArtifact, Products, TestStrategy]:
     keys = sorted(RECORD_KEYS)
     if not isinstance(record, dict) or sorted(k for k in record if k not in OPTIONAL_KEYS) != keys:
-        raise ProblemError(
-            f"a pool record has the fields {', '.join(RECORD_KEYS)} (and certificate, if certified, and content, if keyed)"
-        )
+        raise ProblemError(f"a pool record has the fields {', '.join(RECORD_KEYS)} (and certificate, if certified, and content, if keyed)")
     if "content" in record and record_content_key(record) is None:
-        raise ProblemError("field content must be {\"sha256\": <hex>}")
+        raise ProblemError('field content must be {"sha256": <hex>}')
     if check == "certificate":
         if not isinstance(record.get("certificate"), dict):
             raise ProblemError("the record has no certificate (load it with check='full')")
@@ -301,8 +297,14 @@ def _rebuild(
     if isinstance(flow, bool) or not isinstance(flow, int) or flow < 1:
         raise ProblemError("field summary.flow must be a positive integer")
     routing = RoutingResult(
-        status=str(rest["status"]), flow=flow, cut_edges=cuts, cut_group_keys=[], static_moves_cut=static,
-        blocked_places=np.zeros(0, dtype=np.int64), mip_gap=float(rest["stats"]["mip_gap"]), stats={},
+        status=str(rest["status"]),
+        flow=flow,
+        cut_edges=cuts,
+        cut_group_keys=[],
+        static_moves_cut=static,
+        blocked_places=np.zeros(0, dtype=np.int64),
+        mip_gap=float(rest["stats"]["mip_gap"]),
+        stats={},
     )
     strategy = strategy_from_routing(products, routing, problem.extras.get("setting", "instantaneous"))
     if not np.array_equal(strategy.static_obstacles, static):
@@ -323,8 +325,14 @@ def _rebuild(
         if any(stated[k] != v for k, v in got.items()):
             raise CheckFailed(f"the rebuilt agent strategy ({got}) is not the one recorded")
         agent = AgentSynthesis(
-            agent=problem.agent, controller=controller, system=products.ts, counterexamples=int(rest["counterexamples"]),
-            iterations=[], game_size=game.size(), closed_loop=report, timings={},
+            agent=problem.agent,
+            controller=controller,
+            system=products.ts,
+            counterexamples=int(rest["counterexamples"]),
+            iterations=[],
+            game_size=game.size(),
+            closed_loop=report,
+            timings={},
         )
     derived = derived_summary(problem, spec, products, cuts, strategy, checks.bypass_flow)
     summary = {**derived, **{k: v for k, v in rest.items() if k != "stats"}, "stats": {**derived["stats"], **rest["stats"]}}

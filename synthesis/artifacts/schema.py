@@ -372,78 +372,94 @@ def json_schema() -> dict[str, Any]:
 
     def when(condition: dict[str, Any], then: dict[str, Any], otherwise: dict[str, Any] | None = None) -> dict[str, Any]:
         """``if`` the object's fields match ``condition``, its fields match ``then`` (else ``otherwise``)."""
-        out: dict[str, Any] = {"if": {"type": "object", "properties": condition},
-                               "then": {"type": "object", "properties": then}}
+        out: dict[str, Any] = {"if": {"type": "object", "properties": condition}, "then": {"type": "object", "properties": then}}
         if otherwise is not None:
             out["else"] = {"type": "object", "properties": otherwise}
         return out
 
     cell = pair(nat, nat)
     fuel_state = pair({"$ref": "#/$defs/cell"}, nat)
-    system = obj({
-        "kind": {"enum": list(SYSTEM_KINDS)},
-        "states": array({"anyOf": [{"type": "string"}, {"type": "array"}]}, minItems=1),
-        "moves": array(pair(nat, nat)),
-        "action": array({"anyOf": [{"type": "string"}, {"type": "integer"}]}),
-        "stay": array(bit),
-        "initial": nat,
-        "labels": array(array({"type": "string"})),
-        "terminal": array(nat),
-        "restrictable": array(bit),
-        "places": array({"anyOf": [{"type": "string"}, {"$ref": "#/$defs/cell"}]}),
-        "place": array(nat),
-    }, {
-        "layout": {"anyOf": [{"type": "null"}, obj({
-            "rows": {"type": "integer", "minimum": 1},
-            "cols": {"type": "integer", "minimum": 1},
-            "blocked": array({"$ref": "#/$defs/cell"}),
-            "tokens": array({"type": "array", "prefixItems": [nat, nat, {"type": "string"}], "items": False,
-                             "minItems": 3, "maxItems": 3}),
-        })]},
-        "max_fuel": {"anyOf": [{"type": "null"}, nat]},
-    })
+    system = obj(
+        {
+            "kind": {"enum": list(SYSTEM_KINDS)},
+            "states": array({"anyOf": [{"type": "string"}, {"type": "array"}]}, minItems=1),
+            "moves": array(pair(nat, nat)),
+            "action": array({"anyOf": [{"type": "string"}, {"type": "integer"}]}),
+            "stay": array(bit),
+            "initial": nat,
+            "labels": array(array({"type": "string"})),
+            "terminal": array(nat),
+            "restrictable": array(bit),
+            "places": array({"anyOf": [{"type": "string"}, {"$ref": "#/$defs/cell"}]}),
+            "place": array(nat),
+        },
+        {
+            "layout": {
+                "anyOf": [
+                    {"type": "null"},
+                    obj(
+                        {
+                            "rows": {"type": "integer", "minimum": 1},
+                            "cols": {"type": "integer", "minimum": 1},
+                            "blocked": array({"$ref": "#/$defs/cell"}),
+                            "tokens": array({"type": "array", "prefixItems": [nat, nat, {"type": "string"}], "items": False, "minItems": 3, "maxItems": 3}),
+                        }
+                    ),
+                ]
+            },
+            "max_fuel": {"anyOf": [{"type": "null"}, nat]},
+        },
+    )
     system["allOf"] = [
         when({"kind": {"const": "grid"}}, {"states": array({"$ref": "#/$defs/cell"})}),
         when({"kind": {"const": "fuel"}}, {"states": array(fuel_state)}),
         when({"kind": {"const": "graph"}}, {"states": array({"type": "string"})}),
         # a grid with its map plays the grid's moves (action slots 0-3: flowtest_env.game.GRID_ACTIONS)
-        when({"kind": {"enum": ["grid", "fuel"]}, "layout": {"type": "object"}},
-             {"action": array({"$ref": "#/$defs/grid_action"})}),
+        when({"kind": {"enum": ["grid", "fuel"]}, "layout": {"type": "object"}}, {"action": array({"$ref": "#/$defs/grid_action"})}),
     ]
 
     def automaton(components: dict[str, Any]) -> dict[str, Any]:
-        return obj({
-            "delta": array(array(nat), minItems=1),
-            "initial": nat,
-            "accepting": array(array(bit)),
-            "names": array({"type": "string"}),
-        }, {"components": components})
+        return obj(
+            {
+                "delta": array(array(nat), minItems=1),
+                "initial": nat,
+                "accepting": array(array(bit)),
+                "names": array({"type": "string"}),
+            },
+            {"components": components},
+        )
 
-    controller = obj({
-        "format": {"const": "flowtest.agent-controller"},
-        "version": {"const": 1},
-        "first": {"enum": ["system", "agent"]},
-        "agent_names": array({"type": "string"}, minItems=1),
-        "agent_places": array({"anyOf": [{"type": "null"}, nat]}),
-        "initial_agent": nat,
-        "initial_memory": nat,
-        "n_memory": {"type": "integer", "minimum": 1},
-        "n_hist": {"type": "integer", "minimum": 1},
-        "n_system_states": {"type": "integer", "minimum": 1},
-        "rows": array(pair(nat, nat)),
-        "table": obj({key: array(nat) for key in ("memory", "row", "agent", "next_agent", "next_memory")}),
-        "fallback": array(array(nat)),
-        "sys_place": array(nat),
-    })
-    agent = obj({"controller": controller}, {
-        "moves": array(pair(nat, nat)),
-        "names": array({"type": "string"}),
-        "cells": array({"$ref": "#/$defs/cell"}),
-        "parks": array({"type": "object"}),
-        "start": {"type": "string"},
-        "first": {"enum": ["system", "agent"]},
-        "counterexamples": nat,
-    }, closed=False)
+    controller = obj(
+        {
+            "format": {"const": "flowtest.agent-controller"},
+            "version": {"const": 1},
+            "first": {"enum": ["system", "agent"]},
+            "agent_names": array({"type": "string"}, minItems=1),
+            "agent_places": array({"anyOf": [{"type": "null"}, nat]}),
+            "initial_agent": nat,
+            "initial_memory": nat,
+            "n_memory": {"type": "integer", "minimum": 1},
+            "n_hist": {"type": "integer", "minimum": 1},
+            "n_system_states": {"type": "integer", "minimum": 1},
+            "rows": array(pair(nat, nat)),
+            "table": obj({key: array(nat) for key in ("memory", "row", "agent", "next_agent", "next_memory")}),
+            "fallback": array(array(nat)),
+            "sys_place": array(nat),
+        }
+    )
+    agent = obj(
+        {"controller": controller},
+        {
+            "moves": array(pair(nat, nat)),
+            "names": array({"type": "string"}),
+            "cells": array({"$ref": "#/$defs/cell"}),
+            "parks": array({"type": "object"}),
+            "start": {"type": "string"},
+            "first": {"enum": ["system", "agent"]},
+            "counterexamples": nat,
+        },
+        closed=False,
+    )
     agent_test = when({"kind": {"const": "agent"}}, {"agent": {"$ref": "#/$defs/agent"}}, {"agent": {"type": "null"}})
     agent_test["then"]["required"] = ["agent"]
     return {
@@ -452,8 +468,7 @@ def json_schema() -> dict[str, Any]:
         "title": "FlowTest test artifact",
         "description": "A synthesized FlowTest test, as flowtest synthesize --out writes it (docs/artifact-schema.md).",
         "type": "object",
-        "required": ["format", "version", "name", "kind", "objectives", "system", "letters", "automata", "strategy",
-                     "summary", "source"],
+        "required": ["format", "version", "name", "kind", "objectives", "system", "letters", "automata", "strategy", "summary", "source"],
         "additionalProperties": False,
         "properties": {
             "format": {"const": "flowtest-test"},
@@ -463,23 +478,25 @@ def json_schema() -> dict[str, Any]:
             "objectives": obj({"system": {"type": "string"}, "test": {"type": "string"}}, closed=False),
             "system": {"$ref": "#/$defs/system"},
             "letters": array(array({"type": "string"}), minItems=1),
-            "automata": obj({
-                "system": automaton({"anyOf": [{"type": "null"}, array(array(nat))]}),
-                "test": automaton({"anyOf": [{"type": "null"}, array(array(nat))]}),
-                "histories": automaton(array(pair(nat, nat))),
-            }),
-            "strategy": obj({
-                "setting": {"enum": list(SETTINGS)},
-                "n_hist": {"type": "integer", "minimum": 1},
-                "n_moves": nat,
-                "static_obstacles": array(nat),
-                "restrictions": {"type": "object", "propertyNames": {"type": "string", "pattern": "^(0|[1-9][0-9]*)$"},
-                                 "additionalProperties": array(nat)},
-            }),
+            "automata": obj(
+                {
+                    "system": automaton({"anyOf": [{"type": "null"}, array(array(nat))]}),
+                    "test": automaton({"anyOf": [{"type": "null"}, array(array(nat))]}),
+                    "histories": automaton(array(pair(nat, nat))),
+                }
+            ),
+            "strategy": obj(
+                {
+                    "setting": {"enum": list(SETTINGS)},
+                    "n_hist": {"type": "integer", "minimum": 1},
+                    "n_moves": nat,
+                    "static_obstacles": array(nat),
+                    "restrictions": {"type": "object", "propertyNames": {"type": "string", "pattern": "^(0|[1-9][0-9]*)$"}, "additionalProperties": array(nat)},
+                }
+            ),
             "agent": {"anyOf": [{"type": "null"}, {"$ref": "#/$defs/agent"}]},
             "summary": {"type": "object", "required": ["flow"], "properties": {"flow": {"type": "integer", "minimum": 1}}},
-            "extras": {"type": "object", "properties": {"history_descriptions": array({"type": "string"}),
-                                                        "static_moves": array(nat, uniqueItems=True)}},
+            "extras": {"type": "object", "properties": {"history_descriptions": array({"type": "string"}), "static_moves": array(nat, uniqueItems=True)}},
             "source": obj({"sha256": hex64}),
             "digest": obj({"sha256": hex64}),
         },

@@ -14,8 +14,17 @@ from ..problems.problem import Problem
 from ..synthesized_test import SynthesizedTest
 
 DERIVED_KEYS: tuple[str, ...] = (
-    "problem", "environment", "n_walls", "n_doors", "n_one_way_walls", "physical", "cuts", "restrictions",
-    "static_obstacles", "bypass_flow", "histories",
+    "problem",
+    "environment",
+    "n_walls",
+    "n_doors",
+    "n_one_way_walls",
+    "physical",
+    "cuts",
+    "restrictions",
+    "static_obstacles",
+    "bypass_flow",
+    "histories",
 )
 """Summary fields that come back from the problem, its product graphs and the test's cuts
 (:func:`derived_summary`); the rest says how the solver got there."""
@@ -32,8 +41,7 @@ def derived_summary(
     hist = spec.history_name
     w = ts.to_json_state
     cuts = [
-        {"from": [w(int(g.state[g.src[e]])), hist(int(g.hist[g.src[e]]))], "to": [w(int(g.state[g.dst[e]])), hist(int(g.hist[g.dst[e]]))]}
-        for e in cut_edges
+        {"from": [w(int(g.state[g.src[e]])), hist(int(g.hist[g.src[e]]))], "to": [w(int(g.state[g.dst[e]])), hist(int(g.hist[g.dst[e]]))]} for e in cut_edges
     ]
     restrictions = {
         hist(q): [[w(int(ts.src[m])), w(int(ts.dst[m]))] for m in np.flatnonzero(strategy.restrictions[q])]

@@ -249,9 +249,7 @@ class SpecificationProduct:
         return "; ".join(bits) or "start"
 
 
-def specification_product(
-    sys_objective: Objective, test_objective: Objective, letters: Sequence[Label], max_states: int | None = None
-) -> SpecificationProduct:
+def specification_product(sys_objective: Objective, test_objective: Objective, letters: Sequence[Label], max_states: int | None = None) -> SpecificationProduct:
     """Build B_sys, B_test and their reachable product B_pi (docs/method.md §3).
 
     ``max_states`` bounds every product explored (:class:`ProblemTooLarge` beyond it).

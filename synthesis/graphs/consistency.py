@@ -18,13 +18,10 @@ def check_consistency(products: Products) -> np.ndarray:
     g = products.virtual
     co = coreachable(g.n_nodes, g.src, g.dst, products.target)
     if not co[g.initial]:
-        raise InconsistentProblem(
-            "unreachable", "the system objective cannot be met: no execution from the start reaches the goal"
-        )
+        raise InconsistentProblem("unreachable", "the system objective cannot be met: no execution from the start reaches the goal")
     if not np.any(products.intermediate & co):
         raise InconsistentProblem(
             "unroutable",
-            "the test objective cannot be routed: no execution that meets the system objective "
-            "also meets the test objective",
+            "the test objective cannot be routed: no execution that meets the system objective also meets the test objective",
         )
     return co

@@ -126,9 +126,7 @@ class TestAgent:
         """Plain data for pictures and the artifact: cells as written in the problem."""
         return {
             "cells": [place_json(ts, int(p)) for p in self.cells],
-            "parks": [
-                {"name": p.name, "from": [place_json(ts, int(self.cells[a])) for a in p.entries]} for p in self.parks
-            ],
+            "parks": [{"name": p.name, "from": [place_json(ts, int(self.cells[a])) for a in p.entries]} for p in self.parks],
             "start": self.names[self.start],
             "first": self.first,
             "names": list(self.names),
@@ -227,9 +225,7 @@ def make_test_agent(
         ent: list[int] = []
         for p in entries:
             if int(p) not in state_of:
-                raise ProblemError(
-                    f"{where}: park {name!r} is reached from {place_name(ts, int(p))}, which is not an agent cell"
-                )
+                raise ProblemError(f"{where}: park {name!r} is reached from {place_name(ts, int(p))}, which is not an agent cell")
             ent.append(state_of[int(p)])
         if not ent:
             raise ProblemError(f"{where}: park {name!r} has no cell it is reached `from`")
@@ -249,9 +245,7 @@ def make_test_agent(
             raise ProblemError(f"{where}: the start {place_name(ts, int(start))} is not an agent cell")
         start_state = state_of[int(start)]
         if int(start) == int(ts.place[ts.initial]):
-            raise ProblemError(
-                f"{where}: the agent starts on the system's start {place_name(ts, int(start))}; they would collide"
-            )
+            raise ProblemError(f"{where}: the agent starts on the system's start {place_name(ts, int(start))}; they would collide")
     # moves between cells
     pairs: set[tuple[int, int]] = set()
     if isinstance(moves, str):
@@ -260,7 +254,7 @@ def make_test_agent(
         if moves == "4-neighbour":
             grid_cells = [ts.places[p] for p in cell_list]
             if not all(isinstance(cell, tuple) and len(cell) == 2 for cell in grid_cells):
-                raise ProblemError(f"{where}: `moves = \"4-neighbour\"` needs a grid; use \"system\" or a list of moves")
+                raise ProblemError(f'{where}: `moves = "4-neighbour"` needs a grid; use "system" or a list of moves')
             for i, (r, c) in enumerate(cast(list[Cell], grid_cells)):
                 for j, (r2, c2) in enumerate(cast(list[Cell], grid_cells)):
                     if abs(r - r2) + abs(c - c2) == 1:

@@ -84,14 +84,9 @@ def is_proposition_name(name: object) -> bool:
 def check_proposition_name(name: object, where: str) -> None:
     """Raise :class:`ProblemError` unless ``name`` can name a proposition."""
     if not isinstance(name, str) or _NAME.fullmatch(name) is None:
-        raise ProblemError(
-            f"{where}: {name!r} is not a proposition name (letters, digits and _, not starting with a digit)"
-        )
+        raise ProblemError(f"{where}: {name!r} is not a proposition name (letters, digits and _, not starting with a digit)")
     if name in RESERVED:
-        raise ProblemError(
-            f"{where}: {name!r} is a reserved word of the formula syntax ({', '.join(sorted(RESERVED))}), "
-            "not a proposition name"
-        )
+        raise ProblemError(f"{where}: {name!r} is a reserved word of the formula syntax ({', '.join(sorted(RESERVED))}), not a proposition name")
 
 
 def _tokenize(text: str) -> list[tuple[str, int]]:
@@ -204,10 +199,7 @@ def parse_formula(text: str) -> Formula:
     tree = _Parser(text).parse()
     depth = formula_depth(tree)
     if depth > MAX_FORMULA_DEPTH:
-        raise ProblemError(
-            f"formula {_clip(text)!r} is {depth} levels deep (chains of operators count), "
-            f"more than the {MAX_FORMULA_DEPTH} accepted"
-        )
+        raise ProblemError(f"formula {_clip(text)!r} is {depth} levels deep (chains of operators count), more than the {MAX_FORMULA_DEPTH} accepted")
     return tree
 
 
@@ -374,10 +366,7 @@ def _classify(f: Formula) -> Task | None:
     return None
 
 
-_FRAGMENT = (
-    "F p, F(p1 & F(p2 & ... F pm)), G !p, G(p -> q) or G(p -> F q), "
-    "with p, q Boolean combinations of propositions"
-)
+_FRAGMENT = "F p, F(p1 & F(p2 & ... F pm)), G !p, G(p -> q) or G(p -> F q), with p, q Boolean combinations of propositions"
 
 
 def parse_objective(text: str, role: str) -> Objective:
@@ -409,14 +398,10 @@ def parse_objective(text: str, role: str) -> Objective:
     for part in _conjuncts(tree):
         task = _classify(part)
         if task is None:
-            raise ProblemError(
-                f"the {role} objective part {to_text(part)!r} is outside the supported fragment "
-                f"({_FRAGMENT})"
-            )
+            raise ProblemError(f"the {role} objective part {to_text(part)!r} is outside the supported fragment ({_FRAGMENT})")
         if role == "test" and not task.is_visit:
             raise ProblemError(
-                f"the test objective part {task.text!r} is a {task.kind} task; "
-                "a test objective may hold only visits F p and sequenced visits F(p1 & F p2 ...)"
+                f"the test objective part {task.text!r} is a {task.kind} task; a test objective may hold only visits F p and sequenced visits F(p1 & F p2 ...)"
             )
         tasks.append(task)
     if not any(t.is_visit for t in tasks):
@@ -432,6 +417,5 @@ def check_propositions(objective: Objective, known: Iterable[str], role: str) ->
             unknown = sorted(propositions(p) - known)
             if unknown:
                 raise ProblemError(
-                    f"unknown proposition {unknown[0]!r} in the {role} objective part {task.text!r} "
-                    f"(known: {', '.join(sorted(known)) or 'none'})"
+                    f"unknown proposition {unknown[0]!r} in the {role} objective part {task.text!r} (known: {', '.join(sorted(known)) or 'none'})"
                 )

@@ -61,9 +61,7 @@ class TestStrategy:
         out: np.ndarray = self.blocked[history]
         return out
 
-    def active_obstacles(
-        self, history: int, state: int, visited: Iterable[int], out_moves: list[np.ndarray]
-    ) -> np.ndarray:
+    def active_obstacles(self, history: int, state: int, visited: Iterable[int], out_moves: list[np.ndarray]) -> np.ndarray:
         """Indices of the moves shown as obstacles now.
 
         ``visited`` are the states met since ``history`` began (used by the
@@ -78,11 +76,7 @@ class TestStrategy:
         return {
             "setting": self.setting,
             "static_obstacles": np.flatnonzero(self.static_obstacles).tolist(),
-            "restrictions": {
-                str(q): np.flatnonzero(self.restrictions[q]).tolist()
-                for q in range(self.n_hist)
-                if self.restrictions[q].any()
-            },
+            "restrictions": {str(q): np.flatnonzero(self.restrictions[q]).tolist() for q in range(self.n_hist) if self.restrictions[q].any()},
             "n_hist": self.n_hist,
             "n_moves": int(self.static_obstacles.size),
         }

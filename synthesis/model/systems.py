@@ -212,11 +212,7 @@ def _finish(
     action = [m[2] for m in moves]
     places: dict[Hashable, int] = {}
     place = np.array([places.setdefault(place_of(s), len(places)) for s in states], dtype=np.int32)
-    harness = (
-        np.ones(len(moves), dtype=bool)
-        if restrictable is None
-        else np.array([restrictable(a, b, n) for a, b, n in moves], dtype=bool)
-    )
+    harness = np.ones(len(moves), dtype=bool) if restrictable is None else np.array([restrictable(a, b, n) for a, b, n in moves], dtype=bool)
     stay = stay & ~terminal
     return TransitionSystem(
         kind=kind,

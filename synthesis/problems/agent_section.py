@@ -13,9 +13,7 @@ _AGENT_KEYS = {"cells", "start", "parks", "moves", "stay", "first", "max_iterati
 _PARK_KEYS = {"name", "from"}
 
 
-def agent_from_toml(
-    table: Any, ts: TransitionSystem, cell_of: Callable[[Any, str], list[int]], where: str
-) -> TestAgent:
+def agent_from_toml(table: Any, ts: TransitionSystem, cell_of: Callable[[Any, str], list[int]], where: str) -> TestAgent:
     """The test agent of a problem file's ``[environment.agent]`` table.
 
     The section, for the common case::
@@ -90,7 +88,7 @@ def agent_from_toml(
                 for v in places(item[1], f"{where} moves[{k}]"):
                     moves.append((u, v))
     else:
-        raise ProblemError(f"{where} moves must be \"4-neighbour\", \"system\" or a list of [from, to] moves")
+        raise ProblemError(f'{where} moves must be "4-neighbour", "system" or a list of [from, to] moves')
     stay_spec = table.get("stay", True)
     stay: bool | list[int]
     if isinstance(stay_spec, bool):
@@ -99,7 +97,7 @@ def agent_from_toml(
         stay = places(stay_spec, f"{where} stay")
     first = table.get("first", "system")
     if not isinstance(first, str):
-        raise ProblemError(f"{where} first must be \"system\" or \"agent\"")
+        raise ProblemError(f'{where} first must be "system" or "agent"')
     return make_test_agent(
         ts,
         cells,

@@ -74,13 +74,27 @@ def beaver_rescue() -> Problem:
     """Leave the lab through one door, fetch the beaver, come back through the other."""
     states = ["init", "d1", "d2", "beaver", "p1", "p2", "goal"]
     edges = [
-        ("init", "d1"), ("init", "d2"), ("d1", "d2"), ("d2", "d1"), ("d1", "beaver"), ("d2", "beaver"),
-        ("beaver", "p1"), ("beaver", "p2"), ("p1", "p2"), ("p2", "p1"), ("p1", "goal"), ("p2", "goal"),
+        ("init", "d1"),
+        ("init", "d2"),
+        ("d1", "d2"),
+        ("d2", "d1"),
+        ("d1", "beaver"),
+        ("d2", "beaver"),
+        ("beaver", "p1"),
+        ("beaver", "p2"),
+        ("p1", "p2"),
+        ("p2", "p1"),
+        ("p1", "goal"),
+        ("p2", "goal"),
     ]
     labels = {"d1": ["door1"], "p1": ["door1"], "d2": ["door2"], "p2": ["door2"], "beaver": ["beaver"], "goal": ["goal"]}
     ts = graph_system(states, edges, "init", ["goal"], labels)
     return make_problem(
-        "beaver-rescue", ts, "F(beaver & F goal)", "F door1 & F door2", "reactive",
+        "beaver-rescue",
+        ts,
+        "F(beaver & F goal)",
+        "F door1 & F door2",
+        "reactive",
         description="A rescue robot must use both doors: out through one, back through the other.",
     )
 
@@ -88,21 +102,55 @@ def beaver_rescue() -> Problem:
 def motion_primitives() -> Problem:
     """Doors open according to the motion primitives already shown (jump, lie, stand)."""
     states = [
-        "init", "p1", "p2", "p3", "jump1", "stand1", "stand2", "stand3", "lie3",
-        "d1_j", "d1_s", "d2_s", "d3_s", "d3_l", "goal",
+        "init",
+        "p1",
+        "p2",
+        "p3",
+        "jump1",
+        "stand1",
+        "stand2",
+        "stand3",
+        "lie3",
+        "d1_j",
+        "d1_s",
+        "d2_s",
+        "d3_s",
+        "d3_l",
+        "goal",
     ]
     edges = [
-        ("init", "p1"), ("init", "p2"), ("init", "p3"),
-        ("p1", "jump1"), ("p1", "stand1"), ("p2", "stand2"), ("p3", "stand3"), ("p3", "lie3"),
-        ("jump1", "d1_j"), ("stand1", "d1_s"), ("stand2", "d2_s"), ("stand3", "d3_s"), ("lie3", "d3_l"),
-        ("d1_s", "p1"), ("d1_j", "p1"), ("d2_s", "p2"), ("d3_s", "p3"), ("d3_l", "p3"),
-        ("p1", "p2"), ("p2", "p1"), ("p2", "p3"), ("p3", "p2"),
+        ("init", "p1"),
+        ("init", "p2"),
+        ("init", "p3"),
+        ("p1", "jump1"),
+        ("p1", "stand1"),
+        ("p2", "stand2"),
+        ("p3", "stand3"),
+        ("p3", "lie3"),
+        ("jump1", "d1_j"),
+        ("stand1", "d1_s"),
+        ("stand2", "d2_s"),
+        ("stand3", "d3_s"),
+        ("lie3", "d3_l"),
+        ("d1_s", "p1"),
+        ("d1_j", "p1"),
+        ("d2_s", "p2"),
+        ("d3_s", "p3"),
+        ("d3_l", "p3"),
+        ("p1", "p2"),
+        ("p2", "p1"),
+        ("p2", "p3"),
+        ("p3", "p2"),
     ]
     edges += [(d, "goal") for d in ("d1_j", "d1_s", "d2_s", "d3_s", "d3_l")]
     labels = {"jump1": ["jump"], "lie3": ["lie"], "stand1": ["stand"], "stand2": ["stand"], "stand3": ["stand"], "goal": ["goal"]}
     ts = graph_system(states, edges, "init", ["goal"], labels)
     return make_problem(
-        "motion-primitives", ts, "F goal", "F jump & F lie & F stand", "reactive",
+        "motion-primitives",
+        ts,
+        "F goal",
+        "F jump & F lie & F stand",
+        "reactive",
         description="A legged robot must show a jump, a lie-down and a stand before the exit opens.",
     )
 
@@ -130,7 +178,12 @@ def refueling() -> Problem:
     tokens = {goal: "T", refuel: "R", (4, 0): "S"} | {c: "L" for c in low_cells}
     ts = fuel_grid_world(_grid_cells(5, 5), 5, 5, (4, 0), 10, [refuel], [goal], label, tokens)
     return make_problem(
-        "refueling", ts, "F goal & G !unsafe", "F low", "static", tie_places="static",
+        "refueling",
+        ts,
+        "F goal & G !unsafe",
+        "F low",
+        "static",
+        tie_places="static",
         description="Reach the goal without running dry; walls force a low-fuel detour far from the goal.",
     )
 
@@ -163,12 +216,14 @@ def mars_exploration() -> Problem:
     tokens = {goal: "T", ice: "i", rock: "r", (5, 0): "S"} | {c: "R" for c in refuel} | {c: "D" for c in dropoff}
     ts = fuel_grid_world(_grid_cells(6, 6), 6, 6, (5, 0), 10, refuel, [goal], label, tokens)
     return make_problem(
-        "mars-exploration", ts, "F goal & G !unsafe & G((ice | rock) -> F dropoff)",
-        "F lowfuel & F ice & F rock", "static", tie_places="static",
+        "mars-exploration",
+        ts,
+        "F goal & G !unsafe & G((ice | rock) -> F dropoff)",
+        "F lowfuel & F ice & F rock",
+        "static",
+        tie_places="static",
         description="A rover samples ice and rock, drops them off, and is pushed to run low on fuel.",
     )
-
-
 
 
 # ------------------------------------------------------------ dynamic test agents
@@ -193,11 +248,22 @@ def maze1() -> Problem:
     up = [(places_of_cells(ts, [(r, 2)])[0], places_of_cells(ts, [(r - 1, 2)])[0]) for r in range(1, rows)]
     may_stay = places_of_cells(ts, [(r, 2) for r in (1, 3, 5)])
     agent = make_test_agent(
-        ts, cells, places_of_cells(ts, [(6, 2)])[0], [("above", places_of_cells(ts, [(0, 2)]))],
-        moves=up, stay=may_stay, first="system", where="maze1 agent",
+        ts,
+        cells,
+        places_of_cells(ts, [(6, 2)])[0],
+        [("above", places_of_cells(ts, [(0, 2)]))],
+        moves=up,
+        stay=may_stay,
+        first="system",
+        where="maze1 agent",
     )
     return make_problem(
-        "maze1", ts, "F goal", "F I1 & F I2 & F I3", "agent", agent=agent,
+        "maze1",
+        ts,
+        "F goal",
+        "F I1 & F I2 & F I3",
+        "agent",
+        agent=agent,
         description="A maze with three test cells; a test agent climbing the middle column blocks shortcuts.",
     )
 
@@ -225,11 +291,22 @@ def maze2() -> Problem:
         ("right", places_of_cells(ts, [(2, 4)])),
     ]
     agent = make_test_agent(
-        ts, cells, places_of_cells(ts, [(2, 2)])[0], parks, moves="4-neighbour", stay=True, first="agent",
+        ts,
+        cells,
+        places_of_cells(ts, [(2, 2)])[0],
+        parks,
+        moves="4-neighbour",
+        stay=True,
+        first="agent",
         where="maze2 agent",
     )
     return make_problem(
-        "maze2", ts, "F goal", "F I1 & F I2", "agent", agent=agent,
+        "maze2",
+        ts,
+        "F goal",
+        "F I1 & F I2",
+        "agent",
+        agent=agent,
         description="The headline maze: a test agent on the central plus makes the system visit I1 and I2.",
     )
 
@@ -271,13 +348,25 @@ def patrolling() -> Problem:
     cells = places_of_cells(ts, column, "patrolling agent")
     parks = [("top", places_of_cells(ts, [(0, 2)])), ("bottom", places_of_cells(ts, [(5, 2)]))]
     agent = make_test_agent(
-        ts, cells, places_of_cells(ts, [(5, 2)])[0], parks, moves="4-neighbour", stay=True, first="system",
+        ts,
+        cells,
+        places_of_cells(ts, [(5, 2)])[0],
+        parks,
+        moves="4-neighbour",
+        stay=True,
+        first="system",
         where="patrolling agent",
     )
     return make_problem(
-        "patrolling", ts, "F goal & G !empty", "F lowfuel", "agent", agent=agent,
+        "patrolling",
+        ts,
+        "F goal & G !empty",
+        "F lowfuel",
+        "agent",
+        agent=agent,
         description="A test agent patrolling column 2 pushes a fuel-limited robot to run low far from the goal.",
-        tie_places="static", bidirectional_cuts=True,
+        tie_places="static",
+        bidirectional_cuts=True,
     )
 
 

@@ -78,8 +78,10 @@ def explain_unreachable(problem: Problem) -> str:
     if not _reaches_goal(problem, visits):
         alone = [t for t in visits if not _reaches_goal(problem, [t])]
         if alone:
-            return (f"{_quoted(alone)} cannot be met: no way from the start gets there, whatever else the "
-                    "system objective asks (check the grid's walls, the start and the labels)")
+            return (
+                f"{_quoted(alone)} cannot be met: no way from the start gets there, whatever else the "
+                "system objective asks (check the grid's walls, the start and the labels)"
+            )
         return f"the visits {_quoted(visits)} cannot all be met: no way from the start meets them together"
     blamed = [t for t in others if not _reaches_goal(problem, [*visits, t])]
     goal = _quoted(visits)
@@ -87,8 +89,7 @@ def explain_unreachable(problem: Problem) -> str:
         return f"`{blamed[0].text}` makes the goal unreachable: every way from the start to {goal} breaks it"
     if blamed:
         return f"{_quoted(blamed)} each make the goal unreachable: every way from the start to {goal} breaks them"
-    return (f"{_quoted(others)} together make the goal unreachable: every way from the start to {goal} breaks "
-            "one of them")
+    return f"{_quoted(others)} together make the goal unreachable: every way from the start to {goal} breaks one of them"
 
 
 def explain_unroutable(problem: Problem) -> str:
@@ -99,15 +100,16 @@ def explain_unroutable(problem: Problem) -> str:
     sys_text = f"`{problem.system_objective.text}`"
     blamed = [t for t in test if not _routable(problem, system, [t])]
     if not blamed:
-        return (f"the visits {_quoted(test)} cannot all be made before the goal by one execution that meets "
-                f"{sys_text}, though each can alone")
+        return f"the visits {_quoted(test)} cannot all be made before the goal by one execution that meets {sys_text}, though each can alone"
     visit = blamed[0]
     visits = [t for t in system if t.is_visit]
     others = [t for t in system if not t.is_visit]
     text = f"the test objective's `{visit.text}` cannot be routed: no execution that meets {sys_text} makes it before the goal"
     if implied(_products(problem, _objective(system), _objective([visit]))):
-        text += (f" (the system objective already asks for it: every execution that meets {sys_text} meets "
-                 f"`{visit.text}` by the time it ends; drop it from the test objective)")
+        text += (
+            f" (the system objective already asks for it: every execution that meets {sys_text} meets "
+            f"`{visit.text}` by the time it ends; drop it from the test objective)"
+        )
     elif others and _routable(problem, visits, [visit]):
         culprits = [t for t in others if not _routable(problem, [*visits, t], [visit])]
         if culprits:
@@ -162,4 +164,3 @@ def check_problem_consistency(problem: Problem, products: Products) -> np.ndarra
         if exc.reason == "unroutable":
             raise InconsistentProblem("unroutable", explain_unroutable(problem)) from None
         raise
-

@@ -34,9 +34,7 @@ _ENV_KEYS = {"kind", "static", "bidirectional_cuts", "time_limit", "setting", "a
 def _unknown(section: str, got: dict[str, Any], allowed: set[str]) -> None:
     extra = sorted(set(got) - allowed)
     if extra:
-        raise ProblemError(
-            f"unknown key {extra[0]!r} in {section} (allowed: {', '.join(sorted(allowed))})"
-        )
+        raise ProblemError(f"unknown key {extra[0]!r} in {section} (allowed: {', '.join(sorted(allowed))})")
 
 
 def _is_int(x: Any) -> bool:
@@ -90,10 +88,7 @@ def parse_grid(text: str, where: str = "[system] grid", max_cells: int | None = 
             raise ProblemError(f"{where}: row {i} has {len(r)} cells, row 0 has {width}")
         for j, tok in enumerate(r):
             if tok not in (".", "#") and _TOKEN_NAME.fullmatch(tok) is None:
-                raise ProblemError(
-                    f"{where}: the token {tok!r} at [{i}, {j}] is not '.', '#' or a name "
-                    "(letters, digits and _, not starting with a digit)"
-                )
+                raise ProblemError(f"{where}: the token {tok!r} at [{i}, {j}] is not '.', '#' or a name (letters, digits and _, not starting with a digit)")
     return rows, len(rows), width
 
 
@@ -170,7 +165,7 @@ def problem_from_dict(data: dict[str, Any], source: str = "<problem>", max_cells
     if "static" in env and kind not in ("mixed", "agent"):
         raise ProblemError(f"`static` in [environment]{where} is for mixed and agent problems, not {kind!r} ones")
     if "agent" in env and kind != "agent":
-        raise ProblemError(f"[environment.agent]{where} is for kind = \"agent\" problems, not {kind!r} ones")
+        raise ProblemError(f'[environment.agent]{where} is for kind = "agent" problems, not {kind!r} ones')
     if "grid" in system:
         ts, cell_of = _grid_from_toml(system, labels, where, max_cells)
     elif "states" in system:
@@ -189,16 +184,18 @@ def problem_from_dict(data: dict[str, Any], source: str = "<problem>", max_cells
     one_way = env.get("one_way_walls", kind == "static" and bidir is False)
     FLAG.check(one_way, f"`one_way_walls` in [environment]{where}")
     kw: dict[str, Any] = {
-        "static_moves": static_moves, "time_limit": time_limit, "extras": extras, "caps": caps, "one_way_walls": one_way,
+        "static_moves": static_moves,
+        "time_limit": time_limit,
+        "extras": extras,
+        "caps": caps,
+        "one_way_walls": one_way,
     }
     if "agent" in env:
         kw["agent"] = agent_from_toml(env["agent"], ts, cell_of, f"[environment.agent]{where}")
     elif kind == "agent":
         raise ProblemError(f"an agent problem needs an [environment.agent] section{where}")
     kw["declared_propositions"] = set(labels)
-    return make_problem(
-        name, ts, objectives["system"], objectives["test"], kind, bidir, description=description, **kw
-    )
+    return make_problem(name, ts, objectives["system"], objectives["test"], kind, bidir, description=description, **kw)
 
 
 def _grid_from_toml(
@@ -258,9 +255,7 @@ def _graph_from_toml(system: dict[str, Any], labels: dict[str, Any], where: str)
     if not states:
         raise ProblemError(f"[system] states{where} is empty")
     edges = system.get("edges", [])
-    if not isinstance(edges, list) or not all(
-        isinstance(e, list) and len(e) == 2 and all(isinstance(x, str) for x in e) for e in edges
-    ):
+    if not isinstance(edges, list) or not all(isinstance(e, list) and len(e) == 2 and all(isinstance(x, str) for x in e) for e in edges):
         raise ProblemError(f"[system] edges{where} must be a list of [from, to] state-name pairs")
     start = system["start"]
     if not isinstance(start, str):

@@ -81,6 +81,7 @@ EXPLORED_STATES_PER_SECOND = 10_000
 """About how many automaton states the exact count explores per second: with a deadline,
 the exploration is cut to what the time left allows."""
 
+
 def check_size(problem: Problem, max_edges: int | None, deadline: float | None = None) -> SizeEstimate | None:
     """Refuse ``problem`` if its product graph may exceed ``max_edges`` (``None``: no limit).
 
@@ -117,8 +118,7 @@ def check_size(problem: Problem, max_edges: int | None, deadline: float | None =
             raise TimeoutError("the time limit passed before the problem's size was checked")
         budget = min(budget, max(int(left * EXPLORED_STATES_PER_SECOND / 2), 1))
     try:
-        spec = specification_product(problem.system_objective, problem.test_objective, problem.system.letters(),
-                                     max_states=budget)
+        spec = specification_product(problem.system_objective, problem.test_objective, problem.system.letters(), max_states=budget)
     except ProblemTooLarge:
         spec = None
     if spec is None or spec.dba.n_states > cap:
@@ -130,8 +130,7 @@ def check_size(problem: Problem, max_edges: int | None, deadline: float | None =
         )
     est = SizeEstimate(est.states, est.moves, spec.dba.n_states, est.moves * spec.dba.n_states)
     if est.edges > max_edges:
-        raise ProblemTooLarge(f"problem {problem.name!r} is too large to synthesize: {est.describe()}, above the limit of "
-                              f"{max_edges} edges; {way}")
+        raise ProblemTooLarge(f"problem {problem.name!r} is too large to synthesize: {est.describe()}, above the limit of {max_edges} edges; {way}")
     return est
 
 
@@ -150,6 +149,4 @@ def check_file_size(path: str | Path, what: str, limit: int) -> None:
     except OSError:
         return
     if stat.S_ISREG(st.st_mode) and st.st_size > limit:
-        raise ProblemError(
-            f"{what} {str(path)!r} is {st.st_size / 2**20:.0f} MiB, larger than {limit // 2**20} MiB: refused before reading it"
-        )
+        raise ProblemError(f"{what} {str(path)!r} is {st.st_size / 2**20:.0f} MiB, larger than {limit // 2**20} MiB: refused before reading it")

@@ -29,7 +29,4 @@ def load_problem(name_or_path: str, max_cells: int | None = MAX_GRID_CELLS) -> P
     if p.suffix.lower() == ".toml" or p.exists():
         check_file_size(p, "problem file", MAX_FILE_BYTES)  # by its size, before a byte is read
         return load_problem_file(p, max_cells)
-    raise ProblemError(
-        f"unknown problem {name_or_path!r}: not a file, and not a built-in "
-        f"({', '.join(sorted(BUILTINS))})"
-    )
+    raise ProblemError(f"unknown problem {name_or_path!r}: not a file, and not a built-in ({', '.join(sorted(BUILTINS))})")

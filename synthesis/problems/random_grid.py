@@ -90,9 +90,7 @@ def paper_ap(family: str, n: int) -> int:
     return 2 * n - 1 if family == "reaction" else n + 1
 
 
-def draw_special_cells(
-    size: int, n_props: int, seed: int, attempt: int
-) -> tuple[np.random.Generator, tuple[int, int], tuple[int, int], list[tuple[int, int]]]:
+def draw_special_cells(size: int, n_props: int, seed: int, attempt: int) -> tuple[np.random.Generator, tuple[int, int], tuple[int, int], list[tuple[int, int]]]:
     """``(generator, start, goal, proposition cells)`` of ``(seed, attempt)``: distinct cells
     drawn uniformly, start first, then the goal, then one per proposition; the generator
     (seeded with ``[seed, attempt]``) continues for whatever else an instance draws

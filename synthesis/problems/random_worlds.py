@@ -147,9 +147,7 @@ def _check_world(world: str, kind: str) -> None:
         raise ValueError(f"unknown kind {kind!r}; expected one of {', '.join(POOL_KINDS)}")
 
 
-def world_problem(
-    size: int, family: str, n: int, seed: int, attempt: int = 0, world: str = "empty", kind: str = "reactive"
-) -> Problem:
+def world_problem(size: int, family: str, n: int, seed: int, attempt: int = 0, world: str = "empty", kind: str = "reactive") -> Problem:
     """The random instance of ``(size, family, n, seed, attempt)`` in ``world``, as a ``kind`` problem.
 
     Raises
@@ -200,17 +198,13 @@ def world_problem(
         labels.update({c: [p] for c, p in prop_of.items()})
         ts = grid_world(free, size, size, start, [goal], labels, tokens)
     if kind != "agent":
-        return make_problem(name, ts, sys_obj, test_obj, kind, tie_places=world == "fuel", description=description,
-                            declared_propositions=declared)
+        return make_problem(name, ts, sys_obj, test_obj, kind, tie_places=world == "fuel", description=description, declared_propositions=declared)
     assert agent_start is not None
     agent = _column_agent(ts, column, agent_start)
-    return make_problem(name, ts, sys_obj, test_obj, "agent", agent=agent, description=description,
-                        declared_propositions=declared)
+    return make_problem(name, ts, sys_obj, test_obj, "agent", agent=agent, description=description, declared_propositions=declared)
 
 
-def _fuel_world(
-    size: int, start: Cell, goal: Cell, goal_prop: str, prop_of: dict[Cell, str], refuel: list[Cell], tokens: dict[Cell, str]
-) -> TransitionSystem:
+def _fuel_world(size: int, start: Cell, goal: Cell, goal_prop: str, prop_of: dict[Cell, str], refuel: list[Cell], tokens: dict[Cell, str]) -> TransitionSystem:
     """The fuel grid of a ``fuel`` world (one label per state: goal > empty > proposition)."""
 
     def label(cell: Cell, fuel: int) -> list[str]:
@@ -236,8 +230,15 @@ def _column_agent(ts: TransitionSystem, column: list[Cell], start: Cell) -> Test
         raise InconsistentProblem("unreachable", f"the test agent's column is out of the system's reach: {exc}") from None
     top, bottom = places_of_cells(ts, [column[0]]), places_of_cells(ts, [column[-1]])
     return make_test_agent(
-        ts, cells, places_of_cells(ts, [start])[0], [("top", top), ("bottom", bottom)], moves="4-neighbour", stay=True,
-        first="system", max_iterations=AGENT_ITERATIONS, where="random grid agent",
+        ts,
+        cells,
+        places_of_cells(ts, [start])[0],
+        [("top", top), ("bottom", bottom)],
+        moves="4-neighbour",
+        stay=True,
+        first="system",
+        max_iterations=AGENT_ITERATIONS,
+        where="random grid agent",
     )
 
 
@@ -270,4 +271,3 @@ def first_accepted(
             continue
         return attempt, problem, value
     raise RuntimeError(f"no {world} {kind} random grid with a test for seed {seed} in {max_attempts} attempts")
-

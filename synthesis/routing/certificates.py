@@ -100,9 +100,7 @@ def cut_proof(products: Products, rm: RoutingModel, options: MilpOptions, entrie
     return CutProof(cb.value, flow, best, len(cb.candidates), checked)
 
 
-def test_at_bound(
-    products: Products, rm: RoutingModel, options: MilpOptions, entries: dict[int, np.ndarray], upper: int
-) -> np.ndarray | None:
+def test_at_bound(products: Products, rm: RoutingModel, options: MilpOptions, entries: dict[int, np.ndarray], upper: int) -> np.ndarray | None:
     """MILP-static, phase 1: a checked candidate of the walls' cut bound at the flow upper bound
     ``upper`` (see :func:`cut_proof`), which proves the maximum flow without a search; ``None``
     where there is none (or the bound does not apply)."""

@@ -101,9 +101,7 @@ class _Model:
         lp.a_matrix_.num_col_ = self.n_col
         lp.a_matrix_.num_row_ = self.n_row
         integ = np.concatenate(self.integer) if self.integer else np.zeros(0, dtype=bool)
-        lp.integrality_ = [
-            highspy.HighsVarType.kInteger if b else highspy.HighsVarType.kContinuous for b in integ
-        ]
+        lp.integrality_ = [highspy.HighsVarType.kInteger if b else highspy.HighsVarType.kContinuous for b in integ]
         lp.sense_ = highspy.ObjSense.kMaximize if maximize else highspy.ObjSense.kMinimize
         return lp
 
@@ -231,9 +229,7 @@ class RoutingModel:
         return x
 
 
-def build_model(
-    products: Products, options: MilpOptions, entries: dict[int, np.ndarray], keep_node: np.ndarray
-) -> RoutingModel:
+def build_model(products: Products, options: MilpOptions, entries: dict[int, np.ndarray], keep_node: np.ndarray) -> RoutingModel:
     """Assemble the routing MILP (docs/method.md §5, §7) as column and row blocks.
 
     The blocks go in in a fixed order (columns f, d, mu; rows c2, c3, c4-c5, couplings;
@@ -251,8 +247,11 @@ def build_model(
     path_cut = _add_path_cuts(m, g.initial, me, cut, reach)
     coupling = _add_coupling(m, me, flow, reach)
     feasibility = _add_feasibility(m, products, groups, cut, entries, options.flow_rows == "cut") if entries else []
-    blocked_place, places, place_of_cut = _add_blocked_places(m, products, groups, cut) if options.block_states else (
-        np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64))
+    blocked_place, places, place_of_cut = (
+        _add_blocked_places(m, products, groups, cut)
+        if options.block_states
+        else (np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64))
+    )
     exclusions = _add_exclusions(m, groups, cut, options.exclusions)
     caps = _add_caps(m, products, groups, cut, options.caps) if options.caps else None
     return RoutingModel(
@@ -326,9 +325,7 @@ def model_cut_bound(products: Products, options: MilpOptions, groups: CutGroups,
     return static_cut_bound(products, groups.of_edge, groups.weight, groups.restrictable, me.eu, me.ev, level)
 
 
-def group_reductions(
-    products: Products, options: MilpOptions, groups: CutGroups, me: ModelEdges, with_feasibility: bool
-) -> Reductions:
+def group_reductions(products: Products, options: MilpOptions, groups: CutGroups, me: ModelEdges, with_feasibility: bool) -> Reductions:
     """The reductions of this model's cut groups (none with ``options.reductions`` off);
     the dominance rule only where its proof holds: MILP-static without feasibility flows,
     ``closed_loop``, MILP-agent places or exclusions."""
@@ -402,8 +399,7 @@ def _add_path_cuts(m: _Model, src_node: int, me: ModelEdges, cut: np.ndarray, re
     if np.any(no_vars & (rhs > 0)):
         raise InconsistentProblem(
             "unroutable",
-            "the test objective cannot be routed: an unrestrictable move leads from the start "
-            "straight to the goal",
+            "the test objective cannot be routed: an unrestrictable move leads from the start straight to the goal",
         )
     k, u, v, dk, rhs = (x[~no_vars] for x in (k, u, v, dk, rhs))
     r = m.add_rows(rhs, np.inf, k.size)
@@ -477,9 +473,7 @@ def phase2_integral_columns(rm: RoutingModel, options: MilpOptions) -> np.ndarra
     return out
 
 
-def _add_blocked_places(
-    m: _Model, products: Products, groups: CutGroups, cut: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _add_blocked_places(m: _Model, products: Products, groups: CutGroups, cut: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """MILP-agent (docs/method.md §7): a binary ``d_state`` per place entered by a cut, at least
     every cut into it. Returns ``(columns, places, rows)``."""
     g, ts = products.virtual, products.ts

@@ -75,8 +75,7 @@ def flow_of_phase1(rm: RoutingModel, first: Phase) -> int:
             raise TimeoutError(f"no test with flow >= 1 was found within the {LIMIT_TEXT.get(first.stopped_by or '', 'time limit')}")
         raise InconsistentProblem(
             "unroutable",
-            "the test objective cannot be routed without trapping the system: every routing "
-            "cut set blocks all executions to the goal",
+            "the test objective cannot be routed without trapping the system: every routing cut set blocks all executions to the goal",
         )
     return flow
 
@@ -183,6 +182,7 @@ def trap_test(products: Products, groups: CutGroups, entries: dict[int, np.ndarr
     entries (nothing to trap)."""
     if not entries:
         return None
+
     def traps(cut: np.ndarray) -> bool:
         blocked = blocked_of_edges(products, np.flatnonzero(cut[groups.of_edge]))
         return bool(trapped_entries(products, blocked, entries))

@@ -96,9 +96,7 @@ def solve_routing(products: Products, options: MilpOptions | None = None) -> Rou
     # more rounds than it saves there); reactive ones whose flows would swamp the model
     # start without
     required = required_entries(products, options)
-    eager = options.feasibility == "eager" or (
-        options.feasibility == "auto" and len(required) * products.system.src.size <= EAGER_FLOW_LIMIT
-    )
+    eager = options.feasibility == "eager" or (options.feasibility == "auto" and len(required) * products.system.src.size <= EAGER_FLOW_LIMIT)
     entries: dict[int, np.ndarray] = dict(required) if eager else {}
     clock = Clock(options.time_limit, options.after_first)
     rounds = 0
@@ -237,9 +235,7 @@ def _solve_once(
     return replace(result, stats={**result.stats, **figures}) if figures else result
 
 
-def raise_if_flows_bind(
-    rm: RoutingModel, products: Products, options: MilpOptions, x: np.ndarray, missing: dict[int, np.ndarray]
-) -> None:
+def raise_if_flows_bind(rm: RoutingModel, products: Products, options: MilpOptions, x: np.ndarray, missing: dict[int, np.ndarray]) -> None:
     """Raise :class:`FlowsBind` if phase 1's cuts trap entry nodes of ``missing`` (histories
     whose feasibility flows the model lacks)."""
     if not missing:

@@ -372,7 +372,6 @@ __all__ = [
 ]
 
 
-
 def quiet_highs(threads: int | None, random_seed: int) -> highspy.Highs:
     """A HiGHS instance that prints nothing (its banner included), on ``threads`` threads
     (``None``: HiGHS decides) with a fixed ``random_seed``: what every HiGHS solve of the

@@ -30,9 +30,7 @@ class ClosedLoopReport:
     entries: tuple[np.ndarray, np.ndarray, np.ndarray]
 
 
-def verify_closed_loop(
-    products: Products, strategy: TestStrategy, agent: TestAgent, controller: AgentController
-) -> ClosedLoopReport:
+def verify_closed_loop(products: Products, strategy: TestStrategy, agent: TestAgent, controller: AgentController) -> ClosedLoopReport:
     """Explore the test under the controller against every system behaviour.
 
     Independent of the GR(1) solver: it reads only G, the routing strategy, the agent's
@@ -142,9 +140,7 @@ def verify_closed_loop(
         if bad.size:
             k = int(bad[0])
             what = "blocks a move the test does not restrict" if blocked[k] else "leaves open a move the test restricts"
-            raise CheckFailed(
-                f"the agent {what}: {ts.states[int(ts.src[mv[k]])]} -> {ts.states[int(ts.dst[mv[k]])]} ({where(int(v[row[k]]), int(a[row[k]]))})"
-            )
+            raise CheckFailed(f"the agent {what}: {ts.states[int(ts.src[mv[k]])]} -> {ts.states[int(ts.dst[mv[k]])]} ({where(int(v[row[k]]), int(a[row[k]]))})")
         # every system behaviour: unblocked moves and stays
         open_ = ~blocked
         stay = np.flatnonzero(ts.stay[g.state[v]])
@@ -169,18 +165,12 @@ def verify_closed_loop(
     trapped = np.flatnonzero(~ended[s_node] & ~walled[s_node] & ~alive)
     if trapped.size:
         k = int(states[trapped[0]])
-        raise CheckFailed(
-            f"the test traps the system: no way to the goal from {where(k // (n_mem * n_agent), (k // n_mem) % n_agent)}"
-        )
+        raise CheckFailed(f"the test traps the system: no way to the goal from {where(k // (n_mem * n_agent), (k // n_mem) % n_agent)}")
     into_goal = goal[dst] & ~goal[src]
     bypass = np.flatnonzero(into_goal & ~products.intermediate[s_node[src]])
     if bypass.size:
         k = int(states[src[bypass[0]]])
-        raise CheckFailed(
-            f"a run reaches the goal without the test objective, from {where(k // (n_mem * n_agent), (k // n_mem) % n_agent)}"
-        )
+        raise CheckFailed(f"a run reaches the goal without the test objective, from {where(k // (n_mem * n_agent), (k // n_mem) % n_agent)}")
     used_m_all, used_v_all, used_a_all = (np.concatenate(x) if x else np.zeros(0, dtype=np.int64) for x in (used_m, used_v, used_a))
     entries = (used_m_all, used_v_all, used_a_all)
-    return ClosedLoopReport(
-        positions=int(states.size), transitions=int(src.size), goal_positions=int(goal.sum()), entries=entries
-    )
+    return ClosedLoopReport(positions=int(states.size), transitions=int(src.size), goal_positions=int(goal.sum()), entries=entries)

@@ -153,10 +153,7 @@ class AgentController:
             If the format tag or version does not match.
         """
         if d.get("format") != CONTROLLER_FORMAT or d.get("version") != CONTROLLER_VERSION:
-            raise ValueError(
-                f"not a {CONTROLLER_FORMAT} v{CONTROLLER_VERSION} document: "
-                f"format={d.get('format')!r}, version={d.get('version')!r}"
-            )
+            raise ValueError(f"not a {CONTROLLER_FORMAT} v{CONTROLLER_VERSION} document: format={d.get('format')!r}, version={d.get('version')!r}")
         n_hist, n_sys = int(d["n_hist"]), int(d["n_system_states"])
         n_agent, n_mem = len(d["agent_names"]), int(d["n_memory"])
         rows = np.asarray(d["rows"], dtype=np.int64).reshape(-1, 2)
@@ -198,9 +195,7 @@ def _fallback_table(agent: TestAgent, n_places: int) -> np.ndarray:
     return out
 
 
-def controller_from_strategy(
-    products: Products, game: AgentGame, strategy: GR1Strategy, agent: TestAgent
-) -> AgentController:
+def controller_from_strategy(products: Products, game: AgentGame, strategy: GR1Strategy, agent: TestAgent) -> AgentController:
     """Tabulate a winning GR(1) strategy of the test-agent game per configuration.
 
     The game is a safety game, so every winning answer of a configuration ``(v', a)``

@@ -454,8 +454,6 @@ def build_game(products: Products, rules: GameRules, agent: TestAgent) -> AgentG
     )
 
 
-
-
 def realizability_exclusions(products: Products, agent: TestAgent, groups: CutGroups) -> list[list[int]]:
     """Cuts no test agent can hold, as MILP exclusion rows ``d_g <= 0`` (before the first solve).
 

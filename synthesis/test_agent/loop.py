@@ -63,8 +63,7 @@ def _rejected_text(iterations: list[dict[str, Any]], shown: int = 4) -> str:
     parts = []
     for rec in iterations[-shown:]:
         places = ", ".join(json.dumps(p, separators=(",", ":")) for p in rec["blocked_places"]) or "none"
-        why = ("the agent cannot reach them in time" if rec.get("verdict") == "unrealizable"
-               else rec.get("verdict", "rejected"))
+        why = "the agent cannot reach them in time" if rec.get("verdict") == "unrealizable" else rec.get("verdict", "rejected")
         parts.append(f"cut set {rec['iteration']} blocks places {places}: {why}")
     more = f" (and {len(iterations) - shown} earlier)" if len(iterations) > shown else ""
     return "rejected" + more + ": " + "; ".join(parts)
@@ -173,8 +172,7 @@ def counterexample_loop(
             if it == 1:
                 raise InconsistentProblem(
                     "infeasible",
-                    "no test agent strategy exists: no routing cut set restricts only moves into places the "
-                    f"test agent can occupy ({exc})",
+                    f"no test agent strategy exists: no routing cut set restricts only moves into places the test agent can occupy ({exc})",
                 ) from None
             raise InconsistentProblem(
                 "infeasible",
@@ -216,10 +214,7 @@ def counterexample_loop(
                 t = time.perf_counter()
                 reason = unrealizable_reason(products, groups, cut_mask, agent)
                 timings["reasons"] += time.perf_counter() - t
-        say(
-            f"agent loop {it}/{bound}: flow {routing.flow}, {routing.cut_edges.size} cuts, blocked places "
-            f"{record['blocked_places']}: {record['verdict']}"
-        )
+        say(f"agent loop {it}/{bound}: flow {routing.flow}, {routing.cut_edges.size} cuts, blocked places {record['blocked_places']}: {record['verdict']}")
         if record["verdict"] == "realizable":
             break
         exclusion = Exclusion(tuple(routing.cut_group_keys))

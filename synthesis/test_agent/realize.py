@@ -78,9 +78,7 @@ class AgentSynthesis:
                 "gr1_seconds": self.timings["gr1"],
                 "milp_seconds": self.timings["milp"],
                 "total_seconds": self.timings["total"],
-                "rejected": [
-                    {"iteration": r["iteration"], "reason": r["verdict"]} for r in self.iterations if r["verdict"] != "realizable"
-                ],
+                "rejected": [{"iteration": r["iteration"], "reason": r["verdict"]} for r in self.iterations if r["verdict"] != "realizable"],
             },
         }
 
@@ -93,9 +91,7 @@ class AgentSynthesis:
         }
 
 
-def realize_agent_strategy(
-    products: Products, strategy: TestStrategy, agent: TestAgent
-) -> tuple[AgentGame, AgentController, ClosedLoopReport]:
+def realize_agent_strategy(products: Products, strategy: TestStrategy, agent: TestAgent) -> tuple[AgentGame, AgentController, ClosedLoopReport]:
     """The test agent's strategy for a routing strategy already known to be realizable
     (a stored test's restrictions): the test-agent game solved again, its GR(1) strategy
     checked (:func:`synthesis.test_agent.gr1.verify.verify_strategy`), tabulated and checked in closed loop,

@@ -151,9 +151,7 @@ def _env_witness(game: AgentGame) -> tuple[np.ndarray, np.ndarray]:
     return np.flatnonzero(seen), edges[edges >= 0]
 
 
-def unrealizable_reason(
-    products: Products, groups: CutGroups, cut_mask: np.ndarray, agent: TestAgent
-) -> Reason:
+def unrealizable_reason(products: Products, groups: CutGroups, cut_mask: np.ndarray, agent: TestAgent) -> Reason:
     """The reason the agent loses the game of the cut set ``cut_mask`` (bool over groups).
 
     Falls back to the cut set itself (``Exclusion(C)``) should the game of its rules be
@@ -203,9 +201,7 @@ def unrealizable_reason(
     return Reason(_exclusion(groups, cut, open_), int(cut_mask.sum()), games)
 
 
-def trap_reason(
-    products: Products, groups: CutGroups, cut_mask: np.ndarray, strategy: TestStrategy, node: int
-) -> Reason:
+def trap_reason(products: Products, groups: CutGroups, cut_mask: np.ndarray, strategy: TestStrategy, node: int) -> Reason:
     """The reason the cut set ``cut_mask`` traps the SUT at ``node`` (a node of
     :func:`~synthesis.test_agent.game.trapped_nodes` for ``strategy``, the cut set's test).
 

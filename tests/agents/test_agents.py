@@ -12,9 +12,7 @@ from agents.registry import make_policy
 from experiments.evaluation.episodes import run_episode
 from flowtest_env.artifacts import artifact_path
 
-SHIPPED_IDS = [
-    f"FlowTest-{stem}-v0" for name, (stem, _) in flowtest_env.envs.BUILTIN_ENVS.items() if artifact_path(name).exists()
-]
+SHIPPED_IDS = [f"FlowTest-{stem}-v0" for name, (stem, _) in flowtest_env.envs.BUILTIN_ENVS.items() if artifact_path(name).exists()]
 """Built-ins whose artifact ships (the others would be synthesized on first use: slow)."""
 CORRECT = ["scripted:replanner", "gr1"]
 FAULTY = ["scripted:committed", "scripted:fuel-blind", "scripted:greedy"]
@@ -100,8 +98,7 @@ def test_ppo_smoke_training_learns_saves_model_curve_and_loads_as_sut(tmp_path) 
 
     from experiments.training.system import train
 
-    s = train("FlowTest-SmallReactive-v0", 2048, tmp_path / "m.zip", seed=0, progress_bar=True,
-              eval_episodes=3, n_envs=4, n_steps=64, batch_size=128)
+    s = train("FlowTest-SmallReactive-v0", 2048, tmp_path / "m.zip", seed=0, progress_bar=True, eval_episodes=3, n_envs=4, n_steps=64, batch_size=128)
     assert (tmp_path / "m.zip").exists() and (tmp_path / "m.png").exists()
     summary = json.loads((tmp_path / "m.json").read_text())
     assert summary["steps"] == 2048 and summary["episodes"] == len(summary["points"]) > 0
@@ -130,7 +127,7 @@ def test_policy_memory_matches_the_training_wrapper() -> None:
         while not done:
             mine = memory(obs)
             assert wrapped.observation_space.contains(wobs) and np.array_equal(mine, wobs)
-            seen = mine[env.observation_space.shape[0]:].reshape(5, 5)
+            seen = mine[env.observation_space.shape[0] :].reshape(5, 5)
             assert {tuple(p) for p in np.argwhere(seen == 1)} == places
             a = sut.act(obs, info)
             obs, _, term, trunc, info = env.step(a)
@@ -143,8 +140,7 @@ def test_ppo_model_for_another_observation_shape_is_refused(tmp_path) -> None:
     pytest.importorskip("sb3_contrib")
     from experiments.training.system import train
 
-    train("FlowTest-SmallReactive-v0", 64, tmp_path / "m.zip", seed=0, progress_bar=False, eval_episodes=0,
-          n_envs=1, n_steps=64, batch_size=64, n_epochs=1)
+    train("FlowTest-SmallReactive-v0", 64, tmp_path / "m.zip", seed=0, progress_bar=False, eval_episodes=0, n_envs=1, n_steps=64, batch_size=64, n_epochs=1)
     with pytest.raises(PolicyError, match="shape"):
         make_policy(f"ppo:{tmp_path / 'm.zip'}", gym.make("FlowTest-Maze2-v0"))
 

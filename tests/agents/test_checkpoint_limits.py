@@ -36,8 +36,11 @@ WEIGHT = "tensors/actor.0.weight.npy"  # [16, 84] in the small checkpoint below
 def good(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A small trained MLP checkpoint of small-reactive (84 inputs, 16 hidden, 5 actions)."""
     path = tmp_path_factory.mktemp("good") / "good.zip"
-    train(NativeArgs(env_id="FlowTest-SmallReactive-v0", total_steps=64, num_envs=8, num_steps=8, hidden=(16,), device="cpu",
-                     eval_every=0), out=path, progress_bar=False)
+    train(
+        NativeArgs(env_id="FlowTest-SmallReactive-v0", total_steps=64, num_envs=8, num_steps=8, hidden=(16,), device="cpu", eval_every=0),
+        out=path,
+        progress_bar=False,
+    )
     return path
 
 
@@ -107,7 +110,7 @@ def _set(field: str, value: Any) -> Callable[[str], str]:
     def edit(text: str) -> str:
         doc = json.loads(text)
         if field.startswith("tensors/"):
-            doc["tensors"][field[len("tensors/"):]] = value
+            doc["tensors"][field[len("tensors/") :]] = value
             return json.dumps(doc)
         *parents, last = field.split(".")
         s = doc
@@ -161,8 +164,13 @@ def _hostile(good: Path, out: Path, case: str) -> tuple[Path, str]:
 
 
 TEXT_CASES = ["obs_size Infinity", "n_actions NaN", "100,000-deep JSON"]
-NPY_CASES = ["a .npy header of shape (2**40,)", "a .npy header that is not a literal", "a .npy header that calls code",
-             "a .npy file shorter than its header says", "a .npy file longer than its header says"]
+NPY_CASES = [
+    "a .npy header of shape (2**40,)",
+    "a .npy header that is not a literal",
+    "a .npy header that calls code",
+    "a .npy file shorter than its header says",
+    "a .npy file longer than its header says",
+]
 CASES = [*SETTINGS_CASES, *TEXT_CASES, *NPY_CASES]
 
 
@@ -182,8 +190,7 @@ def test_a_hostile_checkpoint_is_one_error_naming_the_file_and_the_field(good: P
 
 
 @pytest.mark.parametrize("case", CASES)
-def test_flowtest_evaluate_says_it_in_one_error_line(good: Path, tmp_path: Path, case: str,
-                                                      capsys: pytest.CaptureFixture[str]) -> None:
+def test_flowtest_evaluate_says_it_in_one_error_line(good: Path, tmp_path: Path, case: str, capsys: pytest.CaptureFixture[str]) -> None:
     path, says = _hostile(good, tmp_path / "hostile.zip", case)
     try:
         code = main(["evaluate", "--env", "small-reactive", "--sut", f"ppo:{path}", "--episodes", "1", "--out", str(tmp_path / "r"), "-q"])
@@ -196,12 +203,12 @@ def test_flowtest_evaluate_says_it_in_one_error_line(good: Path, tmp_path: Path,
 
 
 @pytest.mark.parametrize("case", ["a network over the budget", "a .npy header of shape (2**40,)", "pad_to a string"])
-def test_flowtest_benchmark_says_it_in_one_error_line(good: Path, tmp_path: Path, case: str,
-                                                       capsys: pytest.CaptureFixture[str]) -> None:
+def test_flowtest_benchmark_says_it_in_one_error_line(good: Path, tmp_path: Path, case: str, capsys: pytest.CaptureFixture[str]) -> None:
     path, says = _hostile(good, tmp_path / "hostile.zip", case)
     try:
-        code = main(["benchmark", "--pool", "safety2/4x4", "--train-count", "2", "--test-count", "2", "--sut", f"ppo:{path}",
-                     "--out", str(tmp_path / "b"), "-q"])
+        code = main(
+            ["benchmark", "--pool", "safety2/4x4", "--train-count", "2", "--test-count", "2", "--sut", f"ppo:{path}", "--out", str(tmp_path / "b"), "-q"]
+        )
     except SystemExit as exc:
         code = int(exc.code or 0)
     out, err = capsys.readouterr()
@@ -257,8 +264,7 @@ def test_no_allocation_before_the_size_check(good: Path, tmp_path: Path) -> None
             for _ in range((n * 4) // len(chunk)):
                 f.write(chunk)
     assert zeros.stat().st_size < 8 << 20 and network.stat().st_size < 1 << 20
-    proc = subprocess.run([sys.executable, "-c", PEAK, str(network), str(header), str(zeros)], capture_output=True, text=True,
-                          timeout=300)
+    proc = subprocess.run([sys.executable, "-c", PEAK, str(network), str(header), str(zeros)], capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
     rows = [json.loads(line) for line in proc.stdout.splitlines()]
     assert len(rows) == 3, proc.stdout

@@ -88,9 +88,7 @@ def test_the_doc_has_a_python_a_javascript_and_a_shell_planner() -> None:
     assert "import flowtest" not in files["bfs_planner.py"] and "from flowtest" not in files["bfs_planner.py"]
 
 
-def test_documented_planners_run_from_the_cli_with_a_report_and_replay_commands(
-    project: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
+def test_documented_planners_run_from_the_cli_with_a_report_and_replay_commands(project: Path, capsys: pytest.CaptureFixture[str]) -> None:
     suts = ["python:bfs_planner:BfsPlanner", "cmd:python3 bfs_planner.py", "cmd:sh prefer.sh S E"]
     code = main(["evaluate", "--env", "warehouse.toml", "--sut", *suts, "--episodes", "1", "--seed", "5", "--out", "report", "-q"])
     assert code == 0, capsys.readouterr().err
@@ -140,17 +138,11 @@ BAD_PLANNERS: dict[str, str] = {
     "hang.py": "import sys, time\nfor line in sys.stdin:\n    time.sleep(60)\n",
     # answers a move into the wall west of the start
     "lie.py": (
-        "import json, sys\n"
-        "for line in sys.stdin:\n"
-        "    if json.loads(line)['type'] == 'step':\n"
-        "        print(json.dumps({'action': 'W'}), flush=True)\n"
+        "import json, sys\nfor line in sys.stdin:\n    if json.loads(line)['type'] == 'step':\n        print(json.dumps({'action': 'W'}), flush=True)\n"
     ),
     # prints its debugging on stdout
     "chatty.py": (
-        "import json, sys\n"
-        "for line in sys.stdin:\n"
-        "    if json.loads(line)['type'] == 'step':\n"
-        "        print('thinking about', line.strip()[:20], flush=True)\n"
+        "import json, sys\nfor line in sys.stdin:\n    if json.loads(line)['type'] == 'step':\n        print('thinking about', line.strip()[:20], flush=True)\n"
     ),
 }
 
@@ -159,7 +151,7 @@ EXPECTED = {
     "crash.py": "step 3: the planner exited with status 1; its last error output: out of battery at step 3",
     "hang.py": "step 0: the planner sent no answer within 1.5 s (--step-timeout); it was stopped",
     "lie.py": "step 0: chose 'W', which the test does not allow now (allowed: ",
-    "chatty.py": "step 0: answered 'thinking about {\"type\":\"step\",\"step', which is not an action",
+    "chatty.py": 'step 0: answered \'thinking about {"type":"step","step\', which is not an action',
 }
 
 
@@ -276,10 +268,22 @@ def test_ctrl_c_keeps_the_pairs_played(project: Path, capsys: pytest.CaptureFixt
 
 
 def _ctrl_c_keeps_the_pairs_played(project: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    write(project, "quitter.py", "import os, signal, time\ndef quit_now(observation, mask):\n"
-                                 "    os.kill(os.getppid(), signal.SIGINT)\n    time.sleep(30)\n")
-    code = main(["evaluate", "--env", "warehouse.toml", "--sut", "python:bfs_planner:BfsPlanner",
-                 "python:quitter:quit_now", "scripted:replanner", "--episodes", "2", "--out", "report"])
+    write(project, "quitter.py", "import os, signal, time\ndef quit_now(observation, mask):\n    os.kill(os.getppid(), signal.SIGINT)\n    time.sleep(30)\n")
+    code = main(
+        [
+            "evaluate",
+            "--env",
+            "warehouse.toml",
+            "--sut",
+            "python:bfs_planner:BfsPlanner",
+            "python:quitter:quit_now",
+            "scripted:replanner",
+            "--episodes",
+            "2",
+            "--out",
+            "report",
+        ]
+    )
     err = capsys.readouterr().err
     assert code == 130 and err.rstrip().endswith("flowtest: interrupted"), err
     assert "1 of 3 (system, test) pairs were played to the end" in err, err
@@ -300,8 +304,7 @@ def test_misbehaving_planners_in_the_cli_report_and_replay(project: Path, capsys
     for name, body in BAD_PLANNERS.items():
         write(project, name, body)
     suts = [f"cmd:python3 {name}" for name in BAD_PLANNERS] + ["python:bfs_planner:BfsPlanner"]
-    code = main(["evaluate", "--env", "warehouse.toml", "--sut", *suts, "--episodes", "2",
-                 "--step-timeout", "1.5", "--out", "report", "-q"])
+    code = main(["evaluate", "--env", "warehouse.toml", "--sut", *suts, "--episodes", "2", "--step-timeout", "1.5", "--out", "report", "-q"])
     assert code == 0
     out = capsys.readouterr().out
     assert out.count("stopped: the planner failed") == len(BAD_PLANNERS)
@@ -327,17 +330,18 @@ def html_escaped(text: str) -> str:
     return html.escape(text)
 
 
-@pytest.mark.parametrize("sut,message", [
-    ("python:no_such_planner:Bfs", "no Python module 'no_such_planner'"),
-    ("python:bfs_planner:Nope", "module 'bfs_planner' has no attribute 'Nope'"),
-    ("python:bfs_planner", "expected python:MODULE:NAME"),
-    ("cmd:no-such-program --fast", "command 'no-such-program' not found on PATH"),
-    ("cmd:./missing.sh", "no program './missing.sh'"),
-    ("cmd:", "cmd: needs a command"),
-])
-def test_a_missing_module_name_or_program_is_one_error_line(
-    project: Path, capsys: pytest.CaptureFixture[str], sut: str, message: str
-) -> None:
+@pytest.mark.parametrize(
+    "sut,message",
+    [
+        ("python:no_such_planner:Bfs", "no Python module 'no_such_planner'"),
+        ("python:bfs_planner:Nope", "module 'bfs_planner' has no attribute 'Nope'"),
+        ("python:bfs_planner", "expected python:MODULE:NAME"),
+        ("cmd:no-such-program --fast", "command 'no-such-program' not found on PATH"),
+        ("cmd:./missing.sh", "no program './missing.sh'"),
+        ("cmd:", "cmd: needs a command"),
+    ],
+)
+def test_a_missing_module_name_or_program_is_one_error_line(project: Path, capsys: pytest.CaptureFixture[str], sut: str, message: str) -> None:
     code = main(["evaluate", "--env", "warehouse.toml", "--sut", sut, "--out", "report", "-q"])
     err = capsys.readouterr().err
     assert code == 2 and err.startswith(f"error: --sut {sut}: ") and message in err, err
@@ -414,10 +418,12 @@ def test_a_factory_that_raises_is_one_error_line(project: Path, capsys: pytest.C
 def test_a_planner_that_writes_unasked_lines_fails_its_run(project: Path) -> None:
     from experiments.evaluation.runs import evaluate
 
-    write(project, "banner.py", "import sys\nprint('BFS planner v2 ready', flush=True)\n"
-                                "for line in sys.stdin:\n    if '\"step\"' in line[:20]:\n        print('stay', flush=True)\n")
+    write(
+        project,
+        "banner.py",
+        "import sys\nprint('BFS planner v2 ready', flush=True)\nfor line in sys.stdin:\n    if '\"step\"' in line[:20]:\n        print('stay', flush=True)\n",
+    )
     cells = evaluate(["small-reactive"], ["cmd:python3 banner.py"], 2)
     said = cells[0].traces[0].planner_error
-    assert "wrote 'BFS planner v2 ready' before it was asked" in said or (
-        "step 0: answered 'BFS planner v2 ready', which is not an action" in said)
+    assert "wrote 'BFS planner v2 ready' before it was asked" in said or ("step 0: answered 'BFS planner v2 ready', which is not an action" in said)
     assert "logs to standard error" in said, said  # either way, where the banner belongs

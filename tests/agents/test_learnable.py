@@ -84,8 +84,9 @@ def test_shaping_is_off_unless_asked_and_potential_based() -> None:
         VisitedPlaces(gym.make("FlowTest-Maze2-v0", obs_kind="grid"))
 
 
-@pytest.mark.parametrize("env_id", ["FlowTest-RandomGrid-v0", "FlowTest-Maze2-v0", "FlowTest-Example1-v0",
-                                    "FlowTest-Refueling-v0", "FlowTest-Maze1-v0", "FlowTest-Patrolling-v0"])
+@pytest.mark.parametrize(
+    "env_id", ["FlowTest-RandomGrid-v0", "FlowTest-Maze2-v0", "FlowTest-Example1-v0", "FlowTest-Refueling-v0", "FlowTest-Maze1-v0", "FlowTest-Patrolling-v0"]
+)
 def test_padded_observation_has_one_shape(env_id: str) -> None:
     env = gym.make(env_id, obs_kind="padded")
     ref = gym.make("FlowTest-SmallReactive-v0", obs_kind="padded")
@@ -116,21 +117,61 @@ def test_train_flags_are_used_saved_and_play_many_tests(tmp_path: Path, capsys: 
     from experiments.cli.cli import main
 
     model = tmp_path / "m.zip"
-    code = main(["train", "FlowTest-Maze2-v0", "--trainer", "sb3", "--steps", "256", "--out", str(model),
-                 "--eval-episodes", "2", "-q", "--n-envs", "2", "--n-steps", "64", "--batch-size", "64", "--net-arch", "16,16", "--shaping", "0",
-                 "--obs-kind", "padded", "--learning-rate", "0.0005"])
+    code = main(
+        [
+            "train",
+            "FlowTest-Maze2-v0",
+            "--trainer",
+            "sb3",
+            "--steps",
+            "256",
+            "--out",
+            str(model),
+            "--eval-episodes",
+            "2",
+            "-q",
+            "--n-envs",
+            "2",
+            "--n-steps",
+            "64",
+            "--batch-size",
+            "64",
+            "--net-arch",
+            "16,16",
+            "--shaping",
+            "0",
+            "--obs-kind",
+            "padded",
+            "--learning-rate",
+            "0.0005",
+        ]
+    )
     out, err = capsys.readouterr()
     assert code == 0
     assert "--shaping 0" in err and "--net-arch 16,16" in err
     assert "obs_kind=padded" in out and "shaping=0" in out
     saved = json.loads(model.with_suffix(".json").read_text())
     assert saved["settings"]["net_arch"] == [16, 16] and saved["settings"]["learning_rate"] == 0.0005
-    assert saved["env_options"] == {"memory": "visited", "shaping": 0.0, "shaping_gamma": 0.99, "obs_kind": "padded",
-                                    "pad_to": 8}
+    assert saved["env_options"] == {"memory": "visited", "shaping": 0.0, "shaping_gamma": 0.99, "obs_kind": "padded", "pad_to": 8}
     out_dir = tmp_path / "report"
     trust_pickled_models(True)  # an SB3 zip: `flowtest evaluate --trust-model`
-    code = main(["evaluate", "--env", "FlowTest-Maze2-v0", "example1", "beaver-rescue", "--sut", f"ppo:{model}",
-                 "scripted:replanner", "--episodes", "1", "--out", str(out_dir), "-q"])
+    code = main(
+        [
+            "evaluate",
+            "--env",
+            "FlowTest-Maze2-v0",
+            "example1",
+            "beaver-rescue",
+            "--sut",
+            f"ppo:{model}",
+            "scripted:replanner",
+            "--episodes",
+            "1",
+            "--out",
+            str(out_dir),
+            "-q",
+        ]
+    )
     assert code == 0
     records = {(r["env"], r["sut"]): r for r in json.loads((out_dir / "results.json").read_text())}
     assert len(records) == 6
@@ -147,10 +188,29 @@ def test_flat_model_on_another_test_is_a_row(tmp_path: Path, capsys: pytest.Capt
     from experiments.cli.cli import main
 
     model = tmp_path / "flat.zip"
-    assert main(["train", "small-reactive", "--steps", "128", "--out", str(model), "--eval-episodes", "0", "-q",
-                 "--n-envs", "1", "--n-steps", "128", "--batch-size", "64"]) == 0  # the native trainer
-    code = main(["evaluate", "--env", "FlowTest-Maze2-v0", "small-reactive", "--sut", f"ppo:{model}", "--episodes", "1",
-                 "--out", str(tmp_path / "r"), "-q"])
+    assert (
+        main(
+            [
+                "train",
+                "small-reactive",
+                "--steps",
+                "128",
+                "--out",
+                str(model),
+                "--eval-episodes",
+                "0",
+                "-q",
+                "--n-envs",
+                "1",
+                "--n-steps",
+                "128",
+                "--batch-size",
+                "64",
+            ]
+        )
+        == 0
+    )  # the native trainer
+    code = main(["evaluate", "--env", "FlowTest-Maze2-v0", "small-reactive", "--sut", f"ppo:{model}", "--episodes", "1", "--out", str(tmp_path / "r"), "-q"])
     out = capsys.readouterr().out
     assert code == 0
     assert "FlowTest-Maze2-v0" in out and "not run: model" in out and "'maze2' gives" in out
@@ -168,12 +228,38 @@ def test_recurrent_ppo_trains_and_plays(tmp_path: Path, capsys: pytest.CaptureFi
     from experiments.cli.cli import main
 
     model = tmp_path / "lstm.zip"
-    assert main(["train", "small-reactive", "--trainer", "sb3", "--algo", "recurrent-ppo", "--steps", "128", "--out",
-                 str(model), "--eval-episodes", "2", "-q", "--n-envs", "1", "--n-steps", "128", "--batch-size", "64",
-                 "--memory", "none", "--net-arch", "16"]) == 0
+    assert (
+        main(
+            [
+                "train",
+                "small-reactive",
+                "--trainer",
+                "sb3",
+                "--algo",
+                "recurrent-ppo",
+                "--steps",
+                "128",
+                "--out",
+                str(model),
+                "--eval-episodes",
+                "2",
+                "-q",
+                "--n-envs",
+                "1",
+                "--n-steps",
+                "128",
+                "--batch-size",
+                "64",
+                "--memory",
+                "none",
+                "--net-arch",
+                "16",
+            ]
+        )
+        == 0
+    )
     trust_pickled_models(True)  # an SB3 zip: `flowtest evaluate --trust-model`
-    assert main(["evaluate", "--env", "small-reactive", "--sut", f"ppo:{model}", "--episodes", "2",
-                 "--out", str(tmp_path / "r"), "-q"]) == 0
+    assert main(["evaluate", "--env", "small-reactive", "--sut", f"ppo:{model}", "--episodes", "2", "--out", str(tmp_path / "r"), "-q"]) == 0
     from agents.ppo import load_model
 
     assert type(load_model(model)).__name__ == "RecurrentPPO"

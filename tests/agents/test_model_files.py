@@ -45,9 +45,10 @@ def evil_sb3_zip(path: Path, marker: Path) -> Path:
     """A stable-baselines3-shaped zip (a ``data`` JSON whose policy class is a serialized
     object, as SB3 writes it) carrying :class:`Payload`."""
     blob = base64.b64encode(pickle.dumps(Payload(marker))).decode()
-    data = {"policy_class": {":type:": "<class 'abc.ABCMeta'>", ":serialized:": blob,
-                             "__module__": "sb3_contrib.common.maskable.policies"},
-            "observation_space": {":type:": "<class 'gymnasium.spaces.box.Box'>", ":serialized:": blob}}
+    data = {
+        "policy_class": {":type:": "<class 'abc.ABCMeta'>", ":serialized:": blob, "__module__": "sb3_contrib.common.maskable.policies"},
+        "observation_space": {":type:": "<class 'gymnasium.spaces.box.Box'>", ":serialized:": blob},
+    }
     with zipfile.ZipFile(path, "w") as z:
         z.writestr("data", json.dumps(data))
         z.writestr("_stable_baselines3_version", "2.3.0")
@@ -71,17 +72,16 @@ def _run(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str,
     return code, out, err
 
 
-@pytest.mark.parametrize("argv", [
-    ["evaluate", "--env", "small-reactive", "--sut", "ppo:{evil}", "--episodes", "1", "--out", "{out}"],
-    ["evaluate", "--env", "FlowTest-Maze2-v0", "--tester", "ppo:{evil}", "--sut", "random", "--episodes", "1",
-     "--out", "{out}"],
-    ["evaluate", "--env", "FlowTest-Maze2-v0", "--tester", "ppo:{folder}", "--sut", "random", "--episodes", "1",
-     "--out", "{out}"],
-    ["benchmark", "--pool", "safety2/4x4", "--train-count", "2", "--test-count", "2", "--sut", "ppo:{evil}",
-     "--out", "{out}"],
-])
-def test_a_pickled_model_runs_nothing_without_the_opt_in(tmp_path: Path, capsys: pytest.CaptureFixture[str],
-                                                         argv: list[str]) -> None:
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["evaluate", "--env", "small-reactive", "--sut", "ppo:{evil}", "--episodes", "1", "--out", "{out}"],
+        ["evaluate", "--env", "FlowTest-Maze2-v0", "--tester", "ppo:{evil}", "--sut", "random", "--episodes", "1", "--out", "{out}"],
+        ["evaluate", "--env", "FlowTest-Maze2-v0", "--tester", "ppo:{folder}", "--sut", "random", "--episodes", "1", "--out", "{out}"],
+        ["benchmark", "--pool", "safety2/4x4", "--train-count", "2", "--test-count", "2", "--sut", "ppo:{evil}", "--out", "{out}"],
+    ],
+)
+def test_a_pickled_model_runs_nothing_without_the_opt_in(tmp_path: Path, capsys: pytest.CaptureFixture[str], argv: list[str]) -> None:
     marker = tmp_path / "payload-ran"
     evil = evil_sb3_zip(tmp_path / "evil.zip", marker)
     folder = tmp_path / "testers"
@@ -147,15 +147,18 @@ def _object_npy(marker: Path) -> bytes:
     return buf.getvalue()
 
 
-@pytest.mark.parametrize("case, says", [
-    ("pickled tensor", "not a plain .npy"),
-    ("extra member", "unexpected members"),
-    ("missing tensor", "missing members"),
-    ("wrong shape", "settings say"),
-    ("other format", "does not name the format"),
-    ("newer version", "format version"),
-    ("not json", "not JSON"),
-])
+@pytest.mark.parametrize(
+    "case, says",
+    [
+        ("pickled tensor", "not a plain .npy"),
+        ("extra member", "unexpected members"),
+        ("missing tensor", "missing members"),
+        ("wrong shape", "settings say"),
+        ("other format", "does not name the format"),
+        ("newer version", "format version"),
+        ("not json", "not JSON"),
+    ],
+)
 def test_native_checkpoint_refuses_anything_else(tmp_path: Path, case: str, says: str) -> None:
     path = _native(tmp_path)
     marker = tmp_path / "payload-ran"
@@ -186,8 +189,7 @@ def test_a_broken_native_checkpoint_is_one_error_line_as_a_sut(tmp_path: Path, c
         load_model(path)
     # a network's checkpoint (its settings are checked before any tensor is read) with a pickled tensor
     path = tmp_path / "net.zip"
-    save_policy(path, make_agent(3, 2, [4]), {"algo": "ppo", "network": {"kind": "mlp", "hidden": [4], "gru_hidden": 1},
-                                              "obs_size": 3, "n_actions": 2})
+    save_policy(path, make_agent(3, 2, [4]), {"algo": "ppo", "network": {"kind": "mlp", "hidden": [4], "gru_hidden": 1}, "obs_size": 3, "n_actions": 2})
     load_model(path)
     _rewrite(path, {"tensors/actor.0.weight.npy": _object_npy(tmp_path / "m")})
     with pytest.raises(PolicyError, match="not a plain .npy"):

@@ -29,10 +29,18 @@ def _minibatch(n: int, d: int, a: int, seed: int, weights: bool = False) -> Mini
     masks[1] = torch.tensor([True] + [False] * (a - 1))  # one legal action: entropy 0
     actions = torch.argmax(torch.rand(n, a, generator=g) * masks, dim=1)
     weight = (torch.rand(n, generator=g) < 0.8) if weights else torch.ones(n, dtype=torch.bool)
-    return Minibatch(obs=(torch.rand(n, d, generator=g) < 0.3).float(), masks=masks, actions=actions,
-                     logprobs=torch.log(torch.rand(n, generator=g) * 0.6 + 0.2), adv=torch.randn(n, generator=g),
-                     returns=torch.randn(n, generator=g), weight=weight, h0=torch.zeros(n, 0), starts=torch.zeros(n, dtype=torch.bool),
-                     all_valid=not weights)
+    return Minibatch(
+        obs=(torch.rand(n, d, generator=g) < 0.3).float(),
+        masks=masks,
+        actions=actions,
+        logprobs=torch.log(torch.rand(n, generator=g) * 0.6 + 0.2),
+        adv=torch.randn(n, generator=g),
+        returns=torch.randn(n, generator=g),
+        weight=weight,
+        h0=torch.zeros(n, 0),
+        starts=torch.zeros(n, dtype=torch.bool),
+        all_valid=not weights,
+    )
 
 
 @pytest.mark.parametrize("hidden", [(8,), (16, 12), (8, 8, 8)])
@@ -72,7 +80,7 @@ def test_flat_adam_takes_torchs_adam_steps_and_autograd_fills_its_gradient() -> 
     for step in range(4):
         for net, o in ((agent, opt), (twin, ref)):
             logits, values = net.replay(x, net.initial_state(3, torch.device("cpu")), starts)
-            loss = (logits ** 2).mean() + values.mean()
+            loss = (logits**2).mean() + values.mean()
             o.zero_grad()
             loss.backward()
             if o is opt:

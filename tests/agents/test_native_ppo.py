@@ -49,8 +49,7 @@ FLOWTEST = Path(sys.executable).parent / "flowtest"
 
 def _runner(kind: str, max_steps: int = 3, n: int = 4, seed: int = 0) -> tuple[Runner, Agent, NativeArgs]:
     """A runner on small-reactive whose episodes end every few steps (``max_steps``)."""
-    env: Any = gym.make_vec("FlowTest-SmallReactive-v0", num_envs=n, vectorization_mode="vector_entry_point",
-                            max_steps=max_steps)
+    env: Any = gym.make_vec("FlowTest-SmallReactive-v0", num_envs=n, vectorization_mode="vector_entry_point", max_steps=max_steps)
     torch.manual_seed(seed)
     where = shared_position_slice([make_encoder(g, "flat") for g in env.unwrapped.games])
     obs_size = int(env.single_observation_space.shape[0]) + (where.stop - where.start)
@@ -110,11 +109,18 @@ def _rollout(terminated: bool) -> Rollout:
     then the autoreset step."""
     f = torch.zeros
     return Rollout(
-        obs=f((3, 1, 2)), masks=torch.ones((3, 1, 2), dtype=torch.bool), actions=torch.zeros((3, 1), dtype=torch.long),
-        logprobs=f((3, 1)), values=torch.tensor([[0.5], [0.25], [2.0]]), rewards=torch.tensor([[0.1], [0.2], [0.0]]),
-        terminated=torch.tensor([[False], [terminated], [False]]), truncated=torch.tensor([[False], [not terminated], [False]]),
-        valid=torch.tensor([[True], [True], [False]]), starts=torch.tensor([[True], [False], [False]]),
-        h0=f((1, 0)), next_value=torch.tensor([7.0]),
+        obs=f((3, 1, 2)),
+        masks=torch.ones((3, 1, 2), dtype=torch.bool),
+        actions=torch.zeros((3, 1), dtype=torch.long),
+        logprobs=f((3, 1)),
+        values=torch.tensor([[0.5], [0.25], [2.0]]),
+        rewards=torch.tensor([[0.1], [0.2], [0.0]]),
+        terminated=torch.tensor([[False], [terminated], [False]]),
+        truncated=torch.tensor([[False], [not terminated], [False]]),
+        valid=torch.tensor([[True], [True], [False]]),
+        starts=torch.tensor([[True], [False], [False]]),
+        h0=f((1, 0)),
+        next_value=torch.tensor([7.0]),
     )
 
 
@@ -144,8 +150,19 @@ def test_masked_logits_give_illegal_actions_no_probability() -> None:
 def test_a_seed_gives_the_same_run_and_the_checkpoint_plays_it(tmp_path: Path, algo: str) -> None:
     """Twice the same seed, once on the torch env and once on the NumPy env: the same
     tensors bit for bit (the two envs give the same runs)."""
-    args = NativeArgs(env_id="FlowTest-SmallReactive-v0", algo=algo, total_steps=512, num_envs=8, num_steps=16,
-                      num_minibatches=2, hidden=(16,), gru_hidden=8, device="cpu", eval_every=256, env_backend="torch")
+    args = NativeArgs(
+        env_id="FlowTest-SmallReactive-v0",
+        algo=algo,
+        total_steps=512,
+        num_envs=8,
+        num_steps=16,
+        num_minibatches=2,
+        hidden=(16,),
+        gru_hidden=8,
+        device="cpu",
+        eval_every=256,
+        env_backend="torch",
+    )
     a = train(args, out=tmp_path / "a.zip", progress_bar=False)
     args.env_backend = "numpy"
     b = train(args, out=tmp_path / "b.zip", progress_bar=False)
@@ -167,12 +184,33 @@ def test_a_seed_gives_the_same_run_and_the_checkpoint_plays_it(tmp_path: Path, a
     assert (t.verdict["system_objective"] == "met") == (a.final["train"]["met"] == 1.0)
 
 
-def test_flowtest_train_native_writes_every_setting_logs_and_a_safe_checkpoint(
-        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_flowtest_train_native_writes_every_setting_logs_and_a_safe_checkpoint(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     model = tmp_path / "m.zip"
-    code = main(["train", "small-reactive", "--steps", "1024", "--num-envs", "8", "--n-steps", "16", "--net-arch", "16",
-                 "--out", str(model), "--log-dir", str(tmp_path / "logs"), "--eval-every", "512", "--eval-episodes", "2",
-                 "--device", "cpu", "-q"])
+    code = main(
+        [
+            "train",
+            "small-reactive",
+            "--steps",
+            "1024",
+            "--num-envs",
+            "8",
+            "--n-steps",
+            "16",
+            "--net-arch",
+            "16",
+            "--out",
+            str(model),
+            "--log-dir",
+            str(tmp_path / "logs"),
+            "--eval-every",
+            "512",
+            "--eval-episodes",
+            "2",
+            "--device",
+            "cpu",
+            "-q",
+        ]
+    )
     out, err = capsys.readouterr()
     assert code == 0, err
     assert "--trainer native" in err and "--n-envs 8" in err and "--net-arch 16" in err and "--device cpu" in err
@@ -189,24 +227,25 @@ def test_flowtest_train_native_writes_every_setting_logs_and_a_safe_checkpoint(
     with zipfile.ZipFile(model) as z:
         names = z.namelist()
     assert names[0] == "flowtest-policy.json" and all(n.startswith("tensors/") and n.endswith(".npy") for n in names[1:])
-    code = main(["evaluate", "--env", "small-reactive", "--sut", f"ppo:{model}", "--episodes", "2",
-                 "--out", str(tmp_path / "r"), "-q"])
+    code = main(["evaluate", "--env", "small-reactive", "--sut", f"ppo:{model}", "--episodes", "2", "--out", str(tmp_path / "r"), "-q"])
     assert code == 0, capsys.readouterr().err
     assert "warning" not in capsys.readouterr().err  # data, not code: no opt-in, no warning
 
 
-@pytest.mark.parametrize("argv, says", [
-    (["--lstm-hidden-size", "8"], "a setting of --trainer sb3"),
-    (["--trainer", "sb3", "--device", "cpu"], "a setting of the native trainer"),
-    (["--trainer", "sb3", "--log-dir", "logs"], "goes with the native trainer"),
-    (["--algo", "maskable-ppo", "--trainer", "sb3", "--gru-hidden-size", "4"], "a setting of the native trainer"),
-    (["--device", "tpu"], "device"),
-    (["--count", "4"], "go with --pool"),
-    (["--pool", "nonsense/5x5"], "unknown family"),
-    (["--pool", "reachability1/5x5"], "--pool trains on a named pool's tests through FlowTest-RandomGrid-v0, not small-reactive"),
-])
-def test_bad_training_flags_are_one_error_line(tmp_path: Path, capsys: pytest.CaptureFixture[str], argv: list[str],
-                                               says: str) -> None:
+@pytest.mark.parametrize(
+    "argv, says",
+    [
+        (["--lstm-hidden-size", "8"], "a setting of --trainer sb3"),
+        (["--trainer", "sb3", "--device", "cpu"], "a setting of the native trainer"),
+        (["--trainer", "sb3", "--log-dir", "logs"], "goes with the native trainer"),
+        (["--algo", "maskable-ppo", "--trainer", "sb3", "--gru-hidden-size", "4"], "a setting of the native trainer"),
+        (["--device", "tpu"], "device"),
+        (["--count", "4"], "go with --pool"),
+        (["--pool", "nonsense/5x5"], "unknown family"),
+        (["--pool", "reachability1/5x5"], "--pool trains on a named pool's tests through FlowTest-RandomGrid-v0, not small-reactive"),
+    ],
+)
+def test_bad_training_flags_are_one_error_line(tmp_path: Path, capsys: pytest.CaptureFixture[str], argv: list[str], says: str) -> None:
     out = tmp_path / "m.zip"
     try:
         code = main(["train", "small-reactive", "--out", str(out), *argv])
@@ -224,9 +263,25 @@ def test_ctrl_c_while_training_leaves_nothing_half_written(tmp_path: Path) -> No
     out = tmp_path / "out"
     out.mkdir()
     proc = start_until(
-        [str(FLOWTEST), "train", "small-reactive", "--steps", "100000000", "--num-envs", "8", "--net-arch", "16",
-         "--out", str(out / "m.zip"), "--log-dir", str(out / "logs"), "--device", "cpu"],
-        "training with", signal.SIGINT,
+        [
+            str(FLOWTEST),
+            "train",
+            "small-reactive",
+            "--steps",
+            "100000000",
+            "--num-envs",
+            "8",
+            "--net-arch",
+            "16",
+            "--out",
+            str(out / "m.zip"),
+            "--log-dir",
+            str(out / "logs"),
+            "--device",
+            "cpu",
+        ],
+        "training with",
+        signal.SIGINT,
     )
     deadline = time.time() + 60
     while not (out / "logs" / "m" / "progress.csv").exists() and time.time() < deadline:
@@ -263,8 +318,9 @@ def test_an_interrupted_run_does_not_wait_for_the_tensorboard_thread(tmp_path: P
             closed.append(self.log_dir)
 
     monkeypatch.setattr(torch.utils.tensorboard, "SummaryWriter", Writer)
-    args = NativeArgs(env_id="FlowTest-SmallReactive-v0", total_steps=256, num_envs=8, num_steps=16, num_minibatches=2,
-                      hidden=(16,), device="cpu", eval_every=0)
+    args = NativeArgs(
+        env_id="FlowTest-SmallReactive-v0", total_steps=256, num_envs=8, num_steps=16, num_minibatches=2, hidden=(16,), device="cpu", eval_every=0
+    )
     train(args, progress_bar=False, log_dir=tmp_path / "done")
     assert closed == [str(tmp_path / "done")]
     calls = []
@@ -320,9 +376,18 @@ def test_level_sampler_ranks_scores_weighs_staleness_and_plays_unseen_levels_fir
 def test_plr_training_samples_its_levels_and_is_seeded(tmp_path: Path) -> None:
     """level_sampling="plr": the env's tests are chosen by the sampler (every level is
     seen, replays happen, the log has the sampler's numbers), and a seed gives the same run."""
-    args = NativeArgs(env_id="FlowTest-RandomGrid-v0", env_kwargs={"pool": "safety2/4x4", "split": "train", "count": 6},
-                      total_steps=1024, num_envs=8, num_steps=16, num_minibatches=2, hidden=(16,), device="cpu",
-                      eval_every=0, level_sampling="plr")
+    args = NativeArgs(
+        env_id="FlowTest-RandomGrid-v0",
+        env_kwargs={"pool": "safety2/4x4", "split": "train", "count": 6},
+        total_steps=1024,
+        num_envs=8,
+        num_steps=16,
+        num_minibatches=2,
+        hidden=(16,),
+        device="cpu",
+        eval_every=0,
+        level_sampling="plr",
+    )
     a = train(args, progress_bar=False)
     b = train(args, progress_bar=False)
     rows = [r for r in a.rows if "plr/levels_seen" in r]
@@ -342,8 +407,9 @@ def test_batch_actor_plays_the_checkpoint_greedy_and_sampled(tmp_path: Path) -> 
     from agents.native_ppo import load_native
     from flowtest_env.scoring import play_batch
 
-    args = NativeArgs(env_id="FlowTest-SmallReactive-v0", total_steps=512, num_envs=8, num_steps=16, num_minibatches=2,
-                      hidden=(16,), device="cpu", eval_every=0)
+    args = NativeArgs(
+        env_id="FlowTest-SmallReactive-v0", total_steps=512, num_envs=8, num_steps=16, num_minibatches=2, hidden=(16,), device="cpu", eval_every=0
+    )
     result = train(args, out=tmp_path / "m.zip", progress_bar=False)
     model = load_native(tmp_path / "m.zip")
     vec: Any = gym.make_vec("FlowTest-SmallReactive-v0", num_envs=1, vectorization_mode="vector_entry_point")
@@ -363,8 +429,17 @@ def test_a_counts_checkpoint_plays_its_memory_everywhere(tmp_path: Path) -> None
     from experiments.evaluation.episodes import run_episode
     from flowtest_env.scoring import play_batch
 
-    args = NativeArgs(env_id="FlowTest-SmallReactive-v0", memory="counts", total_steps=512, num_envs=8, num_steps=16,
-                      num_minibatches=2, hidden=(16,), device="cpu", eval_every=0)
+    args = NativeArgs(
+        env_id="FlowTest-SmallReactive-v0",
+        memory="counts",
+        total_steps=512,
+        num_envs=8,
+        num_steps=16,
+        num_minibatches=2,
+        hidden=(16,),
+        device="cpu",
+        eval_every=0,
+    )
     result = train(args, out=tmp_path / "c.zip", progress_bar=False)
     model = load_native(tmp_path / "c.zip")
     assert model.flowtest_memory == "counts" and model.settings["memory"] == "counts"
@@ -391,14 +466,16 @@ def test_the_network_reads_the_varying_entries_and_is_widened_for_play(tmp_path:
     narrow = make_agent(len(cols), 5, (8,), "mlp")
     wide = widen(narrow, torch.as_tensor(cols), table.shape[1] + 3)
     x = torch.rand(6, table.shape[1] + 3)
-    for a, b in zip(narrow.step(x[:, torch.as_tensor(cols)], torch.zeros(6, 0), torch.zeros(6, dtype=torch.bool)),
-                    wide.step(x, torch.zeros(6, 0), torch.zeros(6, dtype=torch.bool)), strict=True):
+    for a, b in zip(
+        narrow.step(x[:, torch.as_tensor(cols)], torch.zeros(6, 0), torch.zeros(6, dtype=torch.bool)),
+        wide.step(x, torch.zeros(6, 0), torch.zeros(6, dtype=torch.bool)),
+        strict=True,
+    ):
         torch.testing.assert_close(a, b)
     dropped = np.setdiff1d(np.arange(table.shape[1] + 3), cols)
     assert float(wide.actor[0].weight.detach()[:, dropped].abs().sum()) == 0.0
     # end to end: the same seed trains "all" and "varying" to networks of the whole observation
-    base = dict(env_id="FlowTest-SmallReactive-v0", total_steps=256, num_envs=8, num_steps=16, num_minibatches=2, hidden=(16,),
-                device="cpu", eval_every=0)
+    base = dict(env_id="FlowTest-SmallReactive-v0", total_steps=256, num_envs=8, num_steps=16, num_minibatches=2, hidden=(16,), device="cpu", eval_every=0)
     narrow_run = train(NativeArgs(**base, inputs="varying"), out=tmp_path / "v.zip", progress_bar=False)
     full_run = train(NativeArgs(**base, inputs="all"), progress_bar=False)
     assert narrow_run.agent.obs_size == full_run.agent.obs_size
@@ -406,8 +483,9 @@ def test_the_network_reads_the_varying_entries_and_is_widened_for_play(tmp_path:
 
 
 def test_validation_selects_the_checkpoint_and_until_stops_the_run(tmp_path: Path) -> None:
-    args = NativeArgs(env_id="FlowTest-SmallReactive-v0", total_steps=1024, num_envs=8, num_steps=16, num_minibatches=2,
-                      hidden=(16,), device="cpu", eval_every=256)
+    args = NativeArgs(
+        env_id="FlowTest-SmallReactive-v0", total_steps=1024, num_envs=8, num_steps=16, num_minibatches=2, hidden=(16,), device="cpu", eval_every=256
+    )
     vec: Any = gym.make_vec("FlowTest-SmallReactive-v0", num_envs=1, vectorization_mode="vector_entry_point")
     games = list(vec.unwrapped.games)
     result = train(args, out=tmp_path / "s.zip", progress_bar=False, validation=games)

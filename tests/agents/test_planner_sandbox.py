@@ -22,7 +22,7 @@ from tests.testing_processes import start_until
 # A planner that never reads its standard input and prints ``stay`` every 30 ms (issue 43's
 # case); with ``SMALL_PIPE`` it first shrinks its input pipe to one page, so that FlowTest's
 # writes fill it within the first run.
-DEAF = '''import fcntl, os, sys, time
+DEAF = """import fcntl, os, sys, time
 if "--small-pipe" in sys.argv:
     fcntl.fcntl(0, fcntl.F_SETPIPE_SZ, 4096)
 with open("deaf.pid", "w") as f:
@@ -30,7 +30,7 @@ with open("deaf.pid", "w") as f:
 while True:
     print("stay", flush=True)
     time.sleep(0.03)
-'''
+"""
 
 ANSWERS = {
     "superscript.py": "print('\\u00b2', flush=True)",
@@ -43,11 +43,10 @@ ANSWERS = {
 
 
 def answering(statement: str) -> str:
-    return ("import json, sys, time\nfor line in sys.stdin:\n    if json.loads(line)['type'] == 'step':\n        "
-            + statement + "\n")
+    return "import json, sys, time\nfor line in sys.stdin:\n    if json.loads(line)['type'] == 'step':\n        " + statement + "\n"
 
 
-PYTHON_PLANNERS = '''import os, subprocess, sys, time
+PYTHON_PLANNERS = """import os, subprocess, sys, time
 
 def swallows(observation, mask):  # a bare except in a loop: swallows the timer and Ctrl-C alike
     while True:
@@ -81,7 +80,7 @@ class Spawner:  # starts a child in the background that would outlive it
             f.write(str(child.pid))
     def act(self, observation, mask):
         return observation["allowed"][-1]
-'''
+"""
 
 
 @pytest.fixture
@@ -142,8 +141,7 @@ def test_issue_43_acceptance_a_deaf_planner_over_40_episodes(folder: Path, capsy
     verdict, the evaluation ends with its report."""
     (folder / "deaf.py").write_text(DEAF)
     t0 = time.perf_counter()
-    code = main(["evaluate", "--env", "small-reactive", "--sut", "cmd:python3 deaf.py", "--episodes", "40",
-                 "--step-timeout", "3", "--out", "report", "-q"])
+    code = main(["evaluate", "--env", "small-reactive", "--sut", "cmd:python3 deaf.py", "--episodes", "40", "--step-timeout", "3", "--out", "report", "-q"])
     took = time.perf_counter() - t0
     assert code == 0, capsys.readouterr().err
     (record,) = json.loads((folder / "report" / "results.json").read_text())
@@ -153,17 +151,36 @@ def test_issue_43_acceptance_a_deaf_planner_over_40_episodes(folder: Path, capsy
     assert gone_soon(int((folder / "deaf.pid").read_text()))
 
 
-@pytest.mark.parametrize("sig,delay", [(signal.SIGINT, 0.2), (signal.SIGINT, 2.5), (signal.SIGTERM, 2.5)],
-                         ids=["SIGINT-reading", "SIGINT-writing", "SIGTERM-writing"])
+@pytest.mark.parametrize(
+    "sig,delay", [(signal.SIGINT, 0.2), (signal.SIGINT, 2.5), (signal.SIGTERM, 2.5)], ids=["SIGINT-reading", "SIGINT-writing", "SIGTERM-writing"]
+)
 def test_ctrl_c_stops_within_a_second_whatever_the_planner_does(folder: Path, sig: signal.Signals, delay: float) -> None:
     """Ctrl-C or SIGTERM while FlowTest waits for the planner's answer (0.2 s into its pair)
     or is blocked writing to it (2.5 s in: the one-page pipe is full and the step timeout is
     a minute away): exit 130 at once, the pair played kept in results.json, the planner
     gone."""
     (folder / "deaf.py").write_text(DEAF)
-    proc = start_until([sys.executable, "-m", "experiments", "evaluate", "--env", "small-reactive", "--sut", "scripted:replanner",
-                        "cmd:python3 deaf.py --small-pipe", "--episodes", "40", "--step-timeout", "60", "--out", "report"],
-                       "[1/2] scripted:replanner on small-reactive: 40/40 episodes", sig)  # the deaf planner's pair starts
+    proc = start_until(
+        [
+            sys.executable,
+            "-m",
+            "experiments",
+            "evaluate",
+            "--env",
+            "small-reactive",
+            "--sut",
+            "scripted:replanner",
+            "cmd:python3 deaf.py --small-pipe",
+            "--episodes",
+            "40",
+            "--step-timeout",
+            "60",
+            "--out",
+            "report",
+        ],
+        "[1/2] scripted:replanner on small-reactive: 40/40 episodes",
+        sig,
+    )  # the deaf planner's pair starts
     time.sleep(delay)
     signalled = time.perf_counter()
     proc.send_signal(sig)
@@ -224,11 +241,27 @@ def test_parse_answer_takes_names_and_small_indices_only() -> None:
 
     game = game_of(make_env("small-reactive"))
     mask = np.ones(game.n_actions, dtype=np.int8)
-    for answer, action in [("N", 0), ('"E"', 2), ('{"action": "stay"}', 4), ("4", 4), (b"3\r", 3), (1, 1), ({"action": 2}, 2),
-                           (np.int64(3), 3)]:
+    for answer, action in [("N", 0), ('"E"', 2), ('{"action": "stay"}', 4), ("4", 4), (b"3\r", 3), (1, 1), ({"action": 2}, 2), (np.int64(3), 3)]:
         assert parse_answer(answer, game, 3, mask, 0) == action, answer
-    for answer in ["²", "1" * 4301, "٣", "5", "-1", "1e0", "NaN", '{"action": NaN}', '{"action": 1e400}', "[1]", True,
-                   float("nan"), 10 ** 5000, "{" * 100_000, '{"action": ' + "1" * 30 + "}", None, [0]]:
+    for answer in [
+        "²",
+        "1" * 4301,
+        "٣",
+        "5",
+        "-1",
+        "1e0",
+        "NaN",
+        '{"action": NaN}',
+        '{"action": 1e400}',
+        "[1]",
+        True,
+        float("nan"),
+        10**5000,
+        "{" * 100_000,
+        '{"action": ' + "1" * 30 + "}",
+        None,
+        [0],
+    ]:
         with pytest.raises(PlannerError, match="which is not an action"):
             parse_answer(answer, game, 3, mask, 0)
 
@@ -265,14 +298,15 @@ def test_python_planners_that_exit_loop_or_swallow_everything_fail_their_own_run
     assert by["scripted:replanner"].record()["episodes"] == 3
 
 
-@pytest.mark.parametrize("sut,message", [
-    ("python:sys:exit", "error: --sut python:sys:exit: the factory called sys.exit({'name': 'small-reactive'"),
-    ("python:broken.py:act", "error: --sut python:broken.py:act: 'broken.py' could not be loaded: it raised SyntaxError"),
-    ("python:quitter.py:act", "error: --sut python:quitter.py:act: 'quitter.py' could not be loaded: it called sys.exit(5)"),
-])
-def test_a_python_name_that_exits_or_does_not_load_is_one_error_line(
-    folder: Path, capsys: pytest.CaptureFixture[str], sut: str, message: str
-) -> None:
+@pytest.mark.parametrize(
+    "sut,message",
+    [
+        ("python:sys:exit", "error: --sut python:sys:exit: the factory called sys.exit({'name': 'small-reactive'"),
+        ("python:broken.py:act", "error: --sut python:broken.py:act: 'broken.py' could not be loaded: it raised SyntaxError"),
+        ("python:quitter.py:act", "error: --sut python:quitter.py:act: 'quitter.py' could not be loaded: it called sys.exit(5)"),
+    ],
+)
+def test_a_python_name_that_exits_or_does_not_load_is_one_error_line(folder: Path, capsys: pytest.CaptureFixture[str], sut: str, message: str) -> None:
     (folder / "broken.py").write_text("def act(observation, mask)\n    return 0\n")
     (folder / "quitter.py").write_text("import sys\nsys.exit(5)\n")
     code = main(["evaluate", "--env", "small-reactive", "--sut", sut, "--out", "report", "-q"])
@@ -284,18 +318,17 @@ def test_a_python_name_that_exits_or_does_not_load_is_one_error_line(
 # --------------------------------------------------------------------------- numeric options
 
 
-@pytest.mark.parametrize("argv,message", [
-    (["evaluate", "--env", "small-reactive", "--sut", "random", "--out", "r", "--step-timeout", "1e300"],
-     "expected at most 3600 seconds, got '1e300'"),
-    (["evaluate", "--env", "small-reactive", "--sut", "random", "--out", "r", "--step-timeout", "inf"],
-     "expected a positive number of seconds, got 'inf'"),
-    (["evaluate", "--env", "small-reactive", "--sut", "random", "--out", "r", "--step-timeout", "nan"],
-     "expected a positive number of seconds, got 'nan'"),
-    (["evaluate", "--env", "small-reactive", "--sut", "random", "--out", "r", "--step-timeout", "0"],
-     "expected a positive number of seconds, got '0'"),
-    (["serve", "small-reactive", "--port", "70000"], "expected a port (0-65535), got '70000'"),
-    (["serve", "small-reactive", "--port", "-1"], "expected a port (0-65535), got '-1'"),
-])
+@pytest.mark.parametrize(
+    "argv,message",
+    [
+        (["evaluate", "--env", "small-reactive", "--sut", "random", "--out", "r", "--step-timeout", "1e300"], "expected at most 3600 seconds, got '1e300'"),
+        (["evaluate", "--env", "small-reactive", "--sut", "random", "--out", "r", "--step-timeout", "inf"], "expected a positive number of seconds, got 'inf'"),
+        (["evaluate", "--env", "small-reactive", "--sut", "random", "--out", "r", "--step-timeout", "nan"], "expected a positive number of seconds, got 'nan'"),
+        (["evaluate", "--env", "small-reactive", "--sut", "random", "--out", "r", "--step-timeout", "0"], "expected a positive number of seconds, got '0'"),
+        (["serve", "small-reactive", "--port", "70000"], "expected a port (0-65535), got '70000'"),
+        (["serve", "small-reactive", "--port", "-1"], "expected a port (0-65535), got '-1'"),
+    ],
+)
 def test_numeric_options_have_their_range(folder: Path, capsys: pytest.CaptureFixture[str], argv: list[str], message: str) -> None:
     with pytest.raises(SystemExit) as stop:
         main(argv)

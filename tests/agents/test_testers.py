@@ -137,8 +137,9 @@ def learned(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
     folder = tmp_path_factory.mktemp("testers")
     for problem in ("maze2", "small-reactive"):
-        summary = train_tester(problem, 128, folder / f"{problem}.zip", seed=1, progress_bar=False, eval_episodes=1,
-                               n_envs=1, n_steps=128, batch_size=64, n_epochs=1)
+        summary = train_tester(
+            problem, 128, folder / f"{problem}.zip", seed=1, progress_bar=False, eval_episodes=1, n_envs=1, n_steps=128, batch_size=64, n_epochs=1
+        )
         assert summary["steps"] == 128
         assert Path(summary["model"]).exists() and Path(summary["curve"]).exists()
         assert summary["fairness"]["illegal"] == 0
@@ -189,9 +190,25 @@ def test_learned_tester_of_another_problem_is_refused(learned: Path) -> None:
 
 def test_evaluate_compares_testers(learned: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "report"
-    code = main(["evaluate", "--env", "FlowTest-Maze2-v0", "FlowTest-SmallReactive-v0", "--tester", "synthesized",
-                 f"ppo:{learned}", "--sut", "scripted:replanner", "scripted:committed", "--episodes", "2",
-                 "--out", str(out), "-q"])
+    code = main(
+        [
+            "evaluate",
+            "--env",
+            "FlowTest-Maze2-v0",
+            "FlowTest-SmallReactive-v0",
+            "--tester",
+            "synthesized",
+            f"ppo:{learned}",
+            "--sut",
+            "scripted:replanner",
+            "scripted:committed",
+            "--episodes",
+            "2",
+            "--out",
+            str(out),
+            "-q",
+        ]
+    )
     assert code == 0
     records = json.loads((out / "results.json").read_text())
     assert len(records) == 2 * 2 * 2

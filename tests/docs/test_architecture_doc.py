@@ -61,7 +61,4 @@ def test_the_public_api_list_is_synthesis_all() -> None:
     bullets = re.findall(r"^- (.*?)(?=^- |^\S|\Z)", section, flags=re.M | re.S)
     listed = {name for b in bullets for name in re.findall(r"`(\w+)`", b)}
     exported = set(synthesis.__all__)
-    assert listed == exported, (
-        f"docs/architecture.md's public API of synthesis: missing {sorted(exported - listed)}, "
-        f"not exported {sorted(listed - exported)}"
-    )
+    assert listed == exported, f"docs/architecture.md's public API of synthesis: missing {sorted(exported - listed)}, not exported {sorted(listed - exported)}"

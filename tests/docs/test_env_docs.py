@@ -21,9 +21,7 @@ from flowtest_env.envs import BUILTIN_ENVS
 from flowtest_env.game import TestGame
 
 DOCS = Path(__file__).resolve().parents[2] / "docs" / "envs"
-PAGES = {f"FlowTest-{stem}-v0": name for name, (stem, _) in BUILTIN_ENVS.items()} | {
-    "FlowTest-RandomGrid-v0": "random-grid"
-}
+PAGES = {f"FlowTest-{stem}-v0": name for name, (stem, _) in BUILTIN_ENVS.items()} | {"FlowTest-RandomGrid-v0": "random-grid"}
 
 
 def _count(n: int, word: str) -> str:
@@ -97,9 +95,7 @@ def test_page_figures_are_the_envs(env_id: str) -> None:
     else:
         assert "uint8)`" not in text, f"{name} is a graph: it has no grid observation"
     if name != "random-grid":
-        assert shipped_test_sentence(builtin_game(name)) in text, (
-            f"{name}: the page should say: {shipped_test_sentence(builtin_game(name))}"
-        )
+        assert shipped_test_sentence(builtin_game(name)) in text, f"{name}: the page should say: {shipped_test_sentence(builtin_game(name))}"
         objectives = game.artifact.objectives
         assert f"`phi_sys = {objectives['system']}`, hidden `phi_test = {objectives['test']}`" in text
     picture = re.search(r"!\[[^\]]*\]\(([^)]+\.png)\)", text)
@@ -128,8 +124,7 @@ def test_page_says_what_the_observation_lacks_and_how_to_add_it(env_id: str) -> 
     text = _page(env_id)
     assert "## What the observation lacks" in text
     section = text.split("## What the observation lacks", 1)[1].split("\n## ", 1)[0]
-    for needle in ("VisitedPlaces(env)", f'gym.make("{env_id}", memory="visited")', "--algo recurrent-ppo",
-                   "DistanceShaping", 'obs_kind="padded"'):
+    for needle in ("VisitedPlaces(env)", f'gym.make("{env_id}", memory="visited")', "--algo recurrent-ppo", "DistanceShaping", 'obs_kind="padded"'):
         assert needle in section, f"{env_id}: the page does not say {needle}"
     plain = gym.make(env_id)
     with_memory = gym.make(env_id, memory="visited", shaping=10.0)

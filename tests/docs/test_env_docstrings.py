@@ -105,8 +105,7 @@ def test_the_any_test_docstring_rules_hold_for_every_builtin() -> None:
     act, obs = section(doc, "Action Space"), section(doc, "Observation Space")
     for claim in ("``Discrete(5)`` on grids", "``Discrete(k + 1)``", "``k`` the largest out-degree"):
         assert claim in " ".join(act.split()), f"FlowTestEnv's action space section no longer says {claim}"
-    for claim in ('``obs_kind="flat"`` (default): a ``float32`` vector in ``[0, 1]``', "one flat shape for every grid test",
-                  "``uint8[C, H, W]``"):
+    for claim in ('``obs_kind="flat"`` (default): a ``float32`` vector in ``[0, 1]``', "one flat shape for every grid test", "``uint8[C, H, W]``"):
         assert claim in " ".join(obs.split()), f"FlowTestEnv's observation section no longer says {claim}"
     padded = set()
     for name in BUILTIN_ENVS:

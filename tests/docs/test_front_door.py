@@ -25,7 +25,6 @@ from synthesis.problems.files import load_problem_file
 DATA = Path(__file__).resolve().parents[1] / "data"
 
 
-
 @pytest.fixture()
 def problem_file(tmp_path: Path) -> Path:
     p = tmp_path / "mine.toml"
@@ -45,8 +44,7 @@ def _episode(env: gym.Env) -> dict:
     return info["verdict"]
 
 
-def test_problem_file_is_synthesized_once_then_cached(cache: Path, problem_file: Path,
-                                                      monkeypatch: pytest.MonkeyPatch) -> None:
+def test_problem_file_is_synthesized_once_then_cached(cache: Path, problem_file: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     env = gym.make("FlowTest-v0", test=str(problem_file))
     assert env.unwrapped.problem == "ok-grid"
     _episode(env)
@@ -127,11 +125,9 @@ def test_bad_tests_are_one_clear_error(bad: str, needle: str, cache: Path, tmp_p
         flowtest_env.make_env(42)  # type: ignore[arg-type]
 
 
-def test_cli_evaluate_a_problem_file_without_registration(cache: Path, problem_file: Path, tmp_path: Path,
-                                                          capsys: pytest.CaptureFixture[str]) -> None:
+def test_cli_evaluate_a_problem_file_without_registration(cache: Path, problem_file: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "report"
-    code = main(["evaluate", "--env", str(problem_file), "--sut", "scripted:replanner", "gr1",
-                 "--episodes", "2", "--out", str(out), "-q"])
+    code = main(["evaluate", "--env", str(problem_file), "--sut", "scripted:replanner", "gr1", "--episodes", "2", "--out", str(out), "-q"])
     assert code == 0
     records = json.loads((out / "results.json").read_text())
     assert {r["env"] for r in records} == {str(problem_file)}
@@ -141,8 +137,7 @@ def test_cli_evaluate_a_problem_file_without_registration(cache: Path, problem_f
     assert "not a registered ID" in capsys.readouterr().err
 
 
-def test_a_damaged_cache_entry_is_refused_and_rebuilt(cache: Path, problem_file: Path,
-                                                      monkeypatch: pytest.MonkeyPatch) -> None:
+def test_a_damaged_cache_entry_is_refused_and_rebuilt(cache: Path, problem_file: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     flowtest_env.load_test(problem_file)
     (entry,) = (cache / "problems").glob("mine-*.json")
     good = entry.read_text()

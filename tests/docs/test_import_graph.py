@@ -230,8 +230,12 @@ def test_the_graph_sees_every_kind_of_import(graph: list[Edge]) -> None:
 def test_find_cycle_names_a_circle_and_accepts_a_dag() -> None:
     """The search itself: it finds a circle through a function-local edge and names it in
     order, and finds none in a graph without one."""
-    e = [Edge("p.a", "p.b", "p/a.py", 1, False), Edge("p.b", "p.c", "p/b.py", 2, False),
-         Edge("p.c", "p.a", "p/c.py", 9, True), Edge("p.c", "p.d", "p/c.py", 3, False)]
+    e = [
+        Edge("p.a", "p.b", "p/a.py", 1, False),
+        Edge("p.b", "p.c", "p/b.py", 2, False),
+        Edge("p.c", "p.a", "p/c.py", 9, True),
+        Edge("p.c", "p.d", "p/c.py", 3, False),
+    ]
     cycle = find_cycle(e)
     assert cycle is not None and [x.source for x in cycle] == ["p.a", "p.b", "p.c"] and cycle[-1].target == "p.a"
     assert find_cycle(e[:2] + e[3:]) is None
@@ -245,8 +249,7 @@ def test_no_import_circle(graph: list[Edge]) -> None:
     group of modules that import each other, each import with its file and line."""
     found = circles(graph)
     report = "\n".join(
-        f"circle {i + 1} (modules that import each other: {', '.join(sorted(group))}), for instance:\n  "
-        + "\n  ".join(map(str, cycle))
+        f"circle {i + 1} (modules that import each other: {', '.join(sorted(group))}), for instance:\n  " + "\n  ".join(map(str, cycle))
         for i, (group, cycle) in enumerate(found)
     )
     assert not found, f"{len(found)} import circle(s):\n{report}"
@@ -265,8 +268,7 @@ def test_no_circle_among_sub_packages(graph: list[Edge]) -> None:
     units = [Edge(unit(e.source), unit(e.target), e.path, e.line, e.local) for e in graph if unit(e.source) != unit(e.target)]
     found = circles(units)
     report = "\n".join(
-        f"sub-packages that import each other: {', '.join(sorted(group))}, for instance:\n  " + "\n  ".join(map(str, cycle))
-        for group, cycle in found
+        f"sub-packages that import each other: {', '.join(sorted(group))}, for instance:\n  " + "\n  ".join(map(str, cycle)) for group, cycle in found
     )
     assert not found, report
 
@@ -312,8 +314,10 @@ def test_command_modules_do_not_import_each_other(graph: list[Edge]) -> None:
     assert {f"{CLI}.{name}" for name in ("synthesize", "demo", "evaluate", "train", "train_tester", "benchmark", "serve")} <= commands
     crossings = command_crossings(graph, commands)
     assert not crossings, "command modules import other command modules:\n  " + "\n  ".join(map(str, crossings))
-    fake = [Edge(f"{CLI}.demo", f"{CLI}.evaluate", "experiments/cli/demo.py", 3, False),
-            Edge(f"{CLI}.demo", f"{CLI}.arguments", "experiments/cli/demo.py", 4, False)]
+    fake = [
+        Edge(f"{CLI}.demo", f"{CLI}.evaluate", "experiments/cli/demo.py", 3, False),
+        Edge(f"{CLI}.demo", f"{CLI}.arguments", "experiments/cli/demo.py", 4, False),
+    ]
     assert command_crossings(fake, commands) == fake[:1]
 
 
@@ -333,8 +337,11 @@ def test_synthesis_does_not_import_the_environment_libraries() -> None:
     found = []
     for path in sorted((ROOT / "synthesis").rglob("*.py")):
         for node in ast.walk(ast.parse(path.read_text())):
-            names = [a.name for a in node.names] if isinstance(node, ast.Import) else (
-                [node.module or ""] if isinstance(node, ast.ImportFrom) and node.level == 0 else [])
+            names = (
+                [a.name for a in node.names]
+                if isinstance(node, ast.Import)
+                else ([node.module or ""] if isinstance(node, ast.ImportFrom) and node.level == 0 else [])
+            )
             found += [f"{path.relative_to(ROOT)}:{node.lineno} imports {n}" for n in names if n.split(".")[0] in banned]
     assert not found, "\n".join(found)
 

@@ -157,11 +157,7 @@ def check_references(path: str, source: str, page: Method) -> list[str]:
 
 def check_history(path: str, source: str) -> list[str]:
     """Findings for development-history tags anywhere in one module (code, strings, comments)."""
-    return [
-        f"{path}:{i}: development-history tag {m.group(0)!r}"
-        for i, line in enumerate(source.splitlines(), 1)
-        for m in HISTORY.finditer(line)
-    ]
+    return [f"{path}:{i}: development-history tag {m.group(0)!r}" for i, line in enumerate(source.splitlines(), 1) for m in HISTORY.finditer(line)]
 
 
 def product_modules() -> list[Path]:

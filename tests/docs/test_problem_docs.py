@@ -23,7 +23,7 @@ def documented_keys(heading: str) -> set[str]:
     """The first-column keys of the table under ``### heading`` (up to the next heading)."""
     start = TEXT.index(f"### {heading}\n")
     end = TEXT.find("\n#", start + 4)
-    block = TEXT[start:end if end > 0 else None]
+    block = TEXT[start : end if end > 0 else None]
     return set(re.findall(r"^\| `([a-z_]+)` \|", block, flags=re.M))
 
 
@@ -66,7 +66,7 @@ def test_the_python_fuel_example_builds_a_fuel_problem() -> None:
 
 
 def test_an_undocumented_key_is_refused(tmp_path: Path) -> None:
-    block = toml_examples()[-1].replace("max_iterations = 100", "park = \"above\"")
+    block = toml_examples()[-1].replace("max_iterations = 100", 'park = "above"')
     path = tmp_path / "bad.toml"
     path.write_text(block)
     with pytest.raises(ProblemError, match="unknown key 'park'"):

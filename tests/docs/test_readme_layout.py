@@ -41,7 +41,7 @@ def named_paths() -> list[tuple[int, Path]]:
             path = parent / name.rstrip("/")
             out.append((number, path))
             if name.endswith("/"):
-                del parents[depth + 1:]
+                del parents[depth + 1 :]
                 parents.append(path)
     return out
 

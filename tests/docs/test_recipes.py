@@ -112,22 +112,38 @@ def test_recipes_save_models_the_benchmark_scores_with_their_seeds(tmp_path: Pat
     cleanrl, sb3, torchrl = _recipe("cleanrl_ppo"), _recipe("sb3_maskable_ppo"), _recipe("torchrl_vector")
     runs = tmp_path / "runs"
     for seed in (0, 1, 2):
-        stats = cleanrl.main(pool=POOL, count=3, num_envs=8, num_steps=16, steps=256, seed=seed,
-                             save_model=str(runs / f"cleanrl-seed{seed}.pt"))
+        stats = cleanrl.main(pool=POOL, count=3, num_envs=8, num_steps=16, steps=256, seed=seed, save_model=str(runs / f"cleanrl-seed{seed}.pt"))
         assert stats["steps"] >= 256
     for seed in (0, 1):
         sb3.main(num_envs=8, steps=256, seed=seed, pool=POOL, count=3, save=str(runs / f"sb3-seed{seed}.zip"))
-        torchrl.main(num_envs=8, steps=256, frames_per_batch=128, seed=seed, pool=POOL, count=3,
-                     save=str(runs / f"torchrl-seed{seed}.pt"))
+        torchrl.main(num_envs=8, steps=256, frames_per_batch=128, seed=seed, pool=POOL, count=3, save=str(runs / f"torchrl-seed{seed}.pt"))
     saved = torch_load(runs / "cleanrl-seed0.pt")
     assert saved["env_options"] == {"memory": "visited"}  # the observation's options travel with the model
     capsys.readouterr()  # what the libraries printed while training
-    code = main(["benchmark", "--pool", POOL, "--train-count", "3", "--test-count", "4", "--validation-count", "2",
-                 "--bootstrap", "100", "--trust-model", "--sut",
-                 f"cleanrl=python:{RECIPES / 'cleanrl_ppo.py'}:load@{runs}/cleanrl-seed*.pt",
-                 f"sb3=ppo:{runs}/sb3-seed*.zip",
-                 f"torchrl=python:{RECIPES / 'torchrl_vector.py'}:load@{runs}/torchrl-seed*.pt",
-                 "--out", str(tmp_path / "bench"), "--json", "-q"])
+    code = main(
+        [
+            "benchmark",
+            "--pool",
+            POOL,
+            "--train-count",
+            "3",
+            "--test-count",
+            "4",
+            "--validation-count",
+            "2",
+            "--bootstrap",
+            "100",
+            "--trust-model",
+            "--sut",
+            f"cleanrl=python:{RECIPES / 'cleanrl_ppo.py'}:load@{runs}/cleanrl-seed*.pt",
+            f"sb3=ppo:{runs}/sb3-seed*.zip",
+            f"torchrl=python:{RECIPES / 'torchrl_vector.py'}:load@{runs}/torchrl-seed*.pt",
+            "--out",
+            str(tmp_path / "bench"),
+            "--json",
+            "-q",
+        ]
+    )
     out, err = capsys.readouterr()
     assert code == 0, err
     doc = json.loads(out)
@@ -177,11 +193,10 @@ def test_rllib_recipe_in_its_own_venv(tmp_path_factory: pytest.TempPathFactory) 
     """The RLlib recipe in a venv with gymnasium 1.2.2: PPO trains system_0 through
     several episode ends, the synthesized tester a fixed RLModule."""
     python = _rllib_python(tmp_path_factory)
-    code = ("import json, sys; sys.path.insert(0, 'docs/recipes'); import rllib_recipe as r; "
-            "print('RESULT', json.dumps(r.main(steps=256)))")
+    code = "import json, sys; sys.path.insert(0, 'docs/recipes'); import rllib_recipe as r; print('RESULT', json.dumps(r.main(steps=256)))"
     run = subprocess.run([str(python), "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=900)
     assert run.returncode == 0, run.stderr[-3000:]
     line = [ln for ln in run.stdout.splitlines() if ln.startswith("RESULT ")][-1]
-    stats = json.loads(line[len("RESULT "):])
+    stats = json.loads(line[len("RESULT ") :])
     assert stats["steps"] >= 256
     assert stats["episodes"] >= 3

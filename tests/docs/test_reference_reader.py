@@ -75,8 +75,10 @@ def test_the_reader_agrees_with_the_env_on_random_steps(kind: str) -> None:
             episodes += 1
             while True:
                 mine = u.run
-                assert (run.system, run.history, run.agent, run.memory, run.outcome) == (
-                    mine.system, mine.history, mine.agent, mine.memory, mine.outcome), (name, run.steps)
+                assert (run.system, run.history, run.agent, run.memory, run.outcome) == (mine.system, mine.history, mine.agent, mine.memory, mine.outcome), (
+                    name,
+                    run.steps,
+                )
                 assert test.mask(run) == info["action_mask"].tolist(), (name, run.steps)
                 if mine.done or mine.steps >= u.max_steps:
                     break

@@ -31,8 +31,12 @@ def _run(argv: list[str], cwd: Path, env: dict[str, str]) -> subprocess.Complete
 
 def test_the_tutorial_runs_as_written(tmp_path: Path) -> None:
     pytest.importorskip("sb3_contrib")
-    env = {**os.environ, "FLOWTEST_CACHE_DIR": str(tmp_path / "cache"), "MPLBACKEND": "Agg",
-           "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    env = {
+        **os.environ,
+        "FLOWTEST_CACHE_DIR": str(tmp_path / "cache"),
+        "MPLBACKEND": "Agg",
+        "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]),
+    }
     work = tmp_path / "work"
     work.mkdir()
     seen = {"toml": 0, "bash": 0, "python": 0}

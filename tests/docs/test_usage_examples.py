@@ -110,8 +110,17 @@ def test_the_main_exports_are_covered() -> None:
     import flowtest_env
     import synthesis
 
-    starts = {"load_problem", "load_problem_file", "make_problem", "synthesize", "SynthesisOptions", "summary_of", "artifact_of",
-              "TestArtifact", "verify_artifact"}
+    starts = {
+        "load_problem",
+        "load_problem_file",
+        "make_problem",
+        "synthesize",
+        "SynthesisOptions",
+        "summary_of",
+        "artifact_of",
+        "TestArtifact",
+        "verify_artifact",
+    }
     assert starts <= set(synthesis.__all__)
     assert {f"synthesis.{n}" for n in starts} <= set(ENTRY_POINTS)
     env_starts = {"make_env", "load_test", "EnvConfig", "observation_layout"}

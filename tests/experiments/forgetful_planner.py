@@ -47,6 +47,9 @@ class Forgetful:
                 if (s, q) not in dist and move not in refused:
                     dist[(s, q)] = dist[node] + 1
                     todo.append((s, q))
-        options = [(dist.get((self.index[key(t)], self.next[self.q][self.index[key(t)]]), 1 << 30), a)
-                   for a, t in zip(observation["allowed"], observation["to"], strict=True) if a != "stay"]
+        options = [
+            (dist.get((self.index[key(t)], self.next[self.q][self.index[key(t)]]), 1 << 30), a)
+            for a, t in zip(observation["allowed"], observation["to"], strict=True)
+            if a != "stay"
+        ]
         return min(options)[1] if options else "stay"

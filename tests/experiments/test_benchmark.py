@@ -52,8 +52,29 @@ def test_references_meet_every_test_and_random_does_not(tmp_path: Path, capsys: 
     on every test of both splits; a random system does not; the table's numbers are those
     of the report's runs (results.json), and every file is written."""
     out = tmp_path / "b"
-    code, stdout, err = run(["benchmark", "--pool", POOL, "--train-count", "6", "--test-count", "6", "--validation-count", "3",
-                             "--sut", "scripted:replanner", "--sut", "gr1", "random", "--out", str(out), "--json", "-q"], capsys)
+    code, stdout, err = run(
+        [
+            "benchmark",
+            "--pool",
+            POOL,
+            "--train-count",
+            "6",
+            "--test-count",
+            "6",
+            "--validation-count",
+            "3",
+            "--sut",
+            "scripted:replanner",
+            "--sut",
+            "gr1",
+            "random",
+            "--out",
+            str(out),
+            "--json",
+            "-q",
+        ],
+        capsys,
+    )
     assert code == 0, err
     doc = json.loads(stdout)  # the whole of stdout is one JSON document
     assert stdout.count("\n") == 1 and err == ""
@@ -82,8 +103,9 @@ def test_references_meet_every_test_and_random_does_not(tmp_path: Path, capsys: 
         assert rnd[split]["headline_mode"] == "sampled" and _system(doc, "gr1")[split]["headline_mode"] == "greedy"
     # the per-run score matrices beside the table, as rliable reads them: one row per run, one column per test
     scores = np.load(out / "scores.npz")
-    assert sorted(scores.files) == sorted(f"{s}/{m}/{n}" for s in ("train", "validation", "test")
-                                          for m, n in (("sampled", "random"), ("greedy", "scripted:replanner"), ("greedy", "gr1")))
+    assert sorted(scores.files) == sorted(
+        f"{s}/{m}/{n}" for s in ("train", "validation", "test") for m, n in (("sampled", "random"), ("greedy", "scripted:replanner"), ("greedy", "gr1"))
+    )
     assert scores["test/sampled/random"].shape == (1, 6) and scores["validation/greedy/gr1"].shape == (1, 3)
     assert list(scores["test/sampled/random"][0]) == rnd["runs"][0]["test"]["sampled"]["per_test"]
     assert scores["test/sampled/random"].mean() == doc["scale"]["test"]["floor"]
@@ -104,10 +126,12 @@ def test_references_meet_every_test_and_random_does_not(tmp_path: Path, capsys: 
     assert not (out / "learning-curves.png").exists()  # no baseline, no curve
     assert len(list((out / "pool" / "train").glob("seed*.json"))) == 6
     md = (out / "table.md").read_text()
-    assert ("| scripted:replanner | reference | 1 | 1 (reference) | 1 (reference) | 100.0 % (greedy) | 100.0 % | "
-            "100.0 % (greedy) | 100.0 % | 100.0 % | +0.0 pp |") in md
-    rnd_tail = worst_share_mean(rnd["test"]["sampled"]["per_test"] if "per_test" in rnd["test"]["sampled"] else
-                                rnd["runs"][0]["test"]["sampled"]["per_test"], 0.1)
+    assert (
+        "| scripted:replanner | reference | 1 | 1 (reference) | 1 (reference) | 100.0 % (greedy) | 100.0 % | 100.0 % (greedy) | 100.0 % | 100.0 % | +0.0 pp |"
+    ) in md
+    rnd_tail = worst_share_mean(
+        rnd["test"]["sampled"]["per_test"] if "per_test" in rnd["test"]["sampled"] else rnd["runs"][0]["test"]["sampled"]["per_test"], 0.1
+    )
     assert f"| random | floor | 1 | 0 (floor) | – | {100 * rnd['test']['met']['mean']:.1f} % | – | {100 * rnd_tail:.1f} % |" in md
     # the header says what ran: nothing trained, the floor and the references scored
     assert doc["ran"]["trained"] == [] and doc["budget"] == {"steps_per_run": None, "training_runs": 0, "training_steps": 0}
@@ -117,8 +141,22 @@ def test_references_meet_every_test_and_random_does_not(tmp_path: Path, capsys: 
 
 def test_refuses_to_overwrite_without_force(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "b"
-    argv = ["benchmark", "--pool", POOL, "--train-count", "2", "--test-count", "2", "--validation-count", "2",
-            "--sut", "scripted:replanner", "--out", str(out), "-q"]
+    argv = [
+        "benchmark",
+        "--pool",
+        POOL,
+        "--train-count",
+        "2",
+        "--test-count",
+        "2",
+        "--validation-count",
+        "2",
+        "--sut",
+        "scripted:replanner",
+        "--out",
+        str(out),
+        "-q",
+    ]
     assert run(argv, capsys)[0] == 0
     before = (out / "table.json").read_text()
     code, stdout, err = run(argv, capsys)
@@ -135,14 +173,17 @@ def test_refuses_to_overwrite_without_force(tmp_path: Path, capsys: pytest.Captu
     assert (mine / "notes.txt").read_text() == "mine"
 
 
-@pytest.mark.parametrize("argv, says", [
-    (["--pool", "nonsense/5x5"], "unknown family"),
-    (["--pool", "reaction2/5x4"], "not a square size"),
-    (["--pool", POOL, "--sut", "scripted:nosuch"], "unknown scripted SUT"),
-    (["--pool", POOL, "--sut", "nosuch"], "unknown policy"),
-    (["--pool", POOL, "--sut", "ppo", "--steps", "0"], "positive integer"),
-    (["--pool", POOL, "--sut", "ppo", "--algo", "dqn"], "invalid choice"),
-])
+@pytest.mark.parametrize(
+    "argv, says",
+    [
+        (["--pool", "nonsense/5x5"], "unknown family"),
+        (["--pool", "reaction2/5x4"], "not a square size"),
+        (["--pool", POOL, "--sut", "scripted:nosuch"], "unknown scripted SUT"),
+        (["--pool", POOL, "--sut", "nosuch"], "unknown policy"),
+        (["--pool", POOL, "--sut", "ppo", "--steps", "0"], "positive integer"),
+        (["--pool", POOL, "--sut", "ppo", "--algo", "dqn"], "invalid choice"),
+    ],
+)
 def test_bad_input_is_one_error_line(tmp_path: Path, capsys: pytest.CaptureFixture[str], argv: list[str], says: str) -> None:
     out = tmp_path / "b"
     code, stdout, err = run(["benchmark", *argv, "--out", str(out)], capsys)
@@ -153,14 +194,13 @@ def test_bad_input_is_one_error_line(tmp_path: Path, capsys: pytest.CaptureFixtu
 
 def test_metrics_and_confidence_intervals_from_runs() -> None:
     """The table's numbers are computed from the runs' verdicts."""
+
     def trace(outcome: str, realized: bool, restrictions: int, steps: int) -> Trace:
         t = Trace("t.json", "s", 0)
-        t.verdict = {"system_objective": outcome, "test_objective_realized": realized,
-                     "restrictions": restrictions, "steps": steps}
+        t.verdict = {"system_objective": outcome, "test_objective_realized": realized, "restrictions": restrictions, "steps": steps}
         return t
 
-    m = bench.split_metrics([trace("met", True, 2, 10), trace("met", True, 4, 20), trace("violated", False, 0, 5),
-                             trace("open", False, 6, 100)])
+    m = bench.split_metrics([trace("met", True, 2, 10), trace("met", True, 4, 20), trace("violated", False, 0, 5), trace("open", False, 6, 100)])
     assert m["met"] == 0.5 and m["realized"] == 1.0 and m["restrictions"] == 3.0 and m["steps"] == 15.0
     assert (m["violated"], m["open"], m["tests"]) == (1, 1, 4)
     none = bench.split_metrics([trace("open", False, 1, 100)])
@@ -169,7 +209,7 @@ def test_metrics_and_confidence_intervals_from_runs() -> None:
     assert s["mean"] == pytest.approx(0.6) and s["ci95"] == pytest.approx(12.7062 * 0.1 / 1.0, rel=1e-4)
     assert bench.mean_ci([0.3])["ci95"] is None and bench.mean_ci([None])["mean"] is None
     three = bench.mean_ci([1.0, 0.0, 0.5, None])
-    assert three["mean"] == pytest.approx(0.5) and three["ci95"] == pytest.approx(4.3027 * 0.5 / 3 ** 0.5, rel=1e-4)
+    assert three["mean"] == pytest.approx(0.5) and three["ci95"] == pytest.approx(4.3027 * 0.5 / 3**0.5, rel=1e-4)
 
 
 @pytest.mark.parametrize("algo", ["maskable-ppo", "recurrent-ppo"])
@@ -201,10 +241,40 @@ def test_baselines_train_and_are_scored(tmp_path: Path, capsys: pytest.CaptureFi
     the gap is train minus held-out per seed, the generalization curve has a point per
     training-set size, and the figures and the report are written."""
     out = tmp_path / "b"
-    code, stdout, err = run(["benchmark", "--pool", POOL, "--train-count", "4", "--test-count", "3", "--validation-count", "2",
-                             "--sut", "ppo", "--algo", "maskable-ppo", "--steps", "1024", "--seeds", "0", "1",
-                             "--curve-points", "2", "--curve-sizes", "2", "--curve-seeds", "1", "--runs", "2",
-                             "--out", str(out), "-q"], capsys)
+    code, stdout, err = run(
+        [
+            "benchmark",
+            "--pool",
+            POOL,
+            "--train-count",
+            "4",
+            "--test-count",
+            "3",
+            "--validation-count",
+            "2",
+            "--sut",
+            "ppo",
+            "--algo",
+            "maskable-ppo",
+            "--steps",
+            "1024",
+            "--seeds",
+            "0",
+            "1",
+            "--curve-points",
+            "2",
+            "--curve-sizes",
+            "2",
+            "--curve-seeds",
+            "1",
+            "--runs",
+            "2",
+            "--out",
+            str(out),
+            "-q",
+        ],
+        capsys,
+    )
     assert code == 0, err
     assert "held-out normalized score, sampled (0 = random, 1 = reference): maskable-ppo" in stdout
     doc = json.loads((out / "table.json").read_text())
@@ -222,9 +292,11 @@ def test_baselines_train_and_are_scored(tmp_path: Path, capsys: pytest.CaptureFi
     assert e["gap"]["mean"] == pytest.approx(np.mean([r["gap"] for r in e["runs"]]))
     assert doc["headline"]["held_out_gap"]["maskable-ppo"] == e["gap"]
     assert doc["headline"]["mode"] == "sampled"
-    assert doc["headline"]["normalized_held_out"]["maskable-ppo"] == {"headline_mode": "sampled",
-                                                                       "greedy": e["test"]["greedy"]["normalized"],
-                                                                       "sampled": e["test"]["sampled"]["normalized"]}
+    assert doc["headline"]["normalized_held_out"]["maskable-ppo"] == {
+        "headline_mode": "sampled",
+        "greedy": e["test"]["greedy"]["normalized"],
+        "sampled": e["test"]["sampled"]["normalized"],
+    }
     assert doc["headline"]["tail_held_out"]["maskable-ppo"] == e["test"]["sampled"]["tail"]
     assert e["test"]["sampled"]["normalized"]["preliminary"] and e["test"]["sampled"]["normalized"]["statistic"] == "mean"
     curve = doc["generalization"]
@@ -247,10 +319,40 @@ def test_same_seeds_same_table(tmp_path: Path, capsys: pytest.CaptureFixture[str
     times and paths differ), whether the training runs go one at a time or in two processes."""
     docs = []
     for name, workers in (("a", "2"), ("b", "1")):
-        code, stdout, err = run(["benchmark", "--pool", POOL, "--train-count", "3", "--test-count", "3", "--validation-count", "2",
-                                 "--sut", "ppo", "scripted:replanner", "--steps", "1024", "--seeds", "0", "1",
-                                 "--curve-points", "2", "--curve-sizes", "2", "--curve-seeds", "1", "--workers", workers,
-                                 "--out", str(tmp_path / name), "--json", "-q"], capsys)
+        code, stdout, err = run(
+            [
+                "benchmark",
+                "--pool",
+                POOL,
+                "--train-count",
+                "3",
+                "--test-count",
+                "3",
+                "--validation-count",
+                "2",
+                "--sut",
+                "ppo",
+                "scripted:replanner",
+                "--steps",
+                "1024",
+                "--seeds",
+                "0",
+                "1",
+                "--curve-points",
+                "2",
+                "--curve-sizes",
+                "2",
+                "--curve-seeds",
+                "1",
+                "--workers",
+                workers,
+                "--out",
+                str(tmp_path / name),
+                "--json",
+                "-q",
+            ],
+            capsys,
+        )
         assert code == 0, err
         docs.append(json.loads(stdout))
     for doc in docs:
@@ -266,10 +368,29 @@ def test_same_seeds_same_table(tmp_path: Path, capsys: pytest.CaptureFixture[str
 def test_ctrl_c_during_training(tmp_path: Path) -> None:
     """SIGINT while a baseline trains: exit 130 within 2 s, one line, nothing on stdout."""
     proc = start_until(
-        [str(FLOWTEST), "benchmark", "--pool", POOL, "--train-count", "2", "--test-count", "2", "--validation-count", "2",
-         "--sut", "ppo",
-         "--algo", "recurrent-ppo", "--steps", "100000", "--out", str(tmp_path / "b"), "--json"],
-        "training recurrent-ppo", signal.SIGINT,
+        [
+            str(FLOWTEST),
+            "benchmark",
+            "--pool",
+            POOL,
+            "--train-count",
+            "2",
+            "--test-count",
+            "2",
+            "--validation-count",
+            "2",
+            "--sut",
+            "ppo",
+            "--algo",
+            "recurrent-ppo",
+            "--steps",
+            "100000",
+            "--out",
+            str(tmp_path / "b"),
+            "--json",
+        ],
+        "training recurrent-ppo",
+        signal.SIGINT,
     )
     time.sleep(1.0)
     t0 = time.perf_counter()
@@ -281,8 +402,7 @@ def test_ctrl_c_during_training(tmp_path: Path) -> None:
     assert err.splitlines()[-1] == "flowtest: interrupted"
 
 
-def test_a_python_policy_is_scored_by_the_protocol(tmp_path: Path, capsys: pytest.CaptureFixture[str],
-                                                   monkeypatch: pytest.MonkeyPatch) -> None:
+def test_a_python_policy_is_scored_by_the_protocol(tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
     """``--sut python:MODULE:NAME``: a batched policy (its loader marked ``batched = True``,
     agents.batched) plays every test in one batch, a planner function through the single env;
     both get the protocol's numbers (met, normalized with the split's floor and ceiling)."""
@@ -297,14 +417,33 @@ def test_a_python_policy_is_scored_by_the_protocol(tmp_path: Path, capsys: pytes
         "    return int(np.argmax(mask))\n"
     )
     monkeypatch.chdir(tmp_path)
-    code, stdout, err = run(["benchmark", "--pool", POOL, "--train-count", "3", "--test-count", "4", "--validation-count", "2",
-                             "--sut", "python:mine:first_legal", "python:mine:planner", "--out", str(tmp_path / "b"),
-                             "--json", "-q", "--bootstrap", "50"], capsys)
+    code, stdout, err = run(
+        [
+            "benchmark",
+            "--pool",
+            POOL,
+            "--train-count",
+            "3",
+            "--test-count",
+            "4",
+            "--validation-count",
+            "2",
+            "--sut",
+            "python:mine:first_legal",
+            "python:mine:planner",
+            "--out",
+            str(tmp_path / "b"),
+            "--json",
+            "-q",
+            "--bootstrap",
+            "50",
+        ],
+        capsys,
+    )
     assert code == 0, err
     doc = json.loads(stdout)
     batched, single = _system(doc, "python:mine:first_legal"), _system(doc, "python:mine:planner")
-    assert {e["name"] for e in doc["systems"]} == {"random", "scripted:replanner", "gr1", "python:mine:first_legal",
-                                                   "python:mine:planner"}
+    assert {e["name"] for e in doc["systems"]} == {"random", "scripted:replanner", "gr1", "python:mine:first_legal", "python:mine:planner"}
     for split in ("train", "validation", "test"):  # the same deterministic choice, batched or one env at a time
         assert batched[split]["greedy"]["met"]["mean"] == single[split]["greedy"]["met"]["mean"]
         assert batched[split]["greedy"]["runs_per_test"] == 1
@@ -337,8 +476,7 @@ def test_a_standard_pool_id_is_accepted_and_the_command_reruns_the_config() -> N
         bench.check_config(bench.BenchmarkConfig("nosuch1/5x5-v1"))
     assert bench.command_of(bench.BenchmarkConfig(POOL)) == f"flowtest benchmark --pool {POOL} --out OUT"
     small = bench.BenchmarkConfig(POOL, seeds=(0, 1), steps=5000, curve_sizes=(), algos=("plr-ppo",))
-    assert bench.command_of(small) == (f"flowtest benchmark --pool {POOL} --algo plr-ppo --steps 5000 --seeds 0 1 "
-                                       "--curve-sizes --out OUT")
+    assert bench.command_of(small) == (f"flowtest benchmark --pool {POOL} --algo plr-ppo --steps 5000 --seeds 0 1 --curve-sizes --out OUT")
 
 
 def test_the_defaults_take_a_standard_pools_whole_smaller_split(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
@@ -363,8 +501,7 @@ def test_the_defaults_take_a_standard_pools_whole_smaller_split(monkeypatch: pyt
     monkeypatch.setattr(bench, "check_config", stop)
     assert main(["benchmark", "--pool", agent, "--out", str(tmp_path / "a")]) == 2
     assert main(["benchmark", "--pool", agent, "--test-count", "100", "--out", str(tmp_path / "b")]) == 2
-    assert [c.counts() for c in seen] == [{"train": 4096, "validation": 256, "test": 250},
-                                          {"train": 4096, "validation": 256, "test": 100}]
+    assert [c.counts() for c in seen] == [{"train": 4096, "validation": 256, "test": 250}, {"train": 4096, "validation": 256, "test": 100}]
     assert "--test-count 250" in bench.command_of(seen[0])
 
 
@@ -375,8 +512,7 @@ def test_curve_sizes_not_below_the_train_count_are_said_to_be_left_out(
         raise ProblemError("stopped here")
 
     monkeypatch.setattr(bench, "run_benchmark", stop)
-    assert main(["benchmark", "--pool", POOL, "--train-count", "4", "--curve-sizes", "2", "16", "32",
-                 "--out", str(tmp_path / "a")]) == 2
+    assert main(["benchmark", "--pool", POOL, "--train-count", "4", "--curve-sizes", "2", "16", "32", "--out", str(tmp_path / "a")]) == 2
     err = capsys.readouterr().err
     assert "flowtest: warning: curve sizes 16 32 (--curve-sizes) are above --train-count 4: left out" in err
     assert main(["benchmark", "--pool", POOL, "--train-count", "4", "--curve-sizes", "2", "4", "--out", str(tmp_path / "b")]) == 2
@@ -407,29 +543,48 @@ def test_a_system_of_several_seeds_gets_the_seed_and_test_interval() -> None:
     """A system given as it is, with one run per seed from any source (say five checkpoints
     of one method), gets the statistics of a trained baseline: 5 seeds, so the IQM and the
     seed-and-test bootstrap; it is in the headline, and the header counts its seeds."""
-    config = bench.BenchmarkConfig(POOL, suts=("ppo:runs/*.zip",), train_count=4, validation_count=2, test_count=6,
-                                   bootstrap=200, runs=2)
+    config = bench.BenchmarkConfig(POOL, suts=("ppo:runs/*.zip",), train_count=4, validation_count=2, test_count=6, bootstrap=200, runs=2)
     splits = {n: bench.Split(n, n, [10 * i, 10 * i + 5], []) for i, n in enumerate(bench.SPLIT_NAMES)}
     rng = np.random.default_rng(0)
 
     def metrics(per_test: list[float], runs: int) -> dict[str, Any]:
-        return {"tests": len(per_test), "runs": runs, "met": float(np.mean(per_test)), "realized": 1.0, "restrictions": 0.0,
-                "steps": 4.0, "violated": 0, "open": 0, "test_failures": 0, "per_test": per_test}
+        return {
+            "tests": len(per_test),
+            "runs": runs,
+            "met": float(np.mean(per_test)),
+            "realized": 1.0,
+            "restrictions": 0.0,
+            "steps": 4.0,
+            "violated": 0,
+            "open": 0,
+            "test_failures": 0,
+            "per_test": per_test,
+        }
 
     def row(seed: int | None, greedy: list[float] | None, sampled: list[float] | None) -> dict[str, Any]:
-        return {"seed": seed, "sut": "x", **{s: {"greedy": greedy and metrics(greedy, 1), "sampled": sampled and metrics(sampled, 2)}
-                                             for s in bench.SPLIT_NAMES}}
+        return {
+            "seed": seed,
+            "sut": "x",
+            **{s: {"greedy": greedy and metrics(greedy, 1), "sampled": sampled and metrics(sampled, 2)} for s in bench.SPLIT_NAMES},
+        }
 
     mine = [row(k, [float(v) for v in rng.integers(0, 2, 6)], [v / 2 for v in rng.integers(0, 3, 6)]) for k in range(5)]
-    systems = [bench.SystemRuns("ppo:runs/*.zip", "system", mine),
-               bench.SystemRuns("random", "floor", [row(None, None, [0.5, 0.5, 0, 0, 0.5, 0])]),
-               bench.SystemRuns("gr1", "reference", [row(None, [1.0] * 6, None)])]
+    systems = [
+        bench.SystemRuns("ppo:runs/*.zip", "system", mine),
+        bench.SystemRuns("random", "floor", [row(None, None, [0.5, 0.5, 0, 0, 0.5, 0])]),
+        bench.SystemRuns("gr1", "reference", [row(None, [1.0] * 6, None)]),
+    ]
     doc = bench.benchmark_table(config, splits, systems, [])
     n = doc["headline"]["normalized_held_out"]["ppo:runs/*.zip"]["sampled"]
     assert n["statistic"] == "iqm" and n["interval"] == "seed-and-test bootstrap" and not n["preliminary"] and n["seeds"] == 5
     assert n["low"] <= n["point"] <= n["high"]
-    assert doc["ran"]["trained"] == [] and doc["ran"]["scored"][0] == {"name": "ppo:runs/*.zip", "kind": "system", "seeds": 5,
-                                                                       "modes": ["greedy", "sampled"], "runs_per_test": 2}
+    assert doc["ran"]["trained"] == [] and doc["ran"]["scored"][0] == {
+        "name": "ppo:runs/*.zip",
+        "kind": "system",
+        "seeds": 5,
+        "modes": ["greedy", "sampled"],
+        "runs_per_test": 2,
+    }
     md = bench.table_markdown({**doc, "seconds": {}, "outputs": {}})
     assert "`ppo:runs/*.zip` (5 seeds: greedy and sampled, 2 sampled runs per test)" in md
     assert "| ppo:runs/*.zip | system | 5 |" in md

@@ -24,9 +24,34 @@ pytest.importorskip("torch")
 
 FLOWTEST = Path(sys.executable).parent / "flowtest"
 POOL = "safety2/4x4"
-SMALL = ["--pool", POOL, "--train-count", "4", "--test-count", "3", "--validation-count", "2", "--sut", "ppo",
-         "scripted:replanner", "--steps", "1024", "--seeds", "0", "1", "--curve-points", "2", "--curve-sizes", "2",
-         "--curve-seeds", "1", "--workers", "1", "--bootstrap", "200"]
+SMALL = [
+    "--pool",
+    POOL,
+    "--train-count",
+    "4",
+    "--test-count",
+    "3",
+    "--validation-count",
+    "2",
+    "--sut",
+    "ppo",
+    "scripted:replanner",
+    "--steps",
+    "1024",
+    "--seeds",
+    "0",
+    "1",
+    "--curve-points",
+    "2",
+    "--curve-sizes",
+    "2",
+    "--curve-seeds",
+    "1",
+    "--workers",
+    "1",
+    "--bootstrap",
+    "200",
+]
 """Three training runs of a second each (two seeds and one point of the generalization curve)."""
 
 
@@ -49,14 +74,12 @@ def _results(doc: dict[str, Any]) -> dict[str, Any]:
     return {k: doc[k] for k in ("systems", "generalization", "scale", "headline", "budget", "config")}
 
 
-def test_a_sigtermed_benchmark_resumes_to_the_table_of_an_uninterrupted_run(tmp_path: Path,
-                                                                             capsys: pytest.CaptureFixture[str]) -> None:
+def test_a_sigtermed_benchmark_resumes_to_the_table_of_an_uninterrupted_run(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     code, stdout, err = run(["benchmark", *SMALL, "--out", str(tmp_path / "whole"), "--json", "-q"], capsys)
     assert code == 0, err
     whole = json.loads(stdout)
     out = tmp_path / "stopped"
-    proc = start_until([str(FLOWTEST), "benchmark", *SMALL, "--out", str(out)], "maskable-ppo seed 0 on 4 tests",
-                       signal.SIGTERM)
+    proc = start_until([str(FLOWTEST), "benchmark", *SMALL, "--out", str(out)], "maskable-ppo seed 0 on 4 tests", signal.SIGTERM)
     proc.send_signal(signal.SIGTERM)  # in the middle: the first run finished, the second training
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 130, err
@@ -76,8 +99,22 @@ def test_a_sigtermed_benchmark_resumes_to_the_table_of_an_uninterrupted_run(tmp_
 
 def test_resume_continues_the_same_settings_only(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "b"
-    argv = ["benchmark", "--pool", POOL, "--train-count", "2", "--test-count", "2", "--validation-count", "2",
-            "--sut", "scripted:replanner", "--out", str(out), "-q"]
+    argv = [
+        "benchmark",
+        "--pool",
+        POOL,
+        "--train-count",
+        "2",
+        "--test-count",
+        "2",
+        "--validation-count",
+        "2",
+        "--sut",
+        "scripted:replanner",
+        "--out",
+        str(out),
+        "-q",
+    ]
     assert run(argv, capsys)[0] == 0
     stored = json.loads((out / bench.CONFIG_FILE).read_text())
     assert stored["config"]["test_count"] == 2 and "workers" not in stored["config"]
@@ -90,8 +127,26 @@ def test_resume_continues_the_same_settings_only(tmp_path: Path, capsys: pytest.
     assert code == 2 and "give one of them" in err
     code, _, err = run([*argv, "--resume", "--workers", "2"], capsys)  # how many train at once: not a result's setting
     assert code == 0, err
-    code, _, err = run(["benchmark", "--pool", POOL, "--sut", "scripted:replanner", "--out", str(tmp_path / "new"),
-                        "--train-count", "2", "--test-count", "2", "--validation-count", "2", "--resume", "-q"], capsys)
+    code, _, err = run(
+        [
+            "benchmark",
+            "--pool",
+            POOL,
+            "--sut",
+            "scripted:replanner",
+            "--out",
+            str(tmp_path / "new"),
+            "--train-count",
+            "2",
+            "--test-count",
+            "2",
+            "--validation-count",
+            "2",
+            "--resume",
+            "-q",
+        ],
+        capsys,
+    )
     assert code == 0, err  # nothing to resume: it starts
     mine = tmp_path / "mine"
     mine.mkdir()
@@ -139,8 +194,29 @@ def test_a_model_of_other_tests_is_refused_before_any_training(tmp_path: Path, c
     """A model trained on another observation size was a traceback after the training runs and
     the floor's scoring; now it is one line before them."""
     other = tmp_path / "other.zip"
-    code = main(["train", "small-reactive", "--steps", "128", "--num-envs", "8", "--n-steps", "16", "--net-arch", "16",
-                 "--eval-every", "0", "--eval-episodes", "0", "--device", "cpu", "--out", str(other), "-q"])
+    code = main(
+        [
+            "train",
+            "small-reactive",
+            "--steps",
+            "128",
+            "--num-envs",
+            "8",
+            "--n-steps",
+            "16",
+            "--net-arch",
+            "16",
+            "--eval-every",
+            "0",
+            "--eval-episodes",
+            "0",
+            "--device",
+            "cpu",
+            "--out",
+            str(other),
+            "-q",
+        ]
+    )
     assert code == 0
     capsys.readouterr()
     code, stdout, err = run(["benchmark", *SMALL, "--sut", f"ppo:{other}", "--out", str(tmp_path / "b")], capsys)

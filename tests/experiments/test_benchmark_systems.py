@@ -50,9 +50,21 @@ def _native_checkpoints(folder: Path, seeds: list[int]) -> list[Path]:
     paths = []
     for seed in seeds:
         path = folder / f"seed{seed}.zip"
-        train_native("FlowTest-RandomGrid-v0", 128, path, seed, progress_bar=False, eval_episodes=0,
-                     env_kwargs={"pool": POOL, "split": "train", "count": 3}, eval_every=0,
-                     n_envs=8, n_steps=8, batch_size=64, net_arch=[16], device="cpu")
+        train_native(
+            "FlowTest-RandomGrid-v0",
+            128,
+            path,
+            seed,
+            progress_bar=False,
+            eval_episodes=0,
+            env_kwargs={"pool": POOL, "split": "train", "count": 3},
+            eval_every=0,
+            n_envs=8,
+            n_steps=8,
+            batch_size=64,
+            net_arch=[16],
+            device="cpu",
+        )
         paths.append(path)
     return paths
 
@@ -65,12 +77,12 @@ def test_sut_patterns_and_names_make_systems_with_a_seed_per_member(tmp_path: Pa
     (tmp_path / "runs").mkdir()
     for name in ("b.zip", "a.zip", "c.pt", "a.pt"):
         (tmp_path / "runs" / name).write_bytes(b"")
-    specs = parse_systems(["ppo:runs/*.zip", "mine=python:pkg.mod:load@runs/*.pt", "mine=python:pkg.mod:load('x y.pt', n=2)",
-                           "gr1", "gr1"], reserved=["random"])
+    specs = parse_systems(
+        ["ppo:runs/*.zip", "mine=python:pkg.mod:load@runs/*.pt", "mine=python:pkg.mod:load('x y.pt', n=2)", "gr1", "gr1"], reserved=["random"]
+    )
     assert specs == [
         SystemSpec("ppo:runs/*.zip", "system", ("ppo:runs/a.zip", "ppo:runs/b.zip"), True),
-        SystemSpec("mine", "system", ("python:pkg.mod:load('runs/a.pt')", "python:pkg.mod:load('runs/c.pt')",
-                                      "python:pkg.mod:load('x y.pt', n=2)"), True),
+        SystemSpec("mine", "system", ("python:pkg.mod:load('runs/a.pt')", "python:pkg.mod:load('runs/c.pt')", "python:pkg.mod:load('x y.pt', n=2)"), True),
         SystemSpec("gr1", "system", ("gr1",), False),
     ]
     assert specs[0].seeds == [0, 1] and specs[2].seeds == [None]
@@ -78,10 +90,10 @@ def test_sut_patterns_and_names_make_systems_with_a_seed_per_member(tmp_path: Pa
         parse_systems(["ppo:nothing/*.zip"], reserved=[])
     with pytest.raises(ProblemError, match="names a system the benchmark scores already"):
         parse_systems(["random=scripted:greedy"], reserved=["random"])
-    suts = ("scripted:replanner", "mine=ppo:runs/*.zip", "python:m:load(\"it's here.pt\")")
+    suts = ("scripted:replanner", "mine=ppo:runs/*.zip", 'python:m:load("it\'s here.pt")')
     command = bench.command_of(bench.BenchmarkConfig(POOL, suts=suts))
     words = shlex.split(command)  # what a shell gives the rerun: the entries as they were, never globbed
-    assert words[words.index("--sut") + 1:words.index("--out")] == list(suts)
+    assert words[words.index("--sut") + 1 : words.index("--out")] == list(suts)
 
 
 def test_a_glob_of_checkpoints_is_one_system_scored_per_seed(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -89,8 +101,9 @@ def test_a_glob_of_checkpoints_is_one_system_scored_per_seed(tmp_path: Path, cap
     same numbers as that file scored alone; the normalized score and the met share are
     summarized over those seeds (a seed-and-test interval, a t-interval), as a baseline's."""
     a, b = _native_checkpoints(tmp_path, [0, 1])
-    code, stdout, err = run(["benchmark", *SMALL, "--sut", f"mine=ppo:{tmp_path}/seed*.zip", f"ppo:{a}", f"ppo:{b}",
-                             "--out", str(tmp_path / "b"), "--json", "-q"], capsys)
+    code, stdout, err = run(
+        ["benchmark", *SMALL, "--sut", f"mine=ppo:{tmp_path}/seed*.zip", f"ppo:{a}", f"ppo:{b}", "--out", str(tmp_path / "b"), "--json", "-q"], capsys
+    )
     assert code == 0, err
     doc = json.loads(stdout)
     mine = _system(doc, "mine")
@@ -136,8 +149,7 @@ def _policy_module(tmp_path: Path, name: str) -> None:
     )
 
 
-def test_a_python_policy_with_arguments_gets_its_env_options(tmp_path: Path, capsys: pytest.CaptureFixture[str],
-                                                              monkeypatch: pytest.MonkeyPatch) -> None:
+def test_a_python_policy_with_arguments_gets_its_env_options(tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
     """``python:M:F(ARGS)``: the loader is called with the literal arguments (kept in the
     recorded command); one ``act`` gives the greedy and the sampled runs; a policy that
     declares ``env_options={"memory": "visited"}`` is shown the observations with the
@@ -150,13 +162,17 @@ def test_a_python_policy_with_arguments_gets_its_env_options(tmp_path: Path, cap
     _policy_module(tmp_path, "declares_options")
     monkeypatch.chdir(tmp_path)
     monkeypatch.syspath_prepend(str(tmp_path))
-    suts = ["python:declares_options:Policy('visited')", "python:declares_options:Policy(memory='default', label='plain')",
-            "both=python:declares_options:Policy('none', label='a')", "both=python:declares_options:Policy('none', label='b')"]
+    suts = [
+        "python:declares_options:Policy('visited')",
+        "python:declares_options:Policy(memory='default', label='plain')",
+        "both=python:declares_options:Policy('none', label='a')",
+        "both=python:declares_options:Policy('none', label='b')",
+    ]
     code, stdout, err = run(["benchmark", *SMALL, "--sut", *suts, "--out", str(tmp_path / "b"), "--json", "-q"], capsys)
     assert code == 0, err
     doc = json.loads(stdout)
     words = shlex.split(doc["command"])
-    assert words[words.index("--sut") + 1:words.index("--sut") + 1 + len(suts)] == suts  # kept for the rerun
+    assert words[words.index("--sut") + 1 : words.index("--sut") + 1 + len(suts)] == suts  # kept for the rerun
     assert words[words.index("--sut") + 1 + len(suts)].startswith("--")
     enc = make_encoder(TestGame(load_pool(POOL, "train", 1)[0]), "flat")
     plain, memory = int(enc.space.shape[0]), position_slice(enc).stop - position_slice(enc).start
@@ -169,15 +185,19 @@ def test_a_python_policy_with_arguments_gets_its_env_options(tmp_path: Path, cap
     sys.modules.pop("declares_options", None)
 
 
-@pytest.mark.parametrize("sut, says", [
-    ("mine=ppo:nothing/*.zip", "matches no file"),
-    ("gr1=scripted:greedy", "names a system the benchmark scores already"),
-    ("python:bad_loaders:broken('gone.pt')", "its loader raised FileNotFoundError: gone.pt"),
-    ("python:bad_loaders:not_a_policy", "returned a int, not a batched policy"),
-    ("python:bad_loaders:broken(open('x'))", "must be Python literals"),
-])
-def test_bad_systems_are_one_error_line_before_any_work(tmp_path: Path, capsys: pytest.CaptureFixture[str],
-                                                        monkeypatch: pytest.MonkeyPatch, sut: str, says: str) -> None:
+@pytest.mark.parametrize(
+    "sut, says",
+    [
+        ("mine=ppo:nothing/*.zip", "matches no file"),
+        ("gr1=scripted:greedy", "names a system the benchmark scores already"),
+        ("python:bad_loaders:broken('gone.pt')", "its loader raised FileNotFoundError: gone.pt"),
+        ("python:bad_loaders:not_a_policy", "returned a int, not a batched policy"),
+        ("python:bad_loaders:broken(open('x'))", "must be Python literals"),
+    ],
+)
+def test_bad_systems_are_one_error_line_before_any_work(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, sut: str, says: str
+) -> None:
     _policy_module(tmp_path, "bad_loaders")
     monkeypatch.chdir(tmp_path)
     code, stdout, err = run(["benchmark", *SMALL, "--sut", sut, "--out", str(tmp_path / "b")], capsys)
@@ -215,9 +235,34 @@ def test_a_planner_takes_literal_arguments(tmp_path: Path, monkeypatch: pytest.M
 
 
 def _tables(tmp_path: Path, capsys: pytest.CaptureFixture[str], parallel: str, workers: str = "2") -> dict[str, Any]:
-    code, stdout, err = run(["benchmark", *SMALL, "--sut", "ppo", "--steps", "512", "--seeds", "0", "1", "--curve-points", "1",
-                             "--curve-sizes", "2", "--curve-seeds", "1", "--parallel", parallel, "--workers", workers,
-                             "--out", str(tmp_path / parallel), "--json", "-q"], capsys)
+    code, stdout, err = run(
+        [
+            "benchmark",
+            *SMALL,
+            "--sut",
+            "ppo",
+            "--steps",
+            "512",
+            "--seeds",
+            "0",
+            "1",
+            "--curve-points",
+            "1",
+            "--curve-sizes",
+            "2",
+            "--curve-seeds",
+            "1",
+            "--parallel",
+            parallel,
+            "--workers",
+            workers,
+            "--out",
+            str(tmp_path / parallel),
+            "--json",
+            "-q",
+        ],
+        capsys,
+    )
     assert code == 0, err
     doc = json.loads(stdout)
     for e in doc["systems"]:  # what may differ: where the models were written, how long they took

@@ -83,8 +83,16 @@ def check_summary(summary: dict, name: str, kind: str) -> None:
     problem = load_problem(name)
     names = {str(s) for s in problem.system.states} if kind == "graph" else None
     required = {
-        "problem", "environment", "status", "flow", "n_cuts", "cuts",
-        "restrictions", "static_obstacles", "bypass_flow", "stats",
+        "problem",
+        "environment",
+        "status",
+        "flow",
+        "n_cuts",
+        "cuts",
+        "restrictions",
+        "static_obstacles",
+        "bypass_flow",
+        "stats",
     }
     assert required <= set(summary), required - set(summary)
     assert summary["problem"] == name
@@ -196,7 +204,9 @@ def test_json_stdout_whatever_a_library_prints(capfd: pytest.CaptureFixture[str]
 def test_python_dash_m() -> None:
     proc = subprocess.run(
         [sys.executable, "-m", "experiments", "synthesize", "small-reactive", "--json", "--quiet"],
-        capture_output=True, text=True, timeout=120,
+        capture_output=True,
+        text=True,
+        timeout=120,
     )
     assert proc.returncode == 0, proc.stderr
     assert json.loads(proc.stdout)["problem"] == "small-reactive"
@@ -240,8 +250,21 @@ def test_options_reach_the_solver(capsys: pytest.CaptureFixture[str], monkeypatc
         return real(problem, options)
 
     monkeypatch.setattr(pipeline, "synthesize", spy)
-    argv = ["synthesize", "small-reactive", "--json", "--time-limit", "30", "--gap", "0.01",
-            "--threads", "1", "--setting", "accumulative", "--after-first", "5"]
+    argv = [
+        "synthesize",
+        "small-reactive",
+        "--json",
+        "--time-limit",
+        "30",
+        "--gap",
+        "0.01",
+        "--threads",
+        "1",
+        "--setting",
+        "accumulative",
+        "--after-first",
+        "5",
+    ]
     code, out, err = run(argv, capsys)
     assert code == 0, err
     assert seen["time_limit"] == 30.0 and seen["mip_rel_gap"] == 0.01 and seen["threads"] == 1
@@ -394,7 +417,8 @@ def test_ctrl_c_on_the_console_script(sig: signal.Signals, tmp_path: Path) -> No
     art = tmp_path / "mars.json"
     proc = start_until(
         [str(FLOWTEST), "synthesize", "mars-exploration", "--json", "--out", str(art), "--progress", "0.3"],
-        "bound", sig,  # a status line with a bound: HiGHS's search runs
+        "bound",
+        sig,  # a status line with a bound: HiGHS's search runs
     )
     t0 = time.perf_counter()
     proc.send_signal(sig)
@@ -527,8 +551,7 @@ def test_every_entry_point_lists_the_same_commands() -> None:
     the one list (``python -m experiments.cli.cli`` once listed only ``synthesize``)."""
     names = [c.name for c in COMMANDS]
     assert names[0] == "synthesize" and {"demo", "evaluate", "train", "train-tester"} <= set(names)
-    for argv in ([str(FLOWTEST), "--help"], [sys.executable, "-m", "experiments.cli.cli", "--help"],
-                 [sys.executable, "-m", "experiments", "--help"]):
+    for argv in ([str(FLOWTEST), "--help"], [sys.executable, "-m", "experiments.cli.cli", "--help"], [sys.executable, "-m", "experiments", "--help"]):
         proc = subprocess.run(argv, capture_output=True, text=True, timeout=120)
         assert proc.returncode == 0, proc.stderr
         assert _listed_commands(proc.stdout) == names, (argv, proc.stdout)

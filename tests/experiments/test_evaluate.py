@@ -25,11 +25,24 @@ FAULTY_CASES = [
 
 
 def test_evaluate_writes_results_report_and_pictures(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    code = main([
-        "evaluate", "--env", "FlowTest-SmallReactive-v0", "FlowTest-BeaverRescue-v0",
-        "--sut", "scripted:replanner", "scripted:committed", "--episodes", "2", "--seed", "3",
-        "--out", str(tmp_path), "-q",
-    ])
+    code = main(
+        [
+            "evaluate",
+            "--env",
+            "FlowTest-SmallReactive-v0",
+            "FlowTest-BeaverRescue-v0",
+            "--sut",
+            "scripted:replanner",
+            "scripted:committed",
+            "--episodes",
+            "2",
+            "--seed",
+            "3",
+            "--out",
+            str(tmp_path),
+            "-q",
+        ]
+    )
     assert code == 0
     records = json.loads((tmp_path / "results.json").read_text())
     assert len(records) == 4
@@ -74,9 +87,7 @@ def _trapping_env(env_id: str, *, free: int) -> gym.Env:
     u = env.unwrapped
     game = TestGame(u.game.artifact, u.game.setting)  # a copy: the built-in game is shared
     stay = 1 << game.stay_action
-    game.restricted_bits = [
-        [0 if s == free else bits & ~stay for s, bits in enumerate(game.exists_bits)] for _ in game.restricted_bits
-    ]
+    game.restricted_bits = [[0 if s == free else bits & ~stay for s, bits in enumerate(game.exists_bits)] for _ in game.restricted_bits]
     u.games = [game]
     return env
 
@@ -114,8 +125,7 @@ def test_trapped_runs_are_reported_loudly(tmp_path: Path) -> None:
 
 
 def test_replay_through_the_command_line(capsys: pytest.CaptureFixture[str]) -> None:
-    code = main(["evaluate", "--env", "FlowTest-SmallReactive-v0", "--sut", "scripted:committed",
-                 "--episodes", "1", "--seed", "0", "--replay"])
+    code = main(["evaluate", "--env", "FlowTest-SmallReactive-v0", "--sut", "scripted:committed", "--episodes", "1", "--seed", "0", "--replay"])
     out = capsys.readouterr().out
     assert code == 0 and "verdict:" in out and "step   0" in out
 
@@ -136,9 +146,11 @@ def test_unknown_env_is_invalid_input(tmp_path: Path) -> None:
 def test_an_inconsistent_problem_among_several_envs_is_named(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """With several ``--env``, the message of the one with no test says which it is."""
     behind = tmp_path / "behind.toml"
-    behind.write_text('name = "behind"\n[system]\ngrid = """\nS . X D\n"""\nstart = "S"\nterminal = ["D"]\n'
-                      '[labels]\ndock = ["D"]\nspill = ["X"]\n[objectives]\nsystem = "F dock & G !spill"\n'
-                      'test = "F dock"\n[environment]\nkind = "reactive"\n')
+    behind.write_text(
+        'name = "behind"\n[system]\ngrid = """\nS . X D\n"""\nstart = "S"\nterminal = ["D"]\n'
+        '[labels]\ndock = ["D"]\nspill = ["X"]\n[objectives]\nsystem = "F dock & G !spill"\n'
+        'test = "F dock"\n[environment]\nkind = "reactive"\n'
+    )
     code = main(["evaluate", "--env", "small-reactive", str(behind), "--sut", "random", "--out", str(tmp_path / "r"), "-q"])
     err = capsys.readouterr().err
     assert code == 3 and err.startswith(f"error: --env {behind}: inconsistent problem (unreachable): the goal is "), err
@@ -216,19 +228,16 @@ def env_builds(monkeypatch: pytest.MonkeyPatch) -> list[str]:
     return built
 
 
-def test_one_pair_of_one_episode_builds_its_test_once(tmp_path: Path, env_builds: list[str],
-                                                      capsys: pytest.CaptureFixture[str]) -> None:
+def test_one_pair_of_one_episode_builds_its_test_once(tmp_path: Path, env_builds: list[str], capsys: pytest.CaptureFixture[str]) -> None:
     """``flowtest evaluate --env FlowTest-Maze2-v0 --sut scripted:replanner`` resolves its test
     once and hands it on: the SUT check, the run, the trace picture, the test's card and the
     report read that one env and its game (it was built five times). A failing system on the
     same test (its filmstrip and the broken conjunct drawn too) builds nothing more."""
-    code = main(["evaluate", "--env", "FlowTest-Maze2-v0", "--sut", "scripted:replanner", "--episodes", "1",
-                 "--out", str(tmp_path / "one"), "-q"])
+    code = main(["evaluate", "--env", "FlowTest-Maze2-v0", "--sut", "scripted:replanner", "--episodes", "1", "--out", str(tmp_path / "one"), "-q"])
     assert code == 0, capsys.readouterr().err
     assert len(env_builds) == 1, env_builds
     env_builds.clear()
-    code = main(["evaluate", "--env", "FlowTest-Maze2-v0", "--sut", "scripted:replanner", "random", "--episodes", "1",
-                 "--out", str(tmp_path / "two"), "-q"])
+    code = main(["evaluate", "--env", "FlowTest-Maze2-v0", "--sut", "scripted:replanner", "random", "--episodes", "1", "--out", str(tmp_path / "two"), "-q"])
     records = json.loads((tmp_path / "two" / "results.json").read_text())
     assert code == 0 and [r["n_failures"] for r in records] == [0, 1]  # the failing pictures were drawn
     assert "filmstrip" in records[1]["pictures"]

@@ -62,12 +62,12 @@ def _run(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str,
 
 
 def _evaluate(floor: Path, tmp_path: Path, *more: str) -> list[str]:
-    return ["evaluate", "--env", str(floor), "--sut", "scripted:replanner", "--episodes", "2",
-            "--out", str(tmp_path / "report"), "--force", *more]
+    return ["evaluate", "--env", str(floor), "--sut", "scripted:replanner", "--episodes", "2", "--out", str(tmp_path / "report"), "--force", *more]
 
 
-def test_evaluate_after_synthesize_does_not_synthesize_again(floor: Path, tmp_path: Path, cache: Path, syntheses: list[Any],
-                                                             capsys: pytest.CaptureFixture[str]) -> None:
+def test_evaluate_after_synthesize_does_not_synthesize_again(
+    floor: Path, tmp_path: Path, cache: Path, syntheses: list[Any], capsys: pytest.CaptureFixture[str]
+) -> None:
     out_file = tmp_path / "t.json"
     code, _, err = _run(["synthesize", str(floor), "--out", str(out_file)], capsys)
     assert code == 0, err
@@ -90,25 +90,29 @@ def test_the_console_scripts_share_the_cache(floor: Path, tmp_path: Path) -> Non
     """The same as two real processes, as a user types them: the evaluation says it found the
     cached test and no synthesis stage appears."""
     env = {**os.environ, "FLOWTEST_CACHE_DIR": str(tmp_path / "cache")}
-    first = subprocess.run([str(FLOWTEST), "synthesize", str(floor), "--out", str(tmp_path / "t.json")],
-                           capture_output=True, text=True, timeout=300, env=env)
+    first = subprocess.run([str(FLOWTEST), "synthesize", str(floor), "--out", str(tmp_path / "t.json")], capture_output=True, text=True, timeout=300, env=env)
     assert first.returncode == 0, first.stderr
     assert "routing MILP" in first.stderr
-    second = subprocess.run([str(FLOWTEST), *_evaluate(floor, tmp_path)], capture_output=True, text=True, timeout=300,
-                            env=env)
+    second = subprocess.run([str(FLOWTEST), *_evaluate(floor, tmp_path)], capture_output=True, text=True, timeout=300, env=env)
     assert second.returncode == 0, second.stderr
     assert "its cached test" in second.stderr
     assert "synthesizing" not in second.stderr and "routing MILP" not in second.stderr
 
 
-def test_evaluate_shows_the_synthesis_it_must_do_and_caches_it(floor: Path, tmp_path: Path, cache: Path,
-                                                               syntheses: list[Any], capsys: pytest.CaptureFixture[str]) -> None:
+def test_evaluate_shows_the_synthesis_it_must_do_and_caches_it(
+    floor: Path, tmp_path: Path, cache: Path, syntheses: list[Any], capsys: pytest.CaptureFixture[str]
+) -> None:
     code, out, err = _run(_evaluate(floor, tmp_path), capsys)
     assert code == 0, err
     assert len(syntheses) == 1
     lines = err.splitlines()
-    for stage in ("flowtest: synthesizing ok-mixed (mixed test; no time limit", "flowtest: building automata and product graphs",
-                  "flowtest: routing MILP, phase 1 of 2", "flowtest: checking the test", f"flowtest: {floor}: its test is cached in"):
+    for stage in (
+        "flowtest: synthesizing ok-mixed (mixed test; no time limit",
+        "flowtest: building automata and product graphs",
+        "flowtest: routing MILP, phase 1 of 2",
+        "flowtest: checking the test",
+        f"flowtest: {floor}: its test is cached in",
+    ):
         assert any(line.startswith(stage) for line in lines), (stage, err)
     assert "\r" not in err  # not a terminal: plain stage lines
     assert "routing MILP" not in out  # stdout holds the outcome lines only
@@ -120,8 +124,9 @@ def test_evaluate_shows_the_synthesis_it_must_do_and_caches_it(floor: Path, tmp_
     assert code == 0 and "its cached test" not in err
 
 
-def test_evaluate_passes_its_time_limit_to_the_synthesis(floor: Path, tmp_path: Path, cache: Path, syntheses: list[Any],
-                                                         capsys: pytest.CaptureFixture[str]) -> None:
+def test_evaluate_passes_its_time_limit_to_the_synthesis(
+    floor: Path, tmp_path: Path, cache: Path, syntheses: list[Any], capsys: pytest.CaptureFixture[str]
+) -> None:
     code, _, err = _run(_evaluate(floor, tmp_path, "--time-limit", "45"), capsys)
     assert code == 0, err
     assert [o.time_limit for o in syntheses] == [45.0]
@@ -131,8 +136,9 @@ def test_evaluate_passes_its_time_limit_to_the_synthesis(floor: Path, tmp_path: 
     assert refused.value.code == 2 and "error: flowtest evaluate: argument --time-limit" in capsys.readouterr().err
 
 
-def test_evaluate_shows_the_live_line_on_a_terminal(floor: Path, tmp_path: Path, cache: Path, syntheses: list[Any],
-                                                    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+def test_evaluate_shows_the_live_line_on_a_terminal(
+    floor: Path, tmp_path: Path, cache: Path, syntheses: list[Any], monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
     """On a terminal the synthesis's stages share one live line (rewritten with ``\\r``), as
     ``flowtest synthesize``'s do."""
 
@@ -148,16 +154,16 @@ def test_evaluate_shows_the_live_line_on_a_terminal(floor: Path, tmp_path: Path,
     assert len(syntheses) == 1
 
 
-def test_replay_of_a_problem_file_shows_its_synthesis(floor: Path, cache: Path, syntheses: list[Any],
-                                                      capsys: pytest.CaptureFixture[str]) -> None:
+def test_replay_of_a_problem_file_shows_its_synthesis(floor: Path, cache: Path, syntheses: list[Any], capsys: pytest.CaptureFixture[str]) -> None:
     code, out, err = _run(["evaluate", "--env", str(floor), "--sut", "scripted:replanner", "--episodes", "1", "--replay"], capsys)
     assert code == 0, err
     assert len(syntheses) == 1 and "flowtest: synthesizing ok-mixed" in err
     assert out.startswith("scripted:replanner on ") and "routing MILP" not in out
 
 
-def test_other_answer_options_do_not_poison_the_default_entry(floor: Path, tmp_path: Path, cache: Path,
-                                                             syntheses: list[Any], capsys: pytest.CaptureFixture[str]) -> None:
+def test_other_answer_options_do_not_poison_the_default_entry(
+    floor: Path, tmp_path: Path, cache: Path, syntheses: list[Any], capsys: pytest.CaptureFixture[str]
+) -> None:
     """A synthesis under the accumulative setting (another test: what it shows) files its own
     entry; the evaluation, which asks for the default, synthesizes the default's and plays
     the instantaneous test."""
@@ -184,12 +190,10 @@ def test_the_cache_key_names_every_option_that_changes_the_answer() -> None:
     (its own ``--time-limit`` or none) looks up; each option that changes the answer gives
     another key; the budgets that only stop a search do not."""
     default = sources.answer_options()
-    for same in ((), ("--time-limit", "30"), ("--after-first", "5", "--time-limit", "60"), ("--threads", "1"),
-                 ("--progress", "2"), ("--no-size-limit",)):
+    for same in ((), ("--time-limit", "30"), ("--after-first", "5", "--time-limit", "60"), ("--threads", "1"), ("--progress", "2"), ("--no-size-limit",)):
         assert sources.answer_options(_options(*same)) == default, same
     assert sources.answer_options(SynthesisOptions(time_limit=12.0, node_limit=500)) == default
-    others = [("--gap", "0.1"), ("--backend", "highs"), ("--setting", "accumulative"), ("--max-walls", "3"),
-              ("--max-doors", "0"), ("--max-restrictions", "2")]
+    others = [("--gap", "0.1"), ("--backend", "highs"), ("--setting", "accumulative"), ("--max-walls", "3"), ("--max-doors", "0"), ("--max-restrictions", "2")]
     if (os.cpu_count() or 1) >= 2:
         others.append(("--threads", "2"))
     keys = {json.dumps(sources.answer_options(_options(*o)), sort_keys=True) for o in others}

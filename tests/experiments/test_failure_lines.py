@@ -46,9 +46,11 @@ def test_a_planner_that_forgets_a_door_is_told_where_it_loops_and_which_door_ref
     assert tail == {(1, 1), (1, 2)}
     door = game.restricted_bits_of(trace.states[-1])  # the door in front of (1, 2) or (1, 1), closed at the end
     assert door, "the run ends in front of a closed door"
-    line = ("from step 2 on, alternates between (1, 1) and (1, 2) until the step budget ran out; "
-            "the move (1, 1) -> (0, 1) was refused on every visit: door closed under history q3; "
-            "the move (1, 2) -> (0, 2) was refused on every visit: door closed under history q3")
+    line = (
+        "from step 2 on, alternates between (1, 1) and (1, 2) until the step budget ran out; "
+        "the move (1, 1) -> (0, 1) was refused on every visit: door closed under history q3; "
+        "the move (1, 2) -> (0, 2) was refused on every visit: door closed under history q3"
+    )
     (way,) = bad["outcomes"]  # five runs, one way of failing: one line
     assert way["seeds"] == [0, 1, 2, 3, 4] and way["text"] == line and way["line"] == f"seeds 0-4 (5 runs): {line}"
     assert way["replay"].endswith("--seed 0 --replay")
@@ -150,5 +152,4 @@ def test_a_run_that_never_loops_says_how_near_it_came() -> None:
     assert t.verdict["system_objective"] == "open"
     e = explain(t)
     assert e.what == "wander" and e.text.startswith("never settled into a loop before the step budget ran out: went through ")
-    assert re.search(r"\d+ moves? from meeting the system objective past the walls \(nearest: \d+ moves?, at step \d+ in \(\d, \d\)\)",
-                     e.text)
+    assert re.search(r"\d+ moves? from meeting the system objective past the walls \(nearest: \d+ moves?, at step \d+ in \(\d, \d\)\)", e.text)

@@ -50,8 +50,36 @@ BASES = [tomllib.loads(GRID_TOML), tomllib.loads(GRAPH_TOML)]
 ARTIFACT_BASES = {name: json.loads((ARTIFACTS / f"{name}.json").read_text()) for name in ("small-reactive", "maze2")}
 
 #: Words a hostile user would try where names go.
-WORDS = ["true", "false", "F", "G", "X", "U", "S", "T", "goal", ".", "#", "", " ", "a b", "1x", "I1", "->", "F goal",
-         "grid", "static", "reactive", "agent", "mixed", "instantaneous", "\x00", "é", "../x", "nan"]
+WORDS = [
+    "true",
+    "false",
+    "F",
+    "G",
+    "X",
+    "U",
+    "S",
+    "T",
+    "goal",
+    ".",
+    "#",
+    "",
+    " ",
+    "a b",
+    "1x",
+    "I1",
+    "->",
+    "F goal",
+    "grid",
+    "static",
+    "reactive",
+    "agent",
+    "mixed",
+    "instantaneous",
+    "\x00",
+    "é",
+    "../x",
+    "nan",
+]
 
 SCALARS = st.one_of(
     st.none(),
@@ -107,14 +135,18 @@ def byte_mutate(raw: bytes, data: st.DataObject) -> bytes:
     for _ in range(data.draw(st.integers(1, 4), label="byte edits")):
         pos = data.draw(st.integers(0, len(out)), label="position")
         op = data.draw(st.sampled_from(["insert", "delete", "replace"]), label="byte op")
-        chunk = data.draw(st.one_of(st.binary(min_size=1, max_size=4), st.sampled_from(
-            [b'"', b"[", b"]", b"{", b"=", b"\n", b"true", b"nan", b"\xff", b"#", b"\x00", b"9" * 30])), label="bytes")
+        chunk = data.draw(
+            st.one_of(
+                st.binary(min_size=1, max_size=4), st.sampled_from([b'"', b"[", b"]", b"{", b"=", b"\n", b"true", b"nan", b"\xff", b"#", b"\x00", b"9" * 30])
+            ),
+            label="bytes",
+        )
         if op == "insert":
             out[pos:pos] = chunk
         elif op == "delete":
-            del out[pos:pos + len(chunk)]
+            del out[pos : pos + len(chunk)]
         else:
-            out[pos:pos + len(chunk)] = chunk
+            out[pos : pos + len(chunk)] = chunk
     return bytes(out)
 
 
@@ -218,6 +250,7 @@ def invalid_actions(n: int) -> st.SearchStrategy[Any]:
     """Anything but an integer of ``Discrete(n)``."""
     return st.one_of(NON_INTEGERS, st.integers(min_value=n, max_value=2**80))
 
+
 _ENVS: dict[str, Any] = {}
 
 
@@ -287,5 +320,3 @@ def test_fuzz_helpers_make_edits() -> None:
 
     probe()
     assert sum(changed) > len(changed) // 2
-
-

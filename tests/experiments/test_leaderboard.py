@@ -16,22 +16,33 @@ from experiments.tools import leaderboard as lb
 
 def _metrics(per_test: list[float], runs: int) -> dict[str, Any]:
     met = sum(per_test) / len(per_test)
-    return {"tests": len(per_test), "runs": runs, "met": met, "realized": 1.0, "restrictions": 1.0, "steps": 5.0,
-            "violated": 0, "open": 0, "test_failures": 0, "per_test": per_test}
+    return {
+        "tests": len(per_test),
+        "runs": runs,
+        "met": met,
+        "realized": 1.0,
+        "restrictions": 1.0,
+        "steps": 5.0,
+        "violated": 0,
+        "open": 0,
+        "test_failures": 0,
+        "per_test": per_test,
+    }
 
 
 def _doc() -> dict[str, Any]:
-    config = bench.BenchmarkConfig("safety2/4x4", train_count=4, validation_count=2, test_count=4, seeds=(0, 1),
-                                   bootstrap=50, runs=2)
+    config = bench.BenchmarkConfig("safety2/4x4", train_count=4, validation_count=2, test_count=4, seeds=(0, 1), bootstrap=50, runs=2)
     splits = {n: bench.Split(n, n, [10 * i, 10 * i + 3], []) for i, n in enumerate(bench.SPLIT_NAMES)}
 
     def row(seed: int | None, sut: str, greedy: list[float] | None, sampled: list[float] | None) -> dict[str, Any]:
-        return {"seed": seed, "sut": sut, **{s: {"greedy": greedy and _metrics(greedy, 1),
-                                                 "sampled": sampled and _metrics(sampled, 2)} for s in bench.SPLIT_NAMES}}
+        return {
+            "seed": seed,
+            "sut": sut,
+            **{s: {"greedy": greedy and _metrics(greedy, 1), "sampled": sampled and _metrics(sampled, 2)} for s in bench.SPLIT_NAMES},
+        }
 
     systems = [
-        bench.SystemRuns("maskable-ppo", "baseline", [row(0, "ppo:a", [1, 1, 0, 1], [1, 0.5, 0.5, 1]),
-                                                       row(1, "ppo:b", [1, 0, 0, 1], [1, 0.5, 0, 1])]),
+        bench.SystemRuns("maskable-ppo", "baseline", [row(0, "ppo:a", [1, 1, 0, 1], [1, 0.5, 0.5, 1]), row(1, "ppo:b", [1, 0, 0, 1], [1, 0.5, 0, 1])]),
         bench.SystemRuns("random", "floor", [row(None, "random", None, [0.5, 0.5, 0, 0])]),
         bench.SystemRuns("gr1", "reference", [row(None, "gr1", [1, 1, 1, 1], None)]),
     ]
@@ -50,7 +61,7 @@ def test_the_page_shows_the_results_numbers(tmp_path: Path) -> None:
     results = tmp_path / "results"
     stored = lb.add(tmp_path / "table.json", "tiny", results)
     assert stored.parent == results and json.loads(stored.read_text())["format"] == lb.ENTRY_FORMAT
-    assert "\"per_test\"" not in stored.read_text()  # the train and validation per-test arrays are left out
+    assert '"per_test"' not in stored.read_text()  # the train and validation per-test arrays are left out
     text = lb.page(lb.load_entries(results))
     assert "## safety2/4x4" in text and "### tiny" in text
     line = next(x for x in text.splitlines() if x.startswith("| maskable-ppo |"))

@@ -38,8 +38,6 @@ ROOT = Path(__file__).resolve().parents[2]
 FLOWTEST = Path(sys.executable).parent / "flowtest"
 
 
-
-
 def _problem(tmp_path: Path, name: str = "mine") -> Path:
     p = tmp_path / f"{name}.toml"
     shutil.copy(DATA / "ok_grid.toml", p)
@@ -122,9 +120,7 @@ def _fault_case(tmp_path: Path, cache: Path, how: str) -> None:
 
 
 @pytest.mark.parametrize("how", ["a file", "an entry that is a folder", "not creatable", "read-only"])
-def test_a_faulty_cache_is_a_warning_and_the_test_is_kept_in_memory(
-    tmp_path: Path, cache: Path, how: str, monkeypatch: pytest.MonkeyPatch
-) -> None:
+def test_a_faulty_cache_is_a_warning_and_the_test_is_kept_in_memory(tmp_path: Path, cache: Path, how: str, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("FLOWTEST_CACHE_DIR", str(cache))  # restored after the test, whatever the case sets
     _fault_case(tmp_path, cache, how)
     with pytest.warns(UserWarning, match="kept in memory"):
@@ -184,9 +180,7 @@ def test_a_huge_test_file_is_refused_before_it_is_read(tmp_path: Path, cache: Pa
     assert elapsed < 1.0
 
 
-def test_a_huge_env_file_is_one_error_line_from_flowtest_train(
-    tmp_path: Path, cache: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
+def test_a_huge_env_file_is_one_error_line_from_flowtest_train(tmp_path: Path, cache: Path, capsys: pytest.CaptureFixture[str]) -> None:
     pytest.importorskip("torch")
     big = tmp_path / "big.json"
     with open(big, "wb") as f:
@@ -209,9 +203,11 @@ def test_sigterm_while_a_report_is_written_leaves_no_hidden_file(tmp_path: Path)
     for k, delay in enumerate((0.3, 2.0, 4.0, 5.0, 6.0, 7.0)):
         out = tmp_path / f"OUT{k}"
         proc = subprocess.Popen(
-            [str(FLOWTEST), "evaluate", "--env", "small-reactive", "maze2", "--sut", "random", "--episodes", "30",
-             "--out", str(out), "-q"],
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path,
+            [str(FLOWTEST), "evaluate", "--env", "small-reactive", "maze2", "--sut", "random", "--episodes", "30", "--out", str(out), "-q"],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            cwd=tmp_path,
             preexec_fn=lambda: signal.signal(signal.SIGTERM, signal.SIG_DFL),
         )
         time.sleep(delay)
@@ -241,8 +237,24 @@ def test_a_truncated_shipped_pool_file_is_one_line_naming_the_file_and_the_line(
     cut = data / pool.slug / "train.jsonl.gz"
     cut.parent.mkdir(parents=True)
     cut.write_bytes(raw[: len(raw) // 3])
-    code = cli_main(["benchmark", "--pool", pool_id, "--sut", "scripted:replanner", "--train-count", "2",
-                     "--validation-count", "2", "--test-count", "2", "--out", str(tmp_path / "b"), "-q"])
+    code = cli_main(
+        [
+            "benchmark",
+            "--pool",
+            pool_id,
+            "--sut",
+            "scripted:replanner",
+            "--train-count",
+            "2",
+            "--validation-count",
+            "2",
+            "--test-count",
+            "2",
+            "--out",
+            str(tmp_path / "b"),
+            "-q",
+        ]
+    )
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1 and err.startswith("error: ") and f"{cut}, line " in err, err
     assert "the file stops in the middle" in err and "Traceback" not in err and "EOFError" not in err

@@ -80,11 +80,14 @@ def test_a_door_closed_the_whole_loop_is_drawn_in_every_frame_and_never_opens() 
     game = t.game
     events = _events(game, t.states, t.actions)
     closed_at = next(k for k, ev in enumerate(events) if "doors closed" in ev or "door (1, 2) -> (0, 2) closed" in ev)
-    assert not any("opened" in ev for ev in events[closed_at + 1:])
+    assert not any("opened" in ev for ev in events[closed_at + 1 :])
     renderer = render.make_renderer(game, 32, "engineer")
     size = 32
-    door = next(int(m) for m in np.flatnonzero(game.enforced[t.states[-1].history])
-                if game.cells[game.place_list[int(game.ts.src[m])]] == (1, 2) and game.ts.action[m] == "N")
+    door = next(
+        int(m)
+        for m in np.flatnonzero(game.enforced[t.states[-1].history])
+        if game.cells[game.place_list[int(game.ts.src[m])]] == (1, 2) and game.ts.action[m] == "N"
+    )
     assert game.cells[game.place_list[int(game.ts.dst[door])]] == (0, 2)
     seen = set()
     for run in t.states[closed_at:]:
@@ -171,9 +174,21 @@ def test_the_path_plot_labels_each_cell_once() -> None:
 
 # --------------------------------------------------------------------------- test cards
 
-CARD_RECORD = {"sut": "s", "episodes": 1, "seed": 0, "system_objective_met_rate": 1.0, "test_objective_realized_rate": 1.0,
-               "violated": 0, "open": 0, "mean_restrictions": 0.0, "mean_steps": 3.0, "test_failures": 0, "n_failures": 0,
-               "failures": [], "pictures": {}}
+CARD_RECORD = {
+    "sut": "s",
+    "episodes": 1,
+    "seed": 0,
+    "system_objective_met_rate": 1.0,
+    "test_objective_realized_rate": 1.0,
+    "violated": 0,
+    "open": 0,
+    "mean_restrictions": 0.0,
+    "mean_steps": 3.0,
+    "test_failures": 0,
+    "n_failures": 0,
+    "failures": [],
+    "pictures": {},
+}
 
 
 def test_a_card_names_the_step_budget_and_its_histories_neutrally(tmp_path: Path) -> None:
@@ -192,7 +207,7 @@ def test_a_card_names_the_step_budget_and_its_histories_neutrally(tmp_path: Path
     card_png = (tmp_path / info.picture).read_bytes()
     assert card_png == neutral.read_bytes() and card_png != revealed.read_bytes()
     page = render_html([{**CARD_RECORD, "env": "small-reactive"}], [info])
-    card = page[page.index("<div class='test'"):page.index("</details></div>")]
+    card = page[page.index("<div class='test'") : page.index("</details></div>")]
     before, hidden = card.split("<details>")
     assert "a step budget of 50 steps a run" in before and "steps per run" not in page
     assert "saw " not in before and "F I1 &amp; F I2" not in before
@@ -321,6 +336,5 @@ def test_the_cards_take_the_colours_the_report_gives_them(tmp_path: Path) -> Non
 
     colours = render.proposition_colours(["I", "I1", "I2", "goal", "zone"])
     (info,) = test_infos(["small-reactive"], tmp_path, colours)
-    assert {name: colour for name, _, colour in info.propositions} == {
-        name: render.hex_colour(colours[name]) for name in ("I1", "I2", "goal")}
+    assert {name: colour for name, _, colour in info.propositions} == {name: render.hex_colour(colours[name]) for name in ("I1", "I2", "goal")}
     assert isinstance(info, TestInfo)

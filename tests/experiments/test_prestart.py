@@ -182,7 +182,9 @@ def test_ctrl_c_at_start_up_ends_the_child() -> None:
     nothing on stdout, and the child gone within a second."""
     proc = subprocess.Popen(
         [str(FLOWTEST), "synthesize", "refueling", "--json"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     deadline = time.perf_counter() + 30.0

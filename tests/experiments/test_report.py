@@ -43,9 +43,7 @@ def _game(env: Any) -> Any:
 @pytest.fixture(scope="module")
 def report(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[dict[str, Any]]]:
     out = tmp_path_factory.mktemp("report")
-    cells = evaluate(
-        ["FlowTest-SmallReactive-v0", "FlowTest-Maze2-v0"], ["scripted:replanner", "gr1", "scripted:committed"], 2, seed=0
-    )
+    cells = evaluate(["FlowTest-SmallReactive-v0", "FlowTest-Maze2-v0"], ["scripted:replanner", "gr1", "scripted:committed"], 2, seed=0)
     return out, write_report(cells, out)
 
 
@@ -97,8 +95,7 @@ def test_filmstrip_keeps_start_end_and_the_changes() -> None:
     shown = frames_to_show(game, t.states)
     assert shown[0] == 0 and shown[-1] == len(t.states) - 1 and len(shown) <= MAX_FRAMES
     everything = frames_to_show(game, t.states, limit=10_000)
-    moved = [k for k in range(1, len(t.states)) if t.states[k].system != t.states[k - 1].system
-             or t.states[k].agent != t.states[k - 1].agent]
+    moved = [k for k in range(1, len(t.states)) if t.states[k].system != t.states[k - 1].system or t.states[k].agent != t.states[k - 1].agent]
     assert set(moved) <= set(everything)
 
 
@@ -171,8 +168,7 @@ def _card(page: str, env: str) -> str:
 def test_file_key_is_one_to_one_where_a_slug_is_not() -> None:
     """Break 11's pairs get different keys; keys are safe file names and ids and never
     hold ``--`` (the separator of a pair's key)."""
-    pairs = [("probs/a.toml", "probs-a.toml"), ("A.toml", "a.toml"), ("x/a.toml", "x/a_toml"),
-             ("scripted:committed", "scripted-committed")]
+    pairs = [("probs/a.toml", "probs-a.toml"), ("A.toml", "a.toml"), ("x/a.toml", "x/a_toml"), ("scripted:committed", "scripted-committed")]
     for a, b in pairs:
         assert file_key(a) != file_key(b), (a, b)
         assert file_key(a).lower() != file_key(b).lower()  # case-blind file systems too
@@ -273,9 +269,22 @@ def test_each_card_draws_the_restrictions_per_history_and_names_the_propositions
     legend = {name: (where, colour) for name, where, colour in info.propositions}
     assert legend["hazard"][0] == "cell H" and legend["aisle"][0] == "cell A" and legend["bay"][0] == "cell B"
     assert len({c for _, c in legend.values()}) == 3
-    record = {"env": env, "sut": "s", "episodes": 1, "seed": 0, "system_objective_met_rate": 1.0,
-              "test_objective_realized_rate": 1.0, "violated": 0, "open": 0, "mean_restrictions": 0.0, "mean_steps": 3.0,
-              "test_failures": 0, "n_failures": 0, "failures": [], "pictures": {}}
+    record = {
+        "env": env,
+        "sut": "s",
+        "episodes": 1,
+        "seed": 0,
+        "system_objective_met_rate": 1.0,
+        "test_objective_realized_rate": 1.0,
+        "violated": 0,
+        "open": 0,
+        "mean_restrictions": 0.0,
+        "mean_steps": 3.0,
+        "test_failures": 0,
+        "n_failures": 0,
+        "failures": [],
+        "pictures": {},
+    }
     page = render_html([record], [info])
     card = _card(page, env)
     assert "one panel per history" in card and f"src='{info.picture}'" in card
@@ -288,9 +297,22 @@ def test_each_card_draws_the_restrictions_per_history_and_names_the_propositions
 
 def test_the_card_explains_static_and_agent_pictures() -> None:
     for env, words in (("FlowTest-Example1-v0", "Static test"), ("FlowTest-Maze2-v0", "Agent test")):
-        record = {"env": env, "sut": "s", "episodes": 1, "seed": 0, "system_objective_met_rate": 1.0,
-                  "test_objective_realized_rate": 1.0, "violated": 0, "open": 0, "mean_restrictions": 0.0,
-                  "mean_steps": 3.0, "test_failures": 0, "n_failures": 0, "failures": [], "pictures": {}}
+        record = {
+            "env": env,
+            "sut": "s",
+            "episodes": 1,
+            "seed": 0,
+            "system_objective_met_rate": 1.0,
+            "test_objective_realized_rate": 1.0,
+            "violated": 0,
+            "open": 0,
+            "mean_restrictions": 0.0,
+            "mean_steps": 3.0,
+            "test_failures": 0,
+            "n_failures": 0,
+            "failures": [],
+            "pictures": {},
+        }
         info = TestInfo(env, "x", "static" if "Example" in env else "agent", "F goal", "F I", 9, "p.png")
         assert words in _card(render_html([record], [info]), env)
 
@@ -305,10 +327,22 @@ def test_the_layout_wraps_at_laptop_width() -> None:
     assert ".test{" in css and "min-width:0" in css.split(".test{")[1].split("}")[0]
     assert ".testimg{max-width:100%;height:auto" in css
     assert ".scroll{max-width:100%;overflow-x:auto}" in css
-    record = {"env": "/a/very/long/path/" + "x" * 200 + ".toml", "sut": "cmd:" + "y" * 200, "episodes": 1, "seed": 0,
-              "system_objective_met_rate": 1.0, "test_objective_realized_rate": 1.0, "violated": 0, "open": 0,
-              "mean_restrictions": 0.0, "mean_steps": 3.0, "test_failures": 0, "n_failures": 0, "failures": [],
-              "pictures": {}}
+    record = {
+        "env": "/a/very/long/path/" + "x" * 200 + ".toml",
+        "sut": "cmd:" + "y" * 200,
+        "episodes": 1,
+        "seed": 0,
+        "system_objective_met_rate": 1.0,
+        "test_objective_realized_rate": 1.0,
+        "violated": 0,
+        "open": 0,
+        "mean_restrictions": 0.0,
+        "mean_steps": 3.0,
+        "test_failures": 0,
+        "n_failures": 0,
+        "failures": [],
+        "pictures": {},
+    }
     page = render_html([record], [])
     assert "<div class='scroll'><table class='matrix'>" in page
     assert "/a/very/long/path" not in _section(page, "class='matrix'", "</table>")
@@ -316,14 +350,32 @@ def test_the_layout_wraps_at_laptop_width() -> None:
 
 def test_hostile_names_are_escaped_in_titles_and_legends(tmp_path: Path) -> None:
     env = str(tmp_path / "<img src=x onerror=alert(1)>.toml")
-    info = TestInfo(env, "<script>alert(1)</script>", "reactive", "F <bad-a>", "F <bad-b>", 5, "tests/x'.png",
-                    (("<bad-c>", "<bad-d>", "red' onmouseover='x"),))
-    record = {"env": env, "sut": "<svg onload=alert(2)>", "episodes": 1, "seed": 0, "system_objective_met_rate": 0.0,
-              "test_objective_realized_rate": None, "violated": 1, "open": 0, "mean_restrictions": 0.0,
-              "mean_steps": 3.0, "test_failures": 0, "n_failures": 1, "pictures": {},
-              "failures": [{"seed": 0, "kind": "sut", "reason": "violated <bad-e>", "verdict": {}, "replay": "r",
-                            "violation": {"conjunct": "G !<bad-f>", "step": 1, "where": "(0, <bad-g>)", "alone": True,
-                                          "text": "broke G !<bad-h>"}}]}
+    info = TestInfo(env, "<script>alert(1)</script>", "reactive", "F <bad-a>", "F <bad-b>", 5, "tests/x'.png", (("<bad-c>", "<bad-d>", "red' onmouseover='x"),))
+    record = {
+        "env": env,
+        "sut": "<svg onload=alert(2)>",
+        "episodes": 1,
+        "seed": 0,
+        "system_objective_met_rate": 0.0,
+        "test_objective_realized_rate": None,
+        "violated": 1,
+        "open": 0,
+        "mean_restrictions": 0.0,
+        "mean_steps": 3.0,
+        "test_failures": 0,
+        "n_failures": 1,
+        "pictures": {},
+        "failures": [
+            {
+                "seed": 0,
+                "kind": "sut",
+                "reason": "violated <bad-e>",
+                "verdict": {},
+                "replay": "r",
+                "violation": {"conjunct": "G !<bad-f>", "step": 1, "where": "(0, <bad-g>)", "alone": True, "text": "broke G !<bad-h>"},
+            }
+        ],
+    }
     record["stopped"] = "the planner <bad-i> failed in run 1 of 2 (seed 0)"
     page = render_html([record], [info])
     assert "stopped early" in page and "Stopped: the planner &lt;bad-i&gt; failed in run 1 of 2 (seed 0)." in page
@@ -366,8 +418,7 @@ def test_the_card_and_the_filmstrip_name_the_broken_conjunct(tmp_path: Path) -> 
     env = _problem(tmp_path / "floor.toml", "D . A\n. H .\n. . B", name="floor")
     genv = gym.make("FlowTest-v0", test=env)
     policy = make_policy("random", genv)
-    trace = next(t for t in (run_episode(genv, policy, env, "random", seed) for seed in range(40))
-                 if t.verdict["system_objective"] == "violated")
+    trace = next(t for t in (run_episode(genv, policy, env, "random", seed) for seed in range(40)) if t.verdict["system_objective"] == "violated")
     v = violation_of_trace(trace)
     assert v is not None and v["conjunct"] == "G !hazard" and v["where"] == "(1, 1)"
     cell = Cell(env, "random", [trace], trace.seed, 0.1)
@@ -375,15 +426,14 @@ def test_the_card_and_the_filmstrip_name_the_broken_conjunct(tmp_path: Path) -> 
     record["failures"][0].setdefault("violation", v)  # evaluate.py records it (violation_of_trace)
     page = render_html([record], [])
     broke = re.findall(r"<p class='broke'>(.*?)</p>", page)
-    assert broke == [f"Seed {trace.seed} broke <code>G !hazard</code> of the system objective at step {v['step']}, "
-                     "in cell (1, 1)."]
+    assert broke == [f"Seed {trace.seed} broke <code>G !hazard</code> of the system objective at step {v['step']}, in cell (1, 1)."]
     assert f"broke G !hazard at step {v['step']} in cell (1, 1)" in page
     # the filmstrip keeps the frame of the violation however long the run
     game = _game(genv)
     assert v["step"] in frames_to_show(game, trace.states, limit=3, keep_step=v["step"])
 
 
-MIXED = (Path(__file__).resolve().parents[1] / "data" / "ok_mixed.toml")
+MIXED = Path(__file__).resolve().parents[1] / "data" / "ok_mixed.toml"
 
 
 def test_a_mixed_card_draws_the_static_area_typed_in(tmp_path: Path) -> None:
@@ -408,7 +458,20 @@ def test_a_mixed_card_draws_the_static_area_typed_in(tmp_path: Path) -> None:
     fresh = tmp_path / "fresh.png"
     draw_test_picture(_game(gym.make("FlowTest-v0", test=str(MIXED))), fresh)
     assert (out / info.picture).read_bytes() == fresh.read_bytes()
-    record = {"env": str(MIXED), "sut": "s", "episodes": 1, "seed": 0, "system_objective_met_rate": 1.0,
-              "test_objective_realized_rate": 1.0, "violated": 0, "open": 0, "mean_restrictions": 0.0, "mean_steps": 3.0,
-              "test_failures": 0, "n_failures": 0, "failures": [], "pictures": {}}
+    record = {
+        "env": str(MIXED),
+        "sut": "s",
+        "episodes": 1,
+        "seed": 0,
+        "system_objective_met_rate": 1.0,
+        "test_objective_realized_rate": 1.0,
+        "violated": 0,
+        "open": 0,
+        "mean_restrictions": 0.0,
+        "mean_steps": 3.0,
+        "test_failures": 0,
+        "n_failures": 0,
+        "failures": [],
+        "pictures": {},
+    }
     assert "static area the problem gives them (its borders dashed)" in _card(render_html([record], [info]), str(MIXED))

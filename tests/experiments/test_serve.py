@@ -37,8 +37,9 @@ class Server:
     """``flowtest serve TEST --port 0 ARGS`` in a child process, and clients for it."""
 
     def __init__(self, *args: str, test: str = "small-reactive") -> None:
-        self.proc = subprocess.Popen([sys.executable, "-m", "experiments", "serve", test, "--port", "0", *args], cwd=ROOT,
-                                     text=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "experiments", "serve", test, "--port", "0", *args], cwd=ROOT, text=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE
+        )
         assert self.proc.stderr is not None
         line = self.proc.stderr.readline()
         assert line.startswith(f"flowtest: serving {test} on 127.0.0.1:"), line
@@ -135,14 +136,37 @@ def test_answers_are_always_json_and_errors_have_codes(server: Server) -> None:
     """``NaN`` is refused on the way in (an id ``NaN`` was echoed as non-JSON); an id that is
     no string, number or null is refused; every error carries a documented code."""
     c = server.connect()
-    answers = [c.ask(line) for line in [
-        '{"op": "reset", "id": NaN}', '{"op": "status", "id": Infinity}', '{"op": "status", "id": [1, {"a": 2}]}',
-        '{"op": "status", "id": true}', '{"op": "status", "id": "' + "x" * 300 + '"}', '{"op": "reset", "id": 1e308}',
-        '{"op": "step", "action": "NE", "id": "s1"}', '{"op": "step", "state": [9, 9]}', '{"op": "step"}',
-        '{"op": "fly"}', '[1]', "not json",
-    ]]
-    assert [a.get("code") for a in answers] == ["not_json", "not_json", "bad_id", "bad_id", "bad_id", None, "not_an_action",
-                                                "not_a_state", "bad_request", "unknown_op", "not_an_object", "not_json"]
+    answers = [
+        c.ask(line)
+        for line in [
+            '{"op": "reset", "id": NaN}',
+            '{"op": "status", "id": Infinity}',
+            '{"op": "status", "id": [1, {"a": 2}]}',
+            '{"op": "status", "id": true}',
+            '{"op": "status", "id": "' + "x" * 300 + '"}',
+            '{"op": "reset", "id": 1e308}',
+            '{"op": "step", "action": "NE", "id": "s1"}',
+            '{"op": "step", "state": [9, 9]}',
+            '{"op": "step"}',
+            '{"op": "fly"}',
+            "[1]",
+            "not json",
+        ]
+    ]
+    assert [a.get("code") for a in answers] == [
+        "not_json",
+        "not_json",
+        "bad_id",
+        "bad_id",
+        "bad_id",
+        None,
+        "not_an_action",
+        "not_a_state",
+        "bad_request",
+        "unknown_op",
+        "not_an_object",
+        "not_json",
+    ]
     assert answers[5] == {"ok": True, "id": 1e308, "status": answers[5]["status"]}
     assert answers[6]["id"] == "s1" and "id" not in answers[2]
     assert all(a["code"] in {**ERRORS, **REFUSALS} for a in answers if not a["ok"])
@@ -191,13 +215,17 @@ def test_shutdown_and_quit_end_a_session_on_standard_input() -> None:
         assert out.getvalue() == '{"ok":true}\n'
 
 
-@pytest.mark.parametrize("args,message", [
-    (["--idle-timeout", "1e300"], "expected at most 86400 seconds"),
-    (["--max-clients", "0"], "expected a number of sessions (1-1024)"),
-    (["--max-steps", "0"], "expected a step budget (1-1000000000)"),
-])
+@pytest.mark.parametrize(
+    "args,message",
+    [
+        (["--idle-timeout", "1e300"], "expected at most 86400 seconds"),
+        (["--max-clients", "0"], "expected a number of sessions (1-1024)"),
+        (["--max-steps", "0"], "expected a step budget (1-1000000000)"),
+    ],
+)
 def test_serve_options_have_their_range(args: list[str], message: str) -> None:
-    proc = subprocess.run([sys.executable, "-m", "experiments", "serve", "small-reactive", "--port", "0", *args], cwd=ROOT,
-                          capture_output=True, text=True, timeout=120)
+    proc = subprocess.run(
+        [sys.executable, "-m", "experiments", "serve", "small-reactive", "--port", "0", *args], cwd=ROOT, capture_output=True, text=True, timeout=120
+    )
     assert proc.returncode == 2 and proc.stderr.startswith("error: ") and message in proc.stderr, proc.stderr
     assert len(proc.stderr.strip().splitlines()) == 1

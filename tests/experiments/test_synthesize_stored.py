@@ -46,8 +46,12 @@ def test_synthesize_patrolling_shows_its_shipped_test_in_seconds(tmp_path: Path)
     """The console script, as a user types it: well under the minutes a synthesis takes, the
     summary of the proven optimum, and where it came from on both streams."""
     started = time.perf_counter()
-    proc = subprocess.run([str(FLOWTEST), "synthesize", "patrolling", "--out", str(tmp_path / "p.json"),
-                           "--plot", str(tmp_path / "p.png")], capture_output=True, text=True, timeout=120)
+    proc = subprocess.run(
+        [str(FLOWTEST), "synthesize", "patrolling", "--out", str(tmp_path / "p.json"), "--plot", str(tmp_path / "p.png")],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     seconds = time.perf_counter() - started
     assert proc.returncode == 0, proc.stderr
     assert seconds < 60, f"flowtest synthesize patrolling took {seconds:.0f} s"
@@ -67,8 +71,7 @@ def test_the_stored_summary_is_the_shipped_one(no_synthesis: list[str], capsys: 
     assert no_synthesis == []
 
 
-@pytest.mark.parametrize("argv", [["--fresh"], ["--gap", "0.1"], ["--backend", "cpsat"], ["--setting", "accumulative"],
-                                  ["--max-walls", "2"]])
+@pytest.mark.parametrize("argv", [["--fresh"], ["--gap", "0.1"], ["--backend", "cpsat"], ["--setting", "accumulative"], ["--max-walls", "2"]])
 def test_fresh_or_another_answer_synthesizes(argv: list[str], no_synthesis: list[str], capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["synthesize", "patrolling", "--quiet", *argv]) != 0  # the stand-in synthesis raised
     assert no_synthesis == ["patrolling"]
@@ -82,8 +85,9 @@ def test_a_quick_builtin_is_synthesized_as_before(no_synthesis: list[str], capsy
     assert "Synthesized: small-reactive" in capsys.readouterr().err
 
 
-def test_a_problem_files_cached_test_is_shown_when_it_took_long(tmp_path: Path, cache: Path, monkeypatch: pytest.MonkeyPatch,
-                                                                capsys: pytest.CaptureFixture[str]) -> None:
+def test_a_problem_files_cached_test_is_shown_when_it_took_long(
+    tmp_path: Path, cache: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
     """A problem file synthesized once (filed in the cache), asked again: shown from the cache when
     its synthesis took at least ``STORED_AFTER`` seconds (lowered here to 0), synthesized again
     otherwise, and after an edit of the file."""
@@ -93,6 +97,7 @@ def test_a_problem_files_cached_test_is_shown_when_it_took_long(tmp_path: Path, 
     first = json.loads(capsys.readouterr().out)
     calls: list[str] = []
     real = pipeline.synthesize
+
     def counted(problem: Any, options: Any = None) -> Any:
         calls.append(problem.name)
         return real(problem, options)

@@ -28,16 +28,38 @@ def _no_synthesis(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(random_grid, "pool_record", refuse)
 
 
-@pytest.mark.parametrize("trainer, flags", [
-    ("native", ["--n-envs", "8", "--n-steps", "16", "--net-arch", "16", "--eval-every", "0"]),
-    ("sb3", ["--n-envs", "2", "--n-steps", "64", "--net-arch", "16"]),
-])
-def test_train_on_a_standard_pool_prints_the_floor(tmp_path: Path, capsys: pytest.CaptureFixture[str],
-                                                   monkeypatch: pytest.MonkeyPatch, trainer: str, flags: list[str]) -> None:
+@pytest.mark.parametrize(
+    "trainer, flags",
+    [
+        ("native", ["--n-envs", "8", "--n-steps", "16", "--net-arch", "16", "--eval-every", "0"]),
+        ("sb3", ["--n-envs", "2", "--n-steps", "64", "--net-arch", "16"]),
+    ],
+)
+def test_train_on_a_standard_pool_prints_the_floor(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, trainer: str, flags: list[str]
+) -> None:
     _no_synthesis(monkeypatch)
     out = tmp_path / "m.zip"
-    code = main(["train", "FlowTest-RandomGrid-v0", "--trainer", trainer, "--pool", STANDARD, "--count", "8",
-                 "--heldout-count", "6", "--steps", "256", "--out", str(out), "-q", *flags])
+    code = main(
+        [
+            "train",
+            "FlowTest-RandomGrid-v0",
+            "--trainer",
+            trainer,
+            "--pool",
+            STANDARD,
+            "--count",
+            "8",
+            "--heldout-count",
+            "6",
+            "--steps",
+            "256",
+            "--out",
+            str(out),
+            "-q",
+            *flags,
+        ]
+    )
     stdout, err = capsys.readouterr()
     assert code == 0, err
     summary = json.loads(out.with_suffix(".json").read_text())
@@ -59,7 +81,6 @@ def test_train_on_a_standard_pool_prints_the_floor(tmp_path: Path, capsys: pytes
 
 def test_a_standard_pool_split_is_checked(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """A -v2 pool ships so many tests per split: asking for more is one error line."""
-    code = main(["train", "FlowTest-RandomGrid-v0", "--pool", STANDARD, "--split", "validation", "--count", "100000",
-                 "--out", str(tmp_path / "m.zip")])
+    code = main(["train", "FlowTest-RandomGrid-v0", "--pool", STANDARD, "--split", "validation", "--count", "100000", "--out", str(tmp_path / "m.zip")])
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1 and err.startswith(f"error: --pool {STANDARD}: ")

@@ -19,8 +19,7 @@ from synthesis.model.errors import ProblemError
 
 pytest.importorskip("torch")
 
-TINY = ["--steps", "256", "--num-envs", "8", "--n-steps", "16", "--net-arch", "16", "--eval-every", "0",
-        "--eval-episodes", "0", "--device", "cpu", "-q"]
+TINY = ["--steps", "256", "--num-envs", "8", "--n-steps", "16", "--net-arch", "16", "--eval-every", "0", "--eval-episodes", "0", "--device", "cpu", "-q"]
 """One rollout of a tiny network: a run in about a second."""
 
 

@@ -52,17 +52,13 @@ def workdir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
 @pytest.mark.parametrize(
     "argv,words",
     [
-        (["evaluate", "--env", "FlowTest-SmallReactive-v0", "--sut", "random", "--episodes", "1", "--out", "mine"],
-         "did not write"),
-        (["evaluate", "--env", "FlowTest-SmallReactive-v0", "--sut", "random", "--episodes", "1", "--out", "a-file"],
-         "not a folder"),
+        (["evaluate", "--env", "FlowTest-SmallReactive-v0", "--sut", "random", "--episodes", "1", "--out", "mine"], "did not write"),
+        (["evaluate", "--env", "FlowTest-SmallReactive-v0", "--sut", "random", "--episodes", "1", "--out", "a-file"], "not a folder"),
         (["evaluate", "--env", "CartPole-v1", "--sut", "random", "--out", "o"], "not a FlowTest environment"),
         (["evaluate", "--env", "Nope-v0", "--sut", "random", "--out", "o"], "unknown environment"),
         (["evaluate", "--env", "FlowTest-SmallReactive-v0", "--sut", "random", "--seed", "-1", "--replay"], "--seed"),
-        (["evaluate", "--env", "FlowTest-SmallReactive-v0", "--sut", "random", "--episodes", "0", "--replay"],
-         "--episodes"),
-        (["evaluate", "--env", "FlowTest-SmallReactive-v0", "--sut", "ppo:/dev/zero", "--out", "o"],
-         "not a regular file"),
+        (["evaluate", "--env", "FlowTest-SmallReactive-v0", "--sut", "random", "--episodes", "0", "--replay"], "--episodes"),
+        (["evaluate", "--env", "FlowTest-SmallReactive-v0", "--sut", "ppo:/dev/zero", "--out", "o"], "not a regular file"),
         (["synthesize", "/dev/zero"], "not a regular file"),
         (["synthesize", "small-reactive", "--out", "link.json", "--force"], "symbolic link"),
         (["synthesize", "small-reactive", "--out", "a-file/x.json"], "is a file, not a folder"),
@@ -78,9 +74,7 @@ def workdir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
         (["frobnicate"], "invalid choice"),
     ],
 )
-def test_refused_with_one_line_and_nothing_touched(
-    workdir: Path, capsys: pytest.CaptureFixture[str], argv: list[str], words: str
-) -> None:
+def test_refused_with_one_line_and_nothing_touched(workdir: Path, capsys: pytest.CaptureFixture[str], argv: list[str], words: str) -> None:
     if "/dev/zero" in " ".join(argv) and not os.path.exists("/dev/zero"):
         pytest.skip("no /dev/zero here")
     before = snapshot(workdir)
@@ -94,8 +88,7 @@ def test_unwritable_output_refused_before_work(workdir: Path, capsys: pytest.Cap
     if not Path("/proc/self").exists():
         pytest.skip("no /proc here")
     refused(["synthesize", "small-reactive", "--out", "/proc/flowtest-x.json"], capsys, "cannot write")
-    refused(["evaluate", "--env", "FlowTest-SmallReactive-v0", "--sut", "random", "--out", "/proc/flowtest/x"],
-            capsys, "cannot create")
+    refused(["evaluate", "--env", "FlowTest-SmallReactive-v0", "--sut", "random", "--out", "/proc/flowtest/x"], capsys, "cannot create")
 
 
 def test_evaluate_force_and_own_folder(workdir: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -116,5 +109,4 @@ def test_demo_writes_only_inside_its_folder(workdir: Path, capsys: pytest.Captur
     outside = {k for k in after if not k.startswith("d" + os.sep)}
     assert outside == set(before) and all(after[k] == before[k] for k in before)
     names = sorted(p.name for p in (workdir / "d").iterdir())
-    assert names == sorted([".flowtest-demo", "summary.json", "summary.md", "ok-grid.json", "ok-grid.png",
-                            "ok-grid-2.json", "ok-grid-2.png"])
+    assert names == sorted([".flowtest-demo", "summary.json", "summary.md", "ok-grid.json", "ok-grid.png", "ok-grid-2.json", "ok-grid-2.png"])

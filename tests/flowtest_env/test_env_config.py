@@ -34,16 +34,32 @@ ENTRY_POINTS: dict[str, Make] = {
     "parallel_env": lambda **kw: multiagent.parallel_env(test="small-reactive", **kw),
 }
 CLASSES: dict[str, Any] = {
-    "FlowTestEnv": FlowTestEnv, "RandomGridEnv": RandomGridEnv, "FlowTestVectorEnv": FlowTestVectorEnv,
-    "RandomGridVectorEnv": RandomGridVectorEnv, "PoolVectorEnv": PoolVectorEnv, "raw_env": multiagent.raw_env,
+    "FlowTestEnv": FlowTestEnv,
+    "RandomGridEnv": RandomGridEnv,
+    "FlowTestVectorEnv": FlowTestVectorEnv,
+    "RandomGridVectorEnv": RandomGridVectorEnv,
+    "PoolVectorEnv": PoolVectorEnv,
+    "raw_env": multiagent.raw_env,
 }
 TWO_PLAYER = ("raw_env", "parallel_env")
 
 # one value each option refuses (EnvConfig's validator says why)
 BAD: dict[str, Any] = {
-    "setting": "sometimes", "max_steps": 2.7, "obs_kind": "voxels", "pad_to": 0, "render_mode": "svg", "view": "top",
-    "tile_size": -3, "step_cost": float("nan"), "restricted_penalty": "0.1", "goal_reward": float("inf"),
-    "violation_penalty": True, "memory": "everything", "shaping": -1.0, "shaping_gamma": 1.5, "numeric_infos": "yes",
+    "setting": "sometimes",
+    "max_steps": 2.7,
+    "obs_kind": "voxels",
+    "pad_to": 0,
+    "render_mode": "svg",
+    "view": "top",
+    "tile_size": -3,
+    "step_cost": float("nan"),
+    "restricted_penalty": "0.1",
+    "goal_reward": float("inf"),
+    "violation_penalty": True,
+    "memory": "everything",
+    "shaping": -1.0,
+    "shaping_gamma": 1.5,
+    "numeric_infos": "yes",
 }
 
 

@@ -13,8 +13,25 @@ import flowtest_env  # noqa: F401  (registers the envs)
 from flowtest_env import multiagent
 from flowtest_env.wrappers import ActionMaskObservation, DistanceShaping, VisitedPlaces
 
-BAD_ACTIONS = [1.0, 1.5, float("nan"), True, np.True_, "1", b"1", None, [1], np.array([1, 2]), np.array([[1]]),
-               np.array(1.0), np.float32(2), -1, 5, 2**70, object()]
+BAD_ACTIONS = [
+    1.0,
+    1.5,
+    float("nan"),
+    True,
+    np.True_,
+    "1",
+    b"1",
+    None,
+    [1],
+    np.array([1, 2]),
+    np.array([[1]]),
+    np.array(1.0),
+    np.float32(2),
+    -1,
+    5,
+    2**70,
+    object(),
+]
 
 
 @pytest.mark.parametrize("action", BAD_ACTIONS, ids=[repr(a)[:20] for a in BAD_ACTIONS])
@@ -34,15 +51,28 @@ def test_single_env_accepts_integers_of_the_space(action: object) -> None:
 
 
 SINGLE_ENV_BAD_KWARGS = [
-        ({"tile_size": 0}, "tile_size"), ({"tile_size": 2.5}, "tile_size"), ({"tile_size": True}, "tile_size"),
-        ({"max_steps": 1.5}, "max_steps"), ({"max_steps": "10"}, "max_steps"), ({"max_steps": 0}, "max_steps"),
-        ({"step_cost": float("nan")}, "step_cost"), ({"goal_reward": float("inf")}, "goal_reward"),
-        ({"violation_penalty": "1"}, "violation_penalty"), ({"restricted_penalty": None}, "restricted_penalty"),
-        ({"view": "god"}, "view"), ({"view": ["system"]}, "view"), ({"obs_kind": "pixels"}, "obs_kind"),
-        ({"render_mode": "human3d"}, "render_mode"), ({"setting": 3}, "setting"),
-        ({"test": "nope"}, "nope"), ({"memory": "everything"}, "memory"), ({"shaping": -1.0}, "shaping"),
-        ({"shaping": float("nan")}, "shaping"), ({"shaping_gamma": 1.5}, "shaping_gamma"), ({"pad_to": 0}, "pad_to"),
-        ({"memory": "visited", "obs_kind": "grid"}, "flat"),
+    ({"tile_size": 0}, "tile_size"),
+    ({"tile_size": 2.5}, "tile_size"),
+    ({"tile_size": True}, "tile_size"),
+    ({"max_steps": 1.5}, "max_steps"),
+    ({"max_steps": "10"}, "max_steps"),
+    ({"max_steps": 0}, "max_steps"),
+    ({"step_cost": float("nan")}, "step_cost"),
+    ({"goal_reward": float("inf")}, "goal_reward"),
+    ({"violation_penalty": "1"}, "violation_penalty"),
+    ({"restricted_penalty": None}, "restricted_penalty"),
+    ({"view": "god"}, "view"),
+    ({"view": ["system"]}, "view"),
+    ({"obs_kind": "pixels"}, "obs_kind"),
+    ({"render_mode": "human3d"}, "render_mode"),
+    ({"setting": 3}, "setting"),
+    ({"test": "nope"}, "nope"),
+    ({"memory": "everything"}, "memory"),
+    ({"shaping": -1.0}, "shaping"),
+    ({"shaping": float("nan")}, "shaping"),
+    ({"shaping_gamma": 1.5}, "shaping_gamma"),
+    ({"pad_to": 0}, "pad_to"),
+    ({"memory": "visited", "obs_kind": "grid"}, "flat"),
 ]
 
 
@@ -53,9 +83,17 @@ def test_single_env_arguments_are_named(kwargs: dict[str, Any], words: str) -> N
 
 
 RANDOM_GRID_BAD_KWARGS = [
-    ({"size": 0}, "size"), ({"size": 2.0}, "size"), ({"size": 2.5}, "size"), ({"n": True}, "n"), ({"seeds": []}, "seed"),
-    ({"seeds": [-1]}, "seeds"), ({"seeds": [1.5]}, "seeds"), ({"seeds": "01"}, "seeds"),
-    ({"family": ["reachability"]}, "family"), ({"kind": "mixed"}, "kind"), ({"world": "lava"}, "world"),
+    ({"size": 0}, "size"),
+    ({"size": 2.0}, "size"),
+    ({"size": 2.5}, "size"),
+    ({"n": True}, "n"),
+    ({"seeds": []}, "seed"),
+    ({"seeds": [-1]}, "seeds"),
+    ({"seeds": [1.5]}, "seeds"),
+    ({"seeds": "01"}, "seeds"),
+    ({"family": ["reachability"]}, "family"),
+    ({"kind": "mixed"}, "kind"),
+    ({"world": "lava"}, "world"),
     ({"pool": "reachability1/5x5", "count": 2.5}, "count"),
 ]
 
@@ -131,9 +169,16 @@ def test_vector_env_refuses_bool_and_float_actions_like_the_single_env(action: o
         vec.step(action)
 
 
-@pytest.mark.parametrize("kwargs,words", [({"max_cycles": 0}, "max_cycles"), ({"tile_size": -3}, "tile_size"),
-                                          ({"step_cost": float("inf")}, "step_cost"), ({"view": "x"}, "view"),
-                                          ({"problem": "nope"}, "nope")])
+@pytest.mark.parametrize(
+    "kwargs,words",
+    [
+        ({"max_cycles": 0}, "max_cycles"),
+        ({"tile_size": -3}, "tile_size"),
+        ({"step_cost": float("inf")}, "step_cost"),
+        ({"view": "x"}, "view"),
+        ({"problem": "nope"}, "nope"),
+    ],
+)
 def test_multiagent_arguments_are_named(kwargs: dict[str, Any], words: str) -> None:
     with pytest.raises(ValueError, match=words):
         multiagent.raw_env(**{"problem": "small-reactive", **kwargs})
@@ -144,8 +189,7 @@ def test_parallel_env_raises_before_reset_and_after_the_end() -> None:
     with pytest.raises(gym.error.ResetNeeded):
         env.step({a: 0 for a in env.possible_agents})
     env.reset(seed=0)
-    for bad in ({"tester_0": 0}, {"tester_0": 0, "system_0": 1.5}, {"tester_0": True, "system_0": 0},
-                {"tester_0": 0, "system_0": 0, "intruder": 0}, [0, 0]):
+    for bad in ({"tester_0": 0}, {"tester_0": 0, "system_0": 1.5}, {"tester_0": True, "system_0": 0}, {"tester_0": 0, "system_0": 0, "intruder": 0}, [0, 0]):
         with pytest.raises(gym.error.InvalidAction):
             env.step(bad)  # type: ignore[arg-type]
     for _ in range(1000):
@@ -178,4 +222,3 @@ def test_every_wrapper_passes_check_env_and_make_spec(wrapper: type, env_id: str
     a, _ = env.reset(seed=3)
     b, _ = again.reset(seed=3)
     assert gym.utils.env_checker.data_equivalence(a, b)
-

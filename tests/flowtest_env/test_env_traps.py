@@ -36,8 +36,7 @@ def test_pool_vector_env_takes_anything_load_test_takes(tmp_path: Path) -> None:
     ``SynthesizedTest`` objects, one test or a list; each plays as its single env."""
     art_file = tmp_path / "maze2.json"
     load_test("maze2").save(art_file)
-    tests = [builtin_game("maze2", "instantaneous"), load_test("example1"), "small-reactive", str(art_file),
-             example1(), synthesize(small_reactive())]
+    tests = [builtin_game("maze2", "instantaneous"), load_test("example1"), "small-reactive", str(art_file), example1(), synthesize(small_reactive())]
     vec = PoolVectorEnv(len(tests), tests, assignment="fixed", max_steps=10)
     names = [g.artifact.name for g in vec.games]
     assert names == ["maze2", "example1", "small-reactive", "maze2", "example1", "small-reactive"]
@@ -58,8 +57,7 @@ def test_pool_based_spec_lists_the_pool_not_default_seeds(pool_cache: Path) -> N
     assert not {"seeds", "size", "family", "n", "kind"} & set(kwargs), kwargs
     again = gym.make(env.spec)  # the spec rebuilds the same env
     assert [g.artifact.name for g in again.unwrapped.games] == [g.artifact.name for g in env.unwrapped.games]
-    vec = gym.make_vec("FlowTest-RandomGrid-v0", num_envs=2, vectorization_mode="vector_entry_point",
-                       pool="reachability1/5x5", count=2)
+    vec = gym.make_vec("FlowTest-RandomGrid-v0", num_envs=2, vectorization_mode="vector_entry_point", pool="reachability1/5x5", count=2)
     assert "seeds" not in vec.spec.kwargs  # type: ignore[union-attr]
     default = gym.make("FlowTest-RandomGrid-v0")
     names = [g.artifact.name for g in default.unwrapped.games]  # the documented default pool

@@ -446,9 +446,7 @@ def _explore(game: TestGame) -> tuple[list[RunState], np.ndarray, np.ndarray]:
     return states, np.array(src, dtype=np.int64), np.array(dst, dtype=np.int64)
 
 
-@pytest.mark.parametrize(
-    "name", [n if artifact_path(n).exists() else pytest.param(n, marks=_no_artifact(n)) for n in BUILTIN_ENVS]
-)
+@pytest.mark.parametrize("name", [n if artifact_path(n).exists() else pytest.param(n, marks=_no_artifact(n)) for n in BUILTIN_ENVS])
 def test_synthesized_test_keeps_its_guarantees_exhaustively(name: str) -> None:
     """Against every system behaviour (exhaustive over the reachable game states, so over
     every action sequence of any length): every run that meets the system objective has
@@ -549,9 +547,7 @@ def test_make_is_fast_cold(env_id: str) -> None:
     subprocess.run([sys.executable, "-c", "import gymnasium, flowtest_env"], check=True, cwd=ROOT, env=env)  # writes the bytecode
     made, cpu = float("inf"), float("inf")
     for _ in range(3):  # the best of up to three fresh interpreters: the other core's work slows both clocks
-        out = subprocess.run(
-            [sys.executable, "-c", COLD_MAKE.format(env_id=env_id)], capture_output=True, text=True, check=True, cwd=ROOT, env=env
-        )
+        out = subprocess.run([sys.executable, "-c", COLD_MAKE.format(env_id=env_id)], capture_output=True, text=True, check=True, cwd=ROOT, env=env)
         wall, thread_cpu = map(float, out.stdout.split())
         made, cpu = min(made, wall), min(cpu, thread_cpu)
         if made < 1.0 and cpu < 1.0:
@@ -588,12 +584,7 @@ SLOW_ARTIFACTS = {"refueling", "mars-exploration", "patrolling"}
 
 @pytest.mark.parametrize(
     "name",
-    [
-        pytest.param(n, marks=[pytest.mark.slow] + ([] if artifact_path(n).exists() else [_no_artifact(n)]))
-        if n in SLOW_ARTIFACTS
-        else n
-        for n in BUILTIN_ENVS
-    ],
+    [pytest.param(n, marks=[pytest.mark.slow] + ([] if artifact_path(n).exists() else [_no_artifact(n)])) if n in SLOW_ARTIFACTS else n for n in BUILTIN_ENVS],
 )
 def test_shipped_artifact_equals_a_fresh_synthesis(name: str) -> None:
     """What ``gym.make`` loads is what the synthesis computes today (the slow problems'

@@ -88,12 +88,24 @@ def reference_tables(game: TestGame) -> dict[str, Any]:
     walls = np.broadcast_to(strat.static_obstacles[None, :], strat.blocked.shape)
     doomed = ~reference_coreachable(art, walls if game.external_tester else game.enforced, letter)
     return {
-        "n_slots": n_slots, "n_actions": n_slots + 1, "stay_action": n_slots, "slot_move": slot_move,
-        "successor": successor, "dst_place": dst_place, "permanent_wall": reference_permanent_walls(art),
-        "restricted_bits": restricted_bits, "exists_bits": exists_bits, "static_bits": static_bits,
-        "choosable_bits": choosable_bits, "into_bits": into_bits, "_mask_table": table,
-        "next_history": art.histories.delta[:, letter].tolist(), "doomed": doomed.tolist(),
-        "succ_list": successor.tolist(), "slot_list": slot_move.tolist(), "place_list": ts.place.tolist(),
+        "n_slots": n_slots,
+        "n_actions": n_slots + 1,
+        "stay_action": n_slots,
+        "slot_move": slot_move,
+        "successor": successor,
+        "dst_place": dst_place,
+        "permanent_wall": reference_permanent_walls(art),
+        "restricted_bits": restricted_bits,
+        "exists_bits": exists_bits,
+        "static_bits": static_bits,
+        "choosable_bits": choosable_bits,
+        "into_bits": into_bits,
+        "_mask_table": table,
+        "next_history": art.histories.delta[:, letter].tolist(),
+        "doomed": doomed.tolist(),
+        "succ_list": successor.tolist(),
+        "slot_list": slot_move.tolist(),
+        "place_list": ts.place.tolist(),
     }
 
 
@@ -127,10 +139,8 @@ def reference_permanent_walls(art: TestArtifact) -> np.ndarray:
             if d not in reach:
                 reach.add(d)
                 todo.append(d)
-    open_pairs = {(int(ts.place[ts.src[m]]), int(ts.place[ts.dst[m]])) for m in range(ts.n_moves)
-                  if int(ts.src[m]) in reach and not static[m]}
-    return np.array([bool(static[m]) and (int(ts.place[ts.src[m]]), int(ts.place[ts.dst[m]])) not in open_pairs
-                     for m in range(ts.n_moves)], dtype=bool)
+    open_pairs = {(int(ts.place[ts.src[m]]), int(ts.place[ts.dst[m]])) for m in range(ts.n_moves) if int(ts.src[m]) in reach and not static[m]}
+    return np.array([bool(static[m]) and (int(ts.place[ts.src[m]]), int(ts.place[ts.dst[m]])) not in open_pairs for m in range(ts.n_moves)], dtype=bool)
 
 
 def reference_compile(game: TestGame, encoder: Encoder, n_actions: int) -> CompiledTest:
@@ -163,8 +173,9 @@ def reference_compile(game: TestGame, encoder: Encoder, n_actions: int) -> Compi
             if k2 not in index:
                 index[k2] = len(order)
                 order.append(k2)
-                runs[k2] = RunState(system=after.system, history=after.history, agent=after.agent, memory=after.memory,
-                                    visited={after.system}, outcome=after.outcome)
+                runs[k2] = RunState(
+                    system=after.system, history=after.history, agent=after.agent, memory=after.memory, visited={after.system}, outcome=after.outcome
+                )
             row.append(index[k2])
         nxt.append(row)
         refused.append(ref)
@@ -211,8 +222,7 @@ def reference_compile(game: TestGame, encoder: Encoder, n_actions: int) -> Compi
 
 def same(a: Any, b: Any) -> bool:
     if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
-        return (isinstance(a, np.ndarray) and isinstance(b, np.ndarray) and a.dtype == b.dtype and a.shape == b.shape
-                and bool(np.array_equal(a, b)))
+        return isinstance(a, np.ndarray) and isinstance(b, np.ndarray) and a.dtype == b.dtype and a.shape == b.shape and bool(np.array_equal(a, b))
     return type(a) is type(b) and bool(a == b)
 
 

@@ -34,9 +34,23 @@ def test_ctrl_c_to_the_process_group_while_a_pool_loads_is_one_line(tmp_path: Pa
     turned the signal into a ``KeyboardInterrupt`` traceback of their own)."""
     env = {**os.environ, "XDG_CACHE_HOME": str(tmp_path / "cache"), "HOME": str(tmp_path / "home")}
     proc = subprocess.Popen(
-        [sys.executable, "-m", "experiments.cli.cli", "benchmark", "--pool", "reachability1/5x5-v1",
-         "--sut", "scripted:replanner", "--out", str(tmp_path / "out")],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, start_new_session=True,
+        [
+            sys.executable,
+            "-m",
+            "experiments.cli.cli",
+            "benchmark",
+            "--pool",
+            "reachability1/5x5-v1",
+            "--sut",
+            "scripted:replanner",
+            "--out",
+            str(tmp_path / "out"),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+        start_new_session=True,
         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     assert proc.stderr is not None

@@ -114,8 +114,7 @@ def test_seeded_runs_agree_with_the_rules_read_off_the_artifact(game: TestGame) 
                 break
             agent_place = game.agent_place[run.agent] if game.has_agent else -2
             refused = restricted_now(game, history, state, agent_place)
-            legal = {a for a in range(game.n_actions)
-                     if (a == game.stay_action and ts.stay[state]) or (move_of_action(game, state, a) not in (None, *refused))}
+            legal = {a for a in range(game.n_actions) if (a == game.stay_action and ts.stay[state]) or (move_of_action(game, state, a) not in (None, *refused))}
             mask = game.action_mask(run)
             assert set(np.flatnonzero(mask)) == (legal or {game.stay_action}), "the mask offers exactly the legal actions"
             action = rng.randrange(game.n_actions)

@@ -25,8 +25,12 @@ SOLVER_MODULES = ("synthesis.pipeline", "synthesis.test_agent.loop")
 """The synthesis entry point and the test agent's loop, which import every routing backend."""
 
 ROUTING_DATA = (
-    "synthesis.routing", "synthesis.routing.options", "synthesis.routing.solve_status", "synthesis.routing.groups",
-    "synthesis.routing.result", "synthesis.routing.restrictions",
+    "synthesis.routing",
+    "synthesis.routing.options",
+    "synthesis.routing.solve_status",
+    "synthesis.routing.groups",
+    "synthesis.routing.result",
+    "synthesis.routing.restrictions",
 )
 """The only modules of :mod:`synthesis.routing` a played test may load, all plain data: the
 options (which :class:`~synthesis.options.SynthesisOptions` extends and a pool's provenance

@@ -72,8 +72,7 @@ def test_counts_read_the_same_in_the_torch_env(mode: str) -> None:
     from flowtest_env.torch_vector import TorchVectorEnv
 
     gym_mode = {"next_step": AutoresetMode.NEXT_STEP, "same_step": AutoresetMode.SAME_STEP, "disabled": AutoresetMode.DISABLED}[mode]
-    ref = gym.make_vec("FlowTest-Maze2-v0", num_envs=6, vectorization_mode="vector_entry_point", autoreset_mode=gym_mode,
-                       memory="counts", max_steps=25)
+    ref = gym.make_vec("FlowTest-Maze2-v0", num_envs=6, vectorization_mode="vector_entry_point", autoreset_mode=gym_mode, memory="counts", max_steps=25)
     env = TorchVectorEnv.from_numpy(ref)
     assert env.memory is not None and env.single_observation_space == ref.single_observation_space
 

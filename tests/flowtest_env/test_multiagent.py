@@ -520,6 +520,7 @@ def test_pettingzoos_render_test_passes_with_human_rendering(monkeypatch: pytest
     render_test(lambda render_mode=None: multiagent.env(test="maze2", render_mode=render_mode))
     shown: list[tuple[int, ...]] = []
     real = multiagent.HumanWindow.show
+
     def show(self: multiagent.HumanWindow, frame: np.ndarray) -> None:
         shown.append(frame.shape)
         real(self, frame)

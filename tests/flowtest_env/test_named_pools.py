@@ -18,8 +18,14 @@ def test_pool_names_parse_and_print_back() -> None:
     assert parse_pool("safety2/5x5/fuel/agent") == PoolName("safety", 2, 5, "agent", "fuel")
     assert parse_pool("safety2/5x5/agent/fuel") == parse_pool("safety2/5x5/fuel/agent")
     assert parse_pool("reachability1/5x5/empty/reactive") == parse_pool("reachability1/5x5")
-    for name in ("reachability1/5x5", "reaction2/7x7/static", "safety3/10x10", "reachability1/5x5/agent",
-                 "reachability1/7x7/blocked", "reaction2/10x10/fuel/static"):
+    for name in (
+        "reachability1/5x5",
+        "reaction2/7x7/static",
+        "safety3/10x10",
+        "reachability1/5x5/agent",
+        "reachability1/7x7/blocked",
+        "reaction2/10x10/fuel/static",
+    ):
         assert str(parse_pool(name)) == name
 
 
@@ -81,8 +87,7 @@ def test_random_grid_env_draws_from_a_named_pool_and_split(tmp_path: Path, monke
         env.reset(seed=seed)
         names.add(env.unwrapped.artifact.name)
     assert names == {f"random-5x5-reachability1-reactive-s{SPLIT_SPAN + i}" for i in range(2)}
-    vec = gym.make_vec("FlowTest-RandomGrid-v0", num_envs=2, vectorization_mode="vector_entry_point",
-                       pool="reachability1/5x5", split="validation", count=2)
+    vec = gym.make_vec("FlowTest-RandomGrid-v0", num_envs=2, vectorization_mode="vector_entry_point", pool="reachability1/5x5", split="validation", count=2)
     vec.reset(seed=0)
     with pytest.raises(ValueError, match="unknown split"):
         gym.make("FlowTest-RandomGrid-v0", pool="reachability1/5x5", split="holdout")

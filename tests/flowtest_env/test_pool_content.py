@@ -66,7 +66,10 @@ def test_twins_drawn_by_two_seeds_have_one_key_and_two_names(r1: list[TestArtifa
 def test_name_seed_summary_and_extras_leave_the_key_unchanged(r1: list[TestArtifact]) -> None:
     t = r1[0]
     renamed = dataclasses.replace(
-        t, name="another-name-s7", summary={**t.summary, "flow": 99, "stats": {"time": 1.0}}, extras={"provenance": {"seed": 7}},
+        t,
+        name="another-name-s7",
+        summary={**t.summary, "flow": 99, "stats": {"time": 1.0}},
+        extras={"provenance": {"seed": 7}},
         source="0" * 64,
     )
     assert content_key(renamed) == content_key(t)
@@ -261,8 +264,7 @@ def tiny(data: Path, monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> sp.Stan
     return pool
 
 
-def test_the_builder_draws_splits_in_turn_skipping_taken_tests(tiny: sp.StandardPool, tmp_path: Path,
-                                                               monkeypatch: pytest.MonkeyPatch) -> None:
+def test_the_builder_draws_splits_in_turn_skipping_taken_tests(tiny: sp.StandardPool, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     from experiments.tools import build_pools
 
     build_pools.build_split(tiny, "test", 3, reuse_cache=False)
@@ -311,8 +313,15 @@ def _brute_layouts(size: int, family: str, n: int, world: str, kind: str) -> int
     return total
 
 
-@pytest.mark.parametrize("case", [(3, "reachability", 1, "empty", "reactive"), (3, "reachability", 1, "blocked", "agent"),
-                                  (4, "safety", 2, "fuel", "static"), (4, "reachability", 2, "blocked", "agent")])
+@pytest.mark.parametrize(
+    "case",
+    [
+        (3, "reachability", 1, "empty", "reactive"),
+        (3, "reachability", 1, "blocked", "agent"),
+        (4, "safety", 2, "fuel", "static"),
+        (4, "reachability", 2, "blocked", "agent"),
+    ],
+)
 def test_the_layout_count_is_every_draw(case: tuple[int, str, int, str, str]) -> None:
     assert layout_count(*case) == _brute_layouts(*case)
 

@@ -54,8 +54,7 @@ def special_cells(layout_tokens: dict[tuple[int, int], str]) -> dict[str, tuple[
     return {t: c for c, t in layout_tokens.items() if t not in ("t", "t0", "R")}
 
 
-@pytest.mark.parametrize("world,kind", [(w, k) for w in ("blocked", "fuel") for k in ("reactive", "static", "agent")]
-                         + [("empty", "agent")])
+@pytest.mark.parametrize("world,kind", [(w, k) for w in ("blocked", "fuel") for k in ("reactive", "static", "agent")] + [("empty", "agent")])
 def test_a_seed_names_one_problem_drawn_as_documented(world: str, kind: str) -> None:
     drawn: list[str] = []
     for seed in range(6):
@@ -87,8 +86,7 @@ def test_a_seed_names_one_problem_drawn_as_documented(world: str, kind: str) -> 
 
 def test_the_empty_world_is_the_papers_grid() -> None:
     for kind in ("static", "reactive"):
-        assert world_problem(5, "safety", 2, 3, 1, "empty", kind).system.to_dict() == random_problem(
-            5, "safety", 2, 3, 1, kind).system.to_dict()
+        assert world_problem(5, "safety", 2, 3, 1, "empty", kind).system.to_dict() == random_problem(5, "safety", 2, 3, 1, kind).system.to_dict()
     with pytest.raises(ValueError, match="unknown world"):
         world_problem(5, "safety", 2, 0, 0, "lava", "static")
     with pytest.raises(ValueError, match="unknown kind"):
@@ -159,9 +157,7 @@ def build_files(cache: Path, monkeypatch: pytest.MonkeyPatch, name: str, seeds: 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", FAMILY_POOLS)
-def test_each_family_pool_is_byte_identical_under_load_and_through_ray(
-    name: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
+def test_each_family_pool_is_byte_identical_under_load_and_through_ray(name: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """Issue 16's acceptance: the same pool built idle in process, with every core busy,
     and through Ray, gives the same bytes."""
     seeds = range(2) if name.endswith("agent") else range(3)  # an empty-grid agent test takes about a CPU minute

@@ -97,9 +97,7 @@ def test_pool_is_deterministic_and_keyed(cache: Path, tmp_path: Path, monkeypatc
         assert art.extras["provenance"]["pool"]["options"]["node_limit"] == rg.POOL_NODE_LIMIT
 
 
-def test_pool_is_reused_under_the_same_versions_and_rebuilt_under_others(
-    cache: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
+def test_pool_is_reused_under_the_same_versions_and_rebuilt_under_others(cache: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     seen = count_syntheses(monkeypatch)
     pool = rg.build_pool(*POOL, SEEDS, progress=False)
     assert seen == list(SEEDS)
@@ -189,7 +187,11 @@ def test_the_suite_never_touches_the_real_home(tmp_path: Path) -> None:
     test = "tests/flowtest_env/test_pools.py::test_progress_bar_goes_to_stderr"
     done = subprocess.run(
         [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", test],
-        cwd=ROOT, env=env, capture_output=True, text=True, timeout=600,
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
     )
     assert done.returncode == 0, done.stdout + done.stderr
     assert "1 passed" in done.stdout

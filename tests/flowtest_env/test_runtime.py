@@ -107,9 +107,19 @@ def test_a_run_that_ended_takes_no_step() -> None:
 
 
 def test_serve_answers_each_line_and_goes_on_after_bad_ones() -> None:
-    requests = [{"op": "describe"}, {"op": "reset", "id": 7}, "not json", {"op": "step", "state": [1, 1]},
-                {"op": "step", "state": [9, 9]}, {"op": "step", "action": "E", "extra": 1}, {"op": "fly"}, [1, 2],
-                {"op": "status"}, {"op": "quit"}, {"op": "reset"}]
+    requests = [
+        {"op": "describe"},
+        {"op": "reset", "id": 7},
+        "not json",
+        {"op": "step", "state": [1, 1]},
+        {"op": "step", "state": [9, 9]},
+        {"op": "step", "action": "E", "extra": 1},
+        {"op": "fly"},
+        [1, 2],
+        {"op": "status"},
+        {"op": "quit"},
+        {"op": "reset"},
+    ]
     inp = io.StringIO("".join((r if isinstance(r, str) else json.dumps(r)) + "\n" for r in requests))
     out = io.StringIO()
     serve_stream(TestRuntime.load("small-reactive"), inp, out)
@@ -128,13 +138,19 @@ def test_serve_answers_each_line_and_goes_on_after_bad_ones() -> None:
 
 
 def _flowtest(*args: str) -> subprocess.Popen[str]:
-    return subprocess.Popen([sys.executable, "-m", "experiments", *args], cwd=ROOT, text=True,
-                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    return subprocess.Popen(
+        [sys.executable, "-m", "experiments", *args], cwd=ROOT, text=True, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE
+    )
 
 
 def test_flowtest_serve_over_stdin_and_stdout() -> None:
-    proc = subprocess.run([sys.executable, "-m", "experiments", "serve", "maze2"], cwd=ROOT, capture_output=True,
-                          input=b'{"op":"reset"}\n{"op":"st\xffep"}\n{"op":"step","action":"N"}\n', timeout=120)
+    proc = subprocess.run(
+        [sys.executable, "-m", "experiments", "serve", "maze2"],
+        cwd=ROOT,
+        capture_output=True,
+        input=b'{"op":"reset"}\n{"op":"st\xffep"}\n{"op":"step","action":"N"}\n',
+        timeout=120,
+    )
     assert proc.returncode == 0, proc.stderr
     first, bad, second = (json.loads(line) for line in proc.stdout.decode().splitlines())
     assert first["status"]["agent"]["name"] and second["status"]["step"] == 1
@@ -166,8 +182,7 @@ def test_serve_refuses_an_unknown_test(capsys: pytest.CaptureFixture[str]) -> No
     assert capsys.readouterr().err.startswith("error: ")
 
 
-@pytest.mark.parametrize("name,hidden", [("small-reactive", ["I1", "I2"]), ("maze2", ["I1", "I2"]),
-                                         ("refueling", [])])
+@pytest.mark.parametrize("name,hidden", [("small-reactive", ["I1", "I2"]), ("maze2", ["I1", "I2"]), ("refueling", [])])
 def test_the_public_description_hides_the_test_objective(name: str, hidden: list[str]) -> None:
     rt = TestRuntime.load(name)
     test = rt.describe()
@@ -253,10 +268,16 @@ def test_a_status_says_why_the_run_ended_and_names_histories_neutrally() -> None
     assert status["reason"] == f"violated the system objective at step {status['step']}, entering {json.dumps(test['states'][s])}"
 
 
-@pytest.mark.parametrize("kwargs,code", [
-    ({}, "bad_request"), ({"state": [0, 0], "action": "N"}, "bad_request"), ({"state": "T"}, "not_a_state"),
-    ({"state": [1, 2]}, "not_one_move"), ({"action": "NE"}, "not_an_action"),
-])
+@pytest.mark.parametrize(
+    "kwargs,code",
+    [
+        ({}, "bad_request"),
+        ({"state": [0, 0], "action": "N"}, "bad_request"),
+        ({"state": "T"}, "not_a_state"),
+        ({"state": [1, 2]}, "not_one_move"),
+        ({"action": "NE"}, "not_an_action"),
+    ],
+)
 def test_each_refusal_has_its_code(kwargs: dict[str, Any], code: str) -> None:
     from flowtest_env.runtime import REFUSALS
 

@@ -38,10 +38,13 @@ def _dummy(env_id: str, n: int, **options: Any) -> DummyVecEnv:
     return DummyVecEnv([lambda: gym.make(env_id, **options) for _ in range(n)])
 
 
-@pytest.mark.parametrize(("env_id", "options", "ends"), [
-    ("FlowTest-SmallReactive-v0", {"max_steps": 9}, {"truncated", "terminated"}),
-    ("FlowTest-Maze2-v0", {"max_steps": 15, "memory": "visited", "shaping": 2.0}, {"truncated"}),
-])
+@pytest.mark.parametrize(
+    ("env_id", "options", "ends"),
+    [
+        ("FlowTest-SmallReactive-v0", {"max_steps": 9}, {"truncated", "terminated"}),
+        ("FlowTest-Maze2-v0", {"max_steps": 15, "memory": "visited", "shaping": 2.0}, {"truncated"}),
+    ],
+)
 def test_episode_ends_follow_sb3s_vecenv_conventions(env_id: str, options: dict[str, Any], ends: set[str]) -> None:
     """Step for step equal to SB3's DummyVecEnv of the single env (same seeds, same random
     legal actions): observations, rewards, dones, and at every episode end the infos

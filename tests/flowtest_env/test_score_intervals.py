@@ -23,12 +23,11 @@ def loop_iqm(values: list[float]) -> float:
     """The 25 % trimmed mean, by sorting a Python list."""
     xs = sorted(values)
     k = len(xs) // 4
-    kept = xs[k:len(xs) - k]
+    kept = xs[k : len(xs) - k]
     return sum(kept) / len(kept)
 
 
-def loop_normalized(x: np.ndarray, floor: np.ndarray, ceiling: np.ndarray, seeds: list[int], tests: list[int],
-                    statistic: str) -> float:
+def loop_normalized(x: np.ndarray, floor: np.ndarray, ceiling: np.ndarray, seeds: list[int], tests: list[int], statistic: str) -> float:
     """One replicate, entry by entry: each drawn seed's mean over the drawn tests, their IQM or
     mean, normalized by the floor's and the ceiling's means over the same drawn tests."""
     per_seed = [float(np.mean(x[s, tests])) for s in seeds]
@@ -38,8 +37,7 @@ def loop_normalized(x: np.ndarray, floor: np.ndarray, ceiling: np.ndarray, seeds
     return (m - f) / (c - f)
 
 
-def loop_replicates(x: np.ndarray, floor: np.ndarray, ceiling: np.ndarray, reps: int, seed: int, resample_seeds: bool,
-                    statistic: str) -> list[float]:
+def loop_replicates(x: np.ndarray, floor: np.ndarray, ceiling: np.ndarray, reps: int, seed: int, resample_seeds: bool, statistic: str) -> list[float]:
     rng = np.random.default_rng(seed + 1000)  # not the library's draws
     s, t = x.shape
     out = []
@@ -114,7 +112,7 @@ def test_the_preliminary_t_interval_matches_an_independent_implementation() -> N
     assert got.seed_se == pytest.approx(seed_se, rel=1e-9)
     assert got.test_se is not None and got.test_se == pytest.approx(test_se, rel=0.05)  # Monte-Carlo error ~1.1 %
     alone = float(student.ppf(0.975, s - 1)) * seed_se  # the t interval over the seed means alone
-    half = math.sqrt(alone ** 2 + (float(student.ppf(0.975, t - 1)) * test_se) ** 2)
+    half = math.sqrt(alone**2 + (float(student.ppf(0.975, t - 1)) * test_se) ** 2)
     assert got.low == pytest.approx(mean - half, rel=0.02) and got.high == pytest.approx(mean + half, rel=0.02)
     assert got.high - got.low > 2 * alone  # never narrower than the seed means' own t interval
     one = score_interval(x[:1], floor, ceiling, reps=REPS, seed=0)  # one seed: the tests' error only
@@ -183,8 +181,9 @@ def test_bad_input() -> None:
 # --------------------------------------------------------------------------- coverage
 
 
-def world(rng: np.random.Generator, seeds: int, tests: int, runs: int, seed_effect: float = 0.03,
-          test_effect: float = 0.3) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def world(
+    rng: np.random.Generator, seeds: int, tests: int, runs: int, seed_effect: float = 0.03, test_effect: float = 0.3
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """One simulated benchmark on a crossed seed x test model: a test's met probability is
     0.6 + a_seed + b_test + c_seed,test (uniform effects, a in +-``seed_effect``, b in
     +-``test_effect``, c in +-0.05), ``runs`` sampled runs per seed and test; random meets
@@ -204,8 +203,7 @@ def world(rng: np.random.Generator, seeds: int, tests: int, runs: int, seed_effe
 TRUTH = 0.5
 
 
-def per_seed_bootstrap(x: np.ndarray, floor: np.ndarray, ceiling: np.ndarray, reps: int,
-                       rng: np.random.Generator) -> tuple[float, float]:
+def per_seed_bootstrap(x: np.ndarray, floor: np.ndarray, ceiling: np.ndarray, reps: int, rng: np.random.Generator) -> tuple[float, float]:
     """The benchmark's old interval: seeds resampled and, for each drawn seed, its own
     independent resample of the tests; the floor and the ceiling held at their means."""
     s, t = x.shape
@@ -214,7 +212,7 @@ def per_seed_bootstrap(x: np.ndarray, floor: np.ndarray, ceiling: np.ndarray, re
     cols = rng.integers(0, t, (reps, s, t))
     means = np.sort(z[who[:, :, None], cols].mean(axis=2), axis=1)
     k = s // 4
-    low, high = np.quantile(means[:, k:s - k].mean(axis=1), [0.025, 0.975])
+    low, high = np.quantile(means[:, k : s - k].mean(axis=1), [0.025, 0.975])
     return float(low), float(high)
 
 

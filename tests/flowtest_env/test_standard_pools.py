@@ -167,9 +167,14 @@ def _without_cuts_resealed(pool: sp.StandardPool, rec: dict[str, Any]) -> None:
     problem = world_problem(p.size, p.family, p.n, rec["seed"], rec["attempt"], p.world, p.kind)
     _, products = build_graphs(problem)
     routing = RoutingResult(
-        status="optimal", flow=rec["summary"]["flow"], cut_edges=np.zeros(0, dtype=np.int64), cut_group_keys=[],
-        static_moves_cut=np.zeros(products.ts.n_moves, dtype=bool), blocked_places=np.zeros(0, dtype=np.int64),
-        mip_gap=0.0, stats={},
+        status="optimal",
+        flow=rec["summary"]["flow"],
+        cut_edges=np.zeros(0, dtype=np.int64),
+        cut_group_keys=[],
+        static_moves_cut=np.zeros(products.ts.n_moves, dtype=bool),
+        blocked_places=np.zeros(0, dtype=np.int64),
+        mip_gap=0.0,
+        stats={},
     )
     rec["cuts"] = []
     rec["certificate"] = certificate_of(products, strategy_from_routing(products, routing, "instantaneous"), rec["summary"]["flow"])
@@ -241,9 +246,7 @@ def test_load_pool_serves_shipped_tests_then_builds_the_rest(data: Path, cache: 
 # ---------------------------------------------------------------- the builder
 
 
-def test_builder_resumes_is_deterministic_and_survives_ctrl_c(
-    data: Path, cache: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
+def test_builder_resumes_is_deterministic_and_survives_ctrl_c(data: Path, cache: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     pool = sp.standard_pool(R1)
     assert build_pools.build_split(pool, "validation", 2, reuse_cache=False) == 2
     path = pool.path("validation")
@@ -339,9 +342,7 @@ def test_the_builder_reuses_cached_records_of_the_same_parameters_only(cache: Pa
     assert rg.stored_records(5, "reachability", 1, "validation") == {}  # the current version's folder only
 
 
-def test_builder_appends_in_seed_order_whatever_order_records_finish(
-    data: Path, cache: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
+def test_builder_appends_in_seed_order_whatever_order_records_finish(data: Path, cache: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """Through Ray records finish in any order; the file still holds the split's seeds in order."""
     real = rg.synthesize_records
 

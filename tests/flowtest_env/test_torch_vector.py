@@ -88,8 +88,16 @@ def _tests_played(ref: Any) -> np.ndarray | None:
     return np.asarray(inner.test_index) if hasattr(inner, "test_index") else None
 
 
-def compare(ref: Any, env: tv.TorchVectorEnv, steps: int, seed: int, p_any: float, mode: str = "next_step",
-            twin: tv.TorchVectorEnv | None = None, names: list[str] | None = None) -> dict[str, int]:
+def compare(
+    ref: Any,
+    env: tv.TorchVectorEnv,
+    steps: int,
+    seed: int,
+    p_any: float,
+    mode: str = "next_step",
+    twin: tv.TorchVectorEnv | None = None,
+    names: list[str] | None = None,
+) -> dict[str, int]:
     """Step ``ref`` and ``env`` (and ``twin``, the same env with compact observations) on
     the same actions; assert every output equal; count episode ends and verdicts."""
     rng = np.random.default_rng(seed)
@@ -215,8 +223,17 @@ def test_random_assignment_over_a_pool_of_builtins_draws_like_the_numpy_env() ->
 
 def _pool_ref(family: str, world: str, kind: str, num_envs: int = 6, **kw: Any) -> Any:
     return gym.make_vec(
-        "FlowTest-RandomGrid-v0", num_envs=num_envs, vectorization_mode="vector_entry_point",
-        size=3, family=family, n=SPEC_SIZE[family], world=world, kind=kind, seeds=[0, 1], max_steps=15, **kw,
+        "FlowTest-RandomGrid-v0",
+        num_envs=num_envs,
+        vectorization_mode="vector_entry_point",
+        size=3,
+        family=family,
+        n=SPEC_SIZE[family],
+        world=world,
+        kind=kind,
+        seeds=[0, 1],
+        max_steps=15,
+        **kw,
     )
 
 
@@ -278,8 +295,7 @@ def test_memory_and_shaping_on_a_graph_and_a_padded_pool_like_the_numpy_env() ->
 def test_options_match_a_sync_vector_env_of_the_single_env() -> None:
     """The torch env against the single env itself, not only through the NumPy env."""
     kw: dict[str, Any] = {"memory": "visited", "shaping": 10.0, "max_steps": 25}
-    ref = gym.make_vec("FlowTest-Maze1-v0", num_envs=4, vectorization_mode="sync",
-                       vector_kwargs={"autoreset_mode": AutoresetMode.SAME_STEP}, **kw)
+    ref = gym.make_vec("FlowTest-Maze1-v0", num_envs=4, vectorization_mode="sync", vector_kwargs={"autoreset_mode": AutoresetMode.SAME_STEP}, **kw)
     env, twin = twins(_numpy("FlowTest-Maze1-v0", 4, "same_step", **kw), "same_step")
     compare(ref, env, steps=100, seed=1, p_any=0.3, mode="same_step", twin=twin)
 
@@ -411,8 +427,24 @@ def test_the_benchmark_script_runs_and_writes_its_figures(tmp_path: Any, capsys:
     from experiments.lab import gpu_bench
 
     out = tmp_path / "bench.json"
-    code = gpu_bench.main(["--cases", "maze2-tables", "maze2-obs-visited", "--devices", "numpy", "cpu", "--sizes", "8",
-                           "--numpy-sizes", "8", "--seconds", "0.05", "--out", str(out)])
+    code = gpu_bench.main(
+        [
+            "--cases",
+            "maze2-tables",
+            "maze2-obs-visited",
+            "--devices",
+            "numpy",
+            "cpu",
+            "--sizes",
+            "8",
+            "--numpy-sizes",
+            "8",
+            "--seconds",
+            "0.05",
+            "--out",
+            str(out),
+        ]
+    )
     assert code == 0
     doc = json.loads(out.read_text())
     rows = {(r["case"], r["backend"]): r for r in doc["rows"]}

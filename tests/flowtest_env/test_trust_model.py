@@ -57,7 +57,6 @@ def rehash(d: dict[str, Any]) -> dict[str, Any]:
     return d
 
 
-
 # ---------------------------------------------------------------- the digest
 
 
@@ -97,24 +96,19 @@ def test_a_parked_agent_is_refused_through_gym_make(tmp_path: Path, cache: Path)
         gym.make("FlowTest-v0", test=str(path))
 
 
-def test_a_parked_agent_is_one_error_line_from_flowtest_evaluate(
-    tmp_path: Path, cache: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
+def test_a_parked_agent_is_one_error_line_from_flowtest_evaluate(tmp_path: Path, cache: Path, capsys: pytest.CaptureFixture[str]) -> None:
     d = copy.deepcopy(shipped("maze2"))
     _parked_for_good(d)
     path = tmp_path / "maze2-parked.json"
     path.write_text(json.dumps(d))
-    code = cli_main(["evaluate", "--env", str(path), "--sut", "random", "--episodes", "1", "--out", str(tmp_path / "r"),
-                     "-q"])
+    code = cli_main(["evaluate", "--env", str(path), "--sut", "random", "--episodes", "1", "--out", str(tmp_path / "r"), "-q"])
     err = capsys.readouterr().err
     assert code == 2, err  # invalid input, not a FlowTest bug (exit 4)
     errors = [line for line in err.splitlines() if line.startswith("error:")]
     assert len(errors) == 1 and "test agent does not realize" in errors[0] and "Traceback" not in err
 
 
-def test_a_parked_agent_in_the_shipped_maze2_is_refused_even_with_its_manifest_and_digest(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
+def test_a_parked_agent_in_the_shipped_maze2_is_refused_even_with_its_manifest_and_digest(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     folder = tmp_path / "shipped"
     shutil.copytree(SHIPPED, folder)
     monkeypatch.setattr(artifacts, "ARTIFACT_DIR", folder)
@@ -195,9 +189,7 @@ def test_an_edited_but_valid_cache_entry_is_refused_and_rebuilt(tmp_path: Path, 
     assert art.summary["status"] == true_summary["status"] != "optimal-by-hand"
 
 
-def test_an_edited_shipped_artifact_with_its_manifest_rewritten_is_refused(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
+def test_an_edited_shipped_artifact_with_its_manifest_rewritten_is_refused(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     folder = tmp_path / "shipped"
     shutil.copytree(SHIPPED, folder)
     monkeypatch.setattr(artifacts, "ARTIFACT_DIR", folder)
@@ -286,9 +278,7 @@ def test_a_huge_integer_in_an_artifact_is_an_input_error(tmp_path: Path, cache: 
         gym.make("FlowTest-v0", test=str(path))
 
 
-def test_a_huge_integer_is_one_error_line_from_the_cli(
-    tmp_path: Path, cache: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
+def test_a_huge_integer_is_one_error_line_from_the_cli(tmp_path: Path, cache: Path, capsys: pytest.CaptureFixture[str]) -> None:
     text = (SHIPPED / "small-reactive.json").read_text()
     path = tmp_path / "big.json"
     path.write_text(text.replace('"initial":', '"initial":' + "1" * 5000 + "0*", 1).replace("0*", "", 1))
@@ -341,8 +331,13 @@ def test_the_edited_warning_is_one_line_from_the_console_script(tmp_path: Path) 
     path = tmp_path / "edited.json"
     path.write_text(json.dumps(d))
     flowtest = Path(sys.executable).parent / "flowtest"
-    proc = subprocess.run([str(flowtest), "evaluate", "--env", str(path), "--sut", "random", "--episodes", "1", "--replay",
-                           "-q"], capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    proc = subprocess.run(
+        [str(flowtest), "evaluate", "--env", str(path), "--sut", "random", "--episodes", "1", "--replay", "-q"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=tmp_path,
+    )
     assert proc.returncode == 0, proc.stderr
     warned = [line for line in proc.stderr.splitlines() if "changed after FlowTest wrote it" in line]
     assert len(warned) == 1 and warned[0].startswith("flowtest: warning: artifact "), proc.stderr

@@ -37,8 +37,7 @@ import flowtest_env
 from flowtest_env.vector import PoolVectorEnv
 
 DIGESTS = Path(__file__).resolve().parent.parent / "data" / "vector_digests.json"
-GRID_IDS = ["FlowTest-Example1-v0", "FlowTest-SmallReactive-v0", "FlowTest-Refueling-v0", "FlowTest-Maze1-v0", "FlowTest-Maze2-v0",
-            "FlowTest-Patrolling-v0"]
+GRID_IDS = ["FlowTest-Example1-v0", "FlowTest-SmallReactive-v0", "FlowTest-Refueling-v0", "FlowTest-Maze1-v0", "FlowTest-Maze2-v0", "FlowTest-Patrolling-v0"]
 STANDARD = ["reachability1/5x5-v2", "safety2/5x5/fuel-v2", "reachability1/5x5/blocked/agent-v2"]
 
 

@@ -22,8 +22,13 @@ from gymnasium.vector import AutoresetMode
 from flowtest_env.vector import FlowTestVectorEnv, autoreset_mode_of
 
 MODES = [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP, AutoresetMode.DISABLED]
-KINDS = {"static": "FlowTest-Example1-v0", "reactive": "FlowTest-SmallReactive-v0", "agent": "FlowTest-Maze2-v0",
-         "fuel": "FlowTest-Refueling-v0", "graph": "FlowTest-BeaverRescue-v0"}
+KINDS = {
+    "static": "FlowTest-Example1-v0",
+    "reactive": "FlowTest-SmallReactive-v0",
+    "agent": "FlowTest-Maze2-v0",
+    "fuel": "FlowTest-Refueling-v0",
+    "graph": "FlowTest-BeaverRescue-v0",
+}
 
 
 def _pair(env_id: str, n: int, mode: AutoresetMode, **kw: Any) -> tuple[Any, Any]:
@@ -113,11 +118,16 @@ def test_every_mode_without_options_and_reaching_the_goal(mode: AutoresetMode) -
     assert compare(vec, ref, steps=150, seed=2, p_any=0.0)["met"] > 0
 
 
-@pytest.mark.parametrize("options", [
-    {"obs_kind": "grid"}, {"obs_kind": "padded", "memory": "visited"}, {"obs_kind": "padded", "pad_to": 6},
-    {"step_cost": 0.5, "restricted_penalty": 0.0, "goal_reward": 7.0, "violation_penalty": 2.5},
-    {"shaping": 1.0, "shaping_gamma": 1.0},
-])
+@pytest.mark.parametrize(
+    "options",
+    [
+        {"obs_kind": "grid"},
+        {"obs_kind": "padded", "memory": "visited"},
+        {"obs_kind": "padded", "pad_to": 6},
+        {"step_cost": 0.5, "restricted_penalty": 0.0, "goal_reward": 7.0, "violation_penalty": 2.5},
+        {"shaping": 1.0, "shaping_gamma": 1.0},
+    ],
+)
 def test_each_option_equals_sync_vector_env(options: dict[str, Any]) -> None:
     vec, ref = _pair("FlowTest-Maze2-v0", 4, AutoresetMode.SAME_STEP, max_steps=25, **options)
     compare(vec, ref, steps=80, seed=1)
@@ -210,8 +220,9 @@ def test_torchrl_gym_wrapper_takes_the_vector_env(mode: str) -> None:
     pytest.importorskip("torchrl")
     from torchrl.envs import GymWrapper
 
-    venv = gym.make_vec("FlowTest-Maze2-v0", num_envs=8, vectorization_mode="vector_entry_point", autoreset_mode=mode,
-                        memory="visited", numeric_infos=True, max_steps=10)
+    venv = gym.make_vec(
+        "FlowTest-Maze2-v0", num_envs=8, vectorization_mode="vector_entry_point", autoreset_mode=mode, memory="visited", numeric_infos=True, max_steps=10
+    )
     env = GymWrapper(venv, device="cpu")
     rollout = env.rollout(35, break_when_any_done=False)
     assert tuple(rollout.batch_size) == (8, 35)
@@ -219,11 +230,18 @@ def test_torchrl_gym_wrapper_takes_the_vector_env(mode: str) -> None:
 
 
 @pytest.mark.parametrize("mode", MODES, ids=lambda m: m.name)
-@pytest.mark.parametrize("env_id,options", [
-    ("FlowTest-SmallReactive-v0", {}), ("FlowTest-SmallReactive-v0", {"obs_kind": "grid"}),
-    ("FlowTest-SmallReactive-v0", {"obs_kind": "padded", "memory": "visited"}), ("FlowTest-Maze2-v0", {"memory": "visited"}),
-    ("FlowTest-BeaverRescue-v0", {}), ("FlowTest-MotionPrimitives-v0", {}), ("FlowTest-Patrolling-v0", {"shaping": 5.0}),
-])
+@pytest.mark.parametrize(
+    "env_id,options",
+    [
+        ("FlowTest-SmallReactive-v0", {}),
+        ("FlowTest-SmallReactive-v0", {"obs_kind": "grid"}),
+        ("FlowTest-SmallReactive-v0", {"obs_kind": "padded", "memory": "visited"}),
+        ("FlowTest-Maze2-v0", {"memory": "visited"}),
+        ("FlowTest-BeaverRescue-v0", {}),
+        ("FlowTest-MotionPrimitives-v0", {}),
+        ("FlowTest-Patrolling-v0", {"shaping": 5.0}),
+    ],
+)
 def test_accumulative_setting_equals_sync_vector_env(env_id: str, options: dict[str, Any], mode: AutoresetMode) -> None:
     """The accumulative setting shows the restrictions of every state visited under the
     current history: the vector env keeps them per env as the single env does."""
@@ -253,10 +271,10 @@ def test_mask_in_the_observation_in_every_mode(mode: AutoresetMode) -> None:
     from flowtest_env import ActionMaskObservation
     from flowtest_env.vector import VectorActionMaskObservation
 
-    vec = VectorActionMaskObservation(gym.make_vec("FlowTest-Maze1-v0", num_envs=4, vectorization_mode="vector_entry_point",
-                                                   autoreset_mode=mode, max_steps=15))
-    ref = gym.make_vec("FlowTest-Maze1-v0", num_envs=4, vectorization_mode="sync", wrappers=[ActionMaskObservation],
-                       vector_kwargs={"autoreset_mode": mode}, max_steps=15)
+    vec = VectorActionMaskObservation(gym.make_vec("FlowTest-Maze1-v0", num_envs=4, vectorization_mode="vector_entry_point", autoreset_mode=mode, max_steps=15))
+    ref = gym.make_vec(
+        "FlowTest-Maze1-v0", num_envs=4, vectorization_mode="sync", wrappers=[ActionMaskObservation], vector_kwargs={"autoreset_mode": mode}, max_steps=15
+    )
     rng = np.random.default_rng(0)
     o1, i1 = vec.reset(seed=4)
     o2, i2 = ref.reset(seed=4)

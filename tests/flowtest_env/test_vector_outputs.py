@@ -20,8 +20,14 @@ from gymnasium.vector import AutoresetMode
 import flowtest_env
 from flowtest_env.vector import PoolVectorEnv
 
-NO_FUEL = ["FlowTest-Example1-v0", "FlowTest-SmallReactive-v0", "FlowTest-BeaverRescue-v0", "FlowTest-MotionPrimitives-v0",
-           "FlowTest-Maze1-v0", "FlowTest-Maze2-v0"]
+NO_FUEL = [
+    "FlowTest-Example1-v0",
+    "FlowTest-SmallReactive-v0",
+    "FlowTest-BeaverRescue-v0",
+    "FlowTest-MotionPrimitives-v0",
+    "FlowTest-Maze1-v0",
+    "FlowTest-Maze2-v0",
+]
 FUEL = ["FlowTest-Refueling-v0", "FlowTest-MarsExploration-v0", "FlowTest-Patrolling-v0"]
 
 
@@ -37,8 +43,11 @@ def _same_runs(compact: Any, full: Any, steps: int = 120, seed: int = 3) -> int:
     for t in range(steps):
         assert o1.dtype == np.uint8 and np.array_equal(o1.astype(np.float32), o2), t
         assert o1 in compact.observation_space
-        assert data_equivalence(i1, i2, exact=True) if "final_obs" not in i1 else data_equivalence(
-            {k: v for k, v in i1.items() if k != "final_obs"}, {k: v for k, v in i2.items() if k != "final_obs"}, exact=True)
+        assert (
+            data_equivalence(i1, i2, exact=True)
+            if "final_obs" not in i1
+            else data_equivalence({k: v for k, v in i1.items() if k != "final_obs"}, {k: v for k, v in i2.items() if k != "final_obs"}, exact=True)
+        )
         if "final_obs" in i1:
             for a, b in zip(i1["final_obs"], i2["final_obs"], strict=True):
                 assert (a is None and b is None) or np.array_equal(np.asarray(a, dtype=np.float32), b)
@@ -130,8 +139,16 @@ def test_every_entry_point_takes_the_option(pool_cache: Any) -> None:
 
 
 @pytest.mark.parametrize("mode", ["NEXT_STEP", "SAME_STEP", "DISABLED"])
-@pytest.mark.parametrize("options", [{}, {"memory": "visited", "shaping": 5.0}, {"setting": "accumulative", "memory": "visited"},
-                                     {"obs_kind": "grid"}, {"obs_dtype": "uint8", "memory": "visited"}])
+@pytest.mark.parametrize(
+    "options",
+    [
+        {},
+        {"memory": "visited", "shaping": 5.0},
+        {"setting": "accumulative", "memory": "visited"},
+        {"obs_kind": "grid"},
+        {"obs_dtype": "uint8", "memory": "visited"},
+    ],
+)
 def test_copy_false_writes_every_observation_into_one_buffer(mode: str, options: dict[str, Any]) -> None:
     env_id = "FlowTest-SmallReactive-v0" if options.get("setting") else "FlowTest-Maze2-v0"
 

@@ -13,8 +13,7 @@ from experiments.lab import bench_jax
 
 def test_flowtest_rows_alone(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "figures.json"
-    code = bench_jax.main(["--envs", "8", "--seconds", "0.02", "--repeat", "2", "--rows", "numpy flat", "numpy flat-uint8", "torch grid",
-                           "--json", str(out)])
+    code = bench_jax.main(["--envs", "8", "--seconds", "0.02", "--repeat", "2", "--rows", "numpy flat", "numpy flat-uint8", "torch grid", "--json", str(out)])
     assert code == 0
     fig = json.loads(out.read_text())
     rows = {r["row"]: r for r in fig["rows"]}
@@ -33,8 +32,7 @@ def test_a_checkout_beside_in_a_worker(tmp_path: Path) -> None:
     """``--before DIR``: the rows of another checkout (here this one) in a worker process."""
     root = Path(bench_jax.__file__).resolve().parents[2]
     out = tmp_path / "figures.json"
-    assert bench_jax.main(["--envs", "4", "--seconds", "0.02", "--repeat", "1", "--rows", "numpy grid", "--before", str(root),
-                           "--json", str(out)]) == 0
+    assert bench_jax.main(["--envs", "4", "--seconds", "0.02", "--repeat", "1", "--rows", "numpy grid", "--before", str(root), "--json", str(out)]) == 0
     fig = json.loads(out.read_text())
     assert [r["row"] for r in fig["rows"]] == ["numpy grid", "before: numpy grid"]
     assert fig["versions"]["before"]["flowtest_env"] == str(root / "flowtest_env")

@@ -171,12 +171,12 @@ def test_backend_option_reaches_the_solve(tmp_path: Path) -> None:
 
 def test_compare_table_puts_shares_side_by_side(tmp_path: Path) -> None:
     """``--report DIR --compare-to CSV``: per cell of the run, proven/finished per MILP, now and before."""
+
     def rec(i: int, milp: str, outcome: str) -> dict:
         return {"family": "reachability", "n": 1, "size": 5, "instance": i, "milp": milp, "outcome": outcome, "gurobi": False}
 
     now = [rec(0, "static", "optimal"), rec(1, "static", "feasible"), rec(0, "reactive", "optimal")]
-    before = [rec(0, "static", "feasible"), rec(1, "static", "timeout"), rec(0, "reactive", "optimal"),
-              {**rec(0, "static", "optimal"), "size": 10}]
+    before = [rec(0, "static", "feasible"), rec(1, "static", "timeout"), rec(0, "reactive", "optimal"), {**rec(0, "static", "optimal"), "size": 10}]
     csv_path = tmp_path / "before.csv"
     with open(csv_path, "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=study.CSV_FIELDS, extrasaction="ignore")

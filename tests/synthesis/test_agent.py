@@ -249,8 +249,13 @@ def _maze2_with(cells: list[tuple[int, int]], stay: bool, first: str, max_iterat
     on_plus[places_of_cells(ts, plus)] = True
     ts.restrictable = on_plus[ts.place[ts.dst]]
     problem.agent = make_test_agent(
-        ts, places_of_cells(ts, cells), places_of_cells(ts, [cells[0]])[0],
-        [("away", places_of_cells(ts, [cells[0]]))], stay=stay, first=first, max_iterations=max_iterations,
+        ts,
+        places_of_cells(ts, cells),
+        places_of_cells(ts, [cells[0]])[0],
+        [("away", places_of_cells(ts, [cells[0]]))],
+        stay=stay,
+        first=first,
+        max_iterations=max_iterations,
     )
     problem.static_moves = problem.agent.static_moves(ts)
     return problem
@@ -302,14 +307,14 @@ def test_toml_agent_problem(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     ("edits", "message"),
     [
-        ([("first = \"agent\"", "first = \"agent\"\ncolour = \"red\"")], "unknown key 'colour'"),
-        ([("cells = [\"t\", \"t0\"]\n", "")], "missing `cells`"),
+        ([('first = "agent"', 'first = "agent"\ncolour = "red"')], "unknown key 'colour'"),
+        ([('cells = ["t", "t0"]\n', "")], "missing `cells`"),
         ([("from = [[4, 2]]", "from = [[4, 0]]")], "not an agent cell"),
-        ([("start = \"t0\"", "start = [4, 0]")], "not an agent cell"),
-        ([("first = \"agent\"", "first = \"tester\"")], "`first` must be one of"),
-        ([("{name = \"left\", from = [[2, 0]]}", "{name = \"above\", from = [[2, 0]]}")], "used twice"),
-        ([("first = \"agent\"", "first = \"agent\"\nmoves = \"diagonal\"")], "unknown `moves` rule"),
-        ([("cells = [\"t\", \"t0\"]", "cells = [\"t\", \"t0\", \"S\"]"), ("start = \"t0\"", "start = \"S\"")], "collide"),
+        ([('start = "t0"', "start = [4, 0]")], "not an agent cell"),
+        ([('first = "agent"', 'first = "tester"')], "`first` must be one of"),
+        ([('{name = "left", from = [[2, 0]]}', '{name = "above", from = [[2, 0]]}')], "used twice"),
+        ([('first = "agent"', 'first = "agent"\nmoves = "diagonal"')], "unknown `moves` rule"),
+        ([('cells = ["t", "t0"]', 'cells = ["t", "t0", "S"]'), ('start = "t0"', 'start = "S"')], "collide"),
     ],
 )
 def test_toml_agent_errors(tmp_path: Path, edits: list[tuple[str, str]], message: str) -> None:

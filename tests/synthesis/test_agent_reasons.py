@@ -52,8 +52,14 @@ def _strategy_of(products: Products, groups: CutGroups, cut_mask: np.ndarray, st
     cut_edges = np.flatnonzero(cut_mask[groups.of_edge])
     static_cut = np.isin(groups.move_key, groups.keys[cut_mask & groups.static]) & static_moves
     routing = RoutingResult(  # only the fields strategy_from_routing reads matter
-        status="optimal", flow=0, cut_edges=cut_edges, cut_group_keys=[int(k) for k in groups.keys[cut_mask]],
-        static_moves_cut=static_cut, blocked_places=np.zeros(0, dtype=np.int64), mip_gap=0.0, stats={},
+        status="optimal",
+        flow=0,
+        cut_edges=cut_edges,
+        cut_group_keys=[int(k) for k in groups.keys[cut_mask]],
+        static_moves_cut=static_cut,
+        blocked_places=np.zeros(0, dtype=np.int64),
+        mip_gap=0.0,
+        stats={},
     )
     return strategy_from_routing(products, routing, "instantaneous")
 
@@ -114,9 +120,7 @@ def _check_reasons_sound(problem: Problem, n_sets: int, n_supersets: int, seed: 
         for _ in range(n_supersets):
             other = core | (undecided & (rng.random(groups.keys.size) < rng.uniform(0.0, 0.3)))
             assert reason.exclusion.excludes(set(int(k) for k in groups.keys[other]))
-            assert _rejected(products, agent, _strategy_of(products, groups, other, problem.static_moves)), (
-                "an excluded cut set the loop would accept"
-            )
+            assert _rejected(products, agent, _strategy_of(products, groups, other, problem.static_moves)), "an excluded cut set the loop would accept"
         checked += 1
     return checked
 

@@ -65,41 +65,34 @@ EDITS: list[tuple[str, str, Callable[[dict[str, Any]], None], str]] = [
     ("small-reactive", "restrictions emptied", _empty_restrictions, "bypass flow"),
     ("maze2", "restrictions emptied", _empty_restrictions, "bypass flow"),
     ("small-reactive", "flow claimed", lambda d: d["summary"].__setitem__("flow", 7), "the MILP said 7"),
-    ("small-reactive", "move index out of range", lambda d: d["strategy"]["static_obstacles"].append(10_000),
-     "strategy.static_obstacles"),
-    ("small-reactive", "history out of range", lambda d: d["strategy"]["restrictions"].__setitem__("99", [0]),
-     "strategy.restrictions"),
-    ("small-reactive", "delta out of range", lambda d: d["automata"]["histories"]["delta"][0].__setitem__(0, 99),
-     "automata.histories.delta[0][0]"),
+    ("small-reactive", "move index out of range", lambda d: d["strategy"]["static_obstacles"].append(10_000), "strategy.static_obstacles"),
+    ("small-reactive", "history out of range", lambda d: d["strategy"]["restrictions"].__setitem__("99", [0]), "strategy.restrictions"),
+    ("small-reactive", "delta out of range", lambda d: d["automata"]["histories"]["delta"][0].__setitem__(0, 99), "automata.histories.delta[0][0]"),
     ("small-reactive", "initial state out of range", lambda d: d["system"].__setitem__("initial", -1), "system.initial"),
     ("small-reactive", "boolean for an integer", lambda d: d["system"].__setitem__("initial", True), "system.initial"),
     ("small-reactive", "move out of range", lambda d: d["system"]["moves"][0].__setitem__(1, 10_000), "system.moves[0]"),
     ("small-reactive", "field missing", lambda d: d.pop("strategy"), "field strategy: missing"),
     ("small-reactive", "field of the wrong type", lambda d: d.__setitem__("letters", "abc"), "field letters"),
     ("small-reactive", "source missing", lambda d: d.pop("source"), "field source"),
-    ("small-reactive", "label outside the alphabet", lambda d: d["system"]["labels"][0].append("goal"),
-     "system.labels[0]"),
-    ("small-reactive", "label edited", lambda d: d["system"]["labels"].__setitem__(0, d["system"]["labels"][2]),
-     "source hash"),
+    ("small-reactive", "label outside the alphabet", lambda d: d["system"]["labels"][0].append("goal"), "system.labels[0]"),
+    ("small-reactive", "label edited", lambda d: d["system"]["labels"].__setitem__(0, d["system"]["labels"][2]), "source hash"),
     ("small-reactive", "objective edited", lambda d: d["objectives"].__setitem__("test", "F I1"), "source hash"),
     ("example1", "another problem's automata", _swap_automata, "is not one of the letters"),
-    ("small-reactive", "automata swapped", lambda d: d["automata"].update(system=d["automata"]["test"],
-                                                                          test=d["automata"]["system"]),
-     "field automata."),
-    ("small-reactive", "acceptance flipped",
-     lambda d: d["automata"]["test"]["accepting"][0].__setitem__(0, 1 - d["automata"]["test"]["accepting"][0][0]),
-     "automata.test is not the automaton of its objectives"),
-    ("maze2", "agent table out of range", lambda d: d["agent"]["controller"]["table"]["next_agent"].__setitem__(0, 99),
-     "agent.controller.table.next_agent[0]"),
+    ("small-reactive", "automata swapped", lambda d: d["automata"].update(system=d["automata"]["test"], test=d["automata"]["system"]), "field automata."),
+    (
+        "small-reactive",
+        "acceptance flipped",
+        lambda d: d["automata"]["test"]["accepting"][0].__setitem__(0, 1 - d["automata"]["test"]["accepting"][0][0]),
+        "automata.test is not the automaton of its objectives",
+    ),
+    ("maze2", "agent table out of range", lambda d: d["agent"]["controller"]["table"]["next_agent"].__setitem__(0, 99), "agent.controller.table.next_agent[0]"),
     ("maze2", "agent removed", lambda d: d.__setitem__("agent", None), "field agent"),
     ("small-reactive", "not an object", lambda d: d.clear(), "not a FlowTest test artifact"),
 ]
 
 
 @pytest.mark.parametrize("name,what,edit,words", EDITS, ids=[f"{e[0]}-{e[1]}" for e in EDITS])
-def test_edited_artifact_is_refused_naming_what_is_wrong(
-    tmp_path: Path, name: str, what: str, edit: Callable[[dict[str, Any]], None], words: str
-) -> None:
+def test_edited_artifact_is_refused_naming_what_is_wrong(tmp_path: Path, name: str, what: str, edit: Callable[[dict[str, Any]], None], words: str) -> None:
     d = copy.deepcopy(shipped(name))
     edit(d)
     path = tmp_path / f"{name}.json"
@@ -121,8 +114,12 @@ def test_edited_artifact_with_a_recomputed_hash_still_fails_its_restrictions(tmp
 
 
 def test_artifact_files_that_are_not_artifacts(tmp_path: Path) -> None:
-    for text, words in (("[]", "not a FlowTest test artifact"), ("{", "invalid JSON"), ("[" * 100_000, "JSON"),
-                        ('{"format": "flowtest-test", "version": 99}', "version")):
+    for text, words in (
+        ("[]", "not a FlowTest test artifact"),
+        ("{", "invalid JSON"),
+        ("[" * 100_000, "JSON"),
+        ('{"format": "flowtest-test", "version": 99}', "version"),
+    ):
         (tmp_path / "a.json").write_text(text)
         with pytest.raises(ProblemError, match=words):
             TestArtifact.load(tmp_path / "a.json")

@@ -33,7 +33,8 @@ def validator() -> Any:
 
 def test_the_schema_file_is_the_generated_schema() -> None:
     assert json.loads(SCHEMA_FILE.read_text()) == json_schema(), (
-        "docs/artifact-schema.json is out of date: python -m synthesis.artifacts.schema > docs/artifact-schema.json")
+        "docs/artifact-schema.json is out of date: python -m synthesis.artifacts.schema > docs/artifact-schema.json"
+    )
     jsonschema.Draft202012Validator.check_schema(json_schema())
     assert SCHEMA_VERSION == VERSION and json_schema()["properties"]["format"] == {"const": FORMAT}
 
@@ -69,6 +70,7 @@ def _set(path: str, value: Any) -> Callable[[dict[str, Any]], None]:
             target[int(last)] = value
         else:
             target[last] = value
+
     return edit
 
 

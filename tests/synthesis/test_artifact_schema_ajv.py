@@ -43,8 +43,7 @@ def _ajv() -> str:
     node = shutil.which("node")
     if node is None:
         pytest.skip("node is not on PATH (the Ajv check needs Node.js)")
-    found = subprocess.run([node, "-e", "process.stdout.write(require.resolve('ajv/dist/2020'))"], cwd=ROOT,
-                           capture_output=True, text=True, timeout=60)
+    found = subprocess.run([node, "-e", "process.stdout.write(require.resolve('ajv/dist/2020'))"], cwd=ROOT, capture_output=True, text=True, timeout=60)
     if found.returncode != 0:
         pytest.skip("no local Ajv: `npm install ajv@8` in a folder and set NODE_PATH=FOLDER/node_modules")
     return found.stdout
@@ -57,8 +56,7 @@ def test_ajv_strict_mode_compiles_the_schema_and_validates_every_shipped_artifac
     ne = tmp_path / "maze2-NE.json"
     ne.write_text(json.dumps(grid))
     files = [str(p) for p in SHIPPED] + [str(ne)]
-    run = subprocess.run(["node", "-e", CHECK, str(SCHEMA_FILE), *files], cwd=ROOT, capture_output=True, text=True,
-                         timeout=300)
+    run = subprocess.run(["node", "-e", CHECK, str(SCHEMA_FILE), *files], cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, f"Ajv (strict) refuses the schema: {run.stderr[-3000:]}"
     verdicts = json.loads(run.stdout)
     assert len(SHIPPED) >= 9

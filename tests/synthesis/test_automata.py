@@ -150,7 +150,7 @@ def lasso_accepts(dba: DBA, word: list[Label], col: int = 0) -> bool:
     while q not in seen:
         seen.append(q)
         q = int(dba.delta[q, a])
-    cycle = seen[seen.index(q):]
+    cycle = seen[seen.index(q) :]
     return bool(any(dba.accepting[s, col] for s in cycle))
 
 

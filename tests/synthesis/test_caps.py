@@ -63,9 +63,7 @@ B  X  .  .  .  .  .  .  .  D
 """
 
 
-def warehouse(
-    tmp_path: Path, *, grid: str = FLOOR, test: str = "F bay & F aisle", kind: str = "reactive", extra: str = ""
-) -> Path:
+def warehouse(tmp_path: Path, *, grid: str = FLOOR, test: str = "F bay & F aisle", kind: str = "reactive", extra: str = "") -> Path:
     """The 7x10 warehouse problem file: start S, dock D (the goal), bay B, aisle A, spill X."""
     path = tmp_path / f"warehouse-{kind}.toml"
     path.write_text(
@@ -142,8 +140,13 @@ def test_one_way_wall_is_named(tmp_path: Path, capsys: pytest.CaptureFixture[str
 def test_caps_in_the_problem_file(tmp_path: Path) -> None:
     problem = load_problem_file(warehouse(tmp_path, extra="max_doors = 3\nmax_walls = 0\n"))
     assert problem.caps == {"max_doors": 3, "max_walls": 0}
-    for bad, needle in (("max_doors = -1", "max_doors"), ("max_doors = 1.5", "max_doors"), ("max_doors = true", "max_doors"),
-                        ("max_door = 3", "unknown key 'max_door'"), ("max_walls = " + "9" * 4000, "max_walls")):
+    for bad, needle in (
+        ("max_doors = -1", "max_doors"),
+        ("max_doors = 1.5", "max_doors"),
+        ("max_doors = true", "max_doors"),
+        ("max_door = 3", "unknown key 'max_door'"),
+        ("max_walls = " + "9" * 4000, "max_walls"),
+    ):
         with pytest.raises(ProblemError, match=needle):
             load_problem_file(warehouse(tmp_path, extra=bad + "\n"))
 
@@ -180,15 +183,21 @@ def _exhaustive_static(problem_name: str, cap: int) -> tuple[int, int] | None:
     problem = load_problem(problem_name)
     _, products = build_graphs(problem)
     ts = problem.system
-    pairs = sorted({(min(int(ts.place[a]), int(ts.place[b])), max(int(ts.place[a]), int(ts.place[b])))
-                    for a, b in zip(ts.src, ts.dst, strict=True) if ts.place[a] != ts.place[b]})
+    pairs = sorted(
+        {
+            (min(int(ts.place[a]), int(ts.place[b])), max(int(ts.place[a]), int(ts.place[b])))
+            for a, b in zip(ts.src, ts.dst, strict=True)
+            if ts.place[a] != ts.place[b]
+        }
+    )
     best: tuple[int, int] | None = None
     g = products.virtual
     for k in range(cap + 1):
         for walls in itertools.combinations(pairs, k):
             wall_set = set(walls)
-            static = np.array([(min(int(ts.place[a]), int(ts.place[b])), max(int(ts.place[a]), int(ts.place[b]))) in wall_set
-                               for a, b in zip(ts.src, ts.dst, strict=True)])
+            static = np.array(
+                [(min(int(ts.place[a]), int(ts.place[b])), max(int(ts.place[a]), int(ts.place[b]))) in wall_set for a, b in zip(ts.src, ts.dst, strict=True)]
+            )
             strategy = TestStrategy(static, np.zeros((products.spec.dba.n_states, ts.n_moves), dtype=bool))
             blocked = strategy.blocked[g.hist[g.src], g.move]
             if bypass_flow(products, blocked) != 0 or trapped_entries(products, strategy.blocked, {}):
@@ -303,9 +312,7 @@ def test_an_implied_visit_inside_the_test_objective_is_named(tmp_path: Path, cap
 
 
 @pytest.mark.parametrize("test", ["F !hazard", "F !dock"])
-def test_a_test_objective_met_from_the_start_is_said_to_be_implied(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str], test: str
-) -> None:
+def test_a_test_objective_met_from_the_start_is_said_to_be_implied(tmp_path: Path, capsys: pytest.CaptureFixture[str], test: str) -> None:
     """A test objective met at the start (``F !hazard`` beside ``G !hazard``) is routable, so
     the test is synthesized (no restriction, as it should be), and the summary says why it
     tests nothing, where it once said nothing; a test objective that needs restrictions
@@ -415,9 +422,7 @@ def floor30(tmp_path: Path, kind: str) -> Path:
 
 @pytest.mark.slow
 @pytest.mark.parametrize(("kind", "cap", "n"), [("static", "walls", 50), ("static", "walls", 1), ("reactive", "doors", 1)])
-def test_30x30_floor_cap_gives_a_test_within_it_or_exit_3(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str], kind: str, cap: str, n: int
-) -> None:
+def test_30x30_floor_cap_gives_a_test_within_it_or_exit_3(tmp_path: Path, capsys: pytest.CaptureFixture[str], kind: str, cap: str, n: int) -> None:
     path = floor30(tmp_path, kind)
     code, out, err = run(["synthesize", str(path), "--json", "-q", "--time-limit", "90", f"--max-{cap}", str(n)], capsys)
     if code == 0:
@@ -431,17 +436,14 @@ def test_30x30_floor_cap_gives_a_test_within_it_or_exit_3(
 
 @pytest.mark.slow
 @pytest.mark.parametrize(("kind", "cap", "n"), [("static", "walls", 9), ("reactive", "doors", 8)])
-def test_30x30_floor_tight_cap_gives_a_test_well_within_the_time_limit(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str], kind: str, cap: str, n: int
-) -> None:
+def test_30x30_floor_tight_cap_gives_a_test_well_within_the_time_limit(tmp_path: Path, capsys: pytest.CaptureFixture[str], kind: str, cap: str, n: int) -> None:
     """The issue's tight caps on its 30x30 floor ended at the time limit with no test (exit 5):
     phase 1 starts from the capped start now, a test within the cap, and ``--after-first``
     ends the solve soon after it. The caps are the fewest the capped start finds (9 walls,
     8 doors: its local search drops 4 of the 13 walls and 3 of the 11 doors it found first)."""
     path = floor30(tmp_path, kind)
     t0 = time.perf_counter()
-    code, out, err = run(["synthesize", str(path), "--json", "-q", "--time-limit", "120", "--after-first", "10",
-                          f"--max-{cap}", str(n)], capsys)
+    code, out, err = run(["synthesize", str(path), "--json", "-q", "--time-limit", "120", "--after-first", "10", f"--max-{cap}", str(n)], capsys)
     took = time.perf_counter() - t0
     assert code == 0, err
     summary = json.loads(out)
@@ -618,9 +620,7 @@ def test_30x30_floor_capped_start_within_the_cap(tmp_path: Path, kind: str, cap:
     assert took < seconds, took
 
 
-def test_a_capped_solve_the_time_limit_ends_says_neither_a_test_nor_a_proof(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
+def test_a_capped_solve_the_time_limit_ends_says_neither_a_test_nor_a_proof(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """At most 5 walls on the 12x12 rack floor: no test fits (the solve proves it in about a
     minute; the bypass bounds stop at 5), but nothing proves it within 1.5 s.
     The answer says exactly that (found nor proven, the proven bound, the cap), with exit 5
@@ -665,8 +665,9 @@ def test_walls_block_both_ways_unless_the_problem_allows_one_way() -> None:
     ts = problem.system
     static = np.asarray(problem.static_moves, dtype=bool)
     back = {(int(a), int(b)): m for m, (a, b) in enumerate(zip(ts.src, ts.dst, strict=True))}
-    lonely = np.array([static[m] and (int(b), int(a)) in back and not static[back[(int(b), int(a))]]
-                       for m, (a, b) in enumerate(zip(ts.src, ts.dst, strict=True))])
+    lonely = np.array(
+        [static[m] and (int(b), int(a)) in back and not static[back[(int(b), int(a))]] for m, (a, b) in enumerate(zip(ts.src, ts.dst, strict=True))]
+    )
     assert lonely.any()  # the default static area is one-directional somewhere
     base = pipeline.milp_options(problem, pipeline.SynthesisOptions())
     for one_way in (True, False):
@@ -720,12 +721,10 @@ def _relaxed_fewest_walls(problem: Problem, products: Products, most: int) -> in
 def _random_floor(rng: np.random.Generator, rows: int, cols: int) -> str:
     cells = ["S", "D", "B", "A", "X"] + ["#" if rng.random() < 0.15 else "." for _ in range(rows * cols - 5)]
     rng.shuffle(cells)
-    return "\n" + "\n".join("  ".join(cells[r * cols:(r + 1) * cols]) for r in range(rows)) + "\n"
+    return "\n" + "\n".join("  ".join(cells[r * cols : (r + 1) * cols]) for r in range(rows)) + "\n"
 
 
-def _random_floors(
-    tmp_path: Path, rng: np.random.Generator, kind: str, tries: int
-) -> Iterator[tuple[int, Problem, Products]]:
+def _random_floors(tmp_path: Path, rng: np.random.Generator, kind: str, tries: int) -> Iterator[tuple[int, Problem, Products]]:
     """Random 3x4 warehouse floors (``F bay & F aisle``), the consistent ones of ``tries``."""
     for i in range(tries):
         path = warehouse(tmp_path, grid=_random_floor(rng, 3, 4), test="F bay & F aisle", kind=kind)
@@ -802,9 +801,7 @@ def test_history_separation_never_refuses_a_cap_a_test_fits(tmp_path: Path, kind
 
 @pytest.mark.slow
 @pytest.mark.parametrize(("kind", "cap", "why"), [("static", "walls", "share no wall"), ("reactive", "doors", "history")])
-def test_30x30_floor_four_items_are_refused_before_the_solve(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str], kind: str, cap: str, why: str
-) -> None:
+def test_30x30_floor_four_items_are_refused_before_the_solve(tmp_path: Path, capsys: pytest.CaptureFixture[str], kind: str, cap: str, why: str) -> None:
     """The issue's floor with at most 4 walls (doors) ran to the time limit (exit 5, 120 s).
     Walls: two ways into the dock and two out of the start are all a plain count of bypasses
     sees; sparing the route a test leaves open proves 5. Doors: the bypass counts prove 2

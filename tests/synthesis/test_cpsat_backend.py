@@ -155,7 +155,8 @@ def test_ctrl_c_on_the_console_script_ends_the_child(tmp_path: Path) -> None:
     art = tmp_path / "mars.json"
     proc = start_until(
         [str(FLOWTEST), "synthesize", "mars-exploration", "--backend", "cpsat", "--json", "--out", str(art), "--progress", "0.3"],
-        "phase 1 (maximum flow): best", signal.SIGINT,
+        "phase 1 (maximum flow): best",
+        signal.SIGINT,
     )
     children = Path(f"/proc/{proc.pid}/task/{proc.pid}/children")
     kids = [int(p) for p in children.read_text().split()] if children.exists() else []
@@ -184,8 +185,7 @@ def _state(pid: int) -> str:
 @needs_ortools
 def test_json_stdout_only_with_cpsat() -> None:
     """With ``--json`` stdout holds the JSON document alone: the child's output never reaches it."""
-    proc = subprocess.run([str(FLOWTEST), "synthesize", "small-reactive", "--backend", "cpsat", "--json"],
-                          capture_output=True, text=True, timeout=120)
+    proc = subprocess.run([str(FLOWTEST), "synthesize", "small-reactive", "--backend", "cpsat", "--json"], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr
     summary = json.loads(proc.stdout)
     assert summary["status"] == "optimal" and summary["stats"]["backend"] == "cpsat"
@@ -218,10 +218,7 @@ def test_the_child_never_imports_highspy() -> None:
     only: highspy cannot share a process with OR-Tools' own HiGHS build, and NumPy, SciPy
     and pandas (which OR-Tools' ``cp_model`` imports) made most of a fresh child's start-up."""
     heavy = ("highspy", "numpy", "scipy", "pandas", "synthesis", "ortools.sat.python.cp_model")
-    code = (
-        "import runpy, sys; runpy.run_path(sys.argv[1], run_name='not_main'); "
-        f"print(sorted(m for m in {heavy!r} if m in sys.modules))"
-    )
+    code = f"import runpy, sys; runpy.run_path(sys.argv[1], run_name='not_main'); print(sorted(m for m in {heavy!r} if m in sys.modules))"
     proc = subprocess.run([sys.executable, "-P", "-c", code, str(cpsat.WORKER)], capture_output=True, text=True, timeout=60)
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.strip() == "[]"
@@ -286,9 +283,15 @@ def test_auto_runs_the_measured_rule(name: str, backend: str) -> None:
 @pytest.mark.parametrize(
     ("mode", "rows", "backend"),
     [
-        ("static", 199, "highs"), ("static", 200, "cpsat"), ("static", 15_000, "cpsat"), ("static", 15_001, "highs"),
+        ("static", 199, "highs"),
+        ("static", 200, "cpsat"),
+        ("static", 15_000, "cpsat"),
+        ("static", 15_001, "highs"),
         ("static", 21_515, "highs"),  # mars-exploration
-        ("reactive", 199, "highs"), ("reactive", 200, "cpsat"), ("reactive", 2_500, "cpsat"), ("reactive", 2_501, "highs"),
+        ("reactive", 199, "highs"),
+        ("reactive", 200, "cpsat"),
+        ("reactive", 2_500, "cpsat"),
+        ("reactive", 2_501, "highs"),
         ("mixed", 1_000, "highs"),
     ],
 )

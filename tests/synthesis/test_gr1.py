@@ -108,9 +108,7 @@ def _omega_automaton(game: GR1Game):
             targets = _pos_set("p'", succ)
             sys_terms.append(rf"(c' = {c} /\ {targets})")
     aut.action["sys"] = _disj(sys_terms)
-    aut.win["<>[]"] = [aut.add_expr(f"~ {_pos_set('p', s)}") for s in game.env_liveness] or [
-        aut.false
-    ]
+    aut.win["<>[]"] = [aut.add_expr(f"~ {_pos_set('p', s)}") for s in game.env_liveness] or [aut.false]
     aut.win["[]<>"] = [aut.add_expr(_pos_set("p", s)) for s in game.sys_liveness] or [aut.true]
     aut.moore = False
     aut.plus_one = False
@@ -130,9 +128,7 @@ def omega_solve(game: GR1Game, per_position: bool = False) -> tuple[bool, np.nda
     """Return omega's verdict (and optionally its per-position winning mask)."""
     aut = _omega_automaton(game)
     z, _, _ = omega_gr1.solve_streett_game(aut)
-    groups = [
-        rf"(c = {g} /\ {_pos_set('p', grp.tolist())})" for g, grp in enumerate(game.initial)
-    ]
+    groups = [rf"(c = {g} /\ {_pos_set('p', grp.tolist())})" for g, grp in enumerate(game.initial)]
     env_init = rf"c \in 0..{len(game.initial) - 1}" if game.initial else "FALSE"
     verdict = _omega_realizable(aut, z, env_init, _disj(groups))
     if not per_position:
@@ -155,10 +151,7 @@ def random_game(rng: np.random.Generator, n_min: int = 3, n_max: int = 12) -> GR
             choices.append((v, sorted(rng.choice(n, size=min(d, n), replace=False).tolist())))
     env = [rng.random(n) < rng.uniform(0.2, 0.6) for _ in range(int(rng.integers(0, 3)))]
     sys_ = [rng.random(n) < rng.uniform(0.1, 0.5) for _ in range(int(rng.integers(1, 3)))]
-    initial = [
-        rng.choice(n, size=min(int(rng.integers(1, 4)), n), replace=False).tolist()
-        for _ in range(int(rng.integers(1, 4)))
-    ]
+    initial = [rng.choice(n, size=min(int(rng.integers(1, 4)), n), replace=False).tolist() for _ in range(int(rng.integers(1, 4)))]
     return GR1Game.from_lists(n, choices, initial, env, sys_)
 
 
@@ -462,10 +455,7 @@ def test_performance_smoke() -> None:
         t0 = time.perf_counter()
         res = solve(game)
         dt = time.perf_counter() - t0
-        print(
-            f"\n{n} positions / {game.n_choices} choices / {game.n_edges} moves: "
-            f"solved in {dt:.3f}s, |Z|={int(res.winning.sum())}"
-        )
+        print(f"\n{n} positions / {game.n_choices} choices / {game.n_edges} moves: solved in {dt:.3f}s, |Z|={int(res.winning.sum())}")
         game = from_winning(game, k=50)
         strat = _solve_and_check(game).strategy
         assert strat is not None

@@ -124,7 +124,10 @@ def test_start_on_a_model_without_rows() -> None:
     from synthesis.problems.problem import make_problem
 
     ts = graph_system(
-        ["s0", "s1", "s2"], [("s0", "s1"), ("s0", "s2")], "s0", ["s1", "s2"],
+        ["s0", "s1", "s2"],
+        [("s0", "s1"), ("s0", "s2")],
+        "s0",
+        ["s1", "s2"],
         {"s0": {"I1"}, "s1": {"goal"}, "s2": {"goal"}},
     )
     res = synthesize(make_problem("no-rows", ts, "F goal", "F I1", "static"), SynthesisOptions(backend="highs"))

@@ -18,7 +18,7 @@ from tests.testing_problems import SMALL_REACTIVE_TOML
 
 GRID = SMALL_REACTIVE_TOML
 
-GRAPH = '''[system]
+GRAPH = """[system]
 states = ["a", "b", "c"]
 edges = [["a", "b"], ["b", "c"], ["a", "c"]]
 start = "a"
@@ -31,7 +31,7 @@ system = "F goal"
 test = "F mid"
 [environment]
 kind = "reactive"
-'''
+"""
 
 ENV = 'kind = "reactive"'
 
@@ -80,8 +80,7 @@ CASES = [
     (GRAPH, 'states = ["a", "b", "c"]', 'states = ["a", "b", "c", ""]', "[system] states"),
     (GRAPH, 'start = "a"', 'start = "a"\nrestrictable = [[1, 2]]', "restrictable"),
     (GRAPH, ENV, 'kind = "agent"\n[environment.agent]\ncells = 3\nstart = 1\nparks = 2', "cells"),
-    (GRID, ENV, ENV + '\n[environment.agent]\ncells = [[0,1]]\nstart = [0,1]\nparks = [{name="p", from=[[0,1]]}]',
-     'kind = "agent"'),
+    (GRID, ENV, ENV + '\n[environment.agent]\ncells = [[0,1]]\nstart = [0,1]\nparks = [{name="p", from=[[0,1]]}]', 'kind = "agent"'),
 ]
 
 

@@ -161,8 +161,11 @@ def test_comparisons_exercise_integral_phase2() -> None:
     with_mu = 0
     for seed in range(N):
         rows, cols = (2, 2) if seed % 3 == 0 else (2, 3)
-        for problem in (graph_instance(500 + seed), grid_instance(700 + seed, rows, cols, "reactive", None),
-                        grid_instance(1100 + seed, 3, 3, "reactive", None)):
+        for problem in (
+            graph_instance(500 + seed),
+            grid_instance(700 + seed, rows, cols, "reactive", None),
+            grid_instance(1100 + seed, 3, 3, "reactive", None),
+        ):
             rm = _model(problem)
             with_mu += rm is not None and bool(np.any(rm.cols.reach >= 0))
     assert with_mu >= 2 * N, with_mu

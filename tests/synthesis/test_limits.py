@@ -26,9 +26,11 @@ def grid_problem(n: int, test: str = "F I1 & F I2") -> dict:
             row[0], row[-1] = "S", "I2"
         rows.append(" ".join(row))
     return {
-        "name": f"empty-{n}", "system": {"grid": "\n".join(rows), "start": "S", "terminal": ["T"]},
+        "name": f"empty-{n}",
+        "system": {"grid": "\n".join(rows), "start": "S", "terminal": ["T"]},
         "labels": {"goal": ["T"], "I1": ["I1"], "I2": ["I2"]},
-        "objectives": {"system": "F goal", "test": test}, "environment": {"kind": "reactive"},
+        "objectives": {"system": "F goal", "test": test},
+        "environment": {"kind": "reactive"},
     }
 
 
@@ -40,9 +42,11 @@ def test_every_builtin_is_within_the_limit() -> None:
 
 def test_huge_grid_is_refused_fast_with_the_way_on(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     data = grid_problem(1000)
-    text = f'name = "big"\n[system]\ngrid = """\n{data["system"]["grid"]}\n"""\nstart = "S"\nterminal = ["T"]\n' \
-           '[labels]\ngoal = ["T"]\nI1 = ["I1"]\nI2 = ["I2"]\n[objectives]\nsystem = "F goal"\ntest = "F I1 & F I2"\n' \
-           '[environment]\nkind = "reactive"\n'
+    text = (
+        f'name = "big"\n[system]\ngrid = """\n{data["system"]["grid"]}\n"""\nstart = "S"\nterminal = ["T"]\n'
+        '[labels]\ngoal = ["T"]\nI1 = ["I1"]\nI2 = ["I2"]\n[objectives]\nsystem = "F goal"\ntest = "F I1 & F I2"\n'
+        '[environment]\nkind = "reactive"\n'
+    )
     (tmp_path / "big.toml").write_text(text)
     t0 = time.perf_counter()
     assert main(["synthesize", str(tmp_path / "big.toml"), "-q"]) == 2

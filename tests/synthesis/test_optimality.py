@@ -185,9 +185,7 @@ def test_static_trap_instance_by_enumeration() -> None:
     strict, _ = static_optimum(v, problem.system, True, require_feasible=True)
     assert loose is not None and (loose.flow, loose.n_cuts) == (1, 2)
     assert strict is not None and (strict.flow, strict.n_cuts) == (1, 6)
-    blocked = frozenset(
-        (v.state[v.src[e]], v.state[v.dst[e]]) for e in bits(loose.cut)
-    )
+    blocked = frozenset((v.state[v.src[e]], v.state[v.dst[e]]) for e in bits(loose.cut))
     assert not feasible_static(v, blocked)
 
 

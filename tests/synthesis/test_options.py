@@ -104,8 +104,16 @@ def test_a_synthesis_passes_every_budget_and_run_option_to_the_routing_model() -
         pass
 
     given = SynthesisOptions(
-        time_limit=7.0, after_first=2.0, mip_rel_gap=0.01, node_limit=99, work_limit=3.0, threads=2,
-        random_seed=5, backend="highs", progress=progress, closed_loop=True,
+        time_limit=7.0,
+        after_first=2.0,
+        mip_rel_gap=0.01,
+        node_limit=99,
+        work_limit=3.0,
+        threads=2,
+        random_seed=5,
+        backend="highs",
+        progress=progress,
+        closed_loop=True,
     )
     milp = milp_options(problem, given)
     for name in names(Budgets) | names(RunOptions) | {"closed_loop"}:
@@ -246,9 +254,7 @@ FLAGS = [
 
 
 @pytest.mark.parametrize(("flag", "text", "rule", "value"), FLAGS, ids=[f"{f} {t}" for f, t, _, _ in FLAGS])
-def test_a_flag_gets_the_same_reason_as_the_option(
-    flag: str, text: str, rule: Rule, value: Any, capsys: pytest.CaptureFixture[str]
-) -> None:
+def test_a_flag_gets_the_same_reason_as_the_option(flag: str, text: str, rule: Rule, value: Any, capsys: pytest.CaptureFixture[str]) -> None:
     """``flowtest synthesize --time-limit -1.5``: one ``error:`` line with the reason the
     option ``time_limit=-1.5`` gets, exit code 2, before any work."""
     with pytest.raises(SystemExit) as exc:

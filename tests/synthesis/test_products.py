@@ -93,9 +93,7 @@ def random_case(seed: int):
     rng = random.Random(seed)
     ts, raw = random_grid(rng) if seed % 2 == 0 else random_graph(rng)
     sys_text, test_text = random_objectives(rng)
-    spec = specification_product(
-        parse_objective(sys_text, "system"), parse_objective(test_text, "test"), ts.letters()
-    )
+    spec = specification_product(parse_objective(sys_text, "system"), parse_objective(test_text, "test"), ts.letters())
     return ts, raw, spec, (sys_text, test_text)
 
 
@@ -149,11 +147,7 @@ def test_grid_moves_are_the_four_neighbours() -> None:
     for _ in range(40):
         ts, raw = random_grid(rng, max_side=5)
         want = {
-            (a, (a[0] + dr, a[1] + dc))
-            for a in raw["free"]
-            if a not in raw["terminal"]
-            for dr, dc in MOVES.values()
-            if (a[0] + dr, a[1] + dc) in raw["free"]
+            (a, (a[0] + dr, a[1] + dc)) for a in raw["free"] if a not in raw["terminal"] for dr, dc in MOVES.values() if (a[0] + dr, a[1] + dc) in raw["free"]
         }
         got = [(ts.states[a], ts.states[b]) for a, b in zip(ts.src.tolist(), ts.dst.tolist(), strict=True)]
         assert len(got) == len(set(got)) and set(got) == want

@@ -280,11 +280,7 @@ def trapped_configurations(p: Products, blocked: np.ndarray) -> list[tuple[int, 
 
     def succ(x: tuple[int, int], restricted: bool) -> list[tuple[int, int]]:
         s, q = x
-        return [
-            (s2, int(pi.delta[q, letter[ts.labels[s2]]]))
-            for m, s2 in out.get(s, [])
-            if not (restricted and blocked[q, m])
-        ]
+        return [(s2, int(pi.delta[q, letter[ts.labels[s2]]])) for m, s2 in out.get(s, []) if not (restricted and blocked[q, m])]
 
     def graph(restricted: bool) -> nx.DiGraph:
         d = nx.DiGraph()
@@ -450,8 +446,7 @@ def one_way_trap() -> TransitionSystem:
     (no entry node of any history lies there, so c6-c8 do not see it).
     """
     names = ["s", "a1", "a2", "d", "i", "g"]
-    edges = [("s", "a1"), ("a1", "s"), ("s", "a2"), ("a2", "s"), ("a1", "d"), ("a2", "d"),
-             ("d", "g"), ("s", "i"), ("i", "s"), ("i", "g")]
+    edges = [("s", "a1"), ("a1", "s"), ("s", "a2"), ("a2", "s"), ("a1", "d"), ("a2", "d"), ("d", "g"), ("s", "i"), ("i", "s"), ("i", "g")]
     return graph_system(names, edges, "s", ["g"], {"g": {"goal"}, "i": {"I"}})
 
 

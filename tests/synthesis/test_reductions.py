@@ -83,10 +83,7 @@ def _on_route(products: Products, rm: RoutingModel, keep: np.ndarray) -> np.ndar
     hubs = [i for i in np.flatnonzero(products.intermediate).tolist() if i in fwd and i in back]
     before = _reach(g, set(hubs), True)  # reachable from an I node that is on a route
     after = _reach(g, set(hubs), False)  # reaching such a node
-    return np.array([
-        bool(k and u in fwd and v in back and (u in before or v in after))
-        for k, u, v in zip(keep, me.eu, me.ev, strict=True)
-    ])
+    return np.array([bool(k and u in fwd and v in back and (u in before or v in after)) for k, u, v in zip(keep, me.eu, me.ev, strict=True)])
 
 
 def _groups_of(rm: RoutingModel, edges: np.ndarray) -> np.ndarray:

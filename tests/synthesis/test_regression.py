@@ -46,10 +46,7 @@ RANDOM: dict[tuple[int, str, int, int, str], tuple[int, int]] = {
 
 
 def _examples() -> list:
-    return [
-        pytest.param(name, marks=pytest.mark.slow) if name in SLOW_EXAMPLES else name
-        for name in EXAMPLES
-    ]
+    return [pytest.param(name, marks=pytest.mark.slow) if name in SLOW_EXAMPLES else name for name in EXAMPLES]
 
 
 @pytest.mark.parametrize("name", _examples())

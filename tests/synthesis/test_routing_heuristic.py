@@ -44,9 +44,7 @@ def _route_seed(products: Products) -> RouteSeed:
     return RouteSeed(products.ts.place[g.state], g.hist, products.intermediate)
 
 
-CASES = [(5, "reaction", 2, s) for s in range(12)] + [(10, "reaction", 3, s) for s in range(4)] + [
-    (5, "reachability", 3, s) for s in range(4)
-]
+CASES = [(5, "reaction", 2, s) for s in range(12)] + [(10, "reaction", 3, s) for s in range(4)] + [(5, "reachability", 3, s) for s in range(4)]
 
 
 @pytest.mark.parametrize("size,family,n,seed", CASES)

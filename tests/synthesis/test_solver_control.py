@@ -43,6 +43,7 @@ def test_a_stop_request_ends_a_running_solve_within_a_second() -> None:
     h = market_split()
     control = SolveControl()
     statuses: list[str | None] = []
+
     def look_then_stop() -> None:
         statuses.append(status_line(control))
         control.request_stop()

@@ -101,6 +101,7 @@ def random_formula(rng: random.Random, depth: int, names: list[str], temporal: b
 
 # ------------------------------------------------------------------ reference evaluator
 
+
 def evaluate(f: Formula, label: frozenset[str]) -> bool:
     """Truth of a propositional tree on a label, written independently of :func:`holds`."""
     match f:

@@ -17,8 +17,7 @@ from pathlib import Path
 import synthesis
 
 PACKAGE = Path(synthesis.__file__).parent
-LAYER = {"model": 0, "graphs": 1, "problems": 2, "routing": 3, "checks": 3, "test_agent": 4, "options": 5, "synthesized_test": 5, "pipeline": 5,
-         "artifacts": 6}
+LAYER = {"model": 0, "graphs": 1, "problems": 2, "routing": 3, "checks": 3, "test_agent": 4, "options": 5, "synthesized_test": 5, "pipeline": 5, "artifacts": 6}
 
 
 def _part(parts: list[str]) -> str:

@@ -152,9 +152,18 @@ class CpSatSession:
         self._cpu_before = self._worker.cpu
         a = arrays.a
         self._worker.cpu = self._call(
-            ("build", {"indptr": _ints(a.indptr), "indices": _ints(a.indices), "data": _floats(a.data),
-                       "row_lo": _floats(arrays.row_lo), "row_hi": _floats(arrays.row_hi),
-                       "col_lo": _floats(arrays.col_lo), "col_hi": _floats(arrays.col_hi)}),
+            (
+                "build",
+                {
+                    "indptr": _ints(a.indptr),
+                    "indices": _ints(a.indices),
+                    "data": _floats(a.data),
+                    "row_lo": _floats(arrays.row_lo),
+                    "row_hi": _floats(arrays.row_hi),
+                    "col_lo": _floats(arrays.col_lo),
+                    "col_hi": _floats(arrays.col_hi),
+                },
+            ),
         )
         self.spawn_seconds = time.perf_counter() - self.started
         self.spawn_cpu_seconds = self._worker.cpu - self._cpu_before
@@ -187,8 +196,10 @@ class CpSatSession:
         self._worker.cpu = self._call(("rows", [(_ints(i), _floats(v), float(lo), float(hi)) for i, v, lo, hi in rows]))
         n = self.arrays.a.shape[1]
         block = sp.csr_matrix(
-            (np.concatenate([np.asarray(v, dtype=float) for _, v, _, _ in rows]),
-             (np.repeat(np.arange(len(rows)), [len(i) for i, _, _, _ in rows]), np.concatenate([np.asarray(i, dtype=np.int64) for i, _, _, _ in rows]))),
+            (
+                np.concatenate([np.asarray(v, dtype=float) for _, v, _, _ in rows]),
+                (np.repeat(np.arange(len(rows)), [len(i) for i, _, _, _ in rows]), np.concatenate([np.asarray(i, dtype=np.int64) for i, _, _, _ in rows])),
+            ),
             shape=(len(rows), n),
         )
         self.arrays = ModelArrays(
@@ -231,10 +242,18 @@ class CpSatSession:
         Raises ``KeyboardInterrupt`` on Ctrl-C or a stop request (the child is killed)."""
         if hint is not None and self.arrays.violation(hint) > FEASIBILITY_TOLERANCE:
             hint = None
-        params = {"random_seed": int(random_seed), "deterministic_time": work_limit, "seconds": seconds,
-                  "after_first": after_first, "rel_gap": float(rel_gap), "first_at": 1.0,
-                  "search": dict(search or {}), "reach": None if reach is None else float(reach),
-                  "stop_at": None if stop_at is None else float(stop_at), "keep": int(keep)}
+        params = {
+            "random_seed": int(random_seed),
+            "deterministic_time": work_limit,
+            "seconds": seconds,
+            "after_first": after_first,
+            "rel_gap": float(rel_gap),
+            "first_at": 1.0,
+            "search": dict(search or {}),
+            "reach": None if reach is None else float(reach),
+            "stop_at": None if stop_at is None else float(stop_at),
+            "keep": int(keep),
+        }
         sense = "max" if maximize else "min"
         t0 = time.perf_counter()
         if self.control is not None:
@@ -249,8 +268,13 @@ class CpSatSession:
         return self._checked(raw, cost, seconds, work_limit, reach, maximize)
 
     def _checked(
-        self, raw: dict[str, Any], cost: np.ndarray, seconds: float | None, work_limit: float | None,
-        reach: float | None = None, maximize: bool = True,
+        self,
+        raw: dict[str, Any],
+        cost: np.ndarray,
+        seconds: float | None,
+        work_limit: float | None,
+        reach: float | None = None,
+        maximize: bool = True,
     ) -> CpSatAnswer:
         """The child's answer as a :class:`CpSatAnswer`, its solution checked against the model."""
         stats = {k: raw[k] for k in ("wall_seconds", "cpu_seconds", "deterministic_time", "conflicts", "branches")}

@@ -57,9 +57,15 @@ def phase1_cpsat(session: cpsat.CpSatSession, r: Round) -> tuple[Phase, list[dic
     seconds, after_first = _cpsat_budget(clock)
     left = options.work_limit
     ans = session.solve(
-        cost, True, best, seconds=seconds, after_first=after_first,
-        work_limit=cpsat.PROOF_WORK if left is None else min(cpsat.PROOF_WORK, left), rel_gap=options.mip_rel_gap,
-        random_seed=options.random_seed, phase="phase 1 (maximum flow)",
+        cost,
+        True,
+        best,
+        seconds=seconds,
+        after_first=after_first,
+        work_limit=cpsat.PROOF_WORK if left is None else min(cpsat.PROOF_WORK, left),
+        rel_gap=options.mip_rel_gap,
+        random_seed=options.random_seed,
+        phase="phase 1 (maximum flow)",
     )
     runs.append(ans.stats)
     left = None if left is None else left - ans.stats["deterministic_time"]
@@ -132,8 +138,17 @@ def reach_level(
             work = left if work is None else min(work, left)
         seconds, after_first = _cpsat_budget(clock)
         ans = session.solve(
-            cost, True, None if search is None else best, seconds=seconds, after_first=after_first, work_limit=work,
-            rel_gap=0.0, random_seed=options.random_seed, phase="phase 1 (maximum flow)", search=search, reach=level,
+            cost,
+            True,
+            None if search is None else best,
+            seconds=seconds,
+            after_first=after_first,
+            work_limit=work,
+            rel_gap=0.0,
+            random_seed=options.random_seed,
+            phase="phase 1 (maximum flow)",
+            search=search,
+            reach=level,
         )
         runs.append(ans.stats)
         left = None if left is None else left - ans.stats["deterministic_time"]
@@ -151,8 +166,14 @@ def reach_level(
 
 
 def phase2_cpsat(
-    session: cpsat.CpSatSession, rm: RoutingModel, x: np.ndarray, flow: int, options: MilpOptions, clock: Clock,
-    proof: CutProof | None = None, ihs: HittingSetOutcome | None = None,
+    session: cpsat.CpSatSession,
+    rm: RoutingModel,
+    x: np.ndarray,
+    flow: int,
+    options: MilpOptions,
+    clock: Clock,
+    proof: CutProof | None = None,
+    ihs: HittingSetOutcome | None = None,
 ) -> tuple[Phase, list[dict[str, Any]]]:
     """:func:`synthesis.routing.backends.highs.phase2` on CP-SAT: fewest cuts (fewest blocked places first) at flow
     ``flow``, from phase 1's answer as a hint (kept if CP-SAT finds nothing better). With the
@@ -178,8 +199,16 @@ def phase2_cpsat(
         stop_at = max(stop_at or 0.0, ihs.result.bound)
     seconds, _ = _cpsat_budget(clock)
     ans = session.solve(
-        cost, False, x, seconds=seconds, after_first=None, work_limit=options.work_limit,
-        rel_gap=options.mip_rel_gap, random_seed=options.random_seed, phase="phase 2 (fewest cuts)", flow=flow,
+        cost,
+        False,
+        x,
+        seconds=seconds,
+        after_first=None,
+        work_limit=options.work_limit,
+        rel_gap=options.mip_rel_gap,
+        random_seed=options.random_seed,
+        phase="phase 2 (fewest cuts)",
+        flow=flow,
         stop_at=stop_at,
     )
     if ans.status == "infeasible":  # cannot happen: phase 1's solution is feasible

@@ -256,9 +256,7 @@ class _Watch:
     ``after_first`` seconds after its first solution of objective >= ``first_at``, or at
     ``seconds`` without one."""
 
-    def __init__(
-        self, solver: Any, out: Connection, maximize: bool, after_first: float | None, first_at: float, reach: float | None = None
-    ) -> None:
+    def __init__(self, solver: Any, out: Connection, maximize: bool, after_first: float | None, first_at: float, reach: float | None = None) -> None:
         self.solver = solver
         self.out = out
         self.maximize = maximize

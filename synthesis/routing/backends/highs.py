@@ -67,9 +67,7 @@ def phase1(h: highspy.Highs, r: Round) -> Phase:
     watch = clock.watching_first()
     abandoned = False
     try:
-        status, gap, x1 = run(
-            h, clock.latest(), options, phase="phase 1 (maximum flow)", clock=clock, watch_first=watch, hard=_hard(clock)
-        )
+        status, gap, x1 = run(h, clock.latest(), options, phase="phase 1 (maximum flow)", clock=clock, watch_first=watch, hard=_hard(clock))
     except TimeoutError as exc:
         if x_guess is None:
             raise

@@ -188,8 +188,17 @@ def fewest_cuts(
             out.rounds += 1
             t = time.perf_counter()
             ans = session.solve(
-                sep.cost, False, None, seconds=seconds, after_first=None, work_limit=left, rel_gap=0.0,
-                random_seed=random_seed, phase="phase 2 (fewest cuts, hitting set)", flow=flow, keep=KEEP,
+                sep.cost,
+                False,
+                None,
+                seconds=seconds,
+                after_first=None,
+                work_limit=left,
+                rel_gap=0.0,
+                random_seed=random_seed,
+                phase="phase 2 (fewest cuts, hitting set)",
+                flow=flow,
+                keep=KEEP,
             )
             out.master_seconds += time.perf_counter() - t
             out.master_cpu_seconds += float(ans.stats["cpu_seconds"])
@@ -269,7 +278,13 @@ def try_hitting_set(
     budget = HittingSetBudget(work=work, deadline=clock.deadline)
     lower = 0.0 if proof is None else float(proof.bound)
     result = fewest_cuts(
-        sep, flow, rm.cut_of(x), budget, bound=lower, random_seed=options.random_seed, control=options.control,
+        sep,
+        flow,
+        rm.cut_of(x),
+        budget,
+        bound=lower,
+        random_seed=options.random_seed,
+        control=options.control,
     )
     y = x if result.cut is None or np.array_equal(result.cut, rm.cut_of(x)) else model_solution(products, rm, result.cut, flow)
     return HittingSetOutcome(y, result)

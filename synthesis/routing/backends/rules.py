@@ -59,9 +59,4 @@ def per_cut_flow_rows(rm: RoutingModel, options: MilpOptions) -> bool:
     HiGHS, for MILP-reactive models of at least :data:`PER_CUT_MIN_ROWS` rows built per flow
     edge. A function of the built model and the options only, so the choice is the same on
     every machine."""
-    return (
-        options.backend == "highs"
-        and options.mode == "reactive"
-        and bool(rm.cols.feasibility)
-        and rm.model.n_row >= PER_CUT_MIN_ROWS
-    )
+    return options.backend == "highs" and options.mode == "reactive" and bool(rm.cols.feasibility) and rm.model.n_row >= PER_CUT_MIN_ROWS

@@ -152,9 +152,7 @@ class _Search:
         e_rest = np.concatenate([np.cumsum(items[::-1, 1])[::-1], [0]]) if items.size else np.zeros(1, dtype=np.int64)
         x_rest = np.concatenate([np.cumsum(np.maximum(items[::-1, 2], items[::-1, 3]))[::-1], [0]]) if items.size else np.zeros(1, dtype=np.int64)
         # a node: (depth, E so far, X so far, lower bound from its parent, forced in, forced out)
-        stack: list[tuple[int, int, int, float, np.ndarray, np.ndarray]] = [
-            (0, split.base_e, split.base_x + fixed_x, 0.0, forced_in, forced_out)
-        ]
+        stack: list[tuple[int, int, int, float, np.ndarray, np.ndarray]] = [(0, split.base_e, split.base_x + fixed_x, 0.0, forced_in, forced_out)]
         while stack:
             depth, e, x, parent, f_in, f_out = stack.pop()
             # a node no better than the best kept leaf is still searched on a tie: its leaves'
@@ -303,9 +301,7 @@ def _dominators(products: Products, state: np.ndarray, region: np.ndarray, tails
     return out
 
 
-def _state_arcs(
-    state: np.ndarray, src: np.ndarray, dst: np.ndarray, of_edge: np.ndarray, weight: np.ndarray, restrictable: np.ndarray
-) -> _Arcs:
+def _state_arcs(state: np.ndarray, src: np.ndarray, dst: np.ndarray, of_edge: np.ndarray, weight: np.ndarray, restrictable: np.ndarray) -> _Arcs:
     """The arcs of C3 with their integer capacities."""
     a, b = state[src], state[dst]
     keep = a != b
@@ -335,9 +331,7 @@ def _state_arcs(
     return _Arcs(tail, head, group, cap.astype(np.int64), scale, inf_cap, int(weight.size))
 
 
-def _min_cut(
-    arcs: _Arcs, n_states: int, forced_in: np.ndarray, forced_out: np.ndarray, removed: np.ndarray
-) -> tuple[int, list[np.ndarray]]:
+def _min_cut(arcs: _Arcs, n_states: int, forced_in: np.ndarray, forced_out: np.ndarray, removed: np.ndarray) -> tuple[int, list[np.ndarray]]:
     """The minimum directed cut (C4) between ``forced_in`` and ``forced_out`` states over the
     arcs that touch no ``removed`` state, and its smallest and largest source sides (``bool``
     per state). Infinite capacities count as ``arcs.inf_cap``; a value at least that is no cut."""

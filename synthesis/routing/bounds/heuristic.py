@@ -367,9 +367,7 @@ def disjoint_routes(graph: RouteGraph, seed: RouteSeed, route: np.ndarray, count
     return group
 
 
-def _history_sequences(
-    src: int, eu: np.ndarray, ev: np.ndarray, target: np.ndarray, seed: RouteSeed
-) -> list[tuple[int, ...]]:
+def _history_sequences(src: int, eu: np.ndarray, ev: np.ndarray, target: np.ndarray, seed: RouteSeed) -> list[tuple[int, ...]]:
     """Up to ``seed.tries`` sequences of histories a ``Src -> I -> Tgt`` path of G can
     pass, each history once, shortest estimated tour first: the orders to try a route in.
 
@@ -432,9 +430,7 @@ class _RouteSearch:
         self.left = self.BUDGET
         self.work = work
 
-    def through(
-        self, changes: tuple[int, ...], k: int, cur: int, used: frozenset[int], randomized: bool = False
-    ) -> list[int] | None:
+    def through(self, changes: tuple[int, ...], k: int, cur: int, used: frozenset[int], randomized: bool = False) -> list[int] | None:
         """Segments ``k..`` of a place-simple route from ``cur`` through the histories
         ``changes`` (the last one a target history); ``randomized``: no shortest
         segment first, for another route through the same order."""

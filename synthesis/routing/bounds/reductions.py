@@ -162,12 +162,8 @@ def reduce_groups(
         position = np.empty(n_groups, dtype=np.int64)
         position[rank] = np.arange(n_groups)
         # bypass_without[i, j]: free[j] has an edge on a bypass walk once free[i] is removed
-        bypass_without = np.stack(
-            [_bypass_groups(n, src, eu, ev, grp, c5, target, grp != b, n_groups)[free] for b in free]
-        )
-        route_without = np.stack(
-            [_route_groups(n, src, eu, ev, grp, inter, target, grp != a, n_groups)[free] for a in free]
-        )
+        bypass_without = np.stack([_bypass_groups(n, src, eu, ev, grp, c5, target, grp != b, n_groups)[free] for b in free])
+        route_without = np.stack([_route_groups(n, src, eu, ev, grp, inter, target, grp != a, n_groups)[free] for a in free])
         for j, a in enumerate(free):
             # (i) a off every bypass walk without b; (ii) b off every route without a; (iii) rank
             ok = ~bypass_without[:, j] & ~route_without[j, :] & (position[free] < position[a])
@@ -179,8 +175,15 @@ def reduce_groups(
 
 
 def _bypass_groups(
-    n: int, src: int, eu: np.ndarray, ev: np.ndarray, grp: np.ndarray, c5: np.ndarray, target: np.ndarray,
-    keep: np.ndarray, n_groups: int,
+    n: int,
+    src: int,
+    eu: np.ndarray,
+    ev: np.ndarray,
+    grp: np.ndarray,
+    c5: np.ndarray,
+    target: np.ndarray,
+    keep: np.ndarray,
+    n_groups: int,
 ) -> np.ndarray:
     """``bool`` per group: some edge of it lies on a bypass walk over the kept edges."""
     e = np.flatnonzero(c5 & keep)
@@ -201,8 +204,15 @@ def _layered(n: int, src: int, eu: np.ndarray, ev: np.ndarray, inter: np.ndarray
 
 
 def _route_groups(
-    n: int, src: int, eu: np.ndarray, ev: np.ndarray, grp: np.ndarray, inter: np.ndarray, target: np.ndarray,
-    keep: np.ndarray, n_groups: int,
+    n: int,
+    src: int,
+    eu: np.ndarray,
+    ev: np.ndarray,
+    grp: np.ndarray,
+    inter: np.ndarray,
+    target: np.ndarray,
+    keep: np.ndarray,
+    n_groups: int,
 ) -> np.ndarray:
     """``bool`` per group: some edge of it lies on a route over the kept edges."""
     e = np.flatnonzero(keep)

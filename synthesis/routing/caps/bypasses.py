@@ -66,9 +66,20 @@ def bypass_graph(products: Products, options: MilpOptions, cap: str) -> BypassGr
     on_route = after | before
     r = on_route[me.eu] & on_route[me.ev]
     return BypassGraph(
-        n=n, source=int(g.initial), target=tgt, eu=me.eu[c5], ev=me.ev[c5], grp=grp, item=items.of_group[grp],
-        cuttable=me.has_var[grp], counted=items.kinds(cap), n_groups=int(groups.keys.size),
-        route_eu=me.eu[r], route_ev=me.ev[r], route_grp=me.grp[r], route_ends=np.flatnonzero(tgt & after),
+        n=n,
+        source=int(g.initial),
+        target=tgt,
+        eu=me.eu[c5],
+        ev=me.ev[c5],
+        grp=grp,
+        item=items.of_group[grp],
+        cuttable=me.has_var[grp],
+        counted=items.kinds(cap),
+        n_groups=int(groups.keys.size),
+        route_eu=me.eu[r],
+        route_ev=me.ev[r],
+        route_grp=me.grp[r],
+        route_ends=np.flatnonzero(tgt & after),
     )
 
 
@@ -125,8 +136,13 @@ a deterministic budget, so the same problem gets the same answer on every machin
 
 
 def routed_bypasses(
-    products: Products, options: MilpOptions, cap: str, stop_above: int,
-    searches: int = ROUTED_SEARCHES, deadline: float | None = None, bg: BypassGraph | None = None,
+    products: Products,
+    options: MilpOptions,
+    cap: str,
+    stop_above: int,
+    searches: int = ROUTED_SEARCHES,
+    deadline: float | None = None,
+    bg: BypassGraph | None = None,
 ) -> int:
     """``stop_above + 1`` where it is proven that every test needs more than ``stop_above``
     items the cap ``cap`` counts; else :func:`disjoint_bypasses`'s bound.
@@ -179,9 +195,7 @@ def routed_bypasses(
         return counts[spared_groups]
 
     # depth first, over (prefix from Src, suffix into Tgt, the groups on both)
-    stack: list[tuple[tuple[int, ...], tuple[int, ...], frozenset[int]]] = [
-        ((bg.source,), (int(t),), frozenset()) for t in bg.route_ends[::-1]
-    ]
+    stack: list[tuple[tuple[int, ...], tuple[int, ...], frozenset[int]]] = [((bg.source,), (int(t),), frozenset()) for t in bg.route_ends[::-1]]
     while stack:
         head, tail, spared_groups = stack.pop()
         found = count(spared_groups)

@@ -10,6 +10,7 @@ CAP_NOUNS = {"max_walls": "walls", "max_doors": "doors", "max_restrictions": "re
 
 def caps_text(caps: dict[str, int]) -> str:
     """``"at most 3 doors and at most 2 walls"``."""
+
     def noun(k: str, n: int) -> str:
         word = CAP_NOUNS[k].split(" (")[0]
         return word[:-1] if n == 1 else word

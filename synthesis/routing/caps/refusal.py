@@ -76,7 +76,12 @@ def check_caps_reachable(products: Products, options: MilpOptions) -> dict[str, 
 
 
 def proven_bound(
-    products: Products, options: MilpOptions, cap: str, limit: int, plain: int, deadline: float | None = None,
+    products: Products,
+    options: MilpOptions,
+    cap: str,
+    limit: int,
+    plain: int,
+    deadline: float | None = None,
     bg: BypassGraph | None = None,
 ) -> int:
     """The largest ``k <= limit + 1`` proven by

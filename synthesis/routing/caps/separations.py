@@ -120,7 +120,7 @@ class _Network:
         key = rows * (n + 1) + cols
         uniq, slot = np.unique(key, return_inverse=True)
         indptr = np.searchsorted(uniq // (n + 1), np.arange(n + 2)).astype(np.int32)
-        return _Network(n, indptr, (uniq % (n + 1)).astype(np.int32), slot.ravel(), int(uniq.size), slot.ravel()[eu.size:])
+        return _Network(n, indptr, (uniq % (n + 1)).astype(np.int32), slot.ravel(), int(uniq.size), slot.ravel()[eu.size :])
 
     def min_cut(self, src: int, cap: np.ndarray) -> tuple[int, np.ndarray]:
         """A minimum ``src -> Tgt`` cut under the arcs' capacities ``cap``: its value and, per
@@ -211,9 +211,7 @@ class HistorySeparations:
         start[int(g.initial)] = True
         outside = ~inter[me.eu]
         before = reachable(g.n_nodes, me.eu[outside], me.ev[outside], start) & reachable(g.n_nodes, me.ev, me.eu, inter)
-        self._entries = {
-            int(q): nodes[before[nodes] & ~inter[nodes] & ~products.target[nodes]] for q, nodes in g.entry_nodes.items()
-        }
+        self._entries = {int(q): nodes[before[nodes] & ~inter[nodes] & ~products.target[nodes]] for q, nodes in g.entry_nodes.items()}
 
     def _layer(self, q: int) -> _Layer:
         if q not in self._layers:
@@ -266,8 +264,12 @@ class HistorySeparations:
 
 
 def separations_exceed(
-    products: Products, options: MilpOptions, cap: str, limit: int,
-    cuts: int = SEPARATION_CUTS, deadline: float | None = None,
+    products: Products,
+    options: MilpOptions,
+    cap: str,
+    limit: int,
+    cuts: int = SEPARATION_CUTS,
+    deadline: float | None = None,
 ) -> bool:
     """Whether the lemma of the module docstring proves that no test uses at most ``limit`` of
     the items ``cap`` counts (``False``: not proven within ``cuts`` minimum cuts in all and by

@@ -313,7 +313,13 @@ def start_within_caps(
 
 
 def _min_bypass_cut(
-    n: int, src: int, eu: np.ndarray, ev: np.ndarray, grp: np.ndarray, cuttable: np.ndarray, cost: np.ndarray,
+    n: int,
+    src: int,
+    eu: np.ndarray,
+    ev: np.ndarray,
+    grp: np.ndarray,
+    cuttable: np.ndarray,
+    cost: np.ndarray,
     target: np.ndarray,
 ) -> np.ndarray | None:
     """The cut groups (``bool`` per group) of a minimum ``Src -> Tgt`` cut over the bypass
@@ -340,16 +346,22 @@ def _min_bypass_cut(
 
 
 def _cheapest_route(
-    n: int, src: int, eu: np.ndarray, ev: np.ndarray, grp: np.ndarray, usable: np.ndarray, cut: np.ndarray,
-    target: np.ndarray, jitter: np.ndarray | None = None,
+    n: int,
+    src: int,
+    eu: np.ndarray,
+    ev: np.ndarray,
+    grp: np.ndarray,
+    usable: np.ndarray,
+    cut: np.ndarray,
+    target: np.ndarray,
+    jitter: np.ndarray | None = None,
 ) -> np.ndarray | None:
     """The cut groups on a ``Src -> Tgt`` route over the ``usable`` edges (every route to
     ``Tgt`` passes I) that crosses the fewest edges of ``cut``, the shortest of those (each
     edge ``jitter`` long, default 1); empty when a route is open, ``None`` when there is no
     route at all."""
     e_ok = np.flatnonzero(usable)
-    path = zero_one_path(n, eu[e_ok], ev[e_ok], cut[grp[e_ok]], np.arange(n) == src, target,
-                          None if jitter is None else jitter[e_ok])
+    path = zero_one_path(n, eu[e_ok], ev[e_ok], cut[grp[e_ok]], np.arange(n) == src, target, None if jitter is None else jitter[e_ok])
     if path is None:
         return None
     on = e_ok[path]

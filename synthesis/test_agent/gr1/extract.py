@@ -23,9 +23,7 @@ def _segment_argmin(key: np.ndarray, ptr: np.ndarray, sentinel: int) -> np.ndarr
     return out
 
 
-def build_strategy(
-    game: GR1Game, ix: GameIndex, winning: np.ndarray, basins: list[Basin]
-) -> GR1Strategy:
+def build_strategy(game: GR1Game, ix: GameIndex, winning: np.ndarray, basins: list[Basin]) -> GR1Strategy:
     """Tabulate the counter strategy from the final fixpoint data.
 
     Raises
@@ -62,9 +60,7 @@ def build_strategy(
         active = b.inside[ix.owner]
         if np.any(active & ~has):
             c = int(np.flatnonzero(active & ~has)[0])
-            raise RuntimeError(
-                f"internal error: no admissible move for goal {j}, choice {c}"
-            )
+            raise RuntimeError(f"internal error: no admissible move for goal {j}, choice {c}")
         chosen = best[has] % (E + 1)
         next_position[j, has] = succ[chosen]
         goal_choice = b.kind[ix.owner] == KIND_GOAL

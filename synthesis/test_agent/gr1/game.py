@@ -45,9 +45,7 @@ def _as_index_array(value: Any, name: str, upper: int | None) -> np.ndarray:
         bad = np.flatnonzero((arr < 0) | (arr >= upper))
         if bad.size:
             k = int(bad[0])
-            raise ValueError(
-                f"{name}[{k}] = {int(arr[k])} is out of range [0, {upper})"
-            )
+            raise ValueError(f"{name}[{k}] = {int(arr[k])} is out of range [0, {upper})")
     arr.flags.writeable = False
     return arr
 
@@ -57,9 +55,7 @@ def _as_mask(value: Any, name: str, n: int) -> np.ndarray:
     a boolean array of shape ``(n,)``."""
     arr = np.asarray(value)
     if arr.dtype != np.bool_:
-        raise ValueError(
-            f"{name} must be a boolean mask over positions, got dtype {arr.dtype}"
-        )
+        raise ValueError(f"{name} must be a boolean mask over positions, got dtype {arr.dtype}")
     if arr.shape != (n,):
         raise ValueError(f"{name} must have shape ({n},), got {arr.shape}")
     arr = arr.copy()
@@ -138,33 +134,19 @@ class GR1Game:
         ptr = _as_index_array(self.choice_succ_ptr, "choice_succ_ptr", None)
         m = owner.size
         if ptr.size != m + 1:
-            raise ValueError(
-                f"choice_succ_ptr must have n_choices + 1 = {m + 1} entries, "
-                f"got {ptr.size}"
-            )
+            raise ValueError(f"choice_succ_ptr must have n_choices + 1 = {m + 1} entries, got {ptr.size}")
         if ptr[0] != 0:
             raise ValueError(f"choice_succ_ptr[0] must be 0, got {int(ptr[0])}")
         if np.any(np.diff(ptr) < 0):
             raise ValueError("choice_succ_ptr must be non-decreasing")
         if ptr[-1] != succ.size:
-            raise ValueError(
-                f"choice_succ_ptr[-1] = {int(ptr[-1])} must equal "
-                f"len(choice_succ) = {succ.size}"
-            )
+            raise ValueError(f"choice_succ_ptr[-1] = {int(ptr[-1])} must equal len(choice_succ) = {succ.size}")
         for field_name in ("initial", "env_liveness", "sys_liveness"):
             if isinstance(getattr(self, field_name), (np.ndarray, str, bytes)):
                 raise ValueError(f"{field_name} must be a list of arrays")
-        initial = [
-            _as_index_array(g, f"initial[{k}]", n) for k, g in enumerate(self.initial)
-        ]
-        env = [
-            _as_mask(s, f"env_liveness[{k}]", n)
-            for k, s in enumerate(self.env_liveness)
-        ]
-        sys_ = [
-            _as_mask(s, f"sys_liveness[{k}]", n)
-            for k, s in enumerate(self.sys_liveness)
-        ]
+        initial = [_as_index_array(g, f"initial[{k}]", n) for k, g in enumerate(self.initial)]
+        env = [_as_mask(s, f"env_liveness[{k}]", n) for k, s in enumerate(self.env_liveness)]
+        sys_ = [_as_mask(s, f"sys_liveness[{k}]", n) for k, s in enumerate(self.sys_liveness)]
         object.__setattr__(self, "n_positions", n)
         object.__setattr__(self, "choice_owner", owner)
         object.__setattr__(self, "choice_succ_ptr", ptr)
@@ -233,28 +215,19 @@ class GR1Game:
             try:
                 owner, targets = item
             except (TypeError, ValueError):
-                raise ValueError(
-                    f"choices[{k}] must be a pair (owner, successors), got {item!r}"
-                ) from None
+                raise ValueError(f"choices[{k}] must be a pair (owner, successors), got {item!r}") from None
             if isinstance(owner, bool) or not isinstance(owner, (int, np.integer)):
                 raise ValueError(f"choices[{k}]: owner must be an int, got {owner!r}")
             if not 0 <= int(owner) < n:
-                raise ValueError(
-                    f"choices[{k}]: owner {int(owner)} is out of range [0, {n})"
-                )
+                raise ValueError(f"choices[{k}]: owner {int(owner)} is out of range [0, {n})")
             tlist = [int(t) for t in targets]
             for t in tlist:
                 if not 0 <= t < n:
-                    raise ValueError(
-                        f"choices[{k}]: successor {t} is out of range [0, {n})"
-                    )
+                    raise ValueError(f"choices[{k}]: successor {t} is out of range [0, {n})")
             owners.append(int(owner))
             succ.extend(tlist)
             ptr.append(len(succ))
-        groups = [
-            _as_index_array([int(p) for p in g], f"initial[{k}]", n)
-            for k, g in enumerate(initial)
-        ]
+        groups = [_as_index_array([int(p) for p in g], f"initial[{k}]", n) for k, g in enumerate(initial)]
         env = [_set_to_mask(s, f"env_liveness[{k}]", n) for k, s in enumerate(env_liveness)]
         sys_ = [_set_to_mask(s, f"sys_liveness[{k}]", n) for k, s in enumerate(sys_liveness)]
         return cls(

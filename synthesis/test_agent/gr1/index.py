@@ -113,9 +113,7 @@ class GameIndex:
         out: np.ndarray = np.bincount(failing, minlength=self.n) == 0
         return out
 
-    def persist_or_reach(
-        self, reach: np.ndarray, live: np.ndarray, domain: np.ndarray | None = None
-    ) -> tuple[np.ndarray, np.ndarray]:
+    def persist_or_reach(self, reach: np.ndarray, live: np.ndarray, domain: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Compute ``X = nu X. reach | (!live & cpre(X))`` and its complement.
 
         ``X`` is the set from which the system can keep the play in ``!live``

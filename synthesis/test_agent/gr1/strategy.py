@@ -67,10 +67,7 @@ class GR1Strategy:
         self.next_position = np.asarray(self.next_position, dtype=np.int32)
         self.next_memory = np.asarray(self.next_memory, dtype=np.int32)
         if self.next_position.ndim != 2 or self.next_position.shape != self.next_memory.shape:
-            raise ValueError(
-                "next_position and next_memory must be 2-D arrays of equal shape, "
-                f"got {self.next_position.shape} and {self.next_memory.shape}"
-            )
+            raise ValueError(f"next_position and next_memory must be 2-D arrays of equal shape, got {self.next_position.shape} and {self.next_memory.shape}")
         if self.next_position.shape[0] < 1:
             raise ValueError("a strategy needs at least one memory value")
         if np.any(self.initial < 0) or np.any(self.initial >= self.n_positions):
@@ -156,10 +153,7 @@ class GR1Strategy:
             If the format tag, version or table shapes do not match.
         """
         if data.get("format") != _FORMAT or data.get("version") != _FORMAT_VERSION:
-            raise ValueError(
-                f"not a {_FORMAT} v{_FORMAT_VERSION} document: "
-                f"format={data.get('format')!r}, version={data.get('version')!r}"
-            )
+            raise ValueError(f"not a {_FORMAT} v{_FORMAT_VERSION} document: format={data.get('format')!r}, version={data.get('version')!r}")
         shape = (int(data["n_memory"]), int(data["n_choices"]))
         nxt = np.asarray(data["next_position"], dtype=np.int32).reshape(shape)
         mem = np.asarray(data["next_memory"], dtype=np.int32).reshape(shape)

@@ -53,15 +53,9 @@ def verify_strategy(game: GR1Game, strategy: GR1Strategy) -> None:
     n, m = game.n_positions, game.n_choices
     n_mem = strategy.n_memory
     if strategy.n_positions != n or strategy.n_choices != m:
-        raise StrategyError(
-            f"strategy is for {strategy.n_positions} positions / {strategy.n_choices} "
-            f"choices, game has {n} / {m}"
-        )
+        raise StrategyError(f"strategy is for {strategy.n_positions} positions / {strategy.n_choices} choices, game has {n} / {m}")
     if strategy.initial.size != len(game.initial):
-        raise StrategyError(
-            f"strategy has {strategy.initial.size} initial picks, "
-            f"game has {len(game.initial)} groups"
-        )
+        raise StrategyError(f"strategy has {strategy.initial.size} initial picks, game has {len(game.initial)} groups")
     for g, group in enumerate(game.initial):
         pick = int(strategy.initial[g])
         if pick not in set(group.tolist()):
@@ -90,20 +84,14 @@ def verify_strategy(game: GR1Game, strategy: GR1Strategy) -> None:
         bad = np.flatnonzero((nxt < 0) | (nmem < 0) | (nmem >= n_mem))
         if bad.size:
             k = int(bad[0])
-            raise StrategyError(
-                f"no valid move at position {int(src[k] // n_mem)}, memory "
-                f"{int(mem[k])}, environment choice {int(c[k])}"
-            )
+            raise StrategyError(f"no valid move at position {int(src[k] // n_mem)}, memory {int(mem[k])}, environment choice {int(c[k])}")
         keys = c * max(n, 1) + nxt
         where = np.searchsorted(legal, keys)
         ok = where < legal.size
         ok[ok] = legal[where[ok]] == keys[ok]
         if not ok.all():
             k = int(np.flatnonzero(~ok)[0])
-            raise StrategyError(
-                f"illegal move to position {int(nxt[k])} after environment choice "
-                f"{int(c[k])} (memory {int(mem[k])})"
-            )
+            raise StrategyError(f"illegal move to position {int(nxt[k])} after environment choice {int(c[k])} (memory {int(mem[k])})")
         dst = nxt * n_mem + nmem
         srcs.append(src)
         dsts.append(dst)
@@ -126,9 +114,7 @@ def verify_strategy(game: GR1Game, strategy: GR1Strategy) -> None:
         es, ed = s_idx[e_keep], d_idx[e_keep]
         if es.size == 0:
             continue
-        graph = sp.csr_matrix(
-            (np.ones(es.size, dtype=np.int8), (es, ed)), shape=(n_states, n_states)
-        )
+        graph = sp.csr_matrix((np.ones(es.size, dtype=np.int8), (es, ed)), shape=(n_states, n_states))
         n_comp, labels = connected_components(graph, directed=True, connection="strong")
         internal = labels[es] == labels[ed]
         nontrivial = np.zeros(n_comp, dtype=bool)
@@ -144,6 +130,5 @@ def verify_strategy(game: GR1Game, strategy: GR1Strategy) -> None:
             sample = [(int(s // n_mem), int(s % n_mem)) for s in members[:8]]
             raise StrategyError(
                 f"guarantee {j} can be avoided forever while all assumptions hold: "
-                f"reachable cycle through (position, memory) states {sample}"
-                + (" ..." if members.size > 8 else "")
+                f"reachable cycle through (position, memory) states {sample}" + (" ..." if members.size > 8 else "")
             )
