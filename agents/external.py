@@ -747,6 +747,13 @@ class CommandPlanner:
             raise self._crashed(where)
         self._send(msg, where, deadline)
         line = self._receive(where, deadline)
+        unread = self.running.wire.unread_input() if self.running is not None else None
+        if unread:
+            self._drop()
+            raise PlannerError(
+                f"{where}: the planner answered {short(line.decode('utf-8', 'replace'))} without reading this step (its input was "
+                "left unread): one line per step on standard output, after reading the step; write logs to standard error"
+            )
         try:
             return parse_answer(line, self.game, s, mask, msg["step"], hint=LOGS_HINT)
         except PlannerError:

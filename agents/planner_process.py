@@ -22,6 +22,8 @@ POSIX only (``os.fork``, ``os.killpg``, ``poll``), as FlowTest is.
 
 from __future__ import annotations
 
+import array
+import fcntl
 import os
 import pickle
 import select
@@ -30,6 +32,7 @@ import socket
 import struct
 import subprocess
 import sys
+import termios
 import time
 import warnings
 import weakref
@@ -194,6 +197,21 @@ class Wire:
             for line in lines[-ERROR_LINES:]:
                 self.errors.append(line.decode("utf-8", "replace").rstrip("\r")[:300])
             self._error_part = bytearray(rest[-4096:])
+
+    def unread_input(self) -> int | None:
+        """Bytes FlowTest wrote that the planner has not read yet, where the system says
+        (a pipe on Linux: ``FIONREAD`` on its write end); ``None`` for a socket pair or
+        where it cannot be asked. Once the planner has answered a step, a correct planner
+        has read that step's whole line, so anything left unread means it answered without
+        reading."""
+        if self.write_fd == self.read_fd:
+            return None
+        buf = array.array("i", [0])
+        try:
+            fcntl.ioctl(self.write_fd, termios.FIONREAD, buf, True)
+        except OSError:
+            return None
+        return int(buf[0])
 
     def error_tail(self, n: int = 4) -> str:
         """The last ``n`` non-blank lines of the planner's standard error, joined by `` | ``."""

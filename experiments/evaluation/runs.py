@@ -15,8 +15,9 @@ on: its runs play its env, and the report draws its game; nothing builds it agai
 
 A planner from outside FlowTest that crashes, hangs past ``step_timeout`` or answers an
 action the test does not allow fails that run (a SUT failure whose reason says what
-happened and where); the pair stops there (its :class:`Cell`'s ``stopped`` says so) and every
-other pair still runs.
+happened and where); the planner process is ended, the next run starts a fresh one, and every
+run is played: a planner that is slow on one test is still scored on the others, and one that
+never answers ends each of its runs with a timeout verdict after ``step_timeout`` seconds.
 
 ``testers`` chooses who plays the test's side: ``synthesized`` (default, the synthesized
 test as the single-agent env plays it) or a learned tester ``ppo:PATH``
@@ -141,7 +142,7 @@ class Cell:
     tester: str = "synthesized"
     fairness: dict[str, Any] | None = None
     error: str | None = None  # why this SUT cannot play this env (no runs then)
-    stopped: str | None = None  # why fewer runs than asked (the planner failed)
+    stopped: str | None = None  # why fewer runs than asked (kept for older records; every run is played now)
     replayable: bool = True  # False for a system given as a Python object without a name
     step_timeout: float | None = None
     problem: str = ""  # the test's problem name, for a report written without the tests' pictures
@@ -401,13 +402,8 @@ def _play(
                     for i in range(episodes):
                         trace = run_episode(env, policy, env_id, label, seed + i, tester=tester)
                         cell.traces.append(trace)
-                        if trace.planner_error:
-                            cell.stopped = (
-                                f"the planner failed in run {i + 1} of {episodes} (seed {seed + i}); the other runs were not played: {trace.planner_error}"
-                            )
-                            if progress is not None:
-                                progress(f"[{k}/{total}] {label} on {env_id}{against}: the planner failed: {trace.planner_error}")
-                            break
+                        if trace.planner_error and progress is not None:
+                            progress(f"[{k}/{total}] {label} on {env_id}{against}: the planner failed in run {i + 1} of {episodes}: {trace.planner_error}")
                         if progress is not None and (i + 1 == episodes or (i + 1) % max(1, episodes // 10) == 0):
                             progress(f"[{k}/{total}] {label} on {env_id}{against}: {i + 1}/{episodes} episodes")
                 finally:

@@ -167,14 +167,14 @@ def test_crashing_hanging_and_lying_planners_fail_their_run_and_the_others_go_on
     for env in ("warehouse.toml", "small-reactive"):
         for name, reason in EXPECTED.items():
             r = by[(f"cmd:python3 {name}", env)]
-            assert r["error"] is None and r["episodes"] == 1 and r["n_failures"] == 1, r
-            assert r["stopped"].startswith("the planner failed in run 1 of 3 (seed 0); the other runs were not played")
-            f = r["failures"][0]
-            assert f["kind"] == "sut" and f["reason"].startswith("the planner failed: ")
-            assert reason in f["reason"], (name, f["reason"])
-            assert f["verdict"]["system_objective"] == "open"
-            assert f["replay"].startswith(f"cd {shlex.quote(str(project))} && flowtest evaluate")
-            assert "--step-timeout 1.5" in f["replay"]
+            # every run is played, each with a fresh planner process, and each fails the same way
+            assert r["error"] is None and r["episodes"] == 3 and r["n_failures"] == 3 and r["stopped"] is None, r
+            for f in r["failures"]:
+                assert f["kind"] == "sut" and f["reason"].startswith("the planner failed: ")
+                assert reason in f["reason"], (name, f["reason"])
+                assert f["verdict"]["system_objective"] == "open"
+                assert f["replay"].startswith(f"cd {shlex.quote(str(project))} && flowtest evaluate")
+                assert "--step-timeout 1.5" in f["replay"]
         good = by[("cmd:python3 bfs_planner.py", env)]
         assert good["episodes"] == 3 and good["system_objective_met_rate"] == 1.0 and good["stopped"] is None
 
@@ -214,9 +214,10 @@ def test_hanging_python_planners_fail_their_run_and_the_others_go_on(project: Pa
     by = {c.sut: c.record() for c in cells}
     for name in ("spin", "sleepy", "stubborn"):
         r = by[f"python:hangs:{name}"]
-        assert r["n_failures"] == 1 and r["episodes"] == 1, r
-        assert "step 0: the planner gave no answer within 0.5 s (--step-timeout)" in r["failures"][0]["reason"], r
-        assert "--step-timeout 0.5" in r["failures"][0]["replay"]
+        assert r["n_failures"] == 2 and r["episodes"] == 2, r  # every run played, each ends at the step timeout
+        for f in r["failures"]:
+            assert "step 0: the planner gave no answer within 0.5 s (--step-timeout)" in f["reason"], r
+            assert "--step-timeout 0.5" in f["replay"]
     slow = by["python:hangs:SlowReset"]
     assert "reset: the planner did not return within 0.5 s" in str(slow), slow
     good = by["python:bfs_planner:BfsPlanner"]
@@ -307,15 +308,17 @@ def test_misbehaving_planners_in_the_cli_report_and_replay(project: Path, capsys
     code = main(["evaluate", "--env", "warehouse.toml", "--sut", *suts, "--episodes", "2", "--step-timeout", "1.5", "--out", "report", "-q"])
     assert code == 0
     out = capsys.readouterr().out
-    assert out.count("stopped: the planner failed") == len(BAD_PLANNERS)
     records = {r["sut"]: r for r in json.loads((project / "report" / "results.json").read_text())}
+    for name in BAD_PLANNERS:  # every run played, each failing, printed as one way of failing
+        assert records[f"cmd:python3 {name}"]["n_failures"] == 2 and records[f"cmd:python3 {name}"]["stopped"] is None
+        assert f"cmd:python3 {name}" in out and "seeds 0, 1 (2 runs): the planner failed: " in out
     page = (project / "report" / "report.html").read_text()
     for name, reason in EXPECTED.items():
         f = records[f"cmd:python3 {name}"]["failures"][0]
         assert reason in f["reason"]
         assert html_escaped(reason.split(": ")[-1][:30]) in page or reason.split(": ")[-1][:30] in page
     md = (project / "report" / "report.md").read_text()
-    assert md.count("— stopped: the planner failed in run 1 of 2 (seed 0)") == len(BAD_PLANNERS)
+    assert md.count("— 2 of 2 runs failed") >= len(BAD_PLANNERS), md
     # the test by its problem's name, as in the HTML, never the file's path
     assert "| system under test | warehouse |" in md and str(project) + "/warehouse.toml |" not in md
     assert all(r["title"] == "warehouse" for r in records.values())
@@ -386,9 +389,9 @@ def test_a_python_planner_that_raises_or_lies_fails_its_run(project: Path) -> No
         return 7
 
     cells = evaluate(["small-reactive"], [raises, lies, "scripted:replanner"], 2)
-    assert [len(c.traces) for c in cells] == [1, 1, 2]
-    assert cells[0].traces[0].reason == "the planner failed: step 2: raised ZeroDivisionError: division by zero"
-    assert "step 0: answered 7, which is not an action (expected an index 0..4" in cells[1].traces[0].reason
+    assert [len(c.traces) for c in cells] == [2, 2, 2]  # every run is played; a failure ends its own run
+    assert all(t.reason == "the planner failed: step 2: raised ZeroDivisionError: division by zero" for t in cells[0].traces)
+    assert all("step 0: answered 7, which is not an action (expected an index 0..4" in t.reason for t in cells[1].traces)
     assert cells[2].stopped is None and all(t.verdict["system_objective"] == "met" for t in cells[2].traces)
 
 
@@ -425,5 +428,9 @@ def test_a_planner_that_writes_unasked_lines_fails_its_run(project: Path) -> Non
     )
     cells = evaluate(["small-reactive"], ["cmd:python3 banner.py"], 2)
     said = cells[0].traces[0].planner_error
-    assert "wrote 'BFS planner v2 ready' before it was asked" in said or ("step 0: answered 'BFS planner v2 ready', which is not an action" in said)
+    assert (
+        "wrote 'BFS planner v2 ready' before it was asked" in said
+        or "step 0: answered 'BFS planner v2 ready', which is not an action" in said
+        or "step 0: the planner answered 'BFS planner v2 ready' without reading this step" in said
+    ), said
     assert "logs to standard error" in said, said  # either way, where the banner belongs
