@@ -22,9 +22,9 @@ from .systems import SystemSpec, check_systems, parse_systems
 POOL_ENV_ID = "FlowTest-RandomGrid-v0"
 """The env the baselines train on (its ``pool``, ``split``, ``count`` options)."""
 
-BENCH_ALGOS: tuple[str, ...] = (*ALGOS, "plr-ppo")
-"""The baselines ``--algo`` may name: ``flowtest train``'s algorithms and PPO with
-prioritized level replay (native trainer only)."""
+BENCH_ALGOS: tuple[str, ...] = (*ALGOS, "plr-ppo", "counts-ppo")
+"""The baselines ``--algo`` may name: ``flowtest train``'s algorithms, PPO with
+prioritized level replay and PPO with the counting memory (native trainer only)."""
 
 DEFAULT_ALGOS: tuple[str, ...] = ("maskable-ppo",)
 """The baselines ``--sut ppo`` trains by default (the others on request: the time budget)."""
@@ -45,11 +45,14 @@ NATIVE_BASELINES: dict[str, dict[str, Any]] = {
     "maskable-ppo": {"algo": "ppo", "memory": "visited", "device": "cpu"},
     "recurrent-ppo": {"algo": "recurrent-ppo", "device": "cpu"},
     "plr-ppo": {"algo": "ppo", "memory": "visited", "device": "cpu"},
+    "counts-ppo": {"algo": "ppo", "memory": "counts", "device": "cpu"},
 }
 """Settings of each baseline with the native trainer (the default), over
 :data:`~experiments.training.settings.NATIVE_DEFAULTS`: masked PPO with an MLP and the visited-places
-memory, masked PPO with a GRU (its own memory), and the first with prioritized level replay
-(:data:`LEVEL_SAMPLING`); on the CPU, so a seed gives the same table."""
+memory, masked PPO with a GRU (its own memory), the first with prioritized level replay
+(:data:`LEVEL_SAMPLING`), and the first with the counting memory (how often each place was
+occupied, capped at 4: ``flowtest_env.memory``), under which a greedy policy's observation
+keeps changing in a two-cell loop, so it can leave it; on the CPU, so a seed gives the same table."""
 
 LEVEL_SAMPLING: dict[str, str] = {"plr-ppo": "plr"}
 """The baselines that choose their training tests themselves (``NativeArgs.level_sampling``;

@@ -34,7 +34,7 @@ def _save(fig: Any, ax: Any, title: str, path: Path) -> None:
     plt.close(fig)
 
 
-COLORS = {"maskable-ppo": "#1f77b4", "recurrent-ppo": "#d62728", "plr-ppo": "#9467bd"}
+COLORS = {"maskable-ppo": "#1f77b4", "recurrent-ppo": "#d62728", "plr-ppo": "#9467bd", "counts-ppo": "#2ca02c"}
 
 
 def plot_learning_curves(doc: dict[str, Any], path: Path) -> None:

@@ -36,7 +36,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         action="extend",
         nargs="+",
         metavar="SYSTEM",
-        help="systems (repeatable): ppo (train the baselines of --algo), maskable-ppo, recurrent-ppo, plr-ppo, "
+        help="systems (repeatable): ppo (train the baselines of --algo), maskable-ppo, recurrent-ppo, plr-ppo, counts-ppo, "
         "scripted:<name>, gr1, ppo:PATH, python:MODULE:NAME[(ARGS)] (a planner, or the loader of a batched "
         "policy marked batched = True), cmd:COMMAND; one system with a seed per file: 'ppo:runs/*.zip', "
         "'python:MODULE:NAME@runs/*.pt'; NAME=SYSTEM names a system, and NAME= repeated adds a seed per "
@@ -48,7 +48,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         nargs="+",
         choices=BENCH_ALGOS,
         default=list(d.algos),
-        help=f"the baselines --sut ppo trains (default: {' '.join(d.algos)}; plr-ppo: native trainer only)",
+        help=f"the baselines --sut ppo trains (default: {' '.join(d.algos)}; plr-ppo, counts-ppo: native trainer only)",
     )
     p.add_argument("--train-count", type=positive_int, default=None, help=f"tests of the train split to train on (default {d.train_count})")
     p.add_argument(

@@ -588,3 +588,23 @@ def test_a_system_of_several_seeds_gets_the_seed_and_test_interval() -> None:
     md = bench.table_markdown({**doc, "seconds": {}, "outputs": {}})
     assert "`ppo:runs/*.zip` (5 seeds: greedy and sampled, 2 sampled runs per test)" in md
     assert "| ppo:runs/*.zip | system | 5 |" in md
+
+
+def test_the_counting_memory_baseline_trains_and_plays_with_its_memory(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``--algo counts-ppo``: masked PPO with ``memory="counts"``, trained and scored under that
+    memory (its summary's settings, and the saved model's own record of it); refused with
+    ``--trainer sb3``."""
+    assert bench.baseline_settings("counts-ppo")["memory"] == "counts"
+    code, stdout, err = run(
+        ["benchmark", "--pool", POOL, "--algo", "counts-ppo", "--seeds", "0", "--steps", "2048", "--train-count", "4", "--validation-count", "2",
+         "--test-count", "4", "--curve-seeds", "0", "--out", str(tmp_path / "b"), "--json", "-q", "--bootstrap", "50"],
+        capsys,
+    )  # fmt: skip
+    assert code == 0, err
+    counts = _system(json.loads(stdout), "counts-ppo")
+    assert counts["settings"]["memory"] == "counts" and counts["test"]["sampled"]["runs_per_test"] == 8
+    from agents.native_ppo import load_native
+
+    assert load_native(tmp_path / "b" / "models" / "counts-ppo-seed0.zip").flowtest_memory == "counts"
+    code, _, err = run(["benchmark", "--pool", POOL, "--algo", "counts-ppo", "--trainer", "sb3", "--out", str(tmp_path / "c")], capsys)
+    assert code == 2 and "--algo counts-ppo: a baseline of the native trainer only" in err
