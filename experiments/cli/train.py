@@ -108,7 +108,12 @@ def _shown(value: Any) -> str:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Declare ``flowtest train``'s arguments."""
-    p.add_argument("ENV", help="environment: a registered ID (FlowTest-Maze2-v0), a built-in name (maze2), a problem file (mine.toml) or an artifact file")
+    p.add_argument(
+        "ENV",
+        nargs="?",
+        help="environment: a registered ID (FlowTest-Maze2-v0), a built-in name (maze2), a problem file (mine.toml) or an artifact file; "
+        f"with --pool it may be left out ({POOL_ENV}, the env of the pools)",
+    )
     p.add_argument(
         "--trainer",
         choices=TRAINERS,
@@ -197,6 +202,10 @@ def run(args: argparse.Namespace) -> int:
     """Train, save, evaluate; print every setting used, then where the model and its curve are."""
     given = {k: getattr(args, k) for k in dict.fromkeys([*NATIVE_DEFAULTS, *DEFAULTS]) if getattr(args, k) is not None}
     pool = _pool_options(args)
+    if args.ENV is None:
+        if not pool:
+            raise ProblemError("give the environment to train on (ENV: flowtest train FlowTest-Maze2-v0 ...) or a pool (--pool reachability1/5x5-v2)")
+        args.ENV = POOL_ENV
     if args.trainer == "sb3":
         if args.log_dir is not None:
             raise ProblemError("--log-dir goes with the native trainer (--trainer native)")

@@ -43,7 +43,7 @@ def test_train_on_a_standard_pool_prints_the_floor(
     code = main(
         [
             "train",
-            "FlowTest-RandomGrid-v0",
+            *(["FlowTest-RandomGrid-v0"] if trainer == "sb3" else []),  # with --pool the env may be left out
             "--trainer",
             trainer,
             "--pool",
@@ -84,3 +84,10 @@ def test_a_standard_pool_split_is_checked(tmp_path: Path, capsys: pytest.Capture
     code = main(["train", "FlowTest-RandomGrid-v0", "--pool", STANDARD, "--split", "validation", "--count", "100000", "--out", str(tmp_path / "m.zip")])
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1 and err.startswith(f"error: --pool {STANDARD}: ")
+
+
+def test_train_needs_an_env_or_a_pool(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["train", "--out", str(tmp_path / "m.zip")]) == 2
+    err = capsys.readouterr().err
+    assert "give the environment to train on" in err and "Traceback" not in err
+    assert not (tmp_path / "m.zip").exists()
