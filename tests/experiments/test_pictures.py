@@ -28,6 +28,7 @@ from experiments.evaluation.report import TestInfo, render_html
 from experiments.evaluation.results import report_colours
 from experiments.evaluation.trace_picture import step_labels
 from flowtest_env import render
+from tests.testing_reports import passing_record
 
 HERE = Path(__file__).resolve().parent
 FORGETFUL = f"python:{HERE / 'forgetful_planner.py'}:Forgetful"
@@ -174,22 +175,6 @@ def test_the_path_plot_labels_each_cell_once() -> None:
 
 # --------------------------------------------------------------------------- test cards
 
-CARD_RECORD = {
-    "sut": "s",
-    "episodes": 1,
-    "seed": 0,
-    "system_objective_met_rate": 1.0,
-    "test_objective_realized_rate": 1.0,
-    "violated": 0,
-    "open": 0,
-    "mean_restrictions": 0.0,
-    "mean_steps": 3.0,
-    "test_failures": 0,
-    "n_failures": 0,
-    "failures": [],
-    "pictures": {},
-}
-
 
 def test_a_card_names_the_step_budget_and_its_histories_neutrally(tmp_path: Path) -> None:
     """The panels are titled ``history q1``, never what q1 has seen (that gives the hidden
@@ -206,7 +191,7 @@ def test_a_card_names_the_step_budget_and_its_histories_neutrally(tmp_path: Path
     plot_artifact(game.artifact, revealed, dpi=90, header=False, max_cols=panels_per_row(game), reveal=True)
     card_png = (tmp_path / info.picture).read_bytes()
     assert card_png == neutral.read_bytes() and card_png != revealed.read_bytes()
-    page = render_html([{**CARD_RECORD, "env": "small-reactive"}], [info])
+    page = render_html([passing_record("small-reactive")], [info])
     card = page[page.index("<div class='test'") : page.index("</details></div>")]
     before, hidden = card.split("<details>")
     assert "a step budget of 50 steps a run" in before and "steps per run" not in page

@@ -33,6 +33,7 @@ from experiments.evaluation.report import test_infos as draw_test_infos
 from experiments.evaluation.report import test_titles as titles_of
 from experiments.evaluation.violations import violation_of, violation_of_trace, written_conjuncts
 from experiments.plots import artifact_view, panels_of
+from tests.testing_reports import passing_record
 
 
 def _game(env: Any) -> Any:
@@ -269,22 +270,7 @@ def test_each_card_draws_the_restrictions_per_history_and_names_the_propositions
     legend = {name: (where, colour) for name, where, colour in info.propositions}
     assert legend["hazard"][0] == "cell H" and legend["aisle"][0] == "cell A" and legend["bay"][0] == "cell B"
     assert len({c for _, c in legend.values()}) == 3
-    record = {
-        "env": env,
-        "sut": "s",
-        "episodes": 1,
-        "seed": 0,
-        "system_objective_met_rate": 1.0,
-        "test_objective_realized_rate": 1.0,
-        "violated": 0,
-        "open": 0,
-        "mean_restrictions": 0.0,
-        "mean_steps": 3.0,
-        "test_failures": 0,
-        "n_failures": 0,
-        "failures": [],
-        "pictures": {},
-    }
+    record = passing_record(env)
     page = render_html([record], [info])
     card = _card(page, env)
     assert "one panel per history" in card and f"src='{info.picture}'" in card
@@ -297,22 +283,7 @@ def test_each_card_draws_the_restrictions_per_history_and_names_the_propositions
 
 def test_the_card_explains_static_and_agent_pictures() -> None:
     for env, words in (("FlowTest-Example1-v0", "Static test"), ("FlowTest-Maze2-v0", "Agent test")):
-        record = {
-            "env": env,
-            "sut": "s",
-            "episodes": 1,
-            "seed": 0,
-            "system_objective_met_rate": 1.0,
-            "test_objective_realized_rate": 1.0,
-            "violated": 0,
-            "open": 0,
-            "mean_restrictions": 0.0,
-            "mean_steps": 3.0,
-            "test_failures": 0,
-            "n_failures": 0,
-            "failures": [],
-            "pictures": {},
-        }
+        record = passing_record(env)
         info = TestInfo(env, "x", "static" if "Example" in env else "agent", "F goal", "F I", 9, "p.png")
         assert words in _card(render_html([record], [info]), env)
 
@@ -327,22 +298,7 @@ def test_the_layout_wraps_at_laptop_width() -> None:
     assert ".test{" in css and "min-width:0" in css.split(".test{")[1].split("}")[0]
     assert ".testimg{max-width:100%;height:auto" in css
     assert ".scroll{max-width:100%;overflow-x:auto}" in css
-    record = {
-        "env": "/a/very/long/path/" + "x" * 200 + ".toml",
-        "sut": "cmd:" + "y" * 200,
-        "episodes": 1,
-        "seed": 0,
-        "system_objective_met_rate": 1.0,
-        "test_objective_realized_rate": 1.0,
-        "violated": 0,
-        "open": 0,
-        "mean_restrictions": 0.0,
-        "mean_steps": 3.0,
-        "test_failures": 0,
-        "n_failures": 0,
-        "failures": [],
-        "pictures": {},
-    }
+    record = passing_record("/a/very/long/path/" + "x" * 200 + ".toml", sut="cmd:" + "y" * 200)
     page = render_html([record], [])
     assert "<div class='scroll'><table class='matrix'>" in page
     assert "/a/very/long/path" not in _section(page, "class='matrix'", "</table>")
@@ -458,20 +414,5 @@ def test_a_mixed_card_draws_the_static_area_typed_in(tmp_path: Path) -> None:
     fresh = tmp_path / "fresh.png"
     draw_test_picture(_game(gym.make("FlowTest-v0", test=str(MIXED))), fresh)
     assert (out / info.picture).read_bytes() == fresh.read_bytes()
-    record = {
-        "env": str(MIXED),
-        "sut": "s",
-        "episodes": 1,
-        "seed": 0,
-        "system_objective_met_rate": 1.0,
-        "test_objective_realized_rate": 1.0,
-        "violated": 0,
-        "open": 0,
-        "mean_restrictions": 0.0,
-        "mean_steps": 3.0,
-        "test_failures": 0,
-        "n_failures": 0,
-        "failures": [],
-        "pictures": {},
-    }
+    record = passing_record(str(MIXED))
     assert "static area the problem gives them (its borders dashed)" in _card(render_html([record], [info]), str(MIXED))
