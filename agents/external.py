@@ -747,8 +747,8 @@ class CommandPlanner:
             raise self._crashed(where)
         self._send(msg, where, deadline)
         line = self._receive(where, deadline)
-        unread = self.running.wire.unread_input() if self.running is not None else None
-        if unread:
+        assert self.running is not None  # _receive ends the process only by raising
+        if self.running.wire.unread_input():
             self._drop()
             raise PlannerError(
                 f"{where}: the planner answered {short(line.decode('utf-8', 'replace'))} without reading this step (its input was "
