@@ -50,8 +50,8 @@ class NativeArgs:
     num_envs: int = 128  # envs stepped together
     num_steps: int = 32  # rollout length per env
     num_minibatches: int = 4  # minibatches per epoch
-    update_epochs: int = 2  # passes over each rollout
-    learning_rate: float = 1e-3  # Adam's step size (annealed linearly to 0 when anneal_lr)
+    update_epochs: int = 4  # passes over each rollout
+    learning_rate: float = 3e-3  # Adam's step size (annealed linearly to 0 when anneal_lr)
     anneal_lr: bool = True  # anneal the learning rate
     gamma: float = 0.99  # discount
     gae_lambda: float = 0.95  # GAE's lambda
@@ -59,7 +59,7 @@ class NativeArgs:
     ent_coef: float = 0.01  # entropy bonus
     vf_coef: float = 0.5  # value loss weight
     max_grad_norm: float = 0.5  # gradient clip
-    hidden: tuple[int, ...] = (256, 256)  # MLP widths (the GRU variant: its input layers)
+    hidden: tuple[int, ...] = (64, 64)  # MLP widths (the GRU variant: its input layers)
     gru_hidden: int = 128  # GRU width (recurrent-ppo)
     memory: str = "visited"  # "visited" (places occupied this episode), "counts" (how often, capped) or "none"
     obs_kind: str = "flat"  # the env's observation: "flat" or "padded"
