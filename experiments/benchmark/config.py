@@ -78,6 +78,11 @@ RUN_SEED = 0
 """The seed of every scoring batch and single-env run (it matters to a sampled or random
 policy; it is the ``--seed`` of the replay commands)."""
 
+SELECTIONS: tuple[str, ...] = ("validation", "final")
+"""Which model of a training run is scored (``--select``): the checkpoint of the curve
+evaluation with the best greedy met on the validation tests (the latest of equals; the
+protocol's default), or the final one."""
+
 CURVE_TRAIN_TESTS = 256
 """The learning curves watch at most this many train tests (the first; the final score
 uses ``train_eval_count``): each curve point plays them, inside the training time."""
@@ -103,6 +108,7 @@ class BenchmarkConfig:
     curve_seeds: int = 2
     curve_points: int = 5
     trainer: str = "native"
+    select: str = "validation"
     report_tests: int = 20
     bootstrap: int = 2000
     workers: int = field(default_factory=lambda: default_workers())
@@ -235,6 +241,8 @@ def check_config(config: BenchmarkConfig) -> None:
             raise ProblemError(f"unknown --algo {algo!r}; expected one of {', '.join(BENCH_ALGOS)}")
     if config.trainer not in TRAINERS:
         raise ProblemError(f"unknown --trainer {config.trainer!r}; expected one of {', '.join(TRAINERS)}")
+    if config.select not in SELECTIONS:
+        raise ProblemError(f"unknown --select {config.select!r}; expected one of {', '.join(SELECTIONS)}")
     for name in ("runs", "train_eval_count", "report_tests", "bootstrap", "curve_points", "workers"):
         if int(getattr(config, name)) < 1:
             raise ProblemError(f"--{name.replace('_', '-')} must be at least 1")
@@ -332,5 +340,7 @@ def command_of(config: BenchmarkConfig, out: str = "OUT") -> str:
         words += ["--curve-sizes", *map(str, config.curve_sizes)]
     if config.trainer != d.trainer:
         words += ["--trainer", config.trainer]
+    if config.select != d.select:
+        words += ["--select", config.select]
     words += ["--out", out]
     return " ".join(shlex.quote(w) for w in words)

@@ -5,7 +5,7 @@ a stable-baselines3 model is :class:`agents.ppo.ModelBatchPolicy`."""
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -44,14 +44,21 @@ class CurveRecorder:
     of the validation tests whose system objective the deterministic policy meets
     (:func:`batch_verdicts`), for the model as it is after learning from ``step`` time
     steps: at the start, at the first rollout after every ``every`` steps, and at the end.
-    It only reads the model: training goes exactly as without it."""
+    It only reads the model: training goes exactly as without it.
 
-    def __init__(self, every: int, memory: str, splits: dict[str, tuple[list[Any], list[int]]]) -> None:
+    With ``keep``, every measurement whose validation met is at least the best so far (the
+    latest of equals) calls ``keep(model)`` (which saves it) and records its step in
+    ``kept_step``: the run's checkpoint selected by validation."""
+
+    def __init__(self, every: int, memory: str, splits: dict[str, tuple[list[Any], list[int]]], keep: Callable[[Any], None] | None = None) -> None:
         from stable_baselines3.common.callbacks import BaseCallback
 
         recorder = self
         self.points: list[tuple[int, dict[str, float]]] = []
         self.seconds = 0.0
+        self.steps_seen = 0
+        self.kept_step: int | None = None
+        best = [-1.0]
 
         def measure(model: Any, step: int) -> None:
             t0 = time.perf_counter()
@@ -60,6 +67,11 @@ class CurveRecorder:
                 v = batch_verdicts(model, games, memory, budgets)
                 rates[name] = float(np.mean(v["system_objective"] == "met"))
             recorder.points.append((step, rates))
+            recorder.steps_seen = step
+            if keep is not None and rates.get("validation", -1.0) >= best[0]:
+                best[0] = rates["validation"]
+                keep(model)
+                recorder.kept_step = step
             recorder.seconds += time.perf_counter() - t0
 
         class Callback(BaseCallback):

@@ -6,8 +6,9 @@ for each choice):
 
 1. **The pool** (:func:`~experiments.benchmark.pool.load_splits`): the first ``train_count``
    tests of the pool's ``train`` split (the baselines train on them), the first
-   ``validation_count`` of its ``validation`` split (the learning curves, i.e. model
-   monitoring; no model selection is done) and the first ``test_count`` of its ``test`` split
+   ``validation_count`` of its ``validation`` split (the learning curves, and with
+   ``select="validation"``, the default, the choice of each run's scored checkpoint: its best
+   greedy validation met) and the first ``test_count`` of its ``test`` split
    (held out: never seen in training). The splits are disjoint seed ranges
    (:mod:`flowtest_env.pools`); where the tests come from is pluggable (``source``,
    :data:`flowtest_env.scoring.PoolSource`). The tests that are scored are written to

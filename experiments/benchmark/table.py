@@ -3,12 +3,15 @@ file*) and ``table.md``, with the commit and the machine they came from."""
 
 from __future__ import annotations
 
+import math
 import os
 import platform
 import subprocess
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from experiments.formatting import MISSING, percent
 
@@ -68,6 +71,7 @@ def benchmark_table(
                 "seconds": round(b.seconds, 1),
                 "curve_seconds": round(b.curve_seconds, 1),
                 "model": str(b.path),
+                "selected_step": b.selected_step,
                 "curve": [[step, rates.get("train"), rates.get("validation")] for step, rates in b.curve],
             }
             for b in mine
@@ -89,6 +93,7 @@ def benchmark_table(
         "seeds": list(config.seeds),
         "algos": config.baselines(),
         "trainer": config.trainer,
+        "select": config.select,
         "runs": config.runs,
         "curve_points": config.curve_points,
         "curve_sizes": config.curve(),
@@ -117,7 +122,10 @@ def benchmark_table(
                     "kind": e["kind"],
                     "seeds": [r["seed"] for r in e["runs"]],
                     "modes": _modes(e),
-                    "trained": [{"seed": t["seed"], "steps": t["steps"]} for t in e.get("training", [])],
+                    "trained": [
+                        {"seed": t["seed"], "steps": t["steps"], "selected_step": t.get("selected_step"), "validation": [p[2] for p in t["curve"]]}
+                        for t in e.get("training", [])
+                    ],
                 }
                 for e in entries
             ],
@@ -151,7 +159,10 @@ def what_ran(
     run, ``modes``, and for a baseline ``trained``: ``[{"seed", "steps"}]`` of its training runs
     here; without that key, an older result's, its seeds at ``config["steps"]``) and its
     generalization ``curve``: ``trained`` (per baseline trained here: ``algo``, ``seeds``,
-    ``steps`` (the largest run's), ``train_tests``, ``trainer``), ``curve`` (per extra
+    ``steps`` (the largest run's), ``train_tests``, ``trainer``, ``select`` (which model was
+    scored: ``"validation"`` or ``"final"``), ``selected_steps`` (per run, the step of the model
+    scored) and ``plateau`` (:func:`validation_plateau` of the runs' validation curves, where
+    they were recorded)), ``curve`` (per extra
     training-set size: ``train_tests``, ``seeds``), ``training_runs``, ``training_steps``, and
     ``scored`` (each other system: ``name``, ``kind``, ``seeds`` (how many runs: seeds or
     checkpoints), ``modes``, ``runs_per_test`` of its sampled play)."""
@@ -162,6 +173,7 @@ def what_ran(
         if runs is None and s["kind"] == "baseline":
             runs = [{"seed": seed, "steps": config["steps"]} for seed in s["seeds"]]
         if runs:
+            select = config.get("select", "final")
             trained.append(
                 {
                     "algo": s["name"],
@@ -169,6 +181,9 @@ def what_ran(
                     "steps": max(r["steps"] for r in runs),
                     "train_tests": train_tests,
                     "trainer": config["trainer"],
+                    "select": select,
+                    "selected_steps": [r.get("selected_step") if select == "validation" else r["steps"] for r in runs],
+                    "plateau": validation_plateau([r.get("validation") or [] for r in runs], splits["validation"]["count"]),
                 }
             )
             continue
@@ -178,6 +193,59 @@ def what_ran(
         )
     extra = [{"train_tests": p["train_tests"], "seeds": list(p["seeds"])} for p in curve if p["train_tests"] != train_tests]
     return {"trained": trained, "curve": extra, "training_runs": budget["training_runs"], "training_steps": budget["training_steps"], "scored": scored}
+
+
+def validation_plateau(curves: Sequence[Sequence[float | None]], tests: int) -> dict[str, Any] | None:
+    """Whether training runs reached their plateau on the validation split: per run, the
+    greedy validation met gained from the next-to-last curve evaluation to the last (the last
+    ``1 / curve_points`` of the budget), against the 95 % half-width of a met share on
+    ``tests`` validation tests (``1.96 * sqrt(p (1 - p) / tests)`` at the run's last share).
+    A run whose gain exceeds that half-width is **still rising**: a longer budget would
+    likely score higher. ``None`` when fewer than two evaluations were recorded.
+
+    >>> validation_plateau([[0.1, 0.5, 0.52], [0.1, 0.4, 0.6]], 256)["rising"]
+    1
+    """
+    gains, halves = [], []
+    for c in curves:
+        xs = [float(x) for x in c if x is not None]
+        if len(xs) < 2:
+            continue
+        gains.append(xs[-1] - xs[-2])
+        halves.append(1.96 * math.sqrt(max(xs[-1] * (1 - xs[-1]), 1e-12) / max(tests, 1)))
+    if not gains:
+        return None
+    return {
+        "median_last_gain": float(np.median(gains)),
+        "median_half_width": float(np.median(halves)),
+        "rising": int(sum(g > h for g, h in zip(gains, halves, strict=True))),
+        "runs": len(gains),
+        "validation_tests": int(tests),
+    }
+
+
+def selection_text(t: dict[str, Any]) -> str:
+    """What model of each of ``t``'s runs was scored, and whether the runs reached their
+    validation plateau (:func:`validation_plateau`)."""
+    if t.get("select") == "validation":
+        steps = [s for s in t.get("selected_steps") or [] if s is not None]
+        last = sum(1 for s in steps if s >= t["steps"] - 1)
+        text = (
+            f"{t['algo']}: each run's checkpoint with the best greedy met on the validation tests is scored"
+            f" (selected at the final evaluation in {last} of {len(steps)} runs"
+            + (f"; earlier at steps {', '.join(f'{s:,}' for s in sorted(set(steps)) if s < t['steps'] - 1)}" if last < len(steps) else "")
+            + ")"
+        )
+    else:
+        text = f"{t['algo']}: the final model of every run is scored (no model selection)"
+    p = t.get("plateau")
+    if p:
+        verdict = "at its plateau" if p["rising"] == 0 else f"**still rising in {p['rising']} of {p['runs']} runs**"
+        text += (
+            f"; validation plateau: the last evaluation gained a median {100 * p['median_last_gain']:+.1f} pp over the one before"
+            f" (95 % half-width on {p['validation_tests']:,} tests: {100 * p['median_half_width']:.1f} pp): {verdict}"
+        )
+    return text + "."
 
 
 def seeds_text(seeds: Sequence[Any]) -> str:
@@ -208,7 +276,7 @@ def ran_text(ran: dict[str, Any]) -> list[str]:
                 + ", ".join(f"{p['train_tests']:,} ({len(p['seeds'])} seed{'s' if len(p['seeds']) != 1 else ''})" for p in ran["curve"])
                 + " train tests"
             )
-        text += f"; {ran['training_runs']} runs, {ran['training_steps']:,} time steps in all. The final model of every run is scored (no model selection)."
+        text += f"; {ran['training_runs']} runs, {ran['training_steps']:,} time steps in all. " + " ".join(selection_text(t) for t in trained)
     else:
         text = "**Trained**: nothing (no baseline was trained in this run: `--sut` named none)."
     given = [s for s in ran["scored"] if s["kind"] not in ("floor", "reference")]

@@ -41,6 +41,7 @@ class TrainedBaseline:
     curve: list[tuple[int, dict[str, float]]]
     train_tests: int = 0
     policies: dict[str, Any] = field(default_factory=dict)
+    selected_step: int | None = None  # the step of the checkpoint kept (``--select validation``); None: the final model
 
     @property
     def sut(self) -> str:
@@ -86,6 +87,7 @@ def _record(b: TrainedBaseline, config: BenchmarkConfig) -> None:
             "seconds": b.seconds,
             "curve_seconds": b.curve_seconds,
             "curve": [[step, rates] for step, rates in b.curve],
+            "selected_step": b.selected_step,
         },
     )
 
@@ -116,13 +118,19 @@ def _train_sb3_baseline(config: BenchmarkConfig, algo: str, seed: int, splits: d
     env = make_training_vec_env(POOL_ENV_ID, seed, settings, pool_options)
     model = make_model(env, settings, seed)
     shown = _sb3_curve_games(splits, count)
-    recorder = CurveRecorder(every, settings["memory"], shown)
+    keep = (lambda m: write_atomically(path, lambda tmp: m.save(str(tmp)))) if config.select == "validation" else None
+    recorder = CurveRecorder(every, settings["memory"], shown, keep)
     seconds = learn(model, config.steps, recorder, progress_bar)
-    write_atomically(path, lambda tmp: model.save(str(tmp)))
-    mark_own_file(path)  # scored below without --trust-model: this run wrote it
     env.close()
+    if keep is None:
+        write_atomically(path, lambda tmp: model.save(str(tmp)))
+    else:  # the best checkpoint was saved during the run: score that one
+        from agents.ppo import load_model
+
+        model = load_model(path)
+    mark_own_file(path)  # scored below without --trust-model: this run wrote it
     policies = _sb3_policies(model, splits["train"], count, settings["memory"])
-    return TrainedBaseline(algo, seed, path, int(model.num_timesteps), seconds, recorder.seconds, recorder.points, count, policies)
+    return TrainedBaseline(algo, seed, path, recorder.steps_seen, seconds, recorder.seconds, recorder.points, count, policies, recorder.kept_step)
 
 
 @dataclass(frozen=True)
@@ -192,7 +200,19 @@ def finished_run(config: BenchmarkConfig, job: TrainingJob, splits: dict[str, Sp
         where = model_where(model, _sb3_curve_games(splits, job.train_tests)["train"][0], baseline_settings(job.algo, "sb3")["memory"])
         policies = {"greedy": ModelBatchPolicy(model, where, True), "sampled": ModelBatchPolicy(model, where, False)}
     curve = [(int(step), {k: float(v) for k, v in rates.items()}) for step, rates in rec["curve"]]
-    return TrainedBaseline(job.algo, job.seed, path, int(rec["steps"]), float(rec["seconds"]), float(rec["curve_seconds"]), curve, job.train_tests, policies)
+    selected = rec.get("selected_step")
+    return TrainedBaseline(
+        job.algo,
+        job.seed,
+        path,
+        int(rec["steps"]),
+        float(rec["seconds"]),
+        float(rec["curve_seconds"]),
+        curve,
+        job.train_tests,
+        policies,
+        None if selected is None else int(selected),
+    )
 
 
 def train_all(
@@ -371,14 +391,15 @@ def _train_native_baseline(
         args = dataclasses.replace(args, level_sampling=settings["level_sampling"])
     env = PoolVectorEnv(args.num_envs, [TestGame(a) for a in splits["train"].artifacts[:count]], obs_kind=args.obs_kind)
     monitor = [TestGame(a) for a in splits["validation"].scored]
+    watch: dict[str, Any] = {"validation": monitor} if config.select == "validation" else {"heldout": monitor}  # validation: the trainer keeps the best
     try:
-        result = native_train(args, heldout=monitor, progress_bar=progress_bar, evaluate_train=min(count, config.scored("train"), CURVE_TRAIN_TESTS), env=env)
+        result = native_train(args, progress_bar=progress_bar, evaluate_train=min(count, config.scored("train"), CURVE_TRAIN_TESTS), env=env, **watch)
     finally:
         env.close()
     write_atomically(path, lambda tmp: save_policy(tmp, result.agent, result.settings))
-    names = {"train": "train", "heldout": "validation"}
+    names = {"train": "train", "heldout": "validation", "validation": "validation"}
     curve = [(step, {names[k]: v["met"] for k, v in rates.items()}) for step, rates in result.evaluations]
     pos = result.settings.get("position")
     where = slice(int(pos[0]), int(pos[1])) if pos else None
     policies = {"greedy": BatchActor(result.agent, where, True, memory=args.memory), "sampled": BatchActor(result.agent, where, False, memory=args.memory)}
-    return TrainedBaseline(algo, seed, path, result.steps, result.seconds, result.eval_seconds, curve, count, policies)
+    return TrainedBaseline(algo, seed, path, result.steps, result.seconds, result.eval_seconds, curve, count, policies, result.selected_step)

@@ -16,7 +16,7 @@ from pathlib import Path
 
 from experiments import benchmark as library
 from experiments.benchmark import BENCH_ALGOS, DEFAULT_SUTS, BenchmarkConfig, prepare_benchmark_folder, table_markdown
-from experiments.benchmark.config import PARALLEL
+from experiments.benchmark.config import PARALLEL, SELECTIONS
 from experiments.outputs import json_safe, print_json
 from experiments.training.settings import TRAINERS
 
@@ -106,6 +106,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--trainer", choices=TRAINERS, default=d.trainer, help="who trains the baselines: native (FlowTest's batched PPO, default) or sb3 (stable-baselines3)"
     )
+    p.add_argument(
+        "--select",
+        choices=SELECTIONS,
+        default=d.select,
+        help="the model of each training run that is scored: validation (the curve evaluation with the best greedy met "
+        "on the validation tests; default) or final (the last)",
+    )
     add_trust_model(p, "load stable-baselines3 zips given as --sut ppo:PATH, which unpickles them (code from the file runs); native checkpoints never need it")
     p.add_argument(
         "--out",
@@ -144,6 +151,7 @@ def run(args: argparse.Namespace) -> int:
         curve_seeds=args.curve_seeds,
         curve_points=args.curve_points,
         trainer=args.trainer,
+        select=args.select,
         report_tests=args.report_tests,
         bootstrap=args.bootstrap,
         workers=args.workers,

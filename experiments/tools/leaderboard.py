@@ -322,8 +322,10 @@ reference, so the floor's and the reference's own sampling error is in it); a ro
 and the floor's error. *Hardest 10 %* is the mean met share of the 10 % of held-out tests a system
 meets least often (a CVaR). Where the best reference meets fewer than all tests it is called the
 reference, not the ceiling: a system can score above 1. Each result says what it trained and what it
-only scored; a run with fewer seeds, tests or steps than the defaults is labelled as such and is not
-the protocol's default result. Results marked *v1, old statistics* predate these intervals and are
+only scored, which model of each training run was scored (since 2026-12-05 the checkpoint with the
+best greedy validation met; earlier results scored the final model and say "no model selection")
+and whether the runs had reached their validation plateau; a run with fewer seeds, tests or steps
+than the defaults is labelled as such and is not the protocol's default result. Results marked *v1, old statistics* predate these intervals and are
 shown as they were computed.
 
 ## How to add a row

@@ -235,11 +235,13 @@ def test_batch_evaluation_gives_the_single_env_verdicts(tmp_path: Path, algo: st
             assert list(batch[key]) == [t.verdict[key] for t in single], key
 
 
-def test_baselines_train_and_are_scored(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    """A tiny end-to-end run with training: a model and a curve per seed, the curve's last
-    point equals the batched greedy score of the model on the train and validation tests,
-    the gap is train minus held-out per seed, the generalization curve has a point per
-    training-set size, and the figures and the report are written."""
+@pytest.mark.parametrize("select", ["validation", "final"])
+def test_baselines_train_and_are_scored(tmp_path: Path, capsys: pytest.CaptureFixture[str], select: str) -> None:
+    """A tiny end-to-end run with training: a model and a curve per seed; the model scored is
+    the curve point with the best validation met (the latest of equals; ``--select final``:
+    the last point), whose train and validation met equal the batched greedy score of the
+    scored model; the gap is train minus held-out per seed, the generalization curve has a
+    point per training-set size, and the figures and the report are written."""
     out = tmp_path / "b"
     code, stdout, err = run(
         [
@@ -269,6 +271,8 @@ def test_baselines_train_and_are_scored(tmp_path: Path, capsys: pytest.CaptureFi
             "1",
             "--runs",
             "2",
+            "--select",
+            select,
             "--out",
             str(out),
             "-q",
@@ -284,7 +288,14 @@ def test_baselines_train_and_are_scored(tmp_path: Path, capsys: pytest.CaptureFi
         assert Path(training["model"]).is_file() and run_["sut"] == f"ppo:{training['model']}"
         steps = [p[0] for p in training["curve"]]
         assert steps[0] == 0 and steps[-1] == training["steps"] == 1024
-        assert training["curve"][-1][1:] == [run_["train"]["met"], run_["validation"]["met"]]
+        if select == "validation":
+            val = [p[2] for p in training["curve"]]
+            kept = max(i for i, v in enumerate(val) if v == max(val))  # the latest of the best
+            assert training["selected_step"] == steps[kept]
+        else:
+            kept = len(steps) - 1
+            assert training["selected_step"] is None
+        assert training["curve"][kept][1:] == [run_["train"]["met"], run_["validation"]["met"]]
         assert run_["gap"] == pytest.approx(run_["train"]["greedy"]["met"] - run_["test"]["greedy"]["met"])
         assert run_["test"]["sampled"]["runs"] == 2 and run_["test"]["greedy"]["runs"] == 1
         assert run_["test"]["headline_mode"] == "sampled" and run_["test"]["met"] == run_["test"]["sampled"]["met"]
@@ -303,10 +314,23 @@ def test_baselines_train_and_are_scored(tmp_path: Path, capsys: pytest.CaptureFi
     assert [p["train_tests"] for p in curve] == [2, 4] and [p["seeds"] for p in curve] == [[0], [0, 1]]
     assert curve[-1]["greedy"] == e["test"]["greedy"]["normalized"]  # the last point is the main runs
     assert doc["budget"] == {"steps_per_run": 1024, "training_runs": 3, "training_steps": 3 * 1024}
-    assert doc["ran"]["trained"] == [{"algo": "maskable-ppo", "seeds": [0, 1], "steps": 1024, "train_tests": 4, "trainer": "native"}]
+    (trained,) = doc["ran"]["trained"]
+    kept_steps = [t["selected_step"] if select == "validation" else t["steps"] for t in e["training"]]
+    assert {k: v for k, v in trained.items() if k != "plateau"} == {
+        "algo": "maskable-ppo",
+        "seeds": [0, 1],
+        "steps": 1024,
+        "train_tests": 4,
+        "trainer": "native",
+        "select": select,
+        "selected_steps": kept_steps,
+    }
+    assert trained["plateau"]["runs"] == 2 and trained["plateau"]["validation_tests"] == 2
     assert doc["ran"]["curve"] == [{"train_tests": 2, "seeds": [0]}]
     md = (out / "table.md").read_text()
     assert "**Trained**: maskable-ppo, seeds 0, 1 (2 runs), 1,024 time steps each on the first 4 train tests" in md
+    chosen = "checkpoint with the best greedy met on the validation tests is scored" if select == "validation" else "final model of every run is scored"
+    assert chosen in md and "validation plateau: the last evaluation gained" in md
     assert np.load(out / "scores.npz")["test/sampled/maskable-ppo"].shape == (2, 3)
     assert (out / "learning-curves.png").stat().st_size > 10_000
     assert (out / "generalization.png").stat().st_size > 10_000
@@ -608,3 +632,23 @@ def test_the_counting_memory_baseline_trains_and_plays_with_its_memory(tmp_path:
     assert load_native(tmp_path / "b" / "models" / "counts-ppo-seed0.zip").flowtest_memory == "counts"
     code, _, err = run(["benchmark", "--pool", POOL, "--algo", "counts-ppo", "--trainer", "sb3", "--out", str(tmp_path / "c")], capsys)
     assert code == 2 and "--algo counts-ppo: a baseline of the native trainer only" in err
+
+
+def test_the_plateau_counts_runs_whose_last_gain_exceeds_the_validation_half_width() -> None:
+    """A run is still rising when its last evaluation gained more than a met share's 95 %
+    half-width on the validation tests (1.96 sqrt(p (1 - p) / n) at its last share); the
+    row's text says so, and a run with one evaluation counts for nothing."""
+    from experiments.benchmark.table import selection_text, validation_plateau
+
+    half = 1.96 * np.sqrt(0.5 * 0.5 / 100)  # 9.8 pp at p = 0.5 on 100 tests
+    p = validation_plateau([[0.0, 0.45, 0.5], [0.0, 0.3, 0.5], [0.5]], 100)
+    assert p is not None and p["runs"] == 2 and p["rising"] == 1
+    assert p["median_half_width"] == pytest.approx(half) and p["median_last_gain"] == pytest.approx((0.05 + 0.2) / 2)
+    assert validation_plateau([[0.5], []], 100) is None
+    flat = validation_plateau([[0.0, 0.49, 0.5]] * 3, 100)
+    assert flat is not None and flat["rising"] == 0
+    t = {"algo": "maskable-ppo", "steps": 1000, "select": "validation", "selected_steps": [1000, 600, 1000], "plateau": flat}
+    text = selection_text(t)
+    assert "selected at the final evaluation in 2 of 3 runs; earlier at steps 600" in text and "at its plateau" in text
+    assert "still rising in 1 of 2 runs" in selection_text({**t, "plateau": p})
+    assert "final model of every run is scored (no model selection)" in selection_text({"algo": "x", "steps": 1})
