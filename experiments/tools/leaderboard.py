@@ -353,8 +353,9 @@ def standard_ids() -> list[str]:
 
 
 def page(entries: Sequence[dict[str, Any]], standard: Sequence[str] = ()) -> str:
-    """docs/leaderboard.md from the summaries: per pool, each result; then the standard
-    pools (``standard``) that have no result yet."""
+    """docs/leaderboard.md from the summaries: per pool, each result (the protocol's
+    default results first, labelled ``protocol default...``, then the others, each group in
+    file-name order); then the standard pools (``standard``) that have no result yet."""
     lines = [HEADER]
     pools = sorted({e["pool"] for e in entries})
     missing = [p for p in standard if p not in pools]
@@ -364,9 +365,9 @@ def page(entries: Sequence[dict[str, Any]], standard: Sequence[str] = ()) -> str
         lines += ["No result yet."]
     for pool in pools:
         lines += [f"## {pool}", ""]
-        for e in entries:
-            if e["pool"] == pool:
-                lines += entry_markdown(e)
+        mine = [e for e in entries if e["pool"] == pool]
+        for e in sorted(mine, key=lambda e: not str(e.get("label", "")).startswith("protocol default")):
+            lines += entry_markdown(e)
     return "\n".join(lines).rstrip() + "\n"
 
 
