@@ -324,12 +324,22 @@ def first_time(run: Run, split: str, level: float) -> Point | None:
     return next((p for p in run.points if p.met.get(split, -1.0) >= level - 1e-12), None)
 
 
+INDEPENDENT_BUDGETS = ("cleanrl",)
+"""Trainers whose curve points are separate runs, one per budget (not one run's
+evaluations): their plateau is their largest budget's score alone."""
+
+
 def plateau(run: Run, split: str, points: int, n_tests: int) -> dict[str, float]:
-    """The mean of the last ``points`` evaluations and its 95 % interval over ``n_tests`` tests."""
-    last = [p.met[split] for p in run.points[-points:]]
-    mean = float(np.mean(last))
+    """The mean of the last ``points`` evaluations (a trainer of :data:`INDEPENDENT_BUDGETS`:
+    the last point alone, its largest budget's model) and its 95 % interval over ``n_tests``
+    tests; ``rising`` (1.0 or 0.0): the last evaluation is above the one before by more than
+    that half-width, so the run had not levelled off."""
+    used = 1 if run.trainer in INDEPENDENT_BUDGETS else points
+    mets = [p.met[split] for p in run.points]
+    mean = float(np.mean(mets[-used:]))
     half = binomial_half_width(mean, n_tests)
-    return {"met": mean, "low": mean - half, "high": mean + half}
+    rising = len(mets) >= 2 and mets[-1] - mets[-2] > binomial_half_width(mets[-1], n_tests)
+    return {"met": mean, "low": mean - half, "high": mean + half, "rising": float(rising)}
 
 
 def summarize(runs: list[Run], target: float, held: str, n_held: int, points: int, floor: float, ceiling: float) -> dict[str, Any]:
@@ -359,6 +369,7 @@ def summarize(runs: list[Run], target: float, held: str, n_held: int, points: in
         to_common = [first_time(r, held, common) if common is not None else None for r in rs]
         out["heldout"][trainer] = {
             "plateau_met": [round(p["met"], 4) for p in ps],
+            "still_rising": [bool(p["rising"]) for p in ps],
             "plateau_normalized": [round((p["met"] - floor) / (ceiling - floor), 4) for p in ps],
             "seconds_to_plateau": [h.seconds if h else None for h in own],
             "cpu_to_plateau": [h.cpu if h else None for h in own],
@@ -390,6 +401,7 @@ def print_table(summary: dict[str, Any]) -> None:
         print(
             f"  {t:8s} {_median(s['seconds_to_plateau']):>12s} s  {_median(s['seconds_to_sb3_plateau']):>12s} s   "
             f"met {[round(100 * x, 1) for x in s['plateau_met']]} norm {s['plateau_normalized']}"
+            + (f", still rising in {sum(s['still_rising'])} of {len(s['still_rising'])}" if any(s.get("still_rising", [])) else "")
         )
 
 
@@ -423,7 +435,22 @@ def parse(argv: Sequence[str] | None) -> argparse.Namespace:
         help="a native setting (flowtest train's names: n_epochs=4, net_arch=64,64, memory=counts)",
     )
     ap.add_argument("--out", type=Path, default=None)
+    ap.add_argument(
+        "--summarize", type=Path, default=None, metavar="JSON", help="recompute the summary of an earlier run's --out file (no training) and write it back"
+    )
     return ap.parse_args(argv)
+
+
+def resummarize(path: Path, a: argparse.Namespace) -> int:
+    """Recompute ``path``'s summary from its stored curves (the same rules as a run)."""
+    doc = json.loads(path.read_text())
+    runs = [Run(**{**r, "points": [Point(**p) for p in r["points"]]}) for r in doc["runs"]]
+    target = doc.get("summary", {}).get("heldout_target") or {}
+    floor = float(target.get("floor", float("nan")))
+    doc["summary"] = summarize(runs, a.target, "heldout", a.test_count, a.plateau_points, floor, float(target.get("ceiling", a.ceiling)))
+    path.write_text(json.dumps(doc, indent=1) + "\n")
+    print_table(doc["summary"])
+    return 0
 
 
 def native_overrides(items: Sequence[str]) -> dict[str, Any]:
@@ -447,6 +474,8 @@ def native_overrides(items: Sequence[str]) -> dict[str, Any]:
 
 def main(argv: Sequence[str] | None = None) -> int:
     a = parse(argv)
+    if a.summarize is not None:
+        return resummarize(a.summarize, a)
     import torch
 
     torch.set_num_threads(1)
