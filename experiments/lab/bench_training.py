@@ -8,12 +8,13 @@ Rows (each timed after its setup: the pool loaded, the model built):
 
 * **training, end to end** (env steps per second of training, rollouts and updates):
   - ``native (torch env)`` and ``native (numpy env)``: :mod:`agents.native_ppo` with
-    ``flowtest train``'s defaults (128 envs x 32 steps, minibatches of 1,024, 2 epochs);
+    ``flowtest train``'s defaults (:data:`~experiments.training.settings.NATIVE_DEFAULTS`:
+    128 envs x 32 steps, minibatches of 1,024, 4 epochs; the NumPy env is the default on the CPU);
   - ``sb3 MaskablePPO (flowtest defaults)``: ``flowtest train --trainer sb3``'s settings
     (8 single envs x 128 steps, minibatches of 256, 10 epochs);
-  - ``sb3 MaskablePPO (native's PPO settings)``: 128 single envs x 32 steps, minibatches
-    of 1,024, 2 epochs: the same updates as the native run, so the difference is the
-    implementation only;
+  - ``sb3 MaskablePPO (native's PPO settings)``: the native defaults' envs, steps,
+    minibatch and epochs (128 single envs x 32 steps, minibatches of 1,024, 4 epochs): the
+    same updates as the native run, so the difference is the implementation only;
   all with the same network (``--net-arch``, actor and critic each, tanh), the visited-places
   memory, no shaping, one torch thread, on ``--pool``'s first ``--count`` train tests;
 * **env alone** (steps per second, random legal actions chosen in the same library,
@@ -35,6 +36,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from experiments.training.settings import NATIVE_DEFAULTS
 
 POOL_ENV_ID = "FlowTest-RandomGrid-v0"
 
@@ -170,7 +173,11 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--pool", default="reachability1/5x5")
     p.add_argument("--count", type=int, default=128, help="train tests (default 128)")
-    p.add_argument("--net-arch", default="256,256", help="hidden widths of actor and critic (default 256,256)")
+    p.add_argument(
+        "--net-arch",
+        default=",".join(map(str, NATIVE_DEFAULTS["net_arch"])),
+        help="hidden widths of actor and critic (default: the native trainer's, 64,64)",
+    )
     p.add_argument("--native-steps", type=int, default=131_072)
     p.add_argument("--sb3-steps", type=int, default=8_192)
     p.add_argument("--env-envs", type=int, default=1024)
@@ -192,9 +199,10 @@ def main(argv: list[str] | None = None) -> int:
 
     if not args.skip_sb3:
         add(sb3_row("sb3 MaskablePPO (flowtest defaults)", pool, args.sb3_steps, net, {}))
-        add(sb3_row("sb3 MaskablePPO (native's PPO settings)", pool, args.sb3_steps, net, {"n_envs": 128, "n_steps": 32, "batch_size": 1024, "n_epochs": 2}))
-    add(native_row("native (torch env on the CPU, the default)", pool, args.native_steps, net, "torch"))
-    add(native_row("native (numpy env)", pool, args.native_steps, net, "numpy"))
+        same = {k: NATIVE_DEFAULTS[k] for k in ("n_envs", "n_steps", "batch_size", "n_epochs")}
+        add(sb3_row("sb3 MaskablePPO (native's PPO settings)", pool, args.sb3_steps, net, same))
+    add(native_row("native (torch env on the CPU)", pool, args.native_steps, net, "torch"))
+    add(native_row("native (numpy env, the default on the CPU)", pool, args.native_steps, net, "numpy"))
     add(numpy_env_row(pool, args.env_envs, args.env_steps))
     add(torch_env_row(pool, args.env_envs, args.env_steps, "cpu"))
     if torch.cuda.is_available():
