@@ -56,7 +56,6 @@ class CurveRecorder:
         recorder = self
         self.points: list[tuple[int, dict[str, float]]] = []
         self.seconds = 0.0
-        self.steps_seen = 0
         self.kept_step: int | None = None
         best = [-1.0]
 
@@ -67,7 +66,6 @@ class CurveRecorder:
                 v = batch_verdicts(model, games, memory, budgets)
                 rates[name] = float(np.mean(v["system_objective"] == "met"))
             recorder.points.append((step, rates))
-            recorder.steps_seen = step
             if keep is not None and rates.get("validation", -1.0) >= best[0]:
                 best[0] = rates["validation"]
                 keep(model)

@@ -30,6 +30,18 @@ def t_quantile(df: int) -> float:
     return T95[df]
 
 
+def binomial_half_width(p: float, n: int) -> float:
+    """The 95 % normal-approximation half-width of a share ``p`` of ``n`` tests."""
+    return 1.96 * math.sqrt(max(p * (1 - p), 0.0) / max(n, 1))
+
+
+def still_rising(shares: Sequence[float], n: int) -> bool:
+    """Whether a learning curve of met shares on ``n`` tests had not levelled off: its last
+    point is above the one before by more than the last share's
+    :func:`binomial_half_width` (so a longer budget would likely score higher)."""
+    return len(shares) >= 2 and shares[-1] - shares[-2] > binomial_half_width(shares[-1], n)
+
+
 def mean_ci(values: Sequence[float | None]) -> dict[str, Any]:
     """``mean`` and ``ci95`` (the half-width of the 95 % confidence interval of the mean,
     Student's t; ``None`` for fewer than two values) of the values that are not ``None``,

@@ -3,7 +3,6 @@ file*) and ``table.md``, with the commit and the machine they came from."""
 
 from __future__ import annotations
 
-import math
 import os
 import platform
 import subprocess
@@ -17,7 +16,7 @@ from experiments.formatting import MISSING, percent
 
 from .config import SPLIT_NAMES, BenchmarkConfig, baseline_settings, command_of, runs_text
 from .pool import Split
-from .statistics import HEADLINE_MODE, SCORES_FILE, SystemRuns, scale_of, system_entry
+from .statistics import HEADLINE_MODE, SCORES_FILE, SystemRuns, binomial_half_width, scale_of, still_rising, system_entry
 from .training_runs import TrainedBaseline
 
 RESULTS_FORMAT = "flowtest-benchmark"
@@ -199,27 +198,20 @@ def validation_plateau(curves: Sequence[Sequence[float | None]], tests: int) -> 
     """Whether training runs reached their plateau on the validation split: per run, the
     greedy validation met gained from the next-to-last curve evaluation to the last (the last
     ``1 / curve_points`` of the budget), against the 95 % half-width of a met share on
-    ``tests`` validation tests (``1.96 * sqrt(p (1 - p) / tests)`` at the run's last share).
-    A run whose gain exceeds that half-width is **still rising**: a longer budget would
-    likely score higher. ``None`` when fewer than two evaluations were recorded.
+    ``tests`` validation tests at the run's last share: a run whose gain exceeds it is
+    **still rising** (:func:`~experiments.benchmark.statistics.still_rising`). ``None`` when fewer than two evaluations were recorded.
 
     >>> validation_plateau([[0.1, 0.5, 0.52], [0.1, 0.4, 0.6]], 256)["rising"]
     1
     """
-    gains, halves = [], []
-    for c in curves:
-        xs = [float(x) for x in c if x is not None]
-        if len(xs) < 2:
-            continue
-        gains.append(xs[-1] - xs[-2])
-        halves.append(1.96 * math.sqrt(max(xs[-1] * (1 - xs[-1]), 1e-12) / max(tests, 1)))
-    if not gains:
+    runs = [xs for xs in ([float(x) for x in c if x is not None] for c in curves) if len(xs) >= 2]
+    if not runs:
         return None
     return {
-        "median_last_gain": float(np.median(gains)),
-        "median_half_width": float(np.median(halves)),
-        "rising": int(sum(g > h for g, h in zip(gains, halves, strict=True))),
-        "runs": len(gains),
+        "median_last_gain": float(np.median([xs[-1] - xs[-2] for xs in runs])),
+        "median_half_width": float(np.median([binomial_half_width(xs[-1], tests) for xs in runs])),
+        "rising": sum(still_rising(xs, tests) for xs in runs),
+        "runs": len(runs),
         "validation_tests": int(tests),
     }
 
@@ -229,11 +221,11 @@ def selection_text(t: dict[str, Any]) -> str:
     validation plateau (:func:`validation_plateau`)."""
     if t.get("select") == "validation":
         steps = [s for s in t.get("selected_steps") or [] if s is not None]
-        last = sum(1 for s in steps if s >= t["steps"] - 1)
+        last = sum(1 for s in steps if s >= t["steps"])
         text = (
             f"{t['algo']}: each run's checkpoint with the best greedy met on the validation tests is scored"
             f" (selected at the final evaluation in {last} of {len(steps)} runs"
-            + (f"; earlier at steps {', '.join(f'{s:,}' for s in sorted(set(steps)) if s < t['steps'] - 1)}" if last < len(steps) else "")
+            + (f"; earlier at steps {', '.join(f'{s:,}' for s in sorted(set(steps)) if s < t['steps'])}" if last < len(steps) else "")
             + ")"
         )
     else:

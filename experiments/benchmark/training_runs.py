@@ -121,6 +121,7 @@ def _train_sb3_baseline(config: BenchmarkConfig, algo: str, seed: int, splits: d
     keep = (lambda m: write_atomically(path, lambda tmp: m.save(str(tmp)))) if config.select == "validation" else None
     recorder = CurveRecorder(every, settings["memory"], shown, keep)
     seconds = learn(model, config.steps, recorder, progress_bar)
+    steps = int(model.num_timesteps)
     env.close()
     if keep is None:
         write_atomically(path, lambda tmp: model.save(str(tmp)))
@@ -130,7 +131,7 @@ def _train_sb3_baseline(config: BenchmarkConfig, algo: str, seed: int, splits: d
         model = load_model(path)
     mark_own_file(path)  # scored below without --trust-model: this run wrote it
     policies = _sb3_policies(model, splits["train"], count, settings["memory"])
-    return TrainedBaseline(algo, seed, path, recorder.steps_seen, seconds, recorder.seconds, recorder.points, count, policies, recorder.kept_step)
+    return TrainedBaseline(algo, seed, path, steps, seconds, recorder.seconds, recorder.points, count, policies, recorder.kept_step)
 
 
 @dataclass(frozen=True)

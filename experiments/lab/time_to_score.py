@@ -46,7 +46,6 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import json
-import math
 import os
 import platform
 import subprocess
@@ -59,6 +58,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from experiments.benchmark.statistics import binomial_half_width, still_rising
 
 POOL_ENV_ID = "FlowTest-RandomGrid-v0"
 TRAINERS = ("native", "sb3", "cleanrl")
@@ -314,11 +315,6 @@ def run_cleanrl(
 # ---------------------------------------------------------------- the figures
 
 
-def binomial_half_width(p: float, n: int) -> float:
-    """The 95 % normal-approximation half-width of a share ``p`` of ``n`` tests."""
-    return 1.96 * math.sqrt(max(p * (1 - p), 0.0) / max(n, 1))
-
-
 def first_time(run: Run, split: str, level: float) -> Point | None:
     """The first evaluation of ``run`` whose ``split`` met is at least ``level``."""
     return next((p for p in run.points if p.met.get(split, -1.0) >= level - 1e-12), None)
@@ -338,8 +334,7 @@ def plateau(run: Run, split: str, points: int, n_tests: int) -> dict[str, float]
     mets = [p.met[split] for p in run.points]
     mean = float(np.mean(mets[-used:]))
     half = binomial_half_width(mean, n_tests)
-    rising = len(mets) >= 2 and mets[-1] - mets[-2] > binomial_half_width(mets[-1], n_tests)
-    return {"met": mean, "low": mean - half, "high": mean + half, "rising": float(rising)}
+    return {"met": mean, "low": mean - half, "high": mean + half, "rising": float(still_rising(mets, n_tests))}
 
 
 def summarize(runs: list[Run], target: float, held: str, n_held: int, points: int, floor: float, ceiling: float) -> dict[str, Any]:
