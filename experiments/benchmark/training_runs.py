@@ -125,11 +125,11 @@ def _train_sb3_baseline(config: BenchmarkConfig, algo: str, seed: int, splits: d
     env.close()
     if keep is None:
         write_atomically(path, lambda tmp: model.save(str(tmp)))
-    else:  # the best checkpoint was saved during the run: score that one
+    mark_own_file(path)  # loaded and scored below without --trust-model: this run wrote it
+    if keep is not None:  # the best checkpoint was saved during the run: score that one
         from agents.ppo import load_model
 
         model = load_model(path)
-    mark_own_file(path)  # scored below without --trust-model: this run wrote it
     policies = _sb3_policies(model, splits["train"], count, settings["memory"])
     return TrainedBaseline(algo, seed, path, steps, seconds, recorder.seconds, recorder.points, count, policies, recorder.kept_step)
 

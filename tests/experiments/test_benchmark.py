@@ -652,3 +652,21 @@ def test_the_plateau_counts_runs_whose_last_gain_exceeds_the_validation_half_wid
     assert "selected at the final evaluation in 2 of 3 runs; earlier at steps 600" in text and "at its plateau" in text
     assert "still rising in 1 of 2 runs" in selection_text({**t, "plateau": p})
     assert "final model of every run is scored (no model selection)" in selection_text({"algo": "x", "steps": 1})
+
+
+def test_sb3_baselines_are_scored_at_their_checkpoint_chosen_by_validation(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``--trainer sb3`` with the default ``--select validation``: the run saves its best
+    validation checkpoint while it trains and scores that one, without ``--trust-model`` (the
+    run wrote it), and its train and validation met are the curve's at the kept step."""
+    out = tmp_path / "s"
+    argv = ["benchmark", "--pool", POOL, "--trainer", "sb3", "--sut", "ppo", "--train-count", "4", "--validation-count", "2"]
+    argv += ["--test-count", "2", "--train-eval-count", "4", "--steps", "2048", "--seeds", "0", "--curve-sizes", "2"]
+    argv += ["--curve-seeds", "1", "--curve-points", "2", "--runs", "2", "--parallel", "serial", "--out", str(out), "-q"]
+    code, _, err = run(argv, capsys)
+    assert code == 0, err
+    e = _system(json.loads((out / "table.json").read_text()), "maskable-ppo")
+    (training,), (run_,) = e["training"], e["runs"]
+    val = [p[2] for p in training["curve"]]
+    kept = max(i for i, v in enumerate(val) if v == max(val))
+    assert training["selected_step"] == training["curve"][kept][0]
+    assert training["curve"][kept][1:] == [run_["train"]["met"], run_["validation"]["met"]]
